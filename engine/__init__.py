@@ -1,0 +1,11 @@
+"""AASDF engine: algebraic adaptive signed distance fields of triangle meshes, their booleans and surfaces.
+
+Pure numpy + NVIDIA Warp (never Blender): arrays in, arrays out. Kernels run on Warp's default device, or the one
+passed as ``device`` (CPU here, CUDA wherever an NVIDIA GPU is present). Negative inside, positive outside.
+"""
+
+from .boolean import difference, intersection, union
+from .errors import AasdfError
+from .field import AdaptiveField, build_field
+
+__all__ = ["AasdfError", "AdaptiveField", "build_field", "difference", "intersection", "union"]

@@ -1,0 +1,716 @@
+"""The algebraic adaptive signed distance field of a triangle mesh (Ren et al., Sec. 4), built bottom-up in Warp.
+
+Pipeline of :func:`build_field`:
+
+1. finest level: one thread per triangle lists the octets (parents of finest cells) that a triangle-box test says
+   lie within ``padding`` cells of it (Eq. 4-5: whole octets, so every parent gets exactly 8 children); radix sort,
+   de-duplicate, expand to cells, exact closest point per cell from Warp's mesh BVH;
+2. intermediate levels: grandparents of the level below expanded to their 8 children (Eq. 6: parents plus the
+   parents' siblings), de-duplicated; internal nodes take the nearest of their children's projection points, leaves
+   are solved by a fast iterative method over same-level neighbours found by axis-wise key sorting (Eq. 7);
+3. top level: a dense grid over the domain, initialised from its children and solved the same way;
+4. signs, top-down: inside means generalised winding number >= 0.5. A node inherits its parent's sign when their
+   empty balls cover the segment between them; only undecided nodes ask an oracle — the pseudo-normal of the
+   closest point where the mesh is closed and consistently oriented, the winding number where it is not.
+
+Sign convention: negative inside, positive outside (Blender/OpenVDB); the paper uses the opposite.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import warp as wp
+
+from . import octree
+from .errors import AasdfError
+from .octree import MAX_CELLS_PER_AXIS, UNSET_DISTANCE, morton_encode, node_center
+from .sampling import FieldArg, _sample_field_kernel, _source_ids_kernel
+
+# Bytes a finest node costs while building (codes, coords, distances, projections, links, sort buffers).
+BUILD_BYTES_PER_NODE = 160
+SIGN_SAFETY = 0.9
+
+
+# ---- finest level: octets overlapping triangles ----
+
+
+@wp.func
+def _axis_test(axis: wp.vec3, v0: wp.vec3, v1: wp.vec3, v2: wp.vec3, half: wp.vec3) -> bool:
+    """True when ``axis`` separates the triangle (box-centred) from the box."""
+    if wp.length_sq(axis) < 1.0e-30:
+        return False
+    p0 = wp.dot(v0, axis)
+    p1 = wp.dot(v1, axis)
+    p2 = wp.dot(v2, axis)
+    r = half[0] * wp.abs(axis[0]) + half[1] * wp.abs(axis[1]) + half[2] * wp.abs(axis[2])
+    return wp.min(p0, wp.min(p1, p2)) > r or wp.max(p0, wp.max(p1, p2)) < -r
+
+
+@wp.func
+def tri_box_overlap(center: wp.vec3, half: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> bool:
+    """Separating-axis triangle/box overlap test (Akenine-Moller); the triangle's AABB is tested by the caller."""
+    v0 = a - center
+    v1 = b - center
+    v2 = c - center
+    e0 = v1 - v0
+    e1 = v2 - v1
+    e2 = v0 - v2
+    for k in range(3):
+        unit = wp.vec3(0.0)
+        unit[k] = 1.0
+        if _axis_test(wp.cross(unit, e0), v0, v1, v2, half):
+            return False
+        if _axis_test(wp.cross(unit, e1), v0, v1, v2, half):
+            return False
+        if _axis_test(wp.cross(unit, e2), v0, v1, v2, half):
+            return False
+    if _axis_test(wp.cross(e0, e1), v0, v1, v2, half):
+        return False
+    return True
+
+
+@wp.kernel(enable_backward=False)
+def _octets_per_triangle_kernel(
+    verts: wp.array[wp.vec3],
+    tris: wp.array2d[wp.int32],
+    origin: wp.vec3,
+    octet_size: float,
+    pad: float,
+    dims: wp.vec3i,
+    offsets: wp.array[wp.int32],
+    emit: int,
+    counts: wp.array[wp.int32],
+    codes: wp.array[wp.int64],
+):
+    """Count (emit=0) or write (emit=1) the Morton codes of the octets within ``pad`` of triangle ``t``."""
+    t = wp.tid()
+    a = verts[tris[t, 0]]
+    b = verts[tris[t, 1]]
+    c = verts[tris[t, 2]]
+    lo = wp.min(a, wp.min(b, c)) - wp.vec3(pad)
+    hi = wp.max(a, wp.max(b, c)) + wp.vec3(pad)
+    i0 = wp.vec3i(0)
+    i1 = wp.vec3i(0)
+    for k in range(3):
+        i0[k] = wp.clamp(int(wp.floor((lo[k] - origin[k]) / octet_size)), 0, dims[k] - 1)
+        i1[k] = wp.clamp(int(wp.floor((hi[k] - origin[k]) / octet_size)), 0, dims[k] - 1)
+    half = wp.vec3(0.5 * octet_size + pad)
+    n = int(0)
+    base = int(0)
+    if emit == 1:
+        base = offsets[t]
+    for z in range(i0[2], i1[2] + 1):
+        for y in range(i0[1], i1[1] + 1):
+            for x in range(i0[0], i1[0] + 1):
+                cell = wp.vec3i(x, y, z)
+                center = origin + octet_size * wp.vec3(float(x) + 0.5, float(y) + 0.5, float(z) + 0.5)
+                if tri_box_overlap(center, half, a, b, c):
+                    if emit == 1:
+                        codes[base + n] = morton_encode(cell)
+                    n += 1
+    if emit == 0:
+        counts[t] = n
+
+
+@wp.kernel(enable_backward=False)
+def _finest_distance_kernel(
+    mesh: wp.uint64,
+    coords: wp.array[wp.vec3i],
+    origin: wp.vec3,
+    spacing: float,
+    max_dist: float,
+    source_id: int,
+    dist: wp.array[wp.float32],
+    proj: wp.array[wp.vec3],
+    face: wp.array[wp.int32],
+    normal_sign: wp.array[wp.float32],
+    source: wp.array[wp.int32],
+):
+    """Exact closest point of each finest node, and the sign the angle-weighted pseudo-normal gives it."""
+    i = wp.tid()
+    x = node_center(origin, spacing, coords[i])
+    q = wp.mesh_query_point_sign_normal(mesh, x, max_dist)
+    source[i] = source_id
+    if q.result:
+        p = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+        dist[i] = wp.length(x - p)
+        proj[i] = p
+        face[i] = q.face
+        normal_sign[i] = q.sign
+    else:
+        dist[i] = UNSET_DISTANCE
+        proj[i] = x
+        face[i] = -1
+        normal_sign[i] = 1.0
+
+
+# ---- signs ----
+
+
+@wp.kernel(enable_backward=False)
+def _finest_sign_kernel(
+    sign: wp.array[wp.float32],
+    normal_sign: wp.array[wp.float32],
+    face: wp.array[wp.int32],
+    problem_face: wp.array[wp.int32],
+    undecided: wp.array[wp.int32],
+):
+    """Finest nodes the parent could not decide take the pseudo-normal sign unless their closest face touches an
+    open, non-manifold or inconsistently oriented edge; those are flagged for the winding number."""
+    i = wp.tid()
+    undecided[i] = 0
+    if sign[i] == 0.0:
+        f = face[i]
+        if f >= 0 and problem_face[f] == 0:
+            sign[i] = normal_sign[i]
+        else:
+            undecided[i] = 1
+
+
+@wp.kernel(enable_backward=False)
+def _mesh_sign_kernel(
+    mesh: wp.uint64,
+    coords: wp.array[wp.vec3i],
+    nodes: wp.array[wp.int32],
+    origin: wp.vec3,
+    spacing: float,
+    max_dist: float,
+    use_winding: int,
+    sign: wp.array[wp.float32],
+):
+    """Sign oracle: winding number >= 0.5 inside (robust on open meshes) or the closest point's pseudo-normal."""
+    t = wp.tid()
+    i = nodes[t]
+    x = node_center(origin, spacing, coords[i])
+    if use_winding == 1:
+        q = wp.mesh_query_point_sign_winding_number(mesh, x, max_dist, 2.0, 0.5)
+        sign[i] = q.sign
+    else:
+        q2 = wp.mesh_query_point_sign_normal(mesh, x, max_dist)
+        sign[i] = q2.sign
+
+
+@wp.kernel(enable_backward=False)
+def _apply_sign_kernel(dist: wp.array[wp.float32], sign: wp.array[wp.float32], values: wp.array[wp.float32]):
+    i = wp.tid()
+    s = sign[i]
+    if s == 0.0:
+        s = 1.0
+    values[i] = s * dist[i]
+
+
+# ---- the field ----
+
+
+class AdaptiveField:
+    """A hierarchical sparse octree of signed distances (negative inside), closed under booleans.
+
+    Levels are stored finest first and concatenated; ``level_offsets[k]:level_offsets[k+1]`` is level ``k``.
+    Intermediate levels are sorted by Morton code; the top level is dense in x-fastest order.
+    """
+
+    def __init__(self, *, voxel_size, levels, origin, top_dims, level_offsets, codes, coords, values, proj, child,
+                 source, field_ids, device, timings=None, stats=None):
+        self.voxel_size = float(voxel_size)
+        self.levels = int(levels)
+        self.origin = np.asarray(origin, dtype=np.float64)
+        self.top_dims = np.asarray(top_dims, dtype=np.int64)
+        self.level_offsets = np.asarray(level_offsets, dtype=np.int64)
+        self.codes, self.coords, self.values, self.proj = codes, coords, values, proj
+        self.child, self.source = child, source
+        self.field_ids = tuple(sorted(set(int(i) for i in field_ids)))
+        self.device = device
+        self.timings = dict(timings or {})
+        self.stats = dict(stats or {})
+
+    # -- geometry of the domain --
+    @property
+    def top_spacing(self) -> float:
+        return self.voxel_size * 2 ** (self.levels - 1)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) corners of the domain, world space."""
+        return self.origin.copy(), self.origin + self.top_dims * self.top_spacing
+
+    @property
+    def fine_dims(self) -> np.ndarray:
+        return self.top_dims * 2 ** (self.levels - 1)
+
+    @property
+    def node_count(self) -> int:
+        return int(self.level_offsets[-1])
+
+    @property
+    def level_counts(self) -> list[int]:
+        return [int(n) for n in np.diff(self.level_offsets)]
+
+    @property
+    def field_id(self) -> int:
+        return self.field_ids[0]
+
+    def level_slice(self, level: int) -> slice:
+        return slice(int(self.level_offsets[level]), int(self.level_offsets[level + 1]))
+
+    def arg(self) -> FieldArg:
+        f = FieldArg()
+        f.origin = wp.vec3(*self.origin)
+        f.voxel_size = self.voxel_size
+        f.levels = self.levels
+        f.top_dims = wp.vec3i(*(int(d) for d in self.top_dims))
+        f.top_offset = int(self.level_offsets[self.levels - 1])
+        lo, hi = self.bounds
+        f.domain_min = wp.vec3(*lo)
+        f.domain_max = wp.vec3(*hi)
+        f.coords, f.child, f.values, f.source, f.proj = self.coords, self.child, self.values, self.source, self.proj
+        return f
+
+    def __repr__(self) -> str:
+        return (f"AdaptiveField(voxel_size={self.voxel_size:g}, levels={self.levels}, nodes={self.node_count}, "
+                f"level_counts={self.level_counts}, ids={list(self.field_ids)})")
+
+    # -- queries --
+    def sample(self, points, method: str = "mls", *, return_gradient: bool = False):
+        """Signed distance at world-space points.
+
+        Args:
+            points: (N, 3) array-like of world-space points.
+            method: ``"mls"`` (moving least squares, Eq. 9-10) or ``"linear"`` (trilinear, for comparison).
+            return_gradient: Also return the (N, 3) float32 MLS gradient.
+        Returns:
+            (N,) float32 signed distances, negative inside; outside the domain never below the distance to it.
+        Raises:
+            ValueError: If ``points`` is not (N, 3) or ``method`` is unknown.
+        """
+        pts = _as_points(points)
+        if method not in ("mls", "linear"):
+            raise ValueError(f"Expected 'method' to be 'mls' or 'linear', but got {method!r}.")
+        n = len(pts)
+        values = wp.empty(n, dtype=wp.float32, device=self.device)
+        grads = wp.empty(n, dtype=wp.vec3, device=self.device)
+        if n:
+            wp.launch(_sample_field_kernel, dim=n, device=self.device,
+                      inputs=[self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device), 0 if method == "mls" else 1],
+                      outputs=[values, grads])
+        if return_gradient:
+            return values.numpy(), grads.numpy()
+        return values.numpy()
+
+    def source_ids(self, points) -> np.ndarray:
+        """(N,) int32: the id of the input field whose surface determines the value at each point."""
+        pts = _as_points(points)
+        ids = wp.empty(len(pts), dtype=wp.int32, device=self.device)
+        if len(pts):
+            wp.launch(_source_ids_kernel, dim=len(pts), device=self.device,
+                      inputs=[self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device)], outputs=[ids])
+        return ids.numpy()
+
+    def level_of_nodes(self) -> np.ndarray:
+        return np.repeat(np.arange(self.levels, dtype=np.int32), np.diff(self.level_offsets))
+
+    def node_centers(self) -> np.ndarray:
+        """(N, 3) float64 world-space centres of all nodes, finest level first."""
+        lv = self.level_of_nodes()
+        spacing = self.voxel_size * (2.0 ** lv)
+        return self.origin + (self.coords.numpy().astype(np.float64) + 0.5) * spacing[:, None]
+
+    def debug_cells(self) -> dict:
+        """Every stored node: centres (N,3) float32, sizes (N,), levels (N,), sdf (N,), leaf (N,) bool."""
+        lv = self.level_of_nodes()
+        return {
+            "centers": self.node_centers().astype(np.float32),
+            "sizes": (self.voxel_size * (2.0 ** lv)).astype(np.float32),
+            "levels": lv,
+            "sdf": self.values.numpy().copy(),
+            "leaf": self.child.numpy() < 0,
+        }
+
+    def to_dense(self, bounds=None, spacing=None, *, max_bytes=None) -> dict:
+        """Dense samples for debug volumes.
+
+        Args:
+            bounds: ((3,), (3,)) world box; defaults to the domain.
+            spacing: Sample spacing; defaults to the finest voxel size.
+            max_bytes: Refuse blocks larger than this (default: half the available memory).
+        Returns:
+            dict with ``values`` (X, Y, Z) float32 (x-major, index [i, j, k]), ``origin`` (3,) world position of
+            sample [0, 0, 0], and ``spacing``.
+        Raises:
+            AasdfError: If the block would not fit in memory.
+        """
+        lo, hi = self.bounds if bounds is None else (np.asarray(bounds[0], float), np.asarray(bounds[1], float))
+        spacing = self.voxel_size if spacing is None else float(spacing)
+        if not spacing > 0:
+            raise ValueError(f"Expected a positive 'spacing', but got {spacing}.")
+        shape = np.maximum(np.ceil((hi - lo) / spacing).astype(np.int64), 1)
+        budget = available_memory() // 2 if max_bytes is None else int(max_bytes)
+        need = int(np.prod(shape)) * 4 * 8
+        if need > budget:
+            raise AasdfError(f"A dense block of {shape[0]}x{shape[1]}x{shape[2]} samples needs {need / 2**30:.1f} GiB,"
+                             f" more than the {budget / 2**30:.1f} GiB available; use a coarser spacing.")
+        axes = [lo[a] + (np.arange(shape[a]) + 0.5) * spacing for a in range(3)]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        values = self.sample(grid).reshape(tuple(shape))
+        return {"values": values, "origin": lo + 0.5 * spacing, "spacing": spacing}
+
+    def to_mesh(self, iso: float = 0.0):
+        """Marching cubes over the finest level's narrow band: (V,3) float32 vertices, (F,3) int32 triangles."""
+        from .extract import extract_surface
+
+        sl = self.level_slice(0)
+        coords = self.coords.numpy()[sl]
+        values = self.values.numpy()[sl]
+        return extract_surface(coords, values, origin=self.origin, spacing=self.voxel_size, iso=float(iso),
+                               device=self.device)
+
+    # -- booleans as operators --
+    def __or__(self, other):
+        from .boolean import union
+
+        return union(self, other)
+
+    def __and__(self, other):
+        from .boolean import intersection
+
+        return intersection(self, other)
+
+    def __sub__(self, other):
+        from .boolean import difference
+
+        return difference(self, other)
+
+
+# ---- validation and helpers ----
+
+
+def available_memory() -> int:
+    """Bytes of memory available to this process (best effort, 8 GiB when the platform does not say)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return 8 * 2**30
+
+
+def _as_points(points) -> np.ndarray:
+    pts = np.ascontiguousarray(points, dtype=np.float32)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"Expected 'points' of shape (N, 3), but got {pts.shape}.")
+    return pts
+
+
+def validate_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
+    """Check a mesh before any kernel runs; return float32 vertices and the non-degenerate int32 triangles."""
+    verts = np.asarray(vertices)
+    tris = np.asarray(triangles)
+    if verts.ndim != 2 or verts.shape[1] != 3:
+        raise ValueError(f"Expected 'vertices' of shape (V, 3), but got {verts.shape}.")
+    if tris.ndim != 2 or tris.shape[1] != 3:
+        raise ValueError(f"Expected 'triangles' of shape (T, 3), but got {tris.shape}.")
+    if len(verts) == 0 or len(tris) == 0:
+        raise AasdfError("The mesh is empty: it has no vertices or no triangles.")
+    if not np.issubdtype(tris.dtype, np.integer):
+        raise ValueError(f"Expected integer 'triangles', but got dtype {tris.dtype}.")
+    verts64 = verts.astype(np.float64)
+    if not np.all(np.isfinite(verts64)):
+        bad = int(np.count_nonzero(~np.isfinite(verts64).all(axis=1)))
+        raise AasdfError(f"The mesh has {bad} vertices with NaN or infinite coordinates.")
+    if tris.min() < 0 or tris.max() >= len(verts):
+        raise AasdfError(f"Triangle indices must lie in [0, {len(verts) - 1}], but range over "
+                         f"[{int(tris.min())}, {int(tris.max())}].")
+    tris = tris.astype(np.int32)
+    v = verts64[tris]
+    area2 = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    extent = float(np.max(verts64.max(axis=0) - verts64.min(axis=0)))
+    keep = area2 > (1e-12 * extent * extent)
+    if not np.any(keep):
+        raise AasdfError("The mesh is degenerate: all of its triangles have zero area.")
+    return np.ascontiguousarray(verts64, dtype=np.float32), np.ascontiguousarray(tris[keep])
+
+
+def problem_faces(tris: np.ndarray, n_verts: int) -> np.ndarray:
+    """(T,) int32, 1 for faces touching a vertex of an open, non-manifold or inconsistently oriented edge.
+
+    The pseudo-normal sign is only trusted near faces whose neighbourhood is a consistently oriented manifold."""
+    t = tris.astype(np.int64)
+    directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    lo, hi = directed.min(axis=1), directed.max(axis=1)
+    key = lo * n_verts + hi
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    first = np.r_[True, ks[1:] != ks[:-1]]
+    group = np.cumsum(first) - 1
+    counts = np.bincount(group)
+    forward = (directed[order, 0] < directed[order, 1]).astype(np.int64)
+    fwd_per_edge = np.bincount(group, weights=forward).astype(np.int64)
+    bad_edge = (counts != 2) | (fwd_per_edge != 1)
+    bad_members = bad_edge[group]
+    bad_vertex = np.zeros(n_verts, dtype=bool)
+    bad_vertex[directed[order][bad_members].ravel()] = True
+    return bad_vertex[t].any(axis=1).astype(np.int32)
+
+
+def plan_domain(lo, hi, voxel_size: float, levels: int, margin_cells: float):
+    """Domain origin (snapped to the shared world origin at the top spacing, Eq. 3) and top-level dims."""
+    top = voxel_size * 2 ** (levels - 1)
+    margin = margin_cells * voxel_size
+    origin = np.floor((np.asarray(lo, np.float64) - margin) / top) * top
+    dims = np.maximum(np.ceil((np.asarray(hi, np.float64) + margin - origin) / top).astype(np.int64), 1)
+    return origin, dims
+
+
+def check_budget(fine_dims, top_count, fine_nodes_estimate):
+    """Refuse domains the Morton codes cannot address and node counts that would not fit in memory."""
+    if np.any(np.asarray(fine_dims) >= MAX_CELLS_PER_AXIS):
+        raise AasdfError(f"The domain spans {int(np.max(fine_dims))} finest cells along an axis, more than the "
+                         f"{MAX_CELLS_PER_AXIS - 1} the octree can address; use a larger voxel size.")
+    need = (int(fine_nodes_estimate) + int(top_count)) * BUILD_BYTES_PER_NODE
+    budget = available_memory() // 2
+    if need > budget:
+        raise AasdfError(f"This voxel size needs about {need / 2**30:.1f} GiB ({int(fine_nodes_estimate):,} finest "
+                         f"nodes), more than the {budget / 2**30:.1f} GiB that can be used; use a larger voxel size.")
+
+
+def _device(device):
+    return wp.get_device(device)
+
+
+# ---- build ----
+
+
+def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=None, field_id=0) -> AdaptiveField:
+    """Build the adaptive signed distance field of a triangle mesh.
+
+    Args:
+        vertices: (V, 3) world-space vertex positions.
+        triangles: (T, 3) integer vertex indices. Open, multi-shell, flipped or duplicated faces are handled:
+            inside means generalised winding number >= 0.5.
+        voxel_size: Edge length of the finest cells.
+        levels: Number of levels, finest to dense top (>= 1).
+        padding: Finest cells kept around each triangle (>= 0; 1 or more gives watertight surfaces).
+        device: Warp device (``None``: Warp's default).
+        field_id: Integer id carried per node through booleans (see ``source_ids``).
+    Returns:
+        AdaptiveField, negative inside.
+    Raises:
+        ValueError: On wrongly shaped or typed arguments.
+        AasdfError: On empty, non-finite or fully degenerate meshes, out-of-range indices, non-positive voxel
+            size, ``levels < 1``, ``padding < 0``, or a resolution that would not fit in memory.
+    """
+    voxel_size = float(voxel_size)
+    if not np.isfinite(voxel_size) or voxel_size <= 0.0:
+        raise AasdfError(f"The voxel size must be a positive number, but got {voxel_size}.")
+    if int(levels) != levels or levels < 1:
+        raise AasdfError(f"The number of levels must be an integer of at least 1, but got {levels}.")
+    if int(padding) != padding or padding < 0:
+        raise AasdfError(f"The padding must be a non-negative integer, but got {padding}.")
+    levels, padding = int(levels), int(padding)
+    verts, tris = validate_mesh(vertices, triangles)
+    device = _device(device)
+
+    lo, hi = verts.min(axis=0), verts.max(axis=0)
+    origin, top_dims = plan_domain(lo, hi, voxel_size, levels, padding + 2)
+    fine_dims = top_dims * 2 ** (levels - 1)
+    # Upper bound of finest nodes before any kernel runs: every triangle's padded AABB in octets, capped by a
+    # surface-area estimate for large triangles.
+    octet = 2.0 * voxel_size
+    v = verts.astype(np.float64)[tris]
+    ext = (v.max(axis=1) - v.min(axis=1) + 2.0 * padding * voxel_size) / octet + 1.0
+    box_count = np.prod(np.ceil(ext) + 1.0, axis=1)
+    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    area_count = (np.sqrt(area) / octet + 2.0 + padding) ** 2 * (3.0 + padding)
+    estimate = 8.0 * float(np.minimum(box_count, area_count).sum())
+    top_count = int(np.prod(top_dims))
+    check_budget(fine_dims, top_count, estimate if levels > 1 else float(np.prod(fine_dims)))
+
+    timings = {}
+    t0 = time.perf_counter()
+    problem = problem_faces(tris, len(verts))
+    clean = not bool(problem.any())
+    mesh = wp.Mesh(points=wp.array(verts, dtype=wp.vec3, device=device),
+                   indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
+                   support_winding_number=not clean)
+    diag = float(np.linalg.norm(fine_dims * voxel_size))
+    timings["mesh_bvh"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    if levels == 1:
+        coords_np, codes_np = octree.dense_level(top_dims)
+        fine_codes = wp.array(codes_np, dtype=wp.int64, device=device)
+        fine_coords = wp.array(coords_np, dtype=wp.vec3i, device=device)
+        query_radius = diag
+    else:
+        oct_dims = wp.vec3i(*(int(d) for d in fine_dims // 2))
+        verts_wp = wp.array(verts, dtype=wp.vec3, device=device)
+        tris_wp = wp.array(tris, dtype=wp.int32, device=device)
+        counts = wp.empty(len(tris), dtype=wp.int32, device=device)
+        dummy_codes = wp.empty(1, dtype=wp.int64, device=device)
+        args = [verts_wp, tris_wp, wp.vec3(*origin), octet, padding * voxel_size, oct_dims]
+        wp.launch(_octets_per_triangle_kernel, dim=len(tris), inputs=[*args, counts, 0],
+                  outputs=[counts, dummy_codes], device=device)
+        counts_np = counts.numpy().astype(np.int64)
+        total = int(counts_np.sum())
+        check_budget(fine_dims, top_count, 8 * total)
+        offsets = wp.array(np.concatenate([[0], np.cumsum(counts_np)[:-1]]).astype(np.int32), device=device)
+        octet_codes = wp.empty(total, dtype=wp.int64, device=device)
+        wp.launch(_octets_per_triangle_kernel, dim=len(tris), inputs=[*args, offsets, 1],
+                  outputs=[counts, octet_codes], device=device)
+        octets = octree.sort_unique(octet_codes, end_bit=3 * _bits(fine_dims // 2))
+        fine_codes, fine_coords = octree.expand_octets(octets)
+        query_radius = (padding + 4) * octet * 1.8
+    timings["finest_cells"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    n0 = fine_codes.shape[0]
+    dist0 = wp.empty(n0, dtype=wp.float32, device=device)
+    proj0 = wp.empty(n0, dtype=wp.vec3, device=device)
+    face0 = wp.empty(n0, dtype=wp.int32, device=device)
+    nsign0 = wp.empty(n0, dtype=wp.float32, device=device)
+    src0 = wp.empty(n0, dtype=wp.int32, device=device)
+    wp.launch(_finest_distance_kernel, dim=n0, device=device,
+              inputs=[mesh.id, fine_coords, wp.vec3(*origin), voxel_size, float(query_radius), int(field_id)],
+              outputs=[dist0, proj0, face0, nsign0, src0])
+    timings["finest_distance"] = time.perf_counter() - t0
+
+    def oracle(coords, nodes_np, spacing, sign):
+        if len(nodes_np) == 0:
+            return
+        nodes = wp.array(nodes_np.astype(np.int32), dtype=wp.int32, device=device)
+        wp.launch(_mesh_sign_kernel, dim=len(nodes_np), device=device,
+                  inputs=[mesh.id, coords, nodes, wp.vec3(*origin), float(spacing), diag, 0 if clean else 1],
+                  outputs=[sign])
+
+    problem_wp = wp.array(problem, dtype=wp.int32, device=device)
+
+    def finest_signs(coords, sign, lo0, hi0):
+        n = hi0 - lo0
+        undecided = wp.empty(n, dtype=wp.int32, device=device)
+        wp.launch(_finest_sign_kernel, dim=n, inputs=[sign, nsign0, face0, problem_wp], outputs=[undecided],
+                  device=device)
+        idx = np.flatnonzero(undecided.numpy())
+        oracle(coords, idx, voxel_size, sign)
+        return len(idx)
+
+    field = assemble_field(
+        origin=origin, top_dims=top_dims, voxel_size=voxel_size, levels=levels, fine_codes=fine_codes,
+        fine_coords=fine_coords, fine_dist=dist0, fine_proj=proj0, fine_source=src0, oracle=oracle,
+        finest_signs=finest_signs, device=device, field_ids=(field_id,), timings=timings, mesh_id=mesh.id,
+    )
+    field.stats["clean_mesh"] = clean
+    field.stats["problem_faces"] = int(problem.sum())
+    field._mesh = mesh  # keeps the BVH alive for callers that want exact queries
+    return field
+
+
+def _bits(dims) -> int:
+    return max(1, int(np.ceil(np.log2(float(np.max(dims)) + 1.0))))
+
+
+def assemble_field(*, origin, top_dims, voxel_size, levels, fine_codes, fine_coords, fine_dist, fine_proj,
+                   fine_source, oracle, finest_signs, device, field_ids, timings, fine_values=None, mesh_id=0):
+    """Build the intermediate and top levels above a finest level and sign every node (shared by construction
+    and booleans).
+
+    ``fine_dist``/``fine_proj`` are unsigned distances and projection points of the finest nodes. Signs are
+    assigned top-down: ``oracle(coords, nodes, spacing, sign)`` writes the sign of the given nodes of one level;
+    ``finest_signs(coords, sign, lo, hi)`` decides the finest nodes the parent left undecided. When
+    ``fine_values`` (signed) is given the finest level keeps those values instead.
+    """
+    top_dims = np.asarray(top_dims, dtype=np.int64)
+    fine_dims = top_dims * 2 ** (levels - 1)
+    t0 = time.perf_counter()
+    level_codes, level_coords = [fine_codes], [fine_coords]
+    level_times = {}
+    for k in range(1, levels - 1):
+        tk = time.perf_counter()
+        dims_k = fine_dims >> k
+        grand = octree.parent_octets(level_codes[-1], 2, end_bit=3 * _bits(dims_k * 2))
+        c, co = octree.expand_octets(grand)
+        level_codes.append(c)
+        level_coords.append(co)
+        level_times[k] = time.perf_counter() - tk
+    if levels > 1:
+        coords_np, codes_np = octree.dense_level(top_dims)
+        level_codes.append(wp.array(codes_np, dtype=wp.int64, device=device))
+        level_coords.append(wp.array(coords_np, dtype=wp.vec3i, device=device))
+    sizes = [c.shape[0] for c in level_codes]
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    n = int(offsets[-1])
+    codes = wp.empty(n, dtype=wp.int64, device=device)
+    coords = wp.empty(n, dtype=wp.vec3i, device=device)
+    for k in range(levels):
+        if sizes[k]:
+            wp.copy(codes, level_codes[k], dest_offset=int(offsets[k]), count=sizes[k])
+            wp.copy(coords, level_coords[k], dest_offset=int(offsets[k]), count=sizes[k])
+    del level_codes, level_coords
+    child = wp.full(n, -1, dtype=wp.int32, device=device)
+    parent = wp.full(n, -1, dtype=wp.int32, device=device)
+    for k in range(1, levels):
+        lo, hi = int(offsets[k]), int(offsets[k + 1])
+        wp.launch(octree._link_children_kernel, dim=hi - lo,
+                  inputs=[codes, codes, int(offsets[k - 1]), int(offsets[k]), lo], outputs=[child], device=device)
+        wp.launch(octree._link_parents_kernel, dim=hi - lo, inputs=[child, lo], outputs=[parent], device=device)
+    timings["levels_structure"] = time.perf_counter() - t0
+
+    dist = wp.empty(n, dtype=wp.float32, device=device)
+    proj = wp.empty(n, dtype=wp.vec3, device=device)
+    source = wp.empty(n, dtype=wp.int32, device=device)
+    n0 = sizes[0]
+    wp.copy(dist, fine_dist, count=n0)
+    wp.copy(proj, fine_proj, count=n0)
+    wp.copy(source, fine_source, count=n0)
+    neighbours = wp.full((n, 6), -1, dtype=wp.int32, device=device)
+    sweeps = {}
+    origin_t = tuple(float(x) for x in origin)
+    for k in range(1, levels):
+        tk = time.perf_counter()
+        lo, hi = int(offsets[k]), int(offsets[k + 1])
+        octree.level_neighbours(coords, lo, hi, fine_dims >> k, neighbours)
+        tn = time.perf_counter()
+        sweeps[k] = octree.solve_level(coords, child, neighbours, lo, hi, origin_t, voxel_size * 2**k, dist, proj,
+                                       source, mesh_id=mesh_id)
+        name = "top_level" if k == levels - 1 else f"level_{k}"
+        timings[f"{name}_neighbours"] = tn - tk
+        timings[name] = time.perf_counter() - tk + level_times.get(k, 0.0)
+
+    # Signs, top-down.
+    t0 = time.perf_counter()
+    sign = wp.zeros(n, dtype=wp.float32, device=device)
+    top_lo, top_hi = int(offsets[levels - 1]), int(offsets[levels])
+    oracle_counts = {}
+    if levels > 1:
+        oracle(coords, np.arange(top_lo, top_hi), voxel_size * 2 ** (levels - 1), sign)
+        oracle_counts[levels - 1] = top_hi - top_lo
+    origin_v = wp.vec3(*origin_t)
+    for k in range(levels - 2, -1, -1):
+        lo, hi = int(offsets[k]), int(offsets[k + 1])
+        wp.launch(octree._inherit_sign_kernel, dim=hi - lo,
+                  inputs=[coords, parent, lo, origin_v, voxel_size * 2**k, dist, sign, SIGN_SAFETY], device=device)
+        if k > 0:
+            idx = lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
+            oracle(coords, idx, voxel_size * 2**k, sign)
+            oracle_counts[k] = len(idx)
+    if levels == 1:
+        oracle_counts[0] = finest_signs(coords, sign, 0, n0)
+    else:
+        oracle_counts[0] = finest_signs(coords, sign, 0, n0)
+    values = wp.empty(n, dtype=wp.float32, device=device)
+    wp.launch(_apply_sign_kernel, dim=n, inputs=[dist, sign], outputs=[values], device=device)
+    if fine_values is not None:
+        wp.copy(values, fine_values, count=n0)
+    timings["signs"] = time.perf_counter() - t0
+
+    return AdaptiveField(
+        voxel_size=voxel_size, levels=levels, origin=origin, top_dims=top_dims, level_offsets=offsets, codes=codes,
+        coords=coords, values=values, proj=proj, child=child, source=source, field_ids=field_ids, device=device,
+        timings=timings, stats={"fim_sweeps": sweeps, "sign_queries": oracle_counts},
+    )

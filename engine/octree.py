@@ -1,0 +1,454 @@
+"""Structure of the hierarchical sparse octree: Morton codes, sort/unique, levels, neighbours and the FIM solve.
+
+Every level ``k`` (0 = finest) is a set of cells of edge ``voxel_size * 2**k`` whose integer coordinates are
+relative to the field's domain origin, itself a multiple of the top spacing measured from the shared world origin
+(Ren et al., Eq. 3). Cells come in complete octets, so every internal node has exactly 8 children; intermediate
+levels are sorted by 64-bit Morton code, the top level is a dense grid in x-fastest order. These kernels are
+device-agnostic: nothing here knows whether it runs on the CPU or on CUDA.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+# Bits per axis in a Morton code: 21 * 3 = 63 bits fit a signed 64-bit key.
+MORTON_BITS = 21
+MAX_CELLS_PER_AXIS = 1 << MORTON_BITS
+UNSET_DISTANCE = 1.0e30
+
+
+# ---- Morton codes ----
+
+
+@wp.func
+def _spread_bits(v: wp.int64) -> wp.int64:
+    x = v & wp.int64(0x1FFFFF)
+    x = (x | (x << wp.int64(32))) & wp.int64(0x1F00000000FFFF)
+    x = (x | (x << wp.int64(16))) & wp.int64(0x1F0000FF0000FF)
+    x = (x | (x << wp.int64(8))) & wp.int64(0x100F00F00F00F00F)
+    x = (x | (x << wp.int64(4))) & wp.int64(0x10C30C30C30C30C3)
+    x = (x | (x << wp.int64(2))) & wp.int64(0x1249249249249249)
+    return x
+
+
+@wp.func
+def _compact_bits(v: wp.int64) -> wp.int64:
+    x = v & wp.int64(0x1249249249249249)
+    x = (x | (x >> wp.int64(2))) & wp.int64(0x10C30C30C30C30C3)
+    x = (x | (x >> wp.int64(4))) & wp.int64(0x100F00F00F00F00F)
+    x = (x | (x >> wp.int64(8))) & wp.int64(0x1F0000FF0000FF)
+    x = (x | (x >> wp.int64(16))) & wp.int64(0x1F00000000FFFF)
+    x = (x | (x >> wp.int64(32))) & wp.int64(0x1FFFFF)
+    return x
+
+
+@wp.func
+def morton_encode(c: wp.vec3i) -> wp.int64:
+    """Interleave (x, y, z) with x in bit 0: the low 3 bits of a child's code are its octant in the parent."""
+    return (
+        _spread_bits(wp.int64(c[0]))
+        | (_spread_bits(wp.int64(c[1])) << wp.int64(1))
+        | (_spread_bits(wp.int64(c[2])) << wp.int64(2))
+    )
+
+
+@wp.func
+def morton_decode(m: wp.int64) -> wp.vec3i:
+    return wp.vec3i(
+        wp.int32(_compact_bits(m)),
+        wp.int32(_compact_bits(m >> wp.int64(1))),
+        wp.int32(_compact_bits(m >> wp.int64(2))),
+    )
+
+
+def morton_encode_np(coords: np.ndarray) -> np.ndarray:
+    """Host twin of :func:`morton_encode`: (N,3) non-negative ints -> (N,) int64."""
+    coords = np.asarray(coords, dtype=np.int64)
+    out = np.zeros(len(coords), dtype=np.int64)
+    for bit in range(MORTON_BITS):
+        for axis in range(3):
+            out |= ((coords[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return out
+
+
+@wp.func
+def lower_bound(keys: wp.array[wp.int64], lo: int, hi: int, key: wp.int64) -> int:
+    """First index in [lo, hi) whose key is >= ``key`` (keys sorted ascending)."""
+    a = lo
+    b = hi
+    while a < b:
+        mid = (a + b) // 2
+        if keys[mid] < key:
+            a = mid + 1
+        else:
+            b = mid
+    return a
+
+
+@wp.func
+def find_key(keys: wp.array[wp.int64], lo: int, hi: int, key: wp.int64) -> int:
+    """Index of ``key`` in the sorted range [lo, hi), or -1."""
+    i = lower_bound(keys, lo, hi, key)
+    if i < hi:
+        if keys[i] == key:
+            return i
+    return -1
+
+
+# ---- sort and unique ----
+
+
+@wp.kernel(enable_backward=False)
+def _iota_kernel(out: wp.array[wp.int32]):
+    i = wp.tid()
+    out[i] = i
+
+
+@wp.kernel(enable_backward=False)
+def _mark_unique_kernel(keys: wp.array[wp.int64], flags: wp.array[wp.int32]):
+    i = wp.tid()
+    if i == 0:
+        flags[i] = 1
+    elif keys[i] != keys[i - 1]:
+        flags[i] = 1
+    else:
+        flags[i] = 0
+
+
+@wp.kernel(enable_backward=False)
+def _compact_unique_kernel(
+    keys: wp.array[wp.int64], flags: wp.array[wp.int32], slots: wp.array[wp.int32], out: wp.array[wp.int64]
+):
+    i = wp.tid()
+    if flags[i] == 1:
+        out[slots[i]] = keys[i]
+
+
+def sort_unique(keys: wp.array, end_bit: int = 63) -> wp.array:
+    """Sorted unique values of an int64 array (radix sort, mark first occurrences, exclusive scan, compact)."""
+    n = keys.shape[0]
+    device = keys.device
+    if n == 0:
+        return wp.empty(0, dtype=wp.int64, device=device)
+    work_keys = wp.empty(2 * n, dtype=wp.int64, device=device)
+    wp.copy(work_keys, keys, count=n)
+    work_vals = wp.empty(2 * n, dtype=wp.int32, device=device)
+    wp.launch(_iota_kernel, dim=n, outputs=[work_vals], device=device)
+    wp.utils.radix_sort_pairs(work_keys, work_vals, n, end_bit=max(1, min(63, end_bit)))
+    sorted_keys = work_keys[:n]
+    flags = wp.empty(n, dtype=wp.int32, device=device)
+    wp.launch(_mark_unique_kernel, dim=n, inputs=[sorted_keys], outputs=[flags], device=device)
+    slots = wp.empty(n, dtype=wp.int32, device=device)
+    wp.utils.array_scan(flags, slots, inclusive=False)
+    count = int(slots.numpy()[-1] + flags.numpy()[-1])
+    out = wp.empty(count, dtype=wp.int64, device=device)
+    wp.launch(_compact_unique_kernel, dim=n, inputs=[sorted_keys, flags, slots], outputs=[out], device=device)
+    return out
+
+
+# ---- levels: parents, siblings, children ----
+
+
+@wp.kernel(enable_backward=False)
+def _shift_codes_kernel(codes: wp.array[wp.int64], shift: int, out: wp.array[wp.int64]):
+    i = wp.tid()
+    out[i] = codes[i] >> wp.int64(shift)
+
+
+@wp.kernel(enable_backward=False)
+def _expand_octets_kernel(octets: wp.array[wp.int64], codes: wp.array[wp.int64], coords: wp.array[wp.vec3i]):
+    """Each octet code (a parent) becomes its 8 children, in Morton order."""
+    i = wp.tid()
+    base = octets[i] << wp.int64(3)
+    for o in range(8):
+        m = base | wp.int64(o)
+        codes[8 * i + int(o)] = m
+        coords[8 * i + int(o)] = morton_decode(m)
+
+
+def expand_octets(octets: wp.array) -> tuple[wp.array, wp.array]:
+    """Children of every parent code: (8M,) int64 codes sorted when ``octets`` is, and (8M,) vec3i coordinates."""
+    n = octets.shape[0]
+    codes = wp.empty(8 * n, dtype=wp.int64, device=octets.device)
+    coords = wp.empty(8 * n, dtype=wp.vec3i, device=octets.device)
+    if n:
+        wp.launch(_expand_octets_kernel, dim=n, inputs=[octets], outputs=[codes, coords], device=octets.device)
+    return codes, coords
+
+
+def parent_octets(codes: wp.array, levels_up: int, end_bit: int) -> wp.array:
+    """Unique codes ``levels_up`` levels above (Eq. 6 with ``levels_up=2``: grandparents whose 8 children are the
+    parents and their siblings)."""
+    shifted = wp.empty_like(codes)
+    if codes.shape[0]:
+        wp.launch(_shift_codes_kernel, dim=codes.shape[0], inputs=[codes, 3 * levels_up], outputs=[shifted],
+                  device=codes.device)
+    return sort_unique(shifted, end_bit=end_bit)
+
+
+@wp.kernel(enable_backward=False)
+def _dense_coords_kernel(nx: int, ny: int, coords: wp.array[wp.vec3i], codes: wp.array[wp.int64]):
+    i = wp.tid()
+    x = i % nx
+    y = (i // nx) % ny
+    z = i // (nx * ny)
+    c = wp.vec3i(x, y, z)
+    coords[i] = c
+    codes[i] = morton_encode(c)
+
+
+def dense_level(dims) -> tuple[np.ndarray, np.ndarray]:
+    """Coordinates and codes of a dense (nx, ny, nz) level in x-fastest order (host arrays)."""
+    nx, ny, nz = (int(d) for d in dims)
+    idx = np.arange(nx * ny * nz, dtype=np.int64)
+    coords = np.stack([idx % nx, (idx // nx) % ny, idx // (nx * ny)], axis=1).astype(np.int32)
+    return coords, morton_encode_np(coords)
+
+
+@wp.kernel(enable_backward=False)
+def _link_children_kernel(
+    parent_codes: wp.array[wp.int64],
+    child_codes: wp.array[wp.int64],
+    child_lo: int,
+    child_hi: int,
+    parent_base: int,
+    first_child: wp.array[wp.int32],
+):
+    """First child of each node (global index) or -1 for a leaf; children of a node are 8 consecutive entries."""
+    i = wp.tid()
+    j = find_key(child_codes, child_lo, child_hi, parent_codes[parent_base + i] << wp.int64(3))
+    first_child[parent_base + i] = j
+
+
+@wp.kernel(enable_backward=False)
+def _link_parents_kernel(first_child: wp.array[wp.int32], lo: int, parent: wp.array[wp.int32]):
+    i = lo + wp.tid()
+    c = first_child[i]
+    if c >= 0:
+        for o in range(8):
+            parent[c + o] = i
+
+
+# ---- neighbours along each axis (Eq. 7) ----
+
+
+@wp.kernel(enable_backward=False)
+def _axis_keys_kernel(
+    coords: wp.array[wp.vec3i], lo: int, axis: int, dims: wp.vec3i, keys: wp.array[wp.int64], vals: wp.array[wp.int32]
+):
+    i = wp.tid()
+    c = coords[lo + i]
+    a = axis
+    b = (axis + 1) % 3
+    d = (axis + 2) % 3
+    keys[i] = (wp.int64(c[d]) * wp.int64(dims[b]) + wp.int64(c[b])) * wp.int64(dims[a]) + wp.int64(c[a])
+    vals[i] = lo + i
+
+
+@wp.kernel(enable_backward=False)
+def _axis_neighbours_kernel(
+    keys: wp.array[wp.int64], vals: wp.array[wp.int32], n: int, axis: int, neighbours: wp.array2d[wp.int32]
+):
+    """In key order, consecutive keys one apart are neighbours along ``axis`` (no row wrap: keys include the row)."""
+    t = wp.tid()
+    i = vals[t]
+    if t + 1 < n:
+        if keys[t + 1] == keys[t] + wp.int64(1):
+            j = vals[t + 1]
+            neighbours[i, 2 * axis + 1] = j
+            neighbours[j, 2 * axis] = i
+
+
+def level_neighbours(coords: wp.array, lo: int, hi: int, dims, neighbours: wp.array) -> None:
+    """Fill rows [lo, hi) of ``neighbours`` (N,6) int32 with the -x,+x,-y,+y,-z,+z same-level neighbours (Eq. 7)."""
+    n = hi - lo
+    if n == 0:
+        return
+    device = coords.device
+    dims_v = wp.vec3i(*(int(d) for d in dims))
+    total_bits = int(np.ceil(np.log2(float(np.prod(np.asarray(dims, dtype=np.float64))) + 2.0)))
+    keys = wp.empty(2 * n, dtype=wp.int64, device=device)
+    vals = wp.empty(2 * n, dtype=wp.int32, device=device)
+    for axis in range(3):
+        wp.launch(_axis_keys_kernel, dim=n, inputs=[coords, lo, axis, dims_v], outputs=[keys, vals], device=device)
+        wp.utils.radix_sort_pairs(keys, vals, n, end_bit=max(1, min(63, total_bits)))
+        wp.launch(_axis_neighbours_kernel, dim=n, inputs=[keys, vals, n, axis], outputs=[neighbours], device=device)
+
+
+# ---- distances: internal nodes from children, leaves by the fast iterative method ----
+
+
+@wp.func
+def node_center(origin: wp.vec3, spacing: float, c: wp.vec3i) -> wp.vec3:
+    return origin + spacing * wp.vec3(float(c[0]) + 0.5, float(c[1]) + 0.5, float(c[2]) + 0.5)
+
+
+@wp.kernel(enable_backward=False)
+def _init_from_children_kernel(
+    coords: wp.array[wp.vec3i],
+    first_child: wp.array[wp.int32],
+    lo: int,
+    origin: wp.vec3,
+    spacing: float,
+    mesh: wp.uint64,
+    max_dist: float,
+    dist: wp.array[wp.float32],
+    proj: wp.array[wp.vec3],
+    source: wp.array[wp.int32],
+):
+    """Internal nodes are sources. With a mesh, their closest point is exact (the BVH query is seeded by the
+    nearest child projection, which bounds its search radius); without one, the nearest of their children's
+    projection points. Leaves start unset."""
+    i = lo + wp.tid()
+    c = first_child[i]
+    if c < 0:
+        dist[i] = UNSET_DISTANCE
+        return
+    x = node_center(origin, spacing, coords[i])
+    if mesh != wp.uint64(0):
+        q = wp.mesh_query_point_no_sign(mesh, x, max_dist)
+        if q.result:
+            p = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+            dist[i] = wp.length(x - p)
+            proj[i] = p
+            source[i] = source[c]
+            return
+    best = float(UNSET_DISTANCE)
+    best_j = c
+    for o in range(8):
+        j = c + o
+        if dist[j] < UNSET_DISTANCE:
+            dj = wp.length(x - proj[j])
+            if dj < best:
+                best = dj
+                best_j = j
+    dist[i] = best
+    proj[i] = proj[best_j]
+    source[i] = source[best_j]
+
+
+@wp.kernel(enable_backward=False)
+def _fim_sweep_kernel(
+    coords: wp.array[wp.vec3i],
+    first_child: wp.array[wp.int32],
+    neighbours: wp.array2d[wp.int32],
+    lo: int,
+    origin: wp.vec3,
+    spacing: float,
+    dist_in: wp.array[wp.float32],
+    proj_in: wp.array[wp.vec3],
+    src_in: wp.array[wp.int32],
+    dist_out: wp.array[wp.float32],
+    proj_out: wp.array[wp.vec3],
+    src_out: wp.array[wp.int32],
+    changed: wp.array[wp.int32],
+):
+    """One Jacobi sweep of the fast iterative method over a level: each leaf takes the nearest projection point
+    among its face neighbours (a closest-point Eikonal update); internal nodes stay fixed as sources."""
+    i = lo + wp.tid()
+    best = dist_in[i]
+    p = proj_in[i]
+    s = src_in[i]
+    if first_child[i] < 0:
+        x = node_center(origin, spacing, coords[i])
+        for k in range(6):
+            j = neighbours[i, k]
+            if j >= 0:
+                if dist_in[j] < UNSET_DISTANCE:
+                    dj = wp.length(x - proj_in[j])
+                    if dj < best * 0.99999:
+                        best = dj
+                        p = proj_in[j]
+                        s = src_in[j]
+        if best < dist_in[i]:
+            wp.atomic_add(changed, 0, 1)
+    dist_out[i] = best
+    proj_out[i] = p
+    src_out[i] = s
+
+
+def solve_level(coords, first_child, neighbours, lo, hi, origin, spacing, dist, proj, source, mesh_id=0,
+                max_sweeps=4096):
+    """Initialise a level from its children (exactly from ``mesh_id`` when given) and run the fast iterative method
+    until no leaf changes."""
+    n = hi - lo
+    if n == 0:
+        return 0
+    device = coords.device
+    origin_v = wp.vec3(*origin)
+    wp.launch(_init_from_children_kernel, dim=n, device=device,
+              inputs=[coords, first_child, lo, origin_v, float(spacing), wp.uint64(mesh_id), 4.0 * float(spacing)],
+              outputs=[dist, proj, source])
+    dist_b, proj_b, src_b = wp.clone(dist), wp.clone(proj), wp.clone(source)
+    changed = wp.zeros(1, dtype=wp.int32, device=device)
+    bufs = [(dist, proj, source), (dist_b, proj_b, src_b)]
+    sweeps = 0
+    while sweeps < max_sweeps:
+        changed.zero_()
+        src_bufs, dst_bufs = bufs[sweeps % 2], bufs[(sweeps + 1) % 2]
+        wp.launch(_fim_sweep_kernel, dim=n,
+                  inputs=[coords, first_child, neighbours, lo, origin_v, float(spacing), *src_bufs],
+                  outputs=[*dst_bufs, changed], device=device)
+        sweeps += 1
+        if int(changed.numpy()[0]) == 0:
+            break
+    if sweeps % 2 == 1:
+        wp.copy(dist, dist_b, dest_offset=lo, src_offset=lo, count=n)
+        wp.copy(proj, proj_b, dest_offset=lo, src_offset=lo, count=n)
+        wp.copy(source, src_b, dest_offset=lo, src_offset=lo, count=n)
+    if mesh_id:
+        wp.launch(_refine_leaves_kernel, dim=n, device=device,
+                  inputs=[coords, first_child, lo, origin_v, float(spacing), wp.uint64(mesh_id)], outputs=[dist, proj])
+    return sweeps
+
+
+@wp.kernel(enable_backward=False)
+def _refine_leaves_kernel(
+    coords: wp.array[wp.vec3i],
+    first_child: wp.array[wp.int32],
+    lo: int,
+    origin: wp.vec3,
+    spacing: float,
+    mesh: wp.uint64,
+    dist: wp.array[wp.float32],
+    proj: wp.array[wp.vec3],
+):
+    """Exact closest point of a solved leaf: the FIM distance is an upper bound that caps the BVH search radius."""
+    i = lo + wp.tid()
+    if first_child[i] >= 0:
+        return
+    x = node_center(origin, spacing, coords[i])
+    q = wp.mesh_query_point_no_sign(mesh, x, dist[i] * 1.0001 + spacing * 1.0e-4)
+    if q.result:
+        p = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+        d = wp.length(x - p)
+        if d < dist[i]:
+            dist[i] = d
+            proj[i] = p
+
+
+# ---- signs, top-down ----
+
+
+@wp.kernel(enable_backward=False)
+def _inherit_sign_kernel(
+    coords: wp.array[wp.vec3i],
+    parent: wp.array[wp.int32],
+    lo: int,
+    origin: wp.vec3,
+    spacing: float,
+    dist: wp.array[wp.float32],
+    sign: wp.array[wp.float32],
+    safety: float,
+):
+    """A node takes its parent's sign when the two empty balls around them cover the segment between them (no
+    surface can cross it); otherwise its sign stays 0 (undecided) for the caller's oracle."""
+    i = lo + wp.tid()
+    p = parent[i]
+    sign[i] = 0.0
+    if p >= 0:
+        xi = node_center(origin, spacing, coords[i])
+        xp = node_center(origin, 2.0 * spacing, coords[p])
+        if (dist[i] + dist[p]) * safety > wp.length(xi - xp):
+            sign[i] = sign[p]

@@ -1,0 +1,131 @@
+"""Helpers shared by tests and benchmarks: mesh loading and analytic test shapes (no bpy)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_MESHES = ROOT.parent / "shared" / "meshes"
+SAMPLE_MESHES = ROOT / "samples"
+
+
+def mesh_path(name: str) -> Path:
+    """Path of a test mesh: the repository's bundled samples first, then ``../shared/meshes``."""
+    for folder in (SAMPLE_MESHES, SHARED_MESHES):
+        path = folder / name
+        if path.exists():
+            return path
+    raise FileNotFoundError(f"No test mesh named {name!r} in {SAMPLE_MESHES} or {SHARED_MESHES}")
+
+
+def load_obj(path) -> tuple[np.ndarray, np.ndarray]:
+    """Read a Wavefront .obj as (V,3) float32 vertices and (T,3) int32 triangles (polygons fan-triangulated)."""
+    verts, faces = [], []
+    with open(path, encoding="utf-8", errors="replace") as handle:
+        for line in handle:
+            if line.startswith("v "):
+                verts.append(line.split()[1:4])
+            elif line.startswith("f "):
+                idx = [int(tok.split("/")[0]) for tok in line.split()[1:]]
+                faces.append(idx)
+    vertices = np.asarray(verts, dtype=np.float64).astype(np.float32)
+    tris = []
+    for poly in faces:
+        poly = [i - 1 if i > 0 else len(vertices) + i for i in poly]
+        tris.extend((poly[0], poly[k], poly[k + 1]) for k in range(1, len(poly) - 1))
+    return vertices, np.asarray(tris, dtype=np.int32).reshape(-1, 3)
+
+
+def load_mesh(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Load a named test mesh (e.g. ``"spot.obj"``)."""
+    return load_obj(mesh_path(name))
+
+
+def uv_sphere(radius: float = 1.0, center=(0.0, 0.0, 0.0), rings: int = 48, segments: int = 96):
+    """A closed, outward-oriented UV sphere: (V,3) float32, (T,3) int32."""
+    theta = np.linspace(0.0, np.pi, rings + 1)[1:-1]
+    phi = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    ring = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1).reshape(-1, 3)
+    verts = np.concatenate([[[0.0, 0.0, 1.0]], ring, [[0.0, 0.0, -1.0]]]) * radius + np.asarray(center)
+    top, bottom = 0, len(verts) - 1
+    idx = 1 + np.arange((rings - 1) * segments).reshape(rings - 1, segments)
+    nxt = np.roll(idx, -1, axis=1)
+    cap_top = np.stack([np.full(segments, top), idx[0], nxt[0]], axis=1)
+    cap_bot = np.stack([np.full(segments, bottom), nxt[-1], idx[-1]], axis=1)
+    a, b, c, d = idx[:-1], nxt[:-1], idx[1:], nxt[1:]
+    quads = np.concatenate([np.stack([a, c, b], -1).reshape(-1, 3), np.stack([b, c, d], -1).reshape(-1, 3)])
+    tris = np.concatenate([cap_top, quads, cap_bot]).astype(np.int32)
+    return verts.astype(np.float32), tris
+
+
+def box_mesh(half=(1.0, 1.0, 1.0), center=(0.0, 0.0, 0.0), subdivisions: int = 1):
+    """A closed, outward-oriented axis-aligned box, each face split into ``subdivisions``² quads."""
+    n = subdivisions
+    g = np.linspace(-1.0, 1.0, n + 1)
+    verts, tris = [], []
+    for axis in range(3):
+        for side in (-1.0, 1.0):
+            u, v = np.meshgrid(g, g, indexing="ij")
+            pts = np.zeros((n + 1, n + 1, 3))
+            a1, a2 = (axis + 1) % 3, (axis + 2) % 3
+            pts[..., axis] = side
+            pts[..., a1] = u
+            pts[..., a2] = v
+            base = sum(len(x) for x in verts)
+            verts.append(pts.reshape(-1, 3))
+            ids = base + np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+            q00, q10, q01, q11 = ids[:-1, :-1], ids[1:, :-1], ids[:-1, 1:], ids[1:, 1:]
+            t1 = np.stack([q00, q10, q11], -1).reshape(-1, 3)
+            t2 = np.stack([q00, q11, q01], -1).reshape(-1, 3)
+            faces = np.concatenate([t1, t2])
+            if side < 0:
+                faces = faces[:, ::-1]
+            tris.append(faces)
+    verts = np.concatenate(verts) * np.asarray(half) + np.asarray(center)
+    verts, inverse = np.unique(np.round(verts, 9), axis=0, return_inverse=True)
+    tris = inverse.reshape(-1)[np.concatenate(tris)]
+    return verts.astype(np.float32), tris.astype(np.int32)
+
+
+def torus_mesh(major: float = 1.0, minor: float = 0.35, rings: int = 96, segments: int = 48):
+    """A closed, outward-oriented torus around the z axis."""
+    u = np.linspace(0.0, 2.0 * np.pi, rings, endpoint=False)
+    v = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    x = (major + minor * np.cos(vv)) * np.cos(uu)
+    y = (major + minor * np.cos(vv)) * np.sin(uu)
+    z = minor * np.sin(vv)
+    verts = np.stack([x, y, z], -1).reshape(-1, 3)
+    ids = np.arange(rings * segments).reshape(rings, segments)
+    a, b = ids, np.roll(ids, -1, axis=0)
+    c, d = np.roll(ids, -1, axis=1), np.roll(np.roll(ids, -1, axis=0), -1, axis=1)
+    tris = np.concatenate([np.stack([a, b, d], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)])
+    return verts.astype(np.float32), tris.astype(np.int32)
+
+
+def signed_volume(verts, tris) -> float:
+    """Volume enclosed by a closed, outward-oriented triangle mesh (divergence theorem)."""
+    v = np.asarray(verts, dtype=np.float64)[np.asarray(tris)]
+    return float(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0)
+
+
+def edge_use_counts(tris) -> np.ndarray:
+    """How many triangles use each undirected edge (a watertight 2-manifold gives 2 everywhere)."""
+    t = np.asarray(tris, dtype=np.int64)
+    e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(e, axis=0, return_counts=True)
+    return counts
+
+
+def is_watertight(tris) -> bool:
+    """Every undirected edge is shared by exactly two triangles, and each directed edge appears once."""
+    t = np.asarray(tris, dtype=np.int64)
+    if len(t) == 0:
+        return False
+    directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    if len(np.unique(directed, axis=0)) != len(directed):
+        return False
+    return bool(np.all(edge_use_counts(t) == 2))
