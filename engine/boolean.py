@@ -1,13 +1,306 @@
-"""Booleans between adaptive fields (Ren et al., Sec. 5)."""
+"""Booleans between adaptive fields (Ren et al., Sec. 5), closed: the result is a field of the same kind.
+
+The result's finest level is the union of both operands' finest levels on the result lattice (origin = the lower
+corner of both domains, Eq. 11, snapped to the shared world origin). An operand with the result's spacing is
+node-aligned and contributes its exact node values; an operand with another spacing has its finest level rebuilt
+at the result's spacing from its own cells (the paper's "cells as primitives"), its values sampled by MLS. Each finest
+node then takes ``op(phi_a, phi_b)`` (Eq. 8 with negative inside: union = min, intersection = max, difference =
+max(a, -b)), or the polynomial smooth version when ``blend > 0``. The intermediate and top levels are rebuilt bottom-up
+with the construction's own structure code (parents + siblings, dense top), their values sampled from the operands.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import warp as wp
+
+from . import octree
+from .field import AdaptiveField, _bits, assemble_field, check_budget, plan_domain
+from .octree import morton_encode, node_center
+from .sampling import FieldArg, clamp_to_domain, locate_leaf, sample_mls
+
+OP_UNION, OP_INTERSECTION, OP_DIFFERENCE = 0, 1, 2
 
 
-def union(a, b, *, blend=0.0):
-    raise NotImplementedError
+# ---- point operators ----
 
 
-def intersection(a, b, *, blend=0.0):
-    raise NotImplementedError
+@wp.func
+def sdf_smooth_min(a: float, b: float, k: float) -> float:
+    """Polynomial smooth minimum of radius ``k`` (``k = 0``: min)."""
+    if k <= 0.0:
+        return wp.min(a, b)
+    h = wp.clamp(0.5 + 0.5 * (b - a) / k, 0.0, 1.0)
+    return b + (a - b) * h - k * h * (1.0 - h)
 
 
-def difference(a, b, *, blend=0.0):
-    raise NotImplementedError
+@wp.func
+def sdf_combine(op: int, a: float, b: float, k: float) -> float:
+    """union = min, intersection = max, difference (a minus b) = max(a, -b); smooth when ``k > 0``."""
+    if op == 0:
+        return sdf_smooth_min(a, b, k)
+    if op == 1:
+        return -sdf_smooth_min(-a, -b, k)
+    return -sdf_smooth_min(-a, b, k)
+
+
+@wp.func
+def _lookup_or_sample(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3) -> wp.vec4:
+    """(phi, grad) of an operand at result node ``c`` (world ``x``): its own node value when aligned and stored,
+    otherwise its MLS sample; outside its domain, the bound that grows with the distance to the domain."""
+    if aligned == 1:
+        oc = c + offset
+        if oc[0] >= 0 and oc[1] >= 0 and oc[2] >= 0:
+            j = octree.find_key(f.codes, 0, f.fine_count, morton_encode(oc))
+            if j >= 0:
+                p = f.proj[j]
+                g = x - p
+                ln = wp.length(g)
+                phi = f.values[j]
+                if ln > 0.0:
+                    g = g / ln
+                if phi < 0.0:
+                    g = -g
+                return wp.vec4(phi, g[0], g[1], g[2])
+    xc = clamp_to_domain(f, x)
+    r = sample_mls(f, xc)
+    out = wp.length(x - xc)
+    if out > 0.0:
+        gd = (x - xc) / out
+        return wp.vec4(wp.max(r[0], 0.0) + out, gd[0], gd[1], gd[2])
+    return r
+
+
+@wp.kernel(enable_backward=False)
+def _combine_nodes_kernel(
+    a: FieldArg,
+    b: FieldArg,
+    a_aligned: int,
+    b_aligned: int,
+    a_offset: wp.vec3i,
+    b_offset: wp.vec3i,
+    coords: wp.array[wp.vec3i],
+    lo: int,
+    origin: wp.vec3,
+    spacing: float,
+    op: int,
+    blend: float,
+    dist: wp.array[wp.float32],
+    proj: wp.array[wp.vec3],
+    source: wp.array[wp.int32],
+    sign: wp.array[wp.float32],
+    values: wp.array[wp.float32],
+):
+    """Value of the boolean at each node of one level: both operands looked up or sampled, then combined. The
+    operand whose value the combination follows gives the projection point and the source id."""
+    t = wp.tid()
+    i = lo + t
+    c = coords[i]
+    x = node_center(origin, spacing, c)
+    ra = _lookup_or_sample(a, a_aligned, a_offset, c, x)
+    rb = _lookup_or_sample(b, b_aligned, b_offset, c, x)
+    phi = sdf_combine(op, ra[0], rb[0], blend)
+    b_term = rb[0]
+    if op == 2:
+        b_term = -rb[0]
+    use_a = wp.abs(phi - ra[0]) <= wp.abs(phi - b_term)
+    r = rb
+    follow = b
+    if use_a:
+        r = ra
+        follow = a
+    g = wp.vec3(r[1], r[2], r[3])
+    proj[i] = x - r[0] * g
+    dist[i] = wp.abs(phi)
+    sign[i] = wp.where(phi < 0.0, -1.0, 1.0)
+    values[t] = phi
+    source[i] = follow.source[locate_leaf(follow, clamp_to_domain(follow, x))[0]]
+
+
+@wp.kernel(enable_backward=False)
+def _octets_of_cells_kernel(
+    f: FieldArg,
+    origin: wp.vec3,
+    octet_size: float,
+    pad: float,
+    dims: wp.vec3i,
+    offsets: wp.array[wp.int32],
+    emit: int,
+    counts: wp.array[wp.int32],
+    codes: wp.array[wp.int64],
+):
+    """Result octets overlapping each finest cell of an operand (cells as primitives), counted or written."""
+    t = wp.tid()
+    x = node_center(f.origin, f.voxel_size, f.coords[t])
+    half = 0.5 * f.voxel_size + pad
+    i0 = wp.vec3i(0)
+    i1 = wp.vec3i(0)
+    for k in range(3):
+        i0[k] = wp.clamp(int(wp.floor((x[k] - half - origin[k]) / octet_size)), 0, dims[k] - 1)
+        i1[k] = wp.clamp(int(wp.floor((x[k] + half - origin[k]) / octet_size)), 0, dims[k] - 1)
+    n = int(0)
+    base = int(0)
+    if emit == 1:
+        base = offsets[t]
+    for z in range(i0[2], i1[2] + 1):
+        for y in range(i0[1], i1[1] + 1):
+            for xx in range(i0[0], i1[0] + 1):
+                if emit == 1:
+                    codes[base + n] = morton_encode(wp.vec3i(xx, y, z))
+                n += 1
+    if emit == 0:
+        counts[t] = n
+
+
+@wp.kernel(enable_backward=False)
+def _dilate_octets_kernel(
+    octets: wp.array[wp.int64], radius: int, dims: wp.vec3i, out: wp.array[wp.int64]
+):
+    """Every octet within ``radius`` octets (a cube) of a stored one; out of range ones repeat the centre."""
+    t = wp.tid()
+    c = octree.morton_decode(octets[t])
+    w = 2 * radius + 1
+    for n in range(w * w * w):
+        d = wp.vec3i(n % w - radius, (n // w) % w - radius, n // (w * w) - radius)
+        q = c + d
+        code = octets[t]
+        if q[0] >= 0 and q[1] >= 0 and q[2] >= 0 and q[0] < dims[0] and q[1] < dims[1] and q[2] < dims[2]:
+            code = morton_encode(q)
+        out[t * w * w * w + n] = code
+
+
+# ---- host side ----
+
+
+def _check_operands(a, b, blend):
+    for name, f in (("a", a), ("b", b)):
+        if not isinstance(f, AdaptiveField):
+            raise TypeError(f"Expected '{name}' to be an AdaptiveField, but got {type(f).__name__}.")
+    blend = float(blend)
+    if not math.isfinite(blend) or blend < 0.0:
+        raise ValueError(f"Expected a non-negative 'blend', but got {blend}.")
+    if a.device != b.device:
+        raise ValueError(f"Both fields must live on the same device, but got {a.device} and {b.device}.")
+    return blend
+
+
+def _offset_to(f: AdaptiveField, origin: np.ndarray, spacing: float) -> np.ndarray:
+    return np.rint((f.origin - origin) / spacing).astype(np.int64)
+
+
+def _octets_of(f: AdaptiveField, origin, spacing, oct_dims, aligned, device) -> wp.array:
+    """Octet codes (result lattice) that cover an operand's finest level."""
+    n0 = int(f.level_offsets[1])
+    if aligned:
+        coords = f.coords.numpy()[:n0].astype(np.int64) + _offset_to(f, origin, spacing)
+        return wp.array(octree.morton_encode_np(coords >> 1), dtype=wp.int64, device=device)
+    args = [f.arg(), wp.vec3(*origin), 2.0 * spacing, 1.0 * spacing, wp.vec3i(*(int(d) for d in oct_dims))]
+    counts = wp.empty(n0, dtype=wp.int32, device=device)
+    dummy = wp.empty(1, dtype=wp.int64, device=device)
+    wp.launch(_octets_of_cells_kernel, dim=n0, inputs=[*args, counts, 0], outputs=[counts, dummy], device=device)
+    counts_np = counts.numpy().astype(np.int64)
+    total = int(counts_np.sum())
+    check_budget(oct_dims * 2, 0, 8 * total)
+    offsets = wp.array(np.concatenate([[0], np.cumsum(counts_np)[:-1]]).astype(np.int32), device=device)
+    codes = wp.empty(total, dtype=wp.int64, device=device)
+    wp.launch(_octets_of_cells_kernel, dim=n0, inputs=[*args, offsets, 1], outputs=[counts, codes], device=device)
+    return codes
+
+
+def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, spacing: str = "finer"):
+    """Boolean of two fields; ``op`` is OP_UNION, OP_INTERSECTION or OP_DIFFERENCE (a minus b).
+
+    Args:
+        a, b: Operands (any built field or boolean result).
+        op: Which operation.
+        blend: Smoothing radius (world units) of a polynomial smooth union / intersection / difference; 0 = hard.
+        spacing: ``"finer"`` (default), ``"coarser"``, ``"a"`` or ``"b"``: whose finest spacing the result takes.
+    Returns:
+        A new AdaptiveField whose node sources carry the operands' field ids.
+    Raises:
+        TypeError, ValueError: On wrong operands or options.
+        AasdfError: If the combined domain would not fit in memory.
+    """
+    blend = _check_operands(a, b, blend)
+    choices = {"finer": min(a.voxel_size, b.voxel_size), "coarser": max(a.voxel_size, b.voxel_size),
+               "a": a.voxel_size, "b": b.voxel_size}
+    if spacing not in choices:
+        raise ValueError(f"Expected 'spacing' to be one of {sorted(choices)}, but got {spacing!r}.")
+    h = choices[spacing]
+    levels = max(a.levels, b.levels)
+    device = a.device
+    timings = {}
+    t0 = time.perf_counter()
+    lo = np.minimum(a.bounds[0], b.bounds[0])
+    hi = np.maximum(a.bounds[1], b.bounds[1])
+    origin, top_dims = plan_domain(lo, hi, h, levels, 0.0)
+    fine_dims = top_dims * 2 ** (levels - 1)
+    check_budget(fine_dims, int(np.prod(top_dims)), 8 * (a.level_counts[0] + b.level_counts[0]))
+    aligned = [bool(np.isclose(f.voxel_size, h, rtol=1e-6, atol=0.0)) and np.allclose(
+        (f.origin - origin) / h, np.rint((f.origin - origin) / h), atol=1e-3) for f in (a, b)]
+    oct_dims = fine_dims // 2
+    parts = [_octets_of(f, origin, h, oct_dims, al, device) for f, al in zip((a, b), aligned)]
+    all_codes = wp.empty(parts[0].shape[0] + parts[1].shape[0], dtype=wp.int64, device=device)
+    wp.copy(all_codes, parts[0], count=parts[0].shape[0])
+    wp.copy(all_codes, parts[1], dest_offset=parts[0].shape[0], count=parts[1].shape[0])
+    octets = octree.sort_unique(all_codes, end_bit=3 * _bits(oct_dims))
+    radius = int(math.ceil(0.25 * blend / (2.0 * h))) if blend > 0.0 else 0
+    if radius > 0:
+        w = (2 * radius + 1) ** 3
+        check_budget(fine_dims, 0, 8 * octets.shape[0] * w)
+        grown = wp.empty(octets.shape[0] * w, dtype=wp.int64, device=device)
+        wp.launch(_dilate_octets_kernel, dim=octets.shape[0], device=device,
+                  inputs=[octets, radius, wp.vec3i(*(int(d) for d in oct_dims))], outputs=[grown])
+        octets = octree.sort_unique(grown, end_bit=3 * _bits(oct_dims))
+    fine_codes, fine_coords = octree.expand_octets(octets)
+    timings["finest_cells"] = time.perf_counter() - t0
+
+    a_arg, b_arg = a.arg(), b.arg()
+    offs = [wp.vec3i(*(int(v) for v in (-_offset_to(f, origin, h) if al else (0, 0, 0))))
+            for f, al in zip((a, b), aligned)]
+    origin_v = wp.vec3(*origin)
+
+    def run(coords, lo_, hi_, spacing_, dist, proj, source, sign, values):
+        wp.launch(_combine_nodes_kernel, dim=hi_ - lo_, device=device,
+                  inputs=[a_arg, b_arg, int(aligned[0] and spacing_ == h), int(aligned[1] and spacing_ == h),
+                          offs[0], offs[1], coords, lo_, origin_v, float(spacing_), int(op), blend],
+                  outputs=[dist, proj, source, sign, values])
+
+    t0 = time.perf_counter()
+    n0 = fine_codes.shape[0]
+    fine_dist = wp.empty(n0, dtype=wp.float32, device=device)
+    fine_proj = wp.empty(n0, dtype=wp.vec3, device=device)
+    fine_src = wp.empty(n0, dtype=wp.int32, device=device)
+    fine_sign = wp.empty(n0, dtype=wp.float32, device=device)
+    fine_values = wp.empty(n0, dtype=wp.float32, device=device)
+    run(fine_coords, 0, n0, h, fine_dist, fine_proj, fine_src, fine_sign, fine_values)
+    timings["finest_values"] = time.perf_counter() - t0
+
+    def level_values(coords, lo_, hi_, spacing_, dist, proj, source, sign):
+        scratch = wp.empty(hi_ - lo_, dtype=wp.float32, device=device)
+        run(coords, lo_, hi_, spacing_, dist, proj, source, sign, scratch)
+
+    return assemble_field(
+        origin=origin, top_dims=top_dims, voxel_size=h, levels=levels, fine_codes=fine_codes,
+        fine_coords=fine_coords, fine_dist=fine_dist, fine_proj=fine_proj, fine_source=fine_src, oracle=None,
+        finest_signs=None, device=device, field_ids=a.field_ids + b.field_ids, timings=timings,
+        fine_values=fine_values, level_values=level_values,
+    )
+
+
+def union(a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer") -> AdaptiveField:
+    """``a`` or ``b`` (min); smooth when ``blend > 0``. See :func:`combine`."""
+    return combine(a, b, OP_UNION, blend=blend, spacing=spacing)
+
+
+def intersection(a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer") -> AdaptiveField:
+    """``a`` and ``b`` (max); smooth when ``blend > 0``. See :func:`combine`."""
+    return combine(a, b, OP_INTERSECTION, blend=blend, spacing=spacing)
+
+
+def difference(a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer") -> AdaptiveField:
+    """``a`` minus ``b`` (max(a, -b)); smooth when ``blend > 0``. See :func:`combine`."""
+    return combine(a, b, OP_DIFFERENCE, blend=blend, spacing=spacing)

@@ -266,6 +266,8 @@ class AdaptiveField:
         f.domain_min = wp.vec3(*lo)
         f.domain_max = wp.vec3(*hi)
         f.coords, f.child, f.values, f.source, f.proj = self.coords, self.child, self.values, self.source, self.proj
+        f.codes = self.codes
+        f.fine_count = int(self.level_offsets[1])
         return f
 
     def __repr__(self) -> str:
@@ -616,14 +618,17 @@ def _bits(dims) -> int:
 
 
 def assemble_field(*, origin, top_dims, voxel_size, levels, fine_codes, fine_coords, fine_dist, fine_proj,
-                   fine_source, oracle, finest_signs, device, field_ids, timings, fine_values=None, mesh_id=0):
+                   fine_source, oracle, finest_signs, device, field_ids, timings, fine_values=None, mesh_id=0,
+                   level_values=None):
     """Build the intermediate and top levels above a finest level and sign every node (shared by construction
     and booleans).
 
     ``fine_dist``/``fine_proj`` are unsigned distances and projection points of the finest nodes. Signs are
     assigned top-down: ``oracle(coords, nodes, spacing, sign)`` writes the sign of the given nodes of one level;
     ``finest_signs(coords, sign, lo, hi)`` decides the finest nodes the parent left undecided. When
-    ``fine_values`` (signed) is given the finest level keeps those values instead.
+    ``fine_values`` (signed) is given the finest level keeps those values instead. When ``level_values(coords, lo,
+    hi, spacing, dist, proj, source, sign)`` is given (booleans: the operands are sampled), it sets every coarse
+    node's distance, projection, source and sign directly, in place of the FIM solve and the sign oracles.
     """
     top_dims = np.asarray(top_dims, dtype=np.int64)
     fine_dims = top_dims * 2 ** (levels - 1)
@@ -671,27 +676,33 @@ def assemble_field(*, origin, top_dims, voxel_size, levels, fine_codes, fine_coo
     neighbours = wp.full((n, 6), -1, dtype=wp.int32, device=device)
     sweeps = {}
     origin_t = tuple(float(x) for x in origin)
+    sign = wp.zeros(n, dtype=wp.float32, device=device)
     for k in range(1, levels):
         tk = time.perf_counter()
         lo, hi = int(offsets[k]), int(offsets[k + 1])
+        name = "top_level" if k == levels - 1 else f"level_{k}"
+        if level_values is not None:
+            level_values(coords, lo, hi, voxel_size * 2**k, dist, proj, source, sign)
+            timings[name] = time.perf_counter() - tk + level_times.get(k, 0.0)
+            continue
         octree.level_neighbours(coords, lo, hi, fine_dims >> k, neighbours)
         tn = time.perf_counter()
         sweeps[k] = octree.solve_level(coords, child, neighbours, lo, hi, origin_t, voxel_size * 2**k, dist, proj,
                                        source, mesh_id=mesh_id)
-        name = "top_level" if k == levels - 1 else f"level_{k}"
         timings[f"{name}_neighbours"] = tn - tk
         timings[name] = time.perf_counter() - tk + level_times.get(k, 0.0)
 
     # Signs, top-down.
     t0 = time.perf_counter()
-    sign = wp.zeros(n, dtype=wp.float32, device=device)
     top_lo, top_hi = int(offsets[levels - 1]), int(offsets[levels])
     oracle_counts = {}
-    if levels > 1:
+    if level_values is not None:
+        pass
+    elif levels > 1:
         oracle(coords, np.arange(top_lo, top_hi), voxel_size * 2 ** (levels - 1), sign)
         oracle_counts[levels - 1] = top_hi - top_lo
     origin_v = wp.vec3(*origin_t)
-    for k in range(levels - 2, -1, -1):
+    for k in range(levels - 2, -1, -1) if level_values is None else ():
         lo, hi = int(offsets[k]), int(offsets[k + 1])
         wp.launch(octree._inherit_sign_kernel, dim=hi - lo,
                   inputs=[coords, parent, lo, origin_v, voxel_size * 2**k, dist, sign, SIGN_SAFETY], device=device)
@@ -699,9 +710,7 @@ def assemble_field(*, origin, top_dims, voxel_size, levels, fine_codes, fine_coo
             idx = lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
             oracle(coords, idx, voxel_size * 2**k, sign)
             oracle_counts[k] = len(idx)
-    if levels == 1:
-        oracle_counts[0] = finest_signs(coords, sign, 0, n0)
-    else:
+    if fine_values is None:
         oracle_counts[0] = finest_signs(coords, sign, 0, n0)
     values = wp.empty(n, dtype=wp.float32, device=device)
     wp.launch(_apply_sign_kernel, dim=n, inputs=[dist, sign], outputs=[values], device=device)

@@ -32,6 +32,8 @@ class FieldArg:
     values: wp.array[wp.float32]
     proj: wp.array[wp.vec3]
     source: wp.array[wp.int32]
+    codes: wp.array[wp.int64]
+    fine_count: int
 
 
 @wp.func
