@@ -156,9 +156,7 @@ def _octets_of_cells_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def _dilate_octets_kernel(
-    octets: wp.array[wp.int64], radius: int, dims: wp.vec3i, out: wp.array[wp.int64]
-):
+def _dilate_octets_kernel(octets: wp.array[wp.int64], radius: int, dims: wp.vec3i, out: wp.array[wp.int64]):
     """Every octet within ``radius`` octets (a cube) of a stored one; out of range ones repeat the centre."""
     t = wp.tid()
     c = octree.morton_decode(octets[t])
@@ -225,8 +223,12 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         AasdfError: If the combined domain would not fit in memory.
     """
     blend = _check_operands(a, b, blend)
-    choices = {"finer": min(a.voxel_size, b.voxel_size), "coarser": max(a.voxel_size, b.voxel_size),
-               "a": a.voxel_size, "b": b.voxel_size}
+    choices = {
+        "finer": min(a.voxel_size, b.voxel_size),
+        "coarser": max(a.voxel_size, b.voxel_size),
+        "a": a.voxel_size,
+        "b": b.voxel_size,
+    }
     if spacing not in choices:
         raise ValueError(f"Expected 'spacing' to be one of {sorted(choices)}, but got {spacing!r}.")
     h = choices[spacing]
@@ -239,8 +241,11 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     origin, top_dims = plan_domain(lo, hi, h, levels, 0.0)
     fine_dims = top_dims * 2 ** (levels - 1)
     check_budget(fine_dims, int(np.prod(top_dims)), 8 * (a.level_counts[0] + b.level_counts[0]))
-    aligned = [bool(np.isclose(f.voxel_size, h, rtol=1e-6, atol=0.0)) and np.allclose(
-        (f.origin - origin) / h, np.rint((f.origin - origin) / h), atol=1e-3) for f in (a, b)]
+    aligned = [
+        bool(np.isclose(f.voxel_size, h, rtol=1e-6, atol=0.0))
+        and np.allclose((f.origin - origin) / h, np.rint((f.origin - origin) / h), atol=1e-3)
+        for f in (a, b)
+    ]
     oct_dims = fine_dims // 2
     parts = [_octets_of(f, origin, h, oct_dims, al, device) for f, al in zip((a, b), aligned)]
     all_codes = wp.empty(parts[0].shape[0] + parts[1].shape[0], dtype=wp.int64, device=device)
@@ -252,22 +257,44 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         w = (2 * radius + 1) ** 3
         check_budget(fine_dims, 0, 8 * octets.shape[0] * w)
         grown = wp.empty(octets.shape[0] * w, dtype=wp.int64, device=device)
-        wp.launch(_dilate_octets_kernel, dim=octets.shape[0], device=device,
-                  inputs=[octets, radius, wp.vec3i(*(int(d) for d in oct_dims))], outputs=[grown])
+        wp.launch(
+            _dilate_octets_kernel,
+            dim=octets.shape[0],
+            device=device,
+            inputs=[octets, radius, wp.vec3i(*(int(d) for d in oct_dims))],
+            outputs=[grown],
+        )
         octets = octree.sort_unique(grown, end_bit=3 * _bits(oct_dims))
     fine_codes, fine_coords = octree.expand_octets(octets)
     timings["finest_cells"] = time.perf_counter() - t0
 
     a_arg, b_arg = a.arg(), b.arg()
-    offs = [wp.vec3i(*(int(v) for v in (-_offset_to(f, origin, h) if al else (0, 0, 0))))
-            for f, al in zip((a, b), aligned)]
+    offs = [
+        wp.vec3i(*(int(v) for v in (-_offset_to(f, origin, h) if al else (0, 0, 0)))) for f, al in zip((a, b), aligned)
+    ]
     origin_v = wp.vec3(*origin)
 
     def run(coords, lo_, hi_, spacing_, dist, proj, source, sign, values):
-        wp.launch(_combine_nodes_kernel, dim=hi_ - lo_, device=device,
-                  inputs=[a_arg, b_arg, int(aligned[0] and spacing_ == h), int(aligned[1] and spacing_ == h),
-                          offs[0], offs[1], coords, lo_, origin_v, float(spacing_), int(op), blend],
-                  outputs=[dist, proj, source, sign, values])
+        wp.launch(
+            _combine_nodes_kernel,
+            dim=hi_ - lo_,
+            device=device,
+            inputs=[
+                a_arg,
+                b_arg,
+                int(aligned[0] and spacing_ == h),
+                int(aligned[1] and spacing_ == h),
+                offs[0],
+                offs[1],
+                coords,
+                lo_,
+                origin_v,
+                float(spacing_),
+                int(op),
+                blend,
+            ],
+            outputs=[dist, proj, source, sign, values],
+        )
 
     t0 = time.perf_counter()
     n0 = fine_codes.shape[0]
@@ -284,10 +311,22 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         run(coords, lo_, hi_, spacing_, dist, proj, source, sign, scratch)
 
     return assemble_field(
-        origin=origin, top_dims=top_dims, voxel_size=h, levels=levels, fine_codes=fine_codes,
-        fine_coords=fine_coords, fine_dist=fine_dist, fine_proj=fine_proj, fine_source=fine_src, oracle=None,
-        finest_signs=None, device=device, field_ids=a.field_ids + b.field_ids, timings=timings,
-        fine_values=fine_values, level_values=level_values,
+        origin=origin,
+        top_dims=top_dims,
+        voxel_size=h,
+        levels=levels,
+        fine_codes=fine_codes,
+        fine_coords=fine_coords,
+        fine_dist=fine_dist,
+        fine_proj=fine_proj,
+        fine_source=fine_src,
+        oracle=None,
+        finest_signs=None,
+        device=device,
+        field_ids=a.field_ids + b.field_ids,
+        timings=timings,
+        fine_values=fine_values,
+        level_values=level_values,
     )
 
 

@@ -212,8 +212,25 @@ class AdaptiveField:
     Intermediate levels are sorted by Morton code; the top level is dense in x-fastest order.
     """
 
-    def __init__(self, *, voxel_size, levels, origin, top_dims, level_offsets, codes, coords, values, proj, child,
-                 source, field_ids, device, timings=None, stats=None):
+    def __init__(
+        self,
+        *,
+        voxel_size,
+        levels,
+        origin,
+        top_dims,
+        level_offsets,
+        codes,
+        coords,
+        values,
+        proj,
+        child,
+        source,
+        field_ids,
+        device,
+        timings=None,
+        stats=None,
+    ):
         self.voxel_size = float(voxel_size)
         self.levels = int(levels)
         self.origin = np.asarray(origin, dtype=np.float64)
@@ -271,8 +288,10 @@ class AdaptiveField:
         return f
 
     def __repr__(self) -> str:
-        return (f"AdaptiveField(voxel_size={self.voxel_size:g}, levels={self.levels}, nodes={self.node_count}, "
-                f"level_counts={self.level_counts}, ids={list(self.field_ids)})")
+        return (
+            f"AdaptiveField(voxel_size={self.voxel_size:g}, levels={self.levels}, nodes={self.node_count}, "
+            f"level_counts={self.level_counts}, ids={list(self.field_ids)})"
+        )
 
     # -- queries --
     def sample(self, points, method: str = "mls", *, return_gradient: bool = False):
@@ -294,9 +313,13 @@ class AdaptiveField:
         values = wp.empty(n, dtype=wp.float32, device=self.device)
         grads = wp.empty(n, dtype=wp.vec3, device=self.device)
         if n:
-            wp.launch(_sample_field_kernel, dim=n, device=self.device,
-                      inputs=[self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device), 0 if method == "mls" else 1],
-                      outputs=[values, grads])
+            wp.launch(
+                _sample_field_kernel,
+                dim=n,
+                device=self.device,
+                inputs=[self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device), 0 if method == "mls" else 1],
+                outputs=[values, grads],
+            )
         if return_gradient:
             return values.numpy(), grads.numpy()
         return values.numpy()
@@ -306,8 +329,13 @@ class AdaptiveField:
         pts = _as_points(points)
         ids = wp.empty(len(pts), dtype=wp.int32, device=self.device)
         if len(pts):
-            wp.launch(_source_ids_kernel, dim=len(pts), device=self.device,
-                      inputs=[self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device)], outputs=[ids])
+            wp.launch(
+                _source_ids_kernel,
+                dim=len(pts),
+                device=self.device,
+                inputs=[self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device)],
+                outputs=[ids],
+            )
         return ids.numpy()
 
     def level_of_nodes(self) -> np.ndarray:
@@ -316,7 +344,7 @@ class AdaptiveField:
     def node_centers(self) -> np.ndarray:
         """(N, 3) float64 world-space centres of all nodes, finest level first."""
         lv = self.level_of_nodes()
-        spacing = self.voxel_size * (2.0 ** lv)
+        spacing = self.voxel_size * (2.0**lv)
         return self.origin + (self.coords.numpy().astype(np.float64) + 0.5) * spacing[:, None]
 
     def debug_cells(self) -> dict:
@@ -324,7 +352,7 @@ class AdaptiveField:
         lv = self.level_of_nodes()
         return {
             "centers": self.node_centers().astype(np.float32),
-            "sizes": (self.voxel_size * (2.0 ** lv)).astype(np.float32),
+            "sizes": (self.voxel_size * (2.0**lv)).astype(np.float32),
             "levels": lv,
             "sdf": self.values.numpy().copy(),
             "leaf": self.child.numpy() < 0,
@@ -351,8 +379,10 @@ class AdaptiveField:
         budget = available_memory() // 2 if max_bytes is None else int(max_bytes)
         need = int(np.prod(shape)) * 4 * 8
         if need > budget:
-            raise AasdfError(f"A dense block of {shape[0]}x{shape[1]}x{shape[2]} samples needs {need / 2**30:.1f} GiB,"
-                             f" more than the {budget / 2**30:.1f} GiB available; use a coarser spacing.")
+            raise AasdfError(
+                f"A dense block of {shape[0]}x{shape[1]}x{shape[2]} samples needs {need / 2**30:.1f} GiB,"
+                f" more than the {budget / 2**30:.1f} GiB available; use a coarser spacing."
+            )
         axes = [lo[a] + (np.arange(shape[a]) + 0.5) * spacing for a in range(3)]
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
         values = self.sample(grid).reshape(tuple(shape))
@@ -365,8 +395,9 @@ class AdaptiveField:
         sl = self.level_slice(0)
         coords = self.coords.numpy()[sl]
         values = self.values.numpy()[sl]
-        return extract_surface(coords, values, origin=self.origin, spacing=self.voxel_size, iso=float(iso),
-                               device=self.device)
+        return extract_surface(
+            coords, values, origin=self.origin, spacing=self.voxel_size, iso=float(iso), device=self.device
+        )
 
     # -- booleans as operators --
     def __or__(self, other):
@@ -427,8 +458,10 @@ def validate_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
         bad = int(np.count_nonzero(~np.isfinite(verts64).all(axis=1)))
         raise AasdfError(f"The mesh has {bad} vertices with NaN or infinite coordinates.")
     if tris.min() < 0 or tris.max() >= len(verts):
-        raise AasdfError(f"Triangle indices must lie in [0, {len(verts) - 1}], but range over "
-                         f"[{int(tris.min())}, {int(tris.max())}].")
+        raise AasdfError(
+            f"Triangle indices must lie in [0, {len(verts) - 1}], but range over "
+            f"[{int(tris.min())}, {int(tris.max())}]."
+        )
     tris = tris.astype(np.int32)
     v = verts64[tris]
     area2 = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
@@ -473,13 +506,17 @@ def plan_domain(lo, hi, voxel_size: float, levels: int, margin_cells: float):
 def check_budget(fine_dims, top_count, fine_nodes_estimate):
     """Refuse domains the Morton codes cannot address and node counts that would not fit in memory."""
     if np.any(np.asarray(fine_dims) >= MAX_CELLS_PER_AXIS):
-        raise AasdfError(f"The domain spans {int(np.max(fine_dims))} finest cells along an axis, more than the "
-                         f"{MAX_CELLS_PER_AXIS - 1} the octree can address; use a larger voxel size.")
+        raise AasdfError(
+            f"The domain spans {int(np.max(fine_dims))} finest cells along an axis, more than the "
+            f"{MAX_CELLS_PER_AXIS - 1} the octree can address; use a larger voxel size."
+        )
     need = (int(fine_nodes_estimate) + int(top_count)) * BUILD_BYTES_PER_NODE
     budget = available_memory() // 2
     if need > budget:
-        raise AasdfError(f"This voxel size needs about {need / 2**30:.1f} GiB ({int(fine_nodes_estimate):,} finest "
-                         f"nodes), more than the {budget / 2**30:.1f} GiB that can be used; use a larger voxel size.")
+        raise AasdfError(
+            f"This voxel size needs about {need / 2**30:.1f} GiB ({int(fine_nodes_estimate):,} finest "
+            f"nodes), more than the {budget / 2**30:.1f} GiB that can be used; use a larger voxel size."
+        )
 
 
 def _device(device):
@@ -538,9 +575,11 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     t0 = time.perf_counter()
     problem = problem_faces(tris, len(verts))
     clean = not bool(problem.any())
-    mesh = wp.Mesh(points=wp.array(verts, dtype=wp.vec3, device=device),
-                   indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
-                   support_winding_number=not clean)
+    mesh = wp.Mesh(
+        points=wp.array(verts, dtype=wp.vec3, device=device),
+        indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
+        support_winding_number=not clean,
+    )
     diag = float(np.linalg.norm(fine_dims * voxel_size))
     timings["mesh_bvh"] = time.perf_counter() - t0
 
@@ -557,15 +596,25 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         counts = wp.empty(len(tris), dtype=wp.int32, device=device)
         dummy_codes = wp.empty(1, dtype=wp.int64, device=device)
         args = [verts_wp, tris_wp, wp.vec3(*origin), octet, padding * voxel_size, oct_dims]
-        wp.launch(_octets_per_triangle_kernel, dim=len(tris), inputs=[*args, counts, 0],
-                  outputs=[counts, dummy_codes], device=device)
+        wp.launch(
+            _octets_per_triangle_kernel,
+            dim=len(tris),
+            inputs=[*args, counts, 0],
+            outputs=[counts, dummy_codes],
+            device=device,
+        )
         counts_np = counts.numpy().astype(np.int64)
         total = int(counts_np.sum())
         check_budget(fine_dims, top_count, 8 * total)
         offsets = wp.array(np.concatenate([[0], np.cumsum(counts_np)[:-1]]).astype(np.int32), device=device)
         octet_codes = wp.empty(total, dtype=wp.int64, device=device)
-        wp.launch(_octets_per_triangle_kernel, dim=len(tris), inputs=[*args, offsets, 1],
-                  outputs=[counts, octet_codes], device=device)
+        wp.launch(
+            _octets_per_triangle_kernel,
+            dim=len(tris),
+            inputs=[*args, offsets, 1],
+            outputs=[counts, octet_codes],
+            device=device,
+        )
         octets = octree.sort_unique(octet_codes, end_bit=3 * _bits(fine_dims // 2))
         fine_codes, fine_coords = octree.expand_octets(octets)
         query_radius = (padding + 4) * octet * 1.8
@@ -578,34 +627,55 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     face0 = wp.empty(n0, dtype=wp.int32, device=device)
     nsign0 = wp.empty(n0, dtype=wp.float32, device=device)
     src0 = wp.empty(n0, dtype=wp.int32, device=device)
-    wp.launch(_finest_distance_kernel, dim=n0, device=device,
-              inputs=[mesh.id, fine_coords, wp.vec3(*origin), voxel_size, float(query_radius), int(field_id)],
-              outputs=[dist0, proj0, face0, nsign0, src0])
+    wp.launch(
+        _finest_distance_kernel,
+        dim=n0,
+        device=device,
+        inputs=[mesh.id, fine_coords, wp.vec3(*origin), voxel_size, float(query_radius), int(field_id)],
+        outputs=[dist0, proj0, face0, nsign0, src0],
+    )
     timings["finest_distance"] = time.perf_counter() - t0
 
     def oracle(coords, nodes_np, spacing, sign):
         if len(nodes_np) == 0:
             return
         nodes = wp.array(nodes_np.astype(np.int32), dtype=wp.int32, device=device)
-        wp.launch(_mesh_sign_kernel, dim=len(nodes_np), device=device,
-                  inputs=[mesh.id, coords, nodes, wp.vec3(*origin), float(spacing), diag, 0 if clean else 1],
-                  outputs=[sign])
+        wp.launch(
+            _mesh_sign_kernel,
+            dim=len(nodes_np),
+            device=device,
+            inputs=[mesh.id, coords, nodes, wp.vec3(*origin), float(spacing), diag, 0 if clean else 1],
+            outputs=[sign],
+        )
 
     problem_wp = wp.array(problem, dtype=wp.int32, device=device)
 
     def finest_signs(coords, sign, lo0, hi0):
         n = hi0 - lo0
         undecided = wp.empty(n, dtype=wp.int32, device=device)
-        wp.launch(_finest_sign_kernel, dim=n, inputs=[sign, nsign0, face0, problem_wp], outputs=[undecided],
-                  device=device)
+        wp.launch(
+            _finest_sign_kernel, dim=n, inputs=[sign, nsign0, face0, problem_wp], outputs=[undecided], device=device
+        )
         idx = np.flatnonzero(undecided.numpy())
         oracle(coords, idx, voxel_size, sign)
         return len(idx)
 
     field = assemble_field(
-        origin=origin, top_dims=top_dims, voxel_size=voxel_size, levels=levels, fine_codes=fine_codes,
-        fine_coords=fine_coords, fine_dist=dist0, fine_proj=proj0, fine_source=src0, oracle=oracle,
-        finest_signs=finest_signs, device=device, field_ids=(field_id,), timings=timings, mesh_id=mesh.id,
+        origin=origin,
+        top_dims=top_dims,
+        voxel_size=voxel_size,
+        levels=levels,
+        fine_codes=fine_codes,
+        fine_coords=fine_coords,
+        fine_dist=dist0,
+        fine_proj=proj0,
+        fine_source=src0,
+        oracle=oracle,
+        finest_signs=finest_signs,
+        device=device,
+        field_ids=(field_id,),
+        timings=timings,
+        mesh_id=mesh.id,
     )
     field.stats["clean_mesh"] = clean
     field.stats["problem_faces"] = int(problem.sum())
@@ -617,9 +687,26 @@ def _bits(dims) -> int:
     return max(1, int(np.ceil(np.log2(float(np.max(dims)) + 1.0))))
 
 
-def assemble_field(*, origin, top_dims, voxel_size, levels, fine_codes, fine_coords, fine_dist, fine_proj,
-                   fine_source, oracle, finest_signs, device, field_ids, timings, fine_values=None, mesh_id=0,
-                   level_values=None):
+def assemble_field(
+    *,
+    origin,
+    top_dims,
+    voxel_size,
+    levels,
+    fine_codes,
+    fine_coords,
+    fine_dist,
+    fine_proj,
+    fine_source,
+    oracle,
+    finest_signs,
+    device,
+    field_ids,
+    timings,
+    fine_values=None,
+    mesh_id=0,
+    level_values=None,
+):
     """Build the intermediate and top levels above a finest level and sign every node (shared by construction
     and booleans).
 
@@ -661,8 +748,13 @@ def assemble_field(*, origin, top_dims, voxel_size, levels, fine_codes, fine_coo
     parent = wp.full(n, -1, dtype=wp.int32, device=device)
     for k in range(1, levels):
         lo, hi = int(offsets[k]), int(offsets[k + 1])
-        wp.launch(octree._link_children_kernel, dim=hi - lo,
-                  inputs=[codes, codes, int(offsets[k - 1]), int(offsets[k]), lo], outputs=[child], device=device)
+        wp.launch(
+            octree._link_children_kernel,
+            dim=hi - lo,
+            inputs=[codes, codes, int(offsets[k - 1]), int(offsets[k]), lo],
+            outputs=[child],
+            device=device,
+        )
         wp.launch(octree._link_parents_kernel, dim=hi - lo, inputs=[child, lo], outputs=[parent], device=device)
     timings["levels_structure"] = time.perf_counter() - t0
 
@@ -687,8 +779,9 @@ def assemble_field(*, origin, top_dims, voxel_size, levels, fine_codes, fine_coo
             continue
         octree.level_neighbours(coords, lo, hi, fine_dims >> k, neighbours)
         tn = time.perf_counter()
-        sweeps[k] = octree.solve_level(coords, child, neighbours, lo, hi, origin_t, voxel_size * 2**k, dist, proj,
-                                       source, mesh_id=mesh_id)
+        sweeps[k] = octree.solve_level(
+            coords, child, neighbours, lo, hi, origin_t, voxel_size * 2**k, dist, proj, source, mesh_id=mesh_id
+        )
         timings[f"{name}_neighbours"] = tn - tk
         timings[name] = time.perf_counter() - tk + level_times.get(k, 0.0)
 
@@ -704,8 +797,12 @@ def assemble_field(*, origin, top_dims, voxel_size, levels, fine_codes, fine_coo
     origin_v = wp.vec3(*origin_t)
     for k in range(levels - 2, -1, -1) if level_values is None else ():
         lo, hi = int(offsets[k]), int(offsets[k + 1])
-        wp.launch(octree._inherit_sign_kernel, dim=hi - lo,
-                  inputs=[coords, parent, lo, origin_v, voxel_size * 2**k, dist, sign, SIGN_SAFETY], device=device)
+        wp.launch(
+            octree._inherit_sign_kernel,
+            dim=hi - lo,
+            inputs=[coords, parent, lo, origin_v, voxel_size * 2**k, dist, sign, SIGN_SAFETY],
+            device=device,
+        )
         if k > 0:
             idx = lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
             oracle(coords, idx, voxel_size * 2**k, sign)
@@ -719,7 +816,19 @@ def assemble_field(*, origin, top_dims, voxel_size, levels, fine_codes, fine_coo
     timings["signs"] = time.perf_counter() - t0
 
     return AdaptiveField(
-        voxel_size=voxel_size, levels=levels, origin=origin, top_dims=top_dims, level_offsets=offsets, codes=codes,
-        coords=coords, values=values, proj=proj, child=child, source=source, field_ids=field_ids, device=device,
-        timings=timings, stats={"fim_sweeps": sweeps, "sign_queries": oracle_counts},
+        voxel_size=voxel_size,
+        levels=levels,
+        origin=origin,
+        top_dims=top_dims,
+        level_offsets=offsets,
+        codes=codes,
+        coords=coords,
+        values=values,
+        proj=proj,
+        child=child,
+        source=source,
+        field_ids=field_ids,
+        device=device,
+        timings=timings,
+        stats={"fim_sweeps": sweeps, "sign_queries": oracle_counts},
     )

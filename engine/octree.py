@@ -182,8 +182,13 @@ def parent_octets(codes: wp.array, levels_up: int, end_bit: int) -> wp.array:
     parents and their siblings)."""
     shifted = wp.empty_like(codes)
     if codes.shape[0]:
-        wp.launch(_shift_codes_kernel, dim=codes.shape[0], inputs=[codes, 3 * levels_up], outputs=[shifted],
-                  device=codes.device)
+        wp.launch(
+            _shift_codes_kernel,
+            dim=codes.shape[0],
+            inputs=[codes, 3 * levels_up],
+            outputs=[shifted],
+            device=codes.device,
+        )
     return sort_unique(shifted, end_bit=end_bit)
 
 
@@ -368,8 +373,9 @@ def _fim_sweep_kernel(
     src_out[i] = s
 
 
-def solve_level(coords, first_child, neighbours, lo, hi, origin, spacing, dist, proj, source, mesh_id=0,
-                max_sweeps=4096):
+def solve_level(
+    coords, first_child, neighbours, lo, hi, origin, spacing, dist, proj, source, mesh_id=0, max_sweeps=4096
+):
     """Initialise a level from its children (exactly from ``mesh_id`` when given) and run the fast iterative method
     until no leaf changes."""
     n = hi - lo
@@ -377,9 +383,13 @@ def solve_level(coords, first_child, neighbours, lo, hi, origin, spacing, dist, 
         return 0
     device = coords.device
     origin_v = wp.vec3(*origin)
-    wp.launch(_init_from_children_kernel, dim=n, device=device,
-              inputs=[coords, first_child, lo, origin_v, float(spacing), wp.uint64(mesh_id), 4.0 * float(spacing)],
-              outputs=[dist, proj, source])
+    wp.launch(
+        _init_from_children_kernel,
+        dim=n,
+        device=device,
+        inputs=[coords, first_child, lo, origin_v, float(spacing), wp.uint64(mesh_id), 4.0 * float(spacing)],
+        outputs=[dist, proj, source],
+    )
     dist_b, proj_b, src_b = wp.clone(dist), wp.clone(proj), wp.clone(source)
     changed = wp.zeros(1, dtype=wp.int32, device=device)
     bufs = [(dist, proj, source), (dist_b, proj_b, src_b)]
@@ -387,9 +397,13 @@ def solve_level(coords, first_child, neighbours, lo, hi, origin, spacing, dist, 
     while sweeps < max_sweeps:
         changed.zero_()
         src_bufs, dst_bufs = bufs[sweeps % 2], bufs[(sweeps + 1) % 2]
-        wp.launch(_fim_sweep_kernel, dim=n,
-                  inputs=[coords, first_child, neighbours, lo, origin_v, float(spacing), *src_bufs],
-                  outputs=[*dst_bufs, changed], device=device)
+        wp.launch(
+            _fim_sweep_kernel,
+            dim=n,
+            inputs=[coords, first_child, neighbours, lo, origin_v, float(spacing), *src_bufs],
+            outputs=[*dst_bufs, changed],
+            device=device,
+        )
         sweeps += 1
         if int(changed.numpy()[0]) == 0:
             break
@@ -398,8 +412,13 @@ def solve_level(coords, first_child, neighbours, lo, hi, origin, spacing, dist, 
         wp.copy(proj, proj_b, dest_offset=lo, src_offset=lo, count=n)
         wp.copy(source, src_b, dest_offset=lo, src_offset=lo, count=n)
     if mesh_id:
-        wp.launch(_refine_leaves_kernel, dim=n, device=device,
-                  inputs=[coords, first_child, lo, origin_v, float(spacing), wp.uint64(mesh_id)], outputs=[dist, proj])
+        wp.launch(
+            _refine_leaves_kernel,
+            dim=n,
+            device=device,
+            inputs=[coords, first_child, lo, origin_v, float(spacing), wp.uint64(mesh_id)],
+            outputs=[dist, proj],
+        )
     return sweeps
 
 

@@ -106,6 +106,7 @@ def sample_mls(f: FieldArg, x: wp.vec3) -> wp.vec4:
     vsum = float(0.0)
     gsum = wp.vec3(0.0)
     best = float(1.0e30)
+    plane = float(1.0e30)
     for o in range(27):
         off = wp.vec3(float(o % 3 - 1), float((o // 3) % 3 - 1), float(o // 9 - 1))
         q = c + s * off
@@ -128,11 +129,18 @@ def sample_mls(f: FieldArg, x: wp.vec3) -> wp.vec4:
                 w = cubic_spline(2.0 * wp.length(xn - x) / radius)
                 if w > 0.0:
                     if coarse:
-                        r = x - f.proj[nb[0]]
+                        p = f.proj[nb[0]]
+                        r = x - p
                         dist = wp.length(r)
                         if dist < best:
                             best = dist
+                            # the neighbour's surface normal: from its closest point towards the node
+                            nrm = xn - p
+                            ln = wp.length(nrm)
                             gsum = r / wp.max(dist, 1.0e-20)
+                            if ln > 0.0:
+                                gsum = nrm / ln
+                                plane = wp.abs(wp.dot(r, gsum))
                     else:
                         d = (xn - x) / s
                         b = wp.vec4(1.0, d[0], d[1], d[2])
@@ -145,7 +153,14 @@ def sample_mls(f: FieldArg, x: wp.vec3) -> wp.vec4:
         return wp.vec4(f.values[leaf[0]], 0.0, 0.0, 0.0)
     if coarse:
         g = leaf_sign * gsum
-        return wp.vec4(leaf_sign * best, g[0], g[1], g[2])
+        # The tangent plane of the nearest closest point corrects the point distance when x's foot on that plane
+        # is within a cell of it (a locally flat patch); beyond that the plane may run past the surface's edge.
+        est = float(best)
+        if plane < best:
+            tangential = wp.sqrt(wp.max(best * best - plane * plane, 0.0))
+            if tangential <= 0.5 * s:
+                est = plane
+        return wp.vec4(leaf_sign * est, g[0], g[1], g[2])
     # A small ridge on the gradient keeps one-sided neighbourhoods well posed.
     ridge = 1.0e-4 * wsum
     ata[1, 1] += ridge
@@ -197,7 +212,11 @@ def _sample_field_kernel(
         phi = sample_linear(f, xc)
         g = wp.vec3(0.0)
     if out > 0.0:
-        phi = wp.max(phi, 0.0) + out
+        # Both are upper bounds of the distance and neither is below the distance to the domain box: the bound
+        # through the clamped point, and the distance to the closest surface point stored at its leaf.
+        through = wp.max(phi, 0.0) + out
+        direct = wp.length(x - f.proj[locate_leaf(f, xc)[0]])
+        phi = wp.max(wp.min(through, direct), out)
         g = (x - xc) / out
     values[i] = phi
     grads[i] = g
