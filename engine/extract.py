@@ -16,14 +16,16 @@ import numpy as np
 import warp as wp
 import warp.geometry
 
+from .errors import AasdfError
+
 # Corner c of a cube with minimum corner (i, j, k) is the sample (i, j, k) + _CORNER_OFFSETS[c], in the order Warp's
 # sparse marching cubes expects its (M, 8) corner values.
 _CORNER_OFFSETS = np.asarray(warp.geometry.IsoSurfaceMarchingCubes.CUBE_CORNER_OFFSETS, dtype=np.int64)
 
-# The seven non-zero offsets in ascending key order. Keys are i * stride_x + j * stride_y + k with
-# stride_x > stride_y + 1 > 2, so lexicographic (i, j, k) order is key order for every lattice.
-_SEARCH_OFFSETS = tuple(tuple(int(x) for x in o) for o in sorted(map(tuple, _CORNER_OFFSETS.tolist()))[1:])
-_SEARCH_SLOTS = tuple(int(np.flatnonzero((_CORNER_OFFSETS == o).all(axis=1))[0]) for o in _SEARCH_OFFSETS)
+# The seven other corners in ascending key order (corner slot, then its offset). Keys are
+# i * stride_x + j * stride_y + k with stride_x > stride_y + 1 > 2, so lexicographic (i, j, k) order is key order.
+_SEARCH_SLOTS = tuple(sorted(range(1, 8), key=lambda c: _CORNER_OFFSETS[c].tolist()))
+_SEARCH_OFFSETS = tuple(tuple(int(x) for x in _CORNER_OFFSETS[c]) for c in _SEARCH_SLOTS)
 
 # Samples closer to ``iso`` than this fraction of ``spacing`` are pushed to exactly that distance (keeping their side),
 # so that no marching cubes vertex lands on, or within float32 noise of, a lattice sample, which would make vertices
@@ -31,10 +33,13 @@ _SEARCH_SLOTS = tuple(int(np.flatnonzero((_CORNER_OFFSETS == o).all(axis=1))[0])
 _ISO_NUDGE = 1.0e-3
 
 # ... and never less than this many float32 ulps of the largest world coordinate, for lattices far from the origin.
-_ISO_NUDGE_ULPS = 16.0
+_ISO_NUDGE_ULPS = 4.0
 
-# Keys pack (i, j, k) relative to the minimum into one int64; the per-axis span cubed must stay below this.
-_MAX_KEY = 2**62
+# Refuse lattices so far from the world origin that float32 resolves less than this fraction of a cell there.
+_MIN_ULPS_PER_CELL = 32.0
+
+# Keys pack (i, j, k) relative to the minimum into one int64, so the lattice may span at most this many points per axis.
+_MAX_SPAN = 2**20
 
 
 # ---- find cubes ----
@@ -46,6 +51,13 @@ def _gallop_lower_bound(keys: wp.array[wp.int64], start: wp.int32, target: wp.in
 
     Gallops forward from ``start`` before bisecting, so a neighbour a few entries away (the common case for the +z and
     +y corners) costs a few reads instead of a full binary search.
+
+    Args:
+        keys: (N,) int64, strictly increasing.
+        start: First index to consider; every key before it must be ``< target``.
+        target: Key to look for.
+    Returns:
+        int32 index in ``[start, N]``.
     """
     n = keys.shape[0]
     lo = start
@@ -80,8 +92,16 @@ def _find_cube_corners_kernel(
     """Find the 8 corner samples of the cube whose minimum corner is sample ``i`` and flag it if it crosses zero.
 
     A cube is active when all 8 corners exist and its values have both signs (``< 0`` and ``>= 0``, the convention of
-    Warp's marching cubes). ``corners[i]`` holds sample indices in ``CUBE_CORNER_OFFSETS`` order; it is only
-    complete where ``active[i] == 1``.
+    Warp's marching cubes). One thread per sample; the 7 searches gallop forward in ascending key order.
+
+    Args:
+        keys: (N,) int64 sorted sample keys ``i * stride_x + j * stride_y + k`` (relative to the minimum).
+        values: (N,) float32 values minus the level, in key order, none exactly 0.
+        stride_x: Key step of +1 in i.
+        stride_y: Key step of +1 in j (+1 in k is 1).
+        corners: (N, 8) int32 output, sample index of each corner in ``CUBE_CORNER_OFFSETS`` order; only complete
+            where ``active`` is 1.
+        active: (N,) int32 output, 1 for a complete cube whose corners change sign, else 0.
     """
     i = wp.tid()
     n = keys.shape[0]
@@ -121,7 +141,20 @@ def _gather_active_cubes_kernel(
     cells: wp.array[wp.vec3i],
     corner_values: wp.array2d[wp.float32],
 ):
-    """Stream-compact the active cubes into minimum-corner subscripts (decoded from the keys) and corner values."""
+    """Stream-compact the active cubes into minimum-corner subscripts (decoded from the keys) and corner values.
+
+    Args:
+        active: (N,) int32 flags from ``_find_cube_corners_kernel``.
+        active_scan: (N,) int32 inclusive prefix sum of ``active``.
+        keys: (N,) int64 sorted sample keys.
+        values: (N,) float32 values minus the level, in key order.
+        corners: (N, 8) int32 corner sample indices from ``_find_cube_corners_kernel``.
+        lo: Lattice coordinates of key 0.
+        stride_x: Key step of +1 in i.
+        stride_y: Key step of +1 in j.
+        cells: (M,) vec3i output, lattice coordinates of each active cube's minimum corner.
+        corner_values: (M, 8) float32 output, the active cubes' corner values in ``CUBE_CORNER_OFFSETS`` order.
+    """
     i = wp.tid()
     if active[i] == 0:
         return
@@ -140,6 +173,7 @@ def _gather_active_cubes_kernel(
 
 
 def _empty_mesh() -> tuple[np.ndarray, np.ndarray]:
+    """``verts`` (0, 3) float32 and ``tris`` (0, 3) int32."""
     return np.zeros((0, 3), dtype=np.float32), np.zeros((0, 3), dtype=np.int32)
 
 
@@ -191,8 +225,9 @@ def extract_surface(coords, values, *, origin, spacing, iso=0.0, device=None) ->
 
     Sample ``(i, j, k)`` sits at ``origin + ((i, j, k) + 0.5) * spacing`` (the cell centres of the finest octree
     level). Only the dual cubes whose 8 corner samples ``c + {0, 1}^3`` all exist are polygonised, so the result is
-    watertight whenever every cube the ``iso`` level set passes through is complete, e.g. for a band of samples with
-    ``|values - iso| < 2 * spacing`` around it. No dense grid is allocated: memory and time grow with ``N``.
+    watertight whenever every cube the ``iso`` level set passes through is complete: for a distance field, a band
+    holding every sample with ``|values - iso| < 2 * spacing`` is enough (such a cube's corners lie within
+    ``sqrt(3) * spacing`` of the surface). No dense grid is allocated: memory and time grow with ``N``.
 
     Samples within ``1e-3 * spacing`` of ``iso`` are pushed to that distance (keeping their side; values equal to
     ``iso`` count as outside), so no vertex lands on a sample and no triangle collapses.
@@ -213,18 +248,22 @@ def extract_surface(coords, values, *, origin, spacing, iso=0.0, device=None) ->
             or not finite; if ``origin`` is not a finite (3,); if ``spacing`` is not positive; if ``iso`` is not
             finite; or if the coordinates span too many lattice points to pack into 64-bit keys.
         TypeError: If ``coords`` is not an integer array.
+        AasdfError: If the lattice lies so far from the world origin that float32 vertices cannot resolve 1/32 of
+            ``spacing`` there.
     """
     coords, values, origin, spacing, iso = _validate(coords, values, origin, spacing, iso)
     if len(coords) == 0:
         return _empty_mesh()
     device = wp.get_device(device)
 
-    # ---- pack (i, j, k) into sorted int64 keys ----
+    # Pack (i, j, k) into int64 keys and sort; a field that emits its samples in key order skips the sort.
     lo = np.array([coords[:, axis].min() for axis in range(3)], dtype=np.int64)
     hi = np.array([coords[:, axis].max() for axis in range(3)], dtype=np.int64)
+    if int((hi - lo).max()) >= _MAX_SPAN:
+        raise ValueError(
+            f"Expected 'coords' spanning fewer than 2**20 lattice points per axis, but got {(hi - lo + 1).tolist()}."
+        )
     span = hi - lo + 2  # one spare slot per axis: a search for c + 1 past the maximum can never alias
-    if int(span.max()) ** 3 >= _MAX_KEY:
-        raise ValueError(f"Expected 'coords' spanning fewer than 2**20 lattice points per axis, but got {span - 2}.")
     stride_y = int(span[2])
     stride_x = int(span[1]) * stride_y
     keys = (coords[:, 0] - lo[0]).astype(np.int64) * stride_x
@@ -237,11 +276,19 @@ def extract_surface(coords, values, *, origin, spacing, iso=0.0, device=None) ->
         if duplicates:
             raise ValueError(f"Expected unique 'coords', but got {duplicates} repeated samples.")
 
-    extent = np.abs(origin) + (np.maximum(np.abs(lo), np.abs(hi)) + 2) * spacing
-    nudge = max(_ISO_NUDGE * spacing, _ISO_NUDGE_ULPS * float(np.spacing(np.float32(extent.max()))))
+    # Vertices are float32 world positions: their resolution where the lattice lies bounds the nudge from below.
+    extent = float(np.abs([origin + (lo + 0.5) * spacing, origin + (hi + 1.5) * spacing]).max())
+    ulp = float(np.spacing(np.float32(extent)))
+    if ulp * _MIN_ULPS_PER_CELL > spacing:
+        raise AasdfError(
+            f"The surface lies too far from the world origin for its voxel size: float32 positions {extent:.4g} "
+            f"away resolve only {ulp:.3g}, more than 1/{_MIN_ULPS_PER_CELL:g} of the voxel size {spacing:.3g}. "
+            "Move the objects closer to the origin or use a coarser resolution."
+        )
+    nudge = max(_ISO_NUDGE * spacing, _ISO_NUDGE_ULPS * ulp)
     shifted = _nudge_values(values, iso, nudge)
 
-    # ---- find the complete cubes that cross the level ----
+    # Find the complete cubes whose corners change sign and gather their corner values.
     n = len(keys)
     keys_wp = wp.array(keys, dtype=wp.int64, device=device)
     values_wp = wp.array(shifted, dtype=wp.float32, device=device)
@@ -278,7 +325,6 @@ def extract_surface(coords, values, *, origin, spacing, iso=0.0, device=None) ->
         device=device,
     )
 
-    # ---- marching cubes ----
     # Warp puts subscript (0, 0, 0) at ``origin``; our sample (0, 0, 0) is a cell centre, half a cell further on.
     # Its winding already faces the side where values are >= threshold, i.e. outwards for negative-inside distances
     # (tests/engine/test_extract.py checks every face normal of a sphere), so no flip is needed.
