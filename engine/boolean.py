@@ -247,21 +247,20 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         for f in (a, b)
     ]
     oct_dims = fine_dims // 2
-    parts = [_octets_of(f, origin, h, oct_dims, al, device) for f, al in zip((a, b), aligned)]
+    parts = [_octets_of(f, origin, h, oct_dims, al, device) for f, al in zip((a, b), aligned, strict=False)]
     all_codes = wp.empty(parts[0].shape[0] + parts[1].shape[0], dtype=wp.int64, device=device)
     wp.copy(all_codes, parts[0], count=parts[0].shape[0])
     wp.copy(all_codes, parts[1], dest_offset=parts[0].shape[0], count=parts[1].shape[0])
     octets = octree.sort_unique(all_codes, end_bit=3 * _bits(oct_dims))
     radius = int(math.ceil(0.25 * blend / (2.0 * h))) if blend > 0.0 else 0
-    if radius > 0:
-        w = (2 * radius + 1) ** 3
-        check_budget(fine_dims, 0, 8 * octets.shape[0] * w)
-        grown = wp.empty(octets.shape[0] * w, dtype=wp.int64, device=device)
+    for _ in range(radius):  # grow one octet at a time: 27x the set, then de-duplicate
+        check_budget(fine_dims, 0, 8 * 27 * octets.shape[0])
+        grown = wp.empty(octets.shape[0] * 27, dtype=wp.int64, device=device)
         wp.launch(
             _dilate_octets_kernel,
             dim=octets.shape[0],
             device=device,
-            inputs=[octets, radius, wp.vec3i(*(int(d) for d in oct_dims))],
+            inputs=[octets, 1, wp.vec3i(*(int(d) for d in oct_dims))],
             outputs=[grown],
         )
         octets = octree.sort_unique(grown, end_bit=3 * _bits(oct_dims))
@@ -270,7 +269,8 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
 
     a_arg, b_arg = a.arg(), b.arg()
     offs = [
-        wp.vec3i(*(int(v) for v in (-_offset_to(f, origin, h) if al else (0, 0, 0)))) for f, al in zip((a, b), aligned)
+        wp.vec3i(*(int(v) for v in (-_offset_to(f, origin, h) if al else (0, 0, 0))))
+        for f, al in zip((a, b), aligned, strict=False)
     ]
     origin_v = wp.vec3(*origin)
 

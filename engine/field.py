@@ -10,8 +10,9 @@ Pipeline of :func:`build_field`:
    are solved by a fast iterative method over same-level neighbours found by axis-wise key sorting (Eq. 7);
 3. top level: a dense grid over the domain, initialised from its children and solved the same way;
 4. signs, top-down: inside means generalised winding number >= 0.5. A node inherits its parent's sign when their
-   empty balls cover the segment between them; only undecided nodes ask an oracle — the pseudo-normal of the
-   closest point where the mesh is closed and consistently oriented, the winding number where it is not.
+   empty balls cover the segment between them; only undecided nodes pay the winding number (the dense top level
+   and the coarse nodes within about half a cell of the surface). Undecided finest nodes take the pseudo-normal
+   sign of their closest point, except near open, non-manifold or inconsistently oriented edges.
 
 Sign convention: negative inside, positive outside (Blender/OpenVDB); the paper uses the opposite.
 """
@@ -578,7 +579,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     mesh = wp.Mesh(
         points=wp.array(verts, dtype=wp.vec3, device=device),
         indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
-        support_winding_number=not clean,
+        support_winding_number=True,
     )
     diag = float(np.linalg.norm(fine_dims * voxel_size))
     timings["mesh_bvh"] = time.perf_counter() - t0
@@ -644,11 +645,13 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
             _mesh_sign_kernel,
             dim=len(nodes_np),
             device=device,
-            inputs=[mesh.id, coords, nodes, wp.vec3(*origin), float(spacing), diag, 0 if clean else 1],
+            inputs=[mesh.id, coords, nodes, wp.vec3(*origin), float(spacing), diag, 1],
             outputs=[sign],
         )
 
-    problem_wp = wp.array(problem, dtype=wp.int32, device=device)
+    # Undecided finest nodes lie within about half a voxel of the surface. The pseudo-normal sign of their closest
+    # point is wrong near open edges and where shells intersect or touch, so they pay the winding number too.
+    problem_wp = wp.array(np.ones_like(problem), dtype=wp.int32, device=device)
 
     def finest_signs(coords, sign, lo0, hi0):
         n = hi0 - lo0

@@ -1,0 +1,206 @@
+"""Booleans between adaptive fields: against exact mesh booleans (manifold3d), analytic volumes, invariants."""
+
+import numpy as np
+import pytest
+
+import engine
+from tests.engine.test_field import _check_structure
+from tests.metrics import exact_boolean, hausdorff, mesh_volume, winding_inside
+from tests.support import box_mesh, is_watertight, load_mesh, uv_sphere
+
+OPS = {"UNION": engine.union, "INTERSECT": engine.intersection, "DIFFERENCE": engine.difference}
+
+
+def _pair(name_a, name_b, shift):
+    va, ta = load_mesh(name_a)
+    vb, tb = load_mesh(name_b)
+    # scale b to a's size and shift it so the two overlap
+    size_a = np.linalg.norm(va.max(0) - va.min(0))
+    size_b = np.linalg.norm(vb.max(0) - vb.min(0))
+    vb = (vb - vb.mean(0)) * (0.8 * size_a / size_b) + va.mean(0) + np.asarray(shift) * size_a
+    return (va, ta), (vb.astype(np.float32), tb)
+
+
+def _voxel(*meshes, res=256):
+    pts = np.concatenate([m[0] for m in meshes])
+    return float(np.linalg.norm(pts.max(0) - pts.min(0)) / res)
+
+
+def _assert_close_to_exact(result_mesh, exact_mesh, h, vol_tol=0.01):
+    verts, tris = result_mesh
+    assert is_watertight(tris)
+    vol, vol_exact = mesh_volume(verts, tris), mesh_volume(*exact_mesh)
+    assert abs(vol / vol_exact - 1.0) <= vol_tol, (vol, vol_exact)
+    dist = hausdorff(verts, tris, *exact_mesh, n=50_000)
+    assert dist["p95"] <= h, (dist, h)
+
+
+@pytest.mark.parametrize("op", sorted(OPS))
+@pytest.mark.parametrize(
+    ("name_a", "name_b", "shift"),
+    [("spot.obj", "fandisk.obj", (0.15, 0.1, 0.0)), ("cow.obj", "rocker-arm.obj", (0.1, 0.0, 0.1))],
+)
+def test_booleans_match_exact_mesh_booleans(op, name_a, name_b, shift):
+    a, b = _pair(name_a, name_b, shift)
+    h = _voxel(a, b)
+    fa = engine.build_field(*a, voxel_size=h, field_id=1)
+    fb = engine.build_field(*b, voxel_size=h, field_id=2)
+    result = OPS[op](fa, fb)
+    _assert_close_to_exact(result.to_mesh(), exact_boolean(op, *a, *b), h)
+
+
+def test_three_deep_chain_keeps_accuracy():
+    a, b = _pair("spot.obj", "fandisk.obj", (0.15, 0.1, 0.0))
+    c = uv_sphere(0.25, center=a[0].mean(0) + np.float32([0.0, 0.2, 0.2]))
+    d = box_mesh(half=(0.4, 0.5, 0.45), center=a[0].mean(0))
+    h = _voxel(a, b, c, d)
+    fa, fb, fc, fd = (engine.build_field(*m, voxel_size=h, field_id=i) for i, m in enumerate((a, b, c, d)))
+    result = engine.intersection(engine.difference(engine.union(fa, fb), fc), fd)
+    exact = exact_boolean("INTERSECT", *exact_boolean("DIFFERENCE", *exact_boolean("UNION", *a, *b), *c), *d)
+    _assert_close_to_exact(result.to_mesh(), exact, h)
+    _check_structure(result)
+
+
+@pytest.mark.parametrize("op", sorted(OPS))
+def test_operands_of_different_spacings(op):
+    a, b = _pair("spot.obj", "cow.obj", (0.2, 0.0, 0.1))
+    h = _voxel(a, b)
+    fa = engine.build_field(*a, voxel_size=h)
+    fb = engine.build_field(*b, voxel_size=1.7 * h)
+    result = OPS[op](fa, fb)
+    assert result.voxel_size == pytest.approx(h)
+    # the coarser operand limits accuracy: compare within its voxel
+    _assert_close_to_exact(result.to_mesh(), exact_boolean(op, *a, *b), 1.7 * h, vol_tol=0.015)
+    coarse = OPS[op](fa, fb, spacing="coarser")
+    assert coarse.voxel_size == pytest.approx(1.7 * h)
+    _check_structure(coarse)
+
+
+# ---- analytic cases ----
+
+H = 0.02
+
+
+def _sphere_field(r, center, field_id=0):
+    return engine.build_field(*uv_sphere(r, center=center, rings=64, segments=128), voxel_size=H, field_id=field_id)
+
+
+def test_sphere_booleans_match_lens_volumes():
+    a, b = _sphere_field(1.0, (0, 0, 0), 1), _sphere_field(1.0, (1.0, 0, 0), 2)
+    lens = np.pi * (4 + 1) * (2 - 1) ** 2 / 12
+    ball = 4.0 / 3.0 * np.pi
+    for op, expected in (("UNION", 2 * ball - lens), ("INTERSECT", lens), ("DIFFERENCE", ball - lens)):
+        verts, tris = OPS[op](a, b).to_mesh()
+        assert is_watertight(tris)
+        assert mesh_volume(verts, tris) == pytest.approx(expected, rel=0.005)
+
+
+def test_disjoint_operands_far_apart():
+    a, b = _sphere_field(0.5, (0, 0, 0)), _sphere_field(0.5, (6.0, 1.0, -2.0))
+    verts, tris = engine.union(a, b).to_mesh()
+    assert is_watertight(tris)
+    assert mesh_volume(verts, tris) == pytest.approx(2 * 4 / 3 * np.pi * 0.125, rel=0.01)
+    empty_v, empty_t = engine.intersection(a, b).to_mesh()
+    assert empty_v.shape == (0, 3) and empty_t.shape == (0, 3)
+    verts, tris = engine.difference(a, b).to_mesh()
+    assert mesh_volume(verts, tris) == pytest.approx(4 / 3 * np.pi * 0.125, rel=0.01)
+
+
+def test_difference_with_an_inner_operand_gives_a_hollow_shell():
+    outer, inner = _sphere_field(1.0, (0, 0, 0)), _sphere_field(0.6, (0.1, 0, 0))
+    shell = engine.difference(outer, inner)
+    verts, tris = shell.to_mesh()
+    assert is_watertight(tris)
+    assert mesh_volume(verts, tris) == pytest.approx(4 / 3 * np.pi * (1.0 - 0.6**3), rel=0.01)
+    d = shell.sample(np.array([[0.1, 0, 0], [0.85, 0, 0], [1.5, 0, 0]], dtype=np.float32))
+    assert d[0] > 0 and d[1] < 0 and d[2] > 0
+
+
+def test_source_ids_follow_the_operands():
+    a, b = _sphere_field(1.0, (0, 0, 0), 7), _sphere_field(1.0, (1.2, 0, 0), 9)
+    result = engine.union(a, b)
+    assert result.field_ids == (7, 9)
+    ids = result.source_ids(np.array([[-1.0, 0, 0], [2.2, 0, 0], [0, 0.99, 0], [1.2, 0.99, 0]], dtype=np.float32))
+    np.testing.assert_array_equal(ids, [7, 9, 7, 9])
+
+
+def test_operators_are_the_boolean_functions():
+    a, b = _sphere_field(1.0, (0, 0, 0)), _sphere_field(1.0, (1.0, 0, 0))
+    pts = np.random.default_rng(0).uniform(-1.5, 2.5, (2000, 3)).astype(np.float32)
+    for op, fn in ((a | b, engine.union), (a & b, engine.intersection), (a - b, engine.difference)):
+        np.testing.assert_allclose(op.sample(pts), fn(a, b).sample(pts), atol=1e-6)
+
+
+def test_boolean_results_keep_the_invariants():
+    a, b = _sphere_field(1.0, (0, 0, 0)), _sphere_field(0.7, (1.0, 0.3, 0))
+    for fn in OPS.values():
+        _check_structure(fn(a, b))
+    _check_structure(engine.union(a, b, blend=0.2))
+
+
+# ---- smooth booleans ----
+
+
+def test_blend_grows_the_union_monotonically_and_stays_near_the_hard_result():
+    a, b = _sphere_field(1.0, (0, 0, 0)), _sphere_field(1.0, (1.5, 0, 0))
+    hard = engine.union(a, b)
+    hard_v, hard_t = hard.to_mesh()
+    volumes = []
+    for k in (0.0, 0.1, 0.2, 0.4):
+        field = engine.union(a, b, blend=k)
+        verts, tris = field.to_mesh()
+        assert is_watertight(tris)
+        volumes.append(mesh_volume(verts, tris))
+        # every smooth surface point lies within blend (plus a voxel) of the hard surface
+        assert np.abs(hard.sample(verts)).max() <= k + H
+    assert all(v1 < v2 for v1, v2 in zip(volumes, volumes[1:], strict=False)), volumes
+    zero_v, zero_t = engine.union(a, b, blend=0.0).to_mesh()
+    np.testing.assert_array_equal(zero_t, hard_t)
+    np.testing.assert_allclose(zero_v, hard_v)
+
+
+def test_smooth_difference_and_intersection_are_watertight():
+    a, b = _sphere_field(1.0, (0, 0, 0)), _sphere_field(1.0, (1.0, 0, 0))
+    for fn in (engine.intersection, engine.difference):
+        verts, tris = fn(a, b, blend=0.2).to_mesh()
+        assert is_watertight(tris)
+        hard_v, hard_t = fn(a, b).to_mesh()
+        assert mesh_volume(verts, tris) < mesh_volume(hard_v, hard_t)
+
+
+# ---- open inputs ----
+
+
+@pytest.mark.parametrize("name", ["teapot.obj", "suzanne.obj"])
+def test_open_inputs_give_watertight_results_that_agree_with_the_winding_number(name):
+    verts, tris = load_mesh(name)
+    h = _voxel((verts, tris))
+    sphere = uv_sphere(0.3 * float(np.linalg.norm(verts.max(0) - verts.min(0))), center=verts.max(0))
+    fa = engine.build_field(verts, tris, voxel_size=h)
+    fb = engine.build_field(*sphere, voxel_size=h)
+    result = engine.difference(fa, fb)
+    rv, rt = result.to_mesh()
+    assert is_watertight(rt)
+    rng = np.random.default_rng(0)
+    lo, hi = result.bounds
+    pts = rng.uniform(lo, hi, (20000, 3)).astype(np.float32)
+    inside_a = winding_inside(verts, tris, pts)
+    inside_b = np.linalg.norm(pts - verts.max(0), axis=1) < np.linalg.norm(sphere[0][0] - verts.max(0))
+    expected = inside_a & ~inside_b
+    got = winding_inside(rv, rt, pts)
+    # points within two voxels of either surface are excluded: the sign there is the extraction's business
+    margin = np.minimum(np.abs(fa.sample(pts)), np.abs(fb.sample(pts))) > 2 * h
+    assert np.mean(got[margin] == expected[margin]) >= 0.995
+
+
+# ---- validation ----
+
+
+def test_boolean_arguments_are_checked():
+    a = _sphere_field(1.0, (0, 0, 0))
+    with pytest.raises(TypeError, match="'b' to be an AdaptiveField"):
+        engine.union(a, "sphere")
+    with pytest.raises(ValueError, match="non-negative 'blend'"):
+        engine.union(a, a, blend=-1.0)
+    with pytest.raises(ValueError, match="'spacing' to be one of"):
+        engine.union(a, a, spacing="finest")
