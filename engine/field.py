@@ -28,11 +28,13 @@ import warp as wp
 from . import octree
 from .errors import AasdfError
 from .octree import MAX_CELLS_PER_AXIS, UNSET_DISTANCE, morton_encode, node_center
-from .sampling import FieldArg, _sample_field_kernel, _source_ids_kernel
+from .sampling import FieldArg, _sample_field_kernel, _source_ids_kernel, locate_leaf
 
 # Bytes a finest node costs while building (codes, coords, distances, projections, links, sort buffers).
 BUILD_BYTES_PER_NODE = 160
 SIGN_SAFETY = 0.9
+# Rounds of refining coarse leaves the zero set crosses (open meshes: the surface across a hole).
+MAX_SIGN_REFINEMENTS = 4
 
 
 # ---- finest level: octets overlapping triangles ----
@@ -126,49 +128,23 @@ def _finest_distance_kernel(
     source_id: int,
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
-    face: wp.array[wp.int32],
-    normal_sign: wp.array[wp.float32],
     source: wp.array[wp.int32],
 ):
-    """Exact closest point of each finest node, and the sign the angle-weighted pseudo-normal gives it."""
+    """Exact closest point of each finest node (Warp's mesh BVH)."""
     i = wp.tid()
     x = node_center(origin, spacing, coords[i])
-    q = wp.mesh_query_point_sign_normal(mesh, x, max_dist)
+    q = wp.mesh_query_point_no_sign(mesh, x, max_dist)
     source[i] = source_id
     if q.result:
         p = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
         dist[i] = wp.length(x - p)
         proj[i] = p
-        face[i] = q.face
-        normal_sign[i] = q.sign
     else:
         dist[i] = UNSET_DISTANCE
         proj[i] = x
-        face[i] = -1
-        normal_sign[i] = 1.0
 
 
 # ---- signs ----
-
-
-@wp.kernel(enable_backward=False)
-def _finest_sign_kernel(
-    sign: wp.array[wp.float32],
-    normal_sign: wp.array[wp.float32],
-    face: wp.array[wp.int32],
-    problem_face: wp.array[wp.int32],
-    undecided: wp.array[wp.int32],
-):
-    """Finest nodes the parent could not decide take the pseudo-normal sign unless their closest face touches an
-    open, non-manifold or inconsistently oriented edge; those are flagged for the winding number."""
-    i = wp.tid()
-    undecided[i] = 0
-    if sign[i] == 0.0:
-        f = face[i]
-        if f >= 0 and problem_face[f] == 0:
-            sign[i] = normal_sign[i]
-        else:
-            undecided[i] = 1
 
 
 @wp.kernel(enable_backward=False)
@@ -179,19 +155,61 @@ def _mesh_sign_kernel(
     origin: wp.vec3,
     spacing: float,
     max_dist: float,
-    use_winding: int,
     sign: wp.array[wp.float32],
 ):
-    """Sign oracle: winding number >= 0.5 inside (robust on open meshes) or the closest point's pseudo-normal."""
+    """Sign oracle: inside where the generalised winding number is >= 0.5 (robust on open and multi-shell meshes)."""
     t = wp.tid()
     i = nodes[t]
     x = node_center(origin, spacing, coords[i])
-    if use_winding == 1:
-        q = wp.mesh_query_point_sign_winding_number(mesh, x, max_dist, 2.0, 0.5)
-        sign[i] = q.sign
-    else:
-        q2 = wp.mesh_query_point_sign_normal(mesh, x, max_dist)
-        sign[i] = q2.sign
+    q = wp.mesh_query_point_sign_winding_number(mesh, x, max_dist, 2.0, 0.5)
+    sign[i] = q.sign
+
+
+@wp.kernel(enable_backward=False)
+def _band_gap_kernel(f: FieldArg, out: wp.array[wp.int64]):
+    """For each finest node and each of its 26 neighbour positions outside the finest band: the octet code there
+    when the coarse leaf covering it has the other sign (a marching cube there would be incomplete), else -1."""
+    i = wp.tid()
+    c = node_center(f.origin, f.voxel_size, f.coords[i])
+    inside = f.values[i] < 0.0
+    for o in range(27):
+        out[27 * i + o] = wp.int64(-1)
+        if o != 13:
+            d = wp.vec3(float(o % 3 - 1), float((o // 3) % 3 - 1), float(o // 9 - 1))
+            q = c + f.voxel_size * d
+            ok = int(1)
+            for a in range(3):
+                if q[a] <= f.domain_min[a] or q[a] >= f.domain_max[a]:
+                    ok = int(0)
+            if ok == 1:
+                nb = locate_leaf(f, q)
+                if nb[1] > 0 and (f.values[nb[0]] < 0.0) != inside:
+                    qc = f.coords[i] + wp.vec3i(o % 3 - 1, (o // 3) % 3 - 1, o // 9 - 1)
+                    out[27 * i + o] = morton_encode(wp.vec3i(qc[0] >> 1, qc[1] >> 1, qc[2] >> 1))
+
+
+@wp.kernel(enable_backward=False)
+def _sign_change_kernel(f: FieldArg, node_level: wp.array[wp.int32], marks: wp.array[wp.int32]):
+    """Mark coarse leaves that have a face neighbour of the opposite sign: the zero set crosses them."""
+    i = f.fine_count + wp.tid()
+    marks[wp.tid()] = 0
+    if f.child[i] >= 0:
+        return
+    s = f.voxel_size * float(1 << node_level[i])
+    c = node_center(f.origin, s, f.coords[i])
+    inside = f.values[i] < 0.0
+    for k in range(6):
+        d = wp.vec3(0.0)
+        d[k // 2] = wp.where(k % 2 == 0, -s, s)
+        q = c + d
+        ok = int(1)
+        for a in range(3):
+            if q[a] <= f.domain_min[a] or q[a] >= f.domain_max[a]:
+                ok = int(0)
+        if ok == 1:
+            nb = locate_leaf(f, q)
+            if (f.values[nb[0]] < 0.0) != inside:
+                marks[wp.tid()] = 1
 
 
 @wp.kernel(enable_backward=False)
@@ -587,9 +605,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     t0 = time.perf_counter()
     if levels == 1:
         coords_np, codes_np = octree.dense_level(top_dims)
-        fine_codes = wp.array(codes_np, dtype=wp.int64, device=device)
-        fine_coords = wp.array(coords_np, dtype=wp.vec3i, device=device)
-        query_radius = diag
+        base_octets = None
     else:
         oct_dims = wp.vec3i(*(int(d) for d in fine_dims // 2))
         verts_wp = wp.array(verts, dtype=wp.vec3, device=device)
@@ -616,26 +632,8 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
             outputs=[counts, octet_codes],
             device=device,
         )
-        octets = octree.sort_unique(octet_codes, end_bit=3 * _bits(fine_dims // 2))
-        fine_codes, fine_coords = octree.expand_octets(octets)
-        query_radius = (padding + 4) * octet * 1.8
+        base_octets = octree.sort_unique(octet_codes, end_bit=3 * _bits(fine_dims // 2))
     timings["finest_cells"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    n0 = fine_codes.shape[0]
-    dist0 = wp.empty(n0, dtype=wp.float32, device=device)
-    proj0 = wp.empty(n0, dtype=wp.vec3, device=device)
-    face0 = wp.empty(n0, dtype=wp.int32, device=device)
-    nsign0 = wp.empty(n0, dtype=wp.float32, device=device)
-    src0 = wp.empty(n0, dtype=wp.int32, device=device)
-    wp.launch(
-        _finest_distance_kernel,
-        dim=n0,
-        device=device,
-        inputs=[mesh.id, fine_coords, wp.vec3(*origin), voxel_size, float(query_radius), int(field_id)],
-        outputs=[dist0, proj0, face0, nsign0, src0],
-    )
-    timings["finest_distance"] = time.perf_counter() - t0
 
     def oracle(coords, nodes_np, spacing, sign):
         if len(nodes_np) == 0:
@@ -645,45 +643,112 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
             _mesh_sign_kernel,
             dim=len(nodes_np),
             device=device,
-            inputs=[mesh.id, coords, nodes, wp.vec3(*origin), float(spacing), diag, 1],
+            inputs=[mesh.id, coords, nodes, wp.vec3(*origin), float(spacing), diag],
             outputs=[sign],
         )
 
-    # Undecided finest nodes lie within about half a voxel of the surface. The pseudo-normal sign of their closest
-    # point is wrong near open edges and where shells intersect or touch, so they pay the winding number too.
-    problem_wp = wp.array(np.ones_like(problem), dtype=wp.int32, device=device)
-
     def finest_signs(coords, sign, lo0, hi0):
-        n = hi0 - lo0
-        undecided = wp.empty(n, dtype=wp.int32, device=device)
-        wp.launch(
-            _finest_sign_kernel, dim=n, inputs=[sign, nsign0, face0, problem_wp], outputs=[undecided], device=device
-        )
-        idx = np.flatnonzero(undecided.numpy())
+        # Undecided finest nodes lie within about half a voxel of the surface, where the pseudo-normal sign is wrong
+        # near open edges and where shells intersect or touch: they pay the winding number.
+        idx = lo0 + np.flatnonzero(sign.numpy()[lo0:hi0] == 0.0)
         oracle(coords, idx, voxel_size, sign)
         return len(idx)
 
-    field = assemble_field(
-        origin=origin,
-        top_dims=top_dims,
-        voxel_size=voxel_size,
-        levels=levels,
-        fine_codes=fine_codes,
-        fine_coords=fine_coords,
-        fine_dist=dist0,
-        fine_proj=proj0,
-        fine_source=src0,
-        oracle=oracle,
-        finest_signs=finest_signs,
-        device=device,
-        field_ids=(field_id,),
-        timings=timings,
-        mesh_id=mesh.id,
-    )
+    def build(octets, query_radius):
+        t0 = time.perf_counter()
+        if octets is None:
+            fine_codes = wp.array(codes_np, dtype=wp.int64, device=device)
+            fine_coords = wp.array(coords_np, dtype=wp.vec3i, device=device)
+        else:
+            fine_codes, fine_coords = octree.expand_octets(octets)
+        n0 = fine_codes.shape[0]
+        dist0 = wp.empty(n0, dtype=wp.float32, device=device)
+        proj0 = wp.empty(n0, dtype=wp.vec3, device=device)
+        src0 = wp.empty(n0, dtype=wp.int32, device=device)
+        wp.launch(
+            _finest_distance_kernel,
+            dim=n0,
+            device=device,
+            inputs=[mesh.id, fine_coords, wp.vec3(*origin), voxel_size, float(query_radius), int(field_id)],
+            outputs=[dist0, proj0, src0],
+        )
+        timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
+        return assemble_field(
+            origin=origin,
+            top_dims=top_dims,
+            voxel_size=voxel_size,
+            levels=levels,
+            fine_codes=fine_codes,
+            fine_coords=fine_coords,
+            fine_dist=dist0,
+            fine_proj=proj0,
+            fine_source=src0,
+            oracle=oracle,
+            finest_signs=finest_signs,
+            device=device,
+            field_ids=(field_id,),
+            timings=timings,
+            mesh_id=mesh.id,
+        )
+
+    field = build(base_octets, diag if levels == 1 else (padding + 4) * octet * 1.8)
+    # Across a hole of an open mesh the inside/outside boundary (winding number 0.5) runs away from any triangle,
+    # through coarse leaves. Refine those leaves to the finest level so the surface there can be extracted too.
+    rounds = 0
+    while levels > 1 and rounds < MAX_SIGN_REFINEMENTS:
+        extra = sign_change_octets(field)
+        if len(extra) == 0:
+            break
+        rounds += 1
+        check_budget(fine_dims, top_count, field.level_counts[0] + 8 * len(extra))
+        t0 = time.perf_counter()
+        merged = wp.empty(base_octets.shape[0] + len(extra), dtype=wp.int64, device=device)
+        wp.copy(merged, base_octets, count=base_octets.shape[0])
+        merged_np_tail = wp.array(extra, dtype=wp.int64, device=device)
+        wp.copy(merged, merged_np_tail, dest_offset=base_octets.shape[0], count=len(extra))
+        base_octets = octree.sort_unique(merged, end_bit=3 * _bits(fine_dims // 2))
+        timings["finest_cells"] += time.perf_counter() - t0
+        field = build(base_octets, diag)
+    field.stats["sign_refinements"] = rounds
     field.stats["clean_mesh"] = clean
     field.stats["problem_faces"] = int(problem.sum())
     field._mesh = mesh  # keeps the BVH alive for callers that want exact queries
     return field
+
+
+def sign_change_octets(field: AdaptiveField) -> np.ndarray:
+    """Octet codes the finest level lacks where the zero set leaves it: every coarse leaf whose face neighbour has
+    the opposite sign, and every octet next to the band whose covering coarse leaf has another sign than a band node
+    beside it (so every marching cube that straddles the zero set is complete)."""
+    n_coarse = field.node_count - field.level_counts[0]
+    if n_coarse == 0:
+        return np.zeros(0, dtype=np.int64)
+    levels_np = field.level_of_nodes()
+    marks = wp.empty(n_coarse, dtype=wp.int32, device=field.device)
+    wp.launch(
+        _sign_change_kernel,
+        dim=n_coarse,
+        inputs=[field.arg(), wp.array(levels_np, dtype=wp.int32, device=field.device)],
+        outputs=[marks],
+        device=field.device,
+    )
+    n0 = field.level_counts[0]
+    gaps = wp.empty(27 * n0, dtype=wp.int64, device=field.device)
+    wp.launch(_band_gap_kernel, dim=n0, inputs=[field.arg()], outputs=[gaps], device=field.device)
+    gaps_np = gaps.numpy()
+    gap_octets = np.unique(gaps_np[gaps_np >= 0])
+    marked = n0 + np.flatnonzero(marks.numpy())
+    if len(marked) == 0:
+        return gap_octets
+    coords = field.coords.numpy()[marked].astype(np.int64)
+    lv = levels_np[marked]
+    out = []
+    for k in np.unique(lv):
+        n = 2 ** (int(k) - 1)  # octets per axis in a level-k cell
+        base = coords[lv == k] * n
+        grid = np.stack(np.meshgrid(*([np.arange(n)] * 3), indexing="ij"), axis=-1).reshape(-1, 3)
+        out.append((base[:, None, :] + grid[None, :, :]).reshape(-1, 3))
+    return np.union1d(octree.morton_encode_np(np.concatenate(out)), gap_octets)
 
 
 def _bits(dims) -> int:

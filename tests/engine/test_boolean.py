@@ -171,7 +171,7 @@ def test_smooth_difference_and_intersection_are_watertight():
 # ---- open inputs ----
 
 
-@pytest.mark.parametrize("name", ["teapot.obj", "suzanne.obj"])
+@pytest.mark.parametrize("name", ["stanford-bunny.obj", "teapot.obj", "suzanne.obj"])
 def test_open_inputs_give_watertight_results_that_agree_with_the_winding_number(name):
     verts, tris = load_mesh(name)
     h = _voxel((verts, tris))
