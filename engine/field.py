@@ -166,31 +166,46 @@ def _mesh_sign_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def _band_gap_kernel(f: FieldArg, out: wp.array[wp.int64]):
-    """For each finest node and each of its 26 neighbour positions outside the finest band: the octet code there
-    when the coarse leaf covering it has the other sign (a marching cube there would be incomplete), else -1."""
-    i = wp.tid()
-    c = node_center(f.origin, f.voxel_size, f.coords[i])
-    inside = f.values[i] < 0.0
+def _band_gap_kernel(f: FieldArg, capacity: int, count: wp.array[wp.int32], out: wp.array[wp.int64]):
+    """Octets next to the finest band whose covering coarse leaf has another sign than a node of the band octet
+    beside them: a marching cube straddling the zero set there would be incomplete. One thread per band octet
+    (8 consecutive finest nodes); found octet codes are appended to ``out``."""
+    t = wp.tid()
+    first = 8 * t
+    octet = wp.vec3i(f.coords[first][0] >> 1, f.coords[first][1] >> 1, f.coords[first][2] >> 1)
+    size = 2.0 * f.voxel_size
+    c = f.origin + size * wp.vec3(float(octet[0]) + 0.5, float(octet[1]) + 0.5, float(octet[2]) + 0.5)
     for o in range(27):
-        out[27 * i + o] = wp.int64(-1)
         if o != 13:
-            d = wp.vec3(float(o % 3 - 1), float((o // 3) % 3 - 1), float(o // 9 - 1))
-            q = c + f.voxel_size * d
+            d = wp.vec3i(o % 3 - 1, (o // 3) % 3 - 1, o // 9 - 1)
+            q = c + size * wp.vec3(float(d[0]), float(d[1]), float(d[2]))
             ok = int(1)
             for a in range(3):
                 if q[a] <= f.domain_min[a] or q[a] >= f.domain_max[a]:
                     ok = int(0)
             if ok == 1:
                 nb = locate_leaf(f, q)
-                if nb[1] > 0 and (f.values[nb[0]] < 0.0) != inside:
-                    qc = f.coords[i] + wp.vec3i(o % 3 - 1, (o // 3) % 3 - 1, o // 9 - 1)
-                    out[27 * i + o] = morton_encode(wp.vec3i(qc[0] >> 1, qc[1] >> 1, qc[2] >> 1))
+                if nb[1] > 0:
+                    other = f.values[nb[0]] < 0.0
+                    # only this octet's nodes on the side facing the neighbour share marching cubes with it
+                    differs = int(0)
+                    for n in range(8):
+                        facing = int(1)
+                        for a in range(3):
+                            bit = (n >> a) & 1
+                            if (d[a] > 0 and bit == 0) or (d[a] < 0 and bit == 1):
+                                facing = int(0)
+                        if facing == 1 and (f.values[first + n] < 0.0) != other:
+                            differs = int(1)
+                    if differs == 1:
+                        slot = wp.atomic_add(count, 0, 1)
+                        if slot < capacity:
+                            out[slot] = morton_encode(octet + d)
 
 
 @wp.kernel(enable_backward=False)
 def _sign_change_kernel(f: FieldArg, node_level: wp.array[wp.int32], marks: wp.array[wp.int32]):
-    """Mark coarse leaves that have a face neighbour of the opposite sign: the zero set crosses them."""
+    """Mark coarse leaves that have a coarse face neighbour of the opposite sign: the zero set crosses them."""
     i = f.fine_count + wp.tid()
     marks[wp.tid()] = 0
     if f.child[i] >= 0:
@@ -199,8 +214,10 @@ def _sign_change_kernel(f: FieldArg, node_level: wp.array[wp.int32], marks: wp.a
     c = node_center(f.origin, s, f.coords[i])
     inside = f.values[i] < 0.0
     for k in range(6):
+        # probe just across the face centre: the leaf found there touches this one
         d = wp.vec3(0.0)
-        d[k // 2] = wp.where(k % 2 == 0, -s, s)
+        step = 0.5 * s + 0.25 * f.voxel_size
+        d[k // 2] = wp.where(k % 2 == 0, -step, step)
         q = c + d
         ok = int(1)
         for a in range(3):
@@ -208,7 +225,8 @@ def _sign_change_kernel(f: FieldArg, node_level: wp.array[wp.int32], marks: wp.a
                 ok = int(0)
         if ok == 1:
             nb = locate_leaf(f, q)
-            if (f.values[nb[0]] < 0.0) != inside:
+            # sign changes next to the finest band are the band-gap kernel's business
+            if nb[1] > 0 and (f.values[nb[0]] < 0.0) != inside:
                 marks[wp.tid()] = 1
 
 
@@ -733,10 +751,22 @@ def sign_change_octets(field: AdaptiveField) -> np.ndarray:
         device=field.device,
     )
     n0 = field.level_counts[0]
-    gaps = wp.empty(27 * n0, dtype=wp.int64, device=field.device)
-    wp.launch(_band_gap_kernel, dim=n0, inputs=[field.arg()], outputs=[gaps], device=field.device)
-    gaps_np = gaps.numpy()
-    gap_octets = np.unique(gaps_np[gaps_np >= 0])
+    capacity = max(1024, n0 // 8)
+    while True:
+        count = wp.zeros(1, dtype=wp.int32, device=field.device)
+        gaps = wp.empty(capacity, dtype=wp.int64, device=field.device)
+        wp.launch(
+            _band_gap_kernel,
+            dim=n0 // 8,
+            inputs=[field.arg(), capacity],
+            outputs=[count, gaps],
+            device=field.device,
+        )
+        found = int(count.numpy()[0])
+        if found <= capacity:
+            break
+        capacity = found
+    gap_octets = np.unique(gaps.numpy()[:found])
     marked = n0 + np.flatnonzero(marks.numpy())
     if len(marked) == 0:
         return gap_octets

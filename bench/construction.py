@@ -1,0 +1,110 @@
+"""Construction benchmark: the adaptive field against Blender's Mesh to SDF Grid and a dense grid, side by side.
+
+For each mesh and finest spacing (bounding-box diagonal / 256 and / 512) it prints, in one run: the build time of
+each stage of ``engine.build_field`` (finest level, each intermediate level, top level, signs), node counts per
+level, the geometry-nodes Mesh to SDF Grid node (OpenVDB, narrow band of 3 voxels) at the same voxel size, and a
+dense uniform grid of exact signed distances over the same domain (its node count, and its time where it fits).
+Times are medians of ``--repeat`` runs (default 3) after one warm-up; the machine is noted in the header.
+
+    .venv/bin/python bench/construction.py [--meshes stanford-bunny.obj spot.obj rocker-arm.obj] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp-cache"))
+
+import warp as wp  # noqa: E402
+
+import engine  # noqa: E402
+from bench import baselines  # noqa: E402
+from tests.metrics import unsigned_distance  # noqa: E402
+from tests.support import load_mesh  # noqa: E402
+
+DENSE_LIMIT = 40_000_000  # dense grids above this many voxels are counted, not built
+
+
+def machine() -> str:
+    return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, warp {wp.__version__} on cpu"
+
+
+def median_time(fn, repeat):
+    times, result = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), result
+
+
+def dense_grid_seconds(field, verts, tris):
+    """Exact unsigned distances on every finest voxel of the domain (chunked), or None when it is too large."""
+    dims = field.fine_dims
+    n = int(np.prod(dims))
+    if n > DENSE_LIMIT:
+        return None
+    lo = field.bounds[0]
+    t0 = time.perf_counter()
+    axes = [lo[a] + (np.arange(dims[a]) + 0.5) * field.voxel_size for a in range(3)]
+    step = max(1, int(4_000_000 // (dims[1] * dims[2])))
+    for x0 in range(0, dims[0], step):
+        grid = np.stack(np.meshgrid(axes[0][x0 : x0 + step], axes[1], axes[2], indexing="ij"), -1).reshape(-1, 3)
+        unsigned_distance(verts, tris, grid.astype(np.float32))
+    return time.perf_counter() - t0
+
+
+def run(meshes, resolutions, repeat):
+    print(f"# Construction benchmark — {machine()}; medians of {repeat} runs after a warm-up\n")
+    header = (
+        "| mesh | tris | res | voxel | AASDF build s | finest s | levels s | top s | signs s | nodes per level "
+        "| nodes | uniform voxels | ratio | GN Mesh to SDF s | AASDF / GN | dense grid s |"
+    )
+    print(header)
+    print("|" + "|".join(["---"] * (header.count("|") - 1)) + "|")
+    for name in meshes:
+        verts, tris = load_mesh(name)
+        diag = float(np.linalg.norm(verts.max(0) - verts.min(0)))
+        for res in resolutions:
+            h = diag / res
+            engine.build_field(verts, tris, voxel_size=h)  # warm-up (kernel load)
+            build_s, field = median_time(lambda v=verts, t=tris, h=h: engine.build_field(v, t, voxel_size=h), repeat)
+            t = field.timings
+            finest = t.get("mesh_bvh", 0) + t.get("finest_cells", 0) + t.get("finest_distance", 0)
+            levels = sum(v for k, v in t.items() if k.startswith("level_") and not k.endswith("neighbours"))
+            levels += t.get("levels_structure", 0)
+            gn_s = statistics.median(baselines.gn_mesh_to_sdf((verts, tris), h)["seconds"] for _ in range(repeat))
+            uniform = int(np.prod(field.fine_dims))
+            dense = dense_grid_seconds(field, verts, tris) if res <= 256 else None
+            dense_text = f"{dense:.2f}" if dense is not None else "—"
+            print(
+                f"| {name} | {len(tris):,} | /{res} | {h:.5f} | {build_s:.3f} | {finest:.3f} | {levels:.3f} "
+                f"| {t.get('top_level', 0):.3f} | {t.get('signs', 0):.3f} | {field.level_counts} "
+                f"| {field.node_count:,} | {uniform:,} | {uniform / field.node_count:.1f}x | {gn_s:.3f} "
+                f"| {build_s / gn_s:.2f}x | {dense_text} |"
+            )
+            sys.stdout.flush()
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--meshes", nargs="+", default=["stanford-bunny.obj", "spot.obj", "rocker-arm.obj"])
+    parser.add_argument("--resolutions", nargs="+", type=int, default=[256, 512])
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args(argv)
+    wp.config.quiet = True
+    run(args.meshes, args.resolutions, args.repeat)
+
+
+if __name__ == "__main__":
+    main()
