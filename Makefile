@@ -1,0 +1,39 @@
+# The README's commands. Each target sets up .venv itself (Python 3.11 + requirements-dev.txt).
+PYTHON ?= python3.11
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.requirements-dev.stamp
+PYTEST_ARGS ?=
+
+.PHONY: venv test test-fast lint extension demo clean
+
+venv: $(STAMP)
+
+# Re-installs only when requirements-dev.txt changes (or the venv is new).
+$(STAMP): requirements-dev.txt
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -r requirements-dev.txt
+	touch $@
+
+# The whole suite: engine, Blender and packaging tests, including the slow install test.
+test: venv
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+# Everything but the slow tests (the install test builds a 150 MB zip and installs it in a bare bpy).
+test-fast: venv
+	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)
+
+lint: venv
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
+
+# One installable zip per platform in dist/, with the platform's warp-lang wheel (downloaded into wheels/).
+extension: venv
+	$(PY) tools/build_extension.py --output-dir dist
+
+# The main job. Until the batch boolean lands: build the linux-x64 extension and list what is in it.
+demo: venv
+	$(PY) tools/build_extension.py --platform linux-x64 --output-dir dist --list
+
+clean:
+	rm -rf build dist .warp-cache .pytest_cache .ruff_cache

@@ -1,0 +1,191 @@
+"""Between Blender objects and the engine's arrays: evaluated meshes out as world-space numpy, results back in.
+
+``evaluated_mesh`` reads an object's evaluated geometry (modifiers applied) with ``foreach_get`` and moves it to
+world space in one matrix product; ``combine`` folds fields with the engine's booleans as a balanced tree; and
+``write_result_object`` builds a new mesh object with ``foreach_set``. Nothing here loops over vertices in Python.
+"""
+
+import bpy
+import numpy as np
+
+from . import runtime
+
+# operation identifier -> name of the engine's binary boolean
+_ENGINE_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
+
+
+def evaluated_local_mesh(obj, depsgraph) -> tuple[np.ndarray, np.ndarray]:
+    """The evaluated (modifiers applied) triangles of a mesh object in its local space.
+
+    Args:
+        obj: A mesh object (original or evaluated).
+        depsgraph: The evaluated depsgraph, e.g. ``context.evaluated_depsgraph_get()``.
+    Returns:
+        (V, 3) float32 local vertex positions and (T, 3) int32 triangles (polygons split into loop triangles).
+    """
+    evaluated = obj.evaluated_get(depsgraph)
+    mesh = evaluated.to_mesh()
+    try:
+        mesh.calc_loop_triangles()
+        verts = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+        mesh.vertices.foreach_get("co", verts)
+        tris = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
+        mesh.loop_triangles.foreach_get("vertices", tris)
+    finally:
+        evaluated.to_mesh_clear()
+    return verts.reshape(-1, 3), tris.reshape(-1, 3)
+
+
+def world_matrix(obj, depsgraph) -> np.ndarray:
+    """(4, 4) float64 evaluated world matrix of ``obj``."""
+    return np.array(obj.evaluated_get(depsgraph).matrix_world, dtype=np.float64)
+
+
+def to_world(verts, tris, matrix) -> tuple[np.ndarray, np.ndarray]:
+    """Apply a (4, 4) world matrix to (V, 3) vertices; a mirroring matrix also flips the triangles' winding.
+
+    Returns:
+        (V, 3) float32 world-space vertices and (T, 3) int32 triangles, outward as in local space.
+    """
+    matrix = np.asarray(matrix, dtype=np.float64)
+    world = (np.asarray(verts, dtype=np.float64) @ matrix[:3, :3].T + matrix[:3, 3]).astype(np.float32)
+    tris = np.asarray(tris, dtype=np.int32)
+    if np.linalg.det(matrix[:3, :3]) < 0.0:
+        tris = tris[:, ::-1]
+    return world, np.ascontiguousarray(tris)
+
+
+def evaluated_mesh(obj, depsgraph) -> tuple[np.ndarray, np.ndarray]:
+    """The evaluated geometry of a mesh object in world space: (V, 3) float32 vertices, (T, 3) int32 triangles."""
+    verts, tris = evaluated_local_mesh(obj, depsgraph)
+    return to_world(verts, tris, world_matrix(obj, depsgraph))
+
+
+def world_bounds(objects, depsgraph) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) world corners of the evaluated bounding boxes of ``objects`` (float64 (3,) each)."""
+    corners = []
+    for obj in objects:
+        evaluated = obj.evaluated_get(depsgraph)
+        local = np.array([tuple(c) for c in evaluated.bound_box], dtype=np.float64)
+        corners.append(to_world(local, np.zeros((0, 3), np.int32), evaluated.matrix_world)[0])
+    points = np.concatenate(corners).astype(np.float64)
+    return points.min(axis=0), points.max(axis=0)
+
+
+def combine(operation: str, fields, blend: float = 0.0, *, progress=None):
+    """Fold fields with one boolean, as a balanced binary tree (depth ``ceil(log2 n)``).
+
+    Args:
+        operation: ``"UNION"``, ``"INTERSECT"`` or ``"DIFFERENCE"``. DIFFERENCE is the first field minus the union
+            of all the others (that union is sharp; ``blend`` rounds the final cut only).
+        fields: Sequence of at least one ``AdaptiveField``.
+        blend: Smooth-blend radius of the booleans (0 keeps sharp edges).
+        progress: Optional callable, called once after each binary boolean.
+    Returns:
+        The combined ``AdaptiveField`` (the field itself when only one is given).
+    Raises:
+        ValueError: On an unknown operation or an empty ``fields``.
+    """
+    if operation not in _ENGINE_OPS:
+        raise ValueError(f"Expected 'operation' in {tuple(_ENGINE_OPS)}, but got {operation!r}.")
+    fields = list(fields)
+    if not fields:
+        raise ValueError("Expected at least one field, but got none.")
+    engine = runtime.engine()
+    tick = progress or (lambda: None)
+
+    def fold(op, items, k):
+        items = list(items)
+        while len(items) > 1:
+            paired = []
+            for i in range(0, len(items) - 1, 2):
+                paired.append(op(items[i], items[i + 1], blend=k))
+                tick()
+            if len(items) % 2:
+                paired.append(items[-1])
+            items = paired
+        return items[0]
+
+    if operation == "DIFFERENCE":
+        if len(fields) == 1:
+            return fields[0]
+        cutter = fold(engine.union, fields[1:], 0.0)
+        result = engine.difference(fields[0], cutter, blend=blend)
+        tick()
+        return result
+    return fold(getattr(engine, _ENGINE_OPS[operation]), fields, blend)
+
+
+def operand_materials(objects) -> tuple[list, np.ndarray]:
+    """Material slots for a result and the slot of each operand.
+
+    Returns:
+        The distinct materials of all operands' slots, in order (plus one empty slot when some operand has no
+        material but others do), and (len(objects),) int32: the slot of each operand's first material.
+    """
+    materials, slot_of = [], []
+    firsts = [next((slot.material for slot in obj.material_slots if slot.material), None) for obj in objects]
+    for obj in objects:
+        for slot in obj.material_slots:
+            if slot.material is not None and slot.material not in materials:
+                materials.append(slot.material)
+    for first in firsts:
+        if first is None:
+            if materials and None not in materials:
+                materials.append(None)
+            slot_of.append(materials.index(None) if None in materials else 0)
+        else:
+            slot_of.append(materials.index(first))
+    return materials, np.asarray(slot_of, dtype=np.int32)
+
+
+def is_smooth(obj) -> bool:
+    """Whether most faces of a mesh object are smooth-shaded."""
+    polygons = obj.data.polygons
+    if not len(polygons):
+        return False
+    smooth = np.empty(len(polygons), dtype=bool)
+    polygons.foreach_get("use_smooth", smooth)
+    return bool(smooth.mean() >= 0.5)
+
+
+def write_result_object(context, name, verts, tris, materials=(), face_material_index=None, smooth=False):
+    """Create a mesh object from arrays, linked next to the active object, made active and the only selection.
+
+    Args:
+        context: The operator's context (its active object's first collection receives the result).
+        name: Name of the new object and mesh.
+        verts: (V, 3) float32 world-space vertices (the object gets the identity transform).
+        tris: (F, 3) int32 triangles.
+        materials: Materials for the slots, in order (``None`` gives an empty slot).
+        face_material_index: Optional (F,) int slot index of each face.
+        smooth: Smooth shading for all faces.
+    Returns:
+        The new ``bpy.types.Object``.
+    """
+    verts = np.ascontiguousarray(verts, dtype=np.float32).reshape(-1, 3)
+    tris = np.ascontiguousarray(tris, dtype=np.int32).reshape(-1, 3)
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(verts))
+    mesh.vertices.foreach_set("co", verts.ravel())
+    mesh.loops.add(tris.size)
+    mesh.loops.foreach_set("vertex_index", tris.ravel())
+    mesh.polygons.add(len(tris))
+    mesh.polygons.foreach_set("loop_start", np.arange(0, tris.size, 3, dtype=np.int32))
+    for material in materials:
+        mesh.materials.append(material)
+    if face_material_index is not None and len(tris):
+        mesh.polygons.foreach_set("material_index", np.ascontiguousarray(face_material_index, dtype=np.int32))
+    mesh.update(calc_edges=True)
+    if len(tris):  # meshes without a "sharp_face" attribute are smooth: say it either way
+        mesh.shade_smooth() if smooth else mesh.shade_flat()
+
+    obj = bpy.data.objects.new(name, mesh)
+    active = context.active_object
+    collection = active.users_collection[0] if active is not None and active.users_collection else None
+    (collection or context.scene.collection).objects.link(obj)
+    for other in context.selected_objects:
+        other.select_set(False)
+    obj.select_set(True)
+    context.view_layer.objects.active = obj
+    return obj

@@ -1,0 +1,189 @@
+"""Per-object cache of input fields, so re-running a boolean on unchanged objects builds no field.
+
+An entry belongs to one object (``obj.session_uid``) and is valid for one key: a hash of the object's evaluated
+local geometry (vertex and triangle bytes), its world matrix and the field settings (voxel size, levels, padding,
+device). A changed key rebuilds that object's field only. Entries are kept in least-recently-used order within the
+memory limit of the add-on preferences (``cache_limit_mb``; 0 turns the cache off). A ``depsgraph_update_post``
+handler drops the entries of objects whose geometry changed, ``load_pre`` empties the cache, and ``unregister()``
+removes the handlers and empties it too.
+
+Undo and redo re-evaluate every object as if its geometry had changed. The update that follows ``undo_post`` or
+``redo_post`` is therefore not taken as an edit, so the redo panel re-runs an operator on cached fields (the key,
+not the handler, is what keeps entries correct: a field is only ever reused for the same geometry hash).
+"""
+
+import copy
+import hashlib
+from collections import OrderedDict
+
+import bpy
+import numpy as np
+
+from . import bridge, preferences, runtime
+
+_entries: OrderedDict = OrderedDict()  # session_uid -> (key, field, nbytes), least recently used first
+_stats = {"hits": 0, "builds": 0, "evictions": 0, "invalidations": 0}
+_skip_next_update = False  # set by undo/redo: their re-evaluation is not an edit
+
+DEFAULT_LIMIT_MB = 1024
+
+_FIELD_ARRAYS = ("codes", "coords", "values", "proj", "child", "source")
+
+
+def field_nbytes(field) -> int:
+    """Bytes held by a field's arrays."""
+    return int(sum(getattr(getattr(field, name, None), "capacity", 0) or 0 for name in _FIELD_ARRAYS))
+
+
+def limit_bytes(context=None) -> int:
+    """The cache's memory limit in bytes, from the add-on preferences (1 GiB without preferences)."""
+    prefs = preferences.get(context)
+    mb = prefs.cache_limit_mb if prefs is not None else DEFAULT_LIMIT_MB
+    return int(mb) * 2**20
+
+
+def geometry_key(verts, tris, matrix, *, voxel_size, levels, padding, device) -> str:
+    """Hash of local geometry, world matrix and field settings: equal keys give equal fields."""
+    digest = hashlib.blake2b(digest_size=20)
+    for array in (verts, tris, np.asarray(matrix, dtype=np.float64)):
+        array = np.ascontiguousarray(array)
+        digest.update(str(array.shape).encode())
+        digest.update(array.tobytes())
+    digest.update(repr((float(voxel_size), int(levels), int(padding), str(device))).encode())
+    return digest.hexdigest()
+
+
+def with_field_id(field, field_id: int):
+    """The field with every node's source id set to ``field_id`` (a shallow copy; the field itself when equal)."""
+    if tuple(field.field_ids) == (int(field_id),):
+        return field
+    import warp as wp
+
+    relabelled = copy.copy(field)
+    relabelled.source = wp.full(field.source.shape[0], int(field_id), dtype=wp.int32, device=field.source.device)
+    relabelled.field_ids = (int(field_id),)
+    return relabelled
+
+
+def field_for(obj, depsgraph, *, voxel_size, levels, padding, field_id=0, device=None, context=None):
+    """The adaptive field of a mesh object's evaluated world-space geometry, from the cache or newly built.
+
+    Args:
+        obj: A mesh object (original).
+        depsgraph: The evaluated depsgraph.
+        voxel_size, levels, padding: Field settings, as for ``engine.build_field``.
+        field_id: Source id of the returned field's nodes (cached fields are relabelled, not rebuilt).
+        device: Warp device (``None``: the preferred device).
+        context: For the preferences (memory limit, device).
+    Returns:
+        ``AdaptiveField``.
+    Raises:
+        AasdfError: From ``engine.build_field`` (empty or degenerate geometry, too fine for memory).
+    """
+    engine = runtime.engine()
+    device = device or runtime.device(context)
+    verts, tris = bridge.evaluated_local_mesh(obj, depsgraph)
+    matrix = bridge.world_matrix(obj, depsgraph)
+    key = geometry_key(verts, tris, matrix, voxel_size=voxel_size, levels=levels, padding=padding, device=device)
+    uid = obj.original.session_uid
+    entry = _entries.get(uid)
+    if entry is not None and entry[0] == key:
+        _entries.move_to_end(uid)
+        _stats["hits"] += 1
+        return with_field_id(entry[1], field_id)
+    _entries.pop(uid, None)
+    world, world_tris = bridge.to_world(verts, tris, matrix)
+    field = engine.build_field(
+        world, world_tris, voxel_size=voxel_size, levels=levels, padding=padding, device=device, field_id=field_id
+    )
+    _stats["builds"] += 1
+    _store(uid, key, field, limit_bytes(context))
+    return field
+
+
+def _store(uid, key, field, limit):
+    nbytes = field_nbytes(field)
+    if nbytes > limit:
+        return
+    _entries[uid] = (key, field, nbytes)
+    while total_bytes() > limit:
+        _entries.popitem(last=False)
+        _stats["evictions"] += 1
+
+
+def total_bytes() -> int:
+    """Bytes held by all cached fields."""
+    return sum(entry[2] for entry in _entries.values())
+
+
+def stats() -> dict:
+    """Counters since the last ``reset_stats()``: hits, builds, evictions, invalidations; plus entries and bytes."""
+    return {**_stats, "entries": len(_entries), "bytes": total_bytes()}
+
+
+def reset_stats():
+    for name in _stats:
+        _stats[name] = 0
+
+
+def invalidate(session_uid: int) -> bool:
+    """Drop one object's entry; returns whether there was one."""
+    if _entries.pop(session_uid, None) is None:
+        return False
+    _stats["invalidations"] += 1
+    return True
+
+
+def clear():
+    """Drop every cached field."""
+    _entries.clear()
+
+
+# ---- handlers ----
+
+
+@bpy.app.handlers.persistent
+def _on_depsgraph_update(scene, depsgraph):
+    global _skip_next_update
+    if _skip_next_update:
+        _skip_next_update = False
+        return
+    if not _entries:
+        return
+    for update in depsgraph.updates:
+        if update.is_updated_geometry and isinstance(update.id, bpy.types.Object):
+            invalidate(update.id.original.session_uid)
+
+
+@bpy.app.handlers.persistent
+def _on_load_pre(*_args):
+    clear()
+
+
+@bpy.app.handlers.persistent
+def _on_undo_redo_post(*_args):
+    global _skip_next_update
+    _skip_next_update = True
+
+
+_HANDLERS = (
+    (bpy.app.handlers.depsgraph_update_post, _on_depsgraph_update),
+    (bpy.app.handlers.load_pre, _on_load_pre),
+    (bpy.app.handlers.undo_post, _on_undo_redo_post),
+    (bpy.app.handlers.redo_post, _on_undo_redo_post),
+)
+
+
+def register():
+    for handlers, handler in _HANDLERS:
+        if handler not in handlers:
+            handlers.append(handler)
+
+
+def unregister():
+    global _skip_next_update
+    for handlers, handler in _HANDLERS:
+        while handler in handlers:
+            handlers.remove(handler)
+    _skip_next_update = False
+    clear()

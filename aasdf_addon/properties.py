@@ -1,0 +1,82 @@
+"""Scene settings of AASDF (``Scene.aasdf``) and the enum items shared by operators and panels."""
+
+import bpy
+from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty
+
+# (identifier, label, description) items for the boolean operation; ``sdf_difference(a, b)`` is *a minus b*.
+OPERATIONS = (
+    ("UNION", "Union", ""),
+    ("INTERSECT", "Intersect", ""),
+    ("DIFFERENCE", "Difference", ""),
+)
+
+
+class AASDF_PG_scene(bpy.types.PropertyGroup):
+    """Field and result settings used by the SDF boolean operators of a scene."""
+
+    resolution: IntProperty(
+        name="Resolution",
+        description="Finest voxels along the longest side of the inputs' combined bounding box "
+        "(used when Voxel Size is 0)",
+        default=128,
+        min=8,
+        soft_max=512,
+        max=4096,
+    )
+    voxel_size: FloatProperty(
+        name="Voxel Size",
+        description="Edge length of the finest voxels; 0 derives it from Resolution",
+        default=0.0,
+        min=0.0,
+        soft_max=1.0,
+        precision=4,
+        subtype="DISTANCE",
+    )
+    levels: IntProperty(
+        name="Levels",
+        description="Octree levels above the finest voxels: cells grow coarser away from the surface",
+        default=5,
+        min=1,
+        max=12,
+    )
+    padding: IntProperty(
+        name="Padding",
+        description="Voxels of empty space kept around the surface on each side of the field",
+        default=2,
+        min=0,
+        max=32,
+    )
+    blend: FloatProperty(
+        name="Blend",
+        description="Radius of the smooth blend along the seams; 0 keeps sharp edges",
+        default=0.0,
+        min=0.0,
+        soft_max=1.0,
+        precision=3,
+        subtype="DISTANCE",
+    )
+    hide_inputs: BoolProperty(
+        name="Hide Inputs",
+        description="Hide the input objects once the result is created",
+        default=True,
+    )
+    debug_volume: BoolProperty(
+        name="Debug Volume",
+        description="Also create a volume object showing the adaptive field's cells and distances",
+        default=False,
+    )
+
+
+# PropertyGroups in registration order (a group used by a PointerProperty must come before its user).
+classes = (AASDF_PG_scene,)
+
+
+def register():
+    """Attach the settings pointers; called after ``classes`` are registered."""
+    bpy.types.Scene.aasdf = PointerProperty(type=AASDF_PG_scene)
+
+
+def unregister():
+    """Remove the settings pointers; called before ``classes`` are unregistered."""
+    if hasattr(bpy.types.Scene, "aasdf"):
+        del bpy.types.Scene.aasdf

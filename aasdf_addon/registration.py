@@ -1,0 +1,49 @@
+"""Registers AASDF's classes and settings with Blender, and removes them again in reverse order.
+
+To add a class, put it in the ``classes`` tuple of its package (``operators``, ``ui``) or of
+``aasdf_addon.properties``; nothing here changes. A module that must hook into Blender beyond classes (settings
+pointers, app handlers, caches to clear) gets ``register()``/``unregister()`` functions and a place in ``_modules()``.
+"""
+
+import bpy
+
+from .. import operators, ui
+from . import cache, preferences, properties
+
+
+def _classes():
+    """All classes in registration order: PropertyGroups first (pointers need them), panels last."""
+    return (*properties.classes, preferences.AASDF_AddonPreferences, *operators.classes, *ui.classes)
+
+
+def _modules():
+    """Modules whose ``register()`` runs after the classes are registered, and ``unregister()`` before they go.
+
+    Their ``unregister()`` must be harmless when ``register()`` did not run (it is also used to roll back).
+    """
+    return (properties, cache)
+
+
+def register():
+    done = []
+    try:
+        for cls in _classes():
+            bpy.utils.register_class(cls)
+            done.append(cls)
+        for module in _modules():
+            module.register()
+    except Exception:
+        # Leave Blender as it was: a half-registered add-on cannot be enabled again.
+        for module in reversed(_modules()):
+            module.unregister()
+        for cls in reversed(done):
+            bpy.utils.unregister_class(cls)
+        raise
+
+
+def unregister():
+    for module in reversed(_modules()):
+        module.unregister()
+    for cls in reversed(_classes()):
+        if cls.is_registered:
+            bpy.utils.unregister_class(cls)

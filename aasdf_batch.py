@@ -1,0 +1,206 @@
+"""Headless SDF booleans with AASDF: mesh files or objects of a .blend in, a mesh file or a .blend out.
+
+Run it with Blender or with the ``bpy`` module::
+
+    blender -b [scene.blend] -P aasdf_batch.py -- --operation union --inputs a.obj b.stl --resolution 256 \\
+        --output out.ply [--debug-volume out.vdb] [--objects NAME ...]
+    python aasdf_batch.py --operation difference --inputs a.obj b.ply --output out.blend [--blend scene.blend]
+
+Operands are the imported files (``.obj``, ``.ply``, ``.stl``; a file holding several meshes becomes one operand),
+then the named objects, in the order given: the first is the active object, so DIFFERENCE is the first operand
+minus all the others. The output is ``.ply``, ``.obj``, ``.stl`` or ``.blend``. The boolean runs through
+``bpy.ops.aasdf.boolean``; when AASDF is not already enabled, the repository this script sits in is registered as
+the package ``aasdf``. Prints a one-line summary; exits with 2 on bad arguments or input and with 1 when the
+boolean fails or is empty, with the reason on stderr.
+"""
+
+import argparse
+import importlib.util
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+PACKAGE = "aasdf"
+IMPORTERS = {".obj": "obj_import", ".ply": "ply_import", ".stl": "stl_import"}
+EXPORTERS = {".obj": "obj_export", ".ply": "ply_export", ".stl": "stl_export"}
+OPERATIONS = {"union": "UNION", "intersect": "INTERSECT", "intersection": "INTERSECT", "difference": "DIFFERENCE"}
+
+
+class BatchError(Exception):
+    """Bad arguments or input: printed without a traceback, exit status 2."""
+
+
+def script_args(argv):
+    """The script's own arguments: those after ``--`` when present (Blender's ``-P`` and ``python x.py --``)."""
+    return argv[argv.index("--") + 1 :] if "--" in argv else argv[1:]
+
+
+def parse_args(args):
+    parser = argparse.ArgumentParser(prog="aasdf_batch.py", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--operation", required=True, type=str.lower, choices=sorted(OPERATIONS))
+    parser.add_argument("--inputs", nargs="+", default=[], metavar="FILE", help="mesh files: .obj, .ply, .stl")
+    parser.add_argument("--objects", nargs="+", default=[], metavar="NAME", help="mesh objects of the open .blend")
+    parser.add_argument("--output", required=True, metavar="FILE", help=".ply, .obj, .stl or .blend")
+    parser.add_argument("--resolution", type=int, default=256, help="voxels along the inputs' bounding-box diagonal")
+    parser.add_argument("--voxel-size", type=float, default=0.0, help="finest voxel size (overrides --resolution)")
+    parser.add_argument("--levels", type=int, default=4)
+    parser.add_argument("--padding", type=int, default=1)
+    parser.add_argument("--blend-radius", type=float, default=0.0, help="smooth blend radius (0: sharp)")
+    parser.add_argument("--debug-volume", metavar="FILE", help="also write the result's field as a .vdb")
+    parser.add_argument("--blend", metavar="FILE", help="open this .blend first (with the bpy module)")
+    return parser.parse_args(args)
+
+
+def check_args(args):
+    """Refuse what cannot work before Blender does anything."""
+    for path in args.inputs:
+        if not os.path.isfile(path):
+            raise BatchError(f"input file not found: {path}")
+        if Path(path).suffix.lower() not in IMPORTERS:
+            raise BatchError(f"cannot import {path}: use one of {', '.join(IMPORTERS)}")
+    if args.blend is not None and not os.path.isfile(args.blend):
+        raise BatchError(f".blend file not found: {args.blend}")
+    suffix = Path(args.output).suffix.lower()
+    if suffix not in EXPORTERS and suffix != ".blend":
+        raise BatchError(f"cannot write {args.output}: use one of {', '.join([*EXPORTERS, '.blend'])}")
+    if args.debug_volume is not None and Path(args.debug_volume).suffix.lower() != ".vdb":
+        raise BatchError(f"the debug volume must be a .vdb file, not {args.debug_volume}")
+    if len(args.inputs) + len(args.objects) < 2:
+        raise BatchError("give at least two operands (--inputs and --objects together)")
+    if args.resolution < 8 or args.voxel_size < 0.0:
+        raise BatchError("--resolution must be at least 8 and --voxel-size not negative")
+
+
+def ensure_addon():
+    """The module of ``AASDF_OT_boolean``: the enabled add-on's, else the repository registered as ``aasdf``."""
+    import bpy
+
+    if not hasattr(bpy.types, "AASDF_OT_boolean"):
+        package = sys.modules.get(PACKAGE)
+        if package is None:
+            spec = importlib.util.spec_from_file_location(
+                PACKAGE, ROOT / "__init__.py", submodule_search_locations=[str(ROOT)]
+            )
+            package = importlib.util.module_from_spec(spec)
+            sys.modules[PACKAGE] = package
+            spec.loader.exec_module(package)
+        if PACKAGE not in bpy.context.preferences.addons:  # as enabling the add-on does: preferences exist
+            bpy.context.preferences.addons.new().module = PACKAGE
+        package.register()
+    return sys.modules[bpy.types.AASDF_OT_boolean.__module__]
+
+
+def import_operand(path):
+    """Import one mesh file; several meshes in it are joined into one object."""
+    import bpy
+
+    before = set(bpy.data.objects)
+    getattr(bpy.ops.wm, IMPORTERS[Path(path).suffix.lower()])(filepath=os.path.abspath(path))
+    meshes = [obj for obj in bpy.data.objects if obj not in before and obj.type == "MESH"]
+    if not meshes:
+        raise BatchError(f"{path} holds no mesh")
+    if len(meshes) > 1:
+        with bpy.context.temp_override(
+            active_object=meshes[0], selected_objects=meshes, selected_editable_objects=meshes
+        ):
+            bpy.ops.object.join()
+    return meshes[0]
+
+
+def scene_operand(name):
+    import bpy
+
+    obj = bpy.data.objects.get(name)
+    if obj is None or obj.name not in bpy.context.view_layer.objects:
+        raise BatchError(f"no object named {name!r} in the scene")
+    if obj.type != "MESH":
+        raise BatchError(f"object {name!r} is not a mesh (its type is {obj.type})")
+    return obj
+
+
+def export_result(args):
+    import bpy
+
+    path = os.path.abspath(args.output)
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    suffix = Path(path).suffix.lower()
+    if suffix == ".blend":
+        bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+    else:
+        getattr(bpy.ops.wm, EXPORTERS[suffix])(filepath=path, export_selected_objects=True)
+    return path
+
+
+def run(args) -> int:
+    check_args(args)
+    import bpy
+
+    if args.blend is not None:
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
+    operator_module = ensure_addon()
+    if bpy.context.mode != "OBJECT":
+        bpy.ops.object.mode_set(mode="OBJECT")
+    # Names first: an unknown object fails before anything is imported.
+    named = [scene_operand(name) for name in args.objects]
+    operands = [import_operand(path) for path in args.inputs] + named
+    if len({obj.name for obj in operands}) < 2:
+        raise BatchError("give at least two different operands")
+
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(False)
+    for obj in operands:
+        obj.hide_set(False)
+        obj.select_set(True)
+    bpy.context.view_layer.objects.active = operands[0]
+    start = time.perf_counter()
+    try:
+        status = bpy.ops.aasdf.boolean(
+            operation=OPERATIONS[args.operation],
+            voxel_size=args.voxel_size,
+            resolution=args.resolution,
+            levels=args.levels,
+            padding=args.padding,
+            blend=args.blend_radius,
+            debug_volume=args.debug_volume is not None,
+            hide_inputs=True,
+        )
+    except RuntimeError as err:  # the operator's ERROR report
+        print(f"aasdf_batch: the boolean failed: {err}", file=sys.stderr)
+        return 1
+    if status != {"FINISHED"}:
+        print("aasdf_batch: the boolean result is empty: nothing written", file=sys.stderr)
+        return 1
+    summary = dict(operator_module.last_run)
+    result = bpy.data.objects[summary["object"]]
+    if args.debug_volume is not None:
+        volume = bpy.data.objects[f"{result.name}.sdf"].data
+        os.makedirs(os.path.dirname(os.path.abspath(args.debug_volume)), exist_ok=True)
+        shutil.copyfile(bpy.path.abspath(volume.filepath), args.debug_volume)
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj == result)
+    bpy.context.view_layer.objects.active = result
+    path = export_result(args)
+    print(
+        f"aasdf_batch: {args.operation} of {summary['operands']} operands -> {path}: "
+        f"{summary['triangles']:,} triangles, {summary['nodes']:,} field nodes, "
+        f"voxel size {summary['voxel_size']:.5g}, boolean {summary['seconds']:.2f} s, "
+        f"total {time.perf_counter() - start:.2f} s"
+        + (f"; debug volume {args.debug_volume}" if args.debug_volume else "")
+    )
+    return 0
+
+
+def main(argv=None) -> int:
+    args = parse_args(script_args(sys.argv if argv is None else argv))
+    try:
+        return run(args)
+    except BatchError as err:
+        print(f"aasdf_batch: error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

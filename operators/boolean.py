@@ -1,0 +1,292 @@
+"""``aasdf.boolean``: the selected mesh objects combined as an SDF boolean into a new object. Also
+``aasdf.debug_volume`` (the active mesh's field as a Volume object) and ``aasdf.clear_cache``.
+
+The active object is the first operand. DIFFERENCE is the active object minus all the others; UNION and
+INTERSECT take them all. Each operand's field comes from ``aasdf_addon.cache`` (built at most once per geometry,
+transform and settings), the fields are combined as a balanced tree, and the surface is written as a new object
+with the operands' materials, each face taking the material of the operand it came from.
+"""
+
+import time
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
+
+from ..aasdf_addon import bridge, cache, runtime
+from ..aasdf_addon.properties import OPERATIONS
+
+# Numbers of the last successful run, for scripts (``aasdf_batch.py`` prints them).
+last_run: dict = {}
+
+
+def mesh_operands(context) -> list:
+    """The active mesh object (selected or not) followed by the other selected mesh objects."""
+    active = context.active_object
+    first = [active] if active is not None and active.type == "MESH" else []
+    return first + [obj for obj in context.selected_objects if obj.type == "MESH" and obj not in first]
+
+
+class AASDF_OT_boolean(bpy.types.Operator):
+    """Combine the active mesh with the other selected meshes as an SDF boolean, into a new object"""
+
+    bl_idname, bl_label, bl_options = "aasdf.boolean", "SDF Boolean", {"REGISTER", "UNDO"}
+
+    operation: EnumProperty(
+        name="Operation",
+        description="Boolean to apply; Difference subtracts the other selected meshes from the active one",
+        items=OPERATIONS,
+        default="DIFFERENCE",
+    )
+    voxel_size: FloatProperty(
+        name="Voxel Size",
+        description="Edge length of the finest voxels; 0 derives it from Resolution",
+        default=0.0,
+        min=0.0,
+        soft_max=1.0,
+        precision=4,
+        subtype="DISTANCE",
+    )
+    resolution: IntProperty(
+        name="Resolution",
+        description="Finest voxels along the diagonal of the inputs' combined bounding box "
+        "(used when Voxel Size is 0)",
+        default=256,
+        min=8,
+        soft_max=1024,
+        max=8192,
+    )
+    levels: IntProperty(
+        name="Levels",
+        description="Octree levels: cells grow coarser away from the surface",
+        default=4,
+        min=1,
+        max=12,
+    )
+    padding: IntProperty(
+        name="Padding",
+        description="Finest voxels kept around the surface on each side",
+        default=1,
+        min=0,
+        max=32,
+    )
+    blend: FloatProperty(
+        name="Blend",
+        description="Radius of the smooth blend along the seams; 0 keeps sharp edges",
+        default=0.0,
+        min=0.0,
+        soft_max=1.0,
+        precision=3,
+        subtype="DISTANCE",
+    )
+    debug_volume: BoolProperty(
+        name="Debug Volume",
+        description="Also add the result's field as a Volume object and its octree cells as points",
+        default=False,
+    )
+    hide_inputs: BoolProperty(
+        name="Hide Inputs",
+        description="Hide (never delete) the input objects once the result is created",
+        default=True,
+    )
+
+    @classmethod
+    def poll(cls, context):
+        if context.mode != "OBJECT":
+            cls.poll_message_set("Switch to Object Mode to run an SDF boolean")
+            return False
+        obj = context.active_object
+        if obj is None or obj.type != "MESH":
+            cls.poll_message_set("Needs an active mesh object")
+            return False
+        if len(mesh_operands(context)) < 2:
+            cls.poll_message_set("Select at least two mesh objects")
+            return False
+        return True
+
+    def execute(self, context):
+        engine = runtime.engine()  # lazy: keeps registration fast
+        start = time.perf_counter()
+        operands = mesh_operands(context)
+        active = operands[0]
+        depsgraph = context.evaluated_depsgraph_get()
+        voxel_size = self.voxel_size
+        if voxel_size <= 0.0:
+            lo, hi = bridge.world_bounds(operands, depsgraph)
+            voxel_size = float(np.linalg.norm(hi - lo)) / self.resolution
+        if not voxel_size > 0.0:
+            self.report({"ERROR"}, "The selected meshes have no extent: set a Voxel Size")
+            return {"CANCELLED"}
+
+        wm = context.window_manager
+        wm.progress_begin(0, 2 * len(operands))
+        before = cache.stats()
+        try:
+            try:
+                fields = self._operand_fields(context, operands, depsgraph, voxel_size)
+                self._status(context, "SDF boolean: combining fields")
+                steps = iter(range(len(operands) + 1, 2 * len(operands)))
+                field = bridge.combine(
+                    self.operation, fields, self.blend, progress=lambda: wm.progress_update(next(steps))
+                )
+                verts, tris = field.to_mesh()
+            except engine.AasdfError as err:
+                self.report({"ERROR"}, str(err))
+                return {"CANCELLED"}
+            if len(tris) == 0:
+                self.report({"WARNING"}, "The boolean result is empty: nothing was added")
+                return {"CANCELLED"}
+            materials, slot_of = bridge.operand_materials(operands)
+            face_slots = None
+            if materials:
+                ids = field.source_ids(verts[tris].mean(axis=1))
+                face_slots = slot_of[ids.clip(0, len(operands) - 1)]
+            result = bridge.write_result_object(
+                context,
+                f"{active.name}.aasdf",
+                verts,
+                tris,
+                materials=materials,
+                face_material_index=face_slots,
+                smooth=bridge.is_smooth(active),
+            )
+            if self.debug_volume:
+                self._add_debug_objects(context, field, result, engine)
+            if self.hide_inputs:
+                for obj in operands:
+                    obj.hide_set(True)
+        finally:
+            wm.progress_end()
+            self._status(context, None)
+
+        after = cache.stats()
+        hits, builds = after["hits"] - before["hits"], after["builds"] - before["builds"]
+        seconds = time.perf_counter() - start
+        last_run.clear()
+        last_run.update(
+            object=result.name,
+            operation=self.operation,
+            operands=len(operands),
+            voxel_size=voxel_size,
+            seconds=seconds,
+            nodes=field.node_count,
+            vertices=len(verts),
+            triangles=len(tris),
+            cache_hits=hits,
+            fields_built=builds,
+        )
+        self.report(
+            {"INFO"},
+            f"{result.name}: {self.operation.lower()} of {len(operands)} objects in {seconds:.2f} s, "
+            f"{field.node_count:,} field nodes, {len(tris):,} triangles, {hits}/{len(operands)} fields from cache",
+        )
+        return {"FINISHED"}
+
+    def _operand_fields(self, context, operands, depsgraph, voxel_size):
+        """One field per operand (operand ``k`` gets ``field_id=k``); an AasdfError names its operand."""
+        engine = runtime.engine()
+        fields = []
+        for k, obj in enumerate(operands):
+            self._status(context, f"SDF boolean: field of {obj.name} ({k + 1}/{len(operands)})")
+            try:
+                field = cache.field_for(
+                    obj,
+                    depsgraph,
+                    voxel_size=voxel_size,
+                    levels=self.levels,
+                    padding=self.padding,
+                    field_id=k,
+                    context=context,
+                )
+            except engine.AasdfError as err:
+                raise engine.AasdfError(f"{obj.name}: {err}") from err
+            fields.append(field)
+            context.window_manager.progress_update(k + 1)
+        return fields
+
+    def _add_debug_objects(self, context, field, result, engine):
+        from ..aasdf_addon import debug
+
+        try:
+            debug.add_debug_objects(context, field, result.name)
+        except engine.AasdfError as err:  # too large for memory: the result stays
+            self.report({"WARNING"}, f"No debug volume: {err}")
+        context.view_layer.objects.active = result
+
+    @staticmethod
+    def _status(context, text):
+        if context.workspace is not None:
+            context.workspace.status_text_set(text)
+
+
+class AASDF_OT_debug_volume(bpy.types.Operator):
+    """Show the signed distance field of the active mesh as a Volume object, with its octree cells as points"""
+
+    bl_idname, bl_label, bl_options = "aasdf.debug_volume", "Debug Volume", {"REGISTER", "UNDO"}
+
+    voxel_size: FloatProperty(
+        name="Voxel Size",
+        description="Edge length of the finest voxels; 0 derives it from Resolution",
+        default=0.0,
+        min=0.0,
+        soft_max=1.0,
+        precision=4,
+        subtype="DISTANCE",
+    )
+    resolution: IntProperty(
+        name="Resolution",
+        description="Finest voxels along the diagonal of the object's bounding box (used when Voxel Size is 0)",
+        default=128,
+        min=8,
+        soft_max=1024,
+        max=8192,
+    )
+    levels: IntProperty(name="Levels", description="Octree levels", default=4, min=1, max=12)
+    padding: IntProperty(name="Padding", description="Finest voxels around the surface", default=1, min=0, max=32)
+
+    @classmethod
+    def poll(cls, context):
+        if context.mode != "OBJECT":
+            cls.poll_message_set("Switch to Object Mode to add a debug volume")
+            return False
+        obj = context.active_object
+        if obj is None or obj.type != "MESH":
+            cls.poll_message_set("Needs an active mesh object")
+            return False
+        return True
+
+    def execute(self, context):
+        from ..aasdf_addon import debug
+
+        engine = runtime.engine()
+        obj = context.active_object
+        depsgraph = context.evaluated_depsgraph_get()
+        voxel_size = self.voxel_size
+        if voxel_size <= 0.0:
+            lo, hi = bridge.world_bounds([obj], depsgraph)
+            voxel_size = float(np.linalg.norm(hi - lo)) / self.resolution
+        if not voxel_size > 0.0:
+            self.report({"ERROR"}, f"{obj.name} has no extent: set a Voxel Size")
+            return {"CANCELLED"}
+        try:
+            field = cache.field_for(
+                obj, depsgraph, voxel_size=voxel_size, levels=self.levels, padding=self.padding, context=context
+            )
+            volume, cells = debug.add_debug_objects(context, field, obj.name)
+        except engine.AasdfError as err:
+            self.report({"ERROR"}, f"{obj.name}: {err}")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"{volume.name}, {cells.name}: {field.node_count:,} field nodes")
+        return {"FINISHED"}
+
+
+class AASDF_OT_clear_cache(bpy.types.Operator):
+    """Forget the cached fields of all objects (they are rebuilt when next needed)"""
+
+    bl_idname, bl_label, bl_options = "aasdf.clear_cache", "Clear Field Cache", {"REGISTER"}
+
+    def execute(self, context):
+        count, nbytes = cache.stats()["entries"], cache.total_bytes()
+        cache.clear()
+        self.report({"INFO"}, f"Cleared {count} cached fields ({nbytes / 2**20:.1f} MB)")
+        return {"FINISHED"}

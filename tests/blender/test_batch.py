@@ -1,0 +1,135 @@
+"""``aasdf_batch.py`` run as a subprocess with the ``bpy`` module: outputs written, bad input refused cleanly."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+from tests.support import is_watertight, load_mesh, mesh_path
+
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPT = ROOT / "aasdf_batch.py"
+
+
+def run_batch(*args, timeout=240):
+    return subprocess.run(
+        [sys.executable, str(SCRIPT), *map(str, args)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
+
+def write_binary_stl(path, verts, tris):
+    """A binary STL of (V,3) vertices and (T,3) triangles."""
+    v = np.asarray(verts, dtype=np.float32)[tris]
+    normals = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]).astype(np.float32)
+    record = np.zeros(len(tris), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+    record["n"], record["v"] = normals, v
+    with open(path, "wb") as handle:
+        handle.write(b"\0" * 80 + np.uint32(len(tris)).tobytes() + record.tobytes())
+
+
+def imported_arrays(path):
+    """Vertices and triangles of the one mesh in a file, imported into the current (empty) scene."""
+    bpy.ops.wm.ply_import(filepath=str(path))
+    mesh = bpy.context.selected_objects[0].data
+    mesh.calc_loop_triangles()
+    verts = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+    mesh.vertices.foreach_get("co", verts)
+    tris = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
+    mesh.loop_triangles.foreach_get("vertices", tris)
+    return verts.reshape(-1, 3), tris.reshape(-1, 3)
+
+
+@pytest.fixture(scope="module")
+def scene_blend(tmp_path_factory):
+    """A .blend with two overlapping spheres ``A``, ``B`` (meshes) and an ``Empty``."""
+    from tests.support import uv_sphere
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    for name, x in (("A", 0.0), ("B", 0.7)):
+        mesh = bpy.data.meshes.new(name)
+        verts, tris = uv_sphere(1.0, center=(x, 0.0, 0.0), rings=16, segments=32)
+        mesh.from_pydata(verts.tolist(), [], tris.tolist())
+        bpy.context.scene.collection.objects.link(bpy.data.objects.new(name, mesh))
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("Empty", None))
+    path = tmp_path_factory.mktemp("scene") / "scene.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path), copy=True)
+    return path
+
+
+def test_mesh_files_in_ply_and_debug_volume_out(tmp_path):
+    verts, tris = load_mesh("spot.obj")
+    # The OBJ importer turns Y-up into Z-up; the STL importer keeps axes: shift along the imported X anyway.
+    stl = tmp_path / "shifted.stl"
+    write_binary_stl(stl, verts[:, [0, 2, 1]] * [1, -1, 1] + np.float32([0.3, 0.0, 0.1]), tris)
+    out, vdb = tmp_path / "out" / "union.ply", tmp_path / "union.vdb"
+    done = run_batch(
+        "--operation", "union", "--inputs", mesh_path("spot.obj"), stl, "--resolution", 64,
+        "--output", out, "--debug-volume", vdb,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    summary = [line for line in done.stdout.splitlines() if line.startswith("aasdf_batch: union of 2 operands")]
+    assert len(summary) == 1, done.stdout[-3000:]
+    result_verts, result_tris = imported_arrays(out)
+    assert is_watertight(result_tris)
+    assert f"{len(result_tris):,} triangles" in summary[0]
+    assert vdb.stat().st_size > 0
+    volume = bpy.data.volumes.new("Debug")
+    volume.filepath = str(vdb)
+    assert volume.grids.load() and "sdf" in volume.grids
+
+
+def test_objects_of_a_blend_in_blend_out(scene_blend, tmp_path):
+    out = tmp_path / "result.blend"
+    done = run_batch(
+        "--blend", scene_blend, "--objects", "A", "B", "--operation", "difference", "--resolution", 48,
+        "--output", out,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    result = bpy.data.objects["A.aasdf"]
+    assert len(result.data.polygons) > 0
+    assert bpy.data.objects["A"].hide_get() and bpy.data.objects["B"].hide_get()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--inputs", "missing.obj", "{spot}"], "input file not found: missing.obj"),
+        (["--inputs", "{spot}"], "give at least two operands"),
+        (["--inputs", "{spot}", "{spot}", "--output", "out.fbx"], "cannot write out.fbx"),
+        (["--blend", "{blend}", "--objects", "A", "Nope"], "no object named 'Nope'"),
+        (["--blend", "{blend}", "--objects", "A", "Empty"], "object 'Empty' is not a mesh (its type is EMPTY)"),
+    ],
+    ids=["missing-file", "one-operand", "bad-output", "unknown-object", "non-mesh"],
+)
+def test_bad_input_exits_with_a_clear_message(args, message, scene_blend, tmp_path):
+    args = [arg.format(spot=mesh_path("spot.obj"), blend=scene_blend) for arg in args]
+    if "--output" not in args:
+        args += ["--output", str(tmp_path / "out.ply")]
+    done = run_batch("--operation", "union", *args)
+    assert done.returncode == 2, done.stdout[-2000:] + done.stderr[-2000:]
+    assert f"aasdf_batch: error: {message}" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert not (tmp_path / "out.ply").exists()
+
+
+def test_unknown_operation_is_an_argument_error():
+    done = run_batch("--operation", "xor", "--inputs", "a.obj", "b.obj", "--output", "out.ply")
+    assert done.returncode == 2 and "invalid choice: 'xor'" in done.stderr
+
+
+def test_engine_error_exits_1_and_writes_nothing(tmp_path):
+    out = tmp_path / "out.ply"
+    spot = mesh_path("spot.obj")
+    done = run_batch("--operation", "union", "--inputs", spot, spot, "--voxel-size", 1e-6, "--output", out)
+    assert done.returncode == 1, done.stdout[-2000:] + done.stderr[-2000:]
+    assert "aasdf_batch: the boolean failed: Error: spot: " in done.stderr
+    assert "use a larger voxel size" in done.stderr and not out.exists()

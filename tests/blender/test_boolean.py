@@ -1,0 +1,544 @@
+"""``aasdf.boolean`` and ``aasdf.clear_cache`` on real meshes, headless: results against exact booleans, the field
+cache, undo, materials, poll messages, error reports and debug volumes."""
+
+from types import SimpleNamespace
+
+import bpy
+import numpy as np
+import pytest
+
+from aasdf.aasdf_addon import bridge, cache, preferences, runtime
+from aasdf.operators import boolean as boolean_op
+from tests.metrics import exact_boolean, mesh_volume
+from tests.support import is_watertight, load_mesh, uv_sphere
+
+SHIFT = np.array([0.3, 0.1, 0.05])
+
+
+def add_mesh_object(name, verts, tris, location=(0.0, 0.0, 0.0), materials=()):
+    """A mesh object from numpy arrays, linked to the scene's collection."""
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(np.asarray(verts).tolist(), [], np.asarray(tris).tolist())
+    for material in materials:
+        mesh.materials.append(material)
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    obj.location = location
+    bpy.context.view_layer.update()  # matrix_world follows the location
+    return obj
+
+
+def select(*objects, active=None):
+    """Select exactly ``objects`` and make ``active`` (default: the first) the active object."""
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(False)
+    for obj in objects:
+        obj.select_set(True)
+    bpy.context.view_layer.objects.active = active or objects[0]
+
+
+def world_arrays(obj):
+    """(V,3) world vertices and (T,3) triangles of an object's own mesh (no modifiers)."""
+    return bridge.evaluated_mesh(obj, bpy.context.evaluated_depsgraph_get())
+
+
+def local_vertices(obj):
+    co = np.empty(len(obj.data.vertices) * 3, dtype=np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    return co.reshape(-1, 3)
+
+
+def spot_pair():
+    verts, tris = load_mesh("spot.obj")
+    a = add_mesh_object("Spot", verts, tris)
+    b = add_mesh_object("Shifted", verts, tris, location=tuple(SHIFT))
+    return a, b
+
+
+@pytest.fixture
+def fresh_cache():
+    cache.clear()
+    cache.reset_stats()
+    yield cache
+    cache.clear()
+
+
+# ---- results ----
+
+
+@pytest.mark.parametrize("operation", ["UNION", "INTERSECT", "DIFFERENCE"])
+def test_operation_on_real_meshes_matches_exact_boolean(operation, fresh_cache):
+    a, b = spot_pair()
+    before = {obj.name: (local_vertices(obj).copy(), np.array(obj.matrix_world)) for obj in (a, b)}
+    select(a, b)
+    assert bpy.ops.aasdf.boolean(operation=operation, resolution=128) == {"FINISHED"}
+
+    result = bpy.context.active_object
+    assert result.name == "Spot.aasdf" and result.select_get()
+    assert not a.select_get() and not b.select_get()
+    assert np.allclose(np.array(result.matrix_world), np.eye(4))
+    assert result.users_collection[0] == a.users_collection[0]
+    verts, tris = world_arrays(result)
+    assert is_watertight(tris)
+    exact = exact_boolean(operation, *world_arrays(a), *world_arrays(b))
+    assert mesh_volume(verts, tris) == pytest.approx(mesh_volume(*exact), rel=0.02)
+    # Inputs untouched, hidden but not deleted.
+    for obj in (a, b):
+        np.testing.assert_array_equal(local_vertices(obj), before[obj.name][0])
+        np.testing.assert_array_equal(np.array(obj.matrix_world), before[obj.name][1])
+        assert obj.name in bpy.data.objects and obj.hide_get()
+    assert boolean_op.last_run["triangles"] == len(tris) and boolean_op.last_run["fields_built"] == 2
+
+
+def test_operator_result_equals_direct_engine_call(fresh_cache):
+    a, b = spot_pair()
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=64, hide_inputs=False)
+    result_verts, result_tris = world_arrays(bpy.context.active_object)
+    engine = runtime.engine()
+    voxel_size = boolean_op.last_run["voxel_size"]
+    fields = [
+        engine.build_field(*world_arrays(obj), voxel_size=voxel_size, levels=4, padding=1, field_id=k)
+        for k, obj in enumerate((a, b))
+    ]
+    verts, tris = engine.difference(*fields).to_mesh()
+    assert len(result_tris) == len(tris)
+    np.testing.assert_allclose(np.sort(result_verts, axis=0), np.sort(verts, axis=0), atol=1e-5)
+    lo, hi = bridge.world_bounds((a, b), bpy.context.evaluated_depsgraph_get())
+    assert voxel_size == pytest.approx(np.linalg.norm(hi - lo) / 64)
+
+
+def test_difference_is_active_minus_all_others_and_union_is_n_ary(fresh_cache):
+    spheres = [uv_sphere(1.0, center=c, rings=24, segments=48) for c in ((0, 0, 0), (0.9, 0, 0), (-0.9, 0, 0))]
+    objects = [add_mesh_object(f"S{k}", *sphere) for k, sphere in enumerate(spheres)]
+    select(*objects, active=objects[0])
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96, hide_inputs=False)
+    verts, tris = world_arrays(bpy.context.active_object)
+    cutters = exact_boolean("UNION", *spheres[1], *spheres[2])
+    expected = exact_boolean("DIFFERENCE", *spheres[0], *cutters)
+    assert is_watertight(tris)
+    assert mesh_volume(verts, tris) == pytest.approx(mesh_volume(*expected), rel=0.03)
+
+    select(*objects, active=objects[1])
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=96, hide_inputs=False)
+    assert bpy.context.active_object.name == "S1.aasdf"
+    verts, tris = world_arrays(bpy.context.active_object)
+    expected = exact_boolean("UNION", *spheres[0], *cutters)
+    assert mesh_volume(verts, tris) == pytest.approx(mesh_volume(*expected), rel=0.02)
+
+
+def test_mirrored_operand_keeps_its_inside(fresh_cache):
+    sphere = uv_sphere(1.0, rings=24, segments=48)
+    a = add_mesh_object("A", *sphere)
+    b = add_mesh_object("B", *sphere, location=(1.0, 0.0, 0.0))
+    b.scale = (-1.0, 1.0, 1.0)
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=64)
+    verts, tris = world_arrays(bpy.context.active_object)
+    expected = exact_boolean("UNION", *sphere, sphere[0] + np.float32([1, 0, 0]), sphere[1])
+    assert mesh_volume(verts, tris) == pytest.approx(mesh_volume(*expected), rel=0.03)
+
+
+def test_operands_are_evaluated_with_their_modifiers(fresh_cache):
+    sphere = uv_sphere(1.0, rings=24, segments=48)
+    arrayed = add_mesh_object("Arrayed", *sphere)
+    modifier = arrayed.modifiers.new("Array", "ARRAY")
+    modifier.count, modifier.relative_offset_displace = 2, (1.6, 0.0, 0.0)  # copies at x = 0 and x = 3.2
+    lone = add_mesh_object("Lone", *sphere, location=(3.2, 0.0, 0.0))
+    select(lone, arrayed)
+    bpy.ops.aasdf.boolean(operation="INTERSECT", resolution=96)
+    verts, tris = world_arrays(bpy.context.active_object)
+    assert mesh_volume(verts, tris) == pytest.approx(mesh_volume(*sphere), rel=0.02)
+    assert len(arrayed.data.vertices) == len(sphere[0]) and len(arrayed.modifiers) == 1  # the input is untouched
+
+
+def test_faces_take_the_material_of_their_operand_and_shading_of_the_active(fresh_cache):
+    red, blue = bpy.data.materials.new("Red"), bpy.data.materials.new("Blue")
+    a = add_mesh_object("A", *uv_sphere(1.0, center=(-0.6, 0, 0), rings=24, segments=48), materials=[red])
+    b = add_mesh_object("B", *uv_sphere(1.0, center=(0.6, 0, 0), rings=24, segments=48), materials=[blue])
+    a.data.shade_smooth()
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=64)
+    result = bpy.context.active_object
+    assert [slot.material for slot in result.material_slots] == [red, blue]
+    mesh = result.data
+    slots = np.empty(len(mesh.polygons), dtype=np.int32)
+    mesh.polygons.foreach_get("material_index", slots)
+    centers = np.empty(len(mesh.polygons) * 3, dtype=np.float32)
+    mesh.polygons.foreach_get("center", centers)
+    x = centers.reshape(-1, 3)[:, 0]
+    assert np.all(slots[x < -0.2] == 0) and np.all(slots[x > 0.2] == 1)
+    assert bridge.is_smooth(result)
+
+    b.hide_set(False), a.hide_set(False)
+    select(b, a)  # flat-shaded active object: flat result, its material first
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=64)
+    result = bpy.context.active_object
+    assert not bridge.is_smooth(result)
+    assert [slot.material for slot in result.material_slots] == [blue, red]
+    assert boolean_op.last_run["cache_hits"] == 2  # cached fields, relabelled with the new operand order
+    mesh = result.data
+    slots = np.empty(len(mesh.polygons), dtype=np.int32)
+    mesh.polygons.foreach_get("material_index", slots)
+    centers = np.empty(len(mesh.polygons) * 3, dtype=np.float32)
+    mesh.polygons.foreach_get("center", centers)
+    x = centers.reshape(-1, 3)[:, 0]
+    assert np.all(slots[x < -0.2] == 1) and np.all(slots[x > 0.2] == 0)
+
+
+# ---- cache ----
+
+
+def test_second_run_on_unchanged_inputs_builds_no_field(fresh_cache):
+    a, b = spot_pair()
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=64, hide_inputs=False)
+    first = bpy.context.active_object
+    assert cache.stats()["builds"] == 2 and cache.stats()["entries"] == 2
+    select(b, a)  # other order: the cached fields are relabelled, not rebuilt
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=64, hide_inputs=False)
+    assert cache.stats()["builds"] == 2 and cache.stats()["hits"] == 2
+    assert boolean_op.last_run["cache_hits"] == 2 and boolean_op.last_run["fields_built"] == 0
+    assert len(world_arrays(bpy.context.active_object)[1]) == len(world_arrays(first)[1])
+
+
+def test_moving_one_operand_rebuilds_only_its_field(fresh_cache):
+    a, b = spot_pair()
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", voxel_size=0.04, hide_inputs=False)
+    b.location.x += 0.2
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", voxel_size=0.04, hide_inputs=False)
+    assert boolean_op.last_run["cache_hits"] == 1 and boolean_op.last_run["fields_built"] == 1
+    select(a, b)  # other settings: a new field for both
+    bpy.ops.aasdf.boolean(operation="UNION", voxel_size=0.04, levels=3, hide_inputs=False)
+    assert boolean_op.last_run["fields_built"] == 2
+    # With the voxel size from the resolution, moving an operand changes the combined box, hence both fields.
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=64, hide_inputs=False)
+    b.location.x += 0.2
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=64, hide_inputs=False)
+    assert boolean_op.last_run["fields_built"] == 2
+
+
+def test_geometry_edit_drops_the_cached_field(fresh_cache):
+    a, b = spot_pair()
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", voxel_size=0.04, hide_inputs=False)
+    assert cache.stats()["entries"] == 2
+    co = local_vertices(b) * 1.1
+    b.data.vertices.foreach_set("co", co.ravel())
+    b.data.update()
+    bpy.context.view_layer.update()  # evaluates the depsgraph: the handler sees the geometry update
+    assert cache.stats()["invalidations"] == 1 and cache.stats()["entries"] == 1
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", voxel_size=0.04, hide_inputs=False)
+    assert boolean_op.last_run["cache_hits"] == 1 and boolean_op.last_run["fields_built"] == 1
+
+
+def test_clear_cache_operator_and_file_load_empty_the_cache(fresh_cache):
+    a, b = spot_pair()
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=48, hide_inputs=False)
+    assert cache.stats()["entries"] == 2 and cache.total_bytes() > 0
+    assert bpy.ops.aasdf.clear_cache() == {"FINISHED"}
+    assert cache.stats()["entries"] == 0 and cache.total_bytes() == 0
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=48, hide_inputs=False)
+    assert cache.stats()["entries"] == 2
+    bpy.ops.wm.read_homefile(use_empty=True)  # load_pre handler
+    assert cache.stats()["entries"] == 0
+
+
+def test_cache_off_keeps_no_field(fresh_cache):
+    prefs = preferences.get()
+    a, b = spot_pair()
+    try:
+        prefs.cache_limit_mb = 0
+        select(a, b)
+        bpy.ops.aasdf.boolean(operation="UNION", resolution=48, hide_inputs=False)
+        assert cache.stats()["entries"] == 0 and cache.stats()["builds"] == 2
+    finally:
+        prefs.cache_limit_mb = 1024
+
+
+def test_cache_evicts_least_recently_used_fields_beyond_its_limit(fresh_cache):
+    def fake_field(megabytes):  # field_nbytes() sums the arrays' capacities
+        return SimpleNamespace(values=SimpleNamespace(capacity=megabytes * 2**20))
+
+    limit = 3 * 2**20
+    for uid in (1, 2, 3):
+        cache._store(uid, f"key{uid}", fake_field(1), limit)
+    assert list(cache._entries) == [1, 2, 3] and cache.total_bytes() == limit
+    cache._entries.move_to_end(1)  # a hit on 1 makes 2 the least recently used
+    cache._store(4, "key4", fake_field(1), limit)
+    assert list(cache._entries) == [3, 1, 4] and cache.stats()["evictions"] == 1
+    cache._store(5, "key5", fake_field(4), limit)  # larger than the whole limit: not kept, nothing evicted
+    assert list(cache._entries) == [3, 1, 4] and cache.total_bytes() <= limit
+    assert cache.invalidate(3) and not cache.invalidate(3)
+    assert list(cache._entries) == [1, 4]
+
+
+# ---- undo ----
+
+
+def test_undo_restores_the_scene(fresh_cache):
+    a, b = spot_pair()
+    select(a, b)
+    bpy.ops.ed.undo_push(message="before")
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=48)
+    bpy.ops.ed.undo_push(message="SDF Boolean")
+    assert "Spot.aasdf" in bpy.data.objects and bpy.data.objects["Spot"].hide_get()
+    bpy.ops.ed.undo()
+    assert "Spot.aasdf" not in bpy.data.objects
+    assert {obj.name for obj in bpy.context.scene.objects} == {"Spot", "Shifted"}
+    assert not bpy.data.objects["Spot"].hide_get() and not bpy.data.objects["Shifted"].hide_get()
+    bpy.ops.ed.redo()
+    assert "Spot.aasdf" in bpy.data.objects
+
+
+def test_rerun_after_undo_reuses_the_cache(fresh_cache):
+    """What the redo panel does: undo, then run again with other settings, on the same fields."""
+    a, b = spot_pair()
+    select(a, b)
+    bpy.ops.ed.undo_push(message="before")
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=48)
+    bpy.ops.ed.undo_push(message="SDF Boolean")
+    bpy.ops.ed.undo()
+    assert cache.stats()["entries"] == 2
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=48)
+    assert boolean_op.last_run["cache_hits"] == 2 and boolean_op.last_run["fields_built"] == 0
+    # An edit after the undo is still seen.
+    obj = bpy.data.objects["Shifted"]
+    obj.data.vertices[0].co.x += 0.01
+    obj.data.update()
+    bpy.context.view_layer.update()
+    assert cache.stats()["entries"] == 1
+
+
+# ---- poll messages and reports ----
+
+
+def test_poll_needs_two_selected_meshes():
+    a, _ = spot_pair()
+    select(a)
+    with pytest.raises(RuntimeError, match="Select at least two mesh objects"):
+        bpy.ops.aasdf.boolean()
+
+
+def test_poll_ignores_non_mesh_objects():
+    a, _ = spot_pair()
+    empty = bpy.data.objects.new("Empty", None)
+    bpy.context.scene.collection.objects.link(empty)
+    select(a, empty)
+    with pytest.raises(RuntimeError, match="Select at least two mesh objects"):
+        bpy.ops.aasdf.boolean()
+
+
+def test_active_mesh_is_the_first_operand_even_when_not_selected(fresh_cache):
+    a = add_mesh_object("A", *uv_sphere(1.0, rings=16, segments=32))
+    b = add_mesh_object("B", *uv_sphere(1.0, rings=16, segments=32), location=(0.8, 0.0, 0.0))
+    select(b, active=a)
+    assert not a.select_get()
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=48) == {"FINISHED"}
+    result = bpy.context.active_object
+    assert result.name == "A.aasdf" and a.hide_get() and b.hide_get()
+    xs = world_arrays(result)[0][:, 0]
+    assert xs.min() < -0.9 and xs.max() < 0.45  # A minus B ends at the spheres' circle of contact, x = 0.4
+
+
+def test_poll_needs_an_active_mesh():
+    a, b = spot_pair()
+    empty = bpy.data.objects.new("Empty", None)
+    bpy.context.scene.collection.objects.link(empty)
+    select(a, b, empty, active=empty)
+    with pytest.raises(RuntimeError, match="Needs an active mesh object"):
+        bpy.ops.aasdf.boolean()
+    select(a, b)
+    bpy.context.view_layer.objects.active = None
+    with pytest.raises(RuntimeError, match="Needs an active mesh object"):
+        bpy.ops.aasdf.boolean()
+
+
+def test_poll_needs_object_mode():
+    a, b = spot_pair()
+    select(a, b)
+    bpy.ops.object.mode_set(mode="EDIT")
+    try:
+        with pytest.raises(RuntimeError, match="Switch to Object Mode"):
+            bpy.ops.aasdf.boolean()
+    finally:
+        bpy.ops.object.mode_set(mode="OBJECT")
+
+
+def test_too_fine_voxel_size_is_reported_and_adds_nothing(fresh_cache):
+    a, b = spot_pair()
+    select(a, b)
+    with pytest.raises(RuntimeError, match="Spot: .*use a larger voxel size"):
+        bpy.ops.aasdf.boolean(voxel_size=1e-6)
+    assert {obj.name for obj in bpy.data.objects} == {"Spot", "Shifted"}
+    assert not a.hide_get() and cache.stats()["builds"] == 0
+
+
+def test_degenerate_operand_is_reported_with_its_name(fresh_cache):
+    a, _ = spot_pair()
+    flat = add_mesh_object("Flat", [[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]])
+    select(a, flat)
+    with pytest.raises(RuntimeError, match="Error: Flat: "):
+        bpy.ops.aasdf.boolean(operation="UNION", resolution=32)
+    assert "Spot.aasdf" not in bpy.data.objects
+
+
+def test_operands_without_extent_need_a_voxel_size(fresh_cache):
+    point = ([[0.0, 0.0, 0.0]] * 3, [[0, 1, 2]])
+    select(add_mesh_object("P", *point), add_mesh_object("Q", *point))
+    with pytest.raises(RuntimeError, match="The selected meshes have no extent: set a Voxel Size"):
+        bpy.ops.aasdf.boolean(operation="UNION")
+    assert len(bpy.data.objects) == 2
+
+
+def test_empty_result_is_a_warning_and_adds_nothing(fresh_cache):
+    a = add_mesh_object("A", *uv_sphere(1.0, rings=16, segments=32))
+    b = add_mesh_object("B", *uv_sphere(1.0, rings=16, segments=32), location=(5.0, 0.0, 0.0))
+    select(a, b)
+    assert bpy.ops.aasdf.boolean(operation="INTERSECT", resolution=64) == {"CANCELLED"}
+    assert {obj.name for obj in bpy.data.objects} == {"A", "B"}
+    assert not a.hide_get() and not b.hide_get()
+
+
+# ---- debug volume ----
+
+
+def test_debug_volume_loads_back_with_an_sdf_grid(fresh_cache):
+    a = add_mesh_object("A", *uv_sphere(1.0, rings=24, segments=48))
+    b = add_mesh_object("B", *uv_sphere(1.0, rings=24, segments=48), location=(0.8, 0.0, 0.0))
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=48, debug_volume=True)
+    assert bpy.context.active_object.name == "A.aasdf"
+    collection = bpy.data.collections["AASDF Debug"]
+    volume_obj, cells_obj = collection.objects["A.aasdf.sdf"], collection.objects["A.aasdf.cells"]
+    volume = bpy.data.volumes.new("Reloaded")
+    volume.filepath = volume_obj.data.filepath
+    assert volume.grids.load()
+    grid = volume.grids["sdf"]
+    assert grid.data_type == "FLOAT"
+    # Index space -> world: the voxel size is a power-of-two multiple of the field's, the domain contains the result.
+    matrix = np.array(grid.matrix_object)
+    step = matrix[0, 0]
+    ratio = step / boolean_op.last_run["voxel_size"]
+    assert ratio == pytest.approx(2 ** round(np.log2(ratio)))
+    assert np.all(matrix[:3, 3] < [-1.0, -1.0, -1.0])
+
+    mesh = cells_obj.data
+    assert len(mesh.vertices) == boolean_op.last_run["nodes"]
+    assert {"level", "sdf", "size"} <= set(mesh.attributes.keys())
+    sdf = np.empty(len(mesh.vertices), dtype=np.float32)
+    mesh.attributes["sdf"].data.foreach_get("value", sdf)
+    assert sdf.min() < 0.0 < sdf.max()
+
+
+def test_debug_volume_operator_shows_the_active_mesh_field(fresh_cache):
+    obj = add_mesh_object("Ball", *uv_sphere(1.0, rings=16, segments=32), location=(2.0, 0.0, 0.0))
+    select(obj)
+    assert bpy.ops.aasdf.debug_volume(resolution=64) == {"FINISHED"}
+    collection = bpy.data.collections["AASDF Debug"]
+    volume = collection.objects["Ball.sdf"].data
+    assert volume.grids.load() and volume.grids["sdf"].data_type == "FLOAT"
+    cells = collection.objects["Ball.cells"].data
+    levels = np.empty(len(cells.vertices), dtype=np.int32)
+    cells.attributes["level"].data.foreach_get("value", levels)
+    assert set(np.unique(levels)) == {0, 1, 2, 3}
+    co = local_vertices(collection.objects["Ball.cells"])
+    finest = co[levels == 0]  # the finest cells hug the surface: world space, around the ball
+    assert np.abs(finest.mean(axis=0) - [2.0, 0.0, 0.0]).max() < 0.1
+    assert np.median(np.linalg.norm(finest - [2.0, 0.0, 0.0], axis=1)) == pytest.approx(1.0, abs=0.1)
+    assert cache.stats()["builds"] == 1
+    bpy.ops.aasdf.debug_volume(resolution=64)  # the field comes from the cache the second time
+    assert cache.stats()["builds"] == 1 and cache.stats()["hits"] == 1
+
+
+def test_debug_volume_operator_polls_and_reports():
+    empty = bpy.data.objects.new("Empty", None)
+    bpy.context.scene.collection.objects.link(empty)
+    select(empty)
+    with pytest.raises(RuntimeError, match="Needs an active mesh object"):
+        bpy.ops.aasdf.debug_volume()
+    obj = add_mesh_object("Ball", *uv_sphere(1.0, rings=16, segments=32))
+    select(obj)
+    with pytest.raises(RuntimeError, match="Ball: .*use a larger voxel size"):
+        bpy.ops.aasdf.debug_volume(voxel_size=1e-6)
+    assert "AASDF Debug" not in bpy.data.collections
+
+
+def test_debug_vdb_values_match_the_field(tmp_path):
+    from aasdf.aasdf_addon import debug
+
+    engine = runtime.engine()
+    field = engine.build_field(*uv_sphere(1.0, rings=24, segments=48), voxel_size=0.1, levels=3)
+    path = debug.write_vdb(field, tmp_path / "sphere.vdb")
+    bpy.utils.expose_bundled_modules()
+    import openvdb
+
+    grid = openvdb.read(path, "sdf")
+    accessor = grid.getConstAccessor()
+    dense = field.to_dense()
+    for ijk in ((0, 0, 0), tuple(s // 2 for s in dense["values"].shape)):
+        world = grid.transform.indexToWorld(ijk)
+        np.testing.assert_allclose(world, dense["origin"] + np.array(ijk) * dense["spacing"], atol=1e-6)
+        assert accessor.getValue(ijk) == pytest.approx(dense["values"][ijk], abs=1e-6)
+    assert accessor.getValue(tuple(s // 2 for s in dense["values"].shape)) < -0.8  # the sphere's centre
+    # Blender reads the same placement: index [0,0,0] at the first sample, the sample spacing per index step.
+    volume = bpy.data.volumes.new("Sphere")
+    volume.filepath = path
+    assert volume.grids.load()
+    matrix = np.array(volume.grids["sdf"].matrix_object)
+    np.testing.assert_allclose(matrix[:3, :3], np.eye(3) * dense["spacing"], atol=1e-6)
+    np.testing.assert_allclose(matrix[:3, 3], dense["origin"], atol=1e-6)
+
+
+def test_debug_volume_spacing_stays_within_its_sample_budget():
+    from aasdf.aasdf_addon import debug
+
+    engine = runtime.engine()
+    field = engine.build_field(*uv_sphere(1.0, rings=16, segments=32), voxel_size=0.05, levels=3)
+    lo, hi = field.bounds
+    assert debug.dense_spacing(field) == field.voxel_size
+    spacing = debug.dense_spacing(field, max_samples=1000)
+    assert np.prod(np.ceil((hi - lo) / spacing)) <= 1000 < np.prod(np.ceil((hi - lo) / (spacing / 2)))
+    assert spacing / field.voxel_size in (2.0, 4.0, 8.0, 16.0)
+
+
+# ---- registration ----
+
+
+def addon_handlers():
+    """(handler list name, function) of every app handler that belongs to the add-on."""
+    found = []
+    for name in dir(bpy.app.handlers):
+        handlers = getattr(bpy.app.handlers, name)
+        if isinstance(handlers, list):
+            found += [(name, fn) for fn in handlers if getattr(fn, "__module__", "").startswith("aasdf.")]
+    return sorted(found, key=lambda item: (item[0], item[1].__name__))
+
+
+def test_unregister_removes_the_handlers(addon):
+    expected = sorted(
+        [
+            ("depsgraph_update_post", cache._on_depsgraph_update),
+            ("load_pre", cache._on_load_pre),
+            ("redo_post", cache._on_undo_redo_post),
+            ("undo_post", cache._on_undo_redo_post),
+        ],
+        key=lambda item: (item[0], item[1].__name__),
+    )
+    assert addon_handlers() == expected
+    addon.unregister()
+    try:
+        assert addon_handlers() == []
+        assert not [name for name in dir(bpy.types) if name.startswith("AASDF_OT_")]
+        addon.unregister()  # harmless twice
+        assert addon_handlers() == []
+    finally:
+        addon.register()
+    assert addon_handlers() == expected  # once each, not twice

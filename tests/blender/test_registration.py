@@ -1,0 +1,134 @@
+"""Registration: what ``aasdf.register()`` adds to Blender, and that unregistering removes all of it."""
+
+import os
+import sys
+from pathlib import Path
+
+import bpy
+import pytest
+
+import aasdf
+from aasdf.aasdf_addon import preferences, properties, registration, runtime
+
+PANELS = ("AASDF_PT_main", "AASDF_PT_main_debug")
+
+
+def registered_state():
+    """Everything registration is responsible for, as plain values."""
+    return {
+        "scene_group": bpy.types.PropertyGroup.bl_rna_get_subclass_py("AASDF_PG_scene") is not None,
+        "preferences": bpy.types.AddonPreferences.bl_rna_get_subclass_py("AASDF_AddonPreferences") is not None,
+        "scene_pointer": hasattr(bpy.types.Scene, "aasdf"),
+        "panels": [name for name in PANELS if hasattr(bpy.types, name)],
+        "classes": [cls.__name__ for cls in registration._classes() if cls.is_registered],
+    }
+
+
+ALL_REGISTERED = {
+    "scene_group": True,
+    "preferences": True,
+    "scene_pointer": True,
+    "panels": list(PANELS),
+    "classes": [cls.__name__ for cls in registration._classes()],
+}
+NOTHING_REGISTERED = {"scene_group": False, "preferences": False, "scene_pointer": False, "panels": [], "classes": []}
+
+
+def test_add_on_is_the_repository_loaded_as_a_package():
+    assert Path(aasdf.__file__).resolve() == Path(__file__).resolve().parents[2] / "__init__.py"
+    assert preferences.ADDON_ID == "aasdf"
+    assert sys.modules["aasdf.aasdf_addon.registration"] is registration
+
+
+def test_register_adds_classes_pointer_and_panels():
+    assert registered_state() == ALL_REGISTERED
+    assert {"AASDF_PG_scene", "AASDF_AddonPreferences", *PANELS} <= set(ALL_REGISTERED["classes"])
+
+
+def test_scene_settings_have_their_defaults_and_accept_values():
+    settings = bpy.context.scene.aasdf
+    defaults = {name: getattr(settings, name) for name in ("resolution", "voxel_size", "levels", "padding", "blend")}
+    assert defaults == {"resolution": 128, "voxel_size": 0.0, "levels": 5, "padding": 2, "blend": 0.0}
+    assert (settings.hide_inputs, settings.debug_volume) == (True, False)
+    settings.resolution = 3  # below the minimum: Blender clamps
+    assert settings.resolution == 8
+    settings.blend = 0.25
+    assert settings.blend == pytest.approx(0.25)
+
+
+def test_operations_are_upper_case_enum_items():
+    assert [item[0] for item in properties.OPERATIONS] == ["UNION", "INTERSECT", "DIFFERENCE"]
+    assert all(len(item) == 3 and item[0].isupper() for item in properties.OPERATIONS)
+
+
+def test_preferences_are_reachable_with_defaults():
+    prefs = preferences.get()
+    assert prefs is not None
+    assert (prefs.device, prefs.cache_limit_mb) == ("CPU", 1024)
+    assert {item.identifier for item in prefs.bl_rna.properties["device"].enum_items} == {"CPU", "CUDA"}
+
+
+def test_panel_lives_in_the_aasdf_sidebar_tab():
+    panel = bpy.types.AASDF_PT_main
+    assert (panel.bl_space_type, panel.bl_region_type, panel.bl_category) == ("VIEW_3D", "UI", "AASDF")
+    assert bpy.types.AASDF_PT_main_debug.bl_parent_id == "AASDF_PT_main"
+
+
+def test_unregister_register_round_trip_leaves_nothing_behind():
+    bpy.context.scene.aasdf.levels = 7
+    aasdf.unregister()
+    try:
+        assert registered_state() == NOTHING_REGISTERED
+        aasdf.unregister()  # a second unregister is harmless
+        assert registered_state() == NOTHING_REGISTERED
+    finally:
+        aasdf.register()
+    assert registered_state() == ALL_REGISTERED
+    # The pointer is back and usable; the stored value survived (it lives in the scene's ID properties).
+    assert bpy.context.scene.aasdf.levels == 7
+    bpy.context.scene.aasdf.levels = 3
+    assert bpy.context.scene.aasdf.levels == 3
+
+
+def test_failed_registration_rolls_back(monkeypatch):
+    aasdf.unregister()
+
+    class Broken:  # not a bpy type: register_class raises
+        is_registered = False
+
+    try:
+        monkeypatch.setattr(registration.ui, "classes", (*registration.ui.classes, Broken))
+        with pytest.raises(RuntimeError, match="missing bl_rna"):
+            aasdf.register()
+        assert registered_state() == NOTHING_REGISTERED
+    finally:
+        monkeypatch.undo()
+        aasdf.register()
+    assert registered_state() == ALL_REGISTERED
+
+
+def test_kernel_cache_outside_an_extension_uses_warp_cache_path():
+    assert runtime.kernel_cache_dir() == os.environ["WARP_CACHE_PATH"]
+
+
+def test_engine_is_imported_lazily_once_with_the_cache_configured():
+    engine = runtime.engine()
+    assert engine is sys.modules["aasdf.engine"]
+    assert runtime.engine() is engine
+    assert callable(engine.build_field) and issubclass(engine.AasdfError, RuntimeError)
+    import warp
+
+    cache = Path(warp.config.kernel_cache_dir).resolve()
+    assert cache.is_relative_to(Path(os.environ["WARP_CACHE_PATH"]).resolve())
+
+
+def test_device_follows_preferences():
+    import warp
+
+    prefs = preferences.get()
+    assert runtime.device() == "cpu"
+    prefs.device = "CUDA"
+    try:
+        assert runtime.device() == ("cuda:0" if warp.is_cuda_available() else "cpu")
+    finally:
+        prefs.device = "CPU"

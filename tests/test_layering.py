@@ -1,0 +1,87 @@
+"""Layering: the engine never touches Blender, and registering the add-on does not import Warp (or the engine).
+
+The import checks run in fresh subprocesses, so modules other tests imported cannot hide a violation.
+"""
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BLENDER_MODULES = {"bpy", "bmesh", "mathutils", "bpy_extras", "gpu", "addon_utils"}
+ADDON_MODULES = {"aasdf", "aasdf_addon", "operators", "ui", "tests"}
+
+
+def run_python(code: str, *args: str) -> dict:
+    """Run ``code`` in a fresh interpreter with the repository root as its working directory; return its JSON."""
+    done = subprocess.run(
+        [sys.executable, "-c", code, *args], cwd=ROOT, capture_output=True, text=True, timeout=300, check=False
+    )
+    assert done.returncode == 0, done.stderr[-4000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+IMPORT_ENGINE = """
+import json, sys
+sys.path.insert(0, ".")
+import engine
+print(json.dumps({"file": engine.__file__, "loaded": sorted(m for m in sys.argv[1:] if m in sys.modules)}))
+"""
+
+REGISTER_ADDON = """
+import importlib.util, json, sys
+spec = importlib.util.spec_from_file_location("aasdf", "__init__.py", submodule_search_locations=["."])
+aasdf = importlib.util.module_from_spec(spec)
+sys.modules["aasdf"] = aasdf
+spec.loader.exec_module(aasdf)
+after_import = sorted(m for m in sys.modules if m == "bpy" or m.startswith("aasdf."))
+aasdf.register()
+import bpy
+state = {
+    "after_import": after_import,
+    "registered": hasattr(bpy.types.Scene, "aasdf"),
+    "warp": sorted(m for m in sys.modules if m == "warp" or m.startswith("warp.")),
+    "engine": sorted(m for m in sys.modules if m == "aasdf.engine" or m.startswith("aasdf.engine.")),
+}
+aasdf.unregister()
+print(json.dumps(state))
+"""
+
+
+def test_import_engine_loads_no_blender_module():
+    result = run_python(IMPORT_ENGINE, *sorted(BLENDER_MODULES))
+    assert Path(result["file"]).resolve() == ROOT / "engine" / "__init__.py"
+    assert result["loaded"] == []
+
+
+def test_register_loads_neither_warp_nor_the_engine():
+    result = run_python(REGISTER_ADDON)
+    assert result["after_import"] == []  # importing the root package imports nothing
+    assert result["registered"] is True
+    assert result["warp"] == []
+    assert result["engine"] == []
+
+
+def engine_imports():
+    """(file, line, level, module) for every import statement in engine/*.py."""
+    found = []
+    for path in sorted((ROOT / "engine").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            if isinstance(node, ast.Import):
+                found += [(path.name, node.lineno, 0, alias.name) for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                found.append((path.name, node.lineno, node.level, node.module or ""))
+    return found
+
+
+def test_engine_source_imports_nothing_from_blender_or_above_itself():
+    imports = engine_imports()
+    assert imports, "engine/ has no imports at all: the scan found no source"
+    parents = [imp for imp in imports if imp[2] > 1]
+    blender = [imp for imp in imports if imp[3].split(".")[0] in BLENDER_MODULES]
+    addon = [imp for imp in imports if imp[2] == 0 and imp[3].split(".")[0] in ADDON_MODULES | {"engine"}]
+    assert parents == [], "engine/ must not reach out with '..'"
+    assert blender == [], "engine/ must not import Blender modules"
+    assert addon == [], "engine/ must import its own modules relatively and nothing of the add-on"

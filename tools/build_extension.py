@@ -1,0 +1,113 @@
+"""Build the extension zips with Blender's own builder, one per platform: ``dist/aasdf-<version>-<platform>.zip``.
+
+Steps: fetch the platform wheels (``tools/fetch_wheels.py``); copy the files the manifest's
+``[build] paths_exclude_pattern`` lets through into a staging folder (``build/extension/``), with the manifest's
+``platforms`` and ``wheels`` narrowed to the requested platforms and the wheels hard-linked in; validate it; then run
+``blender_ext.py build --split-platforms``. Staging lets one platform be built without the other platforms' wheels.
+
+Usage: ``python tools/build_extension.py [--platform linux-x64 ...] [--output-dir dist]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import fetch_wheels
+from fetch_wheels import MANIFEST, ROOT
+
+STAGE_DIR = ROOT / "build" / "extension"
+TAGS = "scripts/modules/_bpy_internal/extensions/tags.py"
+
+
+def _toml_list(key: str, values) -> str:
+    body = "".join(f'  "{value}",\n' for value in values)
+    return f"{key} = [\n{body}]"
+
+
+def narrowed_manifest(text: str, platforms, wheels) -> str:
+    """The manifest ``text`` with its top-level ``platforms`` and ``wheels`` lists replaced."""
+    for key, values in (("platforms", platforms), ("wheels", wheels)):
+        text, count = re.subn(rf"(?ms)^{key}\s*=\s*\[.*?\]", _toml_list(key, values), text, count=1)
+        if count != 1:
+            raise SystemExit(f"build_extension: no top-level '{key} = [...]' in {MANIFEST.name}")
+    return text
+
+
+def stage(platforms, wheel_paths, stage_dir: Path = STAGE_DIR) -> Path:
+    """Copy the package files into ``stage_dir`` as the builder would select them; return ``stage_dir``."""
+    builder = blender_ext()
+    manifest = fetch_wheels.read_manifest()
+    excluded = builder.PathPatternMatch(manifest.get("build", {}).get("paths_exclude_pattern", []))
+    if stage_dir.exists():
+        shutil.rmtree(stage_dir)
+    stage_dir.mkdir(parents=True)
+    for folder, dirs, files in os.walk(ROOT):
+        rel = Path(folder).relative_to(ROOT)
+        dirs[:] = [d for d in dirs if not excluded.test_path(f"{(rel / d).as_posix()}/")]
+        for name in files:
+            rel_file = (rel / name).as_posix()
+            if rel_file == MANIFEST.name or excluded.test_path(rel_file) or os.path.islink(Path(folder) / name):
+                continue
+            (stage_dir / rel).mkdir(parents=True, exist_ok=True)
+            shutil.copy2(Path(folder) / name, stage_dir / rel_file)
+    rel_wheels = []
+    (stage_dir / "wheels").mkdir()
+    for path in wheel_paths:
+        target = stage_dir / "wheels" / path.name
+        try:
+            os.link(path, target)
+        except OSError:
+            shutil.copy2(path, target)
+        rel_wheels.append(f"./wheels/{path.name}")
+    text = narrowed_manifest(MANIFEST.read_text(encoding="utf-8"), platforms, rel_wheels)
+    (stage_dir / MANIFEST.name).write_text(text, encoding="utf-8")
+    return stage_dir
+
+
+def blender_ext():
+    return fetch_wheels.blender_ext()
+
+
+def build(platforms, output_dir: Path) -> list[Path]:
+    """Fetch wheels, stage and build; return the zips written to ``output_dir``, one per platform."""
+    wheels = fetch_wheels.fetch(platforms)
+    source = stage(platforms, [path for plat in platforms for path in wheels[plat]])
+    script = blender_ext().__file__
+    tags = Path(script).parents[4] / TAGS
+    output_dir.mkdir(parents=True, exist_ok=True)
+    subprocess.run([sys.executable, script, "validate", "--valid-tags", str(tags), str(source)], check=True)
+    cmd = [sys.executable, script, "build", "--source-dir", str(source), "--output-dir", str(output_dir)]
+    subprocess.run([*cmd, "--valid-tags", str(tags), "--split-platforms"], check=True)
+    version = fetch_wheels.read_manifest()["version"]
+    zips = [output_dir / f"aasdf-{version}-{platform.replace('-', '_')}.zip" for platform in platforms]
+    missing = [str(path) for path in zips if not path.is_file()]
+    if missing:
+        raise SystemExit(f"build_extension: the builder did not write {missing}")
+    return zips
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--platform", action="append", help="Blender platform (repeatable); default: all")
+    parser.add_argument("--output-dir", type=Path, default=ROOT / "dist")
+    parser.add_argument("--list", action="store_true", help="also list each zip's files")
+    args = parser.parse_args(argv)
+    platforms = args.platform or fetch_wheels.read_manifest()["platforms"]
+    for path in build(platforms, args.output_dir.resolve()):
+        shown = path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
+        print(f"built {shown} ({path.stat().st_size / 2**20:.1f} MiB)")
+        if args.list:
+            with zipfile.ZipFile(path) as archive:
+                for info in archive.infolist():
+                    print(f"  {info.file_size:>12,d}  {info.filename}")
+
+
+if __name__ == "__main__":
+    main()
