@@ -31,9 +31,11 @@ lint: venv
 extension: venv
 	$(PY) tools/build_extension.py --output-dir dist
 
-# The main job. Until the batch boolean lands: build the linux-x64 extension and list what is in it.
+# The main job: a headless SDF boolean on the bundled sample meshes (cow minus sphere) that writes the result mesh
+# and a debug volume of its field, and prints what it did.
 demo: venv
-	$(PY) tools/build_extension.py --platform linux-x64 --output-dir dist --list
+	$(PY) aasdf_batch.py --operation difference --inputs samples/cow.obj samples/sphere.obj --resolution 256 \
+		--output demo-output/cow-minus-sphere.ply --debug-volume demo-output/cow-minus-sphere.vdb
 
 clean:
 	rm -rf build dist .warp-cache .pytest_cache .ruff_cache

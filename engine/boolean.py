@@ -20,9 +20,11 @@ import warp as wp
 from . import octree
 from .field import AdaptiveField, _bits, assemble_field, check_budget, plan_domain
 from .octree import morton_encode, node_center
-from .sampling import FieldArg, clamp_to_domain, locate_leaf, sample_mls
+from .sampling import FieldArg, clamp_to_domain, level_spacing, locate_leaf, sample_mls
 
 OP_UNION, OP_INTERSECTION, OP_DIFFERENCE = 0, 1, 2
+# Finest octets are kept where some node is within this many voxels of the result's surface.
+KEEP_BAND = 2.5
 
 
 # ---- point operators ----
@@ -48,23 +50,27 @@ def sdf_combine(op: int, a: float, b: float, k: float) -> float:
 
 
 @wp.func
-def _lookup_or_sample(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3) -> wp.vec4:
-    """(phi, grad) of an operand at result node ``c`` (world ``x``): its own node value when aligned and stored,
-    otherwise its MLS sample; outside its domain, the bound that grows with the distance to the domain."""
+def _lookup(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3):
+    """An operand's own finest node at result node ``c`` when the lattices are aligned: (found, phi, grad)."""
     if aligned == 1:
         oc = c + offset
         if oc[0] >= 0 and oc[1] >= 0 and oc[2] >= 0:
             j = octree.find_key(f.codes, 0, f.fine_count, morton_encode(oc))
             if j >= 0:
-                p = f.proj[j]
-                g = x - p
+                g = x - f.proj[j]
                 ln = wp.length(g)
                 phi = f.values[j]
                 if ln > 0.0:
                     g = g / ln
                 if phi < 0.0:
                     g = -g
-                return wp.vec4(phi, g[0], g[1], g[2])
+                return 1, phi, g
+    return 0, 0.0, wp.vec3(0.0)
+
+
+@wp.func
+def _sample(f: FieldArg, x: wp.vec3) -> wp.vec4:
+    """(phi, grad) by MLS; outside the domain, the bound that grows with the distance to the domain."""
     xc = clamp_to_domain(f, x)
     r = sample_mls(f, xc)
     out = wp.length(x - xc)
@@ -72,6 +78,45 @@ def _lookup_or_sample(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, 
         gd = (x - xc) / out
         return wp.vec4(wp.max(r[0], 0.0) + out, gd[0], gd[1], gd[2])
     return r
+
+
+@wp.func
+def _extrapolate(f: FieldArg, x: wp.vec3) -> wp.vec4:
+    """(phi, grad) from the leaf containing ``x``: its value carried along its exact gradient (the direction from its
+    closest point), i.e. the distance to its tangent plane. Cheap; used for the coarse levels of a result."""
+    xc = clamp_to_domain(f, x)
+    leaf = locate_leaf(f, xc)
+    s = level_spacing(f, leaf[1])
+    centre = node_center(f.origin, s, f.coords[leaf[0]])
+    phi = f.values[leaf[0]]
+    n = centre - f.proj[leaf[0]]
+    ln = wp.length(n)
+    g = wp.vec3(0.0)
+    if ln > 0.0:
+        g = wp.where(phi < 0.0, -1.0, 1.0) * n / ln
+    phi = phi + wp.dot(g, xc - centre)
+    out = wp.length(x - xc)
+    if out > 0.0:
+        g = (x - xc) / out
+        phi = wp.max(phi, 0.0) + out
+    return wp.vec4(phi, g[0], g[1], g[2])
+
+
+@wp.func
+def _estimate(f: FieldArg, x: wp.vec3):
+    """A cheap bracket of an operand's value: (phi, radius) from the coarse leaf containing ``x`` (the field is
+    1-Lipschitz, so the value at ``x`` lies within ``radius`` of the leaf's); radius -1 in the finest band."""
+    xc = clamp_to_domain(f, x)
+    leaf = locate_leaf(f, xc)
+    if leaf[1] == 0:
+        return 0.0, -1.0
+    s = level_spacing(f, leaf[1])
+    centre = node_center(f.origin, s, f.coords[leaf[0]])
+    phi = f.values[leaf[0]]
+    out = wp.length(x - xc)
+    if out > 0.0:
+        phi = wp.max(phi, 0.0) + out
+    return phi, wp.length(xc - centre)
 
 
 @wp.kernel(enable_backward=False)
@@ -88,6 +133,7 @@ def _combine_nodes_kernel(
     spacing: float,
     op: int,
     blend: float,
+    precise: int,
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
@@ -100,8 +146,63 @@ def _combine_nodes_kernel(
     i = lo + t
     c = coords[i]
     x = node_center(origin, spacing, c)
-    ra = _lookup_or_sample(a, a_aligned, a_offset, c, x)
-    rb = _lookup_or_sample(b, b_aligned, b_offset, c, x)
+    # Exact node values where the lattices align; elsewhere a cheap bracket from the containing coarse leaf, and
+    # the MLS sample only when that operand can decide the result (its bracket overlaps the other's within blend).
+    fa, va, ga = _lookup(a, a_aligned, a_offset, c, x)
+    fb, vb, gb = _lookup(b, b_aligned, b_offset, c, x)
+    if precise == 0:
+        # coarse levels: each operand's containing leaf, extrapolated along its gradient
+        if fa == 0:
+            r = _extrapolate(a, x)
+            va = r[0]
+            ga = wp.vec3(r[1], r[2], r[3])
+        if fb == 0:
+            r = _extrapolate(b, x)
+            vb = r[0]
+            gb = wp.vec3(r[1], r[2], r[3])
+    else:
+        rad_a = float(0.0)
+        rad_b = float(0.0)
+        if fa == 0:
+            va, rad_a = _estimate(a, x)
+        if fb == 0:
+            vb, rad_b = _estimate(b, x)
+        if rad_a < 0.0:
+            r = _sample(a, x)
+            va = r[0]
+            ga = wp.vec3(r[1], r[2], r[3])
+            rad_a = 0.0
+        if rad_b < 0.0:
+            r = _sample(b, x)
+            vb = r[0]
+            gb = wp.vec3(r[1], r[2], r[3])
+            rad_b = 0.0
+        # bracket of the second argument as the operation sees it (difference uses -b)
+        tb = vb
+        if op == 2:
+            tb = -vb
+        need_a = int(1)
+        need_b = int(1)
+        if op == 0:
+            if tb - rad_b >= va + rad_a + blend:
+                need_b = 0
+            elif va - rad_a >= tb + rad_b + blend:
+                need_a = 0
+        else:
+            if tb + rad_b <= va - rad_a - blend:
+                need_b = 0
+            elif va + rad_a <= tb - rad_b - blend:
+                need_a = 0
+        if need_a == 1 and rad_a > 0.0:
+            r = _sample(a, x)
+            va = r[0]
+            ga = wp.vec3(r[1], r[2], r[3])
+        if need_b == 1 and rad_b > 0.0:
+            r = _sample(b, x)
+            vb = r[0]
+            gb = wp.vec3(r[1], r[2], r[3])
+    ra = wp.vec4(va, ga[0], ga[1], ga[2])
+    rb = wp.vec4(vb, gb[0], gb[1], gb[2])
     phi = sdf_combine(op, ra[0], rb[0], blend)
     b_term = rb[0]
     if op == 2:
@@ -118,6 +219,40 @@ def _combine_nodes_kernel(
     sign[i] = wp.where(phi < 0.0, -1.0, 1.0)
     values[t] = phi
     source[i] = follow.source[locate_leaf(follow, clamp_to_domain(follow, x))[0]]
+
+
+@wp.kernel(enable_backward=False)
+def _keep_octets_kernel(
+    octets: wp.array[wp.int64],
+    near: wp.array[wp.int32],
+    has_neg: wp.array[wp.int32],
+    has_pos: wp.array[wp.int32],
+    keep: wp.array[wp.int32],
+):
+    """Keep an octet near the surface, or with a sign change inside it or towards one of its 26 neighbours."""
+    t = wp.tid()
+    keep[t] = 0
+    if near[t] == 1 or (has_neg[t] == 1 and has_pos[t] == 1):
+        keep[t] = 1
+        return
+    c = octree.morton_decode(octets[t])
+    n = octets.shape[0]
+    for o in range(27):
+        q = c + wp.vec3i(o % 3 - 1, (o // 3) % 3 - 1, o // 9 - 1)
+        if o != 13 and q[0] >= 0 and q[1] >= 0 and q[2] >= 0:
+            j = octree.find_key(octets, 0, n, morton_encode(q))
+            if j >= 0:
+                if (has_neg[j] == 1 and has_pos[t] == 1) or (has_pos[j] == 1 and has_neg[t] == 1):
+                    keep[t] = 1
+                    return
+
+
+@wp.kernel(enable_backward=False)
+def _aligned_octets_kernel(coords: wp.array[wp.vec3i], offset: wp.vec3i, codes: wp.array[wp.int64]):
+    """Octet code, on the result lattice, of each finest node of an aligned operand."""
+    i = wp.tid()
+    c = coords[i] + offset
+    codes[i] = morton_encode(wp.vec3i(c[0] >> 1, c[1] >> 1, c[2] >> 1))
 
 
 @wp.kernel(enable_backward=False)
@@ -193,8 +328,10 @@ def _octets_of(f: AdaptiveField, origin, spacing, oct_dims, aligned, device) -> 
     """Octet codes (result lattice) that cover an operand's finest level."""
     n0 = int(f.level_offsets[1])
     if aligned:
-        coords = f.coords.numpy()[:n0].astype(np.int64) + _offset_to(f, origin, spacing)
-        return wp.array(octree.morton_encode_np(coords >> 1), dtype=wp.int64, device=device)
+        codes = wp.empty(n0, dtype=wp.int64, device=device)
+        offset = wp.vec3i(*(int(v) for v in _offset_to(f, origin, spacing)))
+        wp.launch(_aligned_octets_kernel, dim=n0, inputs=[f.coords, offset], outputs=[codes], device=device)
+        return codes
     args = [f.arg(), wp.vec3(*origin), 2.0 * spacing, 1.0 * spacing, wp.vec3i(*(int(d) for d in oct_dims))]
     counts = wp.empty(n0, dtype=wp.int32, device=device)
     dummy = wp.empty(1, dtype=wp.int64, device=device)
@@ -275,25 +412,30 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     origin_v = wp.vec3(*origin)
 
     def run(coords, lo_, hi_, spacing_, dist, proj, source, sign, values):
-        wp.launch(
+        flags = [int(aligned[0] and spacing_ == h), int(aligned[1] and spacing_ == h)]
+        octree.launch_split(
             _combine_nodes_kernel,
-            dim=hi_ - lo_,
-            device=device,
-            inputs=[
+            hi_ - lo_,
+            lambda start, n: [
                 a_arg,
                 b_arg,
-                int(aligned[0] and spacing_ == h),
-                int(aligned[1] and spacing_ == h),
+                *flags,
                 offs[0],
                 offs[1],
                 coords,
-                lo_,
+                lo_ + start,
                 origin_v,
                 float(spacing_),
                 int(op),
                 blend,
+                int(spacing_ == h),
+                dist,
+                proj,
+                source,
+                sign,
+                values[start : start + n],
             ],
-            outputs=[dist, proj, source, sign, values],
+            device,
         )
 
     t0 = time.perf_counter()
@@ -305,6 +447,33 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     fine_values = wp.empty(n0, dtype=wp.float32, device=device)
     run(fine_coords, 0, n0, h, fine_dist, fine_proj, fine_src, fine_sign, fine_values)
     timings["finest_values"] = time.perf_counter() - t0
+
+    # Keep the result adaptive: drop octets the result's surface is far from (an operand's band buried inside the
+    # other operand, say). A marching cube with a corner farther than its diagonal from the surface cannot contain
+    # it, so octets whose nodes are all beyond KEEP_BAND voxels change no surface — unless the field jumps there
+    # (the surface an open operand gets across a hole): octets with both signs, or next to one of the other sign,
+    # stay.
+    t0 = time.perf_counter()
+    octet_values = fine_values.numpy().reshape(-1, 8)
+    near = wp.array((np.abs(octet_values) <= KEEP_BAND * h).any(axis=1).astype(np.int32), device=device)
+    has_neg = wp.array((octet_values < 0.0).any(axis=1).astype(np.int32), device=device)
+    has_pos = wp.array((octet_values >= 0.0).any(axis=1).astype(np.int32), device=device)
+    keep_wp = wp.empty(near.shape[0], dtype=wp.int32, device=device)
+    wp.launch(
+        _keep_octets_kernel,
+        dim=near.shape[0],
+        inputs=[octets, near, has_neg, has_pos],
+        outputs=[keep_wp],
+        device=device,
+    )
+    near = keep_wp.numpy().astype(bool)
+    if not near.all():
+        keep = np.repeat(near, 8)
+        fine_codes, fine_coords, fine_dist, fine_proj, fine_src, fine_values = (
+            wp.array(arr.numpy()[keep], dtype=arr.dtype, device=device)
+            for arr in (fine_codes, fine_coords, fine_dist, fine_proj, fine_src, fine_values)
+        )
+    timings["finest_prune"] = time.perf_counter() - t0
 
     def level_values(coords, lo_, hi_, spacing_, dist, proj, source, sign):
         scratch = wp.empty(hi_ - lo_, dtype=wp.float32, device=device)

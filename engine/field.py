@@ -35,6 +35,9 @@ BUILD_BYTES_PER_NODE = 160
 SIGN_SAFETY = 0.9
 # Rounds of refining coarse leaves the zero set crosses (open meshes: the surface across a hole).
 MAX_SIGN_REFINEMENTS = 4
+# Sweeps of same-level sign propagation, and the stride of oracle seeds on the dense top level.
+MAX_SIGN_SWEEPS = 64
+TOP_SEED_STRIDE = 16
 
 
 # ---- finest level: octets overlapping triangles ----
@@ -228,6 +231,60 @@ def _sign_change_kernel(f: FieldArg, node_level: wp.array[wp.int32], marks: wp.a
             # sign changes next to the finest band are the band-gap kernel's business
             if nb[1] > 0 and (f.values[nb[0]] < 0.0) != inside:
                 marks[wp.tid()] = 1
+
+
+@wp.kernel(enable_backward=False)
+def _propagate_sign_kernel(
+    neighbours: wp.array2d[wp.int32],
+    lo: int,
+    dist: wp.array[wp.float32],
+    sign: wp.array[wp.float32],
+    safety: float,
+    spacing: float,
+    changed: wp.array[wp.int32],
+):
+    """An unsigned node takes a signed face neighbour's sign when their empty balls cover the edge between them.
+    Signs only ever go from 0 to final, so sweeps may read and write in place."""
+    i = lo + wp.tid()
+    if sign[i] != 0.0:
+        return
+    for k in range(6):
+        j = neighbours[i, k]
+        if j >= 0:
+            if sign[j] != 0.0 and (dist[i] + dist[j]) * safety > spacing:
+                sign[i] = sign[j]
+                wp.atomic_add(changed, 0, 1)
+                return
+
+
+@wp.kernel(enable_backward=False)
+def _propagate_sign_search_kernel(
+    codes: wp.array[wp.int64],
+    coords: wp.array[wp.vec3i],
+    lo: int,
+    hi: int,
+    dist: wp.array[wp.float32],
+    sign: wp.array[wp.float32],
+    safety: float,
+    spacing: float,
+    changed: wp.array[wp.int32],
+):
+    """The same on a level without a neighbour table (the finest): neighbours by binary search of Morton codes."""
+    i = lo + wp.tid()
+    if sign[i] != 0.0:
+        return
+    c = coords[i]
+    for k in range(6):
+        d = wp.vec3i(0)
+        d[k // 2] = wp.where(k % 2 == 0, -1, 1)
+        q = c + d
+        if q[0] >= 0 and q[1] >= 0 and q[2] >= 0:
+            j = octree.find_key(codes, lo, hi, morton_encode(q))
+            if j >= 0:
+                if sign[j] != 0.0 and (dist[i] + dist[j]) * safety > spacing:
+                    sign[i] = sign[j]
+                    wp.atomic_add(changed, 0, 1)
+                    return
 
 
 @wp.kernel(enable_backward=False)
@@ -657,12 +714,12 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         if len(nodes_np) == 0:
             return
         nodes = wp.array(nodes_np.astype(np.int32), dtype=wp.int32, device=device)
-        wp.launch(
+        origin_v = wp.vec3(*origin)
+        octree.launch_split(
             _mesh_sign_kernel,
-            dim=len(nodes_np),
-            device=device,
-            inputs=[mesh.id, coords, nodes, wp.vec3(*origin), float(spacing), diag],
-            outputs=[sign],
+            len(nodes_np),
+            lambda lo, n: [mesh.id, coords, nodes[lo : lo + n], origin_v, float(spacing), diag, sign],
+            device,
         )
 
     def finest_signs(coords, sign, lo0, hi0):
@@ -683,12 +740,22 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         dist0 = wp.empty(n0, dtype=wp.float32, device=device)
         proj0 = wp.empty(n0, dtype=wp.vec3, device=device)
         src0 = wp.empty(n0, dtype=wp.int32, device=device)
-        wp.launch(
+        origin_v = wp.vec3(*origin)
+        octree.launch_split(
             _finest_distance_kernel,
-            dim=n0,
-            device=device,
-            inputs=[mesh.id, fine_coords, wp.vec3(*origin), voxel_size, float(query_radius), int(field_id)],
-            outputs=[dist0, proj0, src0],
+            n0,
+            lambda lo, n: [
+                mesh.id,
+                fine_coords[lo : lo + n],
+                origin_v,
+                voxel_size,
+                float(query_radius),
+                int(field_id),
+                dist0[lo : lo + n],
+                proj0[lo : lo + n],
+                src0[lo : lo + n],
+            ],
+            device,
         )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
         return assemble_field(
@@ -883,16 +950,43 @@ def assemble_field(
         timings[f"{name}_neighbours"] = tn - tk
         timings[name] = time.perf_counter() - tk + level_times.get(k, 0.0)
 
-    # Signs, top-down.
+    # Signs, top-down: the top level from a sparse set of oracle seeds, every lower level from its parents; then
+    # within each level from already signed neighbours (empty balls again); the oracle only for what is left.
     t0 = time.perf_counter()
     top_lo, top_hi = int(offsets[levels - 1]), int(offsets[levels])
     oracle_counts = {}
-    if level_values is not None:
-        pass
-    elif levels > 1:
-        oracle(coords, np.arange(top_lo, top_hi), voxel_size * 2 ** (levels - 1), sign)
-        oracle_counts[levels - 1] = top_hi - top_lo
     origin_v = wp.vec3(*origin_t)
+
+    def spread(k, lo, hi):
+        changed = wp.zeros(1, dtype=wp.int32, device=device)
+        for _ in range(MAX_SIGN_SWEEPS):
+            changed.zero_()
+            if k == 0:
+                wp.launch(
+                    _propagate_sign_search_kernel,
+                    dim=hi - lo,
+                    inputs=[codes, coords, lo, hi, dist, sign, SIGN_SAFETY * 1.0, float(voxel_size)],
+                    outputs=[changed],
+                    device=device,
+                )
+            else:
+                wp.launch(
+                    _propagate_sign_kernel,
+                    dim=hi - lo,
+                    inputs=[neighbours, lo, dist, sign, SIGN_SAFETY, float(voxel_size * 2**k)],
+                    outputs=[changed],
+                    device=device,
+                )
+            if int(changed.numpy()[0]) == 0:
+                break
+        return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
+
+    if level_values is None and levels > 1:
+        seeds = np.arange(top_lo, top_hi, TOP_SEED_STRIDE)
+        oracle(coords, seeds, voxel_size * 2 ** (levels - 1), sign)
+        rest = spread(levels - 1, top_lo, top_hi)
+        oracle(coords, rest, voxel_size * 2 ** (levels - 1), sign)
+        oracle_counts[levels - 1] = len(seeds) + len(rest)
     for k in range(levels - 2, -1, -1) if level_values is None else ():
         lo, hi = int(offsets[k]), int(offsets[k + 1])
         wp.launch(
@@ -902,10 +996,12 @@ def assemble_field(
             device=device,
         )
         if k > 0:
-            idx = lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
+            idx = spread(k, lo, hi)
             oracle(coords, idx, voxel_size * 2**k, sign)
             oracle_counts[k] = len(idx)
     if fine_values is None:
+        if levels > 1:
+            spread(0, 0, n0)
         oracle_counts[0] = finest_signs(coords, sign, 0, n0)
     values = wp.empty(n, dtype=wp.float32, device=device)
     wp.launch(_apply_sign_kernel, dim=n, inputs=[dist, sign], outputs=[values], device=device)

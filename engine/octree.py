@@ -9,6 +9,9 @@ device-agnostic: nothing here knows whether it runs on the CPU or on CUDA.
 
 from __future__ import annotations
 
+import os
+import threading
+
 import numpy as np
 import warp as wp
 
@@ -16,6 +19,46 @@ import warp as wp
 MORTON_BITS = 21
 MAX_CELLS_PER_AXIS = 1 << MORTON_BITS
 UNSET_DISTANCE = 1.0e30
+
+
+# ---- launching ----
+
+# Below this many threads a launch is not worth splitting across CPU cores.
+SPLIT_MIN_DIM = 20_000
+
+
+def launch_split(kernel, dim: int, args, device, *, parts: int | None = None) -> None:
+    """Launch ``kernel`` over [0, dim) — on the CPU, as one launch per core from as many Python threads.
+
+    A Warp CPU launch runs on one thread but releases the GIL, so launches from two threads use two cores. ``args``
+    is called with (start, count) and returns the launch's ``inputs`` list (slices of per-thread arrays, or an
+    offset the kernel adds to its thread id). On CUDA, or for small launches, this is one ordinary launch.
+    """
+    if dim <= 0:
+        return
+    device = wp.get_device(device)
+    parts = parts or (os.cpu_count() or 1)
+    if device.is_cuda or parts < 2 or dim < SPLIT_MIN_DIM:
+        wp.launch(kernel, dim=dim, inputs=args(0, dim), device=device)
+        return
+    wp.load_module(kernel.module, device=device)  # compile (or load) once, before the threads race for it
+    bounds = np.linspace(0, dim, parts + 1).astype(np.int64)
+    errors = []
+
+    def run(lo, hi):
+        try:
+            wp.launch(kernel, dim=int(hi - lo), inputs=args(int(lo), int(hi - lo)), device=device)
+        except Exception as err:  # re-raised below, in the caller's thread
+            errors.append(err)
+
+    threads = [threading.Thread(target=run, args=(bounds[k], bounds[k + 1])) for k in range(1, parts)]
+    for t in threads:
+        t.start()
+    run(bounds[0], bounds[1])
+    for t in threads:
+        t.join()
+    if errors:
+        raise errors[0]
 
 
 # ---- Morton codes ----

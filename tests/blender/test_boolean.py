@@ -280,6 +280,19 @@ def test_cache_evicts_least_recently_used_fields_beyond_its_limit(fresh_cache):
     assert list(cache._entries) == [1, 4]
 
 
+def test_relabelled_field_shares_everything_but_its_source_ids():
+    engine = runtime.engine()
+    field = engine.build_field(*uv_sphere(1.0, rings=16, segments=32), voxel_size=0.1, levels=3, field_id=0)
+    relabelled = cache.with_field_id(field, 3)
+    assert cache.with_field_id(field, 0) is field
+    points = np.array([[0.0, 0.0, 0.0], [0.9, 0.1, 0.0], [2.0, 0.0, 0.0]], dtype=np.float32)
+    assert relabelled.field_ids == (3,) and list(relabelled.source_ids(points)) == [3, 3, 3]
+    assert field.field_ids == (0,) and list(field.source_ids(points)) == [0, 0, 0]
+    np.testing.assert_array_equal(relabelled.sample(points), field.sample(points))
+    union = engine.union(field, cache.with_field_id(field, 1))
+    assert union.field_ids == (0, 1)
+
+
 # ---- undo ----
 
 
