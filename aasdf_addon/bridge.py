@@ -2,7 +2,8 @@
 
 ``evaluated_mesh`` reads an object's evaluated geometry (modifiers applied) with ``foreach_get`` and moves it to
 world space in one matrix product; ``combine`` folds fields with the engine's booleans as a balanced tree; and
-``write_result_object`` builds a new mesh object with ``foreach_set``. Nothing here loops over vertices in Python.
+``write_result_object`` builds a new mesh object with ``foreach_set`` (``update_result_object`` gives an existing one
+new mesh data, in place). Nothing here loops over vertices in Python.
 """
 
 import bpy
@@ -149,19 +150,18 @@ def is_smooth(obj) -> bool:
     return bool(smooth.mean() >= 0.5)
 
 
-def write_result_object(context, name, verts, tris, materials=(), face_material_index=None, smooth=False):
-    """Create a mesh object from arrays, linked next to the active object, made active and the only selection.
+def result_mesh(name, verts, tris, materials=(), face_material_index=None, smooth=False):
+    """A new mesh datablock from arrays.
 
     Args:
-        context: The operator's context (its active object's first collection receives the result).
-        name: Name of the new object and mesh.
-        verts: (V, 3) float32 world-space vertices (the object gets the identity transform).
+        name: Name of the mesh.
+        verts: (V, 3) float32 vertices.
         tris: (F, 3) int32 triangles.
         materials: Materials for the slots, in order (``None`` gives an empty slot).
         face_material_index: Optional (F,) int slot index of each face.
         smooth: Smooth shading for all faces.
     Returns:
-        The new ``bpy.types.Object``.
+        The new ``bpy.types.Mesh``.
     """
     verts = np.ascontiguousarray(verts, dtype=np.float32).reshape(-1, 3)
     tris = np.ascontiguousarray(tris, dtype=np.int32).reshape(-1, 3)
@@ -179,13 +179,69 @@ def write_result_object(context, name, verts, tris, materials=(), face_material_
     mesh.update(calc_edges=True)
     if len(tris):  # meshes without a "sharp_face" attribute are smooth: say it either way
         mesh.shade_smooth() if smooth else mesh.shade_flat()
+    return mesh
 
+
+def write_result_object(
+    context,
+    name,
+    verts,
+    tris,
+    materials=(),
+    face_material_index=None,
+    smooth=False,
+    *,
+    collection=None,
+    select=True,
+):
+    """Create a mesh object from arrays, linked next to the active object, made active and the only selection.
+
+    Args:
+        context: The operator's context (its active object's first collection receives the result).
+        name: Name of the new object and mesh.
+        verts: (V, 3) float32 world-space vertices (the object gets the identity transform).
+        tris: (F, 3) int32 triangles.
+        materials: Materials for the slots, in order (``None`` gives an empty slot).
+        face_material_index: Optional (F,) int slot index of each face.
+        smooth: Smooth shading for all faces.
+        collection: Collection receiving the object instead of the active object's (or the scene's).
+        select: Make the new object active and the only selection; ``False`` leaves the selection alone.
+    Returns:
+        The new ``bpy.types.Object``.
+    """
+    mesh = result_mesh(name, verts, tris, materials, face_material_index, smooth)
     obj = bpy.data.objects.new(name, mesh)
-    active = context.active_object
-    collection = active.users_collection[0] if active is not None and active.users_collection else None
+    if collection is None:
+        active = context.active_object
+        collection = active.users_collection[0] if active is not None and active.users_collection else None
     (collection or context.scene.collection).objects.link(obj)
-    for other in context.selected_objects:
-        other.select_set(False)
-    obj.select_set(True)
-    context.view_layer.objects.active = obj
+    if select:
+        for other in context.selected_objects:
+            other.select_set(False)
+        obj.select_set(True)
+        context.view_layer.objects.active = obj
+    return obj
+
+
+def update_result_object(obj, verts, tris, materials=(), face_material_index=None, smooth=False):
+    """Give an existing mesh object new mesh data from world-space arrays, in place (same object, new mesh).
+
+    The vertices are moved into the object's local space, so the result sits where the booleans put it whatever the
+    object's transform. The previous mesh is removed when nothing else uses it, and the new one takes its name.
+
+    Args:
+        obj: A mesh object.
+        verts, tris, materials, face_material_index, smooth: As for ``write_result_object``.
+    Returns:
+        ``obj``.
+    """
+    matrix = np.array(obj.matrix_world, dtype=np.float64)
+    if not np.allclose(matrix, np.eye(4)):
+        verts, tris = to_world(verts, tris, np.linalg.inv(matrix))
+    old = obj.data
+    name = old.name
+    obj.data = result_mesh(name, verts, tris, materials, face_material_index, smooth)
+    if old.users == 0:
+        bpy.data.meshes.remove(old)
+        obj.data.name = name
     return obj

@@ -24,6 +24,7 @@ from . import bridge, preferences, runtime
 _entries: OrderedDict = OrderedDict()  # session_uid -> (key, field, nbytes), least recently used first
 _stats = {"hits": 0, "builds": 0, "evictions": 0, "invalidations": 0}
 _skip_next_update = False  # set by undo/redo: their re-evaluation is not an edit
+_bytes = 0  # sum of the entries' nbytes, kept up to date so the sidebar reads it without summing
 
 DEFAULT_LIMIT_MB = 1024
 
@@ -91,7 +92,7 @@ def field_for(obj, depsgraph, *, voxel_size, levels, padding, field_id=0, device
         _entries.move_to_end(uid)
         _stats["hits"] += 1
         return with_field_id(entry[1], field_id)
-    _entries.pop(uid, None)
+    _pop(uid)
     world, world_tris = bridge.to_world(verts, tris, matrix)
     field = engine.build_field(
         world, world_tris, voxel_size=voxel_size, levels=levels, padding=padding, device=device, field_id=field_id
@@ -102,18 +103,30 @@ def field_for(obj, depsgraph, *, voxel_size, levels, padding, field_id=0, device
 
 
 def _store(uid, key, field, limit):
+    global _bytes
     nbytes = field_nbytes(field)
     if nbytes > limit:
         return
+    _pop(uid)
     _entries[uid] = (key, field, nbytes)
-    while total_bytes() > limit:
-        _entries.popitem(last=False)
+    _bytes += nbytes
+    while _bytes > limit:
+        _bytes -= _entries.popitem(last=False)[1][2]
         _stats["evictions"] += 1
 
 
+def _pop(uid):
+    """Remove one entry (if any) and return it."""
+    global _bytes
+    entry = _entries.pop(uid, None)
+    if entry is not None:
+        _bytes -= entry[2]
+    return entry
+
+
 def total_bytes() -> int:
-    """Bytes held by all cached fields."""
-    return sum(entry[2] for entry in _entries.values())
+    """Bytes held by all cached fields (a running sum: cheap enough for a panel's ``draw()``)."""
+    return _bytes
 
 
 def stats() -> dict:
@@ -128,7 +141,7 @@ def reset_stats():
 
 def invalidate(session_uid: int) -> bool:
     """Drop one object's entry; returns whether there was one."""
-    if _entries.pop(session_uid, None) is None:
+    if _pop(session_uid) is None:
         return False
     _stats["invalidations"] += 1
     return True
@@ -136,7 +149,9 @@ def invalidate(session_uid: int) -> bool:
 
 def clear():
     """Drop every cached field."""
+    global _bytes
     _entries.clear()
+    _bytes = 0
 
 
 # ---- handlers ----

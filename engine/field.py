@@ -774,6 +774,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
             field_ids=(field_id,),
             timings=timings,
             mesh_id=mesh.id,
+            spread_signs=clean,
         )
 
     field = build(base_octets, diag if levels == 1 else (padding + 4) * octet * 1.8)
@@ -871,6 +872,7 @@ def assemble_field(
     fine_values=None,
     mesh_id=0,
     level_values=None,
+    spread_signs=True,
 ):
     """Build the intermediate and top levels above a finest level and sign every node (shared by construction
     and booleans).
@@ -881,6 +883,7 @@ def assemble_field(
     ``fine_values`` (signed) is given the finest level keeps those values instead. When ``level_values(coords, lo,
     hi, spacing, dist, proj, source, sign)`` is given (booleans: the operands are sampled), it sets every coarse
     node's distance, projection, source and sign directly, in place of the FIM solve and the sign oracles.
+    ``spread_signs`` lets signs spread between same-level neighbours (valid for closed meshes only).
     """
     top_dims = np.asarray(top_dims, dtype=np.int64)
     fine_dims = top_dims * 2 ** (levels - 1)
@@ -958,6 +961,8 @@ def assemble_field(
     origin_v = wp.vec3(*origin_t)
 
     def spread(k, lo, hi):
+        if not spread_signs:
+            return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
         changed = wp.zeros(1, dtype=wp.int32, device=device)
         for _ in range(MAX_SIGN_SWEEPS):
             changed.zero_()
@@ -982,7 +987,9 @@ def assemble_field(
         return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
 
     if level_values is None and levels > 1:
-        seeds = np.arange(top_lo, top_hi, TOP_SEED_STRIDE)
+        # Across a hole of an open mesh the sign changes where no triangle is near, so empty balls prove nothing
+        # there: open meshes ask the oracle for every top node and do not spread signs within levels.
+        seeds = np.arange(top_lo, top_hi, TOP_SEED_STRIDE if spread_signs else 1)
         oracle(coords, seeds, voxel_size * 2 ** (levels - 1), sign)
         rest = spread(levels - 1, top_lo, top_hi)
         oracle(coords, rest, voxel_size * 2 ** (levels - 1), sign)

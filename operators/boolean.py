@@ -7,17 +7,12 @@ transform and settings), the fields are combined as a balanced tree, and the sur
 with the operands' materials, each face taking the material of the operand it came from.
 """
 
-import time
-
 import bpy
-import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
 
-from ..aasdf_addon import bridge, cache, runtime
+from ..aasdf_addon import bridge, cache, pipeline, runtime
+from ..aasdf_addon.pipeline import last_run  # noqa: F401  (scripts read ``operators.boolean.last_run``)
 from ..aasdf_addon.properties import OPERATIONS
-
-# Numbers of the last successful run, for scripts (``aasdf_batch.py`` prints them).
-last_run: dict = {}
 
 
 def mesh_operands(context) -> list:
@@ -106,103 +101,76 @@ class AASDF_OT_boolean(bpy.types.Operator):
 
     def execute(self, context):
         engine = runtime.engine()  # lazy: keeps registration fast
-        start = time.perf_counter()
+        run = pipeline.Run()
         operands = mesh_operands(context)
         active = operands[0]
         depsgraph = context.evaluated_depsgraph_get()
-        voxel_size = self.voxel_size
-        if voxel_size <= 0.0:
-            lo, hi = bridge.world_bounds(operands, depsgraph)
-            voxel_size = float(np.linalg.norm(hi - lo)) / self.resolution
+        voxel_size = pipeline.voxel_size_for(operands, depsgraph, self.voxel_size, self.resolution)
         if not voxel_size > 0.0:
             self.report({"ERROR"}, "The selected meshes have no extent: set a Voxel Size")
             return {"CANCELLED"}
 
         wm = context.window_manager
         wm.progress_begin(0, 2 * len(operands))
-        before = cache.stats()
         try:
             try:
-                fields = self._operand_fields(context, operands, depsgraph, voxel_size)
+                with run.stage("fields"):
+                    fields = pipeline.operand_fields(
+                        context,
+                        operands,
+                        depsgraph,
+                        voxel_size=voxel_size,
+                        levels=self.levels,
+                        padding=self.padding,
+                        progress=lambda k, obj: self._field_progress(context, k, obj, len(operands)),
+                    )
+                wm.progress_update(len(operands))
                 self._status(context, "SDF boolean: combining fields")
                 steps = iter(range(len(operands) + 1, 2 * len(operands)))
-                field = bridge.combine(
-                    self.operation, fields, self.blend, progress=lambda: wm.progress_update(next(steps))
-                )
-                verts, tris = field.to_mesh()
+                with run.stage("booleans"):
+                    field = bridge.combine(
+                        self.operation, fields, self.blend, progress=lambda: wm.progress_update(next(steps))
+                    )
+                with run.stage("surface"):
+                    result = pipeline.surface(field, operands)
             except engine.AasdfError as err:
                 self.report({"ERROR"}, str(err))
                 return {"CANCELLED"}
-            if len(tris) == 0:
+            if len(result["tris"]) == 0:
                 self.report({"WARNING"}, "The boolean result is empty: nothing was added")
                 return {"CANCELLED"}
-            materials, slot_of = bridge.operand_materials(operands)
-            face_slots = None
-            if materials:
-                ids = field.source_ids(verts[tris].mean(axis=1))
-                face_slots = slot_of[ids.clip(0, len(operands) - 1)]
-            result = bridge.write_result_object(
-                context,
-                f"{active.name}.aasdf",
-                verts,
-                tris,
-                materials=materials,
-                face_material_index=face_slots,
-                smooth=bridge.is_smooth(active),
-            )
+            with run.stage("write"):
+                obj = pipeline.write_result(context, f"{active.name}.aasdf", result, smooth=bridge.is_smooth(active))
             if self.debug_volume:
-                self._add_debug_objects(context, field, result, engine)
+                self._add_debug_objects(context, field, obj, engine)
             if self.hide_inputs:
-                for obj in operands:
-                    obj.hide_set(True)
+                for operand in operands:
+                    operand.hide_set(True)
         finally:
             wm.progress_end()
             self._status(context, None)
 
-        after = cache.stats()
-        hits, builds = after["hits"] - before["hits"], after["builds"] - before["builds"]
-        seconds = time.perf_counter() - start
-        last_run.clear()
-        last_run.update(
-            object=result.name,
+        numbers = pipeline.record(
+            run,
+            field,
+            result,
+            source="aasdf.boolean",
+            object=obj.name,
             operation=self.operation,
             operands=len(operands),
             voxel_size=voxel_size,
-            seconds=seconds,
-            nodes=field.node_count,
-            vertices=len(verts),
-            triangles=len(tris),
-            cache_hits=hits,
-            fields_built=builds,
         )
         self.report(
             {"INFO"},
-            f"{result.name}: {self.operation.lower()} of {len(operands)} objects in {seconds:.2f} s, "
-            f"{field.node_count:,} field nodes, {len(tris):,} triangles, {hits}/{len(operands)} fields from cache",
+            f"{obj.name}: {self.operation.lower()} of {len(operands)} objects in {numbers['seconds']:.2f} s, "
+            f"{field.node_count:,} field nodes, {numbers['triangles']:,} triangles, "
+            f"{numbers['cache_hits']}/{len(operands)} fields from cache",
         )
         return {"FINISHED"}
 
-    def _operand_fields(self, context, operands, depsgraph, voxel_size):
-        """One field per operand (operand ``k`` gets ``field_id=k``); an AasdfError names its operand."""
-        engine = runtime.engine()
-        fields = []
-        for k, obj in enumerate(operands):
-            self._status(context, f"SDF boolean: field of {obj.name} ({k + 1}/{len(operands)})")
-            try:
-                field = cache.field_for(
-                    obj,
-                    depsgraph,
-                    voxel_size=voxel_size,
-                    levels=self.levels,
-                    padding=self.padding,
-                    field_id=k,
-                    context=context,
-                )
-            except engine.AasdfError as err:
-                raise engine.AasdfError(f"{obj.name}: {err}") from err
-            fields.append(field)
-            context.window_manager.progress_update(k + 1)
-        return fields
+    def _field_progress(self, context, k, obj, count):
+        self._status(context, f"SDF boolean: field of {obj.name} ({k + 1}/{count})")
+        context.window_manager.progress_update(k)
 
     def _add_debug_objects(self, context, field, result, engine):
         from ..aasdf_addon import debug
@@ -261,10 +229,7 @@ class AASDF_OT_debug_volume(bpy.types.Operator):
         engine = runtime.engine()
         obj = context.active_object
         depsgraph = context.evaluated_depsgraph_get()
-        voxel_size = self.voxel_size
-        if voxel_size <= 0.0:
-            lo, hi = bridge.world_bounds([obj], depsgraph)
-            voxel_size = float(np.linalg.norm(hi - lo)) / self.resolution
+        voxel_size = pipeline.voxel_size_for([obj], depsgraph, self.voxel_size, self.resolution)
         if not voxel_size > 0.0:
             self.report({"ERROR"}, f"{obj.name} has no extent: set a Voxel Size")
             return {"CANCELLED"}
