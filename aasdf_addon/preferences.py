@@ -1,19 +1,72 @@
 """Add-on preferences: the compute device and the field cache's memory limit.
 
 ``ADDON_ID`` is the add-on's package name: ``bl_ext.<repo>.aasdf`` when installed as an extension, ``aasdf`` when the
-repository is loaded as a plain package (tests). Warp is not imported here: the device list is static and
-``aasdf_addon.runtime`` resolves it to an available Warp device when the engine is first used.
+repository is loaded as a plain package (tests). Warp is not imported here: the device list is filled the first time
+Blender asks for it (drawing the preferences), from the CUDA driver itself (``cuda_devices``: a few ``ctypes`` calls),
+and ``aasdf_addon.runtime`` resolves the choice to a Warp device when the engine is first used.
 """
+
+import ctypes
+import sys
 
 import bpy
 from bpy.props import EnumProperty, IntProperty
 
 ADDON_ID = __package__.rpartition(".")[0]
 
-DEVICES = (
-    ("CPU", "CPU", "Run the engine's Warp kernels on the CPU"),
-    ("CUDA", "CUDA", "Run the engine's Warp kernels on the first CUDA GPU (falls back to the CPU when there is none)"),
-)
+_CUDA_LIBRARIES = {"linux": ("libcuda.so.1", "libcuda.so"), "win32": ("nvcuda.dll",)}
+_cuda_devices = None  # [(ordinal, name)], probed once
+_device_items = None  # kept alive: Blender holds pointers into dynamic enum items
+
+
+def _probe_cuda_devices() -> list[tuple[int, str]]:
+    """(ordinal, name) of each CUDA device the NVIDIA driver reports; empty without a driver or a GPU."""
+    for name in _CUDA_LIBRARIES.get(sys.platform, ()):
+        try:
+            cuda = ctypes.CDLL(name)
+        except OSError:
+            continue
+        count = ctypes.c_int(0)
+        if cuda.cuInit(0) != 0 or cuda.cuDeviceGetCount(ctypes.byref(count)) != 0:
+            return []
+        devices = []
+        for ordinal in range(count.value):
+            handle, label = ctypes.c_int(0), ctypes.create_string_buffer(256)
+            if cuda.cuDeviceGet(ctypes.byref(handle), ordinal) == 0 and cuda.cuDeviceGetName(label, 256, handle) == 0:
+                devices.append((ordinal, label.value.decode(errors="replace")))
+        return devices
+    return []
+
+
+def cuda_devices() -> list[tuple[int, str]]:
+    """The CUDA devices present, probed on first call only (registration does not probe)."""
+    global _cuda_devices
+    if _cuda_devices is None:
+        _cuda_devices = _probe_cuda_devices()
+    return _cuda_devices
+
+
+def device_items(self, context):
+    """Enum items of ``device``: ``CPU`` and one ``CUDA_<n>`` per CUDA device (value ``n + 1``)."""
+    global _device_items
+    if _device_items is None:
+        _device_items = [("CPU", "CPU", "Run the engine's Warp kernels on the CPU", "NONE", 0)] + [
+            (
+                f"CUDA_{ordinal}",
+                f"{name} (cuda:{ordinal})",
+                f"Run the engine's Warp kernels on cuda:{ordinal}",
+                "NONE",
+                1 + ordinal,
+            )
+            for ordinal, name in cuda_devices()
+        ]
+    return _device_items
+
+
+def reset_devices():
+    """Probe the CUDA devices again the next time the list is needed."""
+    global _cuda_devices, _device_items
+    _cuda_devices = _device_items = None
 
 
 class AASDF_AddonPreferences(bpy.types.AddonPreferences):
@@ -21,9 +74,9 @@ class AASDF_AddonPreferences(bpy.types.AddonPreferences):
 
     device: EnumProperty(
         name="Device",
-        description="Where the engine runs",
-        items=DEVICES,
-        default="CPU",
+        description="Where the engine runs: the CPU, or a CUDA GPU when one is present",
+        items=device_items,
+        default=0,
     )
     cache_limit_mb: IntProperty(
         name="Cache Memory Limit",

@@ -11,6 +11,9 @@ OPERATIONS = (
 )
 
 
+CSG_TREE = "AASDF_NT_csg"  # bl_idname of the node tree (``aasdf_addon.nodes``)
+
+
 class AASDF_PG_scene(bpy.types.PropertyGroup):
     """Field and result settings used by the SDF boolean operators of a scene."""
 
@@ -64,6 +67,12 @@ class AASDF_PG_scene(bpy.types.PropertyGroup):
         name="Debug Volume",
         description="Also create a volume object showing the adaptive field's cells and distances",
         default=False,
+    )
+    tree: PointerProperty(
+        name="CSG Tree",
+        description="The AASDF CSG node tree shown in the sidebar",
+        type=bpy.types.NodeTree,
+        poll=lambda self, tree: tree.bl_idname == CSG_TREE,
     )
 
 

@@ -8,12 +8,18 @@ pointers, app handlers, caches to clear) gets ``register()``/``unregister()`` fu
 import bpy
 
 from .. import operators, ui
-from . import cache, preferences, properties
+from . import autoupdate, cache, nodes, preferences, properties
 
 
 def _classes():
-    """All classes in registration order: PropertyGroups first (pointers need them), panels last."""
-    return (*properties.classes, preferences.AASDF_AddonPreferences, *operators.classes, *ui.classes)
+    """All classes in registration order: PropertyGroups first (pointers need them), node types, panels last."""
+    return (
+        *properties.classes,
+        preferences.AASDF_AddonPreferences,
+        *nodes.classes,
+        *operators.classes,
+        *ui.classes,
+    )
 
 
 def _modules():
@@ -21,7 +27,7 @@ def _modules():
 
     Their ``unregister()`` must be harmless when ``register()`` did not run (it is also used to roll back).
     """
-    return (properties, cache)
+    return (properties, cache, autoupdate, ui)
 
 
 def register():

@@ -7,6 +7,7 @@ is launched.
 
 import os
 import tempfile
+from pathlib import Path
 
 import bpy
 
@@ -14,6 +15,8 @@ from . import preferences
 from .preferences import ADDON_ID
 
 _engine = None
+# Shipped in the zip by ``make extension`` (absent in a source checkout: kernels then compile on first use).
+PREBUILT_KERNELS = Path(__file__).resolve().parents[1] / "kernels"
 
 
 def kernel_cache_dir() -> str:
@@ -46,17 +49,22 @@ def engine():
             warp.config.kernel_cache_dir = kernel_cache_dir()
         from .. import engine as module
 
+        # Kernels compiled when the zip was built, so that the first boolean loads them instead of compiling.
+        warp.init()
+        module.kernels.install_prebuilt(PREBUILT_KERNELS, warp.config.kernel_cache_dir, module.__name__)
         _engine = module
     return _engine
 
 
 def device(context=None) -> str:
-    """Warp device for the preferred device: ``"cuda:0"`` when CUDA is chosen and present, otherwise ``"cpu"``."""
+    """Warp device for the preferred device: ``"cuda:<n>"`` when ``CUDA_<n>`` is chosen and present, else ``"cpu"``."""
     prefs = preferences.get(context)
-    if prefs is not None and prefs.device == "CUDA":
+    choice = prefs.device if prefs is not None else "CPU"
+    if choice.startswith("CUDA"):
+        ordinal = int(choice.partition("_")[2] or 0)
         engine()  # configures the kernel cache before Warp initialises
         import warp
 
-        if warp.is_cuda_available():
-            return "cuda:0"
+        if warp.is_cuda_available() and ordinal < warp.get_cuda_device_count():
+            return f"cuda:{ordinal}"
     return "cpu"

@@ -4,8 +4,11 @@ Pure numpy + NVIDIA Warp (never Blender): arrays in, arrays out. Kernels run on 
 passed as ``device`` (CPU here, CUDA wherever an NVIDIA GPU is present). Negative inside, positive outside.
 """
 
+from . import kernels
 from .boolean import difference, intersection, union
 from .errors import AasdfError
 from .field import AdaptiveField, build_field
+
+kernels.configure_modules(__name__)
 
 __all__ = ["AasdfError", "AdaptiveField", "build_field", "difference", "intersection", "union"]

@@ -22,8 +22,27 @@ WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.
 GENERIC_PACKAGE = "engine"
 CUDA_ARCHS = (75, 86, 89, 90)
+# Warp's default CPU flags without -march=native: objects built here load on any x86-64 (or arm64) CPU of the same
+# platform. The flags are part of each module's hash, so build and run time must agree.
+PORTABLE_CPU_FLAGS = (
+    "-mllvm=-inline-threshold=9000 -mllvm=-inline-cold-callsite-threshold=3000 -mllvm=-slp-recursion-max-depth=4"
+)
 # wp_<module>_<7-hex hash><.suffixes>; the folder Warp keeps a module in is the part before the suffixes.
 _MODULE_FILE = re.compile(r"^(wp_.+_[0-9a-f]{7})(\..*)?$")
+
+
+def warp_modules(engine_package: str) -> list:
+    """The Python modules whose Warp kernels the engine launches."""
+    names = [f"{engine_package}.{name}" for name in ENGINE_MODULES] + list(WARP_MODULES)
+    return [importlib.import_module(name) for name in names]
+
+
+def configure_modules(engine_package: str) -> None:
+    """Give every module the engine launches the portable CPU flags (before any of them loads)."""
+    import warp as wp
+
+    for module in warp_modules(engine_package):
+        wp.set_module_options({"cpu_compiler_flags": PORTABLE_CPU_FLAGS}, module)
 
 
 def compile_prebuilt(out_dir, *, cuda: bool = True) -> list[Path]:
@@ -39,8 +58,8 @@ def compile_prebuilt(out_dir, *, cuda: bool = True) -> list[Path]:
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    modules = [importlib.import_module(f"{GENERIC_PACKAGE}.{name}") for name in ENGINE_MODULES]
-    modules += [importlib.import_module(name) for name in WARP_MODULES]
+    modules = warp_modules(GENERIC_PACKAGE)
+    configure_modules(GENERIC_PACKAGE)
     written = []
     for module in modules:
         wp.set_module_options({"block_dim": 1}, module)

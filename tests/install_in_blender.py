@@ -79,8 +79,23 @@ def check_union_of_two_cubes(bpy, report):
     first = bpy.context.active_object
     bpy.ops.mesh.primitive_cube_add(size=2.0, location=(1.0, 0.0, 0.0))
     second = bpy.context.active_object
-    with bpy.context.temp_override(active_object=first, selected_objects=[first, second]):
+    import contextlib
+    import io
+
+    import warp
+
+    # Warp names every module it loads, and whether it came from the cache or had to be compiled.
+    warp.config.quiet = False
+    log = io.StringIO()
+    with (
+        contextlib.redirect_stdout(log),
+        bpy.context.temp_override(active_object=first, selected_objects=[first, second]),
+    ):
         report["boolean_result"] = sorted(bpy.ops.aasdf.boolean(operation="UNION"))
+    warp.config.quiet = True
+    loads = [line for line in log.getvalue().splitlines() if line.startswith("Module ")]
+    report["modules_loaded"] = sorted(line.split()[1] for line in loads)
+    report["modules_compiled"] = sorted(line.split()[1] for line in loads if "(compiled)" in line)
     result = bpy.data.objects.get(f"{first.name}.aasdf")
     if result is None:
         report["union_volume"] = None

@@ -22,5 +22,10 @@ def unexpected_in_package(files) -> list[str]:
         for f in files
         if "__pycache__" in f
         or f.endswith(".pyc")
-        or not (f.split("/")[0] in allowed_top or ("/" not in f and f.endswith(".py")) or f.startswith("wheels/"))
+        or not (
+            f.split("/")[0] in allowed_top
+            or ("/" not in f and f.endswith(".py"))
+            or f.startswith("wheels/")
+            or (f.startswith("kernels/wp_") and f.endswith((".o", ".ptx", ".meta")))
+        )
     )

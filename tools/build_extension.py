@@ -16,6 +16,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -68,7 +69,24 @@ def stage(platforms, wheel_paths, stage_dir: Path = STAGE_DIR) -> Path:
         rel_wheels.append(f"./wheels/{path.name}")
     text = narrowed_manifest(MANIFEST.read_text(encoding="utf-8"), platforms, rel_wheels)
     (stage_dir / MANIFEST.name).write_text(text, encoding="utf-8")
+    compile_kernels(stage_dir / "kernels")
     return stage_dir
+
+
+def compile_kernels(out_dir: Path) -> list[Path]:
+    """Prebuilt Warp kernels for the zip (CPU objects for this platform, PTX for common CUDA architectures),
+    compiled in a fresh process with an empty kernel cache; sources are left out. See ``engine/kernels.py``."""
+    code = (
+        "import sys; sys.path.insert(0, sys.argv[1]); import warp; warp.config.quiet = True; "
+        "from engine import kernels; kernels.compile_prebuilt(sys.argv[2])"
+    )
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "WARP_CACHE_PATH": cache}
+        subprocess.run([sys.executable, "-c", code, str(ROOT), str(out_dir)], check=True, env=env)
+    for path in out_dir.iterdir():
+        if path.suffix in (".cpp", ".cu"):
+            path.unlink()
+    return sorted(out_dir.iterdir())
 
 
 def blender_ext():

@@ -7,7 +7,7 @@ import bpy
 import numpy as np
 import pytest
 
-from aasdf.aasdf_addon import bridge, cache, preferences, runtime
+from aasdf.aasdf_addon import autoupdate, bridge, cache, preferences, runtime
 from aasdf.operators import boolean as boolean_op
 from tests.metrics import exact_boolean, mesh_volume
 from tests.support import is_watertight, load_mesh, uv_sphere
@@ -542,6 +542,8 @@ def test_unregister_removes_the_handlers(addon):
             ("load_pre", cache._on_load_pre),
             ("redo_post", cache._on_undo_redo_post),
             ("undo_post", cache._on_undo_redo_post),
+            ("depsgraph_update_post", autoupdate._on_depsgraph_update),  # CSG trees' Auto Update
+            ("load_post", autoupdate._on_load_post),
         ],
         key=lambda item: (item[0], item[1].__name__),
     )

@@ -65,7 +65,10 @@ def test_preferences_are_reachable_with_defaults():
     prefs = preferences.get()
     assert prefs is not None
     assert (prefs.device, prefs.cache_limit_mb) == ("CPU", 1024)
-    assert {item.identifier for item in prefs.bl_rna.properties["device"].enum_items} == {"CPU", "CUDA"}
+    # The device list is dynamic: the CPU, then one item per CUDA device the driver reports.
+    items = preferences.device_items(prefs, bpy.context)
+    assert items[0][0] == "CPU"
+    assert [item[0] for item in items[1:]] == [f"CUDA_{n}" for n, _ in preferences.cuda_devices()]
 
 
 def test_panel_lives_in_the_aasdf_sidebar_tab():
@@ -122,13 +125,17 @@ def test_engine_is_imported_lazily_once_with_the_cache_configured():
     assert cache.is_relative_to(Path(os.environ["WARP_CACHE_PATH"]).resolve())
 
 
-def test_device_follows_preferences():
+def test_device_follows_preferences(monkeypatch):
     import warp
 
     prefs = preferences.get()
     assert runtime.device() == "cpu"
-    prefs.device = "CUDA"
+    monkeypatch.setattr(preferences, "_cuda_devices", [(0, "Test GPU")])  # as if the driver reported one
+    monkeypatch.setattr(preferences, "_device_items", None)
+    prefs.device = "CUDA_0"
     try:
         assert runtime.device() == ("cuda:0" if warp.is_cuda_available() else "cpu")
     finally:
         prefs.device = "CPU"
+        monkeypatch.undo()
+        preferences.reset_devices()

@@ -1,0 +1,248 @@
+"""Evaluation of an ``AASDF CSG`` tree: validate, then walk it once bottom-up through the shared pipeline.
+
+``plan_tree`` checks the whole tree before any work starts: every input socket connected, each Object node on a mesh
+object, each Collection node on a collection with mesh objects, Output nodes with distinct names of objects that are
+not their own inputs. Problems are written on their nodes (``node.message``) and raised together as ``AasdfError``,
+so the previous results stay as they are. A valid output becomes a plan: nested ``("field", k)``, ``("union", [...])``
+and ``(operation, blend, [...])`` over its operands, the distinct mesh objects below it in depth-first order.
+
+``evaluate_tree`` then asks ``pipeline.operand_fields`` (the field cache) for each operand, folds the plan with
+``bridge.combine`` (n-ary inputs as balanced binary trees), extracts the surface with the operands' materials and
+writes or updates the result object in place: the same calls ``aasdf.boolean`` makes.
+"""
+
+from dataclasses import dataclass, field
+
+import bpy
+
+from . import bridge, nodes, pipeline, runtime
+
+
+@dataclass
+class OutputPlan:
+    """What one Output node computes."""
+
+    node_name: str
+    object_name: str
+    operands: list  # distinct mesh objects, field_id = index
+    plan: tuple
+    collection: object = None  # where a new result object goes
+    errors: dict = field(default_factory=dict)
+
+
+def _linked_nodes(socket) -> list:
+    """The nodes feeding an input socket, first linked first, through reroutes; muted or invalid links do not count."""
+    found = []
+    for link in sorted(socket.links, key=lambda link: link.multi_input_sort_id):
+        if link.is_muted or not link.is_valid:
+            continue
+        node = link.from_node
+        if node.bl_idname == "NodeReroute":
+            found += _linked_nodes(node.inputs[0])
+        else:
+            found.append(node)
+    return found
+
+
+def result_names(tree) -> set:
+    """Names of the objects the tree's Output nodes write."""
+    return {node.object_name for node in tree.nodes if node.bl_idname == nodes.OUTPUT and node.object_name}
+
+
+def collection_meshes(collection, exclude=()) -> list:
+    """Mesh objects of a collection and its children, except those named in ``exclude`` (the tree's results)."""
+    return [obj for obj in collection.all_objects if obj.type == "MESH" and obj.name not in exclude]
+
+
+def input_objects(tree) -> tuple[set, set]:
+    """(session_uids of the input objects, session_uids of the input collections) of a tree, for Auto Update."""
+    objects, collections = set(), set()
+    exclude = result_names(tree)
+    for node in tree.nodes:
+        if node.bl_idname == nodes.OBJECT and node.object is not None:
+            objects.add(node.object.session_uid)
+        elif node.bl_idname == nodes.COLLECTION and node.collection is not None:
+            collections.add(node.collection.session_uid)
+            objects |= {obj.session_uid for obj in collection_meshes(node.collection, exclude)}
+    return objects, collections
+
+
+def plan_tree(tree) -> list[OutputPlan]:
+    """Validate a tree and plan each Output node; problems go on the nodes and are raised together.
+
+    Raises:
+        AasdfError: Listing every problem as ``node: message``.
+    """
+    engine = runtime.engine()
+    errors = {}  # node name -> message
+    outputs = [node for node in tree.nodes if node.bl_idname == nodes.OUTPUT]
+    exclude = result_names(tree)
+    if not outputs:
+        tree.message = "Add an Output node"
+        raise engine.AasdfError(f"{tree.name}: add an Output node")
+    seen = {}
+    for node in outputs:
+        name = node.object_name.strip()
+        if not name:
+            errors[node.name] = "Name the result object"
+        elif name in seen:
+            errors[node.name] = errors[seen[name]] = f"Another Output node also writes '{name}'"
+        else:
+            seen[name] = node.name
+
+    plans = []
+    for out in outputs:
+        operands = []
+        linked = _linked_nodes(out.inputs[0])
+        if not linked:
+            errors[out.name] = "Connect the 'Field' input"
+            plan = None
+        else:
+            plan = _plan_node(linked[0], operands, errors, exclude)
+        target = bpy.data.objects.get(out.object_name)
+        if target is not None and target.type != "MESH":
+            errors[out.name] = f"'{target.name}' exists and is not a mesh object"
+        elif target is not None and target in operands:
+            errors[out.name] = f"'{target.name}' is also an input of this output"
+        first = operands[0] if operands else None
+        collection = first.users_collection[0] if first is not None and first.users_collection else None
+        plans.append(OutputPlan(out.name, out.object_name, operands, plan, collection))
+
+    _set_messages(tree, errors)
+    if errors:
+        tree.message = f"{len(errors)} node(s) need attention"
+        raise engine.AasdfError("; ".join(f"{name}: {message}" for name, message in errors.items()))
+    return plans
+
+
+def _operand(obj, operands) -> tuple:
+    if obj not in operands:
+        operands.append(obj)
+    return ("field", operands.index(obj))
+
+
+def _plan_node(node, operands, errors, exclude):
+    """The plan of the field a node outputs, adding its mesh objects to ``operands``; ``None`` on a problem."""
+    kind = node.bl_idname
+    if kind == nodes.OBJECT:
+        obj = node.object
+        if obj is None:
+            errors[node.name] = "Choose a mesh object"
+            return None
+        if obj.type != "MESH":
+            errors[node.name] = f"'{obj.name}' is not a mesh object"
+            return None
+        return _operand(obj, operands)
+    if kind == nodes.COLLECTION:
+        collection = node.collection
+        if collection is None:
+            errors[node.name] = "Choose a collection"
+            return None
+        meshes = collection_meshes(collection, exclude)
+        if not meshes:
+            errors[node.name] = f"Collection '{collection.name}' has no mesh objects"
+            return None
+        return ("UNION", 0.0, [_operand(obj, operands) for obj in meshes])
+    if kind in nodes.BOOLEAN_NODES:
+        children = []
+        for socket in node.inputs:
+            linked = _linked_nodes(socket)
+            if not linked:
+                errors[node.name] = f"Connect the '{socket.name}' input"
+            children += [_plan_node(child, operands, errors, exclude) for child in linked]
+        if node.name in errors or None in children:
+            return None
+        return (nodes.BOOLEAN_NODES[kind], float(node.blend), children)
+    errors[node.name] = f"A {node.bl_label} node cannot feed an SDF input"
+    return None
+
+
+def _set_messages(tree, errors):
+    """Write each node's message (empty when fine), touching only those that change."""
+    for node in tree.nodes:
+        if isinstance(node, nodes.CsgNode):
+            message = errors.get(node.name, "")
+            if node.message != message:
+                node.message = message
+    if not errors and tree.message:
+        tree.message = ""
+
+
+def fold(plan, fields):
+    """The field of a plan: ``("field", k)`` is ``fields[k]``; other tuples combine their children."""
+    if plan[0] == "field":
+        return fields[plan[1]]
+    operation, blend, children = plan
+    return bridge.combine(operation, [fold(child, fields) for child in children], blend)
+
+
+def evaluate_tree(context, tree) -> list[dict]:
+    """Evaluate every Output node of a CSG tree and write its result object.
+
+    Args:
+        context: The caller's context (preferences, depsgraph, scene).
+        tree: An ``AASDF CSG`` node tree.
+    Returns:
+        One ``pipeline.last_run``-style dict per output; an empty result has ``"empty": True`` and writes nothing.
+    Raises:
+        AasdfError: Invalid tree (nothing written) or an engine error (message on the Output node; earlier outputs
+            are written, this one keeps its previous result).
+    """
+    engine = runtime.engine()
+    plans = plan_tree(tree)
+    depsgraph = context.evaluated_depsgraph_get()
+    runs = []
+    for plan in plans:
+        out = tree.nodes[plan.node_name]
+        run = pipeline.Run()
+        try:
+            voxel_size = pipeline.voxel_size_for(plan.operands, depsgraph, tree.voxel_size, tree.resolution)
+            if not voxel_size > 0.0:
+                raise engine.AasdfError("the inputs have no extent: set a Voxel Size")
+            with run.stage("fields"):
+                fields = pipeline.operand_fields(
+                    context,
+                    plan.operands,
+                    depsgraph,
+                    voxel_size=voxel_size,
+                    levels=tree.levels,
+                    padding=tree.padding,
+                )
+            with run.stage("booleans"):
+                result_field = fold(plan.plan, fields)
+            with run.stage("surface"):
+                result = pipeline.surface(result_field, plan.operands)
+        except engine.AasdfError as err:
+            out.message = str(err)
+            tree.message = f"{out.name}: {err}"
+            raise engine.AasdfError(f"{out.name}: {err}") from err
+        if len(result["tris"]) == 0:
+            out.message = "The result is empty: the previous result is kept"
+            runs.append({"object": plan.object_name, "empty": True})
+            continue
+        with run.stage("write"):
+            target = bpy.data.objects.get(plan.object_name)
+            obj = pipeline.write_result(
+                context,
+                plan.object_name,
+                result,
+                smooth=bridge.is_smooth(plan.operands[0]),
+                target=target,
+                collection=plan.collection,
+                select=False,
+            )
+        if tree.hide_inputs:
+            for operand in plan.operands:
+                operand.hide_set(True)
+        numbers = pipeline.record(
+            run,
+            result_field,
+            result,
+            source=tree.name,
+            object=obj.name,
+            operation="TREE",
+            operands=len(plan.operands),
+            voxel_size=voxel_size,
+        )
+        runs.append(dict(numbers))
+    return runs

@@ -1,0 +1,245 @@
+"""The ``AASDF CSG`` node tree: procedural SDF booleans that stay live.
+
+Input nodes (Object, Collection) give fields; Union / Intersect / Difference nodes combine them (each with a blend
+radius); an Output node names the object that receives the result. Blender only stores and draws these trees: they are
+evaluated by ``aasdf_addon.csg`` (``aasdf.evaluate_tree``, or Auto Update through ``aasdf_addon.autoupdate``). Every
+setting that changes a result tells ``autoupdate`` that its tree changed; a tree gets a fake user as soon as it has
+nodes, so it is saved with the .blend even when no editor shows it.
+"""
+
+import bpy
+from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+
+from .properties import CSG_TREE as TREE
+
+SOCKET = "AASDF_NS_field"
+OBJECT, COLLECTION = "AASDF_N_object", "AASDF_N_collection"
+UNION, INTERSECT, DIFFERENCE = "AASDF_N_union", "AASDF_N_intersect", "AASDF_N_difference"
+OUTPUT = "AASDF_N_output"
+
+# Boolean node type -> operation identifier of ``properties.OPERATIONS``.
+BOOLEAN_NODES = {UNION: "UNION", INTERSECT: "INTERSECT", DIFFERENCE: "DIFFERENCE"}
+
+
+def _changed(self, context):
+    """Property update callback: the tree of ``self`` (a tree or a node) needs evaluating again."""
+    from . import autoupdate
+
+    autoupdate.tree_changed(self.id_data)
+
+
+def is_csg_tree(tree) -> bool:
+    return tree is not None and getattr(tree, "bl_idname", "") == TREE
+
+
+class AASDF_NT_csg(bpy.types.NodeTree):
+    """Procedural SDF booleans of mesh objects, evaluated into result objects"""
+
+    bl_idname, bl_label, bl_icon = TREE, "AASDF CSG", "MOD_BOOLEAN"
+
+    voxel_size: FloatProperty(
+        name="Voxel Size",
+        description="Edge length of the finest voxels; 0 derives it from Resolution",
+        default=0.0,
+        min=0.0,
+        soft_max=1.0,
+        precision=4,
+        subtype="DISTANCE",
+        update=_changed,
+    )
+    resolution: IntProperty(
+        name="Resolution",
+        description="Finest voxels along the diagonal of each output's combined input bounding box "
+        "(used when Voxel Size is 0)",
+        default=128,
+        min=8,
+        soft_max=1024,
+        max=8192,
+        update=_changed,
+    )
+    levels: IntProperty(
+        name="Levels",
+        description="Octree levels: cells grow coarser away from the surface",
+        default=5,
+        min=1,
+        max=12,
+        update=_changed,
+    )
+    padding: IntProperty(
+        name="Padding",
+        description="Finest voxels kept around the surface on each side",
+        default=2,
+        min=0,
+        max=32,
+        update=_changed,
+    )
+    auto_update: BoolProperty(
+        name="Auto Update",
+        description="Evaluate the tree again shortly after an input object or a node setting changes",
+        default=False,
+        update=_changed,
+    )
+    hide_inputs: BoolProperty(
+        name="Hide Inputs",
+        description="Hide (never delete) the input objects after each evaluation",
+        default=False,
+    )
+    message: StringProperty(name="Message", description="Problem found by the last evaluation")
+
+    @classmethod
+    def poll(cls, context):
+        return True
+
+    def update(self):
+        """Links or nodes changed."""
+        if len(self.nodes) and not self.use_fake_user:
+            self.use_fake_user = True  # 0 users would not be saved
+        _changed(self, None)
+
+
+class AASDF_NS_field(bpy.types.NodeSocket):
+    """A signed distance field"""
+
+    bl_idname, bl_label = SOCKET, "SDF"
+
+    def draw(self, context, layout, node, text):
+        layout.label(text=text)
+
+    @classmethod
+    def draw_color_simple(cls):
+        return (0.35, 0.75, 0.85, 1.0)
+
+
+class CsgNode:
+    """Mix-in of all CSG nodes: only in CSG trees, with the message of the last evaluation shown on the node."""
+
+    message: StringProperty(name="Message", description="Problem found by the last evaluation")
+
+    @classmethod
+    def poll(cls, ntree):
+        return ntree.bl_idname == TREE
+
+    def draw_buttons(self, context, layout):
+        self.draw_settings(layout)
+        if self.message:
+            layout.label(text=self.message, icon="ERROR")
+
+    def draw_settings(self, layout):
+        pass
+
+
+class AASDF_N_object(CsgNode, bpy.types.Node):
+    """The field of a mesh object's evaluated geometry (modifiers applied), in world space"""
+
+    bl_idname, bl_label, bl_icon = OBJECT, "Object", "OBJECT_DATA"
+
+    object: PointerProperty(
+        name="Object",
+        description="Mesh object whose surface becomes a field",
+        type=bpy.types.Object,
+        poll=lambda self, obj: obj.type == "MESH",
+        update=_changed,
+    )
+
+    def init(self, context):
+        self.outputs.new(SOCKET, "Field")
+
+    def draw_settings(self, layout):
+        layout.prop(self, "object", text="")
+
+
+class AASDF_N_collection(CsgNode, bpy.types.Node):
+    """The union of the fields of a collection's mesh objects (child collections included)"""
+
+    bl_idname, bl_label, bl_icon = COLLECTION, "Collection", "OUTLINER_COLLECTION"
+
+    collection: PointerProperty(
+        name="Collection",
+        description="Collection whose mesh objects are united into one field",
+        type=bpy.types.Collection,
+        update=_changed,
+    )
+
+    def init(self, context):
+        self.outputs.new(SOCKET, "Field")
+
+    def draw_settings(self, layout):
+        layout.prop(self, "collection", text="")
+
+
+class BooleanNode(CsgNode):
+    blend: FloatProperty(
+        name="Blend",
+        description="Radius of the smooth blend along the seams; 0 keeps sharp edges",
+        default=0.0,
+        min=0.0,
+        soft_max=1.0,
+        precision=3,
+        subtype="DISTANCE",
+        update=_changed,
+    )
+
+    def draw_settings(self, layout):
+        layout.prop(self, "blend")
+
+
+class AASDF_N_union(BooleanNode, bpy.types.Node):
+    """Union of all connected fields (a balanced tree of binary unions)"""
+
+    bl_idname, bl_label, bl_icon = UNION, "Union", "SELECT_EXTEND"
+
+    def init(self, context):
+        self.inputs.new(SOCKET, "Fields", use_multi_input=True)
+        self.outputs.new(SOCKET, "Field")
+
+
+class AASDF_N_intersect(BooleanNode, bpy.types.Node):
+    """Intersection of all connected fields (a balanced tree of binary intersections)"""
+
+    bl_idname, bl_label, bl_icon = INTERSECT, "Intersect", "SELECT_INTERSECT"
+
+    def init(self, context):
+        self.inputs.new(SOCKET, "Fields", use_multi_input=True)
+        self.outputs.new(SOCKET, "Field")
+
+
+class AASDF_N_difference(BooleanNode, bpy.types.Node):
+    """The Base field minus the union of all Cutters"""
+
+    bl_idname, bl_label, bl_icon = DIFFERENCE, "Difference", "SELECT_SUBTRACT"
+
+    def init(self, context):
+        self.inputs.new(SOCKET, "Base")
+        self.inputs.new(SOCKET, "Cutters", use_multi_input=True)
+        self.outputs.new(SOCKET, "Field")
+
+
+class AASDF_N_output(CsgNode, bpy.types.Node):
+    """Writes the connected field's surface into the named mesh object (created when missing, else updated in place)"""
+
+    bl_idname, bl_label, bl_icon = OUTPUT, "Output", "OUTPUT"
+
+    object_name: StringProperty(
+        name="Result",
+        description="Name of the mesh object that receives the result",
+        default="CSG Result",
+        update=_changed,
+    )
+
+    def init(self, context):
+        self.inputs.new(SOCKET, "Field")
+
+    def draw_settings(self, layout):
+        layout.prop(self, "object_name", text="", icon="OBJECT_DATA")
+
+
+classes = (
+    AASDF_NT_csg,
+    AASDF_NS_field,
+    AASDF_N_object,
+    AASDF_N_collection,
+    AASDF_N_union,
+    AASDF_N_intersect,
+    AASDF_N_difference,
+    AASDF_N_output,
+)
