@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.requirements-dev.stamp
 PYTEST_ARGS ?=
 
-.PHONY: venv test test-fast lint extension demo clean
+.PHONY: venv test test-fast lint extension demo bench clean
 
 venv: $(STAMP)
 
@@ -36,6 +36,12 @@ extension: venv
 demo: venv
 	$(PY) aasdf_batch.py --operation difference --inputs samples/cow.obj samples/sphere.obj --resolution 256 \
 		--output demo-output/cow-minus-sphere.ply --debug-volume demo-output/cow-minus-sphere.vdb
+
+# Side-by-side benchmarks against Blender's own tools (tables for README.md); minutes, not seconds.
+bench: venv
+	$(PY) bench/construction.py
+	$(PY) bench/pipeline.py
+	$(PY) bench/cold_start.py
 
 clean:
 	rm -rf build dist .warp-cache .pytest_cache .ruff_cache

@@ -17,8 +17,10 @@ from . import csg, nodes, runtime
 DEBOUNCE = 0.4  # seconds without changes before a dirty tree is evaluated
 
 _dirty: set = set()  # session_uid of the trees to evaluate
+_inputs: dict = {}  # tree session_uid -> session_uids of its input objects when it was last evaluated
 _last_change = 0.0
 _evaluating = False
+_enabled = False  # between register() and unregister(): unregistering the tree types calls their update()
 
 
 def csg_trees():
@@ -32,7 +34,7 @@ def is_dirty(tree) -> bool:
 def mark_dirty(tree):
     """Queue ``tree`` for the timer (when its Auto Update is on) and restart the debounce interval."""
     global _last_change
-    if _evaluating or not tree.auto_update:
+    if _evaluating or not _enabled or not tree.auto_update:
         return
     _dirty.add(tree.session_uid)
     _last_change = time.monotonic()
@@ -60,6 +62,7 @@ def evaluate_now(context, tree) -> list:
         return csg.evaluate_tree(context, tree)
     finally:
         _evaluating = False
+        _inputs[tree.session_uid] = csg.input_objects(tree)[0]
 
 
 def _on_timer():
@@ -89,27 +92,30 @@ def _on_timer():
 def _on_depsgraph_update(scene, depsgraph):
     if _evaluating:
         return
-    trees = [tree for tree in csg_trees() if tree.auto_update and tree.session_uid not in _dirty]
+    trees = [tree for tree in csg_trees() if tree.auto_update]  # dirty ones too: a change restarts the debounce
     if not trees:
         return
-    changed = set()
+    moved, collections_changed = set(), set()
     for update in depsgraph.updates:
         data = update.id
         if isinstance(data, bpy.types.Object) and (update.is_updated_geometry or update.is_updated_transform):
-            changed.add(data.original.session_uid)
+            moved.add(data.original.session_uid)
         elif isinstance(data, bpy.types.Collection):
-            changed.add(data.original.session_uid)
-    if not changed:
+            collections_changed.add(data.original.session_uid)
+    if not (moved or collections_changed):
         return
     for tree in trees:
         objects, collections = csg.input_objects(tree)
-        if changed & (objects | collections):
+        # A collection is also reported when only relations were rebuilt: what counts is a change of its members.
+        members_changed = collections_changed & collections and objects != _inputs.get(tree.session_uid)
+        if moved & objects or members_changed:
             mark_dirty(tree)
 
 
 @bpy.app.handlers.persistent
 def _on_load_post(*_args):
     _dirty.clear()
+    _inputs.clear()
 
 
 _HANDLERS = (
@@ -119,17 +125,21 @@ _HANDLERS = (
 
 
 def register():
+    global _enabled
+    _enabled = True
     for handlers, handler in _HANDLERS:
         if handler not in handlers:
             handlers.append(handler)
 
 
 def unregister():
-    global _evaluating
+    global _evaluating, _enabled
+    _enabled = False
     for handlers, handler in _HANDLERS:
         while handler in handlers:
             handlers.remove(handler)
     if bpy.app.timers.is_registered(_on_timer):
         bpy.app.timers.unregister(_on_timer)
     _dirty.clear()
+    _inputs.clear()
     _evaluating = False

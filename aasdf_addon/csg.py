@@ -222,6 +222,8 @@ def evaluate_tree(context, tree) -> list[dict]:
             continue
         with run.stage("write"):
             target = bpy.data.objects.get(plan.object_name)
+            if target is not None and not target.users_collection:  # an orphan: show it again
+                (plan.collection or context.scene.collection).objects.link(target)
             obj = pipeline.write_result(
                 context,
                 plan.object_name,

@@ -87,10 +87,16 @@ class AASDF_AddonPreferences(bpy.types.AddonPreferences):
     )
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split, layout.use_property_decorate = True, False
-        layout.prop(self, "device")
-        layout.prop(self, "cache_limit_mb")
+        draw_preferences(self.layout, self)
+
+
+def draw_preferences(layout, prefs):
+    """The preferences' settings (reads the cached device list only: nothing is probed or imported here)."""
+    layout.use_property_split, layout.use_property_decorate = True, False
+    layout.prop(prefs, "device")
+    if _cuda_devices == []:
+        layout.label(text="No CUDA device found: the engine runs on the CPU", icon="INFO")
+    layout.prop(prefs, "cache_limit_mb")
 
 
 def get(context=None):

@@ -1,8 +1,9 @@
 """Registers AASDF's classes and settings with Blender, and removes them again in reverse order.
 
 To add a class, put it in the ``classes`` tuple of its package (``operators``, ``ui``) or of
-``aasdf_addon.properties``; nothing here changes. A module that must hook into Blender beyond classes (settings
-pointers, app handlers, caches to clear) gets ``register()``/``unregister()`` functions and a place in ``_modules()``.
+``aasdf_addon.properties`` / ``aasdf_addon.nodes``; nothing here changes. A module that must hook into Blender beyond
+classes (settings pointers, app handlers, timers, menu entries, caches to clear) gets ``register()``/``unregister()``
+functions and a place in ``_modules()``.
 """
 
 import bpy

@@ -333,16 +333,9 @@ def _octets_of(f: AdaptiveField, origin, spacing, oct_dims, aligned, device) -> 
         wp.launch(_aligned_octets_kernel, dim=n0, inputs=[f.coords, offset], outputs=[codes], device=device)
         return codes
     args = [f.arg(), wp.vec3(*origin), 2.0 * spacing, 1.0 * spacing, wp.vec3i(*(int(d) for d in oct_dims))]
-    counts = wp.empty(n0, dtype=wp.int32, device=device)
-    dummy = wp.empty(1, dtype=wp.int64, device=device)
-    wp.launch(_octets_of_cells_kernel, dim=n0, inputs=[*args, counts, 0], outputs=[counts, dummy], device=device)
-    counts_np = counts.numpy().astype(np.int64)
-    total = int(counts_np.sum())
-    check_budget(oct_dims * 2, 0, 8 * total)
-    offsets = wp.array(np.concatenate([[0], np.cumsum(counts_np)[:-1]]).astype(np.int32), device=device)
-    codes = wp.empty(total, dtype=wp.int64, device=device)
-    wp.launch(_octets_of_cells_kernel, dim=n0, inputs=[*args, offsets, 1], outputs=[counts, codes], device=device)
-    return codes
+    return octree.count_then_emit(
+        _octets_of_cells_kernel, n0, args, device, check=lambda total: check_budget(oct_dims * 2, 0, 8 * total)
+    )
 
 
 def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, spacing: str = "finer"):

@@ -61,6 +61,25 @@ def launch_split(kernel, dim: int, args, device, *, parts: int | None = None) ->
         raise errors[0]
 
 
+def count_then_emit(kernel, dim: int, args, device, check=None) -> wp.array:
+    """Run a two-pass "count, then write at scanned offsets" kernel; return the int64 codes it writes.
+
+    ``kernel`` takes ``(*args, offsets, emit, counts, codes)``: with ``emit=0`` it writes each thread's count, with
+    ``emit=1`` it writes its codes from ``offsets[tid]``. ``check(total)`` may refuse the total before allocation.
+    """
+    counts = wp.empty(dim, dtype=wp.int32, device=device)
+    dummy = wp.empty(1, dtype=wp.int64, device=device)
+    wp.launch(kernel, dim=dim, inputs=[*args, counts, 0], outputs=[counts, dummy], device=device)
+    counts_np = counts.numpy().astype(np.int64)
+    total = int(counts_np.sum())
+    if check is not None:
+        check(total)
+    offsets = wp.array(np.concatenate([[0], np.cumsum(counts_np)[:-1]]).astype(np.int32), device=device)
+    codes = wp.empty(total, dtype=wp.int64, device=device)
+    wp.launch(kernel, dim=dim, inputs=[*args, offsets, 1], outputs=[counts, codes], device=device)
+    return codes
+
+
 # ---- Morton codes ----
 
 
@@ -341,14 +360,17 @@ def _init_from_children_kernel(
     spacing: float,
     mesh: wp.uint64,
     max_dist: float,
+    known: wp.array[wp.int32],
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
 ):
     """Internal nodes are sources. With a mesh, their closest point is exact (the BVH query is seeded by the
     nearest child projection, which bounds its search radius); without one, the nearest of their children's
-    projection points. Leaves start unset."""
+    projection points. Leaves start unset. Nodes marked ``known`` keep the values they were given."""
     i = lo + wp.tid()
+    if known[i] == 1:
+        return
     c = first_child[i]
     if c < 0:
         dist[i] = UNSET_DISTANCE
@@ -390,6 +412,7 @@ def _fim_sweep_kernel(
     dist_out: wp.array[wp.float32],
     proj_out: wp.array[wp.vec3],
     src_out: wp.array[wp.int32],
+    known: wp.array[wp.int32],
     changed: wp.array[wp.int32],
 ):
     """One Jacobi sweep of the fast iterative method over a level: each leaf takes the nearest projection point
@@ -398,7 +421,7 @@ def _fim_sweep_kernel(
     best = dist_in[i]
     p = proj_in[i]
     s = src_in[i]
-    if first_child[i] < 0:
+    if first_child[i] < 0 and known[i] == 0:
         x = node_center(origin, spacing, coords[i])
         for k in range(6):
             j = neighbours[i, k]
@@ -417,21 +440,34 @@ def _fim_sweep_kernel(
 
 
 def solve_level(
-    coords, first_child, neighbours, lo, hi, origin, spacing, dist, proj, source, mesh_id=0, max_sweeps=4096
+    coords, first_child, neighbours, lo, hi, origin, spacing, dist, proj, source, mesh_id=0, known=None, max_sweeps=4096
 ):
     """Initialise a level from its children (exactly from ``mesh_id`` when given) and run the fast iterative method
-    until no leaf changes."""
+    until no leaf changes. Nodes flagged in ``known`` (N,) int32 keep their given distance and projection."""
     n = hi - lo
     if n == 0:
         return 0
     device = coords.device
+    if known is None:
+        known = wp.zeros(dist.shape[0], dtype=wp.int32, device=device)
     origin_v = wp.vec3(*origin)
-    wp.launch(
+    launch_split(
         _init_from_children_kernel,
-        dim=n,
-        device=device,
-        inputs=[coords, first_child, lo, origin_v, float(spacing), wp.uint64(mesh_id), 4.0 * float(spacing)],
-        outputs=[dist, proj, source],
+        n,
+        lambda start, count: [
+            coords,
+            first_child,
+            lo + start,
+            origin_v,
+            float(spacing),
+            wp.uint64(mesh_id),
+            4.0 * float(spacing),
+            known,
+            dist,
+            proj,
+            source,
+        ],
+        device,
     )
     dist_b, proj_b, src_b = wp.clone(dist), wp.clone(proj), wp.clone(source)
     changed = wp.zeros(1, dtype=wp.int32, device=device)
@@ -444,7 +480,7 @@ def solve_level(
             _fim_sweep_kernel,
             dim=n,
             inputs=[coords, first_child, neighbours, lo, origin_v, float(spacing), *src_bufs],
-            outputs=[*dst_bufs, changed],
+            outputs=[*dst_bufs, known, changed],
             device=device,
         )
         sweeps += 1
@@ -455,12 +491,21 @@ def solve_level(
         wp.copy(proj, proj_b, dest_offset=lo, src_offset=lo, count=n)
         wp.copy(source, src_b, dest_offset=lo, src_offset=lo, count=n)
     if mesh_id:
-        wp.launch(
+        launch_split(
             _refine_leaves_kernel,
-            dim=n,
-            device=device,
-            inputs=[coords, first_child, lo, origin_v, float(spacing), wp.uint64(mesh_id)],
-            outputs=[dist, proj],
+            n,
+            lambda start, count: [
+                coords,
+                first_child,
+                lo + start,
+                origin_v,
+                float(spacing),
+                wp.uint64(mesh_id),
+                known,
+                dist,
+                proj,
+            ],
+            device,
         )
     return sweeps
 
@@ -473,12 +518,13 @@ def _refine_leaves_kernel(
     origin: wp.vec3,
     spacing: float,
     mesh: wp.uint64,
+    known: wp.array[wp.int32],
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
 ):
     """Exact closest point of a solved leaf: the FIM distance is an upper bound that caps the BVH search radius."""
     i = lo + wp.tid()
-    if first_child[i] >= 0:
+    if first_child[i] >= 0 or known[i] == 1:
         return
     x = node_center(origin, spacing, coords[i])
     q = wp.mesh_query_point_no_sign(mesh, x, dist[i] * 1.0001 + spacing * 1.0e-4)
@@ -508,7 +554,8 @@ def _inherit_sign_kernel(
     surface can cross it); otherwise its sign stays 0 (undecided) for the caller's oracle."""
     i = lo + wp.tid()
     p = parent[i]
-    sign[i] = 0.0
+    if sign[i] != 0.0:  # already known (a node kept from an earlier build of the same mesh)
+        return
     if p >= 0:
         xi = node_center(origin, spacing, coords[i])
         xp = node_center(origin, 2.0 * spacing, coords[p])

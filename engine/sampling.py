@@ -52,6 +52,15 @@ def clamp_to_domain(f: FieldArg, x: wp.vec3) -> wp.vec3:
 
 
 @wp.func
+def inside_domain(f: FieldArg, x: wp.vec3) -> bool:
+    """Whether ``x`` lies strictly inside the field's domain box."""
+    for a in range(3):
+        if x[a] <= f.domain_min[a] or x[a] >= f.domain_max[a]:
+            return False
+    return True
+
+
+@wp.func
 def locate_leaf(f: FieldArg, x: wp.vec3) -> wp.vec2i:
     """(node index, level) of the leaf containing ``x`` (clamped into the domain)."""
     level = f.levels - 1
@@ -110,11 +119,7 @@ def sample_mls(f: FieldArg, x: wp.vec3) -> wp.vec4:
     for o in range(27):
         off = wp.vec3(float(o % 3 - 1), float((o // 3) % 3 - 1), float(o // 9 - 1))
         q = c + s * off
-        inside = int(1)
-        for a in range(3):
-            if q[a] <= f.domain_min[a] or q[a] >= f.domain_max[a]:
-                inside = int(0)
-        if inside == 1:
+        if inside_domain(f, q):
             nb = locate_leaf(f, q)
             dup = int(0)
             for t in range(count):

@@ -4,7 +4,8 @@
 The active object is the first operand. DIFFERENCE is the active object minus all the others; UNION and
 INTERSECT take them all. Each operand's field comes from ``aasdf_addon.cache`` (built at most once per geometry,
 transform and settings), the fields are combined as a balanced tree, and the surface is written as a new object
-with the operands' materials, each face taking the material of the operand it came from.
+with the operands' materials, each face taking the material of the operand it came from. Every step is a call into
+``aasdf_addon.pipeline``, which the CSG node tree (``aasdf.evaluate_tree``) uses as well.
 """
 
 import bpy
