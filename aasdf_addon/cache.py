@@ -66,6 +66,21 @@ def with_field_id(field, field_id: int):
     return relabelled
 
 
+def uncached_meshes(objects, depsgraph, *, voxel_size, levels, padding, device=None, context=None) -> list:
+    """(object, (verts, tris) in world space) for each object whose field is not cached for these settings, to
+    check them together before building any."""
+    device = device or runtime.device(context)
+    meshes = []
+    for obj in objects:
+        verts, tris = bridge.evaluated_local_mesh(obj, depsgraph)
+        matrix = bridge.world_matrix(obj, depsgraph)
+        key = geometry_key(verts, tris, matrix, voxel_size=voxel_size, levels=levels, padding=padding, device=device)
+        entry = _entries.get(obj.original.session_uid)
+        if entry is None or entry[0] != key:
+            meshes.append((obj, bridge.to_world(verts, tris, matrix)))
+    return meshes
+
+
 def field_for(obj, depsgraph, *, voxel_size, levels, padding, field_id=0, device=None, context=None):
     """The adaptive field of a mesh object's evaluated world-space geometry, from the cache or newly built.
 

@@ -72,6 +72,18 @@ def operand_fields(context, objects, depsgraph, *, voxel_size, levels, padding, 
         AasdfError: From the engine, its message prefixed with the object's name.
     """
     engine = runtime.engine()
+    # Everything that must be built is checked together first: an impossible request builds nothing.
+    pending = cache.uncached_meshes(
+        objects, depsgraph, voxel_size=voxel_size, levels=levels, padding=padding, context=context
+    )
+    try:
+        engine.check_meshes([mesh for _, mesh in pending], voxel_size=voxel_size, levels=levels, padding=padding)
+    except engine.AasdfError as err:
+        message = str(err)
+        if message.startswith("Mesh "):  # "Mesh <k>: ..." counts the pending meshes: name the object instead
+            head, _, rest = message.partition(": ")
+            message = f"{pending[int(head.split()[1])][0].name}: {rest}"
+        raise engine.AasdfError(message) from err
     fields = []
     for k, obj in enumerate(objects):
         if progress is not None:

@@ -7,8 +7,17 @@ passed as ``device`` (CPU here, CUDA wherever an NVIDIA GPU is present). Negativ
 from . import kernels
 from .boolean import difference, intersection, union
 from .errors import AasdfError
-from .field import AdaptiveField, build_field
+from .field import AdaptiveField, build_field, check_meshes, plan_field
 
 kernels.configure_modules(__name__)
 
-__all__ = ["AasdfError", "AdaptiveField", "build_field", "difference", "intersection", "union"]
+__all__ = [
+    "AasdfError",
+    "AdaptiveField",
+    "build_field",
+    "check_meshes",
+    "difference",
+    "intersection",
+    "plan_field",
+    "union",
+]

@@ -623,6 +623,81 @@ def _device(device):
 # ---- build ----
 
 
+def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
+    """Validate a build and estimate what it needs, without running any kernel.
+
+    Returns:
+        dict with the cleaned ``vertices``/``triangles``, the domain (``origin``, ``top_dims``, ``fine_dims``,
+        ``top_count``), an upper bound of the finest nodes (``fine_nodes``) and of the bytes the build needs
+        (``bytes``).
+    Raises:
+        ValueError, AasdfError: As :func:`build_field` does for bad input.
+    """
+    voxel_size = float(voxel_size)
+    if not np.isfinite(voxel_size) or voxel_size <= 0.0:
+        raise AasdfError(f"The voxel size must be a positive number, but got {voxel_size}.")
+    if int(levels) != levels or levels < 1:
+        raise AasdfError(f"The number of levels must be an integer of at least 1, but got {levels}.")
+    if int(padding) != padding or padding < 0:
+        raise AasdfError(f"The padding must be a non-negative integer, but got {padding}.")
+    levels, padding = int(levels), int(padding)
+    verts, tris = validate_mesh(vertices, triangles)
+    lo, hi = verts.min(axis=0), verts.max(axis=0)
+    origin, top_dims = plan_domain(lo, hi, voxel_size, levels, padding + 2)
+    fine_dims = top_dims * 2 ** (levels - 1)
+    # Upper bound of finest nodes: every triangle's padded AABB in octets, capped by a surface-area estimate for
+    # large triangles.
+    octet = 2.0 * voxel_size
+    v = verts.astype(np.float64)[tris]
+    ext = (v.max(axis=1) - v.min(axis=1) + 2.0 * padding * voxel_size) / octet + 1.0
+    box_count = np.prod(np.ceil(ext) + 1.0, axis=1)
+    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    area_count = (np.sqrt(area) / octet + 2.0 + padding) ** 2 * (3.0 + padding)
+    fine_nodes = 8.0 * float(np.minimum(box_count, area_count).sum()) if levels > 1 else float(np.prod(fine_dims))
+    top_count = int(np.prod(top_dims))
+    return {
+        "vertices": verts,
+        "triangles": tris,
+        "voxel_size": voxel_size,
+        "levels": levels,
+        "padding": padding,
+        "origin": origin,
+        "top_dims": top_dims,
+        "fine_dims": fine_dims,
+        "top_count": top_count,
+        "fine_nodes": fine_nodes,
+        "bytes": int((fine_nodes + top_count) * BUILD_BYTES_PER_NODE),
+    }
+
+
+def check_meshes(meshes, *, voxel_size, levels=4, padding=1) -> int:
+    """Refuse, before any work, a set of builds that is invalid or would not fit in memory together.
+
+    Args:
+        meshes: Iterable of (vertices, triangles) pairs.
+        voxel_size, levels, padding: As for :func:`build_field`.
+    Returns:
+        The estimated bytes of all the builds.
+    Raises:
+        AasdfError: The first invalid mesh (its index in the message), or the total being too large.
+    """
+    total = 0
+    for k, (verts, tris) in enumerate(meshes):
+        try:
+            plan = plan_field(verts, tris, voxel_size=voxel_size, levels=levels, padding=padding)
+            check_budget(plan["fine_dims"], plan["top_count"], plan["fine_nodes"])
+        except AasdfError as err:
+            raise AasdfError(f"Mesh {k}: {err}") from err
+        total += plan["bytes"]
+    budget = available_memory() // 2
+    if total > budget:
+        raise AasdfError(
+            f"These fields need about {total / 2**30:.1f} GiB together, more than the {budget / 2**30:.1f} GiB "
+            "that can be used; use a larger voxel size."
+        )
+    return total
+
+
 def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=None, field_id=0) -> AdaptiveField:
     """Build the adaptive signed distance field of a triangle mesh.
 
@@ -642,31 +717,13 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         AasdfError: On empty, non-finite or fully degenerate meshes, out-of-range indices, non-positive voxel
             size, ``levels < 1``, ``padding < 0``, or a resolution that would not fit in memory.
     """
-    voxel_size = float(voxel_size)
-    if not np.isfinite(voxel_size) or voxel_size <= 0.0:
-        raise AasdfError(f"The voxel size must be a positive number, but got {voxel_size}.")
-    if int(levels) != levels or levels < 1:
-        raise AasdfError(f"The number of levels must be an integer of at least 1, but got {levels}.")
-    if int(padding) != padding or padding < 0:
-        raise AasdfError(f"The padding must be a non-negative integer, but got {padding}.")
-    levels, padding = int(levels), int(padding)
-    verts, tris = validate_mesh(vertices, triangles)
-    device = _device(device)
-
-    lo, hi = verts.min(axis=0), verts.max(axis=0)
-    origin, top_dims = plan_domain(lo, hi, voxel_size, levels, padding + 2)
-    fine_dims = top_dims * 2 ** (levels - 1)
-    # Upper bound of finest nodes before any kernel runs: every triangle's padded AABB in octets, capped by a
-    # surface-area estimate for large triangles.
+    plan = plan_field(vertices, triangles, voxel_size=voxel_size, levels=levels, padding=padding)
+    check_budget(plan["fine_dims"], plan["top_count"], plan["fine_nodes"])
+    verts, tris, origin, top_dims = plan["vertices"], plan["triangles"], plan["origin"], plan["top_dims"]
+    fine_dims, top_count = plan["fine_dims"], plan["top_count"]
+    voxel_size, levels, padding = plan["voxel_size"], plan["levels"], plan["padding"]
     octet = 2.0 * voxel_size
-    v = verts.astype(np.float64)[tris]
-    ext = (v.max(axis=1) - v.min(axis=1) + 2.0 * padding * voxel_size) / octet + 1.0
-    box_count = np.prod(np.ceil(ext) + 1.0, axis=1)
-    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-    area_count = (np.sqrt(area) / octet + 2.0 + padding) ** 2 * (3.0 + padding)
-    estimate = 8.0 * float(np.minimum(box_count, area_count).sum())
-    top_count = int(np.prod(top_dims))
-    check_budget(fine_dims, top_count, estimate if levels > 1 else float(np.prod(fine_dims)))
+    device = _device(device)
 
     timings = {}
     t0 = time.perf_counter()

@@ -401,6 +401,21 @@ def test_degenerate_operand_is_reported_with_its_name(fresh_cache):
     with pytest.raises(RuntimeError, match="Error: Flat: "):
         bpy.ops.aasdf.boolean(operation="UNION", resolution=32)
     assert "Spot.aasdf" not in bpy.data.objects
+    assert cache.stats()["builds"] == 0  # refused before the first operand's field was built
+
+
+def test_operands_that_fit_alone_but_not_together_are_refused_before_any_build(fresh_cache, monkeypatch):
+    import aasdf.engine.field as engine_field
+
+    a, b = spot_pair()
+    verts, tris = load_mesh("spot.obj")
+    one = engine_field.plan_field(verts, tris, voxel_size=0.02)["bytes"]
+    monkeypatch.setattr(engine_field, "available_memory", lambda: 3 * one)  # half usable: 1.5 fields
+    select(a, b)
+    with pytest.raises(RuntimeError, match="together"):
+        bpy.ops.aasdf.boolean(operation="UNION", voxel_size=0.02)
+    assert cache.stats()["builds"] == 0
+    assert "Spot.aasdf" not in bpy.data.objects
 
 
 def test_operands_without_extent_need_a_voxel_size(fresh_cache):

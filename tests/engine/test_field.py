@@ -279,3 +279,14 @@ def test_sample_validates_points_and_method():
     with pytest.raises(ValueError, match="'mls' or 'linear'"):
         field.sample(np.zeros((1, 3)), method="cubic")
     assert field.sample(np.zeros((0, 3))).shape == (0,)
+
+
+def test_check_meshes_refuses_builds_that_do_not_fit_together(monkeypatch):
+    verts, tris = uv_sphere(1.0)
+    one = engine.plan_field(verts, tris, voxel_size=0.05)["bytes"]
+    monkeypatch.setattr(engine.field, "available_memory", lambda: 3 * one)  # half of it can be used: 1.5 builds
+    assert engine.check_meshes([(verts, tris)], voxel_size=0.05) == one
+    with pytest.raises(engine.AasdfError, match="together"):
+        engine.check_meshes([(verts, tris), (verts, tris)], voxel_size=0.05)
+    with pytest.raises(engine.AasdfError, match="Mesh 1: The mesh is empty"):
+        engine.check_meshes([(verts, tris), (np.zeros((0, 3)), np.zeros((0, 3), int))], voxel_size=0.05)
