@@ -67,7 +67,8 @@ def dense_grid_seconds(field, verts, tris):
 def run(meshes, resolutions, repeat):
     print(f"# Construction benchmark — {machine()}; medians of {repeat} runs after a warm-up\n")
     header = (
-        "| mesh | tris | res | voxel | AASDF build s | finest s | levels s | top s | signs s | nodes per level "
+        "| mesh | tris | res | voxel | AASDF build s | finest s | levels s | top s | neighbours s | signs s "
+        "| nodes per level "
         "| nodes | uniform voxels | ratio | GN Mesh to SDF s | AASDF / GN | dense grid s |"
     )
     print(header)
@@ -83,13 +84,15 @@ def run(meshes, resolutions, repeat):
             finest = t.get("mesh_bvh", 0) + t.get("finest_cells", 0) + t.get("finest_distance", 0)
             levels = sum(v for k, v in t.items() if k.startswith("level_") and not k.endswith("neighbours"))
             levels += t.get("levels_structure", 0)
+            neighbours = sum(v for k, v in t.items() if k.endswith("_neighbours"))
+            signs = t.get("signs", 0) + t.get("sign_check", 0)
             gn_s = statistics.median(baselines.gn_mesh_to_sdf((verts, tris), h)["seconds"] for _ in range(repeat))
             uniform = int(np.prod(field.fine_dims))
             dense = dense_grid_seconds(field, verts, tris) if res <= 256 else None
             dense_text = f"{dense:.2f}" if dense is not None else "—"
             print(
                 f"| {name} | {len(tris):,} | /{res} | {h:.5f} | {build_s:.3f} | {finest:.3f} | {levels:.3f} "
-                f"| {t.get('top_level', 0):.3f} | {t.get('signs', 0):.3f} | {field.level_counts} "
+                f"| {t.get('top_level', 0):.3f} | {neighbours:.3f} | {signs:.3f} | {field.level_counts} "
                 f"| {field.node_count:,} | {uniform:,} | {uniform / field.node_count:.1f}x | {gn_s:.3f} "
                 f"| {build_s / gn_s:.2f}x | {dense_text} |"
             )

@@ -855,8 +855,11 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     # Across a hole of an open mesh the inside/outside boundary (winding number 0.5) runs away from any triangle,
     # through coarse leaves. Refine those leaves to the finest level so the surface there can be extracted too.
     rounds = 0
+    refine_seconds = 0.0
     while levels > 1 and rounds < MAX_SIGN_REFINEMENTS:
+        t_refine = time.perf_counter()
         extra = sign_change_octets(field)
+        refine_seconds += time.perf_counter() - t_refine
         if len(extra) == 0:
             break
         rounds += 1
@@ -872,6 +875,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         field = build(base_octets, near_radius, previous=field)
         field.stats["sign_queries"] = {k: v + queries.get(k, 0) for k, v in field.stats["sign_queries"].items()}
     field.stats["sign_refinements"] = rounds
+    field.timings["sign_check"] = refine_seconds
     field.stats["clean_mesh"] = clean
     field.stats["problem_faces"] = int(problem.sum())
     field._mesh = mesh  # keeps the BVH alive for callers that want exact queries
@@ -1011,7 +1015,7 @@ def assemble_field(
             device=device,
         )
         wp.launch(octree._link_parents_kernel, dim=hi - lo, inputs=[child, lo], outputs=[parent], device=device)
-    timings["levels_structure"] = time.perf_counter() - t0
+    timings["levels_structure"] = timings.get("levels_structure", 0.0) + time.perf_counter() - t0
 
     dist = wp.empty(n, dtype=wp.float32, device=device)
     proj = wp.empty(n, dtype=wp.vec3, device=device)
@@ -1053,7 +1057,7 @@ def assemble_field(
         name = "top_level" if k == levels - 1 else f"level_{k}"
         if level_values is not None:
             level_values(coords, lo, hi, voxel_size * 2**k, dist, proj, source, sign)
-            timings[name] = time.perf_counter() - tk + level_times.get(k, 0.0)
+            timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk + level_times.get(k, 0.0)
             continue
         octree.level_neighbours(coords, lo, hi, fine_dims >> k, neighbours)
         tn = time.perf_counter()
@@ -1071,8 +1075,8 @@ def assemble_field(
             mesh_id=mesh_id,
             known=known,
         )
-        timings[f"{name}_neighbours"] = tn - tk
-        timings[name] = time.perf_counter() - tk + level_times.get(k, 0.0)
+        timings[f"{name}_neighbours"] = timings.get(f"{name}_neighbours", 0.0) + tn - tk
+        timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk + level_times.get(k, 0.0)
 
     # Signs, top-down: the top level from a sparse set of oracle seeds, every lower level from its parents; then
     # within each level from already signed neighbours (empty balls again); the oracle only for what is left.
@@ -1146,7 +1150,7 @@ def assemble_field(
     wp.launch(_apply_sign_kernel, dim=n, inputs=[dist, sign], outputs=[values], device=device)
     if fine_values is not None:
         wp.copy(values, fine_values, count=n0)
-    timings["signs"] = time.perf_counter() - t0
+    timings["signs"] = timings.get("signs", 0.0) + time.perf_counter() - t0
 
     return AdaptiveField(
         voxel_size=voxel_size,
