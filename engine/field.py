@@ -853,10 +853,12 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     near_radius = diag if levels == 1 else (padding + 4) * octet * 1.8
     field = build(base_octets, near_radius)
     # Across a hole of an open mesh the inside/outside boundary (winding number 0.5) runs away from any triangle,
-    # through coarse leaves. Refine those leaves to the finest level so the surface there can be extracted too.
+    # through coarse leaves. Refine those leaves to the finest level so the surface there can be extracted too. A
+    # closed, consistently oriented mesh (even a self-intersecting one) changes its winding number only across its
+    # triangles, which the finest level covers: nothing to check.
     rounds = 0
     refine_seconds = 0.0
-    while levels > 1 and rounds < MAX_SIGN_REFINEMENTS:
+    while levels > 1 and not clean and rounds < MAX_SIGN_REFINEMENTS:
         t_refine = time.perf_counter()
         extra = sign_change_octets(field)
         refine_seconds += time.perf_counter() - t_refine

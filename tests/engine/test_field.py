@@ -290,3 +290,18 @@ def test_check_meshes_refuses_builds_that_do_not_fit_together(monkeypatch):
         engine.check_meshes([(verts, tris), (verts, tris)], voxel_size=0.05)
     with pytest.raises(engine.AasdfError, match="Mesh 1: The mesh is empty"):
         engine.check_meshes([(verts, tris), (np.zeros((0, 3)), np.zeros((0, 3), int))], voxel_size=0.05)
+
+
+def test_closed_meshes_need_no_band_refinement_and_open_ones_close_their_holes():
+    from engine.field import sign_change_octets
+    from tests.support import is_watertight
+
+    verts, tris = load_mesh("spot.obj")
+    closed = engine.build_field(verts, tris, voxel_size=_voxel(verts, 128))
+    assert closed.stats["sign_refinements"] == 0
+    assert len(sign_change_octets(closed)) == 0  # skipping the check for closed meshes loses nothing
+    verts, tris = load_mesh("stanford-bunny.obj")
+    opened = engine.build_field(verts, tris, voxel_size=_voxel(verts, 128))
+    assert opened.stats["sign_refinements"] >= 1
+    assert len(sign_change_octets(opened)) == 0
+    assert is_watertight(opened.to_mesh()[1])
