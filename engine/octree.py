@@ -254,17 +254,6 @@ def parent_octets(codes: wp.array, levels_up: int, end_bit: int) -> wp.array:
     return sort_unique(shifted, end_bit=end_bit)
 
 
-@wp.kernel(enable_backward=False)
-def _dense_coords_kernel(nx: int, ny: int, coords: wp.array[wp.vec3i], codes: wp.array[wp.int64]):
-    i = wp.tid()
-    x = i % nx
-    y = (i // nx) % ny
-    z = i // (nx * ny)
-    c = wp.vec3i(x, y, z)
-    coords[i] = c
-    codes[i] = morton_encode(c)
-
-
 def dense_level(dims) -> tuple[np.ndarray, np.ndarray]:
     """Coordinates and codes of a dense (nx, ny, nz) level in x-fastest order (host arrays)."""
     nx, ny, nz = (int(d) for d in dims)

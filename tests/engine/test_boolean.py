@@ -204,3 +204,33 @@ def test_boolean_arguments_are_checked():
         engine.union(a, a, blend=-1.0)
     with pytest.raises(ValueError, match="'spacing' to be one of"):
         engine.union(a, a, spacing="finest")
+
+
+# ---- debug data ----
+
+
+def test_debug_cells_describe_every_stored_node():
+    a, b = _sphere_field(1.0, (0, 0, 0)), _sphere_field(0.7, (1.0, 0.3, 0))
+    result = engine.union(a, b)
+    cells = result.debug_cells()
+    n = result.node_count
+    assert cells["centers"].shape == (n, 3) and cells["sizes"].shape == (n,) and cells["sdf"].shape == (n,)
+    np.testing.assert_array_equal(np.bincount(cells["levels"]), result.level_counts)
+    np.testing.assert_allclose(np.unique(cells["sizes"]), H * 2.0 ** np.arange(result.levels), rtol=1e-6)
+    # the leaves tile the domain, and the stored values are the field's values at the node centres
+    lo, hi = result.bounds
+    np.testing.assert_allclose((cells["sizes"][cells["leaf"]] ** 3).sum(), np.prod(hi - lo), rtol=1e-6)
+    fine = cells["levels"] == 0
+    np.testing.assert_allclose(result.sample(cells["centers"][fine][:2000]), cells["sdf"][fine][:2000], atol=0.1 * H)
+
+
+def test_to_dense_matches_sample_and_refuses_blocks_that_do_not_fit():
+    a = _sphere_field(1.0, (0, 0, 0))
+    block = a.to_dense(bounds=((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)), spacing=0.1)
+    assert block["values"].shape == (10, 10, 10)
+    i, j, k = 3, 7, 2
+    point = block["origin"] + block["spacing"] * np.array([i, j, k])
+    assert block["values"][i, j, k] == pytest.approx(float(a.sample(point[None].astype(np.float32))[0]), abs=1e-6)
+    assert block["values"][i, j, k] == pytest.approx(np.linalg.norm(point) - 1.0, abs=0.01)
+    with pytest.raises(engine.AasdfError, match="dense block of .* use a coarser spacing"):
+        a.to_dense(spacing=1e-4)
