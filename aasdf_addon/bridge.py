@@ -92,6 +92,28 @@ def combine(operation: str, fields, blend: float = 0.0, *, progress=None):
     fields = list(fields)
     if not fields:
         raise ValueError("Expected at least one field, but got none.")
+    # The same operation on the same fields (nothing changed since the last run) gives the same result: reuse it.
+    # Fields are compared by their node arrays (a relabelled cached field shares them) and their source ids.
+    key = (operation, float(blend), tuple((id(f.codes), f.field_ids) for f in fields))
+    if _last_combine and _last_combine[0] == key:
+        memo_stats["hits"] += 1
+        return _last_combine[2]
+    result = _combine(operation, fields, blend, progress)
+    _last_combine[:] = [key, fields, result]  # the fields stay referenced, so their ids cannot be reused
+    return result
+
+
+# [key, operand fields, result] of the last ``combine``, and how often it was reused.
+_last_combine: list = []
+memo_stats = {"hits": 0}
+
+
+def clear_memo() -> None:
+    """Forget the last combined result (with the field cache)."""
+    _last_combine.clear()
+
+
+def _combine(operation: str, fields, blend: float, progress):
     engine = runtime.engine()
     tick = progress or (lambda: None)
 

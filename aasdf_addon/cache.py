@@ -163,10 +163,11 @@ def invalidate(session_uid: int) -> bool:
 
 
 def clear():
-    """Drop every cached field."""
+    """Drop every cached field (and the last combined result, which holds fields)."""
     global _bytes
     _entries.clear()
     _bytes = 0
+    bridge.clear_memo()
 
 
 # ---- handlers ----

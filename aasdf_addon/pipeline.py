@@ -107,11 +107,15 @@ def surface(field, operands) -> dict:
     Returns:
         ``{"verts": (V,3) float32, "tris": (F,3) int32, "materials": [...], "face_slots": (F,) int32 or None}``.
     """
-    verts, tris = field.to_mesh()
+    faces = getattr(field, "_faces", None)  # a reused result (see bridge.combine) keeps its surface
+    if faces is None:
+        verts, tris = field.to_mesh()
+        ids = field.source_ids(verts[tris].mean(axis=1)) if len(tris) else np.zeros(0, np.int32)
+        field._faces = faces = (verts, tris, ids)
+    verts, tris, ids = faces
     materials, slot_of = bridge.operand_materials(operands)
     face_slots = None
     if materials and len(tris):
-        ids = field.source_ids(verts[tris].mean(axis=1))
         face_slots = slot_of[ids.clip(0, len(operands) - 1)]
     return {"verts": verts, "tris": tris, "materials": materials, "face_slots": face_slots}
 

@@ -202,6 +202,23 @@ def test_second_run_on_unchanged_inputs_builds_no_field(fresh_cache):
     assert len(world_arrays(bpy.context.active_object)[1]) == len(world_arrays(first)[1])
 
 
+def test_rerun_with_nothing_changed_reuses_the_boolean_and_its_surface(fresh_cache):
+    a, b = spot_pair()
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=64, hide_inputs=False)
+    first = bpy.context.active_object
+    hits = bridge.memo_stats["hits"]
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=64, hide_inputs=False)
+    assert bridge.memo_stats["hits"] == hits + 1
+    np.testing.assert_array_equal(world_arrays(bpy.context.active_object)[1], world_arrays(first)[1])
+    select(a, b)  # another operation is another boolean
+    bpy.ops.aasdf.boolean(operation="UNION", resolution=64, hide_inputs=False)
+    assert bridge.memo_stats["hits"] == hits + 1
+    bpy.ops.aasdf.clear_cache()
+    assert bridge._last_combine == []
+
+
 def test_moving_one_operand_rebuilds_only_its_field(fresh_cache):
     a, b = spot_pair()
     select(a, b)
