@@ -850,7 +850,8 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
             spread_signs=clean,
         )
 
-    near_radius = diag if levels == 1 else (padding + 4) * octet * 1.8
+    # a band node lies within (padding + 1) cells (L-inf) of a triangle; misses fall back to the domain diagonal
+    near_radius = diag if levels == 1 else (padding + 2) * voxel_size * 1.75
     field = build(base_octets, near_radius)
     # Across a hole of an open mesh the inside/outside boundary (winding number 0.5) runs away from any triangle,
     # through coarse leaves. Refine those leaves to the finest level so the surface there can be extracted too. A

@@ -354,9 +354,9 @@ def _init_from_children_kernel(
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
 ):
-    """Internal nodes are sources. With a mesh, their closest point is exact (the BVH query is seeded by the
-    nearest child projection, which bounds its search radius); without one, the nearest of their children's
-    projection points. Leaves start unset. Nodes marked ``known`` keep the values they were given."""
+    """Internal nodes are sources: the nearest of their children's projection points (Ren et al.), which with a
+    mesh is then made exact by a BVH query bounded by that distance. Leaves start unset. Nodes marked ``known`` keep
+    the values they were given."""
     i = lo + wp.tid()
     if known[i] == 1:
         return
@@ -365,14 +365,6 @@ def _init_from_children_kernel(
         dist[i] = UNSET_DISTANCE
         return
     x = node_center(origin, spacing, coords[i])
-    if mesh != wp.uint64(0):
-        q = wp.mesh_query_point_no_sign(mesh, x, max_dist)
-        if q.result:
-            p = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
-            dist[i] = wp.length(x - p)
-            proj[i] = p
-            source[i] = source[c]
-            return
     best = float(UNSET_DISTANCE)
     best_j = c
     for o in range(8):
@@ -385,6 +377,14 @@ def _init_from_children_kernel(
     dist[i] = best
     proj[i] = proj[best_j]
     source[i] = source[best_j]
+    if mesh != wp.uint64(0):
+        q = wp.mesh_query_point_no_sign(mesh, x, wp.min(best * 1.0001 + spacing * 1.0e-4, max_dist))
+        if q.result:
+            p = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+            d = wp.length(x - p)
+            if d < best:
+                dist[i] = d
+                proj[i] = p
 
 
 @wp.kernel(enable_backward=False)
