@@ -42,6 +42,7 @@ bench: venv
 	$(PY) bench/construction.py
 	$(PY) bench/pipeline.py
 	$(PY) bench/cold_start.py
+	$(PY) bench/scaling.py
 
 clean:
 	rm -rf build dist .warp-cache .pytest_cache .ruff_cache

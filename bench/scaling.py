@@ -1,0 +1,95 @@
+"""Scaling and memory: time against resolution and triangle count, and peak memory against Blender's SDF pipeline.
+
+Each measurement runs in a fresh process (so its peak resident memory is its own): a union of two overlapping copies
+of a mesh, through AASDF's whole pipeline and through the geometry-nodes SDF pipeline at the same voxel size.
+
+- vs resolution: spot ∪ spot(+0.3 x) at diagonal / 128, 256, 512, 1024;
+- vs triangles at diagonal / 256: UV spheres of about 5 k, 80 k and 1 M triangles, and the Stanford bunny (69 k).
+
+    .venv/bin/python bench/scaling.py
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+CHILD = r"""
+import json, resource, sys, time
+sys.path.insert(0, sys.argv[1])
+method, case, res = sys.argv[2], sys.argv[3], int(sys.argv[4])
+import numpy as np
+from tests.support import load_mesh, uv_sphere
+if case == "spot":
+    a = load_mesh("spot.obj")
+elif case == "bunny":
+    a = load_mesh("stanford-bunny.obj")
+else:
+    rings = int(case.split(":")[1])
+    a = uv_sphere(1.0, rings=rings, segments=2 * rings)
+b = (a[0] + np.float32([0.3 * float(np.linalg.norm(a[0].max(0) - a[0].min(0))), 0, 0]), a[1])
+pts = np.vstack([a[0], b[0]])
+h = float(np.linalg.norm(pts.max(0) - pts.min(0))) / res
+if method == "aasdf":
+    import warp as wp
+    wp.config.quiet = True
+    import engine
+    fa = engine.build_field(*a, voxel_size=h * 4); fb = engine.build_field(*b, voxel_size=h * 4)
+    engine.union(fa, fb).to_mesh()  # loads the kernels
+    t0 = time.perf_counter()
+    fa = engine.build_field(*a, voxel_size=h); fb = engine.build_field(*b, voxel_size=h)
+    verts, tris = engine.union(fa, fb).to_mesh()
+    seconds = time.perf_counter() - t0
+    nodes = fa.node_count + fb.node_count
+else:
+    from bench import baselines
+    r = baselines.gn_sdf_boolean(a, b, "UNION", h)
+    tris, seconds, nodes = r["tris"], r["seconds"], 0
+print("RESULT " + json.dumps({"seconds": seconds, "triangles": int(len(tris)), "input_triangles": int(len(a[1])),
+                               "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "nodes": nodes}))
+"""
+
+
+def measure(method: str, case: str, res: int) -> dict:
+    env = {**os.environ, "WARP_CACHE_PATH": os.environ.get("WARP_CACHE_PATH", str(ROOT / ".warp-cache"))}
+    out = subprocess.run(
+        [sys.executable, "-c", CHILD, str(ROOT), method, case, str(res)],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    line = next(line for line in out.splitlines() if line.startswith("RESULT "))
+    return json.loads(line[len("RESULT ") :])
+
+
+def row(label: str, case: str, res: int) -> None:
+    ours, gn = measure("aasdf", case, res), measure("gn", case, res)
+    print(
+        f"| {label} | {ours['input_triangles']:,} | /{res} | {ours['seconds']:.2f} | {gn['seconds']:.2f} "
+        f"| {ours['seconds'] / gn['seconds']:.2f}x | {ours['nodes']:,} | {ours['rss_mb']:.0f} | {gn['rss_mb']:.0f} |"
+    )
+    sys.stdout.flush()
+
+
+def main() -> None:
+    print("# Scaling — union of a mesh and a shifted copy, fresh process per measurement (peak RSS is the process's)\n")
+    print(
+        "| case | triangles (each) | res | AASDF s | GN SDF s | ratio | AASDF field nodes | AASDF peak MB "
+        "| GN peak MB |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    for res in (128, 256, 512, 1024):
+        row("spot ∪ spot", "spot", res)
+    for rings in (48, 200, 700):
+        row("sphere ∪ sphere", f"sphere:{rings}", 256)
+    row("bunny ∪ bunny", "bunny", 256)
+
+
+if __name__ == "__main__":
+    main()
