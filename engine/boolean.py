@@ -257,6 +257,7 @@ def _aligned_octets_kernel(coords: wp.array[wp.vec3i], offset: wp.vec3i, codes: 
 
 @wp.kernel(enable_backward=False)
 def _octets_of_cells_kernel(
+    first: int,
     f: FieldArg,
     origin: wp.vec3,
     octet_size: float,
@@ -268,7 +269,7 @@ def _octets_of_cells_kernel(
     codes: wp.array[wp.int64],
 ):
     """Result octets overlapping each finest cell of an operand (cells as primitives), counted or written."""
-    t = wp.tid()
+    t = first + wp.tid()
     x = node_center(f.origin, f.voxel_size, f.coords[t])
     half = 0.5 * f.voxel_size + pad
     i0 = wp.vec3i(0)

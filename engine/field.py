@@ -83,6 +83,7 @@ def tri_box_overlap(center: wp.vec3, half: wp.vec3, a: wp.vec3, b: wp.vec3, c: w
 
 @wp.kernel(enable_backward=False)
 def _octets_per_triangle_kernel(
+    first: int,
     verts: wp.array[wp.vec3],
     tris: wp.array2d[wp.int32],
     origin: wp.vec3,
@@ -95,7 +96,7 @@ def _octets_per_triangle_kernel(
     codes: wp.array[wp.int64],
 ):
     """Count (emit=0) or write (emit=1) the Morton codes of the octets within ``pad`` of triangle ``t``."""
-    t = wp.tid()
+    t = first + wp.tid()
     a = verts[tris[t, 0]]
     b = verts[tris[t, 1]]
     c = verts[tris[t, 2]]
@@ -600,14 +601,15 @@ def plan_domain(lo, hi, voxel_size: float, levels: int, margin_cells: float):
     return origin, dims
 
 
-def check_budget(fine_dims, top_count, fine_nodes_estimate):
-    """Refuse domains the Morton codes cannot address and node counts that would not fit in memory."""
+def check_budget(fine_dims, top_count, fine_nodes_estimate, pairs=0):
+    """Refuse domains the Morton codes cannot address and node counts that would not fit in memory (``pairs``:
+    (triangle, octet) codes to sort before de-duplication, about 32 bytes each with the sort buffers)."""
     if np.any(np.asarray(fine_dims) >= MAX_CELLS_PER_AXIS):
         raise AasdfError(
             f"The domain spans {int(np.max(fine_dims))} finest cells along an axis, more than the "
             f"{MAX_CELLS_PER_AXIS - 1} the octree can address; use a larger voxel size."
         )
-    need = (int(fine_nodes_estimate) + int(top_count)) * BUILD_BYTES_PER_NODE
+    need = max((int(fine_nodes_estimate) + int(top_count)) * BUILD_BYTES_PER_NODE, 32 * int(pairs))
     budget = available_memory() // 2
     if need > budget:
         raise AasdfError(
@@ -653,7 +655,11 @@ def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
     box_count = np.prod(np.ceil(ext) + 1.0, axis=1)
     area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
     area_count = (np.sqrt(area) / octet + 2.0 + padding) ** 2 * (3.0 + padding)
-    fine_nodes = 8.0 * float(np.minimum(box_count, area_count).sum()) if levels > 1 else float(np.prod(fine_dims))
+    per_triangle = 8.0 * float(np.minimum(box_count, area_count).sum())
+    # Many small triangles share their octets: the band around the whole surface (both sides, padding plus octet
+    # rounding, a 1.5x margin) and the dense domain bound it too.
+    band = 1.5 * 2.0 * (padding + 2) * float(area.sum()) / voxel_size**2
+    fine_nodes = min(per_triangle, band, float(np.prod(fine_dims))) if levels > 1 else float(np.prod(fine_dims))
     top_count = int(np.prod(top_dims))
     return {
         "vertices": verts,
@@ -751,7 +757,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
             len(tris),
             args,
             device,
-            check=lambda total: check_budget(fine_dims, top_count, 8 * total),
+            check=lambda total: check_budget(fine_dims, top_count, min(8 * total, plan["fine_nodes"]), pairs=total),
         )
         base_octets = octree.sort_unique(octet_codes, end_bit=3 * _bits(fine_dims // 2))
     timings["finest_cells"] = time.perf_counter() - t0

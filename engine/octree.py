@@ -64,19 +64,20 @@ def launch_split(kernel, dim: int, args, device, *, parts: int | None = None) ->
 def count_then_emit(kernel, dim: int, args, device, check=None) -> wp.array:
     """Run a two-pass "count, then write at scanned offsets" kernel; return the int64 codes it writes.
 
-    ``kernel`` takes ``(*args, offsets, emit, counts, codes)``: with ``emit=0`` it writes each thread's count, with
-    ``emit=1`` it writes its codes from ``offsets[tid]``. ``check(total)`` may refuse the total before allocation.
+    ``kernel`` takes ``(first, *args, offsets, emit, counts, codes)`` and handles item ``first + tid``: with ``emit=0``
+    it writes that item's count, with ``emit=1`` its codes from ``offsets[item]``. Both passes are split over the CPU
+    cores. ``check(total)`` may refuse the total before allocation.
     """
     counts = wp.empty(dim, dtype=wp.int32, device=device)
     dummy = wp.empty(1, dtype=wp.int64, device=device)
-    wp.launch(kernel, dim=dim, inputs=[*args, counts, 0], outputs=[counts, dummy], device=device)
+    launch_split(kernel, dim, lambda lo, n: [lo, *args, counts, 0, counts, dummy], device)
     counts_np = counts.numpy().astype(np.int64)
     total = int(counts_np.sum())
     if check is not None:
         check(total)
     offsets = wp.array(np.concatenate([[0], np.cumsum(counts_np)[:-1]]).astype(np.int32), device=device)
     codes = wp.empty(total, dtype=wp.int64, device=device)
-    wp.launch(kernel, dim=dim, inputs=[*args, offsets, 1], outputs=[counts, codes], device=device)
+    launch_split(kernel, dim, lambda lo, n: [lo, *args, offsets, 1, counts, codes], device)
     return codes
 
 
