@@ -14,19 +14,9 @@ OPERATIONS = (
 CSG_TREE = "AASDF_NT_csg"  # bl_idname of the node tree (``aasdf_addon.nodes``)
 
 
-class AASDF_PG_scene(bpy.types.PropertyGroup):
-    """Field and result settings used by the SDF boolean operators of a scene."""
-
-    resolution: IntProperty(
-        name="Resolution",
-        description="Finest voxels along the longest side of the inputs' combined bounding box "
-        "(used when Voxel Size is 0)",
-        default=128,
-        min=8,
-        soft_max=512,
-        max=4096,
-    )
-    voxel_size: FloatProperty(
+# The field settings, defined once for the scene's settings and the operators that take them as arguments.
+def voxel_size_property():
+    return FloatProperty(
         name="Voxel Size",
         description="Edge length of the finest voxels; 0 derives it from Resolution",
         default=0.0,
@@ -35,21 +25,42 @@ class AASDF_PG_scene(bpy.types.PropertyGroup):
         precision=4,
         subtype="DISTANCE",
     )
-    levels: IntProperty(
+
+
+def resolution_property():
+    return IntProperty(
+        name="Resolution",
+        description="Finest voxels along the diagonal of the inputs' combined bounding box "
+        "(used when Voxel Size is 0)",
+        default=256,
+        min=8,
+        soft_max=1024,
+        max=8192,
+    )
+
+
+def levels_property():
+    return IntProperty(
         name="Levels",
-        description="Octree levels above the finest voxels: cells grow coarser away from the surface",
-        default=5,
+        description="Octree levels: cells grow coarser away from the surface",
+        default=4,
         min=1,
         max=12,
     )
-    padding: IntProperty(
+
+
+def padding_property():
+    return IntProperty(
         name="Padding",
-        description="Voxels of empty space kept around the surface on each side of the field",
-        default=2,
+        description="Finest voxels kept around the surface on each side",
+        default=1,
         min=0,
         max=32,
     )
-    blend: FloatProperty(
+
+
+def blend_property():
+    return FloatProperty(
         name="Blend",
         description="Radius of the smooth blend along the seams; 0 keeps sharp edges",
         default=0.0,
@@ -58,6 +69,16 @@ class AASDF_PG_scene(bpy.types.PropertyGroup):
         precision=3,
         subtype="DISTANCE",
     )
+
+
+class AASDF_PG_scene(bpy.types.PropertyGroup):
+    """Field and result settings used by the SDF boolean operators of a scene."""
+
+    resolution: resolution_property()
+    voxel_size: voxel_size_property()
+    levels: levels_property()
+    padding: padding_property()
+    blend: blend_property()
     hide_inputs: BoolProperty(
         name="Hide Inputs",
         description="Hide the input objects once the result is created",

@@ -13,7 +13,14 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
 
 from ..aasdf_addon import bridge, cache, pipeline, runtime
 from ..aasdf_addon.pipeline import last_run  # noqa: F401  (scripts read ``operators.boolean.last_run``)
-from ..aasdf_addon.properties import OPERATIONS
+from ..aasdf_addon.properties import (
+    OPERATIONS,
+    blend_property,
+    levels_property,
+    padding_property,
+    resolution_property,
+    voxel_size_property,
+)
 
 
 def mesh_operands(context) -> list:
@@ -34,47 +41,11 @@ class AASDF_OT_boolean(bpy.types.Operator):
         items=OPERATIONS,
         default="DIFFERENCE",
     )
-    voxel_size: FloatProperty(
-        name="Voxel Size",
-        description="Edge length of the finest voxels; 0 derives it from Resolution",
-        default=0.0,
-        min=0.0,
-        soft_max=1.0,
-        precision=4,
-        subtype="DISTANCE",
-    )
-    resolution: IntProperty(
-        name="Resolution",
-        description="Finest voxels along the diagonal of the inputs' combined bounding box "
-        "(used when Voxel Size is 0)",
-        default=256,
-        min=8,
-        soft_max=1024,
-        max=8192,
-    )
-    levels: IntProperty(
-        name="Levels",
-        description="Octree levels: cells grow coarser away from the surface",
-        default=4,
-        min=1,
-        max=12,
-    )
-    padding: IntProperty(
-        name="Padding",
-        description="Finest voxels kept around the surface on each side",
-        default=1,
-        min=0,
-        max=32,
-    )
-    blend: FloatProperty(
-        name="Blend",
-        description="Radius of the smooth blend along the seams; 0 keeps sharp edges",
-        default=0.0,
-        min=0.0,
-        soft_max=1.0,
-        precision=3,
-        subtype="DISTANCE",
-    )
+    voxel_size: voxel_size_property()
+    resolution: resolution_property()
+    levels: levels_property()
+    padding: padding_property()
+    blend: blend_property()
     debug_volume: BoolProperty(
         name="Debug Volume",
         description="Also add the result's field as a Volume object and its octree cells as points",

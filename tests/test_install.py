@@ -112,7 +112,7 @@ def test_enabled_add_on_registers_settings_panels_and_operators(report):
         "AASDF_AddonPreferences": True,
     }
     assert report["scene_pointer"] is True
-    assert report["scene_resolution"] == 128
+    assert report["scene_resolution"] == 256
     assert report["preferences_device"] == "CPU"
     assert report["operators_missing"] == []
 

@@ -48,7 +48,7 @@ def test_register_adds_classes_pointer_and_panels():
 def test_scene_settings_have_their_defaults_and_accept_values():
     settings = bpy.context.scene.aasdf
     defaults = {name: getattr(settings, name) for name in ("resolution", "voxel_size", "levels", "padding", "blend")}
-    assert defaults == {"resolution": 128, "voxel_size": 0.0, "levels": 5, "padding": 2, "blend": 0.0}
+    assert defaults == {"resolution": 256, "voxel_size": 0.0, "levels": 4, "padding": 1, "blend": 0.0}
     assert (settings.hide_inputs, settings.debug_volume) == (True, False)
     settings.resolution = 3  # below the minimum: Blender clamps
     assert settings.resolution == 8
