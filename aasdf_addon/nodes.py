@@ -8,9 +8,10 @@ nodes, so it is saved with the .blend even when no editor shows it.
 """
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProperty
 
 from .properties import CSG_TREE as TREE
+from .properties import levels_property, padding_property, resolution_property, voxel_size_property
 
 SOCKET = "AASDF_NS_field"
 OBJECT, COLLECTION = "AASDF_N_object", "AASDF_N_collection"
@@ -37,42 +38,15 @@ class AASDF_NT_csg(bpy.types.NodeTree):
 
     bl_idname, bl_label, bl_icon = TREE, "AASDF CSG", "MOD_BOOLEAN"
 
-    voxel_size: FloatProperty(
-        name="Voxel Size",
-        description="Edge length of the finest voxels; 0 derives it from Resolution",
-        default=0.0,
-        min=0.0,
-        soft_max=1.0,
-        precision=4,
-        subtype="DISTANCE",
-        update=_changed,
-    )
-    resolution: IntProperty(
-        name="Resolution",
+    voxel_size: voxel_size_property(update=_changed)
+    resolution: resolution_property(
         description="Finest voxels along the diagonal of each output's combined input bounding box "
         "(used when Voxel Size is 0)",
         default=128,
-        min=8,
-        soft_max=1024,
-        max=8192,
         update=_changed,
     )
-    levels: IntProperty(
-        name="Levels",
-        description="Octree levels: cells grow coarser away from the surface",
-        default=5,
-        min=1,
-        max=12,
-        update=_changed,
-    )
-    padding: IntProperty(
-        name="Padding",
-        description="Finest voxels kept around the surface on each side",
-        default=2,
-        min=0,
-        max=32,
-        update=_changed,
-    )
+    levels: levels_property(default=5, update=_changed)
+    padding: padding_property(default=2, update=_changed)
     auto_update: BoolProperty(
         name="Auto Update",
         description="Evaluate the tree again shortly after an input object or a node setting changes",

@@ -14,61 +14,67 @@ OPERATIONS = (
 CSG_TREE = "AASDF_NT_csg"  # bl_idname of the node tree (``aasdf_addon.nodes``)
 
 
-# The field settings, defined once for the scene's settings and the operators that take them as arguments.
-def voxel_size_property():
-    return FloatProperty(
-        name="Voxel Size",
-        description="Edge length of the finest voxels; 0 derives it from Resolution",
-        default=0.0,
-        min=0.0,
-        soft_max=1.0,
-        precision=4,
-        subtype="DISTANCE",
-    )
+# The field settings, defined once for the scene's settings, the operators and the CSG tree (``overrides`` adjust
+# a default, a description or add an update callback).
+def voxel_size_property(**overrides):
+    options = {
+        "name": "Voxel Size",
+        "description": "Edge length of the finest voxels; 0 derives it from Resolution",
+        "default": 0.0,
+        "min": 0.0,
+        "soft_max": 1.0,
+        "precision": 4,
+        "subtype": "DISTANCE",
+    }
+    return FloatProperty(**{**options, **overrides})
 
 
-def resolution_property():
-    return IntProperty(
-        name="Resolution",
-        description="Finest voxels along the diagonal of the inputs' combined bounding box "
-        "(used when Voxel Size is 0)",
-        default=256,
-        min=8,
-        soft_max=1024,
-        max=8192,
-    )
+def resolution_property(**overrides):
+    options = {
+        "name": "Resolution",
+        "description": "Finest voxels along the diagonal of the inputs' combined bounding box (used when Voxel Size "
+        "is 0)",
+        "default": 256,
+        "min": 8,
+        "soft_max": 1024,
+        "max": 8192,
+    }
+    return IntProperty(**{**options, **overrides})
 
 
-def levels_property():
-    return IntProperty(
-        name="Levels",
-        description="Octree levels: cells grow coarser away from the surface",
-        default=4,
-        min=1,
-        max=12,
-    )
+def levels_property(**overrides):
+    options = {
+        "name": "Levels",
+        "description": "Octree levels: cells grow coarser away from the surface",
+        "default": 4,
+        "min": 1,
+        "max": 12,
+    }
+    return IntProperty(**{**options, **overrides})
 
 
-def padding_property():
-    return IntProperty(
-        name="Padding",
-        description="Finest voxels kept around the surface on each side",
-        default=1,
-        min=0,
-        max=32,
-    )
+def padding_property(**overrides):
+    options = {
+        "name": "Padding",
+        "description": "Finest voxels kept around the surface on each side",
+        "default": 1,
+        "min": 0,
+        "max": 32,
+    }
+    return IntProperty(**{**options, **overrides})
 
 
-def blend_property():
-    return FloatProperty(
-        name="Blend",
-        description="Radius of the smooth blend along the seams; 0 keeps sharp edges",
-        default=0.0,
-        min=0.0,
-        soft_max=1.0,
-        precision=3,
-        subtype="DISTANCE",
-    )
+def blend_property(**overrides):
+    options = {
+        "name": "Blend",
+        "description": "Radius of the smooth blend along the seams; 0 keeps sharp edges",
+        "default": 0.0,
+        "min": 0.0,
+        "soft_max": 1.0,
+        "precision": 3,
+        "subtype": "DISTANCE",
+    }
+    return FloatProperty(**{**options, **overrides})
 
 
 class AASDF_PG_scene(bpy.types.PropertyGroup):

@@ -9,7 +9,7 @@ with the operands' materials, each face taking the material of the operand it ca
 """
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty
 
 from ..aasdf_addon import bridge, cache, pipeline, runtime
 from ..aasdf_addon.pipeline import last_run  # noqa: F401  (scripts read ``operators.boolean.last_run``)
@@ -164,25 +164,13 @@ class AASDF_OT_debug_volume(bpy.types.Operator):
 
     bl_idname, bl_label, bl_options = "aasdf.debug_volume", "Debug Volume", {"REGISTER", "UNDO"}
 
-    voxel_size: FloatProperty(
-        name="Voxel Size",
-        description="Edge length of the finest voxels; 0 derives it from Resolution",
-        default=0.0,
-        min=0.0,
-        soft_max=1.0,
-        precision=4,
-        subtype="DISTANCE",
-    )
-    resolution: IntProperty(
-        name="Resolution",
+    voxel_size: voxel_size_property()
+    resolution: resolution_property(
         description="Finest voxels along the diagonal of the object's bounding box (used when Voxel Size is 0)",
         default=128,
-        min=8,
-        soft_max=1024,
-        max=8192,
     )
-    levels: IntProperty(name="Levels", description="Octree levels", default=4, min=1, max=12)
-    padding: IntProperty(name="Padding", description="Finest voxels around the surface", default=1, min=0, max=32)
+    levels: levels_property()
+    padding: padding_property()
 
     @classmethod
     def poll(cls, context):
