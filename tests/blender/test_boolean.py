@@ -9,37 +9,11 @@ import pytest
 
 from aasdf.aasdf_addon import autoupdate, bridge, cache, preferences, runtime
 from aasdf.operators import boolean as boolean_op
+from tests.blender.scene import add_mesh_object, select, world_arrays
 from tests.metrics import exact_boolean, mesh_volume
 from tests.support import is_watertight, load_mesh, uv_sphere
 
 SHIFT = np.array([0.3, 0.1, 0.05])
-
-
-def add_mesh_object(name, verts, tris, location=(0.0, 0.0, 0.0), materials=()):
-    """A mesh object from numpy arrays, linked to the scene's collection."""
-    mesh = bpy.data.meshes.new(name)
-    mesh.from_pydata(np.asarray(verts).tolist(), [], np.asarray(tris).tolist())
-    for material in materials:
-        mesh.materials.append(material)
-    obj = bpy.data.objects.new(name, mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    obj.location = location
-    bpy.context.view_layer.update()  # matrix_world follows the location
-    return obj
-
-
-def select(*objects, active=None):
-    """Select exactly ``objects`` and make ``active`` (default: the first) the active object."""
-    for obj in bpy.context.view_layer.objects:
-        obj.select_set(False)
-    for obj in objects:
-        obj.select_set(True)
-    bpy.context.view_layer.objects.active = active or objects[0]
-
-
-def world_arrays(obj):
-    """(V,3) world vertices and (T,3) triangles of an object's own mesh (no modifiers)."""
-    return bridge.evaluated_mesh(obj, bpy.context.evaluated_depsgraph_get())
 
 
 def local_vertices(obj):

@@ -5,38 +5,15 @@ import bpy
 import numpy as np
 import pytest
 
-from aasdf.aasdf_addon import autoupdate, bridge, cache, csg, nodes, pipeline
+from aasdf.aasdf_addon import autoupdate, cache, csg, nodes, pipeline
 from aasdf.ui import node_editor
+from tests.blender.scene import add_mesh_object, select, world_arrays
 from tests.metrics import mesh_volume
 from tests.support import is_watertight, uv_sphere
 
 VOXEL = 0.04  # explicit: the combined bounding box must not change the spacing when an input moves
 SPHERE = uv_sphere(1.0, rings=24, segments=48)
 SMALL = uv_sphere(0.5, rings=16, segments=32)
-
-
-def add_mesh_object(name, verts, tris, location=(0.0, 0.0, 0.0), collection=None, material=None):
-    mesh = bpy.data.meshes.new(name)
-    mesh.from_pydata(np.asarray(verts).tolist(), [], np.asarray(tris).tolist())
-    if material is not None:
-        mesh.materials.append(material)
-    obj = bpy.data.objects.new(name, mesh)
-    (collection or bpy.context.scene.collection).objects.link(obj)
-    obj.location = location
-    bpy.context.view_layer.update()
-    return obj
-
-
-def select(*objects, active=None):
-    for obj in bpy.context.view_layer.objects:
-        obj.select_set(False)
-    for obj in objects:
-        obj.select_set(True)
-    bpy.context.view_layer.objects.active = active or objects[0]
-
-
-def world_arrays(obj):
-    return bridge.evaluated_mesh(obj, bpy.context.evaluated_depsgraph_get())
 
 
 def face_slots_and_centers(obj):
@@ -51,12 +28,12 @@ def face_slots_and_centers(obj):
 def scene():
     """Objects A and B, and a collection ``Cutters`` with C1 and C2, each with its own material."""
     red, blue, green = (bpy.data.materials.new(name) for name in ("Red", "Blue", "Green"))
-    a = add_mesh_object("A", *SPHERE, material=red)
-    b = add_mesh_object("B", *SPHERE, location=(1.0, 0.0, 0.0), material=blue)
+    a = add_mesh_object("A", *SPHERE, materials=[red])
+    b = add_mesh_object("B", *SPHERE, location=(1.0, 0.0, 0.0), materials=[blue])
     cutters = bpy.data.collections.new("Cutters")
     bpy.context.scene.collection.children.link(cutters)
-    c1 = add_mesh_object("C1", *SMALL, location=(0.5, 0.0, 0.8), collection=cutters, material=green)
-    c2 = add_mesh_object("C2", *SMALL, location=(0.5, 0.0, -0.8), collection=cutters, material=green)
+    c1 = add_mesh_object("C1", *SMALL, location=(0.5, 0.0, 0.8), collection=cutters, materials=[green])
+    c2 = add_mesh_object("C2", *SMALL, location=(0.5, 0.0, -0.8), collection=cutters, materials=[green])
     return a, b, cutters, c1, c2
 
 
