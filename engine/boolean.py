@@ -20,7 +20,7 @@ import warp as wp
 from . import octree
 from .field import AdaptiveField, _bits, assemble_field, check_budget, plan_domain
 from .octree import morton_encode, node_center
-from .sampling import FieldArg, clamp_to_domain, level_spacing, locate_leaf, sample_mls
+from .sampling import FieldArg, clamp_to_domain, inside_domain, level_spacing, locate_leaf, sample_mls
 
 OP_UNION, OP_INTERSECTION, OP_DIFFERENCE = 0, 1, 2
 # Finest octets are kept where some node is within this many voxels of the result's surface.
@@ -221,8 +221,115 @@ def _combine_nodes_kernel(
     source[i] = follow.source[locate_leaf(follow, clamp_to_domain(follow, x))[0]]
 
 
+@wp.func
+def _bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3):
+    """(phi, radius): an operand's value at result node ``c`` lies within ``radius`` of ``phi`` — exact (radius 0)
+    where the lattices align, the containing coarse leaf's bracket elsewhere; radius -1 in a non-aligned finest band."""
+    found, phi, g = _lookup(f, aligned, offset, c, x)
+    if found == 1:
+        return phi, 0.0
+    return _estimate(f, x)
+
+
+@wp.func
+def _octet_source(f: FieldArg, octet_mode: int, offset: wp.vec3i, oc: wp.vec3i, origin: wp.vec3, spacing: float):
+    """Where an operand holds result octet ``oc`` when its lattice is aligned at octet granularity: (index of the
+    octet's first child in its finest level, or -1; else the coarse leaf covering the whole octet, or -1; its level).
+    An operand's finest level is octet-complete and sorted, so the 8 children follow the first in Morton order."""
+    if octet_mode == 1:
+        c0 = wp.vec3i(2 * oc[0], 2 * oc[1], 2 * oc[2]) + offset
+        if c0[0] >= 0 and c0[1] >= 0 and c0[2] >= 0:
+            j = octree.find_key(f.codes, 0, f.fine_count, morton_encode(c0))
+            if j >= 0:
+                return j, -1, 0
+        x = origin + 2.0 * spacing * wp.vec3(float(oc[0]) + 0.5, float(oc[1]) + 0.5, float(oc[2]) + 0.5)
+        if inside_domain(f, x):
+            leaf = locate_leaf(f, x)
+            if leaf[1] > 0:
+                return -1, leaf[0], leaf[1]
+    return -1, -1, 0
+
+
+@wp.func
+def _node_bracket(
+    f: FieldArg, first: int, leaf: int, level: int, k: int, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3
+):
+    """(phi, radius) of an operand at child ``k`` of an octet located by :func:`_octet_source`."""
+    if first >= 0:
+        return f.values[first + k], 0.0
+    if leaf >= 0:
+        centre = node_center(f.origin, level_spacing(f, level), f.coords[leaf])
+        return f.values[leaf], wp.length(x - centre)
+    return _bracket(f, aligned, offset, c, x)
+
+
+@wp.kernel(enable_backward=False)
+def _octet_bracket_kernel(
+    first: int,
+    a: FieldArg,
+    b: FieldArg,
+    a_aligned: int,
+    b_aligned: int,
+    a_octets: int,
+    b_octets: int,
+    a_offset: wp.vec3i,
+    b_offset: wp.vec3i,
+    octets: wp.array[wp.int64],
+    origin: wp.vec3,
+    spacing: float,
+    op: int,
+    blend: float,
+    band: float,
+    near: wp.array[wp.int32],
+    has_neg: wp.array[wp.int32],
+    has_pos: wp.array[wp.int32],
+):
+    """Per finest octet of the result, from the operands' brackets alone (no interpolation): whether a node may lie
+    within ``band`` of the result's surface, and which signs its nodes may have."""
+    t = first + wp.tid()
+    oc = octree.morton_decode(octets[t])
+    a_first, a_leaf, a_level = _octet_source(a, a_octets, a_offset, oc, origin, spacing)
+    b_first, b_leaf, b_level = _octet_source(b, b_octets, b_offset, oc, origin, spacing)
+    n_near = int(0)
+    neg = int(0)
+    pos = int(0)
+    for k in range(8):
+        c = wp.vec3i(2 * oc[0] + (k & 1), 2 * oc[1] + ((k >> 1) & 1), 2 * oc[2] + ((k >> 2) & 1))
+        x = node_center(origin, spacing, c)
+        va, ra = _node_bracket(a, a_first, a_leaf, a_level, k, a_aligned, a_offset, c, x)
+        vb, rb = _node_bracket(b, b_first, b_leaf, b_level, k, b_aligned, b_offset, c, x)
+        if ra < 0.0 or rb < 0.0:
+            n_near = 1
+            neg = 1
+            pos = 1
+        else:
+            tb = vb
+            if op == 2:
+                tb = -vb
+            # min and max are monotone; the polynomial smooth min lies within blend / 4 below the min
+            lo = wp.min(va - ra, tb - rb) - 0.25 * blend
+            hi = wp.min(va + ra, tb + rb)
+            if op != 0:
+                lo = wp.max(va - ra, tb - rb)
+                hi = wp.max(va + ra, tb + rb) + 0.25 * blend
+            if lo <= band and hi >= -band:
+                n_near = 1
+            # a node whose bracket contains zero may have either sign
+            if hi < 0.0:
+                neg = 1
+            elif lo >= 0.0:
+                pos = 1
+            else:
+                neg = 1
+                pos = 1
+    near[t] = n_near
+    has_neg[t] = neg
+    has_pos[t] = pos
+
+
 @wp.kernel(enable_backward=False)
 def _keep_octets_kernel(
+    first: int,
     octets: wp.array[wp.int64],
     near: wp.array[wp.int32],
     has_neg: wp.array[wp.int32],
@@ -230,7 +337,7 @@ def _keep_octets_kernel(
     keep: wp.array[wp.int32],
 ):
     """Keep an octet near the surface, or with a sign change inside it or towards one of its 26 neighbours."""
-    t = wp.tid()
+    t = first + wp.tid()
     keep[t] = 0
     if near[t] == 1 or (has_neg[t] == 1 and has_pos[t] == 1):
         keep[t] = 1
@@ -395,7 +502,6 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
             outputs=[grown],
         )
         octets = octree.sort_unique(grown, end_bit=3 * _bits(oct_dims))
-    fine_codes, fine_coords = octree.expand_octets(octets)
     timings["finest_cells"] = time.perf_counter() - t0
 
     a_arg, b_arg = a.arg(), b.arg()
@@ -404,6 +510,49 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         for f, al in zip((a, b), aligned, strict=False)
     ]
     origin_v = wp.vec3(*origin)
+
+    # Keep the result adaptive: drop octets the result's surface is far from (an operand's band buried inside the
+    # other operand, say), deciding from the operands' brackets before any interpolation, so only kept nodes pay
+    # for MLS. A marching cube with a corner farther than its diagonal from the surface cannot contain it, so
+    # octets whose nodes are all beyond KEEP_BAND voxels change no surface — unless the field jumps there (the
+    # surface an open operand gets across a hole): octets with both signs, or next to one of the other sign, stay.
+    t0 = time.perf_counter()
+    n_oct = octets.shape[0]
+    near, has_neg, has_pos, keep_wp = (wp.empty(n_oct, dtype=wp.int32, device=device) for _ in range(4))
+    flags = [int(aligned[0]), int(aligned[1])]
+    # octet-granular look-ups need the operand's octets to coincide with the result's (even lattice offsets)
+    octet_flags = [int(al and not (_offset_to(f, origin, h) % 2).any()) for f, al in zip((a, b), aligned, strict=False)]
+    octree.launch_split(
+        _octet_bracket_kernel,
+        n_oct,
+        lambda start, n: [
+            start,
+            a_arg,
+            b_arg,
+            *flags,
+            *octet_flags,
+            offs[0],
+            offs[1],
+            octets,
+            origin_v,
+            float(h),
+            int(op),
+            blend,
+            KEEP_BAND * h,
+            near,
+            has_neg,
+            has_pos,
+        ],
+        device,
+    )
+    octree.launch_split(
+        _keep_octets_kernel, n_oct, lambda start, n: [start, octets, near, has_neg, has_pos, keep_wp], device
+    )
+    keep = keep_wp.numpy().astype(bool)
+    if not keep.all():
+        octets = wp.array(octets.numpy()[keep], dtype=wp.int64, device=device)
+    fine_codes, fine_coords = octree.expand_octets(octets)
+    timings["finest_prune"] = time.perf_counter() - t0
 
     def run(coords, lo_, hi_, spacing_, dist, proj, source, sign, values):
         flags = [int(aligned[0] and spacing_ == h), int(aligned[1] and spacing_ == h)]
@@ -441,33 +590,6 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     fine_values = wp.empty(n0, dtype=wp.float32, device=device)
     run(fine_coords, 0, n0, h, fine_dist, fine_proj, fine_src, fine_sign, fine_values)
     timings["finest_values"] = time.perf_counter() - t0
-
-    # Keep the result adaptive: drop octets the result's surface is far from (an operand's band buried inside the
-    # other operand, say). A marching cube with a corner farther than its diagonal from the surface cannot contain
-    # it, so octets whose nodes are all beyond KEEP_BAND voxels change no surface — unless the field jumps there
-    # (the surface an open operand gets across a hole): octets with both signs, or next to one of the other sign,
-    # stay.
-    t0 = time.perf_counter()
-    octet_values = fine_values.numpy().reshape(-1, 8)
-    near = wp.array((np.abs(octet_values) <= KEEP_BAND * h).any(axis=1).astype(np.int32), device=device)
-    has_neg = wp.array((octet_values < 0.0).any(axis=1).astype(np.int32), device=device)
-    has_pos = wp.array((octet_values >= 0.0).any(axis=1).astype(np.int32), device=device)
-    keep_wp = wp.empty(near.shape[0], dtype=wp.int32, device=device)
-    wp.launch(
-        _keep_octets_kernel,
-        dim=near.shape[0],
-        inputs=[octets, near, has_neg, has_pos],
-        outputs=[keep_wp],
-        device=device,
-    )
-    near = keep_wp.numpy().astype(bool)
-    if not near.all():
-        keep = np.repeat(near, 8)
-        fine_codes, fine_coords, fine_dist, fine_proj, fine_src, fine_values = (
-            wp.array(arr.numpy()[keep], dtype=arr.dtype, device=device)
-            for arr in (fine_codes, fine_coords, fine_dist, fine_proj, fine_src, fine_values)
-        )
-    timings["finest_prune"] = time.perf_counter() - t0
 
     def level_values(coords, lo_, hi_, spacing_, dist, proj, source, sign):
         scratch = wp.empty(hi_ - lo_, dtype=wp.float32, device=device)

@@ -259,6 +259,7 @@ def _propagate_sign_kernel(
 
 @wp.kernel(enable_backward=False)
 def _propagate_sign_search_kernel(
+    first: int,
     codes: wp.array[wp.int64],
     coords: wp.array[wp.vec3i],
     lo: int,
@@ -269,8 +270,9 @@ def _propagate_sign_search_kernel(
     spacing: float,
     changed: wp.array[wp.int32],
 ):
-    """The same on a level without a neighbour table (the finest): neighbours by binary search of Morton codes."""
-    i = lo + wp.tid()
+    """The same on a level without a neighbour table (the finest): neighbours by binary search of Morton codes.
+    Node ``first + tid``; neighbours are searched in [lo, hi)."""
+    i = first + wp.tid()
     if sign[i] != 0.0:
         return
     c = coords[i]
@@ -1111,12 +1113,23 @@ def assemble_field(
         for _ in range(MAX_SIGN_SWEEPS):
             changed.zero_()
             if k == 0:
-                wp.launch(
+                # in place from two threads: a sign only ever goes from unset to final, so races are harmless
+                octree.launch_split(
                     _propagate_sign_search_kernel,
-                    dim=hi - lo,
-                    inputs=[codes, coords, lo, hi, dist, sign, SIGN_SAFETY * 1.0, float(voxel_size)],
-                    outputs=[changed],
-                    device=device,
+                    hi - lo,
+                    lambda start, _n, lo=lo, hi=hi: [
+                        lo + start,
+                        codes,
+                        coords,
+                        lo,
+                        hi,
+                        dist,
+                        sign,
+                        SIGN_SAFETY * 1.0,
+                        float(voxel_size),
+                        changed,
+                    ],
+                    device,
                 )
             else:
                 wp.launch(

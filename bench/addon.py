@@ -1,0 +1,166 @@
+"""The add-on as a user meets it: `aasdf.boolean` cold, warm and re-run, against the geometry-nodes SDF pipeline.
+
+For each case and finest spacing (combined bounding-box diagonal / 256 and / 512, given to both as an explicit voxel
+size so that moving an operand does not change it), in one ``bpy`` process with the add-on registered:
+
+- **cold**: field cache and boolean memo cleared, both fields built, boolean, surface, result object written;
+- **warm**: the second operand moved a little (a new position every run, so its field is rebuilt; the first operand's
+  field comes from the cache);
+- **re-run**: nothing changed (the redo panel, a script calling the operator again): cached fields and boolean;
+- **GN SDF**: Mesh to SDF Grid ×2 → SDF Grid Boolean → Grid to Mesh on fresh objects (geometry nodes keeps no
+  per-operand grid, so moving an operand re-evaluates all of it).
+
+Times are medians of ``--repeat`` runs (default 3) after a warm-up, wall clock around the operator call (it includes
+reading the evaluated meshes and writing the result object). Ratios are against the GN SDF time of the same row.
+
+    .venv/bin/python bench/addon.py [--cases bunny-spot spheres] [--resolutions 256 512] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp-cache"))
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+from bench import baselines  # noqa: E402
+from tests.conftest import load_addon_package  # noqa: E402
+from tests.support import load_mesh, uv_sphere  # noqa: E402
+
+OPERATION = "DIFFERENCE"
+
+
+def cases() -> dict:
+    spot = load_mesh("spot.obj")
+    bunny = load_mesh("stanford-bunny.obj")
+    size = float(np.linalg.norm(spot[0].max(0) - spot[0].min(0)))
+    own = float(np.linalg.norm(bunny[0].max(0) - bunny[0].min(0)))
+    centre = 0.5 * (spot[0].max(0) + spot[0].min(0))
+    bunny_v = (bunny[0] - 0.5 * (bunny[0].max(0) + bunny[0].min(0))) * (0.8 * size / own) + centre
+    bunny_v = (bunny_v + np.float32([0.25 * size, 0.0, 0.0])).astype(np.float32)
+    return {
+        "bunny-spot": ((bunny_v, bunny[1]), spot),
+        "spheres": (uv_sphere(1.0, rings=48, segments=96), uv_sphere(1.0, center=(1.2, 0.0, 0.0))),
+    }
+
+
+def register():
+    from aasdf.aasdf_addon.preferences import ADDON_ID
+
+    aasdf = load_addon_package()
+    if ADDON_ID not in bpy.context.preferences.addons:
+        bpy.context.preferences.addons.new().module = ADDON_ID
+    aasdf.register()
+    return aasdf
+
+
+def _select(first, second):
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(False)
+    first.select_set(True)
+    second.select_set(True)
+    bpy.context.view_layer.objects.active = first
+
+
+def _run_operator(first, second, voxel_size):
+    """Seconds of one ``aasdf.boolean`` call; its result object is removed afterwards."""
+    from aasdf.aasdf_addon import pipeline
+
+    _select(first, second)
+    t0 = time.perf_counter()
+    status = bpy.ops.aasdf.boolean(operation=OPERATION, voxel_size=voxel_size, hide_inputs=False)
+    seconds = time.perf_counter() - t0
+    if status != {"FINISHED"}:
+        raise RuntimeError(f"aasdf.boolean returned {status}")
+    numbers = dict(pipeline.last_run)
+    bpy.data.objects.remove(bpy.data.objects[numbers["object"]], do_unlink=True)
+    return seconds, numbers
+
+
+def _clear_cache():
+    from aasdf.aasdf_addon import bridge, cache
+
+    cache.clear()
+    bridge.clear_memo()
+
+
+def measure(a, b, voxel_size, repeat):
+    bpy.ops.wm.read_homefile(use_empty=True)
+    first = baselines.mesh_object("operand_a", *a)
+    second = baselines.mesh_object("operand_b", *b)
+    bpy.context.view_layer.update()
+    diag = float(np.linalg.norm(b[0].max(0) - b[0].min(0)))
+    out = {"cold": [], "warm": [], "rerun": [], "gn": []}
+    built = {}
+    step = 0
+    for k in range(repeat + 1):  # the first round warms up
+        _clear_cache()
+        seconds, numbers = _run_operator(first, second, voxel_size)
+        built["cold"] = numbers["fields_built"]
+        if k:
+            out["cold"].append(seconds)
+        step += 1
+        second.location.x = 1.0e-3 * diag * step
+        bpy.context.view_layer.update()
+        seconds, numbers = _run_operator(first, second, voxel_size)
+        built["warm"] = numbers["fields_built"]
+        if k:
+            out["warm"].append(seconds)
+        seconds, numbers = _run_operator(first, second, voxel_size)
+        built["rerun"] = numbers["fields_built"]
+        if k:
+            out["rerun"].append(seconds)
+        moved = (b[0] + np.float32([second.location.x, 0.0, 0.0]), b[1])
+        gn = baselines.gn_sdf_boolean(a, moved, OPERATION, voxel_size)
+        if k:
+            out["gn"].append(gn["seconds"])
+    medians = {key: statistics.median(v) for key, v in out.items()}
+    return medians, built
+
+
+def machine() -> str:
+    return f"{platform.machine()}, {os.cpu_count()} cores, bpy {bpy.app.version_string}, warp on cpu"
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cases", nargs="+", default=["bunny-spot", "spheres"])
+    parser.add_argument("--resolutions", nargs="+", type=int, default=[256, 512])
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args(argv)
+    register()
+    all_cases = cases()
+    print(f"# Add-on benchmark — {machine()}; {OPERATION.lower()}, medians of {args.repeat} runs after a warm-up\n")
+    header = (
+        "| case | res | GN SDF s | cold s | cold / GN | warm s (one field rebuilt) | warm / GN "
+        "| re-run s | re-run / GN | fields built cold / warm / re-run |"
+    )
+    print(header)
+    print("|" + "|".join(["---"] * (header.count("|") - 1)) + "|")
+    for name in args.cases:
+        a, b = all_cases[name]
+        pts = np.vstack([a[0], b[0]])
+        diag = float(np.linalg.norm(pts.max(0) - pts.min(0)))
+        for res in args.resolutions:
+            m, built = measure(a, b, diag / res, args.repeat)
+            gn = m["gn"]
+            print(
+                f"| {name} | /{res} | {gn:.2f} | {m['cold']:.2f} | {m['cold'] / gn:.2f}× | {m['warm']:.2f} "
+                f"| {m['warm'] / gn:.2f}× | {m['rerun']:.3f} | {m['rerun'] / gn:.3f}× "
+                f"| {built['cold']} / {built['warm']} / {built['rerun']} |",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main()
