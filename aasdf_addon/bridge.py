@@ -172,6 +172,15 @@ def is_smooth(obj) -> bool:
     return bool(smooth.mean() >= 0.5)
 
 
+def _set_attribute(mesh, name, prop, values, collection, rna_prop):
+    """Fill a built-in attribute from a numpy array, or the RNA collection where the attribute is not exposed."""
+    attribute = mesh.attributes.get(name)
+    if attribute is not None:
+        attribute.data.foreach_set(prop, values.ravel())
+    else:
+        collection.foreach_set(rna_prop, values.ravel())
+
+
 def result_mesh(name, verts, tris, materials=(), face_material_index=None, smooth=False):
     """A new mesh datablock from arrays.
 
@@ -188,19 +197,23 @@ def result_mesh(name, verts, tris, materials=(), face_material_index=None, smoot
     verts = np.ascontiguousarray(verts, dtype=np.float32).reshape(-1, 3)
     tris = np.ascontiguousarray(tris, dtype=np.int32).reshape(-1, 3)
     mesh = bpy.data.meshes.new(name)
+    # The contiguous attribute arrays take numpy buffers directly: ~10x faster than the per-element RNA collections.
     mesh.vertices.add(len(verts))
-    mesh.vertices.foreach_set("co", verts.ravel())
+    _set_attribute(mesh, "position", "vector", verts, mesh.vertices, "co")
     mesh.loops.add(tris.size)
-    mesh.loops.foreach_set("vertex_index", tris.ravel())
+    _set_attribute(mesh, ".corner_vert", "value", tris, mesh.loops, "vertex_index")
     mesh.polygons.add(len(tris))
     mesh.polygons.foreach_set("loop_start", np.arange(0, tris.size, 3, dtype=np.int32))
     for material in materials:
         mesh.materials.append(material)
     if face_material_index is not None and len(tris):
-        mesh.polygons.foreach_set("material_index", np.ascontiguousarray(face_material_index, dtype=np.int32))
+        index = mesh.attributes.get("material_index") or mesh.attributes.new("material_index", "INT", "FACE")
+        index.data.foreach_set("value", np.ascontiguousarray(face_material_index, dtype=np.int32))
     mesh.update(calc_edges=True)
-    if len(tris):  # meshes without a "sharp_face" attribute are smooth: say it either way
-        mesh.shade_smooth() if smooth else mesh.shade_flat()
+    if len(tris) and not smooth:  # meshes without a "sharp_face" attribute are smooth
+        # the attribute directly: Mesh.shade_flat() takes ~0.2 s on a million faces
+        sharp = mesh.attributes.get("sharp_face") or mesh.attributes.new("sharp_face", "BOOLEAN", "FACE")
+        sharp.data.foreach_set("value", np.ones(len(tris), dtype=bool))
     return mesh
 
 

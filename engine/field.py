@@ -257,36 +257,61 @@ def _propagate_sign_kernel(
                 return
 
 
+@wp.func
+def _take_sign(i: int, j: int, dist: wp.array[wp.float32], sign: wp.array[wp.float32], safety: float, spacing: float):
+    """Give unsigned node ``i`` the sign of face neighbour ``j`` when their empty balls cover the edge between them."""
+    if sign[j] != 0.0 and (dist[i] + dist[j]) * safety > spacing:
+        sign[i] = sign[j]
+        return 1
+    return 0
+
+
 @wp.kernel(enable_backward=False)
-def _propagate_sign_search_kernel(
+def _propagate_sign_octet_kernel(
     first: int,
     codes: wp.array[wp.int64],
-    coords: wp.array[wp.vec3i],
-    lo: int,
-    hi: int,
+    count: int,
     dist: wp.array[wp.float32],
     sign: wp.array[wp.float32],
     safety: float,
     spacing: float,
     changed: wp.array[wp.int32],
 ):
-    """The same on a level without a neighbour table (the finest): neighbours by binary search of Morton codes.
-    Node ``first + tid``; neighbours are searched in [lo, hi)."""
-    i = first + wp.tid()
-    if sign[i] != 0.0:
+    """The same on the finest level, which has no neighbour table: one thread per octet (8 consecutive nodes in
+    Morton order). Three face neighbours of a node are in its own octet; the other three are the same child of the
+    face-adjacent octets, each found once by binary search."""
+    t = first + wp.tid()
+    base = 8 * t
+    unset = int(0)
+    for k in range(8):
+        if sign[base + k] == 0.0:
+            unset += 1
+    if unset == 0:
         return
-    c = coords[i]
-    for k in range(6):
-        d = wp.vec3i(0)
-        d[k // 2] = wp.where(k % 2 == 0, -1, 1)
-        q = c + d
-        if q[0] >= 0 and q[1] >= 0 and q[2] >= 0:
-            j = octree.find_key(codes, lo, hi, morton_encode(q))
-            if j >= 0:
-                if sign[j] != 0.0 and (dist[i] + dist[j]) * safety > spacing:
-                    sign[i] = sign[j]
-                    wp.atomic_add(changed, 0, 1)
-                    return
+    octet = octree.morton_decode(codes[base] >> wp.int64(3))
+    # first node of the octet across each face (-x, +x, -y, +y, -z, +z); -2: not looked up yet
+    across = wp.vector(-2, -2, -2, -2, -2, -2, length=6, dtype=int)
+    got = int(0)
+    for _sweep in range(2):
+        for k in range(8):
+            i = base + k
+            if sign[i] == 0.0:
+                for a in range(3):
+                    if sign[i] == 0.0:
+                        got += _take_sign(i, base + (k ^ (1 << a)), dist, sign, safety, spacing)
+                    if sign[i] == 0.0:
+                        bit = (k >> a) & 1
+                        face = 2 * a + bit
+                        if across[face] == -2:
+                            q = octet
+                            q[a] = q[a] + wp.where(bit == 0, -1, 1)
+                            across[face] = -1
+                            if q[a] >= 0:
+                                across[face] = octree.find_key(codes, 0, count, morton_encode(q) << wp.int64(3))
+                        if across[face] >= 0:
+                            got += _take_sign(i, across[face] + (k ^ (1 << a)), dist, sign, safety, spacing)
+    if got > 0:
+        wp.atomic_add(changed, 0, got)
 
 
 @wp.kernel(enable_backward=False)
@@ -1115,13 +1140,11 @@ def assemble_field(
             if k == 0:
                 # in place from two threads: a sign only ever goes from unset to final, so races are harmless
                 octree.launch_split(
-                    _propagate_sign_search_kernel,
-                    hi - lo,
-                    lambda start, _n, lo=lo, hi=hi: [
-                        lo + start,
+                    _propagate_sign_octet_kernel,
+                    (hi - lo) // 8,
+                    lambda start, _n: [
+                        start,
                         codes,
-                        coords,
-                        lo,
                         hi,
                         dist,
                         sign,
