@@ -109,14 +109,14 @@ def surface(field, operands) -> dict:
     """
     faces = getattr(field, "_faces", None)  # a reused result (see bridge.combine) keeps its surface
     if faces is None:
-        verts, tris = field.to_mesh()
-        ids = field.source_ids(verts[tris].mean(axis=1)) if len(tris) else np.zeros(0, np.int32)
-        field._faces = faces = (verts, tris, ids)
-    verts, tris, ids = faces
+        field._faces = faces = {"verts_tris": field.to_mesh()}
+    verts, tris = faces["verts_tris"]
     materials, slot_of = bridge.operand_materials(operands)
     face_slots = None
     if materials and len(tris):
-        face_slots = slot_of[ids.clip(0, len(operands) - 1)]
+        if "ids" not in faces:  # which operand each face came from: only needed for materials
+            faces["ids"] = field.source_ids(verts[tris].mean(axis=1))
+        face_slots = slot_of[faces["ids"].clip(0, len(operands) - 1)]
     return {"verts": verts, "tris": tris, "materials": materials, "face_slots": face_slots}
 
 

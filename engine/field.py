@@ -450,12 +450,12 @@ class AdaptiveField:
         pts = _as_points(points)
         ids = wp.empty(len(pts), dtype=wp.int32, device=self.device)
         if len(pts):
-            wp.launch(
+            arg, pts_wp = self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device)
+            octree.launch_split(
                 _source_ids_kernel,
-                dim=len(pts),
-                device=self.device,
-                inputs=[self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device)],
-                outputs=[ids],
+                len(pts),
+                lambda lo, n: [arg, pts_wp[lo : lo + n], ids[lo : lo + n]],
+                self.device,
             )
         return ids.numpy()
 

@@ -25,9 +25,10 @@ UNSET_DISTANCE = 1.0e30
 
 # Below this many threads a launch is not worth splitting across CPU cores.
 SPLIT_MIN_DIM = 20_000
+EMIT_SPLIT_MIN_DIM = 1_000
 
 
-def launch_split(kernel, dim: int, args, device, *, parts: int | None = None) -> None:
+def launch_split(kernel, dim: int, args, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM) -> None:
     """Launch ``kernel`` over [0, dim) — on the CPU, as one launch per core from as many Python threads.
 
     A Warp CPU launch runs on one thread but releases the GIL, so launches from two threads use two cores. ``args``
@@ -38,7 +39,7 @@ def launch_split(kernel, dim: int, args, device, *, parts: int | None = None) ->
         return
     device = wp.get_device(device)
     parts = parts or (os.cpu_count() or 1)
-    if device.is_cuda or parts < 2 or dim < SPLIT_MIN_DIM:
+    if device.is_cuda or parts < 2 or dim < min_dim:
         wp.launch(kernel, dim=dim, inputs=args(0, dim), device=device)
         return
     wp.load_module(kernel.module, device=device)  # compile (or load) once, before the threads race for it
@@ -70,14 +71,15 @@ def count_then_emit(kernel, dim: int, args, device, check=None) -> wp.array:
     """
     counts = wp.empty(dim, dtype=wp.int32, device=device)
     dummy = wp.empty(1, dtype=wp.int64, device=device)
-    launch_split(kernel, dim, lambda lo, n: [lo, *args, counts, 0, counts, dummy], device)
+    # items (triangles, cells) each enumerate many octets: worth splitting from a few thousand on
+    launch_split(kernel, dim, lambda lo, n: [lo, *args, counts, 0, counts, dummy], device, min_dim=EMIT_SPLIT_MIN_DIM)
     counts_np = counts.numpy().astype(np.int64)
     total = int(counts_np.sum())
     if check is not None:
         check(total)
     offsets = wp.array(np.concatenate([[0], np.cumsum(counts_np)[:-1]]).astype(np.int32), device=device)
     codes = wp.empty(total, dtype=wp.int64, device=device)
-    launch_split(kernel, dim, lambda lo, n: [lo, *args, offsets, 1, counts, codes], device)
+    launch_split(kernel, dim, lambda lo, n: [lo, *args, offsets, 1, counts, codes], device, min_dim=EMIT_SPLIT_MIN_DIM)
     return codes
 
 
@@ -466,12 +468,23 @@ def solve_level(
     while sweeps < max_sweeps:
         changed.zero_()
         src_bufs, dst_bufs = bufs[sweeps % 2], bufs[(sweeps + 1) % 2]
-        wp.launch(
+        # Jacobi sweeps read one buffer and write the other: both cores may take half each
+        launch_split(
             _fim_sweep_kernel,
-            dim=n,
-            inputs=[coords, first_child, neighbours, lo, origin_v, float(spacing), *src_bufs],
-            outputs=[*dst_bufs, known, changed],
-            device=device,
+            n,
+            lambda start, count, src_bufs=src_bufs, dst_bufs=dst_bufs: [
+                coords,
+                first_child,
+                neighbours,
+                lo + start,
+                origin_v,
+                float(spacing),
+                *src_bufs,
+                *dst_bufs,
+                known,
+                changed,
+            ],
+            device,
         )
         sweeps += 1
         if int(changed.numpy()[0]) == 0:
