@@ -19,6 +19,7 @@ Sign convention: negative inside, positive outside (Blender/OpenVDB); the paper 
 
 from __future__ import annotations
 
+import math
 import os
 import time
 
@@ -241,12 +242,20 @@ def _propagate_sign_kernel(
     sign: wp.array[wp.float32],
     safety: float,
     spacing: float,
+    coords: wp.array[wp.vec3i],
+    origin: wp.vec3,
+    cap_lo: wp.vec3,
+    cap_hi: wp.vec3,
+    cap_radius: float,
     changed: wp.array[wp.int32],
 ):
     """An unsigned node takes a signed face neighbour's sign when their empty balls cover the edge between them.
-    Signs only ever go from 0 to final, so sweeps may read and write in place."""
+    Signs only ever go from 0 to final, so sweeps may read and write in place. Not near an open mesh's holes (see
+    ``hole_caps``)."""
     i = lo + wp.tid()
     if sign[i] != 0.0:
+        return
+    if octree.near_cap(node_center(origin, spacing, coords[i]), cap_lo, cap_hi, cap_radius, spacing):
         return
     for k in range(6):
         j = neighbours[i, k]
@@ -275,6 +284,10 @@ def _propagate_sign_octet_kernel(
     sign: wp.array[wp.float32],
     safety: float,
     spacing: float,
+    origin: wp.vec3,
+    cap_lo: wp.vec3,
+    cap_hi: wp.vec3,
+    cap_radius: float,
     changed: wp.array[wp.int32],
 ):
     """The same on the finest level, which has no neighbour table: one thread per octet (8 consecutive nodes in
@@ -289,6 +302,9 @@ def _propagate_sign_octet_kernel(
     if unset == 0:
         return
     octet = octree.morton_decode(codes[base] >> wp.int64(3))
+    centre = origin + 2.0 * spacing * wp.vec3(float(octet[0]) + 0.5, float(octet[1]) + 0.5, float(octet[2]) + 0.5)
+    if octree.near_cap(centre, cap_lo, cap_hi, cap_radius, 2.0 * spacing):
+        return
     # first node of the octet across each face (-x, +x, -y, +y, -z, +z); -2: not looked up yet
     across = wp.vector(-2, -2, -2, -2, -2, -2, length=6, dtype=int)
     got = int(0)
@@ -619,6 +635,36 @@ def problem_faces(tris: np.ndarray, n_verts: int) -> np.ndarray:
     return bad_vertex[t].any(axis=1).astype(np.int32)
 
 
+def hole_caps(vertices: np.ndarray, triangles: np.ndarray):
+    """Where an open mesh's winding number may be far from an integer: (box lo, box hi, radius), or None.
+
+    Let G be the mesh's boundary: its edges whose two orientations do not cancel (open, or inconsistently oriented),
+    with multiplicity, and C the cone over G from the centre of G's bounding box. The mesh minus C is closed, so its
+    winding number is an integer that changes only across the mesh or C, and the mesh's winding number differs from it
+    by C's, whose magnitude is at most area(C) / (4 pi d^2) at distance d from C. Farther than
+    ``radius = sqrt(area(C) / pi)`` from the box (which holds C) that is at most 1/4: there the winding number stays
+    within 1/4 of an integer, so two points joined by a segment that crosses no triangle are on the same side of 0.5,
+    and signs may spread between nodes whose empty balls cover the segment between them, as on a closed mesh.
+    Returns None when every edge cancels (closed, consistently oriented, possibly non-manifold).
+    """
+    t = np.asarray(triangles, dtype=np.int64)
+    edges = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    lo_v, hi_v = edges.min(axis=1), edges.max(axis=1)
+    key = lo_v * len(vertices) + hi_v
+    unique, inverse = np.unique(key, return_inverse=True)
+    net = np.bincount(inverse, weights=np.where(edges[:, 0] < edges[:, 1], 1.0, -1.0), minlength=len(unique))
+    open_edges = net != 0.0
+    if not open_edges.any():
+        return None
+    a = np.asarray(vertices, dtype=np.float64)[unique[open_edges] // len(vertices)]
+    b = np.asarray(vertices, dtype=np.float64)[unique[open_edges] % len(vertices)]
+    box_lo = np.minimum(a, b).min(axis=0)
+    box_hi = np.maximum(a, b).max(axis=0)
+    apex = 0.5 * (box_lo + box_hi)
+    area = float((0.5 * np.linalg.norm(np.cross(a - apex, b - apex), axis=1) * np.abs(net[open_edges])).sum())
+    return box_lo, box_hi, math.sqrt(area / math.pi)
+
+
 def plan_domain(lo, hi, voxel_size: float, levels: int, margin_cells: float):
     """Domain origin (snapped to the shared world origin at the top spacing, Eq. 3) and top-level dims."""
     top = voxel_size * 2 ** (levels - 1)
@@ -762,6 +808,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     t0 = time.perf_counter()
     problem = problem_faces(tris, len(verts))
     clean = not bool(problem.any())
+    caps = None if clean else hole_caps(verts, tris)
     mesh = wp.Mesh(
         points=wp.array(verts, dtype=wp.vec3, device=device),
         indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
@@ -880,7 +927,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
             field_ids=(field_id,),
             timings=timings,
             mesh_id=mesh.id,
-            spread_signs=clean,
+            hole_caps=caps,
         )
 
     # a band node lies within (padding + 1) cells (L-inf) of a triangle; misses fall back to the domain diagonal
@@ -999,6 +1046,7 @@ def assemble_field(
     level_values=None,
     spread_signs=True,
     known_signs=None,
+    hole_caps=None,
 ):
     """Build the intermediate and top levels above a finest level and sign every node (shared by construction
     and booleans).
@@ -1009,7 +1057,8 @@ def assemble_field(
     ``fine_values`` (signed) is given the finest level keeps those values instead. When ``level_values(coords, lo,
     hi, spacing, dist, proj, source, sign)`` is given (booleans: the operands are sampled), it sets every coarse
     node's distance, projection, source and sign directly, in place of the FIM solve and the sign oracles.
-    ``spread_signs`` lets signs spread between same-level neighbours (valid for closed meshes only).
+    ``spread_signs`` lets signs spread between same-level neighbours; ``hole_caps`` (box lo, box hi, radius, from
+    :func:`hole_caps`) keeps them from spreading near an open mesh's holes.
     ``known_signs``: an earlier field of the same mesh and domain whose nodes' signs are reused where nodes match.
     """
     top_dims = np.asarray(top_dims, dtype=np.int64)
@@ -1131,6 +1180,10 @@ def assemble_field(
     oracle_counts = {}
     origin_v = wp.vec3(*origin_t)
 
+    cap_args = [wp.vec3(0.0), wp.vec3(0.0), -1.0]
+    if hole_caps is not None:
+        cap_args = [wp.vec3(*hole_caps[0]), wp.vec3(*hole_caps[1]), float(hole_caps[2])]
+
     def spread(k, lo, hi):
         if not spread_signs:
             return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
@@ -1150,6 +1203,8 @@ def assemble_field(
                         sign,
                         SIGN_SAFETY * 1.0,
                         float(voxel_size),
+                        origin_v,
+                        *cap_args,
                         changed,
                     ],
                     device,
@@ -1158,7 +1213,17 @@ def assemble_field(
                 wp.launch(
                     _propagate_sign_kernel,
                     dim=hi - lo,
-                    inputs=[neighbours, lo, dist, sign, SIGN_SAFETY, float(voxel_size * 2**k)],
+                    inputs=[
+                        neighbours,
+                        lo,
+                        dist,
+                        sign,
+                        SIGN_SAFETY,
+                        float(voxel_size * 2**k),
+                        coords,
+                        origin_v,
+                        *cap_args,
+                    ],
                     outputs=[changed],
                     device=device,
                 )
@@ -1168,7 +1233,7 @@ def assemble_field(
 
     if level_values is None and levels > 1:
         # Across a hole of an open mesh the sign changes where no triangle is near, so empty balls prove nothing
-        # there: open meshes ask the oracle for every top node and do not spread signs within levels.
+        # near it: signs spread only away from the holes' caps (``hole_caps``), the oracle decides the rest.
         seeds = np.arange(top_lo, top_hi, TOP_SEED_STRIDE if spread_signs else 1)
         seeds = seeds[sign.numpy()[seeds] == 0.0]
         oracle(coords, seeds, voxel_size * 2 ** (levels - 1), sign)

@@ -301,7 +301,8 @@ def _axis_keys_kernel(
     a = axis
     b = (axis + 1) % 3
     d = (axis + 2) % 3
-    keys[i] = (wp.int64(c[d]) * wp.int64(dims[b]) + wp.int64(c[b])) * wp.int64(dims[a]) + wp.int64(c[a])
+    # rows are dims[a] + 1 long, so the last node of a row and the first of the next are never one apart
+    keys[i] = (wp.int64(c[d]) * wp.int64(dims[b]) + wp.int64(c[b])) * wp.int64(dims[a] + 1) + wp.int64(c[a])
     vals[i] = lo + i
 
 
@@ -309,7 +310,8 @@ def _axis_keys_kernel(
 def _axis_neighbours_kernel(
     keys: wp.array[wp.int64], vals: wp.array[wp.int32], n: int, axis: int, neighbours: wp.array2d[wp.int32]
 ):
-    """In key order, consecutive keys one apart are neighbours along ``axis`` (no row wrap: keys include the row)."""
+    """In key order, consecutive keys one apart are neighbours along ``axis`` (rows are padded by one key, so a row's
+    last node is never taken for the next row's first)."""
     t = wp.tid()
     i = vals[t]
     if t + 1 < n:
@@ -326,7 +328,7 @@ def level_neighbours(coords: wp.array, lo: int, hi: int, dims, neighbours: wp.ar
         return
     device = coords.device
     dims_v = wp.vec3i(*(int(d) for d in dims))
-    total_bits = int(np.ceil(np.log2(float(np.prod(np.asarray(dims, dtype=np.float64))) + 2.0)))
+    total_bits = int(np.ceil(np.log2(float(np.prod(np.asarray(dims, dtype=np.float64) + 1.0)) + 2.0)))
     keys = wp.empty(2 * n, dtype=wp.int64, device=device)
     vals = wp.empty(2 * n, dtype=wp.int32, device=device)
     for axis in range(3):
@@ -542,6 +544,16 @@ def _refine_leaves_kernel(
 # ---- signs, top-down ----
 
 
+@wp.func
+def near_cap(x: wp.vec3, cap_lo: wp.vec3, cap_hi: wp.vec3, cap_radius: float, margin: float) -> bool:
+    """Whether ``x`` is within ``cap_radius + margin`` of the box holding the caps over an open mesh's holes
+    (``cap_radius < 0``: no holes)."""
+    if cap_radius < 0.0:
+        return False
+    d = wp.max(wp.max(cap_lo - x, x - cap_hi), wp.vec3(0.0))
+    return wp.length(d) < cap_radius + margin
+
+
 @wp.kernel(enable_backward=False)
 def _inherit_sign_kernel(
     coords: wp.array[wp.vec3i],
@@ -554,7 +566,9 @@ def _inherit_sign_kernel(
     safety: float,
 ):
     """A node takes its parent's sign when the two empty balls around them cover the segment between them (no
-    surface can cross it); otherwise its sign stays 0 (undecided) for the caller's oracle."""
+    surface can cross it); otherwise its sign stays 0 (undecided) for the caller's oracle. Near an open mesh's holes
+    (``field.hole_caps``) a segment may cross the jump of the winding number over a hole without meeting a triangle:
+    there this is a heuristic, which the band refinement of open meshes checks where it matters."""
     i = lo + wp.tid()
     p = parent[i]
     if sign[i] != 0.0:  # already known (a node kept from an earlier build of the same mesh)

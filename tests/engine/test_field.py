@@ -6,7 +6,7 @@ import warp as wp
 
 import engine
 from engine.octree import morton_encode_np
-from tests.metrics import exact_sdf
+from tests.metrics import exact_sdf, winding_inside
 from tests.support import box_mesh, load_mesh, torus_mesh, uv_sphere
 
 RES = 256
@@ -136,6 +136,63 @@ def test_open_meshes_pay_the_winding_number_on_few_nodes(name):
     assert not field.stats["clean_mesh"]
     queries = sum(field.stats["sign_queries"].values())
     assert queries <= 0.2 * field.node_count, (queries, field.node_count)
+
+
+@pytest.mark.parametrize("name", ["stanford-bunny.obj", "suzanne.obj", "teapot.obj"])
+def test_open_meshes_coarse_node_signs_agree_with_the_winding_number(name):
+    # coarse signs spread between neighbours only away from the holes' caps, where that is exact
+    verts, tris = load_mesh(name)
+    field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
+    coarse = slice(field.level_counts[0], field.node_count)
+    centres = field.node_centers()[coarse].astype(np.float32)
+    values = field.values.numpy()[coarse]
+    clear = np.abs(values) > 0.5 * field.voxel_size  # the sign of a node on the surface is ill-conditioned
+    centres, inside_field = centres[clear], values[clear] < 0.0
+    # away from the caps: exactly what the build's own oracle says
+    lo, hi, radius = engine.field.hole_caps(verts, tris)
+    away = np.linalg.norm(np.maximum(np.maximum(lo - centres, centres - hi), 0.0), axis=1) > radius
+    oracle = winding_inside(verts, tris, centres[away], accuracy=engine.field.WINDING_ACCURACY)
+    assert np.array_equal(inside_field[away], oracle), np.count_nonzero(inside_field[away] != oracle)
+    # everywhere: the accurate winding number but for a few nodes
+    accurate = winding_inside(verts, tris, centres, accuracy=4.0)
+    assert np.mean(inside_field == accurate) >= 0.995
+
+
+def test_hole_caps_bound_the_boundary_of_open_meshes():
+    verts, tris = box_mesh(subdivisions=2)
+    assert engine.field.hole_caps(verts, tris) is None
+    top = (verts[tris].mean(axis=1)[:, 2] > 0.99) & (
+        np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])[:, 2] > 0
+    )
+    lo, hi, radius = engine.field.hole_caps(verts, tris[~top])
+    np.testing.assert_allclose(lo, [-1.0, -1.0, 1.0], atol=1e-6)
+    np.testing.assert_allclose(hi, [1.0, 1.0, 1.0], atol=1e-6)
+    # the cone over the square rim from its centre is the 2 x 2 top face: radius sqrt(4 / pi)
+    assert radius == pytest.approx(np.sqrt(4.0 / np.pi), rel=1e-6)
+    # a flipped face makes its edges count twice where the orientations disagree
+    flipped = tris.copy()
+    flipped[0] = flipped[0, ::-1]
+    assert engine.field.hole_caps(verts, flipped) is not None
+
+
+def test_level_neighbours_are_exactly_the_face_adjacent_nodes():
+    verts, tris = uv_sphere(1.0, rings=24, segments=48)
+    field = engine.build_field(verts, tris, voxel_size=0.08)
+    coords = field.coords.numpy().astype(np.int64)
+    table = wp.full((field.node_count, 6), -1, dtype=wp.int32)
+    for k in range(1, field.levels):
+        level = field.level_slice(k)
+        engine.octree.level_neighbours(field.coords, level.start, level.stop, field.fine_dims >> k, table)
+    table = table.numpy()
+    for k in range(1, field.levels):
+        level = field.level_slice(k)
+        c = coords[level]
+        index = {tuple(x): level.start + i for i, x in enumerate(c)}
+        for slot in range(6):
+            step = np.zeros(3, dtype=np.int64)
+            step[slot // 2] = 1 if slot % 2 else -1
+            expected = np.array([index.get(tuple(x), -1) for x in c + step])
+            np.testing.assert_array_equal(table[level, slot], expected, err_msg=f"level {k}, slot {slot}")
 
 
 def test_open_box_inside_is_decided_by_the_winding_number():
