@@ -178,11 +178,11 @@ def _mesh_sign_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def _band_gap_kernel(f: FieldArg, capacity: int, count: wp.array[wp.int32], out: wp.array[wp.int64]):
+def _band_gap_kernel(start: int, f: FieldArg, capacity: int, count: wp.array[wp.int32], out: wp.array[wp.int64]):
     """Octets next to the finest band whose covering coarse leaf has another sign than a node of the band octet
     beside them: a marching cube straddling the zero set there would be incomplete. One thread per band octet
-    (8 consecutive finest nodes); found octet codes are appended to ``out``."""
-    t = wp.tid()
+    (8 consecutive finest nodes, octet ``start + tid``); found octet codes are appended to ``out``."""
+    t = start + wp.tid()
     first = 8 * t
     octet = wp.vec3i(f.coords[first][0] >> 1, f.coords[first][1] >> 1, f.coords[first][2] >> 1)
     size = 2.0 * f.voxel_size
@@ -212,10 +212,12 @@ def _band_gap_kernel(f: FieldArg, capacity: int, count: wp.array[wp.int32], out:
 
 
 @wp.kernel(enable_backward=False)
-def _sign_change_kernel(f: FieldArg, node_level: wp.array[wp.int32], marks: wp.array[wp.int32]):
-    """Mark coarse leaves that have a coarse face neighbour of the opposite sign: the zero set crosses them."""
-    i = f.fine_count + wp.tid()
-    marks[wp.tid()] = 0
+def _sign_change_kernel(start: int, f: FieldArg, node_level: wp.array[wp.int32], marks: wp.array[wp.int32]):
+    """Mark coarse leaves that have a coarse face neighbour of the opposite sign: the zero set crosses them.
+    Coarse node ``start + tid``."""
+    t = start + wp.tid()
+    i = f.fine_count + t
+    marks[t] = 0
     if f.child[i] >= 0:
         return
     s = f.voxel_size * float(1 << node_level[i])
@@ -231,7 +233,7 @@ def _sign_change_kernel(f: FieldArg, node_level: wp.array[wp.int32], marks: wp.a
             nb = locate_leaf(f, q)
             # sign changes next to the finest band are the band-gap kernel's business
             if nb[1] > 0 and (f.values[nb[0]] < 0.0) != inside:
-                marks[wp.tid()] = 1
+                marks[t] = 1
 
 
 @wp.kernel(enable_backward=False)
@@ -974,30 +976,29 @@ def sign_change_octets(field: AdaptiveField) -> np.ndarray:
         return np.zeros(0, dtype=np.int64)
     levels_np = field.level_of_nodes()
     marks = wp.empty(n_coarse, dtype=wp.int32, device=field.device)
-    wp.launch(
-        _sign_change_kernel,
-        dim=n_coarse,
-        inputs=[field.arg(), wp.array(levels_np, dtype=wp.int32, device=field.device)],
-        outputs=[marks],
-        device=field.device,
-    )
+    arg = field.arg()
+    node_level = wp.array(levels_np, dtype=wp.int32, device=field.device)
+    octree.launch_split(_sign_change_kernel, n_coarse, lambda lo, n: [lo, arg, node_level, marks], field.device)
+    n_octets = field.level_counts[0] // 8
+    # each part of the split launch appends to its own buffer (CPU launches have no cross-thread atomics)
+    parts = {}
+
+    def part_args(lo, n):
+        capacity = max(1024, n // 4)
+        while True:
+            count = wp.zeros(1, dtype=wp.int32, device=field.device)
+            gaps = wp.empty(capacity, dtype=wp.int64, device=field.device)
+            wp.launch(_band_gap_kernel, dim=n, inputs=[lo, arg, capacity, count, gaps], device=field.device)
+            found = int(count.numpy()[0])
+            if found <= capacity:
+                parts[lo] = gaps.numpy()[:found]
+                return
+            capacity = found
+
+    wp.load_module(_band_gap_kernel.module, device=field.device)
+    octree.run_split(part_args, n_octets, field.device)
+    gap_octets = np.unique(np.concatenate([parts[k] for k in sorted(parts)] or [np.zeros(0, np.int64)]))
     n0 = field.level_counts[0]
-    capacity = max(1024, n0 // 8)
-    while True:
-        count = wp.zeros(1, dtype=wp.int32, device=field.device)
-        gaps = wp.empty(capacity, dtype=wp.int64, device=field.device)
-        wp.launch(
-            _band_gap_kernel,
-            dim=n0 // 8,
-            inputs=[field.arg(), capacity],
-            outputs=[count, gaps],
-            device=field.device,
-        )
-        found = int(count.numpy()[0])
-        if found <= capacity:
-            break
-        capacity = found
-    gap_octets = np.unique(gaps.numpy()[:found])
     marked = n0 + np.flatnonzero(marks.numpy())
     if len(marked) == 0:
         return gap_octets

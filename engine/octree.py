@@ -28,27 +28,22 @@ SPLIT_MIN_DIM = 20_000
 EMIT_SPLIT_MIN_DIM = 1_000
 
 
-def launch_split(kernel, dim: int, args, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM) -> None:
-    """Launch ``kernel`` over [0, dim) — on the CPU, as one launch per core from as many Python threads.
-
-    A Warp CPU launch runs on one thread but releases the GIL, so launches from two threads use two cores. ``args``
-    is called with (start, count) and returns the launch's ``inputs`` list (slices of per-thread arrays, or an
-    offset the kernel adds to its thread id). On CUDA, or for small launches, this is one ordinary launch.
-    """
+def run_split(work, dim: int, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM) -> None:
+    """Call ``work(start, count)`` on consecutive parts of [0, dim), from one Python thread per CPU core (Warp CPU
+    launches release the GIL); one call on CUDA or for small ``dim``. The first error is re-raised in the caller."""
     if dim <= 0:
         return
     device = wp.get_device(device)
     parts = parts or (os.cpu_count() or 1)
     if device.is_cuda or parts < 2 or dim < min_dim:
-        wp.launch(kernel, dim=dim, inputs=args(0, dim), device=device)
+        work(0, dim)
         return
-    wp.load_module(kernel.module, device=device)  # compile (or load) once, before the threads race for it
     bounds = np.linspace(0, dim, parts + 1).astype(np.int64)
     errors = []
 
     def run(lo, hi):
         try:
-            wp.launch(kernel, dim=int(hi - lo), inputs=args(int(lo), int(hi - lo)), device=device)
+            work(int(lo), int(hi - lo))
         except Exception as err:  # re-raised below, in the caller's thread
             errors.append(err)
 
@@ -60,6 +55,25 @@ def launch_split(kernel, dim: int, args, device, *, parts: int | None = None, mi
         t.join()
     if errors:
         raise errors[0]
+
+
+def launch_split(kernel, dim: int, args, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM) -> None:
+    """Launch ``kernel`` over [0, dim) — on the CPU, as one launch per core from as many Python threads.
+
+    A Warp CPU launch runs on one thread but releases the GIL, so launches from two threads use two cores. ``args``
+    is called with (start, count) and returns the launch's ``inputs`` list (slices of per-thread arrays, or an
+    offset the kernel adds to its thread id). On CUDA, or for small launches, this is one ordinary launch.
+    """
+    if dim <= 0:
+        return
+    wp.load_module(kernel.module, device=device)  # compile (or load) once, before threads race for it
+    run_split(
+        lambda lo, n: wp.launch(kernel, dim=n, inputs=args(lo, n), device=device),
+        dim,
+        device,
+        parts=parts,
+        min_dim=min_dim,
+    )
 
 
 def count_then_emit(kernel, dim: int, args, device, check=None) -> wp.array:
