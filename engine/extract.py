@@ -17,6 +17,7 @@ import warp as wp
 import warp.geometry
 
 from .errors import AasdfError
+from .octree import launch_split
 
 # Corner c of a cube with minimum corner (i, j, k) is the sample (i, j, k) + _CORNER_OFFSETS[c], in the order Warp's
 # sparse marching cubes expects its (M, 8) corner values.
@@ -82,6 +83,7 @@ def _gallop_lower_bound(keys: wp.array[wp.int64], start: wp.int32, target: wp.in
 
 @wp.kernel(enable_backward=False)
 def _find_cube_corners_kernel(
+    first: int,
     keys: wp.array[wp.int64],
     values: wp.array[wp.float32],
     stride_x: wp.int64,
@@ -95,6 +97,7 @@ def _find_cube_corners_kernel(
     Warp's marching cubes). One thread per sample; the 7 searches gallop forward in ascending key order.
 
     Args:
+        first: Sample of thread 0 (launches may cover part of the samples).
         keys: (N,) int64 sorted sample keys ``i * stride_x + j * stride_y + k`` (relative to the minimum).
         values: (N,) float32 values minus the level, in key order, none exactly 0.
         stride_x: Key step of +1 in i.
@@ -103,7 +106,7 @@ def _find_cube_corners_kernel(
             where ``active`` is 1.
         active: (N,) int32 output, 1 for a complete cube whose corners change sign, else 0.
     """
-    i = wp.tid()
+    i = first + wp.tid()
     n = keys.shape[0]
     key = keys[i]
     active[i] = 0
@@ -294,12 +297,11 @@ def extract_surface(coords, values, *, origin, spacing, iso=0.0, device=None) ->
     values_wp = wp.array(shifted, dtype=wp.float32, device=device)
     corners = wp.empty((n, 8), dtype=wp.int32, device=device)
     active = wp.empty(n, dtype=wp.int32, device=device)
-    wp.launch(
+    launch_split(
         _find_cube_corners_kernel,
-        dim=n,
-        inputs=[keys_wp, values_wp, wp.int64(stride_x), wp.int64(stride_y)],
-        outputs=[corners, active],
-        device=device,
+        n,
+        lambda start, _count: [start, keys_wp, values_wp, wp.int64(stride_x), wp.int64(stride_y), corners, active],
+        device,
     )
     active_scan = wp.empty(n, dtype=wp.int32, device=device)
     wp.utils.array_scan(active, active_scan, inclusive=True)
