@@ -355,10 +355,10 @@ def _keep_octets_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def _aligned_octets_kernel(coords: wp.array[wp.vec3i], offset: wp.vec3i, codes: wp.array[wp.int64]):
-    """Octet code, on the result lattice, of each finest node of an aligned operand."""
+def _aligned_octets_kernel(coords: wp.array[wp.vec3i], offset: wp.vec3i, step: int, codes: wp.array[wp.int64]):
+    """Octet code, on the result lattice, of every ``step``-th finest node of an aligned operand."""
     i = wp.tid()
-    c = coords[i] + offset
+    c = coords[step * i] + offset
     codes[i] = morton_encode(wp.vec3i(c[0] >> 1, c[1] >> 1, c[2] >> 1))
 
 
@@ -436,9 +436,14 @@ def _octets_of(f: AdaptiveField, origin, spacing, oct_dims, aligned, device) -> 
     """Octet codes (result lattice) that cover an operand's finest level."""
     n0 = int(f.level_offsets[1])
     if aligned:
-        codes = wp.empty(n0, dtype=wp.int64, device=device)
-        offset = wp.vec3i(*(int(v) for v in _offset_to(f, origin, spacing)))
-        wp.launch(_aligned_octets_kernel, dim=n0, inputs=[f.coords, offset], outputs=[codes], device=device)
+        offset_np = _offset_to(f, origin, spacing)
+        # with even offsets the operand's octets are result octets: one code per octet (its first node) will do
+        step = 8 if f.levels > 1 and not (offset_np % 2).any() else 1
+        codes = wp.empty(n0 // step, dtype=wp.int64, device=device)
+        offset = wp.vec3i(*(int(v) for v in offset_np))
+        wp.launch(
+            _aligned_octets_kernel, dim=n0 // step, inputs=[f.coords, offset, step], outputs=[codes], device=device
+        )
         return codes
     args = [f.arg(), wp.vec3(*origin), 2.0 * spacing, 1.0 * spacing, wp.vec3i(*(int(d) for d in oct_dims))]
     return octree.count_then_emit(
