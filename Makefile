@@ -41,6 +41,7 @@ demo: venv
 bench: venv
 	$(PY) bench/construction.py
 	$(PY) bench/pipeline.py
+	$(PY) bench/addon.py
 	$(PY) bench/cold_start.py
 	$(PY) bench/scaling.py
 

@@ -126,6 +126,127 @@ def _octets_per_triangle_kernel(
         counts[t] = n
 
 
+@wp.func
+def _closest_on_segment(p: wp.vec3, a: wp.vec3, b: wp.vec3) -> wp.vec3:
+    ab = b - a
+    t = wp.dot(p - a, ab) / wp.max(wp.dot(ab, ab), 1.0e-30)
+    return a + ab * wp.clamp(t, 0.0, 1.0)
+
+
+@wp.func
+def closest_on_triangle(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.vec3:
+    """Closest point to ``p`` on triangle (a, b, c) by Voronoi regions (Ericson, Real-Time Collision Detection
+    5.1.5); a degenerate triangle falls back to its nearest edge."""
+    ab = b - a
+    ac = c - a
+    ap = p - a
+    d1 = wp.dot(ab, ap)
+    d2 = wp.dot(ac, ap)
+    if d1 <= 0.0 and d2 <= 0.0:
+        return a
+    bp = p - b
+    d3 = wp.dot(ab, bp)
+    d4 = wp.dot(ac, bp)
+    if d3 >= 0.0 and d4 <= d3:
+        return b
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        return a + ab * (d1 / (d1 - d3))
+    cp = p - c
+    d5 = wp.dot(ab, cp)
+    d6 = wp.dot(ac, cp)
+    if d6 >= 0.0 and d5 <= d6:
+        return c
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        return a + ac * (d2 / (d2 - d6))
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))
+    total = va + vb + vc
+    if total > 0.0:
+        return a + ab * (vb / total) + ac * (vc / total)
+    # degenerate: the nearest of the three edges
+    q = _closest_on_segment(p, a, b)
+    r = _closest_on_segment(p, b, c)
+    if wp.length_sq(p - r) < wp.length_sq(p - q):
+        q = r
+    r = _closest_on_segment(p, c, a)
+    if wp.length_sq(p - r) < wp.length_sq(p - q):
+        q = r
+    return q
+
+
+@wp.func
+def _node_closest_point(mesh: wp.uint64, x: wp.vec3, max_dist: float, far_dist: float):
+    """(found, closest point) of one node by the mesh BVH: within ``max_dist``, else within ``far_dist``."""
+    q = wp.mesh_query_point_no_sign(mesh, x, max_dist)
+    if not q.result:
+        # a node added where an open mesh's surface crosses a hole can be far from every triangle
+        q = wp.mesh_query_point_no_sign(mesh, x, far_dist)
+    if q.result:
+        return 1, wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+    return 0, x
+
+
+@wp.kernel(enable_backward=False)
+def _finest_octet_distance_kernel(
+    first: int,
+    mesh: wp.uint64,
+    coords: wp.array[wp.vec3i],
+    octet_nodes: wp.array[wp.int32],
+    origin: wp.vec3,
+    spacing: float,
+    max_dist: float,
+    far_dist: float,
+    dist: wp.array[wp.float32],
+    proj: wp.array[wp.vec3],
+):
+    """Exact closest points of the 8 nodes of one finest octet (first node ``octet_nodes[first + tid]``, children in
+    Morton order). One BVH query at the octet's centre gives its distance d; each node's closest triangle then lies
+    within d + sqrt(3) h of the centre, so the triangles whose boxes meet that cube are all the candidates, and every
+    node is tested against them directly — one BVH query per octet instead of eight. Octets far from the mesh (no
+    triangle within ``max_dist`` of the centre) query per node."""
+    t = first + wp.tid()
+    base = octet_nodes[t]
+    c = node_center(origin, spacing, coords[base]) + wp.vec3(0.5 * spacing)
+    q = wp.mesh_query_point_no_sign(mesh, c, max_dist)
+    if q.result:
+        reach = wp.length(c - wp.mesh_eval_position(mesh, q.face, q.u, q.v)) + 1.7321 * spacing * 1.001
+        best = wp.vector(UNSET_DISTANCE, length=8, dtype=float)
+        foot = wp.matrix(0.0, shape=(8, 3), dtype=float)
+        m = wp.mesh_get(mesh)
+        candidates = wp.mesh_query_aabb(mesh, c - wp.vec3(reach), c + wp.vec3(reach))
+        f = int(0)
+        while wp.mesh_query_aabb_next(candidates, f):
+            a = m.points[m.indices[3 * f]]
+            b = m.points[m.indices[3 * f + 1]]
+            cc = m.points[m.indices[3 * f + 2]]
+            for k in range(8):
+                x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
+                p = closest_on_triangle(x, a, b, cc)
+                d = wp.length_sq(x - p)
+                if d < best[k]:
+                    best[k] = d
+                    foot[k] = p
+        for k in range(8):
+            x = node_center(origin, spacing, coords[base + k])
+            if best[k] < UNSET_DISTANCE:
+                p = wp.vec3(foot[k, 0], foot[k, 1], foot[k, 2])
+                dist[base + k] = wp.length(x - p)
+                proj[base + k] = p
+            else:  # cannot happen but for rounding: the node's own query
+                found, p = _node_closest_point(mesh, x, max_dist, far_dist)
+                dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
+                proj[base + k] = p
+        return
+    for k in range(8):
+        x = node_center(origin, spacing, coords[base + k])
+        found, p = _node_closest_point(mesh, x, max_dist, far_dist)
+        dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
+        proj[base + k] = p
+
+
 @wp.kernel(enable_backward=False)
 def _finest_distance_kernel(
     mesh: wp.uint64,
@@ -139,21 +260,13 @@ def _finest_distance_kernel(
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
 ):
-    """Exact closest point of each finest node (Warp's mesh BVH)."""
+    """Exact closest point of each node of a dense finest level (Warp's mesh BVH)."""
     i = wp.tid()
     x = node_center(origin, spacing, coords[i])
-    q = wp.mesh_query_point_no_sign(mesh, x, max_dist)
-    if not q.result:
-        # a node added where an open mesh's surface crosses a hole can be far from every triangle
-        q = wp.mesh_query_point_no_sign(mesh, x, far_dist)
+    found, p = _node_closest_point(mesh, x, max_dist, far_dist)
     source[i] = source_id
-    if q.result:
-        p = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
-        dist[i] = wp.length(x - p)
-        proj[i] = p
-    else:
-        dist[i] = UNSET_DISTANCE
-        proj[i] = x
+    dist[i] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
+    proj[i] = p
 
 
 # ---- signs ----
@@ -879,38 +992,49 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
                 dst.assign(host)
             src0.fill_(int(field_id))
             todo = np.flatnonzero(~found).astype(np.int32)
-        query_coords = (
-            fine_coords if todo is None else wp.array(fine_coords.numpy()[todo], dtype=wp.vec3i, device=device)
-        )
-        count = n0 if todo is None else len(todo)
-        q_dist = wp.empty(count, dtype=wp.float32, device=device)
-        q_proj = wp.empty(count, dtype=wp.vec3, device=device)
-        q_src = wp.empty(count, dtype=wp.int32, device=device)
         origin_v = wp.vec3(*origin)
-        octree.launch_split(
-            _finest_distance_kernel,
-            count,
-            lambda lo, n: [
-                mesh.id,
-                query_coords[lo : lo + n],
-                origin_v,
-                voxel_size,
-                float(query_radius),
-                diag,
-                int(field_id),
-                q_dist[lo : lo + n],
-                q_proj[lo : lo + n],
-                q_src[lo : lo + n],
-            ],
-            device,
-        )
-        if todo is None:
-            dist0, proj0, src0 = q_dist, q_proj, q_src
-        elif count:
-            for dst, src in ((dist0, q_dist), (proj0, q_proj)):
-                host = dst.numpy().copy()
-                host[todo] = src.numpy()
-                dst.assign(host)
+        if octets is not None:
+            # octet by octet, in place; an incremental build computes only the octets its previous build lacks
+            first_nodes = np.arange(0, n0, 8) if todo is None else np.unique(todo // 8) * 8
+            octet_nodes = wp.array(first_nodes.astype(np.int32), dtype=wp.int32, device=device)
+            if todo is None:
+                src0.fill_(int(field_id))
+            octree.launch_split(
+                _finest_octet_distance_kernel,
+                len(first_nodes),
+                lambda lo, n: [
+                    lo,
+                    mesh.id,
+                    fine_coords,
+                    octet_nodes,
+                    origin_v,
+                    voxel_size,
+                    float(query_radius),
+                    diag,
+                    dist0,
+                    proj0,
+                ],
+                device,
+                min_dim=octree.EMIT_SPLIT_MIN_DIM,
+            )
+        else:  # a single dense level: node by node
+            octree.launch_split(
+                _finest_distance_kernel,
+                n0,
+                lambda lo, n: [
+                    mesh.id,
+                    fine_coords[lo : lo + n],
+                    origin_v,
+                    voxel_size,
+                    float(query_radius),
+                    diag,
+                    int(field_id),
+                    dist0[lo : lo + n],
+                    proj0[lo : lo + n],
+                    src0[lo : lo + n],
+                ],
+                device,
+            )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
         return assemble_field(
             origin=origin,
