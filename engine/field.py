@@ -201,18 +201,25 @@ def _finest_octet_distance_kernel(
     far_dist: float,
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
+    octet_dist: wp.array[wp.float32],
+    octet_proj: wp.array[wp.vec3],
 ):
     """Exact closest points of the 8 nodes of one finest octet (first node ``octet_nodes[first + tid]``, children in
     Morton order). One BVH query at the octet's centre gives its distance d; each node's closest triangle then lies
     within d + sqrt(3) h of the centre, so the triangles whose boxes meet that cube are all the candidates, and every
     node is tested against them directly — one BVH query per octet instead of eight. Octets far from the mesh (no
-    triangle within ``max_dist`` of the centre) query per node."""
+    triangle within ``max_dist`` of the centre) query per node. The centre's closest point (the octet's parent node's)
+    goes to ``octet_dist``/``octet_proj`` (UNSET_DISTANCE when not found)."""
     t = first + wp.tid()
     base = octet_nodes[t]
     c = node_center(origin, spacing, coords[base]) + wp.vec3(0.5 * spacing)
     q = wp.mesh_query_point_no_sign(mesh, c, max_dist)
+    octet_dist[base // 8] = UNSET_DISTANCE
     if q.result:
-        reach = wp.length(c - wp.mesh_eval_position(mesh, q.face, q.u, q.v)) + 1.7321 * spacing * 1.001
+        centre_foot = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+        octet_dist[base // 8] = wp.length(c - centre_foot)
+        octet_proj[base // 8] = centre_foot
+        reach = octet_dist[base // 8] + 1.7321 * spacing * 1.001
         best = wp.vector(UNSET_DISTANCE, length=8, dtype=float)
         foot = wp.matrix(0.0, shape=(8, 3), dtype=float)
         m = wp.mesh_get(mesh)
@@ -997,6 +1004,9 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
             # octet by octet, in place; an incremental build computes only the octets its previous build lacks
             first_nodes = np.arange(0, n0, 8) if todo is None else np.unique(todo // 8) * 8
             octet_nodes = wp.array(first_nodes.astype(np.int32), dtype=wp.int32, device=device)
+            octet_dist = wp.full(n0 // 8, octree.UNSET_DISTANCE, dtype=wp.float32, device=device)
+            octet_proj = wp.empty(n0 // 8, dtype=wp.vec3, device=device)
+            octet_points = (octet_dist, octet_proj)
             if todo is None:
                 src0.fill_(int(field_id))
             octree.launch_split(
@@ -1013,11 +1023,14 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
                     diag,
                     dist0,
                     proj0,
+                    octet_dist,
+                    octet_proj,
                 ],
                 device,
                 min_dim=octree.EMIT_SPLIT_MIN_DIM,
             )
         else:  # a single dense level: node by node
+            octet_points = None
             octree.launch_split(
                 _finest_distance_kernel,
                 n0,
@@ -1053,6 +1066,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
             field_ids=(field_id,),
             timings=timings,
             mesh_id=mesh.id,
+            octet_points=octet_points,
             hole_caps=caps,
         )
 
@@ -1172,6 +1186,7 @@ def assemble_field(
     spread_signs=True,
     known_signs=None,
     hole_caps=None,
+    octet_points=None,
 ):
     """Build the intermediate and top levels above a finest level and sign every node (shared by construction
     and booleans).
@@ -1183,7 +1198,8 @@ def assemble_field(
     hi, spacing, dist, proj, source, sign)`` is given (booleans: the operands are sampled), it sets every coarse
     node's distance, projection, source and sign directly, in place of the FIM solve and the sign oracles.
     ``spread_signs`` lets signs spread between same-level neighbours; ``hole_caps`` (box lo, box hi, radius, from
-    :func:`hole_caps`) keeps them from spreading near an open mesh's holes.
+    :func:`hole_caps`) keeps them from spreading near an open mesh's holes. ``octet_points`` (distances, closest
+    points) of the finest octets' centres, where the finest level's computation found them: the level-1 nodes there.
     ``known_signs``: an earlier field of the same mesh and domain whose nodes' signs are reused where nodes match.
     """
     top_dims = np.asarray(top_dims, dtype=np.int64)
@@ -1284,6 +1300,7 @@ def assemble_field(
             source,
             mesh_id=mesh_id,
             known=known,
+            octet_points=octet_points if k == 1 else None,
         )
         timings[f"{name}_neighbours"] = timings.get(f"{name}_neighbours", 0.0) + tn - tk
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk + level_times.get(k, 0.0)

@@ -369,13 +369,16 @@ def _init_from_children_kernel(
     mesh: wp.uint64,
     max_dist: float,
     known: wp.array[wp.int32],
+    octet_dist: wp.array[wp.float32],
+    octet_proj: wp.array[wp.vec3],
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
 ):
     """Internal nodes are sources: the nearest of their children's projection points (Ren et al.), which with a
     mesh is then made exact by a BVH query bounded by that distance. Leaves start unset. Nodes marked ``known`` keep
-    the values they were given."""
+    the values they were given. ``octet_dist``/``octet_proj`` (per octet of the level below, empty if none): exact
+    closest points of octet centres already found (UNSET_DISTANCE where not), which are this level's node centres."""
     i = lo + wp.tid()
     if known[i] == 1:
         return
@@ -396,6 +399,11 @@ def _init_from_children_kernel(
     dist[i] = best
     proj[i] = proj[best_j]
     source[i] = source[best_j]
+    if octet_dist.shape[0] > 0:
+        if octet_dist[c // 8] < UNSET_DISTANCE:
+            dist[i] = octet_dist[c // 8]
+            proj[i] = octet_proj[c // 8]
+            return
     if mesh != wp.uint64(0):
         q = wp.mesh_query_point_no_sign(mesh, x, wp.min(best * 1.0001 + spacing * 1.0e-4, max_dist))
         if q.result:
@@ -448,10 +456,24 @@ def _fim_sweep_kernel(
 
 
 def solve_level(
-    coords, first_child, neighbours, lo, hi, origin, spacing, dist, proj, source, mesh_id=0, known=None, max_sweeps=4096
+    coords,
+    first_child,
+    neighbours,
+    lo,
+    hi,
+    origin,
+    spacing,
+    dist,
+    proj,
+    source,
+    mesh_id=0,
+    known=None,
+    max_sweeps=4096,
+    octet_points=None,
 ):
     """Initialise a level from its children (exactly from ``mesh_id`` when given) and run the fast iterative method
-    until no leaf changes. Nodes flagged in ``known`` (N,) int32 keep their given distance and projection."""
+    until no leaf changes. Nodes flagged in ``known`` (N,) int32 keep their given distance and projection.
+    ``octet_points``: (distances, closest points) of the octet centres of the level below, where already known."""
     n = hi - lo
     if n == 0:
         return 0
@@ -459,6 +481,8 @@ def solve_level(
     if known is None:
         known = wp.zeros(dist.shape[0], dtype=wp.int32, device=device)
     origin_v = wp.vec3(*origin)
+    if octet_points is None:
+        octet_points = (wp.empty(0, dtype=wp.float32, device=device), wp.empty(0, dtype=wp.vec3, device=device))
     launch_split(
         _init_from_children_kernel,
         n,
@@ -471,6 +495,7 @@ def solve_level(
             wp.uint64(mesh_id),
             4.0 * float(spacing),
             known,
+            *octet_points,
             dist,
             proj,
             source,
