@@ -1253,8 +1253,14 @@ def assemble_field(
     neighbours = wp.full((n, 6), -1, dtype=wp.int32, device=device)
     # Coarse nodes an earlier build of the same mesh and domain has keep their distances (refinement rounds).
     known = wp.zeros(n, dtype=wp.int32, device=device)
-    if known_signs is not None and level_values is None:
+    # nodes of each level the earlier build has too: (found, where in its level), shared by distances and signs
+    matches = {}
+    if known_signs is not None:
         codes_np, prev_codes = codes.numpy(), known_signs.codes.numpy()
+        for k in range(levels):
+            ks = known_signs.level_slice(k)
+            matches[k] = _match_codes(prev_codes[ks], codes_np[int(offsets[k]) : int(offsets[k + 1])])
+    if known_signs is not None and level_values is None:
         known_np = np.zeros(n, dtype=np.int32)
         dist_np, proj_np, src_np = dist.numpy(), proj.numpy(), source.numpy()
         prev_dist, prev_proj, prev_src = (
@@ -1265,7 +1271,7 @@ def assemble_field(
         for k in range(1, levels):
             lo, hi = int(offsets[k]), int(offsets[k + 1])
             ks = known_signs.level_slice(k)
-            found, where = _match_codes(prev_codes[ks], codes_np[lo:hi])
+            found, where = matches[k]
             idx = lo + np.flatnonzero(found)
             src_idx = ks.start + where[found]
             known_np[idx] = 1
@@ -1315,7 +1321,7 @@ def assemble_field(
         for k in range(levels):
             lo, hi = int(offsets[k]), int(offsets[k + 1])
             ks = known_signs.level_slice(k)
-            found, where = _match_codes(known_signs.codes.numpy()[ks], codes_np[lo:hi])
+            found, where = matches[k]
             sign_np[lo:hi][found] = np.where(known_values[ks][where[found]] < 0.0, -1.0, 1.0)
         sign.assign(sign_np)
     top_lo, top_hi = int(offsets[levels - 1]), int(offsets[levels])
