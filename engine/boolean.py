@@ -50,22 +50,49 @@ def sdf_combine(op: int, a: float, b: float, k: float) -> float:
 
 
 @wp.func
+def _node_of(f: FieldArg, j: int, x: wp.vec3):
+    """(1, phi, grad, j) of an operand's finest node ``j`` seen from ``x`` (its position)."""
+    g = x - f.proj[j]
+    ln = wp.length(g)
+    phi = f.values[j]
+    if ln > 0.0:
+        g = g / ln
+    if phi < 0.0:
+        g = -g
+    return 1, phi, g, j
+
+
+@wp.func
 def _lookup(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3):
-    """An operand's own finest node at result node ``c`` when the lattices are aligned: (found, phi, grad)."""
+    """An operand's own finest node at result node ``c`` when the lattices are aligned: (found, phi, grad, index)."""
     if aligned == 1:
         oc = c + offset
         if oc[0] >= 0 and oc[1] >= 0 and oc[2] >= 0:
             j = octree.find_key(f.codes, 0, f.fine_count, morton_encode(oc))
             if j >= 0:
-                g = x - f.proj[j]
-                ln = wp.length(g)
-                phi = f.values[j]
-                if ln > 0.0:
-                    g = g / ln
-                if phi < 0.0:
-                    g = -g
-                return 1, phi, g
-    return 0, 0.0, wp.vec3(0.0)
+                return _node_of(f, j, x)
+    return 0, 0.0, wp.vec3(0.0), -1
+
+
+@wp.func
+def _lookup_node(
+    f: FieldArg,
+    aligned: int,
+    offset: wp.vec3i,
+    c: wp.vec3i,
+    x: wp.vec3,
+    octet_mode: int,
+    octet_first: wp.array[wp.int32],
+    i: int,
+):
+    """:func:`_lookup` for result finest node ``i`` (child ``i % 8`` of octet ``i // 8``), through the octet's first
+    node in the operand when the octets coincide (``octet_mode``; -1 there: the operand lacks the octet)."""
+    if octet_mode == 1:
+        j0 = octet_first[i // 8]
+        if j0 >= 0:
+            return _node_of(f, j0 + i % 8, x)
+        return 0, 0.0, wp.vec3(0.0), -1
+    return _lookup(f, aligned, offset, c, x)
 
 
 @wp.func
@@ -139,17 +166,23 @@ def _combine_nodes_kernel(
     source: wp.array[wp.int32],
     sign: wp.array[wp.float32],
     values: wp.array[wp.float32],
+    a_octets: int,
+    b_octets: int,
+    a_first: wp.array[wp.int32],
+    b_first: wp.array[wp.int32],
 ):
     """Value of the boolean at each node of one level: both operands looked up or sampled, then combined. The
-    operand whose value the combination follows gives the projection point and the source id."""
+    operand whose value the combination follows gives the projection point and the source id. On the finest level,
+    ``a_first``/``b_first`` give each result octet's first node in an operand whose octets coincide with the
+    result's (``a_octets``/``b_octets``), found by the bracket pass."""
     t = wp.tid()
     i = lo + t
     c = coords[i]
     x = node_center(origin, spacing, c)
     # Exact node values where the lattices align; elsewhere a cheap bracket from the containing coarse leaf, and
     # the MLS sample only when that operand can decide the result (its bracket overlaps the other's within blend).
-    fa, va, ga = _lookup(a, a_aligned, a_offset, c, x)
-    fb, vb, gb = _lookup(b, b_aligned, b_offset, c, x)
+    fa, va, ga, ja = _lookup_node(a, a_aligned, a_offset, c, x, a_octets, a_first, i)
+    fb, vb, gb, jb = _lookup_node(b, b_aligned, b_offset, c, x, b_octets, b_first, i)
     if precise == 0:
         # coarse levels: each operand's containing leaf, extrapolated along its gradient
         if fa == 0:
@@ -210,22 +243,26 @@ def _combine_nodes_kernel(
     use_a = wp.abs(phi - ra[0]) <= wp.abs(phi - b_term)
     r = rb
     follow = b
+    node = jb
     if use_a:
         r = ra
         follow = a
+        node = ja
     g = wp.vec3(r[1], r[2], r[3])
     proj[i] = x - r[0] * g
     dist[i] = wp.abs(phi)
     sign[i] = wp.where(phi < 0.0, -1.0, 1.0)
     values[t] = phi
-    source[i] = follow.source[locate_leaf(follow, clamp_to_domain(follow, x))[0]]
+    if node < 0:
+        node = locate_leaf(follow, clamp_to_domain(follow, x))[0]
+    source[i] = follow.source[node]
 
 
 @wp.func
 def _bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3):
     """(phi, radius): an operand's value at result node ``c`` lies within ``radius`` of ``phi`` — exact (radius 0)
     where the lattices align, the containing coarse leaf's bracket elsewhere; radius -1 in a non-aligned finest band."""
-    found, phi, g = _lookup(f, aligned, offset, c, x)
+    found, phi, g, j = _lookup(f, aligned, offset, c, x)
     if found == 1:
         return phi, 0.0
     return _estimate(f, x)
@@ -283,6 +320,8 @@ def _octet_bracket_kernel(
     near: wp.array[wp.int32],
     has_neg: wp.array[wp.int32],
     has_pos: wp.array[wp.int32],
+    a_first_out: wp.array[wp.int32],
+    b_first_out: wp.array[wp.int32],
 ):
     """Per finest octet of the result, from the operands' brackets alone (no interpolation): whether a node may lie
     within ``band`` of the result's surface, and which signs its nodes may have."""
@@ -323,6 +362,8 @@ def _octet_bracket_kernel(
                 neg = 1
                 pos = 1
     near[t] = n_near
+    a_first_out[t] = a_first
+    b_first_out[t] = b_first
     has_neg[t] = neg
     has_pos[t] = pos
 
@@ -523,7 +564,9 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     # surface an open operand gets across a hole): octets with both signs, or next to one of the other sign, stay.
     t0 = time.perf_counter()
     n_oct = octets.shape[0]
-    near, has_neg, has_pos, keep_wp = (wp.empty(n_oct, dtype=wp.int32, device=device) for _ in range(4))
+    near, has_neg, has_pos, keep_wp, a_first, b_first = (
+        wp.empty(n_oct, dtype=wp.int32, device=device) for _ in range(6)
+    )
     flags = [int(aligned[0]), int(aligned[1])]
     # octet-granular look-ups need the operand's octets to coincide with the result's (even lattice offsets)
     octet_flags = [int(al and not (_offset_to(f, origin, h) % 2).any()) for f, al in zip((a, b), aligned, strict=False)]
@@ -547,6 +590,8 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
             near,
             has_neg,
             has_pos,
+            a_first,
+            b_first,
         ],
         device,
     )
@@ -555,12 +600,23 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     )
     keep = keep_wp.numpy().astype(bool)
     if not keep.all():
-        octets = wp.array(octets.numpy()[keep], dtype=wp.int64, device=device)
+        octets, a_first, b_first = (
+            wp.array(arr.numpy()[keep], dtype=arr.dtype, device=device) for arr in (octets, a_first, b_first)
+        )
     fine_codes, fine_coords = octree.expand_octets(octets)
     timings["finest_prune"] = time.perf_counter() - t0
 
+    no_octets = wp.empty(0, dtype=wp.int32, device=device)
+
     def run(coords, lo_, hi_, spacing_, dist, proj, source, sign, values):
         flags = [int(aligned[0] and spacing_ == h), int(aligned[1] and spacing_ == h)]
+        finest = spacing_ == h
+        octet_args = [
+            octet_flags[0] if finest else 0,
+            octet_flags[1] if finest else 0,
+            a_first if finest else no_octets,
+            b_first if finest else no_octets,
+        ]
         octree.launch_split(
             _combine_nodes_kernel,
             hi_ - lo_,
@@ -582,6 +638,7 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
                 source,
                 sign,
                 values[start : start + n],
+                *octet_args,
             ],
             device,
         )

@@ -1166,11 +1166,13 @@ def sign_change_octets(field: AdaptiveField) -> np.ndarray:
 
 def _match_codes(known: np.ndarray, codes: np.ndarray):
     """For each of ``codes``: whether the sorted-or-not array ``known`` holds it, and where."""
-    order = np.argsort(known, kind="stable")
-    pos = np.searchsorted(known[order], codes)
-    pos = np.minimum(pos, max(len(known) - 1, 0))
-    found = (known[order][pos] == codes) if len(known) else np.zeros(len(codes), dtype=bool)
-    return found, order[pos]
+    if len(known) == 0:
+        return np.zeros(len(codes), dtype=bool), np.zeros(len(codes), dtype=np.int64)
+    order = None if bool(np.all(known[1:] > known[:-1])) else np.argsort(known, kind="stable")
+    ordered = known if order is None else known[order]
+    pos = np.minimum(np.searchsorted(ordered, codes), len(known) - 1)
+    found = ordered[pos] == codes
+    return found, (pos if order is None else order[pos])
 
 
 def _bits(dims) -> int:
