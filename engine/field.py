@@ -71,6 +71,9 @@ def tri_box_overlap(center: wp.vec3, half: wp.vec3, a: wp.vec3, b: wp.vec3, c: w
     e0 = v1 - v0
     e1 = v2 - v1
     e2 = v0 - v2
+    # the triangle's plane first: it rejects most boxes near a triangle
+    if _axis_test(wp.cross(e0, e1), v0, v1, v2, half):
+        return False
     for k in range(3):
         unit = wp.vec3(0.0)
         unit[k] = 1.0
@@ -80,8 +83,6 @@ def tri_box_overlap(center: wp.vec3, half: wp.vec3, a: wp.vec3, b: wp.vec3, c: w
             return False
         if _axis_test(wp.cross(unit, e2), v0, v1, v2, half):
             return False
-    if _axis_test(wp.cross(e0, e1), v0, v1, v2, half):
-        return False
     return True
 
 
