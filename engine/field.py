@@ -4,15 +4,16 @@ Pipeline of :func:`build_field`:
 
 1. finest level: one thread per triangle lists the octets (parents of finest cells) that a triangle-box test says
    lie within ``padding`` cells of it (Eq. 4-5: whole octets, so every parent gets exactly 8 children); radix sort,
-   de-duplicate, expand to cells, exact closest point per cell from Warp's mesh BVH;
+   de-duplicate, expand to cells; exact closest points octet by octet (one BVH query at the octet centre bounds the
+   candidate triangles, one box query lists them), per cell from Warp's mesh BVH for meshes finer than the cells;
 2. intermediate levels: grandparents of the level below expanded to their 8 children (Eq. 6: parents plus the
    parents' siblings), de-duplicated; internal nodes take the nearest of their children's projection points, leaves
    are solved by a fast iterative method over same-level neighbours found by axis-wise key sorting (Eq. 7);
 3. top level: a dense grid over the domain, initialised from its children and solved the same way;
 4. signs, top-down: inside means generalised winding number >= 0.5. A node inherits its parent's sign when their
    empty balls cover the segment between them; only undecided nodes pay the winding number (the dense top level
-   and the coarse nodes within about half a cell of the surface). Undecided finest nodes take the pseudo-normal
-   sign of their closest point, except near open, non-manifold or inconsistently oriented edges.
+   and the coarse nodes within about half a cell of the surface). Signs also spread between same-level neighbours
+   (on an open mesh only away from the caps over its holes, see :func:`hole_caps`).
 
 Sign convention: negative inside, positive outside (Blender/OpenVDB); the paper uses the opposite.
 """
