@@ -181,7 +181,33 @@ def _set_attribute(mesh, name, prop, values, collection, rna_prop):
         collection.foreach_set(rna_prop, values.ravel())
 
 
-def result_mesh(name, verts, tris, materials=(), face_material_index=None, smooth=False):
+def _cache_edges(mesh, edge_cache) -> None:
+    """Store a mesh's edges (their vertex pairs and each corner's edge) in ``edge_cache``, when one is given."""
+    edge_verts, corner_edge = mesh.attributes.get(".edge_verts"), mesh.attributes.get(".corner_edge")
+    if edge_cache is None or edge_verts is None or corner_edge is None:
+        return
+    pairs = np.empty(2 * len(mesh.edges), dtype=np.int32)
+    edge_verts.data.foreach_get("value", pairs)
+    corners = np.empty(len(mesh.loops), dtype=np.int32)
+    corner_edge.data.foreach_get("value", corners)
+    edge_cache["edge_verts"], edge_cache["corner_edge"] = pairs, corners
+
+
+def _set_cached_edges(mesh, edge_cache) -> bool:
+    """Give a mesh the edges cached for its triangles and update it; False when there is nothing to reuse."""
+    if not edge_cache or "edge_verts" not in edge_cache or len(edge_cache["corner_edge"]) != len(mesh.loops):
+        return False
+    mesh.edges.add(len(edge_cache["edge_verts"]) // 2)
+    edge_verts, corner_edge = mesh.attributes.get(".edge_verts"), mesh.attributes.get(".corner_edge")
+    if edge_verts is None or corner_edge is None:
+        return False
+    edge_verts.data.foreach_set("value", edge_cache["edge_verts"])
+    corner_edge.data.foreach_set("value", edge_cache["corner_edge"])
+    mesh.update()
+    return True
+
+
+def result_mesh(name, verts, tris, materials=(), face_material_index=None, smooth=False, edge_cache=None):
     """A new mesh datablock from arrays.
 
     Args:
@@ -191,6 +217,8 @@ def result_mesh(name, verts, tris, materials=(), face_material_index=None, smoot
         materials: Materials for the slots, in order (``None`` gives an empty slot).
         face_material_index: Optional (F,) int slot index of each face.
         smooth: Smooth shading for all faces.
+        edge_cache: Optional dict kept with these triangles: an empty one receives the edges Blender derives, a filled
+            one gives them back, so writing the same triangles again skips deriving them.
     Returns:
         The new ``bpy.types.Mesh``.
     """
@@ -209,7 +237,9 @@ def result_mesh(name, verts, tris, materials=(), face_material_index=None, smoot
     if face_material_index is not None and len(tris):
         index = mesh.attributes.get("material_index") or mesh.attributes.new("material_index", "INT", "FACE")
         index.data.foreach_set("value", np.ascontiguousarray(face_material_index, dtype=np.int32))
-    mesh.update(calc_edges=True)
+    if not _set_cached_edges(mesh, edge_cache):
+        mesh.update(calc_edges=True)
+        _cache_edges(mesh, edge_cache)
     if len(tris) and not smooth:  # meshes without a "sharp_face" attribute are smooth
         # the attribute directly: Mesh.shade_flat() takes ~0.2 s on a million faces
         sharp = mesh.attributes.get("sharp_face") or mesh.attributes.new("sharp_face", "BOOLEAN", "FACE")
@@ -228,6 +258,7 @@ def write_result_object(
     *,
     collection=None,
     select=True,
+    edge_cache=None,
 ):
     """Create a mesh object from arrays, linked next to the active object, made active and the only selection.
 
@@ -241,10 +272,11 @@ def write_result_object(
         smooth: Smooth shading for all faces.
         collection: Collection receiving the object instead of the active object's (or the scene's).
         select: Make the new object active and the only selection; ``False`` leaves the selection alone.
+        edge_cache: As for ``result_mesh``.
     Returns:
         The new ``bpy.types.Object``.
     """
-    mesh = result_mesh(name, verts, tris, materials, face_material_index, smooth)
+    mesh = result_mesh(name, verts, tris, materials, face_material_index, smooth, edge_cache)
     obj = bpy.data.objects.new(name, mesh)
     if collection is None:
         active = context.active_object
@@ -258,7 +290,7 @@ def write_result_object(
     return obj
 
 
-def update_result_object(obj, verts, tris, materials=(), face_material_index=None, smooth=False):
+def update_result_object(obj, verts, tris, materials=(), face_material_index=None, smooth=False, edge_cache=None):
     """Give an existing mesh object new mesh data from world-space arrays, in place (same object, new mesh).
 
     The vertices are moved into the object's local space, so the result sits where the booleans put it whatever the
@@ -266,7 +298,7 @@ def update_result_object(obj, verts, tris, materials=(), face_material_index=Non
 
     Args:
         obj: A mesh object.
-        verts, tris, materials, face_material_index, smooth: As for ``write_result_object``.
+        verts, tris, materials, face_material_index, smooth, edge_cache: As for ``write_result_object``.
     Returns:
         ``obj``.
     """
@@ -275,7 +307,7 @@ def update_result_object(obj, verts, tris, materials=(), face_material_index=Non
         verts, tris = to_world(verts, tris, np.linalg.inv(matrix))
     old = obj.data
     name = old.name
-    obj.data = result_mesh(name, verts, tris, materials, face_material_index, smooth)
+    obj.data = result_mesh(name, verts, tris, materials, face_material_index, smooth, edge_cache)
     if old.users == 0:
         bpy.data.meshes.remove(old)
         obj.data.name = name

@@ -105,7 +105,8 @@ def surface(field, operands) -> dict:
         field: The combined ``AdaptiveField``; its source ids index ``operands``.
         operands: The mesh objects, in ``field_id`` order.
     Returns:
-        ``{"verts": (V,3) float32, "tris": (F,3) int32, "materials": [...], "face_slots": (F,) int32 or None}``.
+        ``{"verts": (V,3) float32, "tris": (F,3) int32, "materials": [...], "face_slots": (F,) int32 or None,
+        "edges": the surface's edge cache (see ``bridge.result_mesh``)}``.
     """
     faces = getattr(field, "_faces", None)  # a reused result (see bridge.combine) keeps its surface
     if faces is None:
@@ -117,7 +118,8 @@ def surface(field, operands) -> dict:
         if "ids" not in faces:  # which operand each face came from: only needed for materials
             faces["ids"] = field.source_ids(verts[tris].mean(axis=1))
         face_slots = slot_of[faces["ids"].clip(0, len(operands) - 1)]
-    return {"verts": verts, "tris": tris, "materials": materials, "face_slots": face_slots}
+    edges = faces.setdefault("edges", {})  # filled by the first write, reused by the next ones
+    return {"verts": verts, "tris": tris, "materials": materials, "face_slots": face_slots, "edges": edges}
 
 
 def write_result(context, name, result: dict, *, smooth: bool, target=None, collection=None, select=True):
@@ -135,7 +137,12 @@ def write_result(context, name, result: dict, *, smooth: bool, target=None, coll
         The result object.
     """
     arrays = (result["verts"], result["tris"])
-    options = {"materials": result["materials"], "face_material_index": result["face_slots"], "smooth": smooth}
+    options = {
+        "materials": result["materials"],
+        "face_material_index": result["face_slots"],
+        "smooth": smooth,
+        "edge_cache": result.get("edges"),
+    }
     if target is not None:
         return bridge.update_result_object(target, *arrays, **options)
     return bridge.write_result_object(context, name, *arrays, collection=collection, select=select, **options)

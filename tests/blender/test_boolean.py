@@ -185,7 +185,18 @@ def test_rerun_with_nothing_changed_reuses_the_boolean_and_its_surface(fresh_cac
     select(a, b)
     bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=64, hide_inputs=False)
     assert bridge.memo_stats["hits"] == hits + 1
-    np.testing.assert_array_equal(world_arrays(bpy.context.active_object)[1], world_arrays(first)[1])
+    second = bpy.context.active_object
+    np.testing.assert_array_equal(world_arrays(second)[1], world_arrays(first)[1])
+    # the second mesh took the edges cached from the first: the same edges, and a mesh validate() finds nothing in
+    cached = bridge._last_combine[2]._faces["edges"]
+    assert len(cached["corner_edge"]) == 3 * len(second.data.polygons)
+    for mesh in (first.data, second.data):
+        assert not mesh.validate(verbose=False)
+        assert 2 * len(mesh.edges) == 3 * len(mesh.polygons)  # closed triangle mesh: each edge in two faces
+    pairs = [np.empty(2 * len(o.data.edges), np.int32) for o in (first, second)]
+    for o, out in zip((first, second), pairs, strict=True):
+        o.data.attributes[".edge_verts"].data.foreach_get("value", out)
+    np.testing.assert_array_equal(pairs[0], pairs[1])
     select(a, b)  # another operation is another boolean
     bpy.ops.aasdf.boolean(operation="UNION", resolution=64, hide_inputs=False)
     assert bridge.memo_stats["hits"] == hits + 1
