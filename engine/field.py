@@ -580,12 +580,12 @@ class AdaptiveField:
         values = wp.empty(n, dtype=wp.float32, device=self.device)
         grads = wp.empty(n, dtype=wp.vec3, device=self.device)
         if n:
-            wp.launch(
+            arg, pts_wp, mode = self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device), int(method != "mls")
+            octree.launch_split(
                 _sample_field_kernel,
-                dim=n,
-                device=self.device,
-                inputs=[self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device), 0 if method == "mls" else 1],
-                outputs=[values, grads],
+                n,
+                lambda lo, k: [arg, pts_wp[lo : lo + k], mode, values[lo : lo + k], grads[lo : lo + k]],
+                self.device,
             )
         if return_gradient:
             return values.numpy(), grads.numpy()
