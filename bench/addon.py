@@ -34,24 +34,16 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bench import baselines  # noqa: E402
+from bench.pipeline import cases as pipeline_cases  # noqa: E402
 from tests.conftest import load_addon_package  # noqa: E402
-from tests.support import load_mesh, uv_sphere  # noqa: E402
 
 OPERATION = "DIFFERENCE"
 
 
 def cases() -> dict:
-    spot = load_mesh("spot.obj")
-    bunny = load_mesh("stanford-bunny.obj")
-    size = float(np.linalg.norm(spot[0].max(0) - spot[0].min(0)))
-    own = float(np.linalg.norm(bunny[0].max(0) - bunny[0].min(0)))
-    centre = 0.5 * (spot[0].max(0) + spot[0].min(0))
-    bunny_v = (bunny[0] - 0.5 * (bunny[0].max(0) + bunny[0].min(0))) * (0.8 * size / own) + centre
-    bunny_v = (bunny_v + np.float32([0.25 * size, 0.0, 0.0])).astype(np.float32)
-    return {
-        "bunny-spot": ((bunny_v, bunny[1]), spot),
-        "spheres": (uv_sphere(1.0, rings=48, segments=96), uv_sphere(1.0, center=(1.2, 0.0, 0.0))),
-    }
+    """Two of the pipeline benchmark's cases, the same meshes placed the same way."""
+    every = pipeline_cases()
+    return {"bunny-spot": every["bunny+spot"], "spheres": every["two spheres"]}
 
 
 def register():

@@ -364,6 +364,25 @@ def _sign_change_kernel(start: int, f: FieldArg, node_level: wp.array[wp.int32],
                 marks[t] = 1
 
 
+@wp.func
+def _near_cap(x: wp.vec3, cap_lo: wp.vec3, cap_hi: wp.vec3, cap_radius: float, margin: float) -> bool:
+    """Whether ``x`` is within ``cap_radius + margin`` of the box holding the caps over an open mesh's holes
+    (``cap_radius < 0``: no holes)."""
+    if cap_radius < 0.0:
+        return False
+    d = wp.max(wp.max(cap_lo - x, x - cap_hi), wp.vec3(0.0))
+    return wp.length(d) < cap_radius + margin
+
+
+@wp.func
+def _take_sign(i: int, j: int, dist: wp.array[wp.float32], sign: wp.array[wp.float32], safety: float, spacing: float):
+    """Give unsigned node ``i`` the sign of face neighbour ``j`` when their empty balls cover the edge between them."""
+    if sign[j] != 0.0 and (dist[i] + dist[j]) * safety > spacing:
+        sign[i] = sign[j]
+        return 1
+    return 0
+
+
 @wp.kernel(enable_backward=False)
 def _propagate_sign_kernel(
     neighbours: wp.array2d[wp.int32],
@@ -385,24 +404,14 @@ def _propagate_sign_kernel(
     i = lo + wp.tid()
     if sign[i] != 0.0:
         return
-    if octree.near_cap(node_center(origin, spacing, coords[i]), cap_lo, cap_hi, cap_radius, spacing):
+    if _near_cap(node_center(origin, spacing, coords[i]), cap_lo, cap_hi, cap_radius, spacing):
         return
     for k in range(6):
         j = neighbours[i, k]
         if j >= 0:
-            if sign[j] != 0.0 and (dist[i] + dist[j]) * safety > spacing:
-                sign[i] = sign[j]
+            if _take_sign(i, j, dist, sign, safety, spacing) == 1:
                 wp.atomic_add(changed, 0, 1)
                 return
-
-
-@wp.func
-def _take_sign(i: int, j: int, dist: wp.array[wp.float32], sign: wp.array[wp.float32], safety: float, spacing: float):
-    """Give unsigned node ``i`` the sign of face neighbour ``j`` when their empty balls cover the edge between them."""
-    if sign[j] != 0.0 and (dist[i] + dist[j]) * safety > spacing:
-        sign[i] = sign[j]
-        return 1
-    return 0
 
 
 @wp.kernel(enable_backward=False)
@@ -433,7 +442,7 @@ def _propagate_sign_octet_kernel(
         return
     octet = octree.morton_decode(codes[base] >> wp.int64(3))
     centre = origin + 2.0 * spacing * wp.vec3(float(octet[0]) + 0.5, float(octet[1]) + 0.5, float(octet[2]) + 0.5)
-    if octree.near_cap(centre, cap_lo, cap_hi, cap_radius, 2.0 * spacing):
+    if _near_cap(centre, cap_lo, cap_hi, cap_radius, 2.0 * spacing):
         return
     # first node of the octet across each face (-x, +x, -y, +y, -z, +z); -2: not looked up yet
     across = wp.vector(-2, -2, -2, -2, -2, -2, length=6, dtype=int)
@@ -743,29 +752,36 @@ def validate_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(verts64, dtype=np.float32), np.ascontiguousarray(tris[keep])
 
 
-def problem_faces(tris: np.ndarray, n_verts: int) -> np.ndarray:
-    """(T,) int32, 1 for faces touching a vertex of an open, non-manifold or inconsistently oriented edge.
+def edge_table(tris: np.ndarray, n_verts: int) -> dict:
+    """The undirected edges of a triangle list, for the mesh checks below.
 
-    The pseudo-normal sign is only trusted near faces whose neighbourhood is a consistently oriented manifold."""
-    t = tris.astype(np.int64)
+    Returns:
+        ``{"pairs": (E, 2) int64 vertex pairs (low, high), "faces": (E,) faces per edge, "forward": (E,) of those
+        listing it low -> high}``.
+    """
+    t = np.asarray(tris, dtype=np.int64)
     directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    lo, hi = directed.min(axis=1), directed.max(axis=1)
-    key = lo * n_verts + hi
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    first = np.r_[True, ks[1:] != ks[:-1]]
-    group = np.cumsum(first) - 1
-    counts = np.bincount(group)
-    forward = (directed[order, 0] < directed[order, 1]).astype(np.int64)
-    fwd_per_edge = np.bincount(group, weights=forward).astype(np.int64)
-    bad_edge = (counts != 2) | (fwd_per_edge != 1)
-    bad_members = bad_edge[group]
+    key = directed.min(axis=1) * n_verts + directed.max(axis=1)
+    unique, group = np.unique(key, return_inverse=True)
+    forward = np.bincount(group, weights=directed[:, 0] < directed[:, 1], minlength=len(unique)).astype(np.int64)
+    return {
+        "pairs": np.stack([unique // n_verts, unique % n_verts], axis=1),
+        "faces": np.bincount(group, minlength=len(unique)),
+        "forward": forward,
+    }
+
+
+def problem_faces(tris: np.ndarray, n_verts: int, edges: dict | None = None) -> np.ndarray:
+    """(T,) int32, 1 for faces touching a vertex of an open, non-manifold or inconsistently oriented edge (a mesh
+    without any is closed: no band refinement, signs spread everywhere). ``edges``: ``edge_table(tris, n_verts)``."""
+    edges = edge_table(tris, n_verts) if edges is None else edges
+    bad_edge = (edges["faces"] != 2) | (edges["forward"] != 1)
     bad_vertex = np.zeros(n_verts, dtype=bool)
-    bad_vertex[directed[order][bad_members].ravel()] = True
-    return bad_vertex[t].any(axis=1).astype(np.int32)
+    bad_vertex[edges["pairs"][bad_edge].ravel()] = True
+    return bad_vertex[np.asarray(tris, dtype=np.int64)].any(axis=1).astype(np.int32)
 
 
-def hole_caps(vertices: np.ndarray, triangles: np.ndarray):
+def hole_caps(vertices: np.ndarray, triangles: np.ndarray, edges: dict | None = None):
     """Where an open mesh's winding number may be far from an integer: (box lo, box hi, radius), or None.
 
     Let G be the mesh's boundary: its edges whose two orientations do not cancel (open, or inconsistently oriented),
@@ -775,19 +791,15 @@ def hole_caps(vertices: np.ndarray, triangles: np.ndarray):
     ``radius = sqrt(area(C) / pi)`` from the box (which holds C) that is at most 1/4: there the winding number stays
     within 1/4 of an integer, so two points joined by a segment that crosses no triangle are on the same side of 0.5,
     and signs may spread between nodes whose empty balls cover the segment between them, as on a closed mesh.
-    Returns None when every edge cancels (closed, consistently oriented, possibly non-manifold).
+    Returns None when every edge cancels (closed, consistently oriented, possibly non-manifold). ``edges``:
+    ``edge_table(triangles, len(vertices))`` when already at hand.
     """
-    t = np.asarray(triangles, dtype=np.int64)
-    edges = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    lo_v, hi_v = edges.min(axis=1), edges.max(axis=1)
-    key = lo_v * len(vertices) + hi_v
-    unique, inverse = np.unique(key, return_inverse=True)
-    net = np.bincount(inverse, weights=np.where(edges[:, 0] < edges[:, 1], 1.0, -1.0), minlength=len(unique))
-    open_edges = net != 0.0
+    edges = edge_table(triangles, len(vertices)) if edges is None else edges
+    net = 2 * edges["forward"] - edges["faces"]  # low -> high minus high -> low
+    open_edges = net != 0
     if not open_edges.any():
         return None
-    a = np.asarray(vertices, dtype=np.float64)[unique[open_edges] // len(vertices)]
-    b = np.asarray(vertices, dtype=np.float64)[unique[open_edges] % len(vertices)]
+    a, b = (np.asarray(vertices, dtype=np.float64)[edges["pairs"][open_edges, k]] for k in (0, 1))
     box_lo = np.minimum(a, b).min(axis=0)
     box_hi = np.maximum(a, b).max(axis=0)
     apex = 0.5 * (box_lo + box_hi)
@@ -936,9 +948,10 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
 
     timings = {}
     t0 = time.perf_counter()
-    problem = problem_faces(tris, len(verts))
+    edges = edge_table(tris, len(verts))
+    problem = problem_faces(tris, len(verts), edges)
     clean = not bool(problem.any())
-    caps = None if clean else hole_caps(verts, tris)
+    caps = None if clean else hole_caps(verts, tris, edges)
     mesh = wp.Mesh(
         points=wp.array(verts, dtype=wp.vec3, device=device),
         indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
@@ -1136,7 +1149,7 @@ def sign_change_octets(field: AdaptiveField) -> np.ndarray:
     # each part of the split launch appends to its own buffer (CPU launches have no cross-thread atomics)
     parts = {}
 
-    def part_args(lo, n):
+    def gather_part(lo, n):
         capacity = max(1024, n // 4)
         while True:
             count = wp.zeros(1, dtype=wp.int32, device=field.device)
@@ -1149,7 +1162,7 @@ def sign_change_octets(field: AdaptiveField) -> np.ndarray:
             capacity = found
 
     wp.load_module(_band_gap_kernel.module, device=field.device)
-    octree.run_split(part_args, n_octets, field.device)
+    octree.run_split(gather_part, n_octets, field.device)
     gap_octets = np.unique(np.concatenate([parts[k] for k in sorted(parts)] or [np.zeros(0, np.int64)]))
     n0 = field.level_counts[0]
     marked = n0 + np.flatnonzero(marks.numpy())

@@ -583,16 +583,6 @@ def _refine_leaves_kernel(
 # ---- signs, top-down ----
 
 
-@wp.func
-def near_cap(x: wp.vec3, cap_lo: wp.vec3, cap_hi: wp.vec3, cap_radius: float, margin: float) -> bool:
-    """Whether ``x`` is within ``cap_radius + margin`` of the box holding the caps over an open mesh's holes
-    (``cap_radius < 0``: no holes)."""
-    if cap_radius < 0.0:
-        return False
-    d = wp.max(wp.max(cap_lo - x, x - cap_hi), wp.vec3(0.0))
-    return wp.length(d) < cap_radius + margin
-
-
 @wp.kernel(enable_backward=False)
 def _inherit_sign_kernel(
     coords: wp.array[wp.vec3i],
