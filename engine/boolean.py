@@ -657,22 +657,27 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         scratch = wp.empty(hi_ - lo_, dtype=wp.float32, device=device)
         run(coords, lo_, hi_, spacing_, dist, proj, source, sign, scratch)
 
+    finest = {
+        "codes": fine_codes,
+        "coords": fine_coords,
+        "dist": fine_dist,
+        "proj": fine_proj,
+        "source": fine_src,
+        "values": fine_values,
+    }
+    # assemble_field frees each once copied
+    fine_codes = fine_coords = fine_dist = fine_proj = fine_src = fine_values = fine_sign = octets = None
     return assemble_field(
         origin=origin,
         top_dims=top_dims,
         voxel_size=h,
         levels=levels,
-        fine_codes=fine_codes,
-        fine_coords=fine_coords,
-        fine_dist=fine_dist,
-        fine_proj=fine_proj,
-        fine_source=fine_src,
+        finest=finest,
         oracle=None,
         finest_signs=None,
         device=device,
         field_ids=a.field_ids + b.field_ids,
         timings=timings,
-        fine_values=fine_values,
         level_values=level_values,
     )
 

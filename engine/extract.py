@@ -4,10 +4,11 @@ The finest octree level stores signed distances at cell centres, which form a sp
 lattice: a thin band around the surface inside a possibly huge domain. :func:`extract_surface` polygonises the dual
 cubes of that lattice (cube ``c`` has the samples ``c + {0, 1}^3`` as corners) without ever allocating a dense grid:
 samples are packed into sorted 64-bit keys, a Warp kernel finds each cube's seven other corners by galloping search,
-and only complete cubes whose corners change sign are handed to Warp's sparse marching cubes
-(``warp.geometry.sparse_marching_cubes_from_cells``), which shares vertices between cubes so the mesh is watertight
-wherever the zero set stays inside the band. ``bench/extract_compare.py`` measures this against scikit-image's marching
-cubes run on dense 16^3 blocks.
+and only complete cubes whose corners change sign are polygonised by the core of Warp's sparse marching cubes, with
+the samples themselves as the cubes' shared corners (Warp's public ``sparse_marching_cubes_from_cells`` would sort
+eight corner codes per cube to find them again: ~2x the time and memory; it remains the fallback for other Warp
+versions). Vertices are shared between cubes, so the mesh is watertight wherever the zero set stays inside the band.
+``bench/extract_compare.py`` measures this against scikit-image's marching cubes run on dense 16^3 blocks.
 """
 
 from __future__ import annotations
@@ -18,6 +19,11 @@ import warp.geometry
 
 from .errors import AasdfError
 from .octree import launch_split
+
+try:  # the marching-cubes core of Warp's sparse_marching_cubes_from_cells, given already shared corners
+    from warp._src.geometry.sparse_marching_cubes import _extract_from_dedup as _shared_corner_marching_cubes
+except ImportError:  # another Warp version: the public entry point, which re-derives the shared corners by sorting
+    _shared_corner_marching_cubes = None
 
 # Corner c of a cube with minimum corner (i, j, k) is the sample (i, j, k) + _CORNER_OFFSETS[c], in the order Warp's
 # sparse marching cubes expects its (M, 8) corner values.
@@ -88,13 +94,17 @@ def _find_cube_corners_kernel(
     values: wp.array[wp.float32],
     stride_x: wp.int64,
     stride_y: wp.int64,
-    corners: wp.array2d[wp.int32],
+    emit: int,
+    active_scan: wp.array[wp.int32],
     active: wp.array[wp.int32],
+    cube_corners: wp.array2d[wp.int32],
 ):
-    """Find the 8 corner samples of the cube whose minimum corner is sample ``i`` and flag it if it crosses zero.
+    """Find the 8 corner samples of the cube whose minimum corner is sample ``i``.
 
     A cube is active when all 8 corners exist and its values have both signs (``< 0`` and ``>= 0``, the convention of
-    Warp's marching cubes). One thread per sample; the 7 searches gallop forward in ascending key order.
+    Warp's marching cubes). One thread per sample; the 7 searches gallop forward in ascending key order. Run twice:
+    with ``emit=0`` it flags the active cubes, with ``emit=1`` it searches again for the active ones only and writes
+    their corners to their compacted row (so no (N, 8) table is ever held).
 
     Args:
         first: Sample of thread 0 (launches may cover part of the samples).
@@ -102,15 +112,24 @@ def _find_cube_corners_kernel(
         values: (N,) float32 values minus the level, in key order, none exactly 0.
         stride_x: Key step of +1 in i.
         stride_y: Key step of +1 in j (+1 in k is 1).
-        corners: (N, 8) int32 output, sample index of each corner in ``CUBE_CORNER_OFFSETS`` order; only complete
-            where ``active`` is 1.
-        active: (N,) int32 output, 1 for a complete cube whose corners change sign, else 0.
+        emit: 0 to flag, 1 to write corners.
+        active_scan: (N,) int32 inclusive prefix sum of ``active`` (read with ``emit=1``).
+        active: (N,) int32, written with ``emit=0``: 1 for a complete cube whose corners change sign, else 0.
+        cube_corners: (M, 8) int32 output with ``emit=1``: sample index of each active cube's corners, in
+            ``CUBE_CORNER_OFFSETS`` order.
     """
     i = first + wp.tid()
+    if emit == 1:
+        if active[i] == 0:
+            return
     n = keys.shape[0]
     key = keys[i]
-    active[i] = 0
-    corners[i, 0] = i
+    row = int(0)
+    if emit == 1:
+        row = active_scan[i] - 1
+        cube_corners[row, 0] = i
+    else:
+        active[i] = 0
     negative = wp.where(values[i] < 0.0, 1, 0)
     pos = i + 1
     for c in range(7):
@@ -125,54 +144,145 @@ def _find_cube_corners_kernel(
             return
         if keys[pos] != target:
             return
-        corners[i, wp.static(_SEARCH_SLOTS[c])] = pos
+        if emit == 1:
+            cube_corners[row, wp.static(_SEARCH_SLOTS[c])] = pos
         negative += wp.where(values[pos] < 0.0, 1, 0)
-    if negative > 0 and negative < 8:
+    if emit == 0 and negative > 0 and negative < 8:
         active[i] = 1
 
 
 @wp.kernel(enable_backward=False)
 def _gather_active_cubes_kernel(
-    active: wp.array[wp.int32],
-    active_scan: wp.array[wp.int32],
+    cube_corners: wp.array2d[wp.int32],
     keys: wp.array[wp.int64],
     values: wp.array[wp.float32],
-    corners: wp.array2d[wp.int32],
     lo: wp.vec3i,
     stride_x: wp.int64,
     stride_y: wp.int64,
     cells: wp.array[wp.vec3i],
     corner_values: wp.array2d[wp.float32],
 ):
-    """Stream-compact the active cubes into minimum-corner subscripts (decoded from the keys) and corner values.
+    """Minimum-corner lattice coordinates (decoded from corner 0's key) and corner values of each active cube.
 
     Args:
-        active: (N,) int32 flags from ``_find_cube_corners_kernel``.
-        active_scan: (N,) int32 inclusive prefix sum of ``active``.
+        cube_corners: (M, 8) int32 corner sample indices from ``_find_cube_corners_kernel``.
         keys: (N,) int64 sorted sample keys.
         values: (N,) float32 values minus the level, in key order.
-        corners: (N, 8) int32 corner sample indices from ``_find_cube_corners_kernel``.
         lo: Lattice coordinates of key 0.
         stride_x: Key step of +1 in i.
         stride_y: Key step of +1 in j.
         cells: (M,) vec3i output, lattice coordinates of each active cube's minimum corner.
         corner_values: (M, 8) float32 output, the active cubes' corner values in ``CUBE_CORNER_OFFSETS`` order.
     """
+    o = wp.tid()
+    key = keys[cube_corners[o, 0]]
+    ci = key / stride_x
+    rem = key - ci * stride_x
+    cj = rem / stride_y
+    ck = rem - cj * stride_y
+    cells[o] = lo + wp.vec3i(wp.int32(ci), wp.int32(cj), wp.int32(ck))
+    for c in range(8):
+        corner_values[o, c] = values[cube_corners[o, c]]
+
+
+@wp.kernel(enable_backward=False)
+def _mark_used_corners_kernel(cube_corners: wp.array2d[wp.int32], used: wp.array[wp.int32]):
+    """Flag the samples some active cube uses (every writer writes 1, so races are harmless)."""
+    o = wp.tid()
+    for c in range(8):
+        used[cube_corners[o, c]] = 1
+
+
+@wp.kernel(enable_backward=False)
+def _used_corner_points_kernel(
+    used: wp.array[wp.int32],
+    used_scan: wp.array[wp.int32],
+    keys: wp.array[wp.int64],
+    values: wp.array[wp.float32],
+    stride_x: wp.int64,
+    stride_y: wp.int64,
+    base: wp.vec3,
+    spacing: float,
+    points: wp.array[wp.vec3],
+    point_values: wp.array[wp.float32],
+):
+    """Position (``base`` is the world position of key 0) and value of each used sample, at its compacted index."""
     i = wp.tid()
-    if active[i] == 0:
+    if used[i] == 0:
         return
-    out = active_scan[i] - 1
+    out = used_scan[i] - 1
     key = keys[i]
     ci = key / stride_x
     rem = key - ci * stride_x
     cj = rem / stride_y
     ck = rem - cj * stride_y
-    cells[out] = lo + wp.vec3i(wp.int32(ci), wp.int32(cj), wp.int32(ck))
+    points[out] = base + spacing * wp.vec3(float(ci), float(cj), float(ck))
+    point_values[out] = values[i]
+
+
+@wp.kernel(enable_backward=False)
+def _renumber_corners_kernel(used_scan: wp.array[wp.int32], cube_corners: wp.array2d[wp.int32]):
+    o = wp.tid()
     for c in range(8):
-        corner_values[out, c] = values[corners[i, c]]
+        cube_corners[o, c] = used_scan[cube_corners[o, c]] - 1
 
 
-# ---- host driver ----
+def _shared_corner_surface(keys_wp, values_wp, cube_corners, lo, origin, spacing, strides):
+    """Marching cubes whose corners are the samples themselves: each sample is one shared corner, so no sort is needed
+    to find which cubes share a corner (Warp's public entry point sorts 8 codes per cube). Only the samples some
+    active cube uses take part. Returns Warp arrays (vertices, flat triangle indices)."""
+    device = keys_wp.device
+    n = keys_wp.shape[0]
+    used = wp.zeros(n, dtype=wp.int32, device=device)
+    wp.launch(_mark_used_corners_kernel, dim=cube_corners.shape[0], inputs=[cube_corners, used], device=device)
+    used_scan = wp.empty(n, dtype=wp.int32, device=device)
+    wp.utils.array_scan(used, used_scan, inclusive=True)
+    n_used = int(used_scan[-1:].numpy()[0])
+    # positions relative to key 0, whose world position is taken in double precision
+    base = wp.vec3(*(float(x) for x in origin + (np.asarray(lo, np.float64) + 0.5) * spacing))
+    points = wp.empty(n_used, dtype=wp.vec3, device=device)
+    point_values = wp.empty(n_used, dtype=wp.float32, device=device)
+    wp.launch(
+        _used_corner_points_kernel,
+        dim=n,
+        inputs=[used, used_scan, keys_wp, values_wp, wp.int64(strides[0]), wp.int64(strides[1]), base, spacing],
+        outputs=[points, point_values],
+        device=device,
+    )
+    wp.launch(
+        _renumber_corners_kernel, dim=cube_corners.shape[0], inputs=[used_scan], outputs=[cube_corners], device=device
+    )
+    return _shared_corner_marching_cubes(cube_corners, points, point_values, 0.0, device)
+
+
+def _sorted_corner_surface(keys_wp, values_wp, cube_corners, lo, origin, spacing, strides):
+    """The same through Warp's public ``sparse_marching_cubes_from_cells`` (cube positions and corner values)."""
+    device = keys_wp.device
+    n_cubes = cube_corners.shape[0]
+    cells = wp.empty(n_cubes, dtype=wp.vec3i, device=device)
+    corner_values = wp.empty((n_cubes, 8), dtype=wp.float32, device=device)
+    wp.launch(
+        _gather_active_cubes_kernel,
+        dim=n_cubes,
+        inputs=[
+            cube_corners,
+            keys_wp,
+            values_wp,
+            wp.vec3i(*(int(x) for x in lo)),
+            wp.int64(strides[0]),
+            wp.int64(strides[1]),
+        ],
+        outputs=[cells, corner_values],
+        device=device,
+    )
+    return warp.geometry.sparse_marching_cubes_from_cells(
+        cells,
+        corner_values,
+        origin=tuple(float(x) for x in origin + 0.5 * spacing),
+        cell_width=spacing,
+        threshold=0.0,
+        device=device,
+    )
 
 
 def _empty_mesh() -> tuple[np.ndarray, np.ndarray]:
@@ -295,49 +405,30 @@ def extract_surface(coords, values, *, origin, spacing, iso=0.0, device=None) ->
     n = len(keys)
     keys_wp = wp.array(keys, dtype=wp.int64, device=device)
     values_wp = wp.array(shifted, dtype=wp.float32, device=device)
-    corners = wp.empty((n, 8), dtype=wp.int32, device=device)
     active = wp.empty(n, dtype=wp.int32, device=device)
+    active_scan = wp.empty(n, dtype=wp.int32, device=device)
+    strides = (wp.int64(stride_x), wp.int64(stride_y))
+    no_corners = wp.empty((0, 8), dtype=wp.int32, device=device)
     launch_split(
         _find_cube_corners_kernel,
         n,
-        lambda start, _count: [start, keys_wp, values_wp, wp.int64(stride_x), wp.int64(stride_y), corners, active],
+        lambda start, _count: [start, keys_wp, values_wp, *strides, 0, active_scan, active, no_corners],
         device,
     )
-    active_scan = wp.empty(n, dtype=wp.int32, device=device)
     wp.utils.array_scan(active, active_scan, inclusive=True)
     n_cubes = int(active_scan[-1:].numpy()[0])
     if n_cubes == 0:
         return _empty_mesh()
-    cells = wp.empty(n_cubes, dtype=wp.vec3i, device=device)
-    corner_values = wp.empty((n_cubes, 8), dtype=wp.float32, device=device)
-    wp.launch(
-        _gather_active_cubes_kernel,
-        dim=n,
-        inputs=[
-            active,
-            active_scan,
-            keys_wp,
-            values_wp,
-            corners,
-            wp.vec3i(*(int(x) for x in lo)),
-            wp.int64(stride_x),
-            wp.int64(stride_y),
-        ],
-        outputs=[cells, corner_values],
-        device=device,
+    cube_corners = wp.empty((n_cubes, 8), dtype=wp.int32, device=device)
+    launch_split(
+        _find_cube_corners_kernel,
+        n,
+        lambda start, _count: [start, keys_wp, values_wp, *strides, 1, active_scan, active, cube_corners],
+        device,
     )
-
-    # Warp puts subscript (0, 0, 0) at ``origin``; our sample (0, 0, 0) is a cell centre, half a cell further on.
-    # Its winding already faces the side where values are >= threshold, i.e. outwards for negative-inside distances
-    # (tests/engine/test_extract.py checks every face normal of a sphere), so no flip is needed.
-    verts_wp, indices_wp = warp.geometry.sparse_marching_cubes_from_cells(
-        cells,
-        corner_values,
-        origin=tuple(float(x) for x in origin + 0.5 * spacing),
-        cell_width=spacing,
-        threshold=0.0,
-        device=device,
-    )
+    active = active_scan = keys = values = shifted = coords = None  # freed before the marching cubes
+    surface = _sorted_corner_surface if _shared_corner_marching_cubes is None else _shared_corner_surface
+    verts_wp, indices_wp = surface(keys_wp, values_wp, cube_corners, lo, origin, spacing, (stride_x, stride_y))
     if indices_wp.shape[0] == 0:
         return _empty_mesh()
     verts = verts_wp.numpy().astype(np.float32, copy=False).reshape(-1, 3)

@@ -386,6 +386,7 @@ def _take_sign(i: int, j: int, dist: wp.array[wp.float32], sign: wp.array[wp.flo
 @wp.kernel(enable_backward=False)
 def _propagate_sign_kernel(
     neighbours: wp.array2d[wp.int32],
+    row0: int,
     lo: int,
     dist: wp.array[wp.float32],
     sign: wp.array[wp.float32],
@@ -400,14 +401,14 @@ def _propagate_sign_kernel(
 ):
     """An unsigned node takes a signed face neighbour's sign when their empty balls cover the edge between them.
     Signs only ever go from 0 to final, so sweeps may read and write in place. Not near an open mesh's holes (see
-    ``hole_caps``)."""
+    ``hole_caps``). Node ``i``'s neighbours are in row ``i - row0``."""
     i = lo + wp.tid()
     if sign[i] != 0.0:
         return
     if _near_cap(node_center(origin, spacing, coords[i]), cap_lo, cap_hi, cap_radius, spacing):
         return
     for k in range(6):
-        j = neighbours[i, k]
+        j = neighbours[i - row0, k]
         if j >= 0:
             if _take_sign(i, j, dist, sign, safety, spacing) == 1:
                 wp.atomic_add(changed, 0, 1)
@@ -1077,16 +1078,14 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
                 device,
             )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
+        finest = {"codes": fine_codes, "coords": fine_coords, "dist": dist0, "proj": proj0, "source": src0}
+        fine_codes = fine_coords = dist0 = proj0 = src0 = None  # assemble_field frees them once copied
         return assemble_field(
             origin=origin,
             top_dims=top_dims,
             voxel_size=voxel_size,
             levels=levels,
-            fine_codes=fine_codes,
-            fine_coords=fine_coords,
-            fine_dist=dist0,
-            fine_proj=proj0,
-            fine_source=src0,
+            finest=finest,
             known_signs=previous,
             oracle=oracle,
             finest_signs=finest_signs,
@@ -1200,17 +1199,12 @@ def assemble_field(
     top_dims,
     voxel_size,
     levels,
-    fine_codes,
-    fine_coords,
-    fine_dist,
-    fine_proj,
-    fine_source,
+    finest,
     oracle,
     finest_signs,
     device,
     field_ids,
     timings,
-    fine_values=None,
     mesh_id=0,
     level_values=None,
     spread_signs=True,
@@ -1221,10 +1215,12 @@ def assemble_field(
     """Build the intermediate and top levels above a finest level and sign every node (shared by construction
     and booleans).
 
-    ``fine_dist``/``fine_proj`` are unsigned distances and projection points of the finest nodes. Signs are
-    assigned top-down: ``oracle(coords, nodes, spacing, sign)`` writes the sign of the given nodes of one level;
+    ``finest``: the finest level as a dict of Warp arrays, ``codes`` (sorted Morton codes, octets complete),
+    ``coords``, ``dist``/``proj`` (unsigned distances and projection points), ``source`` and optionally ``values``;
+    the dict is emptied and each array freed once copied (pass no other reference to keep peak memory down). Signs
+    are assigned top-down: ``oracle(coords, nodes, spacing, sign)`` writes the sign of the given nodes of one level;
     ``finest_signs(coords, sign, lo, hi)`` decides the finest nodes the parent left undecided. When
-    ``fine_values`` (signed) is given the finest level keeps those values instead. When ``level_values(coords, lo,
+    ``finest["values"]`` (signed) is given the finest level keeps those values instead. When ``level_values(coords, lo,
     hi, spacing, dist, proj, source, sign)`` is given (booleans: the operands are sampled), it sets every coarse
     node's distance, projection, source and sign directly, in place of the FIM solve and the sign oracles.
     ``spread_signs`` lets signs spread between same-level neighbours; ``hole_caps`` (box lo, box hi, radius, from
@@ -1235,7 +1231,7 @@ def assemble_field(
     top_dims = np.asarray(top_dims, dtype=np.int64)
     fine_dims = top_dims * 2 ** (levels - 1)
     t0 = time.perf_counter()
-    level_codes, level_coords = [fine_codes], [fine_coords]
+    level_codes, level_coords = [finest.pop("codes")], [finest.pop("coords")]
     level_times = {}
     for k in range(1, levels - 1):
         tk = time.perf_counter()
@@ -1277,10 +1273,13 @@ def assemble_field(
     proj = wp.empty(n, dtype=wp.vec3, device=device)
     source = wp.empty(n, dtype=wp.int32, device=device)
     n0 = sizes[0]
-    wp.copy(dist, fine_dist, count=n0)
-    wp.copy(proj, fine_proj, count=n0)
-    wp.copy(source, fine_source, count=n0)
-    neighbours = wp.full((n, 6), -1, dtype=wp.int32, device=device)
+    wp.copy(dist, finest.pop("dist"), count=n0)
+    wp.copy(proj, finest.pop("proj"), count=n0)
+    wp.copy(source, finest.pop("source"), count=n0)
+    fine_values = finest.pop("values", None)
+    # same-level neighbours of the coarse nodes (node i in row i - n0): the finest level finds its own by octet, and
+    # booleans sample their operands instead of solving
+    neighbours = wp.full((n - n0 if level_values is None else 0, 6), -1, dtype=wp.int32, device=device)
     # Coarse nodes an earlier build of the same mesh and domain has keep their distances (refinement rounds).
     known = wp.zeros(n, dtype=wp.int32, device=device)
     # nodes of each level the earlier build has too: (found, where in its level), shared by distances and signs
@@ -1321,7 +1320,7 @@ def assemble_field(
             level_values(coords, lo, hi, voxel_size * 2**k, dist, proj, source, sign)
             timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk + level_times.get(k, 0.0)
             continue
-        octree.level_neighbours(coords, lo, hi, fine_dims >> k, neighbours)
+        octree.level_neighbours(coords, lo, hi, fine_dims >> k, neighbours, row0=n0)
         tn = time.perf_counter()
         sweeps[k] = octree.solve_level(
             coords,
@@ -1337,6 +1336,7 @@ def assemble_field(
             mesh_id=mesh_id,
             known=known,
             octet_points=octet_points if k == 1 else None,
+            row0=n0,
         )
         timings[f"{name}_neighbours"] = timings.get(f"{name}_neighbours", 0.0) + tn - tk
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk + level_times.get(k, 0.0)
@@ -1393,6 +1393,7 @@ def assemble_field(
                     dim=hi - lo,
                     inputs=[
                         neighbours,
+                        n0,
                         lo,
                         dist,
                         sign,

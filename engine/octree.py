@@ -322,21 +322,27 @@ def _axis_keys_kernel(
 
 @wp.kernel(enable_backward=False)
 def _axis_neighbours_kernel(
-    keys: wp.array[wp.int64], vals: wp.array[wp.int32], n: int, axis: int, neighbours: wp.array2d[wp.int32]
+    keys: wp.array[wp.int64],
+    vals: wp.array[wp.int32],
+    n: int,
+    axis: int,
+    row0: int,
+    neighbours: wp.array2d[wp.int32],
 ):
     """In key order, consecutive keys one apart are neighbours along ``axis`` (rows are padded by one key, so a row's
-    last node is never taken for the next row's first)."""
+    last node is never taken for the next row's first). Node ``i``'s row is ``i - row0``."""
     t = wp.tid()
     i = vals[t]
     if t + 1 < n:
         if keys[t + 1] == keys[t] + wp.int64(1):
             j = vals[t + 1]
-            neighbours[i, 2 * axis + 1] = j
-            neighbours[j, 2 * axis] = i
+            neighbours[i - row0, 2 * axis + 1] = j
+            neighbours[j - row0, 2 * axis] = i
 
 
-def level_neighbours(coords: wp.array, lo: int, hi: int, dims, neighbours: wp.array) -> None:
-    """Fill rows [lo, hi) of ``neighbours`` (N,6) int32 with the -x,+x,-y,+y,-z,+z same-level neighbours (Eq. 7)."""
+def level_neighbours(coords: wp.array, lo: int, hi: int, dims, neighbours: wp.array, row0: int = 0) -> None:
+    """Fill the rows of nodes [lo, hi) of ``neighbours`` (int32, 6 columns, node ``i`` in row ``i - row0``) with their
+    -x,+x,-y,+y,-z,+z same-level neighbours (Eq. 7), as node indices."""
     n = hi - lo
     if n == 0:
         return
@@ -348,7 +354,9 @@ def level_neighbours(coords: wp.array, lo: int, hi: int, dims, neighbours: wp.ar
     for axis in range(3):
         wp.launch(_axis_keys_kernel, dim=n, inputs=[coords, lo, axis, dims_v], outputs=[keys, vals], device=device)
         wp.utils.radix_sort_pairs(keys, vals, n, end_bit=max(1, min(63, total_bits)))
-        wp.launch(_axis_neighbours_kernel, dim=n, inputs=[keys, vals, n, axis], outputs=[neighbours], device=device)
+        wp.launch(
+            _axis_neighbours_kernel, dim=n, inputs=[keys, vals, n, axis, row0], outputs=[neighbours], device=device
+        )
 
 
 # ---- distances: internal nodes from children, leaves by the fast iterative method ----
@@ -419,12 +427,15 @@ def _fim_sweep_kernel(
     coords: wp.array[wp.vec3i],
     first_child: wp.array[wp.int32],
     neighbours: wp.array2d[wp.int32],
+    row0: int,
     lo: int,
     origin: wp.vec3,
     spacing: float,
+    in0: int,
     dist_in: wp.array[wp.float32],
     proj_in: wp.array[wp.vec3],
     src_in: wp.array[wp.int32],
+    out0: int,
     dist_out: wp.array[wp.float32],
     proj_out: wp.array[wp.vec3],
     src_out: wp.array[wp.int32],
@@ -432,27 +443,28 @@ def _fim_sweep_kernel(
     changed: wp.array[wp.int32],
 ):
     """One Jacobi sweep of the fast iterative method over a level: each leaf takes the nearest projection point
-    among its face neighbours (a closest-point Eikonal update); internal nodes stay fixed as sources."""
+    among its face neighbours (a closest-point Eikonal update); internal nodes stay fixed as sources. Node ``i`` is
+    entry ``i - in0`` of the inputs, ``i - out0`` of the outputs and row ``i - row0`` of ``neighbours``."""
     i = lo + wp.tid()
-    best = dist_in[i]
-    p = proj_in[i]
-    s = src_in[i]
+    best = dist_in[i - in0]
+    p = proj_in[i - in0]
+    s = src_in[i - in0]
     if first_child[i] < 0 and known[i] == 0:
         x = node_center(origin, spacing, coords[i])
         for k in range(6):
-            j = neighbours[i, k]
+            j = neighbours[i - row0, k]
             if j >= 0:
-                if dist_in[j] < UNSET_DISTANCE:
-                    dj = wp.length(x - proj_in[j])
+                if dist_in[j - in0] < UNSET_DISTANCE:
+                    dj = wp.length(x - proj_in[j - in0])
                     if dj < best * 0.99999:
                         best = dj
-                        p = proj_in[j]
-                        s = src_in[j]
-        if best < dist_in[i]:
+                        p = proj_in[j - in0]
+                        s = src_in[j - in0]
+        if best < dist_in[i - in0]:
             wp.atomic_add(changed, 0, 1)
-    dist_out[i] = best
-    proj_out[i] = p
-    src_out[i] = s
+    dist_out[i - out0] = best
+    proj_out[i - out0] = p
+    src_out[i - out0] = s
 
 
 def solve_level(
@@ -470,10 +482,12 @@ def solve_level(
     known=None,
     max_sweeps=4096,
     octet_points=None,
+    row0=0,
 ):
     """Initialise a level from its children (exactly from ``mesh_id`` when given) and run the fast iterative method
     until no leaf changes. Nodes flagged in ``known`` (N,) int32 keep their given distance and projection.
-    ``octet_points``: (distances, closest points) of the octet centres of the level below, where already known."""
+    ``octet_points``: (distances, closest points) of the octet centres of the level below, where already known.
+    ``neighbours``: the level's rows of the table of :func:`level_neighbours` (node ``i`` in row ``i - row0``)."""
     n = hi - lo
     if n == 0:
         return 0
@@ -502,9 +516,12 @@ def solve_level(
         ],
         device,
     )
-    dist_b, proj_b, src_b = wp.clone(dist), wp.clone(proj), wp.clone(source)
+    # the second buffer of the Jacobi sweeps holds this level only (entry i - lo)
+    dist_b = wp.empty(n, dtype=wp.float32, device=device)
+    proj_b = wp.empty(n, dtype=wp.vec3, device=device)
+    src_b = wp.empty(n, dtype=wp.int32, device=device)
     changed = wp.zeros(1, dtype=wp.int32, device=device)
-    bufs = [(dist, proj, source), (dist_b, proj_b, src_b)]
+    bufs = [(0, dist, proj, source), (lo, dist_b, proj_b, src_b)]
     sweeps = 0
     while sweeps < max_sweeps:
         changed.zero_()
@@ -517,6 +534,7 @@ def solve_level(
                 coords,
                 first_child,
                 neighbours,
+                row0,
                 lo + start,
                 origin_v,
                 float(spacing),
@@ -531,9 +549,9 @@ def solve_level(
         if int(changed.numpy()[0]) == 0:
             break
     if sweeps % 2 == 1:
-        wp.copy(dist, dist_b, dest_offset=lo, src_offset=lo, count=n)
-        wp.copy(proj, proj_b, dest_offset=lo, src_offset=lo, count=n)
-        wp.copy(source, src_b, dest_offset=lo, src_offset=lo, count=n)
+        wp.copy(dist, dist_b, dest_offset=lo, count=n)
+        wp.copy(proj, proj_b, dest_offset=lo, count=n)
+        wp.copy(source, src_b, dest_offset=lo, count=n)
     if mesh_id:
         launch_split(
             _refine_leaves_kernel,

@@ -251,6 +251,38 @@ def test_lattice_too_far_from_the_origin_is_refused():
     assert is_watertight(tris)
 
 
+def oriented_triangles(verts, tris, reference):
+    """``tris`` as sorted rows of indices into ``reference`` (matched by position), each rotated to start at its
+    smallest index so orientation is kept."""
+    distance, index = cKDTree(reference).query(verts)
+    assert distance.max() < 1e-5 and len(np.unique(index)) == len(verts)
+    mapped = index[tris]
+    first = np.argmin(mapped, axis=1)
+    rows = np.arange(len(mapped))
+    mapped = np.stack([mapped[rows, (first + k) % 3] for k in range(3)], axis=1)
+    return mapped[np.lexsort(mapped.T[::-1])]
+
+
+@pytest.mark.parametrize("case", ["sphere", "random"])
+def test_shared_corner_path_matches_warps_public_marching_cubes(monkeypatch, case):
+    # Samples are the shared corners themselves; Warp's public entry point finds them again by sorting cube corners.
+    import engine.extract as extract
+
+    assert extract._shared_corner_marching_cubes is not None  # the pinned Warp has the core this path calls
+    if case == "sphere":
+        coords, values = sphere_band(spacing=0.05)
+    else:
+        coords = lattice((-3, 5, -7), (9, 17, 5))
+        values = np.random.default_rng(3).standard_normal(len(coords)).astype(np.float32)
+    verts, tris = extract_surface(coords, values, origin=(0.1, -0.2, 0.3), spacing=0.05)
+    monkeypatch.setattr(extract, "_shared_corner_marching_cubes", None)
+    public_verts, public_tris = extract_surface(coords, values, origin=(0.1, -0.2, 0.3), spacing=0.05)
+    assert len(tris) > 100 and len(verts) == len(public_verts) and len(tris) == len(public_tris)
+    np.testing.assert_array_equal(
+        oriented_triangles(verts, tris, public_verts), oriented_triangles(public_verts, public_tris, public_verts)
+    )
+
+
 def test_sample_order_does_not_change_the_mesh():
     coords, values = sphere_band(spacing=0.05)
     verts, tris = extract_surface(coords, values, origin=(0.0, 0.0, 0.0), spacing=0.05)
