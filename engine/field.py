@@ -228,8 +228,16 @@ def _finest_octet_distance_kernel(
         octet_proj[base // 8] = centre_foot
     if q.result and box_search == 1:
         reach = octet_dist[base // 8] + 1.7321 * spacing * 1.001
+        half_diagonal = 0.8661 * spacing * 1.001  # centre to node, with room for rounding
+        # the centre's foot is a surface point: every node starts from its distance to it (an upper bound)
         best = wp.vector(UNSET_DISTANCE, length=8, dtype=float)
         foot = wp.matrix(0.0, shape=(8, 3), dtype=float)
+        worst = float(0.0)
+        for k in range(8):
+            x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
+            best[k] = wp.length_sq(x - centre_foot)
+            foot[k] = centre_foot
+            worst = wp.max(worst, best[k])
         m = wp.mesh_get(mesh)
         candidates = wp.mesh_query_aabb(mesh, c - wp.vec3(reach), c + wp.vec3(reach))
         f = int(0)
@@ -237,13 +245,21 @@ def _finest_octet_distance_kernel(
             a = m.points[m.indices[3 * f]]
             b = m.points[m.indices[3 * f + 1]]
             cc = m.points[m.indices[3 * f + 2]]
-            for k in range(8):
-                x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
-                p = closest_on_triangle(x, a, b, cc)
-                d = wp.length_sq(x - p)
-                if d < best[k]:
-                    best[k] = d
-                    foot[k] = p
+            # a node is at most half a diagonal from the centre, so no node is nearer this triangle than `lower`
+            lower = wp.max(wp.length(c - closest_on_triangle(c, a, b, cc)) - half_diagonal, 0.0)
+            if lower * lower < worst:
+                worst = float(0.0)
+                for k in range(8):
+                    if lower * lower < best[k]:
+                        x = c + spacing * wp.vec3(
+                            float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5
+                        )
+                        p = closest_on_triangle(x, a, b, cc)
+                        d = wp.length_sq(x - p)
+                        if d < best[k]:
+                            best[k] = d
+                            foot[k] = p
+                    worst = wp.max(worst, best[k])
         for k in range(8):
             x = node_center(origin, spacing, coords[base + k])
             if best[k] < UNSET_DISTANCE:
