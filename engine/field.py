@@ -431,6 +431,65 @@ def _propagate_sign_kernel(
                 return
 
 
+@wp.func
+def _may_cross(p: wp.vec3, q: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> bool:
+    """Whether segment pq may meet triangle abc: False only when it surely does not (both ends clearly on one side of
+    the plane, or the segment's line clearly outside an edge); touching, grazing and degenerate cases count as
+    meeting."""
+    n = wp.cross(b - a, c - a)
+    d = q - p
+    reach = wp.max(wp.length(a - p), wp.max(wp.length(b - p), wp.length(c - p))) + wp.length(d)
+    # margins 10x above float32 rounding of the products they bound (all lengths cubed)
+    tol = 1.0e-5 * wp.length(n) * reach
+    sp = wp.dot(p - a, n)
+    sq = wp.dot(q - a, n)
+    if (sp > tol and sq > tol) or (sp < -tol and sq < -tol):
+        return False
+    tol = 1.0e-5 * reach * reach * wp.length(d)
+    v0 = wp.dot(wp.cross(a - p, b - p), d)
+    v1 = wp.dot(wp.cross(b - p, c - p), d)
+    v2 = wp.dot(wp.cross(c - p, a - p), d)
+    if (v0 > tol or v1 > tol or v2 > tol) and (v0 < -tol or v1 < -tol or v2 < -tol):
+        return False
+    return True
+
+
+@wp.func
+def _segment_clear(mesh: wp.uint64, p: wp.vec3, q: wp.vec3) -> bool:
+    """Whether segment pq surely meets no triangle of the mesh."""
+    pad = wp.vec3(1.0e-3 * wp.length(q - p))
+    candidates = wp.mesh_query_aabb(mesh, wp.min(p, q) - pad, wp.max(p, q) + pad)
+    m = wp.mesh_get(mesh)
+    f = int(0)
+    while wp.mesh_query_aabb_next(candidates, f):
+        if _may_cross(p, q, m.points[m.indices[3 * f]], m.points[m.indices[3 * f + 1]], m.points[m.indices[3 * f + 2]]):
+            return False
+    return True
+
+
+@wp.func
+def _take_sign_across(
+    i: int,
+    j: int,
+    dist: wp.array[wp.float32],
+    sign: wp.array[wp.float32],
+    safety: float,
+    spacing: float,
+    mesh: wp.uint64,
+    x: wp.vec3,
+    y: wp.vec3,
+):
+    """``_take_sign``, or with a mesh (``mesh`` != 0) also when the segment between the nodes (at ``x`` and ``y``)
+    surely crosses no triangle: away from an open mesh's holes the winding number changes only across triangles."""
+    if _take_sign(i, j, dist, sign, safety, spacing) == 1:
+        return 1
+    if mesh != wp.uint64(0) and sign[j] != 0.0:
+        if _segment_clear(mesh, x, y):
+            sign[i] = sign[j]
+            return 1
+    return 0
+
+
 @wp.kernel(enable_backward=False)
 def _propagate_sign_octet_kernel(
     first: int,
@@ -444,11 +503,14 @@ def _propagate_sign_octet_kernel(
     cap_lo: wp.vec3,
     cap_hi: wp.vec3,
     cap_radius: float,
+    mesh: wp.uint64,
     changed: wp.array[wp.int32],
 ):
     """The same on the finest level, which has no neighbour table: one thread per octet (8 consecutive nodes in
     Morton order). Three face neighbours of a node are in its own octet; the other three are the same child of the
-    face-adjacent octets, each found once by binary search."""
+    face-adjacent octets, each found once by binary search. With a mesh (``mesh`` != 0) a node also takes the sign
+    of a neighbour when the segment between them crosses no triangle (``_take_sign_across``), which signs most of
+    the nodes too near the surface for empty balls without a winding number."""
     t = first + wp.tid()
     base = 8 * t
     unset = int(0)
@@ -468,9 +530,15 @@ def _propagate_sign_octet_kernel(
         for k in range(8):
             i = base + k
             if sign[i] == 0.0:
+                x = centre + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
                 for a in range(3):
+                    bit = (k >> a) & 1
+                    step = wp.vec3(0.0)
+                    step[a] = wp.where(bit == 0, spacing, -spacing)
                     if sign[i] == 0.0:
-                        got += _take_sign(i, base + (k ^ (1 << a)), dist, sign, safety, spacing)
+                        got += _take_sign_across(
+                            i, base + (k ^ (1 << a)), dist, sign, safety, spacing, mesh, x, x + step
+                        )
                     if sign[i] == 0.0:
                         bit = (k >> a) & 1
                         face = 2 * a + bit
@@ -481,7 +549,9 @@ def _propagate_sign_octet_kernel(
                             if q[a] >= 0:
                                 across[face] = octree.find_key(codes, 0, count, morton_encode(q) << wp.int64(3))
                         if across[face] >= 0:
-                            got += _take_sign(i, across[face] + (k ^ (1 << a)), dist, sign, safety, spacing)
+                            got += _take_sign_across(
+                                i, across[face] + (k ^ (1 << a)), dist, sign, safety, spacing, mesh, x, x - step
+                            )
     if got > 0:
         wp.atomic_add(changed, 0, got)
 
@@ -1372,6 +1442,7 @@ def assemble_field(
         sign.assign(sign_np)
     top_lo, top_hi = int(offsets[levels - 1]), int(offsets[levels])
     oracle_counts = {}
+    sign_sweeps = {}
     origin_v = wp.vec3(*origin_t)
 
     cap_args = [wp.vec3(0.0), wp.vec3(0.0), -1.0]
@@ -1382,48 +1453,57 @@ def assemble_field(
         if not spread_signs:
             return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
         changed = wp.zeros(1, dtype=wp.int32, device=device)
-        for _ in range(MAX_SIGN_SWEEPS):
-            changed.zero_()
-            if k == 0:
-                # in place from two threads: a sign only ever goes from unset to final, so races are harmless
-                octree.launch_split(
-                    _propagate_sign_octet_kernel,
-                    (hi - lo) // 8,
-                    lambda start, _n: [
-                        start,
-                        codes,
-                        hi,
-                        dist,
-                        sign,
-                        SIGN_SAFETY * 1.0,
-                        float(voxel_size),
-                        origin_v,
-                        *cap_args,
-                        changed,
-                    ],
-                    device,
-                )
-            else:
-                wp.launch(
-                    _propagate_sign_kernel,
-                    dim=hi - lo,
-                    inputs=[
-                        neighbours,
-                        n0,
-                        lo,
-                        dist,
-                        sign,
-                        SIGN_SAFETY,
-                        float(voxel_size * 2**k),
-                        coords,
-                        origin_v,
-                        *cap_args,
-                    ],
-                    outputs=[changed],
-                    device=device,
-                )
-            if int(changed.numpy()[0]) == 0:
-                break
+        # the finest level first spreads by empty balls alone, then (with a mesh) across segments that cross no
+        # triangle, which costs a box query each and so runs only once the cheap test is exhausted
+        phases = [0, int(mesh_id)] if k == 0 and mesh_id else [0]
+        sweeps = {}
+        for phase_mesh in phases:
+            for sweep in range(MAX_SIGN_SWEEPS):  # noqa: B007 (the count is kept)
+                changed.zero_()
+                if k == 0:
+                    # in place from two threads: a sign only ever goes from unset to final, so races are harmless
+                    octree.launch_split(
+                        _propagate_sign_octet_kernel,
+                        (hi - lo) // 8,
+                        lambda start, _n, phase_mesh=phase_mesh: [
+                            start,
+                            codes,
+                            hi,
+                            dist,
+                            sign,
+                            SIGN_SAFETY * 1.0,
+                            float(voxel_size),
+                            origin_v,
+                            *cap_args,
+                            wp.uint64(phase_mesh),
+                            changed,
+                        ],
+                        device,
+                    )
+                else:
+                    wp.launch(
+                        _propagate_sign_kernel,
+                        dim=hi - lo,
+                        inputs=[
+                            neighbours,
+                            n0,
+                            lo,
+                            dist,
+                            sign,
+                            SIGN_SAFETY,
+                            float(voxel_size * 2**k),
+                            coords,
+                            origin_v,
+                            *cap_args,
+                        ],
+                        outputs=[changed],
+                        device=device,
+                    )
+                if int(changed.numpy()[0]) == 0:
+                    break
+            sweeps[phase_mesh] = sweep + 1
+        if k == 0:
+            sign_sweeps.update({"finest_balls": sweeps[0], "finest_segments": sweeps.get(int(mesh_id), 0)})
         return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
 
     if level_values is None and levels > 1:
@@ -1472,5 +1552,5 @@ def assemble_field(
         field_ids=field_ids,
         device=device,
         timings=timings,
-        stats={"fim_sweeps": sweeps, "sign_queries": oracle_counts},
+        stats={"fim_sweeps": sweeps, "sign_queries": oracle_counts, "sign_sweeps": sign_sweeps},
     )

@@ -138,6 +138,36 @@ def test_open_meshes_pay_the_winding_number_on_few_nodes(name):
     assert queries <= 0.2 * field.node_count, (queries, field.node_count)
 
 
+def _overlapping_shells():
+    a, ta = uv_sphere(1.0, rings=40, segments=80)
+    b, tb = uv_sphere(0.8, rings=40, segments=80)
+    return np.vstack([a, b + np.float32([0.9, 0.1, 0.0])]), np.vstack([ta, tb + len(a)])
+
+
+def _nested_shells():
+    a, ta = uv_sphere(1.0, rings=40, segments=80)
+    b, tb = uv_sphere(0.45, rings=30, segments=60)
+    return np.vstack([a, b + np.float32([0.2, 0.0, 0.1])]), np.vstack([ta, tb + len(a)])
+
+
+@pytest.mark.parametrize("case", ["spot.obj", "rocker-arm.obj", "fandisk.obj", "overlapping shells", "nested shells"])
+def test_closed_meshes_sign_the_finest_level_without_winding_numbers(case):
+    # Near-surface finest nodes take a neighbour's sign across a segment that crosses no triangle (the winding
+    # number of a closed mesh changes only across triangles): exact even where shells intersect (winding number 2
+    # in the overlap) or nest, and almost no node is left for the winding number.
+    shapes = {"overlapping shells": _overlapping_shells, "nested shells": _nested_shells}
+    verts, tris = shapes[case]() if case in shapes else load_mesh(case)
+    field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
+    assert field.stats["clean_mesh"]
+    n0 = field.level_counts[0]
+    assert field.stats["sign_queries"][0] <= 0.001 * n0, field.stats["sign_queries"]
+    values = field.values.numpy()[:n0]
+    clear = np.abs(values) > 0.01 * field.voxel_size  # a node on the surface may take either sign
+    centres = field.node_centers()[:n0][clear].astype(np.float32)
+    oracle = winding_inside(verts, tris, centres, accuracy=4.0)
+    assert np.array_equal(values[clear] < 0.0, oracle), np.count_nonzero((values[clear] < 0.0) != oracle)
+
+
 @pytest.mark.parametrize("name", ["stanford-bunny.obj", "suzanne.obj", "teapot.obj"])
 def test_open_meshes_coarse_node_signs_agree_with_the_winding_number(name):
     # coarse signs spread between neighbours only away from the holes' caps, where that is exact
