@@ -399,38 +399,6 @@ def _take_sign(i: int, j: int, dist: wp.array[wp.float32], sign: wp.array[wp.flo
     return 0
 
 
-@wp.kernel(enable_backward=False)
-def _propagate_sign_kernel(
-    neighbours: wp.array2d[wp.int32],
-    row0: int,
-    lo: int,
-    dist: wp.array[wp.float32],
-    sign: wp.array[wp.float32],
-    safety: float,
-    spacing: float,
-    coords: wp.array[wp.vec3i],
-    origin: wp.vec3,
-    cap_lo: wp.vec3,
-    cap_hi: wp.vec3,
-    cap_radius: float,
-    changed: wp.array[wp.int32],
-):
-    """An unsigned node takes a signed face neighbour's sign when their empty balls cover the edge between them.
-    Signs only ever go from 0 to final, so sweeps may read and write in place. Not near an open mesh's holes (see
-    ``hole_caps``). Node ``i``'s neighbours are in row ``i - row0``."""
-    i = lo + wp.tid()
-    if sign[i] != 0.0:
-        return
-    if _near_cap(node_center(origin, spacing, coords[i]), cap_lo, cap_hi, cap_radius, spacing):
-        return
-    for k in range(6):
-        j = neighbours[i - row0, k]
-        if j >= 0:
-            if _take_sign(i, j, dist, sign, safety, spacing) == 1:
-                wp.atomic_add(changed, 0, 1)
-                return
-
-
 @wp.func
 def _may_cross(p: wp.vec3, q: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> bool:
     """Whether segment pq may meet triangle abc: False only when it surely does not (both ends clearly on one side of
@@ -488,6 +456,42 @@ def _take_sign_across(
             sign[i] = sign[j]
             return 1
     return 0
+
+
+@wp.kernel(enable_backward=False)
+def _propagate_sign_kernel(
+    neighbours: wp.array2d[wp.int32],
+    row0: int,
+    lo: int,
+    dist: wp.array[wp.float32],
+    sign: wp.array[wp.float32],
+    safety: float,
+    spacing: float,
+    coords: wp.array[wp.vec3i],
+    origin: wp.vec3,
+    cap_lo: wp.vec3,
+    cap_hi: wp.vec3,
+    cap_radius: float,
+    mesh: wp.uint64,
+    changed: wp.array[wp.int32],
+):
+    """An unsigned node takes a signed face neighbour's sign when their empty balls cover the edge between them, or
+    with a mesh (``mesh`` != 0) when the segment between them crosses no triangle. Signs only ever go from 0 to
+    final, so sweeps may read and write in place. Not near an open mesh's holes (see ``hole_caps``). Node ``i``'s
+    neighbours are in row ``i - row0``."""
+    i = lo + wp.tid()
+    if sign[i] != 0.0:
+        return
+    x = node_center(origin, spacing, coords[i])
+    if _near_cap(x, cap_lo, cap_hi, cap_radius, spacing):
+        return
+    for k in range(6):
+        j = neighbours[i - row0, k]
+        if j >= 0:
+            y = node_center(origin, spacing, coords[j])
+            if _take_sign_across(i, j, dist, sign, safety, spacing, mesh, x, y) == 1:
+                wp.atomic_add(changed, 0, 1)
+                return
 
 
 @wp.kernel(enable_backward=False)
@@ -1455,7 +1459,7 @@ def assemble_field(
         changed = wp.zeros(1, dtype=wp.int32, device=device)
         # the finest level first spreads by empty balls alone, then (with a mesh) across segments that cross no
         # triangle, which costs a box query each and so runs only once the cheap test is exhausted
-        phases = [0, int(mesh_id)] if k == 0 and mesh_id else [0]
+        phases = [0, int(mesh_id)] if mesh_id else [0]
         sweeps = {}
         for phase_mesh in phases:
             for sweep in range(MAX_SIGN_SWEEPS):  # noqa: B007 (the count is kept)
@@ -1495,6 +1499,7 @@ def assemble_field(
                             coords,
                             origin_v,
                             *cap_args,
+                            wp.uint64(phase_mesh),
                         ],
                         outputs=[changed],
                         device=device,
@@ -1502,8 +1507,7 @@ def assemble_field(
                 if int(changed.numpy()[0]) == 0:
                     break
             sweeps[phase_mesh] = sweep + 1
-        if k == 0:
-            sign_sweeps.update({"finest_balls": sweeps[0], "finest_segments": sweeps.get(int(mesh_id), 0)})
+        sign_sweeps[k] = (sweeps[0], sweeps.get(int(mesh_id), 0))
         return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
 
     if level_values is None and levels > 1:
