@@ -381,13 +381,16 @@ def _sign_change_kernel(start: int, f: FieldArg, node_level: wp.array[wp.int32],
 
 
 @wp.func
-def _near_cap(x: wp.vec3, cap_lo: wp.vec3, cap_hi: wp.vec3, cap_radius: float, margin: float) -> bool:
-    """Whether ``x`` is within ``cap_radius + margin`` of the box holding the caps over an open mesh's holes
-    (``cap_radius < 0``: no holes)."""
-    if cap_radius < 0.0:
-        return False
-    d = wp.max(wp.max(cap_lo - x, x - cap_hi), wp.vec3(0.0))
-    return wp.length(d) < cap_radius + margin
+def _near_cap(
+    x: wp.vec3, cap_lo: wp.array[wp.vec3], cap_hi: wp.array[wp.vec3], cap_radius: wp.array[wp.float32], margin: float
+) -> bool:
+    """Whether ``x`` is within ``cap_radius[c] + margin`` of the box ``c`` holding one of the caps over an open mesh's
+    holes (see ``hole_caps``; no caps: a closed mesh)."""
+    for c in range(cap_radius.shape[0]):
+        d = wp.max(wp.max(cap_lo[c] - x, x - cap_hi[c]), wp.vec3(0.0))
+        if wp.length(d) < cap_radius[c] + margin:
+            return True
+    return False
 
 
 @wp.func
@@ -469,9 +472,9 @@ def _propagate_sign_kernel(
     spacing: float,
     coords: wp.array[wp.vec3i],
     origin: wp.vec3,
-    cap_lo: wp.vec3,
-    cap_hi: wp.vec3,
-    cap_radius: float,
+    cap_lo: wp.array[wp.vec3],
+    cap_hi: wp.array[wp.vec3],
+    cap_radius: wp.array[wp.float32],
     mesh: wp.uint64,
     changed: wp.array[wp.int32],
 ):
@@ -504,9 +507,9 @@ def _propagate_sign_octet_kernel(
     safety: float,
     spacing: float,
     origin: wp.vec3,
-    cap_lo: wp.vec3,
-    cap_hi: wp.vec3,
-    cap_radius: float,
+    cap_lo: wp.array[wp.vec3],
+    cap_hi: wp.array[wp.vec3],
+    cap_radius: wp.array[wp.float32],
     mesh: wp.uint64,
     changed: wp.array[wp.int32],
 ):
@@ -872,30 +875,61 @@ def problem_faces(tris: np.ndarray, n_verts: int, edges: dict | None = None) -> 
     return bad_vertex[np.asarray(tris, dtype=np.int64)].any(axis=1).astype(np.int32)
 
 
+MAX_HOLE_CAPS = 32  # more boundary pieces than this share one cone
+
+
+def _boundary_pieces(pairs: np.ndarray) -> np.ndarray:
+    """Connected piece of each edge of a boundary given as (E, 2) vertex pairs: (E,) labels 0..P-1."""
+    ends, local = np.unique(pairs, return_inverse=True)
+    local = local.reshape(-1, 2)
+    label = np.arange(len(ends))
+    while True:  # hook every vertex to the smallest label among its edges, then shortcut, until stable
+        low = np.minimum(label[local[:, 0]], label[local[:, 1]])
+        hooked = label.copy()
+        np.minimum.at(hooked, local[:, 0], low)
+        np.minimum.at(hooked, local[:, 1], low)
+        hooked = hooked[hooked]
+        if np.array_equal(hooked, label):
+            break
+        label = hooked
+    return np.unique(label, return_inverse=True)[1].reshape(-1)[local[:, 0]]
+
+
 def hole_caps(vertices: np.ndarray, triangles: np.ndarray, edges: dict | None = None):
-    """Where an open mesh's winding number may be far from an integer: (box lo, box hi, radius), or None.
+    """Where an open mesh's winding number may be far from an integer: (box lo (K, 3), box hi (K, 3), radius (K,)),
+    or None.
 
     Let G be the mesh's boundary: its edges whose two orientations do not cancel (open, or inconsistently oriented),
-    with multiplicity, and C the cone over G from the centre of G's bounding box. The mesh minus C is closed, so its
-    winding number is an integer that changes only across the mesh or C, and the mesh's winding number differs from it
-    by C's, whose magnitude is at most area(C) / (4 pi d^2) at distance d from C. Farther than
-    ``radius = sqrt(area(C) / pi)`` from the box (which holds C) that is at most 1/4: there the winding number stays
-    within 1/4 of an integer, so two points joined by a segment that crosses no triangle are on the same side of 0.5,
-    and signs may spread between nodes whose empty balls cover the segment between them, as on a closed mesh.
-    Returns None when every edge cancels (closed, consistently oriented, possibly non-manifold). ``edges``:
-    ``edge_table(triangles, len(vertices))`` when already at hand.
+    with multiplicity, split into its K connected pieces G_c, and C_c the cone over G_c from the centre of G_c's
+    bounding box. Each piece is a closed 1-cycle, so the mesh minus all cones is closed: its winding number is an
+    integer that changes only across the mesh or a cone, and the mesh's winding number differs from it by the cones',
+    each at most area(C_c) / (4 pi d_c^2) at distance d_c from C_c. Farther than ``radius_c = sqrt(K area(C_c) / pi)``
+    from every box c (which holds C_c) their sum is at most 1/4: there the winding number stays within 1/4 of an
+    integer, so two points joined by a segment that crosses no triangle are on the same side of 0.5, and signs may
+    spread between nodes as on a closed mesh. One cone per piece keeps the caps of holes far apart small; beyond
+    ``MAX_HOLE_CAPS`` pieces a single cone over the whole boundary is used. Returns None when every edge cancels
+    (closed, consistently oriented, possibly non-manifold). ``edges``: ``edge_table(triangles, len(vertices))`` when
+    already at hand.
     """
     edges = edge_table(triangles, len(vertices)) if edges is None else edges
     net = 2 * edges["forward"] - edges["faces"]  # low -> high minus high -> low
     open_edges = net != 0
     if not open_edges.any():
         return None
-    a, b = (np.asarray(vertices, dtype=np.float64)[edges["pairs"][open_edges, k]] for k in (0, 1))
-    box_lo = np.minimum(a, b).min(axis=0)
-    box_hi = np.maximum(a, b).max(axis=0)
-    apex = 0.5 * (box_lo + box_hi)
-    area = float((0.5 * np.linalg.norm(np.cross(a - apex, b - apex), axis=1) * np.abs(net[open_edges])).sum())
-    return box_lo, box_hi, math.sqrt(area / math.pi)
+    pairs = edges["pairs"][open_edges]
+    piece = _boundary_pieces(pairs)
+    if piece.max() + 1 > MAX_HOLE_CAPS:
+        piece = np.zeros_like(piece)
+    k = int(piece.max()) + 1
+    a, b = (np.asarray(vertices, dtype=np.float64)[pairs[:, c]] for c in (0, 1))
+    lo = np.full((k, 3), np.inf)
+    hi = np.full((k, 3), -np.inf)
+    np.minimum.at(lo, piece, np.minimum(a, b))
+    np.maximum.at(hi, piece, np.maximum(a, b))
+    apex = 0.5 * (lo + hi)[piece]
+    tri_area = 0.5 * np.linalg.norm(np.cross(a - apex, b - apex), axis=1) * np.abs(net[open_edges])
+    area = np.bincount(piece, weights=tri_area, minlength=k)
+    return lo, hi, np.sqrt(k * area / math.pi)
 
 
 def plan_domain(lo, hi, voxel_size: float, levels: int, margin_cells: float):
@@ -1313,7 +1347,7 @@ def assemble_field(
     ``finest["values"]`` (signed) is given the finest level keeps those values instead. When ``level_values(coords, lo,
     hi, spacing, dist, proj, source, sign)`` is given (booleans: the operands are sampled), it sets every coarse
     node's distance, projection, source and sign directly, in place of the FIM solve and the sign oracles.
-    ``spread_signs`` lets signs spread between same-level neighbours; ``hole_caps`` (box lo, box hi, radius, from
+    ``spread_signs`` lets signs spread between same-level neighbours; ``hole_caps`` (boxes lo, boxes hi, radii, from
     :func:`hole_caps`) keeps them from spreading near an open mesh's holes. ``octet_points`` (distances, closest
     points) of the finest octets' centres, where the finest level's computation found them: the level-1 nodes there.
     ``known_signs``: an earlier field of the same mesh and domain whose nodes' signs are reused where nodes match.
@@ -1449,9 +1483,12 @@ def assemble_field(
     sign_sweeps = {}
     origin_v = wp.vec3(*origin_t)
 
-    cap_args = [wp.vec3(0.0), wp.vec3(0.0), -1.0]
-    if hole_caps is not None:
-        cap_args = [wp.vec3(*hole_caps[0]), wp.vec3(*hole_caps[1]), float(hole_caps[2])]
+    caps = hole_caps if hole_caps is not None else (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    cap_args = [
+        wp.array(np.asarray(caps[0], np.float32).reshape(-1, 3), dtype=wp.vec3, device=device),
+        wp.array(np.asarray(caps[1], np.float32).reshape(-1, 3), dtype=wp.vec3, device=device),
+        wp.array(np.asarray(caps[2], np.float32).reshape(-1), dtype=wp.float32, device=device),
+    ]
 
     def spread(k, lo, hi):
         if not spread_signs:

@@ -168,6 +168,43 @@ def test_closed_meshes_sign_the_finest_level_without_winding_numbers(case):
     assert np.array_equal(values[clear] < 0.0, oracle), np.count_nonzero((values[clear] < 0.0) != oracle)
 
 
+def _away_from_caps(caps, points):
+    """Whether each point is beyond every cap's radius from its box (``hole_caps``)."""
+    lo, hi, radius = caps
+    gap = np.maximum(np.maximum(lo[None] - points[:, None], points[:, None] - hi[None]), 0.0)
+    return np.all(np.linalg.norm(gap, axis=2) > radius[None], axis=1)
+
+
+def _winding_numbers(verts, tris, points):
+    """Exact generalized winding numbers (solid angles, Van Oosterom and Strackee) of a small mesh."""
+    a, b, c = (verts[tris[:, k]][None].astype(np.float64) - points[:, None].astype(np.float64) for k in range(3))
+    la, lb, lc = (np.linalg.norm(v, axis=2) for v in (a, b, c))
+    det = np.einsum("ptk,ptk->pt", a, np.cross(b, c))
+    den = la * lb * lc + np.einsum("ptk,ptk->pt", a, b) * lc + np.einsum("ptk,ptk->pt", b, c) * la
+    den += np.einsum("ptk,ptk->pt", c, a) * lb
+    return (2.0 * np.arctan2(det, den)).sum(axis=1) / (4.0 * np.pi)
+
+
+def test_hole_caps_keep_the_winding_number_near_an_integer_outside_them():
+    # A box open at the top and the bottom: two pieces of boundary, one cap each (the bound sums over both).
+    verts, tris = box_mesh(subdivisions=3)
+    centres = verts[tris].mean(axis=1)[:, 2]
+    open_box = tris[np.abs(centres) < 0.99]
+    lo, hi, radius = engine.field.hole_caps(verts, open_box)
+    assert len(radius) == 2
+    np.testing.assert_allclose(np.sort(lo[:, 2]), [-1.0, 1.0], atol=1e-6)
+    # each cone is a 2 x 2 face; with two caps each radius covers half the budget: sqrt(2 * 4 / pi)
+    np.testing.assert_allclose(radius, np.sqrt(2 * 4.0 / np.pi), rtol=1e-6)
+    points = np.random.default_rng(5).uniform(-6.0, 6.0, size=(4000, 3))
+    away = _away_from_caps((lo, hi, radius), points)
+    assert 500 < away.sum() < 4000  # both kinds of points are there
+    w = _winding_numbers(verts, open_box, points[away])
+    assert np.abs(w - np.rint(w)).max() <= 0.25
+    # inside the caps it does get far from an integer (so the caps are not needlessly large everywhere)
+    w_near = _winding_numbers(verts, open_box, points[~away])
+    assert np.abs(w_near - np.rint(w_near)).max() > 0.05
+
+
 @pytest.mark.parametrize("name", ["stanford-bunny.obj", "suzanne.obj", "teapot.obj"])
 def test_open_meshes_coarse_node_signs_agree_with_the_winding_number(name):
     # coarse signs spread between neighbours only away from the holes' caps, where that is exact
@@ -179,8 +216,7 @@ def test_open_meshes_coarse_node_signs_agree_with_the_winding_number(name):
     clear = np.abs(values) > 0.5 * field.voxel_size  # the sign of a node on the surface is ill-conditioned
     centres, inside_field = centres[clear], values[clear] < 0.0
     # away from the caps: exactly what the build's own oracle says
-    lo, hi, radius = engine.field.hole_caps(verts, tris)
-    away = np.linalg.norm(np.maximum(np.maximum(lo - centres, centres - hi), 0.0), axis=1) > radius
+    away = _away_from_caps(engine.field.hole_caps(verts, tris), centres)
     oracle = winding_inside(verts, tris, centres[away], accuracy=engine.field.WINDING_ACCURACY)
     assert np.array_equal(inside_field[away], oracle), np.count_nonzero(inside_field[away] != oracle)
     # everywhere: the accurate winding number but for a few nodes
@@ -195,10 +231,10 @@ def test_hole_caps_bound_the_boundary_of_open_meshes():
         np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])[:, 2] > 0
     )
     lo, hi, radius = engine.field.hole_caps(verts, tris[~top])
-    np.testing.assert_allclose(lo, [-1.0, -1.0, 1.0], atol=1e-6)
-    np.testing.assert_allclose(hi, [1.0, 1.0, 1.0], atol=1e-6)
+    np.testing.assert_allclose(lo, [[-1.0, -1.0, 1.0]], atol=1e-6)
+    np.testing.assert_allclose(hi, [[1.0, 1.0, 1.0]], atol=1e-6)
     # the cone over the square rim from its centre is the 2 x 2 top face: radius sqrt(4 / pi)
-    assert radius == pytest.approx(np.sqrt(4.0 / np.pi), rel=1e-6)
+    assert radius[0] == pytest.approx(np.sqrt(4.0 / np.pi), rel=1e-6)
     # a flipped face makes its edges count twice where the orientations disagree
     flipped = tris.copy()
     flipped[0] = flipped[0, ::-1]
