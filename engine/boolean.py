@@ -439,21 +439,6 @@ def _octets_of_cells_kernel(
         counts[t] = n
 
 
-@wp.kernel(enable_backward=False)
-def _dilate_octets_kernel(octets: wp.array[wp.int64], radius: int, dims: wp.vec3i, out: wp.array[wp.int64]):
-    """Every octet within ``radius`` octets (a cube) of a stored one; out of range ones repeat the centre."""
-    t = wp.tid()
-    c = octree.morton_decode(octets[t])
-    w = 2 * radius + 1
-    for n in range(w * w * w):
-        d = wp.vec3i(n % w - radius, (n // w) % w - radius, n // (w * w) - radius)
-        q = c + d
-        code = octets[t]
-        if q[0] >= 0 and q[1] >= 0 and q[2] >= 0 and q[0] < dims[0] and q[1] < dims[1] and q[2] < dims[2]:
-            code = morton_encode(q)
-        out[t * w * w * w + n] = code
-
-
 # ---- host side ----
 
 
@@ -539,15 +524,7 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     radius = int(math.ceil(0.25 * blend / (2.0 * h))) if blend > 0.0 else 0
     for _ in range(radius):  # grow one octet at a time: 27x the set, then de-duplicate
         check_budget(fine_dims, 0, 8 * 27 * octets.shape[0])
-        grown = wp.empty(octets.shape[0] * 27, dtype=wp.int64, device=device)
-        wp.launch(
-            _dilate_octets_kernel,
-            dim=octets.shape[0],
-            device=device,
-            inputs=[octets, 1, wp.vec3i(*(int(d) for d in oct_dims))],
-            outputs=[grown],
-        )
-        octets = octree.sort_unique(grown, end_bit=3 * _bits(oct_dims))
+        octets = octree.dilate_octets(octets, oct_dims, end_bit=3 * _bits(oct_dims))
     timings["finest_cells"] = time.perf_counter() - t0
 
     a_arg, b_arg = a.arg(), b.arg()

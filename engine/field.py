@@ -846,6 +846,13 @@ def validate_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(verts64, dtype=np.float32), np.ascontiguousarray(tris[keep])
 
 
+def weld_positions(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The same triangles over one vertex per distinct position: (P, 3) positions and (T, 3) int64 indices (the
+    geometry, and so every distance and winding number, is unchanged)."""
+    unique, index = np.unique(np.asarray(vertices), axis=0, return_inverse=True)
+    return unique, index.reshape(-1)[np.asarray(triangles, dtype=np.int64)]
+
+
 def edge_table(tris: np.ndarray, n_verts: int) -> dict:
     """The undirected edges of a triangle list, for the mesh checks below.
 
@@ -1076,7 +1083,18 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     edges = edge_table(tris, len(verts))
     problem = problem_faces(tris, len(verts), edges)
     clean = not bool(problem.any())
-    caps = None if clean else hole_caps(verts, tris, edges)
+    caps = None
+    if not clean:
+        # the checks are about the surface, not its indexing: seams that repeat a vertex at one position (UV or patch
+        # seams) open edges only in the index, so they are judged on the mesh with those vertices merged
+        seam_verts, seam_tris = weld_positions(verts, tris)
+        if len(seam_verts) == len(verts):
+            seam_verts, seam_tris = verts, tris  # nothing merged: keep the indexing the edge table has
+        else:
+            edges = edge_table(seam_tris, len(seam_verts))
+            problem = problem_faces(seam_tris, len(seam_verts), edges)
+            clean = not bool(problem.any())
+        caps = None if clean else hole_caps(seam_verts, seam_tris, edges)
     mesh = wp.Mesh(
         points=wp.array(verts, dtype=wp.vec3, device=device),
         indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
@@ -1237,12 +1255,16 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         if len(extra) == 0:
             break
         rounds += 1
-        check_budget(fine_dims, top_count, field.level_counts[0] + 8 * len(extra))
+        check_budget(fine_dims, top_count, field.level_counts[0] + 8 * 27 * len(extra))
         t0 = time.perf_counter()
-        merged = wp.empty(base_octets.shape[0] + len(extra), dtype=wp.int64, device=device)
+        # one octet around each: the zero set across a hole leaves coarse leaves in a sheet, and what the first
+        # round adds next to it would otherwise show up as another round's sign changes
+        extra = octree.dilate_octets(
+            wp.array(extra, dtype=wp.int64, device=device), fine_dims // 2, end_bit=3 * _bits(fine_dims // 2)
+        )
+        merged = wp.empty(base_octets.shape[0] + extra.shape[0], dtype=wp.int64, device=device)
         wp.copy(merged, base_octets, count=base_octets.shape[0])
-        merged_np_tail = wp.array(extra, dtype=wp.int64, device=device)
-        wp.copy(merged, merged_np_tail, dest_offset=base_octets.shape[0], count=len(extra))
+        wp.copy(merged, extra, dest_offset=base_octets.shape[0], count=extra.shape[0])
         base_octets = octree.sort_unique(merged, end_bit=3 * _bits(fine_dims // 2))
         timings["finest_cells"] += time.perf_counter() - t0
         queries = field.stats["sign_queries"]

@@ -303,6 +303,34 @@ def _link_parents_kernel(first_child: wp.array[wp.int32], lo: int, parent: wp.ar
             parent[c + o] = i
 
 
+@wp.kernel(enable_backward=False)
+def _dilate_octets_kernel(octets: wp.array[wp.int64], radius: int, dims: wp.vec3i, out: wp.array[wp.int64]):
+    """Every octet within ``radius`` octets (a cube) of a stored one; out of range ones repeat the centre."""
+    t = wp.tid()
+    c = morton_decode(octets[t])
+    w = 2 * radius + 1
+    for n in range(w * w * w):
+        d = wp.vec3i(n % w - radius, (n // w) % w - radius, n // (w * w) - radius)
+        q = c + d
+        code = octets[t]
+        if q[0] >= 0 and q[1] >= 0 and q[2] >= 0 and q[0] < dims[0] and q[1] < dims[1] and q[2] < dims[2]:
+            code = morton_encode(q)
+        out[t * w * w * w + n] = code
+
+
+def dilate_octets(octets: wp.array, dims, end_bit: int) -> wp.array:
+    """Sorted unique octet codes within one octet (a 3x3x3 block) of ``octets``, inside ``dims`` octets."""
+    grown = wp.empty(octets.shape[0] * 27, dtype=wp.int64, device=octets.device)
+    wp.launch(
+        _dilate_octets_kernel,
+        dim=octets.shape[0],
+        inputs=[octets, 1, wp.vec3i(*(int(d) for d in dims))],
+        outputs=[grown],
+        device=octets.device,
+    )
+    return sort_unique(grown, end_bit=end_bit)
+
+
 # ---- neighbours along each axis (Eq. 7) ----
 
 

@@ -428,3 +428,22 @@ def test_closed_meshes_need_no_band_refinement_and_open_ones_close_their_holes()
     assert opened.stats["sign_refinements"] >= 1
     assert len(sign_change_octets(opened)) == 0
     assert is_watertight(opened.to_mesh()[1])
+
+
+def test_seams_that_repeat_vertices_are_not_holes():
+    # UV or patch seams repeat a vertex at one position: the index has open edges, the surface has none.
+    verts, tris = load_mesh("spot.obj")
+    upper = verts[tris].mean(axis=1)[:, 1] > np.median(verts[:, 1])
+    used = np.unique(tris[upper])
+    copies = np.arange(len(verts))
+    copies[used] = len(verts) + np.arange(len(used))
+    seamed_verts = np.vstack([verts, verts[used]])
+    seamed_tris = np.where(upper[:, None], copies[tris], tris)
+    assert engine.field.problem_faces(seamed_tris, len(seamed_verts)).any()  # open in the index
+    h = _voxel(verts, 128)
+    seamed = engine.build_field(seamed_verts, seamed_tris, voxel_size=h)
+    plain = engine.build_field(verts, tris, voxel_size=h)
+    assert seamed.stats["clean_mesh"] and seamed.stats["sign_refinements"] == 0
+    assert seamed.level_counts == plain.level_counts
+    np.testing.assert_array_equal(seamed.values.numpy() < 0.0, plain.values.numpy() < 0.0)
+    np.testing.assert_allclose(seamed.values.numpy(), plain.values.numpy(), atol=1e-6 * h)
