@@ -44,7 +44,7 @@ bench: venv
 	$(PY) bench/addon.py
 	$(PY) bench/cold_start.py
 	$(PY) bench/scaling.py
-	$(PY) bench/profile.py
+	$(PY) bench/breakdown.py
 
 clean:
 	rm -rf build dist .warp-cache .pytest_cache .ruff_cache

@@ -13,7 +13,7 @@ The case is the scaling benchmark's: spot ∪ spot shifted by 0.3 of its diagona
 Both start from the same Python + numpy; the runtime each needs (Warp's library and kernels, Blender as a module) is
 shown as its own row, so what the data costs can be told apart from what loading the runtime costs.
 
-    .venv/bin/python bench/profile.py [--resolutions 512] [--repeat 3]
+    .venv/bin/python bench/breakdown.py [--resolutions 512] [--repeat 3]
 """
 
 from __future__ import annotations
