@@ -191,7 +191,7 @@ def main(argv=None) -> None:
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args(argv)
     print(
-        f"# Profile — {platform.processor() or platform.machine()}, {os.cpu_count()} cores; medians of "
+        f"# Breakdown — {platform.processor() or platform.machine()}, {os.cpu_count()} cores; medians of "
         f"{args.repeat} runs after a warm-up, each side in a fresh process"
     )
     for res in args.resolutions:
