@@ -1483,6 +1483,7 @@ def assemble_field(
             known=known,
             octet_points=octet_points if k == 1 else None,
             row0=n0,
+            ordered_sweeps=k == levels - 1,  # the dense top level: far from the surface, information travels far
         )
         timings[f"{name}_neighbours"] = timings.get(f"{name}_neighbours", 0.0) + tn - tk
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk + level_times.get(k, 0.0)
