@@ -1382,7 +1382,8 @@ def assemble_field(
     for k in range(1, levels - 1):
         tk = time.perf_counter()
         dims_k = fine_dims >> k
-        grand = octree.parent_octets(level_codes[-1], 2, end_bit=3 * _bits(dims_k * 2))
+        # every level is sorted by Morton code (the finest level by contract), so its grandparents come in order
+        grand = octree.parent_octets(level_codes[-1], 2, end_bit=3 * _bits(dims_k * 2), presorted=True)
         c, co = octree.expand_octets(grand)
         level_codes.append(c)
         level_coords.append(co)

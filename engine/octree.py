@@ -204,18 +204,22 @@ def _compact_unique_kernel(
         out[slots[i]] = keys[i]
 
 
-def sort_unique(keys: wp.array, end_bit: int = 63) -> wp.array:
-    """Sorted unique values of an int64 array (radix sort, mark first occurrences, exclusive scan, compact)."""
+def sort_unique(keys: wp.array, end_bit: int = 63, *, presorted: bool = False) -> wp.array:
+    """Sorted unique values of an int64 array (radix sort, mark first occurrences, exclusive scan, compact);
+    ``presorted``: the keys are already non-decreasing, only duplicates go."""
     n = keys.shape[0]
     device = keys.device
     if n == 0:
         return wp.empty(0, dtype=wp.int64, device=device)
-    work_keys = wp.empty(2 * n, dtype=wp.int64, device=device)
-    wp.copy(work_keys, keys, count=n)
-    work_vals = wp.empty(2 * n, dtype=wp.int32, device=device)
-    wp.launch(_iota_kernel, dim=n, outputs=[work_vals], device=device)
-    wp.utils.radix_sort_pairs(work_keys, work_vals, n, end_bit=max(1, min(63, end_bit)))
-    sorted_keys = work_keys[:n]
+    if presorted:
+        sorted_keys = keys
+    else:
+        work_keys = wp.empty(2 * n, dtype=wp.int64, device=device)
+        wp.copy(work_keys, keys, count=n)
+        work_vals = wp.empty(2 * n, dtype=wp.int32, device=device)
+        wp.launch(_iota_kernel, dim=n, outputs=[work_vals], device=device)
+        wp.utils.radix_sort_pairs(work_keys, work_vals, n, end_bit=max(1, min(63, end_bit)))
+        sorted_keys = work_keys[:n]
     flags = wp.empty(n, dtype=wp.int32, device=device)
     wp.launch(_mark_unique_kernel, dim=n, inputs=[sorted_keys], outputs=[flags], device=device)
     slots = wp.empty(n, dtype=wp.int32, device=device)
@@ -256,9 +260,9 @@ def expand_octets(octets: wp.array) -> tuple[wp.array, wp.array]:
     return codes, coords
 
 
-def parent_octets(codes: wp.array, levels_up: int, end_bit: int) -> wp.array:
+def parent_octets(codes: wp.array, levels_up: int, end_bit: int, *, presorted: bool = False) -> wp.array:
     """Unique codes ``levels_up`` levels above (Eq. 6 with ``levels_up=2``: grandparents whose 8 children are the
-    parents and their siblings)."""
+    parents and their siblings). ``presorted``: ``codes`` ascend, and so do their shifted codes: no sort needed."""
     shifted = wp.empty_like(codes)
     if codes.shape[0]:
         wp.launch(
@@ -268,7 +272,7 @@ def parent_octets(codes: wp.array, levels_up: int, end_bit: int) -> wp.array:
             outputs=[shifted],
             device=codes.device,
         )
-    return sort_unique(shifted, end_bit=end_bit)
+    return sort_unique(shifted, end_bit=end_bit, presorted=presorted)
 
 
 def dense_level(dims) -> tuple[np.ndarray, np.ndarray]:
