@@ -233,13 +233,19 @@ def _finest_octet_distance_kernel(
         best = wp.vector(UNSET_DISTANCE, length=8, dtype=float)
         foot = wp.matrix(0.0, shape=(8, 3), dtype=float)
         worst = float(0.0)
+        # each node's closest triangle lies in its ball through the centre's foot: search the box around those balls
+        box_lo = c + wp.vec3(reach)
+        box_hi = c - wp.vec3(reach)
         for k in range(8):
             x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
             best[k] = wp.length_sq(x - centre_foot)
             foot[k] = centre_foot
             worst = wp.max(worst, best[k])
+            r = wp.sqrt(best[k]) * 1.0001 + 1.0e-4 * spacing
+            box_lo = wp.min(box_lo, x - wp.vec3(r))
+            box_hi = wp.max(box_hi, x + wp.vec3(r))
         m = wp.mesh_get(mesh)
-        candidates = wp.mesh_query_aabb(mesh, c - wp.vec3(reach), c + wp.vec3(reach))
+        candidates = wp.mesh_query_aabb(mesh, box_lo, box_hi)
         f = int(0)
         while wp.mesh_query_aabb_next(candidates, f):
             a = m.points[m.indices[3 * f]]
