@@ -8,7 +8,9 @@ and only complete cubes whose corners change sign are polygonised by the core of
 the samples themselves as the cubes' shared corners (Warp's public ``sparse_marching_cubes_from_cells`` would sort
 eight corner codes per cube to find them again: ~2x the time and memory; it remains the fallback for other Warp
 versions). Vertices are shared between cubes, so the mesh is watertight wherever the zero set stays inside the band.
-``bench/extract_compare.py`` measures this against scikit-image's marching cubes run on dense 16^3 blocks.
+:func:`extract_octree_level` does the same on a field's finest level as stored (Morton order, complete octets):
+each cube's corners come from its octet's +x/+y/+z neighbour octets, so nothing is sorted and nothing leaves the
+device. ``bench/extract_compare.py`` measures this against scikit-image's marching cubes run on dense 16^3 blocks.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import warp as wp
 import warp.geometry
 
 from .errors import AasdfError
-from .octree import launch_split
+from .octree import launch_split, morton_decode, morton_encode
 
 try:  # the marching-cubes core of Warp's sparse_marching_cubes_from_cells, given already shared corners
     from warp._src.geometry.sparse_marching_cubes import _extract_from_dedup as _shared_corner_marching_cubes
@@ -225,6 +227,186 @@ def _renumber_corners_kernel(used_scan: wp.array[wp.int32], cube_corners: wp.arr
     o = wp.tid()
     for c in range(8):
         cube_corners[o, c] = used_scan[cube_corners[o, c]] - 1
+
+
+# ---- the finest level of an octree, in its own Morton order ----
+
+
+# For node k of an octet (bits x, y, z) and cube corner c: which of the octet's +x/+y/+z neighbour octets (bits) holds
+# the corner, and which child of it the corner is.
+# Bit c of _CORNER_BITS_X/Y/Z is corner c's offset along that axis.
+_CORNER_BITS_X = int(sum(int(_CORNER_OFFSETS[c][0]) << c for c in range(8)))
+_CORNER_BITS_Y = int(sum(int(_CORNER_OFFSETS[c][1]) << c for c in range(8)))
+_CORNER_BITS_Z = int(sum(int(_CORNER_OFFSETS[c][2]) << c for c in range(8)))
+
+
+@wp.kernel(enable_backward=False)
+def _octet_cube_corners_kernel(
+    first: int,
+    codes: wp.array[wp.int64],
+    values: wp.array[wp.float32],
+    emit: int,
+    neighbours: wp.array2d[wp.int32],
+    active_scan: wp.array[wp.int32],
+    active: wp.array[wp.int32],
+    cube_corners: wp.array2d[wp.int32],
+):
+    """``_find_cube_corners_kernel`` on an octree's finest level (Morton-sorted, in complete octets): one thread per
+    octet. With ``emit=0`` it finds the octet's 7 neighbours towards +x/+y/+z (first node, or -1) into
+    ``neighbours`` — their codes are larger, so a galloping search forward from the octet finds them — and flags
+    the active cubes whose minimum corner is one of its 8 nodes; with ``emit=1`` it writes those cubes' corners,
+    taken from the 8 octets by index arithmetic."""
+    t = first + wp.tid()
+    base = 8 * t
+    n = codes.shape[0]
+    nb = wp.vector(-1, -1, -1, -1, -1, -1, -1, -1, length=8, dtype=int)
+    nb[0] = base
+    if emit == 0:
+        octet = morton_decode(codes[base] >> wp.int64(3))
+        for d in range(1, 8):
+            key = morton_encode(octet + wp.vec3i(d & 1, (d >> 1) & 1, (d >> 2) & 1)) << wp.int64(3)
+            j = _gallop_lower_bound(codes, wp.int32(base + 8), key)
+            found = int(-1)
+            if j < n:
+                if codes[j] == key:
+                    found = int(j)
+            neighbours[t, d - 1] = found
+    for d in range(1, 8):
+        nb[d] = neighbours[t, d - 1]
+    for k in range(8):
+        i = base + k
+        if emit == 0 or active[i] == 1:
+            complete = int(1)
+            negative = int(0)
+            row = int(0)
+            if emit == 1:
+                row = active_scan[i] - 1
+            for c in range(8):
+                # the corner's position in the 4x4x4 nodes of the octet and its +x/+y/+z neighbours
+                sx = (k & 1) + ((_CORNER_BITS_X >> c) & 1)
+                sy = ((k >> 1) & 1) + ((_CORNER_BITS_Y >> c) & 1)
+                sz = ((k >> 2) & 1) + ((_CORNER_BITS_Z >> c) & 1)
+                o = nb[(sx >> 1) | ((sy >> 1) << 1) | ((sz >> 1) << 2)]
+                if o < 0:
+                    complete = 0
+                else:
+                    j = o + ((sx & 1) | ((sy & 1) << 1) | ((sz & 1) << 2))
+                    negative += wp.where(values[j] < 0.0, 1, 0)
+                    if emit == 1:
+                        cube_corners[row, c] = j
+            if emit == 0:
+                active[i] = wp.where(complete == 1 and negative > 0 and negative < 8, 1, 0)
+
+
+@wp.kernel(enable_backward=False)
+def _shift_nudge_kernel(values: wp.array[wp.float32], iso: float, nudge: float, out: wp.array[wp.float32]):
+    """``values - iso``, entries within ``nudge`` of 0 pushed to ``-nudge`` / ``+nudge`` (see ``_nudge_values``)."""
+    i = wp.tid()
+    v = values[i] - iso
+    if wp.abs(v) < nudge:
+        v = wp.where(v < 0.0, -nudge, nudge)
+    out[i] = v
+
+
+@wp.kernel(enable_backward=False)
+def _used_node_points_kernel(
+    used: wp.array[wp.int32],
+    used_scan: wp.array[wp.int32],
+    coords: wp.array[wp.vec3i],
+    lo: wp.vec3i,
+    values: wp.array[wp.float32],
+    base: wp.vec3,
+    spacing: float,
+    points: wp.array[wp.vec3],
+    point_values: wp.array[wp.float32],
+):
+    """``_used_corner_points_kernel`` from lattice coordinates (``base``: world position of lattice point ``lo``)."""
+    i = wp.tid()
+    if used[i] == 0:
+        return
+    out = used_scan[i] - 1
+    c = coords[i] - lo
+    points[out] = base + spacing * wp.vec3(float(c[0]), float(c[1]), float(c[2]))
+    point_values[out] = values[i]
+
+
+def extract_octree_level(codes, coords, values, *, origin, spacing, iso=0.0):
+    """:func:`extract_surface` for an octree's finest level as it is stored: Warp arrays of Morton codes (sorted, in
+    complete octets of 8 consecutive nodes), lattice coordinates and values (signed distances, finite), all on one
+    device. Same mesh as ``extract_surface(coords, values, ...)``, found without leaving the device: each cube's
+    corners come from its octet's neighbours (``_octet_cube_corners_kernel``), so nothing is sorted.
+
+    Returns and raises as :func:`extract_surface` (no ValueError: the level is valid by construction).
+    """
+    n = codes.shape[0]
+    if n == 0:
+        return _empty_mesh()
+    device = codes.device
+    origin = np.asarray(origin, dtype=np.float64)
+    spacing = float(spacing)
+    coords_np = coords.numpy()
+    lo = coords_np.min(axis=0).astype(np.int64)
+    hi = coords_np.max(axis=0).astype(np.int64)
+    extent = float(np.abs([origin + (lo + 0.5) * spacing, origin + (hi + 1.5) * spacing]).max())
+    ulp = float(np.spacing(np.float32(extent)))
+    if ulp * _MIN_ULPS_PER_CELL > spacing:
+        raise AasdfError(
+            f"The surface lies too far from the world origin for its voxel size: float32 positions {extent:.4g} "
+            f"away resolve only {ulp:.3g}, more than 1/{_MIN_ULPS_PER_CELL:g} of the voxel size {spacing:.3g}. "
+            "Move the objects closer to the origin or use a coarser resolution."
+        )
+    nudge = max(_ISO_NUDGE * spacing, _ISO_NUDGE_ULPS * ulp)
+    shifted = wp.empty(n, dtype=wp.float32, device=device)
+    launch_split(
+        _shift_nudge_kernel, n, lambda s, c: [values[s : s + c], float(iso), nudge, shifted[s : s + c]], device
+    )
+    active = wp.empty(n, dtype=wp.int32, device=device)
+    active_scan = wp.empty(n, dtype=wp.int32, device=device)
+    no_corners = wp.empty((0, 8), dtype=wp.int32, device=device)
+    neighbours = wp.empty((n // 8, 7), dtype=wp.int32, device=device)
+    launch_split(
+        _octet_cube_corners_kernel,
+        n // 8,
+        lambda s, c: [s, codes, shifted, 0, neighbours, active_scan, active, no_corners],
+        device,
+    )
+    wp.utils.array_scan(active, active_scan, inclusive=True)
+    n_cubes = int(active_scan[-1:].numpy()[0])
+    if n_cubes == 0:
+        return _empty_mesh()
+    cube_corners = wp.empty((n_cubes, 8), dtype=wp.int32, device=device)
+    launch_split(
+        _octet_cube_corners_kernel,
+        n // 8,
+        lambda s, c: [s, codes, shifted, 1, neighbours, active_scan, active, cube_corners],
+        device,
+    )
+    active = active_scan = neighbours = None
+    if _shared_corner_marching_cubes is None:  # another Warp version: through the generic path
+        return extract_surface(coords_np, shifted.numpy(), origin=origin, spacing=spacing, iso=0.0, device=device)
+    used = wp.zeros(n, dtype=wp.int32, device=device)
+    wp.launch(_mark_used_corners_kernel, dim=n_cubes, inputs=[cube_corners, used], device=device)
+    used_scan = wp.empty(n, dtype=wp.int32, device=device)
+    wp.utils.array_scan(used, used_scan, inclusive=True)
+    n_used = int(used_scan[-1:].numpy()[0])
+    base = wp.vec3(*(float(x) for x in origin + (lo + 0.5) * spacing))
+    points = wp.empty(n_used, dtype=wp.vec3, device=device)
+    point_values = wp.empty(n_used, dtype=wp.float32, device=device)
+    wp.launch(
+        _used_node_points_kernel,
+        dim=n,
+        inputs=[used, used_scan, coords, wp.vec3i(*(int(x) for x in lo)), shifted, base, spacing],
+        outputs=[points, point_values],
+        device=device,
+    )
+    wp.launch(_renumber_corners_kernel, dim=n_cubes, inputs=[used_scan], outputs=[cube_corners], device=device)
+    used = used_scan = shifted = None
+    verts_wp, indices_wp = _shared_corner_marching_cubes(cube_corners, points, point_values, 0.0, device)
+    if indices_wp.shape[0] == 0:
+        return _empty_mesh()
+    verts = verts_wp.numpy().astype(np.float32, copy=False).reshape(-1, 3)
+    tris = indices_wp.numpy().astype(np.int32, copy=False).reshape(-1, 3)
+    return verts, tris
 
 
 def _shared_corner_surface(keys_wp, values_wp, cube_corners, lo, origin, spacing, strides):

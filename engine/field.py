@@ -770,13 +770,16 @@ class AdaptiveField:
 
     def to_mesh(self, iso: float = 0.0):
         """Marching cubes over the finest level's narrow band: (V,3) float32 vertices, (F,3) int32 triangles."""
-        from .extract import extract_surface
+        from .extract import extract_octree_level
 
-        sl = self.level_slice(0)
-        coords = self.coords.numpy()[sl]
-        values = self.values.numpy()[sl]
-        return extract_surface(
-            coords, values, origin=self.origin, spacing=self.voxel_size, iso=float(iso), device=self.device
+        n0 = self.level_counts[0]
+        return extract_octree_level(
+            self.codes[:n0],
+            self.coords[:n0],
+            self.values[:n0],
+            origin=self.origin,
+            spacing=self.voxel_size,
+            iso=float(iso),
         )
 
     # -- booleans as operators --

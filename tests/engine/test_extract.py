@@ -392,3 +392,27 @@ def test_invalid_arguments_raise(coords, values, kwargs, error, match):
     kwargs = {"origin": (0.0, 0.0, 0.0), "spacing": 1.0} | kwargs
     with pytest.raises(error, match=match):
         extract_surface(np.asarray(coords), values, **kwargs)
+
+
+@pytest.mark.parametrize("iso_voxels", [0.0, 1.5, -0.7])
+def test_octree_level_extraction_matches_the_generic_one(iso_voxels):
+    # to_mesh takes each cube's corners from its octet's +x/+y/+z neighbours, in Morton order, without sorting: the
+    # mesh must be the one extract_surface finds from the same samples.
+    import engine
+    from tests.support import uv_sphere
+
+    a = uv_sphere(1.0, rings=24, segments=48)
+    b = (a[0] + np.float32([0.9, 0.2, -0.1]), a[1])
+    h = 0.04
+    field = engine.union(engine.build_field(*a, voxel_size=h), engine.build_field(*b, voxel_size=h))
+    n0 = field.level_counts[0]
+    iso = iso_voxels * h
+    verts, tris = field.to_mesh(iso=iso)
+    generic_verts, generic_tris = extract_surface(
+        field.coords.numpy()[:n0], field.values.numpy()[:n0], origin=field.origin, spacing=h, iso=iso
+    )
+    assert len(tris) > 1000 and len(verts) == len(generic_verts) and len(tris) == len(generic_tris)
+    np.testing.assert_array_equal(
+        oriented_triangles(verts, tris, generic_verts),
+        oriented_triangles(generic_verts, generic_tris, generic_verts),
+    )
