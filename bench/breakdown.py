@@ -19,14 +19,14 @@ shown as its own row, so what the data costs can be told apart from what loading
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
-import subprocess
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.child import run_child  # noqa: E402
 
 COMMON = r"""
 import json, statistics, sys, threading, time
@@ -133,16 +133,7 @@ print("RESULT " + json.dumps(out))
 
 
 def child(script: str, res: int, repeat: int) -> dict:
-    env = {**os.environ, "WARP_CACHE_PATH": os.environ.get("WARP_CACHE_PATH", str(ROOT / ".warp-cache"))}
-    out = subprocess.run(
-        [sys.executable, "-c", COMMON + script, str(ROOT), str(res), str(repeat)],
-        env=env,
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
-    line = next(line for line in out.splitlines() if line.startswith("RESULT "))
-    return json.loads(line[len("RESULT ") :])
+    return run_child(COMMON + script, res, repeat)
 
 
 def report(res: int, repeat: int) -> None:

@@ -11,15 +11,15 @@ them, so both build both fields) and their difference.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import statistics
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench.child import run_child  # noqa: E402
 
 CHILD = r"""
 import importlib.util, json, sys, time
@@ -50,16 +50,7 @@ print("RESULT " + json.dumps(times))
 
 def run_once(kernels: str, resolution: int) -> list[float]:
     with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "WARP_CACHE_PATH": cache}
-        out = subprocess.run(
-            [sys.executable, "-c", CHILD, str(ROOT), kernels, str(resolution)],
-            env=env,
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout
-    line = next(line for line in out.splitlines() if line.startswith("RESULT "))
-    return json.loads(line[len("RESULT ") :])
+        return run_child(CHILD, kernels, resolution, cache=cache)
 
 
 def main(argv=None):

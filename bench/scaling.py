@@ -11,13 +11,13 @@ of a mesh, through AASDF's whole pipeline and through the geometry-nodes SDF pip
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench.child import run_child  # noqa: E402
 
 CHILD = r"""
 import json, resource, sys, time
@@ -56,16 +56,7 @@ print("RESULT " + json.dumps({"seconds": seconds, "triangles": int(len(tris)), "
 
 
 def measure(method: str, case: str, res: int) -> dict:
-    env = {**os.environ, "WARP_CACHE_PATH": os.environ.get("WARP_CACHE_PATH", str(ROOT / ".warp-cache"))}
-    out = subprocess.run(
-        [sys.executable, "-c", CHILD, str(ROOT), method, case, str(res)],
-        env=env,
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
-    line = next(line for line in out.splitlines() if line.startswith("RESULT "))
-    return json.loads(line[len("RESULT ") :])
+    return run_child(CHILD, method, case, res)
 
 
 def row(label: str, case: str, res: int) -> None:

@@ -347,15 +347,7 @@ def extract_octree_level(codes, coords, values, *, origin, spacing, iso=0.0):
     coords_np = coords.numpy()
     lo = coords_np.min(axis=0).astype(np.int64)
     hi = coords_np.max(axis=0).astype(np.int64)
-    extent = float(np.abs([origin + (lo + 0.5) * spacing, origin + (hi + 1.5) * spacing]).max())
-    ulp = float(np.spacing(np.float32(extent)))
-    if ulp * _MIN_ULPS_PER_CELL > spacing:
-        raise AasdfError(
-            f"The surface lies too far from the world origin for its voxel size: float32 positions {extent:.4g} "
-            f"away resolve only {ulp:.3g}, more than 1/{_MIN_ULPS_PER_CELL:g} of the voxel size {spacing:.3g}. "
-            "Move the objects closer to the origin or use a coarser resolution."
-        )
-    nudge = max(_ISO_NUDGE * spacing, _ISO_NUDGE_ULPS * ulp)
+    nudge = _iso_nudge(origin, lo, hi, spacing)
     shifted = wp.empty(n, dtype=wp.float32, device=device)
     launch_split(
         _shift_nudge_kernel, n, lambda s, c: [values[s : s + c], float(iso), nudge, shifted[s : s + c]], device
@@ -384,24 +376,8 @@ def extract_octree_level(codes, coords, values, *, origin, spacing, iso=0.0):
     active = active_scan = neighbours = None
     if _shared_corner_marching_cubes is None:  # another Warp version: through the generic path
         return extract_surface(coords_np, shifted.numpy(), origin=origin, spacing=spacing, iso=0.0, device=device)
-    used = wp.zeros(n, dtype=wp.int32, device=device)
-    wp.launch(_mark_used_corners_kernel, dim=n_cubes, inputs=[cube_corners, used], device=device)
-    used_scan = wp.empty(n, dtype=wp.int32, device=device)
-    wp.utils.array_scan(used, used_scan, inclusive=True)
-    n_used = int(used_scan[-1:].numpy()[0])
-    base = wp.vec3(*(float(x) for x in origin + (lo + 0.5) * spacing))
-    points = wp.empty(n_used, dtype=wp.vec3, device=device)
-    point_values = wp.empty(n_used, dtype=wp.float32, device=device)
-    wp.launch(
-        _used_node_points_kernel,
-        dim=n,
-        inputs=[used, used_scan, coords, wp.vec3i(*(int(x) for x in lo)), shifted, base, spacing],
-        outputs=[points, point_values],
-        device=device,
-    )
-    wp.launch(_renumber_corners_kernel, dim=n_cubes, inputs=[used_scan], outputs=[cube_corners], device=device)
-    used = used_scan = shifted = None
-    verts_wp, indices_wp = _shared_corner_marching_cubes(cube_corners, points, point_values, 0.0, device)
+    point_inputs = [coords, wp.vec3i(*(int(x) for x in lo)), shifted]
+    verts_wp, indices_wp = _polygonise(cube_corners, n, _used_node_points_kernel, point_inputs, lo, origin, spacing)
     if indices_wp.shape[0] == 0:
         return _empty_mesh()
     verts = verts_wp.numpy().astype(np.float32, copy=False).reshape(-1, 3)
@@ -411,29 +387,37 @@ def extract_octree_level(codes, coords, values, *, origin, spacing, iso=0.0):
 
 def _shared_corner_surface(keys_wp, values_wp, cube_corners, lo, origin, spacing, strides):
     """Marching cubes whose corners are the samples themselves: each sample is one shared corner, so no sort is needed
-    to find which cubes share a corner (Warp's public entry point sorts 8 codes per cube). Only the samples some
-    active cube uses take part. Returns Warp arrays (vertices, flat triangle indices)."""
-    device = keys_wp.device
-    n = keys_wp.shape[0]
+    to find which cubes share a corner (Warp's public entry point sorts 8 codes per cube). Returns Warp arrays
+    (vertices, flat triangle indices)."""
+    point_inputs = [keys_wp, values_wp, wp.int64(strides[0]), wp.int64(strides[1])]
+    return _polygonise(cube_corners, keys_wp.shape[0], _used_corner_points_kernel, point_inputs, lo, origin, spacing)
+
+
+def _polygonise(cube_corners, n, point_kernel, point_inputs, lo, origin, spacing):
+    """Warp's marching-cubes core on the active cubes (``cube_corners``: (M, 8) indices of ``n`` samples). Only the
+    samples some cube uses take part: they are compacted, and ``point_kernel(used, used_scan, *point_inputs, base,
+    spacing, points, point_values)`` writes their positions (``base``: world position of lattice point ``lo``, taken
+    in double precision) and values."""
+    device = cube_corners.device
     used = wp.zeros(n, dtype=wp.int32, device=device)
     wp.launch(_mark_used_corners_kernel, dim=cube_corners.shape[0], inputs=[cube_corners, used], device=device)
     used_scan = wp.empty(n, dtype=wp.int32, device=device)
     wp.utils.array_scan(used, used_scan, inclusive=True)
     n_used = int(used_scan[-1:].numpy()[0])
-    # positions relative to key 0, whose world position is taken in double precision
     base = wp.vec3(*(float(x) for x in origin + (np.asarray(lo, np.float64) + 0.5) * spacing))
     points = wp.empty(n_used, dtype=wp.vec3, device=device)
     point_values = wp.empty(n_used, dtype=wp.float32, device=device)
     wp.launch(
-        _used_corner_points_kernel,
+        point_kernel,
         dim=n,
-        inputs=[used, used_scan, keys_wp, values_wp, wp.int64(strides[0]), wp.int64(strides[1]), base, spacing],
+        inputs=[used, used_scan, *point_inputs, base, float(spacing)],
         outputs=[points, point_values],
         device=device,
     )
     wp.launch(
         _renumber_corners_kernel, dim=cube_corners.shape[0], inputs=[used_scan], outputs=[cube_corners], device=device
     )
+    used = used_scan = None
     return _shared_corner_marching_cubes(cube_corners, points, point_values, 0.0, device)
 
 
@@ -504,6 +488,23 @@ def _validate(coords, values, origin, spacing, iso) -> tuple[np.ndarray, np.ndar
     return coords, values, origin, spacing, iso
 
 
+def _iso_nudge(origin: np.ndarray, lo: np.ndarray, hi: np.ndarray, spacing: float) -> float:
+    """How far samples are pushed off the level (see ``_ISO_NUDGE``) for a lattice spanning ``lo``..``hi``.
+
+    Vertices are float32 world positions: their resolution where the lattice lies bounds the nudge from below, and
+    refuses (AasdfError) lattices so far from the origin that float32 cannot resolve a fraction of a cell there.
+    """
+    extent = float(np.abs([origin + (lo + 0.5) * spacing, origin + (hi + 1.5) * spacing]).max())
+    ulp = float(np.spacing(np.float32(extent)))
+    if ulp * _MIN_ULPS_PER_CELL > spacing:
+        raise AasdfError(
+            f"The surface lies too far from the world origin for its voxel size: float32 positions {extent:.4g} "
+            f"away resolve only {ulp:.3g}, more than 1/{_MIN_ULPS_PER_CELL:g} of the voxel size {spacing:.3g}. "
+            "Move the objects closer to the origin or use a coarser resolution."
+        )
+    return max(_ISO_NUDGE * spacing, _ISO_NUDGE_ULPS * ulp)
+
+
 def _nudge_values(values: np.ndarray, iso: float, nudge: float) -> np.ndarray:
     """Return ``values - iso`` as float32 with every entry at least ``nudge`` away from zero.
 
@@ -571,16 +572,7 @@ def extract_surface(coords, values, *, origin, spacing, iso=0.0, device=None) ->
         if duplicates:
             raise ValueError(f"Expected unique 'coords', but got {duplicates} repeated samples.")
 
-    # Vertices are float32 world positions: their resolution where the lattice lies bounds the nudge from below.
-    extent = float(np.abs([origin + (lo + 0.5) * spacing, origin + (hi + 1.5) * spacing]).max())
-    ulp = float(np.spacing(np.float32(extent)))
-    if ulp * _MIN_ULPS_PER_CELL > spacing:
-        raise AasdfError(
-            f"The surface lies too far from the world origin for its voxel size: float32 positions {extent:.4g} "
-            f"away resolve only {ulp:.3g}, more than 1/{_MIN_ULPS_PER_CELL:g} of the voxel size {spacing:.3g}. "
-            "Move the objects closer to the origin or use a coarser resolution."
-        )
-    nudge = max(_ISO_NUDGE * spacing, _ISO_NUDGE_ULPS * ulp)
+    nudge = _iso_nudge(origin, lo, hi, spacing)
     shifted = _nudge_values(values, iso, nudge)
 
     # Find the complete cubes whose corners change sign and gather their corner values.

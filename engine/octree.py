@@ -454,6 +454,35 @@ def _init_from_children_kernel(
                 proj[i] = p
 
 
+@wp.func
+def _nearest_projection(
+    x: wp.vec3,
+    i: int,
+    neighbours: wp.array2d[wp.int32],
+    row0: int,
+    in0: int,
+    dist: wp.array[wp.float32],
+    proj: wp.array[wp.vec3],
+    source: wp.array[wp.int32],
+):
+    """The closest-point Eikonal update of node ``i`` (at ``x``): (distance, projection point, source) of the nearest
+    projection point among its own and its face neighbours' (node ``j`` at entry ``j - in0``, its neighbours in row
+    ``i - row0``); a neighbour's point must be nearer by a relative 1e-5 to win."""
+    best = dist[i - in0]
+    p = proj[i - in0]
+    s = source[i - in0]
+    for k in range(6):
+        j = neighbours[i - row0, k]
+        if j >= 0:
+            if dist[j - in0] < UNSET_DISTANCE:
+                dj = wp.length(x - proj[j - in0])
+                if dj < best * 0.99999:
+                    best = dj
+                    p = proj[j - in0]
+                    s = source[j - in0]
+    return best, p, s
+
+
 @wp.kernel(enable_backward=False)
 def _fim_sweep_kernel(
     coords: wp.array[wp.vec3i],
@@ -482,16 +511,9 @@ def _fim_sweep_kernel(
     p = proj_in[i - in0]
     s = src_in[i - in0]
     if first_child[i] < 0 and known[i] == 0:
-        x = node_center(origin, spacing, coords[i])
-        for k in range(6):
-            j = neighbours[i - row0, k]
-            if j >= 0:
-                if dist_in[j - in0] < UNSET_DISTANCE:
-                    dj = wp.length(x - proj_in[j - in0])
-                    if dj < best * 0.99999:
-                        best = dj
-                        p = proj_in[j - in0]
-                        s = src_in[j - in0]
+        best, p, s = _nearest_projection(
+            node_center(origin, spacing, coords[i]), i, neighbours, row0, in0, dist_in, proj_in, src_in
+        )
         if best < dist_in[i - in0]:
             wp.atomic_add(changed, 0, 1)
     dist_out[i - out0] = best
@@ -525,19 +547,9 @@ def _fim_ordered_sweep_kernel(
         if reverse == 1:
             i = hi - 1 - t
         if first_child[i] < 0 and known[i] == 0:
-            x = node_center(origin, spacing, coords[i])
-            best = dist[i]
-            p = proj[i]
-            s = source[i]
-            for k in range(6):
-                j = neighbours[i - row0, k]
-                if j >= 0:
-                    if dist[j] < UNSET_DISTANCE:
-                        dj = wp.length(x - proj[j])
-                        if dj < best * 0.99999:
-                            best = dj
-                            p = proj[j]
-                            s = source[j]
+            best, p, s = _nearest_projection(
+                node_center(origin, spacing, coords[i]), i, neighbours, row0, 0, dist, proj, source
+            )
             if best < dist[i]:
                 dist[i] = best
                 proj[i] = p
