@@ -273,7 +273,8 @@ def _octet_cube_corners_kernel(
             neighbours[t, d - 1] = found
     for d in range(1, 8):
         nb[d] = neighbours[t, d - 1]
-    for k in range(8):
+    nodes = int(8)  # not unrolled (compile time)
+    for k in range(nodes):
         i = base + k
         if emit == 0 or active[i] == 1:
             complete = int(1)

@@ -494,7 +494,8 @@ def _propagate_sign_kernel(
     x = node_center(origin, spacing, coords[i])
     if _near_cap(x, cap_lo, cap_hi, cap_radius, spacing):
         return
-    for k in range(6):
+    faces = int(6)  # not unrolled: one copy of the segment test (compile time)
+    for k in range(faces):
         j = neighbours[i - row0, k]
         if j >= 0:
             y = node_center(origin, spacing, coords[j])
@@ -539,12 +540,16 @@ def _propagate_sign_octet_kernel(
     # first node of the octet across each face (-x, +x, -y, +y, -z, +z); -2: not looked up yet
     across = wp.vector(-2, -2, -2, -2, -2, -2, length=6, dtype=int)
     got = int(0)
-    for _sweep in range(2):
-        for k in range(8):
+    # loop bounds held in variables keep Warp from unrolling 2 x 8 x 3 copies of the segment test (compile time)
+    sweeps = int(2)
+    nodes = int(8)
+    axes = int(3)
+    for _sweep in range(sweeps):
+        for k in range(nodes):
             i = base + k
             if sign[i] == 0.0:
                 x = centre + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
-                for a in range(3):
+                for a in range(axes):
                     bit = (k >> a) & 1
                     step = wp.vec3(0.0)
                     step[a] = wp.where(bit == 0, spacing, -spacing)
