@@ -227,15 +227,14 @@ def _finest_octet_distance_kernel(
         octet_dist[base // 8] = wp.length(c - centre_foot)
         octet_proj[base // 8] = centre_foot
     if q.result and box_search == 1:
-        reach = octet_dist[base // 8] + 1.7321 * spacing * 1.001
         half_diagonal = 0.8661 * spacing * 1.001  # centre to node, with room for rounding
         # the centre's foot is a surface point: every node starts from its distance to it (an upper bound)
         best = wp.vector(UNSET_DISTANCE, length=8, dtype=float)
         foot = wp.matrix(0.0, shape=(8, 3), dtype=float)
         worst = float(0.0)
         # each node's closest triangle lies in its ball through the centre's foot: search the box around those balls
-        box_lo = c + wp.vec3(reach)
-        box_hi = c - wp.vec3(reach)
+        box_lo = c
+        box_hi = c  # grown around every ball below (starting at the centre can only widen it)
         for k in range(8):
             x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
             best[k] = wp.length_sq(x - centre_foot)
