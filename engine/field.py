@@ -327,15 +327,28 @@ def _mesh_sign_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def _band_gap_kernel(start: int, f: FieldArg, capacity: int, count: wp.array[wp.int32], out: wp.array[wp.int64]):
+def _band_gap_kernel(
+    start: int,
+    f: FieldArg,
+    near_lo: wp.array[wp.vec3],
+    near_hi: wp.array[wp.vec3],
+    near_radius: wp.array[wp.float32],
+    margin: float,
+    capacity: int,
+    count: wp.array[wp.int32],
+    out: wp.array[wp.int64],
+):
     """Octets next to the finest band whose covering coarse leaf has another sign than a node of the band octet
     beside them: a marching cube straddling the zero set there would be incomplete. One thread per band octet
-    (8 consecutive finest nodes, octet ``start + tid``); found octet codes are appended to ``out``."""
+    (8 consecutive finest nodes, octet ``start + tid``), only within ``near_radius + margin`` of a ``near`` box when
+    ``margin >= 0``; found octet codes are appended to ``out``."""
     t = start + wp.tid()
     first = 8 * t
     octet = wp.vec3i(f.coords[first][0] >> 1, f.coords[first][1] >> 1, f.coords[first][2] >> 1)
     size = 2.0 * f.voxel_size
     c = f.origin + size * wp.vec3(float(octet[0]) + 0.5, float(octet[1]) + 0.5, float(octet[2]) + 0.5)
+    if margin >= 0.0 and not _near_cap(c, near_lo, near_hi, near_radius, margin):
+        return
     for o in range(27):
         if o != 13:
             d = wp.vec3i(o % 3 - 1, (o // 3) % 3 - 1, o // 9 - 1)
@@ -361,9 +374,18 @@ def _band_gap_kernel(start: int, f: FieldArg, capacity: int, count: wp.array[wp.
 
 
 @wp.kernel(enable_backward=False)
-def _sign_change_kernel(start: int, f: FieldArg, node_level: wp.array[wp.int32], marks: wp.array[wp.int32]):
+def _sign_change_kernel(
+    start: int,
+    f: FieldArg,
+    node_level: wp.array[wp.int32],
+    near_lo: wp.array[wp.vec3],
+    near_hi: wp.array[wp.vec3],
+    near_radius: wp.array[wp.float32],
+    margin: float,
+    marks: wp.array[wp.int32],
+):
     """Mark coarse leaves that have a coarse face neighbour of the opposite sign: the zero set crosses them.
-    Coarse node ``start + tid``."""
+    Coarse node ``start + tid``; only within ``near_radius + margin`` of a ``near`` box when ``margin >= 0``."""
     t = start + wp.tid()
     i = f.fine_count + t
     marks[t] = 0
@@ -371,6 +393,8 @@ def _sign_change_kernel(start: int, f: FieldArg, node_level: wp.array[wp.int32],
         return
     s = f.voxel_size * float(1 << node_level[i])
     c = node_center(f.origin, s, f.coords[i])
+    if margin >= 0.0 and not _near_cap(c, near_lo, near_hi, near_radius, margin):
+        return
     inside = f.values[i] < 0.0
     for k in range(6):
         # probe just across the face centre: the leaf found there touches this one
@@ -574,8 +598,10 @@ def _propagate_sign_octet_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def _apply_sign_kernel(dist: wp.array[wp.float32], sign: wp.array[wp.float32], values: wp.array[wp.float32]):
-    i = wp.tid()
+def _apply_sign_kernel(
+    first: int, dist: wp.array[wp.float32], sign: wp.array[wp.float32], values: wp.array[wp.float32]
+):
+    i = first + wp.tid()
     s = sign[i]
     if s == 0.0:
         s = 1.0
@@ -1263,7 +1289,9 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     refine_seconds = 0.0
     while levels > 1 and not clean and rounds < MAX_SIGN_REFINEMENTS:
         t_refine = time.perf_counter()
-        extra = sign_change_octets(field)
+        # off the caps over the holes the winding number stays near an integer (see hole_caps): the zero set can
+        # only leave the band near them (no caps: the edges cancel, it never does)
+        extra = sign_change_octets(field, caps if caps is not None else (np.zeros((0, 3)), np.zeros((0, 3)), []))
         refine_seconds += time.perf_counter() - t_refine
         if len(extra) == 0:
             break
@@ -1291,18 +1319,34 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     return field
 
 
-def sign_change_octets(field: AdaptiveField) -> np.ndarray:
+def sign_change_octets(field: AdaptiveField, near=None) -> np.ndarray:
     """Octet codes the finest level lacks where the zero set leaves it: every coarse leaf whose face neighbour has
     the opposite sign, and every octet next to the band whose covering coarse leaf has another sign than a band node
-    beside it (so every marching cube that straddles the zero set is complete)."""
+    beside it (so every marching cube that straddles the zero set is complete).
+
+    ``near``: boxes (lo (K, 3), hi (K, 3), radius (K,)) as from :func:`hole_caps`, outside which the zero set runs
+    only through the band (no sign change away from a triangle): only leaves and octets within reach of them are
+    checked (none for K = 0). None checks everywhere."""
     n_coarse = field.node_count - field.level_counts[0]
     if n_coarse == 0:
         return np.zeros(0, dtype=np.int64)
+    if near is not None and len(near[2]) == 0:
+        return np.zeros(0, dtype=np.int64)
+    boxes = near if near is not None else (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    near_args = [
+        wp.array(np.asarray(boxes[0], np.float32).reshape(-1, 3), dtype=wp.vec3, device=field.device),
+        wp.array(np.asarray(boxes[1], np.float32).reshape(-1, 3), dtype=wp.vec3, device=field.device),
+        wp.array(np.asarray(boxes[2], np.float32).reshape(-1), dtype=wp.float32, device=field.device),
+        # a sign change shows between a leaf or octet and a neighbour's centre, at most a few top cells away
+        -1.0 if near is None else 2.5 * field.top_spacing,
+    ]
     levels_np = field.level_of_nodes()
     marks = wp.empty(n_coarse, dtype=wp.int32, device=field.device)
     arg = field.arg()
     node_level = wp.array(levels_np, dtype=wp.int32, device=field.device)
-    octree.launch_split(_sign_change_kernel, n_coarse, lambda lo, n: [lo, arg, node_level, marks], field.device)
+    octree.launch_split(
+        _sign_change_kernel, n_coarse, lambda lo, n: [lo, arg, node_level, *near_args, marks], field.device
+    )
     n_octets = field.level_counts[0] // 8
     # each part of the split launch appends to its own buffer (CPU launches have no cross-thread atomics)
     parts = {}
@@ -1312,7 +1356,7 @@ def sign_change_octets(field: AdaptiveField) -> np.ndarray:
         while True:
             count = wp.zeros(1, dtype=wp.int32, device=field.device)
             gaps = wp.empty(capacity, dtype=wp.int64, device=field.device)
-            wp.launch(_band_gap_kernel, dim=n, inputs=[lo, arg, capacity, count, gaps], device=field.device)
+            wp.launch(_band_gap_kernel, dim=n, inputs=[lo, arg, *near_args, capacity, count, gaps], device=field.device)
             found = int(count.numpy()[0])
             if found <= capacity:
                 parts[lo] = gaps.numpy()[:found]
@@ -1419,14 +1463,16 @@ def assemble_field(
     parent = wp.full(n, -1, dtype=wp.int32, device=device)
     for k in range(1, levels):
         lo, hi = int(offsets[k]), int(offsets[k + 1])
-        wp.launch(
+        child_lo = int(offsets[k - 1])
+        octree.launch_split(
             octree._link_children_kernel,
-            dim=hi - lo,
-            inputs=[codes, codes, int(offsets[k - 1]), int(offsets[k]), lo],
-            outputs=[child],
-            device=device,
+            hi - lo,
+            lambda start, _n, child_lo=child_lo, lo=lo: [codes, codes, child_lo, lo, lo + start, child],
+            device,
         )
-        wp.launch(octree._link_parents_kernel, dim=hi - lo, inputs=[child, lo], outputs=[parent], device=device)
+        octree.launch_split(
+            octree._link_parents_kernel, hi - lo, lambda start, _n, lo=lo: [child, lo + start, parent], device
+        )
     timings["levels_structure"] = timings.get("levels_structure", 0.0) + time.perf_counter() - t0
 
     dist = wp.empty(n, dtype=wp.float32, device=device)
@@ -1559,13 +1605,14 @@ def assemble_field(
                         device,
                     )
                 else:
-                    wp.launch(
+                    # split the same way (racing increments from two threads still leave ``changed`` nonzero)
+                    octree.launch_split(
                         _propagate_sign_kernel,
-                        dim=hi - lo,
-                        inputs=[
+                        hi - lo,
+                        lambda start, _n, phase_mesh=phase_mesh: [
                             neighbours,
                             n0,
-                            lo,
+                            lo + start,
                             dist,
                             sign,
                             SIGN_SAFETY,
@@ -1574,9 +1621,9 @@ def assemble_field(
                             origin_v,
                             *cap_args,
                             wp.uint64(phase_mesh),
+                            changed,
                         ],
-                        outputs=[changed],
-                        device=device,
+                        device,
                     )
                 if int(changed.numpy()[0]) == 0:
                     break
@@ -1595,11 +1642,20 @@ def assemble_field(
         oracle_counts[levels - 1] = len(seeds) + len(rest)
     for k in range(levels - 2, -1, -1) if level_values is None else ():
         lo, hi = int(offsets[k]), int(offsets[k + 1])
-        wp.launch(
+        octree.launch_split(
             octree._inherit_sign_kernel,
-            dim=hi - lo,
-            inputs=[coords, parent, lo, origin_v, voxel_size * 2**k, dist, sign, SIGN_SAFETY],
-            device=device,
+            hi - lo,
+            lambda start, _n, k=k, lo=lo: [
+                coords,
+                parent,
+                lo + start,
+                origin_v,
+                voxel_size * 2**k,
+                dist,
+                sign,
+                SIGN_SAFETY,
+            ],
+            device,
         )
         if k > 0:
             idx = spread(k, lo, hi)
@@ -1610,7 +1666,7 @@ def assemble_field(
             spread(0, 0, n0)
         oracle_counts[0] = finest_signs(coords, sign, 0, n0)
     values = wp.empty(n, dtype=wp.float32, device=device)
-    wp.launch(_apply_sign_kernel, dim=n, inputs=[dist, sign], outputs=[values], device=device)
+    octree.launch_split(_apply_sign_kernel, n, lambda start, _n: [start, dist, sign, values], device)
     if fine_values is not None:
         wp.copy(values, fine_values, count=n0)
     timings["signs"] = timings.get("signs", 0.0) + time.perf_counter() - t0

@@ -57,6 +57,16 @@ def run_split(work, dim: int, device, *, parts: int | None = None, min_dim: int 
         raise errors[0]
 
 
+def run_tasks(tasks, device) -> None:
+    """Call each of ``tasks`` (callables without arguments that launch independent work) from a Python thread of its
+    own on the CPU, one after the other on CUDA. The first error is re-raised in the caller."""
+    if wp.get_device(device).is_cuda or len(tasks) < 2 or (os.cpu_count() or 1) < 2:
+        for task in tasks:
+            task()
+        return
+    run_split(lambda k, _n: tasks[k](), len(tasks), device, parts=len(tasks), min_dim=0)
+
+
 def launch_split(kernel, dim: int, args, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM) -> None:
     """Launch ``kernel`` over [0, dim) — on the CPU, as one launch per core from as many Python threads.
 
@@ -179,14 +189,14 @@ def find_key(keys: wp.array[wp.int64], lo: int, hi: int, key: wp.int64) -> int:
 
 
 @wp.kernel(enable_backward=False)
-def _iota_kernel(out: wp.array[wp.int32]):
-    i = wp.tid()
+def _iota_kernel(first: int, out: wp.array[wp.int32]):
+    i = first + wp.tid()
     out[i] = i
 
 
 @wp.kernel(enable_backward=False)
-def _mark_unique_kernel(keys: wp.array[wp.int64], flags: wp.array[wp.int32]):
-    i = wp.tid()
+def _mark_unique_kernel(first: int, keys: wp.array[wp.int64], flags: wp.array[wp.int32]):
+    i = first + wp.tid()
     if i == 0:
         flags[i] = 1
     elif keys[i] != keys[i - 1]:
@@ -197,9 +207,9 @@ def _mark_unique_kernel(keys: wp.array[wp.int64], flags: wp.array[wp.int32]):
 
 @wp.kernel(enable_backward=False)
 def _compact_unique_kernel(
-    keys: wp.array[wp.int64], flags: wp.array[wp.int32], slots: wp.array[wp.int32], out: wp.array[wp.int64]
+    first: int, keys: wp.array[wp.int64], flags: wp.array[wp.int32], slots: wp.array[wp.int32], out: wp.array[wp.int64]
 ):
-    i = wp.tid()
+    i = first + wp.tid()
     if flags[i] == 1:
         out[slots[i]] = keys[i]
 
@@ -217,16 +227,16 @@ def sort_unique(keys: wp.array, end_bit: int = 63, *, presorted: bool = False) -
         work_keys = wp.empty(2 * n, dtype=wp.int64, device=device)
         wp.copy(work_keys, keys, count=n)
         work_vals = wp.empty(2 * n, dtype=wp.int32, device=device)
-        wp.launch(_iota_kernel, dim=n, outputs=[work_vals], device=device)
+        launch_split(_iota_kernel, n, lambda lo, _n: [lo, work_vals], device)
         wp.utils.radix_sort_pairs(work_keys, work_vals, n, end_bit=max(1, min(63, end_bit)))
         sorted_keys = work_keys[:n]
     flags = wp.empty(n, dtype=wp.int32, device=device)
-    wp.launch(_mark_unique_kernel, dim=n, inputs=[sorted_keys], outputs=[flags], device=device)
+    launch_split(_mark_unique_kernel, n, lambda lo, _n: [lo, sorted_keys, flags], device)
     slots = wp.empty(n, dtype=wp.int32, device=device)
     wp.utils.array_scan(flags, slots, inclusive=False)
     count = int(slots.numpy()[-1] + flags.numpy()[-1])
     out = wp.empty(count, dtype=wp.int64, device=device)
-    wp.launch(_compact_unique_kernel, dim=n, inputs=[sorted_keys, flags, slots], outputs=[out], device=device)
+    launch_split(_compact_unique_kernel, n, lambda lo, _n: [lo, sorted_keys, flags, slots, out], device)
     return out
 
 
@@ -234,15 +244,17 @@ def sort_unique(keys: wp.array, end_bit: int = 63, *, presorted: bool = False) -
 
 
 @wp.kernel(enable_backward=False)
-def _shift_codes_kernel(codes: wp.array[wp.int64], shift: int, out: wp.array[wp.int64]):
-    i = wp.tid()
+def _shift_codes_kernel(first: int, codes: wp.array[wp.int64], shift: int, out: wp.array[wp.int64]):
+    i = first + wp.tid()
     out[i] = codes[i] >> wp.int64(shift)
 
 
 @wp.kernel(enable_backward=False)
-def _expand_octets_kernel(octets: wp.array[wp.int64], codes: wp.array[wp.int64], coords: wp.array[wp.vec3i]):
-    """Each octet code (a parent) becomes its 8 children, in Morton order."""
-    i = wp.tid()
+def _expand_octets_kernel(
+    first: int, octets: wp.array[wp.int64], codes: wp.array[wp.int64], coords: wp.array[wp.vec3i]
+):
+    """Each octet code (a parent) becomes its 8 children, in Morton order. Octet ``first + tid``."""
+    i = first + wp.tid()
     base = octets[i] << wp.int64(3)
     for o in range(8):
         m = base | wp.int64(o)
@@ -256,7 +268,7 @@ def expand_octets(octets: wp.array) -> tuple[wp.array, wp.array]:
     codes = wp.empty(8 * n, dtype=wp.int64, device=octets.device)
     coords = wp.empty(8 * n, dtype=wp.vec3i, device=octets.device)
     if n:
-        wp.launch(_expand_octets_kernel, dim=n, inputs=[octets], outputs=[codes, coords], device=octets.device)
+        launch_split(_expand_octets_kernel, n, lambda lo, _n: [lo, octets, codes, coords], octets.device)
     return codes, coords
 
 
@@ -265,12 +277,8 @@ def parent_octets(codes: wp.array, levels_up: int, end_bit: int, *, presorted: b
     parents and their siblings). ``presorted``: ``codes`` ascend, and so do their shifted codes: no sort needed."""
     shifted = wp.empty_like(codes)
     if codes.shape[0]:
-        wp.launch(
-            _shift_codes_kernel,
-            dim=codes.shape[0],
-            inputs=[codes, 3 * levels_up],
-            outputs=[shifted],
-            device=codes.device,
+        launch_split(
+            _shift_codes_kernel, codes.shape[0], lambda lo, _n: [lo, codes, 3 * levels_up, shifted], codes.device
         )
     return sort_unique(shifted, end_bit=end_bit, presorted=presorted)
 
@@ -292,7 +300,8 @@ def _link_children_kernel(
     parent_base: int,
     first_child: wp.array[wp.int32],
 ):
-    """First child of each node (global index) or -1 for a leaf; children of a node are 8 consecutive entries."""
+    """First child of each node (global index) or -1 for a leaf; children of a node are 8 consecutive entries.
+    Node ``parent_base + tid``."""
     i = wp.tid()
     j = find_key(child_codes, child_lo, child_hi, parent_codes[parent_base + i] << wp.int64(3))
     first_child[parent_base + i] = j
@@ -381,14 +390,19 @@ def level_neighbours(coords: wp.array, lo: int, hi: int, dims, neighbours: wp.ar
     device = coords.device
     dims_v = wp.vec3i(*(int(d) for d in dims))
     total_bits = int(np.ceil(np.log2(float(np.prod(np.asarray(dims, dtype=np.float64) + 1.0)) + 2.0)))
-    keys = wp.empty(2 * n, dtype=wp.int64, device=device)
-    vals = wp.empty(2 * n, dtype=wp.int32, device=device)
-    for axis in range(3):
+    # the three axes write their own columns: on the CPU each sorts on a thread of its own
+    wp.load_module(_axis_keys_kernel.module, device=device)
+
+    def axis_pass(axis):
+        keys = wp.empty(2 * n, dtype=wp.int64, device=device)
+        vals = wp.empty(2 * n, dtype=wp.int32, device=device)
         wp.launch(_axis_keys_kernel, dim=n, inputs=[coords, lo, axis, dims_v], outputs=[keys, vals], device=device)
         wp.utils.radix_sort_pairs(keys, vals, n, end_bit=max(1, min(63, total_bits)))
         wp.launch(
             _axis_neighbours_kernel, dim=n, inputs=[keys, vals, n, axis, row0], outputs=[neighbours], device=device
         )
+
+    run_tasks([lambda axis=axis: axis_pass(axis) for axis in range(3)], device)
 
 
 # ---- distances: internal nodes from children, leaves by the fast iterative method ----

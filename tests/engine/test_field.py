@@ -436,6 +436,21 @@ def test_closed_meshes_need_no_band_refinement_and_open_ones_close_their_holes()
     assert is_watertight(opened.to_mesh()[1])
 
 
+def test_sign_changes_off_the_band_are_found_near_the_hole_caps_only(monkeypatch):
+    # The refinement looks for the zero set leaving the band only near the caps over the holes: on the first build
+    # of an open mesh (before any refinement) that finds exactly what a search of the whole field finds.
+    from engine.field import hole_caps, sign_change_octets, weld_positions
+
+    monkeypatch.setattr(engine.field, "MAX_SIGN_REFINEMENTS", 0)
+    verts, tris = load_mesh("stanford-bunny.obj")
+    field = engine.build_field(verts, tris, voxel_size=_voxel(verts, 128))
+    everywhere = sign_change_octets(field)
+    near = sign_change_octets(field, hole_caps(*weld_positions(verts, tris)))
+    assert len(everywhere) > 100
+    np.testing.assert_array_equal(near, everywhere)
+    assert len(sign_change_octets(field, (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)))) == 0
+
+
 def test_seams_that_repeat_vertices_are_not_holes():
     # UV or patch seams repeat a vertex at one position: the index has open edges, the surface has none.
     verts, tris = load_mesh("spot.obj")
