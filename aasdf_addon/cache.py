@@ -67,8 +67,8 @@ def with_field_id(field, field_id: int):
 
 
 def uncached_meshes(objects, depsgraph, *, voxel_size, levels, padding, device=None, context=None) -> list:
-    """(object, (verts, tris) in world space) for each object whose field is not cached for these settings, to
-    check them together before building any."""
+    """(object, (verts, tris) in world space, cache key) for each object whose field is not cached for these
+    settings, to check and build them together (``build_together``)."""
     device = device or runtime.device(context)
     meshes = []
     for obj in objects:
@@ -77,8 +77,33 @@ def uncached_meshes(objects, depsgraph, *, voxel_size, levels, padding, device=N
         key = geometry_key(verts, tris, matrix, voxel_size=voxel_size, levels=levels, padding=padding, device=device)
         entry = _entries.get(obj.original.session_uid)
         if entry is None or entry[0] != key:
-            meshes.append((obj, bridge.to_world(verts, tris, matrix)))
+            meshes.append((obj, bridge.to_world(verts, tris, matrix), key))
     return meshes
+
+
+def build_together(pending, *, voxel_size, levels, padding, device=None, context=None) -> dict:
+    """Build the fields of ``uncached_meshes``' objects at the same time (``engine.build_fields``) and cache them
+    (those the memory limit allows).
+
+    Returns:
+        ``{session_uid: field}`` (``field_id`` 0) for every object of ``pending``.
+    Raises:
+        AasdfError: From ``engine.build_fields`` ("Mesh <k>: ..." names the k-th of ``pending``).
+    """
+    if not pending:
+        return {}
+    engine = runtime.engine()
+    device = device or runtime.device(context)
+    fields = engine.build_fields(
+        [mesh for _, mesh, _ in pending], voxel_size=voxel_size, levels=levels, padding=padding, device=device
+    )
+    limit = limit_bytes(context)
+    built = {}
+    for (obj, _, key), field in zip(pending, fields, strict=True):
+        _stats["builds"] += 1
+        _store(obj.original.session_uid, key, field, limit)
+        built[obj.original.session_uid] = field
+    return built
 
 
 def field_for(obj, depsgraph, *, voxel_size, levels, padding, field_id=0, device=None, context=None):

@@ -76,8 +76,11 @@ def operand_fields(context, objects, depsgraph, *, voxel_size, levels, padding, 
     pending = cache.uncached_meshes(
         objects, depsgraph, voxel_size=voxel_size, levels=levels, padding=padding, context=context
     )
+    if pending and progress is not None:
+        progress(list(objects).index(pending[0][0]), pending[0][0])
     try:
-        engine.check_meshes([mesh for _, mesh in pending], voxel_size=voxel_size, levels=levels, padding=padding)
+        # checked together (build_fields does) and built at the same time
+        built = cache.build_together(pending, voxel_size=voxel_size, levels=levels, padding=padding, context=context)
     except engine.AasdfError as err:
         message = str(err)
         if message.startswith("Mesh "):  # "Mesh <k>: ..." counts the pending meshes: name the object instead
@@ -88,6 +91,10 @@ def operand_fields(context, objects, depsgraph, *, voxel_size, levels, padding, 
     for k, obj in enumerate(objects):
         if progress is not None:
             progress(k, obj)
+        field = built.get(obj.original.session_uid)
+        if field is not None:
+            fields.append(cache.with_field_id(field, k))
+            continue
         try:
             field = cache.field_for(
                 obj, depsgraph, voxel_size=voxel_size, levels=levels, padding=padding, field_id=k, context=context

@@ -39,10 +39,10 @@ if method == "aasdf":
     import warp as wp
     wp.config.quiet = True
     import engine
-    fa = engine.build_field(*a, voxel_size=h * 4); fb = engine.build_field(*b, voxel_size=h * 4)
+    fa, fb = engine.build_fields([a, b], voxel_size=h * 4)
     engine.union(fa, fb).to_mesh()  # loads the kernels
     t0 = time.perf_counter()
-    fa = engine.build_field(*a, voxel_size=h); fb = engine.build_field(*b, voxel_size=h)
+    fa, fb = engine.build_fields([a, b], voxel_size=h)  # at the same time, as the add-on does
     verts, tris = engine.union(fa, fb).to_mesh()
     seconds = time.perf_counter() - t0
     nodes = fa.node_count + fb.node_count

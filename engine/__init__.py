@@ -7,7 +7,7 @@ passed as ``device`` (CPU here, CUDA wherever an NVIDIA GPU is present). Negativ
 from . import kernels
 from .boolean import difference, intersection, union
 from .errors import AasdfError
-from .field import AdaptiveField, build_field, check_meshes, plan_field
+from .field import AdaptiveField, build_field, build_fields, check_meshes, plan_field
 
 kernels.configure_modules(__name__)
 
@@ -15,6 +15,7 @@ __all__ = [
     "AasdfError",
     "AdaptiveField",
     "build_field",
+    "build_fields",
     "check_meshes",
     "difference",
     "intersection",

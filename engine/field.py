@@ -1090,6 +1090,60 @@ def check_meshes(meshes, *, voxel_size, levels=4, padding=1) -> int:
     return total
 
 
+def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_ids=None) -> list[AdaptiveField]:
+    """Build the fields of several meshes at one voxel size, checked together first (:func:`check_meshes`), so an
+    impossible request builds none.
+
+    On the CPU the builds run at the same time, one Python thread each (up to the core count): every build has
+    stretches that keep one core busy (sorts, in-place sweeps, small launches), which the other build fills. On
+    CUDA they run one after the other.
+
+    Args:
+        meshes: Sequence of (vertices, triangles) pairs, as for :func:`build_field`.
+        voxel_size, levels, padding, device: As for :func:`build_field`.
+        field_ids: One id per mesh (default 0, 1, 2, ...).
+    Returns:
+        One AdaptiveField per mesh, in order.
+    Raises:
+        ValueError, AasdfError: As :func:`check_meshes` and :func:`build_field`; messages about one mesh start with
+            "Mesh <k>: ".
+    """
+    meshes = list(meshes)
+    field_ids = list(range(len(meshes))) if field_ids is None else [int(k) for k in field_ids]
+    if len(field_ids) != len(meshes):
+        raise ValueError(f"build_fields got {len(field_ids)} field ids for {len(meshes)} meshes")
+    check_meshes(meshes, voxel_size=voxel_size, levels=levels, padding=padding)
+    device = _device(device)
+    fields: list = [None] * len(meshes)
+    errors: dict = {}
+
+    def build(k):
+        try:
+            fields[k] = build_field(
+                *meshes[k], voxel_size=voxel_size, levels=levels, padding=padding, device=device, field_id=field_ids[k]
+            )
+        except AasdfError as err:
+            errors[k] = AasdfError(f"Mesh {k}: {err}")
+            errors[k].__cause__ = err
+        except Exception as err:  # noqa: BLE001 (re-raised below, in the caller's thread)
+            errors[k] = err
+
+    if device.is_cuda or len(meshes) < 2:
+        for k in range(len(meshes)):
+            build(k)
+            if k in errors:
+                raise errors[k]
+        return fields
+    for module in (octree._iota_kernel.module, _mesh_sign_kernel.module, _sample_field_kernel.module):
+        wp.load_module(module, device=device)  # compiled or loaded once, before the threads
+    workers = min(len(meshes), os.cpu_count() or 1)
+    # worker w builds meshes w, w + workers, ...
+    octree.run_tasks([lambda w=w: [build(k) for k in range(w, len(meshes), workers)] for w in range(workers)], device)
+    if errors:
+        raise errors[min(errors)]
+    return fields
+
+
 def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=None, field_id=0) -> AdaptiveField:
     """Build the adaptive signed distance field of a triangle mesh.
 

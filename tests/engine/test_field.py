@@ -410,6 +410,40 @@ def test_sample_validates_points_and_method():
     assert field.sample(np.zeros((0, 3))).shape == (0,)
 
 
+def test_build_fields_builds_several_meshes_at_once_as_build_field_does_one_by_one():
+    spot = load_mesh("spot.obj")
+    torus = torus_mesh(0.6, 0.2)
+    h = _voxel(spot[0], 96)
+    together = engine.build_fields([spot, torus, spot], voxel_size=h)
+    alone = [engine.build_field(*mesh, voxel_size=h, field_id=k) for k, mesh in enumerate([spot, torus, spot])]
+    points = np.random.default_rng(5).uniform(-1.0, 1.0, (20_000, 3)).astype(np.float32)
+    for a, b in zip(together, alone, strict=True):
+        assert a.level_counts == b.level_counts
+        np.testing.assert_array_equal(a.sample(points), b.sample(points))
+        assert a.field_ids == b.field_ids
+    assert [f.field_ids for f in engine.build_fields([torus, torus], voxel_size=h, field_ids=[4, 7])] == [(4,), (7,)]
+
+
+def test_build_fields_refuses_a_bad_mesh_before_building_any(monkeypatch):
+    calls = []
+    monkeypatch.setattr(engine.field, "build_field", lambda *a, **k: calls.append(a))
+    good = uv_sphere(1.0)
+    with pytest.raises(engine.AasdfError, match="Mesh 1: The mesh is empty"):
+        engine.build_fields([good, (np.zeros((0, 3)), np.zeros((0, 3), int)), good], voxel_size=0.05)
+    with pytest.raises(ValueError, match="2 field ids for 1 meshes"):
+        engine.build_fields([good], voxel_size=0.05, field_ids=[0, 1])
+    assert calls == []
+
+    def fails_on_mesh_2(*args, field_id, **kwargs):
+        if field_id == 2:
+            raise engine.AasdfError("no memory left")
+        return field_id
+
+    monkeypatch.setattr(engine.field, "build_field", fails_on_mesh_2)
+    with pytest.raises(engine.AasdfError, match="^Mesh 2: no memory left$"):
+        engine.build_fields([good, good, good, good], voxel_size=0.05)
+
+
 def test_check_meshes_refuses_builds_that_do_not_fit_together(monkeypatch):
     verts, tris = uv_sphere(1.0)
     one = engine.plan_field(verts, tris, voxel_size=0.05)["bytes"]
