@@ -1224,6 +1224,9 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     def oracle(coords, nodes_np, spacing, sign):
         if len(nodes_np) == 0:
             return
+        # winding numbers cost most near holes, which a Morton-ordered list bunches: every other node to each half
+        # of the split launch keeps the two halves even
+        nodes_np = np.concatenate([nodes_np[0::2], nodes_np[1::2]])
         nodes = wp.array(nodes_np.astype(np.int32), dtype=wp.int32, device=device)
         origin_v = wp.vec3(*origin)
         octree.launch_split(
@@ -1231,6 +1234,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
             len(nodes_np),
             lambda lo, n: [mesh.id, coords, nodes[lo : lo + n], origin_v, float(spacing), diag, sign],
             device,
+            min_dim=octree.EMIT_SPLIT_MIN_DIM,  # a winding number costs microseconds: split from a few thousand
         )
 
     def finest_signs(coords, sign, lo0, hi0):

@@ -591,6 +591,7 @@ def _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known
             proj,
         ],
         device,
+        min_dim=EMIT_SPLIT_MIN_DIM,  # a BVH query per leaf: worth two threads from a few thousand
     )
 
 
