@@ -23,9 +23,17 @@ from .errors import AasdfError
 from .octree import launch_split, morton_decode, morton_encode
 
 try:  # the marching-cubes core of Warp's sparse_marching_cubes_from_cells, given already shared corners
+    from warp._src.geometry import sparse_marching_cubes as _warp_mc
     from warp._src.geometry.sparse_marching_cubes import _extract_from_dedup as _shared_corner_marching_cubes
-except ImportError:  # another Warp version: the public entry point, which re-derives the shared corners by sorting
-    _shared_corner_marching_cubes = None
+
+    _cell_case_code = _warp_mc._cell_case_code
+except (ImportError, AttributeError):  # another Warp version: the public entry point, which sorts to share corners
+    _warp_mc = _shared_corner_marching_cubes = None
+
+    @wp.func
+    def _cell_case_code(corners: wp.array2d[wp.int32], values: wp.array[wp.float32], iso: wp.float32, cube: int):
+        return int(0)  # never launched: only compiles the kernels below
+
 
 # Corner c of a cube with minimum corner (i, j, k) is the sample (i, j, k) + _CORNER_OFFSETS[c], in the order Warp's
 # sparse marching cubes expects its (M, 8) corner values.
@@ -346,8 +354,9 @@ def extract_octree_level(codes, coords, values, *, origin, spacing, iso=0.0):
     origin = np.asarray(origin, dtype=np.float64)
     spacing = float(spacing)
     coords_np = coords.numpy()
-    lo = coords_np.min(axis=0).astype(np.int64)
-    hi = coords_np.max(axis=0).astype(np.int64)
+    # column by column: numpy reduces an (N, 3) array along its first axis several times slower
+    lo = np.array([coords_np[:, k].min() for k in range(3)], dtype=np.int64)
+    hi = np.array([coords_np[:, k].max() for k in range(3)], dtype=np.int64)
     nudge = _iso_nudge(origin, lo, hi, spacing)
     shifted = wp.empty(n, dtype=wp.float32, device=device)
     launch_split(
@@ -401,7 +410,8 @@ def _polygonise(cube_corners, n, point_kernel, point_inputs, lo, origin, spacing
     in double precision) and values."""
     device = cube_corners.device
     used = wp.zeros(n, dtype=wp.int32, device=device)
-    wp.launch(_mark_used_corners_kernel, dim=cube_corners.shape[0], inputs=[cube_corners, used], device=device)
+    n_cubes = cube_corners.shape[0]
+    launch_split(_mark_used_corners_kernel, n_cubes, lambda s, c: [cube_corners[s : s + c], used], device)
     used_scan = wp.empty(n, dtype=wp.int32, device=device)
     wp.utils.array_scan(used, used_scan, inclusive=True)
     n_used = int(used_scan[-1:].numpy()[0])
@@ -415,11 +425,147 @@ def _polygonise(cube_corners, n, point_kernel, point_inputs, lo, origin, spacing
         outputs=[points, point_values],
         device=device,
     )
-    wp.launch(
-        _renumber_corners_kernel, dim=cube_corners.shape[0], inputs=[used_scan], outputs=[cube_corners], device=device
-    )
+    launch_split(_renumber_corners_kernel, n_cubes, lambda s, c: [used_scan, cube_corners[s : s + c]], device)
     used = used_scan = None
-    return _shared_corner_marching_cubes(cube_corners, points, point_values, 0.0, device)
+    return _split_marching_cubes(cube_corners, points, point_values, device)
+
+
+@wp.kernel(enable_backward=False)
+def _emit_vertices_kernel(
+    first: int,
+    edge_active: wp.array[wp.int32],
+    edge_vertex_index: wp.array[wp.int32],
+    edge_upper_corner: wp.array[wp.int32],
+    corner_positions: wp.array[wp.vec3],
+    corner_values: wp.array[wp.float32],
+    iso: wp.float32,
+    verts: wp.array[wp.vec3],
+):
+    """Warp's ``_emit_vertices_kernel`` for edge slot ``first + tid`` (slot = owner corner * 3 + axis)."""
+    slot = first + wp.tid()
+    if edge_active[slot] == 0:
+        return
+    lower = slot // 3
+    upper = edge_upper_corner[slot]
+    t = wp.clamp((iso - corner_values[lower]) / (corner_values[upper] - corner_values[lower]), 0.0, 1.0)
+    verts[edge_vertex_index[slot] - 1] = wp.lerp(corner_positions[lower], corner_positions[upper], t)
+
+
+@wp.kernel(enable_backward=False)
+def _emit_faces_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    corner_values: wp.array[wp.float32],
+    iso: wp.float32,
+    case_to_tri_range: wp.array[wp.int32],
+    tri_local_inds: wp.array[wp.int32],
+    edge_owner: wp.array[wp.int32],
+    edge_axis: wp.array[wp.int32],
+    edge_vertex_index: wp.array[wp.int32],
+    face_scan: wp.array[wp.int32],
+    indices: wp.array[wp.int32],
+):
+    """Warp's ``_emit_faces_kernel`` for cube ``first + tid`` (``face_scan``: inclusive scan of faces per cube)."""
+    cube = first + wp.tid()
+    case = _cell_case_code(cube_corners, corner_values, iso, cube)
+    tri_start = case_to_tri_range[case]
+    n_tri = (case_to_tri_range[case + 1] - tri_start) // 3
+    if n_tri == 0:
+        return
+    out = int(0)
+    if cube > 0:
+        out = face_scan[cube - 1]
+    for tri in range(n_tri):
+        for k in range(3):
+            local_edge = tri_local_inds[tri_start + 3 * tri + k]
+            slot = cube_corners[cube, edge_owner[local_edge]] * 3 + edge_axis[local_edge]
+            indices[3 * (out + tri) + k] = edge_vertex_index[slot] - 1
+
+
+def _split_marching_cubes(cube_corners, corner_positions, corner_values, device):
+    """Warp's marching-cubes core (``_extract_from_dedup``, threshold 0) with every pass split over the CPU cores
+    (see ``launch_split``): its own kernels where a launch over a slice of the cubes means the same, the two that
+    index by thread id (above) with an offset. Same vertices and triangles, in the same order."""
+    n_cubes = cube_corners.shape[0]
+    n_slots = 3 * corner_positions.shape[0]
+    case_table = _warp_mc._get_mc_case_to_tri_range_table(device)
+    tri_table = _warp_mc._get_mc_tri_local_inds_table(device)
+    owner = _warp_mc._get_edge_owner_table(device)
+    upper = _warp_mc._get_edge_upper_table(device)
+    axis = _warp_mc._get_edge_axis_table(device)
+    iso = wp.float32(0.0)
+    # one vertex per crossed edge; cubes sharing an edge write the same values to its slot (a harmless race)
+    edge_active = wp.zeros(n_slots, dtype=wp.int32, device=device)
+    edge_upper_corner = wp.empty(n_slots, dtype=wp.int32, device=device)
+    launch_split(
+        _warp_mc._mark_active_edges_kernel,
+        n_cubes,
+        lambda s, c: [
+            cube_corners[s : s + c],
+            corner_values,
+            iso,
+            case_table,
+            tri_table,
+            owner,
+            upper,
+            axis,
+            edge_active,
+            edge_upper_corner,
+        ],
+        device,
+    )
+    edge_vertex_index = wp.empty(n_slots, dtype=wp.int32, device=device)
+    wp.utils.array_scan(edge_active, edge_vertex_index, inclusive=True)
+    n_verts = int(edge_vertex_index[-1:].numpy()[0])
+    verts = wp.empty(n_verts, dtype=wp.vec3, device=device)
+    if n_verts == 0:
+        return verts, wp.empty(0, dtype=wp.int32, device=device)
+    launch_split(
+        _emit_vertices_kernel,
+        n_slots,
+        lambda s, c: [
+            s,
+            edge_active,
+            edge_vertex_index,
+            edge_upper_corner,
+            corner_positions,
+            corner_values,
+            iso,
+            verts,
+        ],
+        device,
+    )
+    edge_active = edge_upper_corner = None
+    face_count = wp.empty(n_cubes, dtype=wp.int32, device=device)
+    launch_split(
+        _warp_mc._count_faces_kernel,
+        n_cubes,
+        lambda s, c: [cube_corners[s : s + c], corner_values, iso, case_table, face_count[s : s + c]],
+        device,
+    )
+    face_scan = wp.empty(n_cubes, dtype=wp.int32, device=device)
+    wp.utils.array_scan(face_count, face_scan, inclusive=True)
+    n_faces = int(face_scan[-1:].numpy()[0])
+    indices = wp.empty(3 * n_faces, dtype=wp.int32, device=device)
+    launch_split(
+        _emit_faces_kernel,
+        n_cubes,
+        lambda s, c: [
+            s,
+            cube_corners,
+            corner_values,
+            iso,
+            case_table,
+            tri_table,
+            owner,
+            axis,
+            edge_vertex_index,
+            face_scan,
+            indices,
+        ],
+        device,
+    )
+    return verts, indices
 
 
 def _sorted_corner_surface(keys_wp, values_wp, cube_corners, lo, origin, spacing, strides):

@@ -283,6 +283,23 @@ def test_shared_corner_path_matches_warps_public_marching_cubes(monkeypatch, cas
     )
 
 
+def test_marching_cubes_split_over_the_cores_gives_warps_mesh_in_warps_order(monkeypatch):
+    # Every pass of the polygonisation is launched in parts (enough cubes here to split): same arrays, same order.
+    import engine.extract as extract
+
+    coords, values = sphere_band(spacing=R / 60)
+    verts, tris = extract_surface(coords, values, origin=(0.1, -0.2, 0.3), spacing=R / 60)
+    assert len(tris) > 40_000
+    monkeypatch.setattr(
+        extract,
+        "_split_marching_cubes",
+        lambda cubes, points, values, device: extract._shared_corner_marching_cubes(cubes, points, values, 0.0, device),
+    )
+    warp_verts, warp_tris = extract_surface(coords, values, origin=(0.1, -0.2, 0.3), spacing=R / 60)
+    np.testing.assert_array_equal(verts, warp_verts)
+    np.testing.assert_array_equal(tris, warp_tris)
+
+
 def test_sample_order_does_not_change_the_mesh():
     coords, values = sphere_band(spacing=0.05)
     verts, tris = extract_surface(coords, values, origin=(0.0, 0.0, 0.0), spacing=0.05)
