@@ -1271,14 +1271,16 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         # Nodes an earlier build of this mesh already has keep their closest points; only new ones are queried.
         todo = None
         if previous is not None:
-            prev = previous.level_slice(0)
-            found, where = _match_codes(previous.codes.numpy()[prev], fine_codes.numpy())
-            for dst, src in ((dist0, previous.dist_unsigned()[prev]), (proj0, previous.proj.numpy()[prev])):
-                host = np.zeros(dst.shape[0], dtype=src.dtype) if src.ndim == 1 else np.zeros((n0, 3), np.float32)
-                host[found] = src[where[found]]
-                dst.assign(host)
+            where = match_levels(fine_codes, [0, n0], previous)
+            no_known = wp.empty(0, dtype=wp.int32, device=device)
+            octree.launch_split(
+                _take_known_kernel,
+                n0,
+                lambda s, _n: [s, where, previous.values, previous.proj, src0, 0, no_known, dist0, proj0, src0],
+                device,
+            )
             src0.fill_(int(field_id))
-            todo = np.flatnonzero(~found).astype(np.int32)
+            todo = np.flatnonzero(where.numpy() < 0).astype(np.int32)
         origin_v = wp.vec3(*origin)
         if octets is not None:
             # octet by octet, in place; an incremental build computes only the octets its previous build lacks
@@ -1452,15 +1454,80 @@ def sign_change_octets(field: AdaptiveField, near=None) -> np.ndarray:
     return np.union1d(octree.morton_encode_np(np.concatenate(out)), gap_octets)
 
 
-def _match_codes(known: np.ndarray, codes: np.ndarray):
-    """For each of ``codes``: whether the sorted-or-not array ``known`` holds it, and where."""
-    if len(known) == 0:
-        return np.zeros(len(codes), dtype=bool), np.zeros(len(codes), dtype=np.int64)
-    order = None if bool(np.all(known[1:] > known[:-1])) else np.argsort(known, kind="stable")
-    ordered = known if order is None else known[order]
-    pos = np.minimum(np.searchsorted(ordered, codes), len(known) - 1)
-    found = ordered[pos] == codes
-    return found, (pos if order is None else order[pos])
+@wp.kernel(enable_backward=False)
+def _match_level_kernel(
+    first: int,
+    codes: wp.array[wp.int64],
+    lo: int,
+    prev_codes: wp.array[wp.int64],
+    prev_lo: int,
+    prev_hi: int,
+    where: wp.array[wp.int32],
+):
+    """Where octet ``first + tid`` of the level at ``lo`` (8 consecutive nodes, sorted by code) is in the sorted range
+    [prev_lo, prev_hi) of ``prev_codes`` (a level of complete octets too): its nodes' indices there, or -1."""
+    i = lo + 8 * (first + wp.tid())
+    j = octree.find_key(prev_codes, prev_lo, prev_hi, codes[i])
+    for o in range(8):
+        where[i + o] = wp.where(j >= 0, j + o, -1)
+
+
+@wp.kernel(enable_backward=False)
+def _take_known_kernel(
+    first: int,
+    where: wp.array[wp.int32],
+    prev_values: wp.array[wp.float32],
+    prev_proj: wp.array[wp.vec3],
+    prev_source: wp.array[wp.int32],
+    with_source: int,
+    known: wp.array[wp.int32],
+    dist: wp.array[wp.float32],
+    proj: wp.array[wp.vec3],
+    source: wp.array[wp.int32],
+):
+    """Node ``first + tid`` found in an earlier build (``where`` >= 0) takes its distance and closest point (and
+    source, ``with_source``), and is marked ``known`` (when ``known`` is not empty)."""
+    i = first + wp.tid()
+    j = where[i]
+    if j < 0:
+        return
+    dist[i] = wp.abs(prev_values[j])
+    proj[i] = prev_proj[j]
+    if with_source == 1:
+        source[i] = prev_source[j]
+    if known.shape[0] > 0:
+        known[i] = 1
+
+
+@wp.kernel(enable_backward=False)
+def _take_known_sign_kernel(
+    first: int, where: wp.array[wp.int32], prev_values: wp.array[wp.float32], sign: wp.array[wp.float32]
+):
+    """Node ``first + tid`` found in an earlier build takes its sign."""
+    i = first + wp.tid()
+    j = where[i]
+    if j >= 0:
+        sign[i] = wp.where(prev_values[j] < 0.0, -1.0, 1.0)
+
+
+def match_levels(codes: wp.array, offsets, previous: AdaptiveField) -> wp.array:
+    """For every node (levels at ``offsets``) its index in ``previous`` (an earlier field of the same domain and
+    levels), level by level, or -1: (N,) int32 on the device. Levels below the top are complete octets sorted by code
+    (matched octet by octet); the dense top level (when ``offsets`` reach it) is the same grid in both."""
+    where = wp.empty(codes.shape[0], dtype=wp.int32, device=codes.device)
+    for k in range(len(offsets) - 1):
+        lo, hi = int(offsets[k]), int(offsets[k + 1])
+        ks = previous.level_slice(k)
+        if k == previous.levels - 1:
+            where[lo:hi].assign(np.arange(ks.start, ks.stop, dtype=np.int32))
+            continue
+        octree.launch_split(
+            _match_level_kernel,
+            (hi - lo) // 8,
+            lambda s, _n, lo=lo, ks=ks: [s, codes, lo, previous.codes, ks.start, ks.stop, where],
+            codes.device,
+        )
+    return where
 
 
 def _bits(dims) -> int:
@@ -1559,33 +1626,26 @@ def assemble_field(
     neighbours = wp.full((n - n0 if level_values is None else 0, 6), -1, dtype=wp.int32, device=device)
     # Coarse nodes an earlier build of the same mesh and domain has keep their distances (refinement rounds).
     known = wp.zeros(n, dtype=wp.int32, device=device)
-    # nodes of each level the earlier build has too: (found, where in its level), shared by distances and signs
-    matches = {}
-    if known_signs is not None:
-        codes_np, prev_codes = codes.numpy(), known_signs.codes.numpy()
-        for k in range(levels):
-            ks = known_signs.level_slice(k)
-            matches[k] = _match_codes(prev_codes[ks], codes_np[int(offsets[k]) : int(offsets[k + 1])])
+    # each node's index in the earlier build (-1: new), shared by distances and signs
+    prev_index = match_levels(codes, offsets, known_signs) if known_signs is not None else None
     if known_signs is not None and level_values is None:
-        known_np = np.zeros(n, dtype=np.int32)
-        dist_np, proj_np, src_np = dist.numpy(), proj.numpy(), source.numpy()
-        prev_dist, prev_proj, prev_src = (
-            known_signs.dist_unsigned(),
-            known_signs.proj.numpy(),
-            known_signs.source.numpy(),
+        octree.launch_split(
+            _take_known_kernel,
+            n - n0,
+            lambda s, _n: [
+                n0 + s,
+                prev_index,
+                known_signs.values,
+                known_signs.proj,
+                known_signs.source,
+                1,
+                known,
+                dist,
+                proj,
+                source,
+            ],
+            device,
         )
-        for k in range(1, levels):
-            lo, hi = int(offsets[k]), int(offsets[k + 1])
-            ks = known_signs.level_slice(k)
-            found, where = matches[k]
-            idx = lo + np.flatnonzero(found)
-            src_idx = ks.start + where[found]
-            known_np[idx] = 1
-            dist_np[idx], proj_np[idx], src_np[idx] = prev_dist[src_idx], prev_proj[src_idx], prev_src[src_idx]
-        known.assign(known_np)
-        dist.assign(dist_np)
-        proj.assign(proj_np)
-        source.assign(src_np)
     sweeps = {}
     origin_t = tuple(float(x) for x in origin)
     sign = wp.zeros(n, dtype=wp.float32, device=device)
@@ -1623,15 +1683,7 @@ def assemble_field(
     # within each level from already signed neighbours (empty balls again); the oracle only for what is left.
     t0 = time.perf_counter()
     if known_signs is not None:
-        codes_np = codes.numpy()
-        sign_np = np.zeros(n, dtype=np.float32)
-        known_values = known_signs.values.numpy()
-        for k in range(levels):
-            lo, hi = int(offsets[k]), int(offsets[k + 1])
-            ks = known_signs.level_slice(k)
-            found, where = matches[k]
-            sign_np[lo:hi][found] = np.where(known_values[ks][where[found]] < 0.0, -1.0, 1.0)
-        sign.assign(sign_np)
+        octree.launch_split(_take_known_sign_kernel, n, lambda s, _n: [s, prev_index, known_signs.values, sign], device)
     top_lo, top_hi = int(offsets[levels - 1]), int(offsets[levels])
     oracle_counts = {}
     sign_sweeps = {}

@@ -485,6 +485,31 @@ def test_sign_changes_off_the_band_are_found_near_the_hole_caps_only(monkeypatch
     assert len(sign_change_octets(field, (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)))) == 0
 
 
+def test_a_refinement_round_reuses_the_nodes_of_the_build_before_it(monkeypatch):
+    from engine.field import match_levels
+
+    verts, tris = load_mesh("stanford-bunny.obj")
+    h = _voxel(verts, 128)
+    refined = engine.build_field(verts, tris, voxel_size=h)
+    assert refined.stats["sign_refinements"] == 1
+    monkeypatch.setattr(engine.field, "MAX_SIGN_REFINEMENTS", 0)
+    first = engine.build_field(verts, tris, voxel_size=h)
+    where = match_levels(refined.codes, refined.level_offsets, first).numpy()
+    codes, first_codes = refined.codes.numpy(), first.codes.numpy()
+    levels, first_levels = refined.level_of_nodes(), first.level_of_nodes()
+    found = where >= 0
+    np.testing.assert_array_equal(codes[found], first_codes[where[found]])
+    np.testing.assert_array_equal(levels[found], first_levels[where[found]])
+    for k in range(refined.levels - 1):  # nothing that is in both is missed
+        common = np.isin(codes[levels == k], first_codes[first_levels == k])
+        np.testing.assert_array_equal(found[levels == k], common)
+    assert found[levels == refined.levels - 1].all()  # the same dense top level
+    # the second round asked no winding number again where the first had the answer
+    top = refined.levels - 1
+    assert refined.stats["sign_queries"][top] == first.stats["sign_queries"][top]
+    np.testing.assert_array_equal(np.sign(refined.values.numpy()[found]), np.sign(first.values.numpy()[where[found]]))
+
+
 def test_seams_that_repeat_vertices_are_not_holes():
     # UV or patch seams repeat a vertex at one position: the index has open edges, the surface has none.
     verts, tris = load_mesh("spot.obj")
