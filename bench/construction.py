@@ -81,7 +81,7 @@ def run(meshes, resolutions, repeat):
             engine.build_field(verts, tris, voxel_size=h)  # warm-up (kernel load)
             build_s, field = median_time(lambda v=verts, t=tris, h=h: engine.build_field(v, t, voxel_size=h), repeat)
             t = field.timings
-            finest = t.get("mesh_bvh", 0) + t.get("finest_cells", 0) + t.get("finest_distance", 0)
+            finest = sum(t.get(k, 0) for k in ("mesh_checks", "mesh_bvh", "finest_cells", "finest_distance"))
             levels = sum(v for k, v in t.items() if k.startswith("level_") and not k.endswith("neighbours"))
             levels += t.get("levels_structure", 0)
             neighbours = sum(v for k, v in t.items() if k.endswith("_neighbours"))

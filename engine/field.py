@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 import time
 
 import numpy as np
@@ -1186,6 +1187,25 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
 
     timings = {}
     t0 = time.perf_counter()
+    # the BVH builds while the mesh checks and the cell enumeration run: on the CPU on a thread of its own (Warp's
+    # native build releases the GIL)
+    made = {}
+
+    def make_mesh():
+        try:
+            made["mesh"] = wp.Mesh(
+                points=wp.array(verts, dtype=wp.vec3, device=device),
+                indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
+                support_winding_number=True,
+            )
+        except Exception as err:  # noqa: BLE001 (re-raised in the caller's thread)
+            made["error"] = err
+
+    builder = threading.Thread(target=make_mesh) if device.is_cpu else None
+    if builder is not None:
+        builder.start()
+    else:
+        make_mesh()
     edges = edge_table(tris, len(verts))
     problem = problem_faces(tris, len(verts), edges)
     clean = not bool(problem.any())
@@ -1201,11 +1221,6 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
             problem = problem_faces(seam_tris, len(seam_verts), edges)
             clean = not bool(problem.any())
         caps = None if clean else hole_caps(seam_verts, seam_tris, edges)
-    mesh = wp.Mesh(
-        points=wp.array(verts, dtype=wp.vec3, device=device),
-        indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
-        support_winding_number=True,
-    )
     diag = float(np.linalg.norm(fine_dims * voxel_size))
     # candidate triangles per octet grow as cell area / triangle area: search boxes only where that stays small
     corners = verts[tris]
@@ -1213,7 +1228,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1).mean()
     )
     box_search = int(0.5 * mean_area >= OCTET_SEARCH_MIN_AREA * voxel_size**2)
-    timings["mesh_bvh"] = time.perf_counter() - t0
+    timings["mesh_checks"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     if levels == 1:
@@ -1233,6 +1248,14 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         )
         base_octets = octree.sort_unique(octet_codes, end_bit=3 * _bits(fine_dims // 2))
     timings["finest_cells"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    if builder is not None:
+        builder.join()
+    timings["mesh_bvh"] = time.perf_counter() - t0  # what is left of the BVH build once the cells are found
+    if "error" in made:
+        raise made["error"]
+    mesh = made["mesh"]
 
     def oracle(coords, nodes_np, spacing, sign):
         if len(nodes_np) == 0:
