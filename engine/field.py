@@ -507,12 +507,15 @@ def _propagate_sign_kernel(
     cap_radius: wp.array[wp.float32],
     mesh: wp.uint64,
     changed: wp.array[wp.int32],
+    span: int,
+    reverse: int,
 ):
     """An unsigned node takes a signed face neighbour's sign when their empty balls cover the edge between them, or
     with a mesh (``mesh`` != 0) when the segment between them crosses no triangle. Signs only ever go from 0 to
-    final, so sweeps may read and write in place. Not near an open mesh's holes (see ``hole_caps``). Node ``i``'s
-    neighbours are in row ``i - row0``."""
-    i = lo + wp.tid()
+    final, so sweeps may read and write in place (a sign travels along the launch's order within one sweep: sweeps
+    alternate ``reverse``). Not near an open mesh's holes (see ``hole_caps``). Node ``i``'s neighbours are in row
+    ``i - row0``; the launch covers nodes [lo, lo + span)."""
+    i = lo + wp.where(reverse == 1, span - 1 - wp.tid(), wp.tid())
     if sign[i] != 0.0:
         return
     x = node_center(origin, spacing, coords[i])
@@ -543,13 +546,16 @@ def _propagate_sign_octet_kernel(
     cap_radius: wp.array[wp.float32],
     mesh: wp.uint64,
     changed: wp.array[wp.int32],
+    span: int,
+    reverse: int,
 ):
     """The same on the finest level, which has no neighbour table: one thread per octet (8 consecutive nodes in
-    Morton order). Three face neighbours of a node are in its own octet; the other three are the same child of the
-    face-adjacent octets, each found once by binary search. With a mesh (``mesh`` != 0) a node also takes the sign
-    of a neighbour when the segment between them crosses no triangle (``_take_sign_across``), which signs most of
-    the nodes too near the surface for empty balls without a winding number."""
-    t = first + wp.tid()
+    Morton order; the launch covers octets [first, first + span)). Three face neighbours of a node are in its own
+    octet; the other three are the same child of the face-adjacent octets, each found once by binary search. With a
+    mesh (``mesh`` != 0) a node also takes the sign of a neighbour when the segment between them crosses no triangle
+    (``_take_sign_across``), which signs most of the nodes too near the surface for empty balls without a winding
+    number."""
+    t = first + wp.where(reverse == 1, span - 1 - wp.tid(), wp.tid())
     base = 8 * t
     unset = int(0)
     for k in range(8):
@@ -1735,7 +1741,7 @@ def assemble_field(
                     octree.launch_split(
                         _propagate_sign_octet_kernel,
                         (hi - lo) // 8,
-                        lambda start, _n, phase_mesh=phase_mesh: [
+                        lambda start, span, phase_mesh=phase_mesh, sweep=sweep: [
                             start,
                             codes,
                             hi,
@@ -1747,6 +1753,8 @@ def assemble_field(
                             *cap_args,
                             wp.uint64(phase_mesh),
                             changed,
+                            span,
+                            sweep % 2,
                         ],
                         device,
                     )
@@ -1755,7 +1763,7 @@ def assemble_field(
                     octree.launch_split(
                         _propagate_sign_kernel,
                         hi - lo,
-                        lambda start, _n, phase_mesh=phase_mesh: [
+                        lambda start, span, phase_mesh=phase_mesh, sweep=sweep: [
                             neighbours,
                             n0,
                             lo + start,
@@ -1768,6 +1776,8 @@ def assemble_field(
                             *cap_args,
                             wp.uint64(phase_mesh),
                             changed,
+                            span,
+                            sweep % 2,
                         ],
                         device,
                     )
