@@ -18,7 +18,7 @@ import numpy as np
 import warp as wp
 
 from . import octree
-from .field import AdaptiveField, _bits, assemble_field, check_budget, plan_domain
+from .field import AdaptiveField, _bits, assemble_field, check_budget, level_layout, plan_domain
 from .octree import morton_encode, node_center
 from .sampling import FieldArg, clamp_to_domain, inside_domain, level_spacing, locate_leaf, sample_mls
 
@@ -580,8 +580,9 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         octets, a_first, b_first = (
             wp.array(arr.numpy()[keep], dtype=arr.dtype, device=device) for arr in (octets, a_first, b_first)
         )
-    fine_codes, fine_coords = octree.expand_octets(octets)
     timings["finest_prune"] = time.perf_counter() - t0
+    # every node's place first, so the finest values are computed where they are kept
+    layout = level_layout(octets, top_dims, levels, device, timings)
 
     no_octets = wp.empty(0, dtype=wp.int32, device=device)
 
@@ -621,35 +622,30 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         )
 
     t0 = time.perf_counter()
-    n0 = fine_codes.shape[0]
-    fine_dist = wp.empty(n0, dtype=wp.float32, device=device)
-    fine_proj = wp.empty(n0, dtype=wp.vec3, device=device)
-    fine_src = wp.empty(n0, dtype=wp.int32, device=device)
+    n, n0 = int(layout["offsets"][-1]), int(layout["offsets"][1])
+    dist = wp.empty(n, dtype=wp.float32, device=device)
+    proj = wp.empty(n, dtype=wp.vec3, device=device)
+    source = wp.empty(n, dtype=wp.int32, device=device)
+    values = wp.empty(n, dtype=wp.float32, device=device)
     fine_sign = wp.empty(n0, dtype=wp.float32, device=device)
-    fine_values = wp.empty(n0, dtype=wp.float32, device=device)
-    run(fine_coords, 0, n0, h, fine_dist, fine_proj, fine_src, fine_sign, fine_values)
+    run(layout["coords"], 0, n0, h, dist, proj, source, fine_sign, values)
+    fine_sign = octets = a_first = b_first = None
     timings["finest_values"] = time.perf_counter() - t0
 
     def level_values(coords, lo_, hi_, spacing_, dist, proj, source, sign):
         scratch = wp.empty(hi_ - lo_, dtype=wp.float32, device=device)
         run(coords, lo_, hi_, spacing_, dist, proj, source, sign, scratch)
 
-    finest = {
-        "codes": fine_codes,
-        "coords": fine_coords,
-        "dist": fine_dist,
-        "proj": fine_proj,
-        "source": fine_src,
-        "values": fine_values,
-    }
-    # assemble_field frees each once copied
-    fine_codes = fine_coords = fine_dist = fine_proj = fine_src = fine_values = fine_sign = octets = None
     return assemble_field(
         origin=origin,
         top_dims=top_dims,
         voxel_size=h,
         levels=levels,
-        finest=finest,
+        layout=layout,
+        dist=dist,
+        proj=proj,
+        source=source,
+        fine_values=values,
         oracle=None,
         finest_signs=None,
         device=device,

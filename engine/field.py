@@ -1238,8 +1238,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
 
     t0 = time.perf_counter()
     if levels == 1:
-        coords_np, codes_np = octree.dense_level(top_dims)
-        base_octets = None
+        base_octets = None  # the dense top level is the finest
     else:
         oct_dims = wp.vec3i(*(int(d) for d in fine_dims // 2))
         verts_wp = wp.array(verts, dtype=wp.vec3, device=device)
@@ -1287,16 +1286,15 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         return len(idx)
 
     def build(octets, query_radius, previous=None):
+        # every node's place first, so each level's values are computed where they are kept
+        layout = level_layout(octets, top_dims, levels, device, timings)
         t0 = time.perf_counter()
-        if octets is None:
-            fine_codes = wp.array(codes_np, dtype=wp.int64, device=device)
-            fine_coords = wp.array(coords_np, dtype=wp.vec3i, device=device)
-        else:
-            fine_codes, fine_coords = octree.expand_octets(octets)
-        n0 = fine_codes.shape[0]
-        dist0 = wp.empty(n0, dtype=wp.float32, device=device)
-        proj0 = wp.empty(n0, dtype=wp.vec3, device=device)
-        src0 = wp.empty(n0, dtype=wp.int32, device=device)
+        n, n0 = int(layout["offsets"][-1]), int(layout["offsets"][1])
+        fine_codes, fine_coords = layout["codes"][:n0], layout["coords"][:n0]
+        dist = wp.empty(n, dtype=wp.float32, device=device)
+        proj = wp.empty(n, dtype=wp.vec3, device=device)
+        source = wp.empty(n, dtype=wp.int32, device=device)
+        dist0, proj0, src0 = dist[:n0], proj[:n0], source[:n0]
         # Nodes an earlier build of this mesh already has keep their closest points; only new ones are queried.
         todo = None
         if previous is not None:
@@ -1361,14 +1359,15 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
                 device,
             )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
-        finest = {"codes": fine_codes, "coords": fine_coords, "dist": dist0, "proj": proj0, "source": src0}
-        fine_codes = fine_coords = dist0 = proj0 = src0 = None  # assemble_field frees them once copied
         return assemble_field(
             origin=origin,
             top_dims=top_dims,
             voxel_size=voxel_size,
             levels=levels,
-            finest=finest,
+            layout=layout,
+            dist=dist,
+            proj=proj,
+            source=source,
             known_signs=previous,
             oracle=oracle,
             finest_signs=finest_signs,
@@ -1563,72 +1562,36 @@ def _bits(dims) -> int:
     return max(1, int(np.ceil(np.log2(float(np.max(dims)) + 1.0))))
 
 
-def assemble_field(
-    *,
-    origin,
-    top_dims,
-    voxel_size,
-    levels,
-    finest,
-    oracle,
-    finest_signs,
-    device,
-    field_ids,
-    timings,
-    mesh_id=0,
-    level_values=None,
-    spread_signs=True,
-    known_signs=None,
-    hole_caps=None,
-    octet_points=None,
-):
-    """Build the intermediate and top levels above a finest level and sign every node (shared by construction
-    and booleans).
+def level_layout(octets, top_dims, levels: int, device, timings: dict | None = None) -> dict:
+    """Where every node of a field goes, before any value is computed.
 
-    ``finest``: the finest level as a dict of Warp arrays, ``codes`` (sorted Morton codes, octets complete),
-    ``coords``, ``dist``/``proj`` (unsigned distances and projection points), ``source`` and optionally ``values``;
-    the dict is emptied and each array freed once copied (pass no other reference to keep peak memory down). Signs
-    are assigned top-down: ``oracle(coords, nodes, spacing, sign)`` writes the sign of the given nodes of one level;
-    ``finest_signs(coords, sign, lo, hi)`` decides the finest nodes the parent left undecided. When
-    ``finest["values"]`` (signed) is given the finest level keeps those values instead. When ``level_values(coords, lo,
-    hi, spacing, dist, proj, source, sign)`` is given (booleans: the operands are sampled), it sets every coarse
-    node's distance, projection, source and sign directly, in place of the FIM solve and the sign oracles.
-    ``spread_signs`` lets signs spread between same-level neighbours; ``hole_caps`` (boxes lo, boxes hi, radii, from
-    :func:`hole_caps`) keeps them from spreading near an open mesh's holes. ``octet_points`` (distances, closest
-    points) of the finest octets' centres, where the finest level's computation found them: the level-1 nodes there.
-    ``known_signs``: an earlier field of the same mesh and domain whose nodes' signs are reused where nodes match.
+    The finest level is the children of ``octets`` (sorted unique octet codes), or with ``octets`` None (and
+    ``levels`` 1) the dense top level itself. Each level above holds the parents of the level below and their
+    siblings (Eq. 6), sorted by code; the top level is dense. Returns ``codes`` and ``coords`` of all levels in one
+    pair of arrays (finest first), the level ``offsets``, each node's first ``child`` and ``parent`` (-1: none).
     """
+    t0 = time.perf_counter()
     top_dims = np.asarray(top_dims, dtype=np.int64)
     fine_dims = top_dims * 2 ** (levels - 1)
-    t0 = time.perf_counter()
-    level_codes, level_coords = [finest.pop("codes")], [finest.pop("coords")]
-    level_times = {}
+    level_octets = [] if octets is None else [octets]
     for k in range(1, levels - 1):
-        tk = time.perf_counter()
+        # every level is sorted by code, so the parents of its octets come in order
         dims_k = fine_dims >> k
-        # every level is sorted by Morton code (the finest level by contract), so its grandparents come in order
-        grand = octree.parent_octets(level_codes[-1], 2, end_bit=3 * _bits(dims_k * 2), presorted=True)
-        c, co = octree.expand_octets(grand)
-        level_codes.append(c)
-        level_coords.append(co)
-        level_times[k] = time.perf_counter() - tk
-    if levels > 1:
-        coords_np, codes_np = octree.dense_level(top_dims)
-        level_codes.append(wp.array(codes_np, dtype=wp.int64, device=device))
-        level_coords.append(wp.array(coords_np, dtype=wp.vec3i, device=device))
-    sizes = [c.shape[0] for c in level_codes]
+        level_octets.append(octree.parent_octets(level_octets[-1], 1, end_bit=3 * _bits(dims_k * 2), presorted=True))
+    top_coords, top_codes = octree.dense_level(top_dims)
+    sizes = [8 * o.shape[0] for o in level_octets] + [len(top_codes)]
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     n = int(offsets[-1])
     codes = wp.empty(n, dtype=wp.int64, device=device)
     coords = wp.empty(n, dtype=wp.vec3i, device=device)
-    for k in range(levels):
-        if sizes[k]:
-            wp.copy(codes, level_codes[k], dest_offset=int(offsets[k]), count=sizes[k])
-            wp.copy(coords, level_coords[k], dest_offset=int(offsets[k]), count=sizes[k])
-    del level_codes, level_coords
+    for k, o in enumerate(level_octets):
+        lo, hi = int(offsets[k]), int(offsets[k + 1])
+        octree.expand_octets(o, codes[lo:hi], coords[lo:hi])
+    codes[int(offsets[-2]) :].assign(top_codes)
+    coords[int(offsets[-2]) :].assign(top_coords)
     child = wp.full(n, -1, dtype=wp.int32, device=device)
     parent = wp.full(n, -1, dtype=wp.int32, device=device)
-    for k in range(1, levels):
+    for k in range(1, len(sizes)):
         lo, hi = int(offsets[k]), int(offsets[k + 1])
         child_lo = int(offsets[k - 1])
         octree.launch_split(
@@ -1640,16 +1603,55 @@ def assemble_field(
         octree.launch_split(
             octree._link_parents_kernel, hi - lo, lambda start, _n, lo=lo: [child, lo + start, parent], device
         )
-    timings["levels_structure"] = timings.get("levels_structure", 0.0) + time.perf_counter() - t0
+    if timings is not None:
+        timings["levels_structure"] = timings.get("levels_structure", 0.0) + time.perf_counter() - t0
+    return {"codes": codes, "coords": coords, "offsets": offsets, "child": child, "parent": parent}
 
-    dist = wp.empty(n, dtype=wp.float32, device=device)
-    proj = wp.empty(n, dtype=wp.vec3, device=device)
-    source = wp.empty(n, dtype=wp.int32, device=device)
-    n0 = sizes[0]
-    wp.copy(dist, finest.pop("dist"), count=n0)
-    wp.copy(proj, finest.pop("proj"), count=n0)
-    wp.copy(source, finest.pop("source"), count=n0)
-    fine_values = finest.pop("values", None)
+
+def assemble_field(
+    *,
+    origin,
+    top_dims,
+    voxel_size,
+    levels,
+    layout,
+    dist,
+    proj,
+    source,
+    oracle,
+    finest_signs,
+    device,
+    field_ids,
+    timings,
+    mesh_id=0,
+    level_values=None,
+    spread_signs=True,
+    known_signs=None,
+    hole_caps=None,
+    octet_points=None,
+    fine_values=None,
+):
+    """Solve the intermediate and top levels above a finest level and sign every node (shared by construction
+    and booleans).
+
+    ``layout``: every node's place (:func:`level_layout`); ``dist``/``proj`` (unsigned distances and projection
+    points) and ``source``: one entry per node, the finest level's filled in. Signs are assigned top-down:
+    ``oracle(coords, nodes, spacing, sign)`` writes the sign of the given nodes of one level; ``finest_signs(coords,
+    sign, lo, hi)`` decides the finest nodes the parent left undecided. When ``fine_values`` (one entry per node, the
+    finest level's signed values filled in) is given the finest level keeps those values (and the array becomes the
+    field's values). When ``level_values(coords, lo,
+    hi, spacing, dist, proj, source, sign)`` is given (booleans: the operands are sampled), it sets every coarse
+    node's distance, projection, source and sign directly, in place of the FIM solve and the sign oracles.
+    ``spread_signs`` lets signs spread between same-level neighbours; ``hole_caps`` (boxes lo, boxes hi, radii, from
+    :func:`hole_caps`) keeps them from spreading near an open mesh's holes. ``octet_points`` (distances, closest
+    points) of the finest octets' centres, where the finest level's computation found them: the level-1 nodes there.
+    ``known_signs``: an earlier field of the same mesh and domain whose nodes' signs are reused where nodes match.
+    """
+    top_dims = np.asarray(top_dims, dtype=np.int64)
+    fine_dims = top_dims * 2 ** (levels - 1)
+    codes, coords, offsets = layout["codes"], layout["coords"], layout["offsets"]
+    child, parent = layout["child"], layout["parent"]
+    n, n0 = int(offsets[-1]), int(offsets[1])
     # same-level neighbours of the coarse nodes (node i in row i - n0): the finest level finds its own by octet, and
     # booleans sample their operands instead of solving
     neighbours = wp.full((n - n0 if level_values is None else 0, 6), -1, dtype=wp.int32, device=device)
@@ -1684,7 +1686,7 @@ def assemble_field(
         name = "top_level" if k == levels - 1 else f"level_{k}"
         if level_values is not None:
             level_values(coords, lo, hi, voxel_size * 2**k, dist, proj, source, sign)
-            timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk + level_times.get(k, 0.0)
+            timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk
             continue
         octree.level_neighbours(coords, lo, hi, fine_dims >> k, neighbours, row0=n0)
         tn = time.perf_counter()
@@ -1706,7 +1708,7 @@ def assemble_field(
             ordered_sweeps=k == levels - 1,  # the dense top level: far from the surface, information travels far
         )
         timings[f"{name}_neighbours"] = timings.get(f"{name}_neighbours", 0.0) + tn - tk
-        timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk + level_times.get(k, 0.0)
+        timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk
 
     # Signs, top-down: the top level from a sparse set of oracle seeds, every lower level from its parents; then
     # within each level from already signed neighbours (empty balls again); the oracle only for what is left.
@@ -1821,10 +1823,12 @@ def assemble_field(
         if levels > 1:
             spread(0, 0, n0)
         oracle_counts[0] = finest_signs(coords, sign, 0, n0)
-    values = wp.empty(n, dtype=wp.float32, device=device)
-    octree.launch_split(_apply_sign_kernel, n, lambda start, _n: [start, dist, sign, values], device)
-    if fine_values is not None:
-        wp.copy(values, fine_values, count=n0)
+    if fine_values is None:
+        values = wp.empty(n, dtype=wp.float32, device=device)
+        octree.launch_split(_apply_sign_kernel, n, lambda start, _n: [start, dist, sign, values], device)
+    else:  # the finest values are in place already
+        values = fine_values
+        octree.launch_split(_apply_sign_kernel, n - n0, lambda start, _n: [n0 + start, dist, sign, values], device)
     timings["signs"] = timings.get("signs", 0.0) + time.perf_counter() - t0
 
     return AdaptiveField(

@@ -262,11 +262,12 @@ def _expand_octets_kernel(
         coords[8 * i + int(o)] = morton_decode(m)
 
 
-def expand_octets(octets: wp.array) -> tuple[wp.array, wp.array]:
-    """Children of every parent code: (8M,) int64 codes sorted when ``octets`` is, and (8M,) vec3i coordinates."""
+def expand_octets(octets: wp.array, codes: wp.array | None = None, coords: wp.array | None = None):
+    """Children of every parent code: (8M,) int64 codes sorted when ``octets`` is, and (8M,) vec3i coordinates
+    (written into ``codes``/``coords`` when given)."""
     n = octets.shape[0]
-    codes = wp.empty(8 * n, dtype=wp.int64, device=octets.device)
-    coords = wp.empty(8 * n, dtype=wp.vec3i, device=octets.device)
+    codes = wp.empty(8 * n, dtype=wp.int64, device=octets.device) if codes is None else codes
+    coords = wp.empty(8 * n, dtype=wp.vec3i, device=octets.device) if coords is None else coords
     if n:
         launch_split(_expand_octets_kernel, n, lambda lo, _n: [lo, octets, codes, coords], octets.device)
     return codes, coords
