@@ -4,10 +4,11 @@ The finest octree level stores signed distances at cell centres, which form a sp
 lattice: a thin band around the surface inside a possibly huge domain. :func:`extract_surface` polygonises the dual
 cubes of that lattice (cube ``c`` has the samples ``c + {0, 1}^3`` as corners) without ever allocating a dense grid:
 samples are packed into sorted 64-bit keys, a Warp kernel finds each cube's seven other corners by galloping search,
-and only complete cubes whose corners change sign are polygonised by the core of Warp's sparse marching cubes, with
-the samples themselves as the cubes' shared corners (Warp's public ``sparse_marching_cubes_from_cells`` would sort
-eight corner codes per cube to find them again: ~2x the time and memory; it remains the fallback for other Warp
-versions). Vertices are shared between cubes, so the mesh is watertight wherever the zero set stays inside the band.
+and only complete cubes whose corners change sign are polygonised by the core of Warp's sparse marching cubes (its
+tables, its passes run here split over the CPU cores), with the samples themselves as the cubes' shared corners
+(Warp's public ``sparse_marching_cubes_from_cells`` would sort eight corner codes per cube to find them again: ~2x
+the time and memory; it remains the fallback for other Warp versions). Vertices are shared between cubes, so the
+mesh is watertight wherever the zero set stays inside the band.
 :func:`extract_octree_level` does the same on a field's finest level as stored (Morton order, complete octets):
 each cube's corners come from its octet's +x/+y/+z neighbour octets, so nothing is sorted and nothing leaves the
 device. ``bench/extract_compare.py`` measures this against scikit-image's marching cubes run on dense 16^3 blocks.
@@ -25,14 +26,8 @@ from .octree import launch_split, morton_decode, morton_encode
 try:  # the marching-cubes core of Warp's sparse_marching_cubes_from_cells, given already shared corners
     from warp._src.geometry import sparse_marching_cubes as _warp_mc
     from warp._src.geometry.sparse_marching_cubes import _extract_from_dedup as _shared_corner_marching_cubes
-
-    _cell_case_code = _warp_mc._cell_case_code
-except (ImportError, AttributeError):  # another Warp version: the public entry point, which sorts to share corners
+except ImportError:  # another Warp version: the public entry point, which sorts to share corners
     _warp_mc = _shared_corner_marching_cubes = None
-
-    @wp.func
-    def _cell_case_code(corners: wp.array2d[wp.int32], values: wp.array[wp.float32], iso: wp.float32, cube: int):
-        return int(0)  # never launched: only compiles the kernels below
 
 
 # Corner c of a cube with minimum corner (i, j, k) is the sample (i, j, k) + _CORNER_OFFSETS[c], in the order Warp's
@@ -430,6 +425,61 @@ def _polygonise(cube_corners, n, point_kernel, point_inputs, lo, origin, spacing
     return _split_marching_cubes(cube_corners, points, point_values, device)
 
 
+# The passes of Warp's marching-cubes core (``_extract_from_dedup``), each over a range of cubes or edge slots so that
+# a launch can be split over the CPU cores. They live here rather than being launched from Warp's module, which would
+# cost every process the code generation of that module's other kernels (Warp hashes a module by generating it).
+
+
+@wp.func
+def _cube_case(cube_corners: wp.array2d[wp.int32], corner_values: wp.array[wp.float32], iso: wp.float32, cube: int):
+    """The 8-bit marching-cubes case of a cube: bit c set when corner c is at or above ``iso``."""
+    case = int(0)
+    for c in range(8):
+        if corner_values[cube_corners[cube, c]] >= iso:
+            case = case | (1 << c)
+    return case
+
+
+@wp.kernel(enable_backward=False)
+def _mark_active_edges_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    corner_values: wp.array[wp.float32],
+    iso: wp.float32,
+    case_to_tri_range: wp.array[wp.int32],
+    tri_local_inds: wp.array[wp.int32],
+    edge_owner: wp.array[wp.int32],
+    edge_upper: wp.array[wp.int32],
+    edge_axis: wp.array[wp.int32],
+    edge_active: wp.array[wp.int32],
+    edge_upper_corner: wp.array[wp.int32],
+):
+    """Mark the edges cube ``first + tid``'s triangles cross, each as slot owner corner * 3 + axis (cubes sharing an
+    edge write the same values to its slot: a harmless race)."""
+    cube = first + wp.tid()
+    case = _cube_case(cube_corners, corner_values, iso, cube)
+    for k in range(case_to_tri_range[case], case_to_tri_range[case + 1]):
+        local_edge = tri_local_inds[k]
+        slot = cube_corners[cube, edge_owner[local_edge]] * 3 + edge_axis[local_edge]
+        edge_active[slot] = 1
+        edge_upper_corner[slot] = cube_corners[cube, edge_upper[local_edge]]
+
+
+@wp.kernel(enable_backward=False)
+def _count_faces_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    corner_values: wp.array[wp.float32],
+    iso: wp.float32,
+    case_to_tri_range: wp.array[wp.int32],
+    face_count: wp.array[wp.int32],
+):
+    """Triangles of cube ``first + tid``."""
+    cube = first + wp.tid()
+    case = _cube_case(cube_corners, corner_values, iso, cube)
+    face_count[cube] = (case_to_tri_range[case + 1] - case_to_tri_range[case]) // 3
+
+
 @wp.kernel(enable_backward=False)
 def _emit_vertices_kernel(
     first: int,
@@ -467,7 +517,7 @@ def _emit_faces_kernel(
 ):
     """Warp's ``_emit_faces_kernel`` for cube ``first + tid`` (``face_scan``: inclusive scan of faces per cube)."""
     cube = first + wp.tid()
-    case = _cell_case_code(cube_corners, corner_values, iso, cube)
+    case = _cube_case(cube_corners, corner_values, iso, cube)
     tri_start = case_to_tri_range[case]
     n_tri = (case_to_tri_range[case + 1] - tri_start) // 3
     if n_tri == 0:
@@ -483,9 +533,8 @@ def _emit_faces_kernel(
 
 
 def _split_marching_cubes(cube_corners, corner_positions, corner_values, device):
-    """Warp's marching-cubes core (``_extract_from_dedup``, threshold 0) with every pass split over the CPU cores
-    (see ``launch_split``): its own kernels where a launch over a slice of the cubes means the same, the two that
-    index by thread id (above) with an offset. Same vertices and triangles, in the same order."""
+    """Warp's marching-cubes core (``_extract_from_dedup``, threshold 0, its case and edge tables) with every pass
+    split over the CPU cores (see ``launch_split``). Same vertices and triangles, in the same order."""
     n_cubes = cube_corners.shape[0]
     n_slots = 3 * corner_positions.shape[0]
     case_table = _warp_mc._get_mc_case_to_tri_range_table(device)
@@ -498,10 +547,11 @@ def _split_marching_cubes(cube_corners, corner_positions, corner_values, device)
     edge_active = wp.zeros(n_slots, dtype=wp.int32, device=device)
     edge_upper_corner = wp.empty(n_slots, dtype=wp.int32, device=device)
     launch_split(
-        _warp_mc._mark_active_edges_kernel,
+        _mark_active_edges_kernel,
         n_cubes,
         lambda s, c: [
-            cube_corners[s : s + c],
+            s,
+            cube_corners,
             corner_values,
             iso,
             case_table,
@@ -538,10 +588,7 @@ def _split_marching_cubes(cube_corners, corner_positions, corner_values, device)
     edge_active = edge_upper_corner = None
     face_count = wp.empty(n_cubes, dtype=wp.int32, device=device)
     launch_split(
-        _warp_mc._count_faces_kernel,
-        n_cubes,
-        lambda s, c: [cube_corners[s : s + c], corner_values, iso, case_table, face_count[s : s + c]],
-        device,
+        _count_faces_kernel, n_cubes, lambda s, c: [s, cube_corners, corner_values, iso, case_table, face_count], device
     )
     face_scan = wp.empty(n_cubes, dtype=wp.int32, device=device)
     wp.utils.array_scan(face_count, face_scan, inclusive=True)
