@@ -440,6 +440,18 @@ def _cube_case(cube_corners: wp.array2d[wp.int32], corner_values: wp.array[wp.fl
     return case
 
 
+@wp.func
+def _edge_slot(
+    cube_corners: wp.array2d[wp.int32],
+    cube: int,
+    local_edge: int,
+    edge_owner: wp.array[wp.int32],
+    edge_axis: wp.array[wp.int32],
+):
+    """Slot of a cube's local edge among all edges: its owner corner * 3 + axis (shared by the cubes around it)."""
+    return cube_corners[cube, edge_owner[local_edge]] * 3 + edge_axis[local_edge]
+
+
 @wp.kernel(enable_backward=False)
 def _mark_active_edges_kernel(
     first: int,
@@ -460,7 +472,7 @@ def _mark_active_edges_kernel(
     case = _cube_case(cube_corners, corner_values, iso, cube)
     for k in range(case_to_tri_range[case], case_to_tri_range[case + 1]):
         local_edge = tri_local_inds[k]
-        slot = cube_corners[cube, edge_owner[local_edge]] * 3 + edge_axis[local_edge]
+        slot = _edge_slot(cube_corners, cube, local_edge, edge_owner, edge_axis)
         edge_active[slot] = 1
         edge_upper_corner[slot] = cube_corners[cube, edge_upper[local_edge]]
 
@@ -528,7 +540,7 @@ def _emit_faces_kernel(
     for tri in range(n_tri):
         for k in range(3):
             local_edge = tri_local_inds[tri_start + 3 * tri + k]
-            slot = cube_corners[cube, edge_owner[local_edge]] * 3 + edge_axis[local_edge]
+            slot = _edge_slot(cube_corners, cube, local_edge, edge_owner, edge_axis)
             indices[3 * (out + tri) + k] = edge_vertex_index[slot] - 1
 
 

@@ -751,10 +751,6 @@ class AdaptiveField:
             )
         return ids.numpy()
 
-    def dist_unsigned(self) -> np.ndarray:
-        """(N,) float32 unsigned distances of all nodes."""
-        return np.abs(self.values.numpy())
-
     def level_of_nodes(self) -> np.ndarray:
         return np.repeat(np.arange(self.levels, dtype=np.int32), np.diff(self.level_offsets))
 
@@ -1154,7 +1150,7 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
             if k in errors:
                 raise errors[k]
         return fields
-    for module in (octree._iota_kernel.module, _mesh_sign_kernel.module, _sample_field_kernel.module):
+    for module in (octree._iota_kernel.module, _mesh_sign_kernel.module):  # the modules a build launches
         wp.load_module(module, device=device)  # compiled or loaded once, before the threads
     workers = min(len(meshes), os.cpu_count() or 1)
     # worker w builds meshes w, w + workers, ...
@@ -1295,29 +1291,26 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         proj = wp.empty(n, dtype=wp.vec3, device=device)
         source = wp.empty(n, dtype=wp.int32, device=device)
         dist0, proj0, src0 = dist[:n0], proj[:n0], source[:n0]
-        # Nodes an earlier build of this mesh already has keep their closest points; only new ones are queried.
-        todo = None
+        # Octets an earlier build of this mesh already has keep their closest points; only new ones are queried.
+        first_nodes = np.arange(0, n0, 8)
         if previous is not None:
             where = match_levels(fine_codes, [0, n0], previous)
             no_known = wp.empty(0, dtype=wp.int32, device=device)
             octree.launch_split(
                 _take_known_kernel,
                 n0,
-                lambda s, _n: [s, where, previous.values, previous.proj, src0, 0, no_known, dist0, proj0, src0],
+                lambda s, _n: [s, where, previous.values, previous.proj, previous.source, no_known, dist0, proj0, src0],
                 device,
             )
-            src0.fill_(int(field_id))
-            todo = np.flatnonzero(where.numpy() < 0).astype(np.int32)
+            first_nodes = 8 * np.flatnonzero(where.numpy()[::8] < 0)  # matched octet by octet
+        src0.fill_(int(field_id))
         origin_v = wp.vec3(*origin)
         if octets is not None:
-            # octet by octet, in place; an incremental build computes only the octets its previous build lacks
-            first_nodes = np.arange(0, n0, 8) if todo is None else np.unique(todo // 8) * 8
+            # octet by octet, in place
             octet_nodes = wp.array(first_nodes.astype(np.int32), dtype=wp.int32, device=device)
             octet_dist = wp.full(n0 // 8, octree.UNSET_DISTANCE, dtype=wp.float32, device=device)
             octet_proj = wp.empty(n0 // 8, dtype=wp.vec3, device=device)
             octet_points = (octet_dist, octet_proj)
-            if todo is None:
-                src0.fill_(int(field_id))
             octree.launch_split(
                 _finest_octet_distance_kernel,
                 len(first_nodes),
@@ -1392,7 +1385,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         t_refine = time.perf_counter()
         # off the caps over the holes the winding number stays near an integer (see hole_caps): the zero set can
         # only leave the band near them (no caps: the edges cancel, it never does)
-        extra = sign_change_octets(field, caps if caps is not None else (np.zeros((0, 3)), np.zeros((0, 3)), []))
+        extra = sign_change_octets(field, caps if caps is not None else NO_BOXES)
         refine_seconds += time.perf_counter() - t_refine
         if len(extra) == 0:
             break
@@ -1420,6 +1413,20 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     return field
 
 
+# No boxes, in the form of :func:`hole_caps`' result.
+NO_BOXES = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+
+
+def _box_arrays(boxes, device) -> list:
+    """Warp arrays (lo, hi, radius) of boxes in the form of :func:`hole_caps`' result (None: no boxes)."""
+    lo, hi, radius = NO_BOXES if boxes is None else boxes
+    return [
+        wp.array(np.asarray(lo, np.float32).reshape(-1, 3), dtype=wp.vec3, device=device),
+        wp.array(np.asarray(hi, np.float32).reshape(-1, 3), dtype=wp.vec3, device=device),
+        wp.array(np.asarray(radius, np.float32).reshape(-1), dtype=wp.float32, device=device),
+    ]
+
+
 def sign_change_octets(field: AdaptiveField, near=None) -> np.ndarray:
     """Octet codes the finest level lacks where the zero set leaves it: every coarse leaf whose face neighbour has
     the opposite sign, and every octet next to the band whose covering coarse leaf has another sign than a band node
@@ -1433,11 +1440,8 @@ def sign_change_octets(field: AdaptiveField, near=None) -> np.ndarray:
         return np.zeros(0, dtype=np.int64)
     if near is not None and len(near[2]) == 0:
         return np.zeros(0, dtype=np.int64)
-    boxes = near if near is not None else (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
     near_args = [
-        wp.array(np.asarray(boxes[0], np.float32).reshape(-1, 3), dtype=wp.vec3, device=field.device),
-        wp.array(np.asarray(boxes[1], np.float32).reshape(-1, 3), dtype=wp.vec3, device=field.device),
-        wp.array(np.asarray(boxes[2], np.float32).reshape(-1), dtype=wp.float32, device=field.device),
+        *_box_arrays(near, field.device),
         # a sign change shows between a leaf or octet and a neighbour's centre, at most a few top cells away
         -1.0 if near is None else 2.5 * field.top_spacing,
     ]
@@ -1507,22 +1511,20 @@ def _take_known_kernel(
     prev_values: wp.array[wp.float32],
     prev_proj: wp.array[wp.vec3],
     prev_source: wp.array[wp.int32],
-    with_source: int,
     known: wp.array[wp.int32],
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
 ):
-    """Node ``first + tid`` found in an earlier build (``where`` >= 0) takes its distance and closest point (and
-    source, ``with_source``), and is marked ``known`` (when ``known`` is not empty)."""
+    """Node ``first + tid`` found in an earlier build (``where`` >= 0) takes its distance, closest point and source,
+    and is marked ``known`` (when ``known`` is not empty)."""
     i = first + wp.tid()
     j = where[i]
     if j < 0:
         return
     dist[i] = wp.abs(prev_values[j])
     proj[i] = prev_proj[j]
-    if with_source == 1:
-        source[i] = prev_source[j]
+    source[i] = prev_source[j]
     if known.shape[0] > 0:
         known[i] = 1
 
@@ -1669,7 +1671,6 @@ def assemble_field(
                 known_signs.values,
                 known_signs.proj,
                 known_signs.source,
-                1,
                 known,
                 dist,
                 proj,
@@ -1720,12 +1721,7 @@ def assemble_field(
     sign_sweeps = {}
     origin_v = wp.vec3(*origin_t)
 
-    caps = hole_caps if hole_caps is not None else (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
-    cap_args = [
-        wp.array(np.asarray(caps[0], np.float32).reshape(-1, 3), dtype=wp.vec3, device=device),
-        wp.array(np.asarray(caps[1], np.float32).reshape(-1, 3), dtype=wp.vec3, device=device),
-        wp.array(np.asarray(caps[2], np.float32).reshape(-1), dtype=wp.float32, device=device),
-    ]
+    cap_args = _box_arrays(hole_caps, device)
 
     def spread(k, lo, hi):
         if not spread_signs:
