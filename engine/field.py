@@ -97,12 +97,14 @@ def _octets_per_triangle_kernel(
     octet_size: float,
     pad: float,
     dims: wp.vec3i,
+    mask: wp.array[wp.uint8],
     offsets: wp.array[wp.int32],
     emit: int,
     counts: wp.array[wp.int32],
     codes: wp.array[wp.int64],
 ):
-    """Count (emit=0) or write (emit=1) the Morton codes of the octets within ``pad`` of triangle ``t``."""
+    """Count (emit=0), write (emit=1) or mark in ``mask`` (emit=2, see ``octree.mark_then_compact``) the octets
+    within ``pad`` of triangle ``t``."""
     t = first + wp.tid()
     a = verts[tris[t, 0]]
     b = verts[tris[t, 1]]
@@ -127,6 +129,8 @@ def _octets_per_triangle_kernel(
                 if tri_box_overlap(center, half, a, b, c):
                     if emit == 1:
                         codes[base + n] = morton_encode(cell)
+                    elif emit == 2:
+                        mask[x + dims[0] * (y + dims[1] * z)] = wp.uint8(1)
                     n += 1
     if emit == 0:
         counts[t] = n
@@ -1240,14 +1244,28 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         verts_wp = wp.array(verts, dtype=wp.vec3, device=device)
         tris_wp = wp.array(tris, dtype=wp.int32, device=device)
         args = [verts_wp, tris_wp, wp.vec3(*origin), octet, padding * voxel_size, oct_dims]
-        octet_codes = octree.count_then_emit(
-            _octets_per_triangle_kernel,
-            len(tris),
-            args,
-            device,
-            check=lambda total: check_budget(fine_dims, top_count, min(8 * total, plan["fine_nodes"]), pairs=total),
-        )
-        base_octets = octree.sort_unique(octet_codes, end_bit=3 * _bits(fine_dims // 2))
+        mask_bytes = int(np.prod(fine_dims // 2))
+        if mask_bytes <= min(octree.MASK_MAX_CELLS, available_memory() // 8):
+            mask = wp.empty(mask_bytes, dtype=wp.uint8, device=device)
+            base_octets = octree.mark_then_compact(
+                _octets_per_triangle_kernel,
+                len(tris),
+                [*args, mask],
+                fine_dims // 2,
+                device,
+                check=lambda total: check_budget(fine_dims, top_count, 8 * total),
+            )
+            del mask
+        else:
+            no_mask = wp.empty(0, dtype=wp.uint8, device=device)
+            octet_codes = octree.count_then_emit(
+                _octets_per_triangle_kernel,
+                len(tris),
+                [*args, no_mask],
+                device,
+                check=lambda total: check_budget(fine_dims, top_count, min(8 * total, plan["fine_nodes"]), pairs=total),
+            )
+            base_octets = octree.sort_unique(octet_codes, end_bit=3 * _bits(fine_dims // 2))
     timings["finest_cells"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

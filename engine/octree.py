@@ -107,6 +107,79 @@ def count_then_emit(kernel, dim: int, args, device, check=None) -> wp.array:
     return codes
 
 
+# Octet grids up to this many cells are de-duplicated in a dense byte mask (one byte per octet) instead of by sorting
+# every (item, octet) pair: small items (triangles of about a voxel) each enumerate a few dozen octets, mostly the
+# same as their neighbours'.
+MASK_MAX_CELLS = 1 << 28
+
+
+def mark_then_compact(kernel, dim: int, args, dims, device, check=None) -> wp.array:
+    """Sorted unique octet codes marked by ``kernel`` (see :func:`count_then_emit`) called with ``emit=2``: item
+    ``first + tid`` sets ``mask[x + dims.x * (y + dims.y * z)] = 1`` for each of its octets, where ``mask`` (a uint8
+    array of ``prod(dims)`` bytes) is the last of ``args`` (setting a byte to 1 from two threads is harmless).
+    ``check(total)`` may refuse the count of unique octets before their codes are allocated."""
+    nx, ny, nz = (int(d) for d in dims)
+    mask = args[-1]
+    mask.zero_()
+    none_i32 = wp.empty(1, dtype=wp.int32, device=device)
+    none_i64 = wp.empty(1, dtype=wp.int64, device=device)
+    launch_split(
+        kernel, dim, lambda lo, n: [lo, *args, none_i32, 2, none_i32, none_i64], device, min_dim=EMIT_SPLIT_MIN_DIM
+    )
+    rows = ny * nz
+    counts = wp.empty(rows, dtype=wp.int32, device=device)
+    launch_split(
+        _count_mask_rows_kernel, rows, lambda lo, n: [lo, mask, nx, counts], device, min_dim=EMIT_SPLIT_MIN_DIM
+    )
+    counts_np = counts.numpy().astype(np.int64)
+    total = int(counts_np.sum())
+    if check is not None:
+        check(total)
+    offsets = wp.array(np.concatenate([[0], np.cumsum(counts_np)[:-1]]).astype(np.int32), device=device)
+    codes = wp.empty(2 * total, dtype=wp.int64, device=device)  # the second half: the radix sort's buffer
+    dims_v = wp.vec3i(nx, ny, nz)
+    launch_split(
+        _emit_mask_rows_kernel,
+        rows,
+        lambda lo, n: [lo, mask, dims_v, offsets, codes],
+        device,
+        min_dim=EMIT_SPLIT_MIN_DIM,
+    )
+    values = wp.empty(2 * total, dtype=wp.int32, device=device)
+    if total > 1:
+        bits = max(1, int(np.ceil(np.log2(float(max(nx, ny, nz)) + 1.0))))
+        wp.utils.radix_sort_pairs(codes, values, total, end_bit=max(1, min(63, 3 * bits)))
+    return codes[:total]
+
+
+@wp.kernel(enable_backward=False)
+def _count_mask_rows_kernel(first: int, mask: wp.array[wp.uint8], nx: int, counts: wp.array[wp.int32]):
+    """Set bytes in row ``first + tid`` (``nx`` consecutive bytes) of a mask."""
+    r = first + wp.tid()
+    base = r * nx
+    n = int(0)
+    for x in range(nx):
+        n += int(mask[base + x])
+    counts[r] = n
+
+
+@wp.kernel(enable_backward=False)
+def _emit_mask_rows_kernel(
+    first: int, mask: wp.array[wp.uint8], dims: wp.vec3i, offsets: wp.array[wp.int32], codes: wp.array[wp.int64]
+):
+    """Morton codes of the set bytes of row ``first + tid`` of a (dims.x, dims.y, dims.z) x-fastest mask, from
+    ``offsets[row]``."""
+    r = first + wp.tid()
+    base = r * dims[0]
+    y = r % dims[1]
+    z = r / dims[1]
+    k = offsets[r]
+    for x in range(dims[0]):
+        if mask[base + x] != wp.uint8(0):
+            codes[k] = morton_encode(wp.vec3i(x, y, z))
+            k += 1
+
+
 # ---- Morton codes ----
 
 

@@ -336,6 +336,21 @@ def test_fields_with_the_same_spacing_share_node_positions():
         np.testing.assert_allclose(frac, np.rint(frac), atol=1e-4)
 
 
+@pytest.mark.parametrize("name", ["stanford-bunny.obj", "rocker-arm.obj"])
+def test_octets_found_through_the_byte_mask_are_those_sorting_finds(name, monkeypatch):
+    verts, tris = load_mesh(name)
+    h = _voxel(verts, 160)
+    masked = engine.build_field(verts, tris, voxel_size=h)
+    monkeypatch.setattr(engine.octree, "MASK_MAX_CELLS", 0)  # every (triangle, octet) pair sorted instead
+    sorted_ = engine.build_field(verts, tris, voxel_size=h)
+    assert masked.level_counts == sorted_.level_counts
+    np.testing.assert_array_equal(masked.codes.numpy(), sorted_.codes.numpy())
+    np.testing.assert_array_equal(masked.values.numpy(), sorted_.values.numpy())
+    # the finest level holds each octet once, in Morton order
+    octets = masked.codes.numpy()[: masked.level_counts[0] : 8] >> 3
+    assert np.all(np.diff(octets) > 0)
+
+
 def test_morton_codes_match_between_host_and_device():
     coords = np.random.default_rng(0).integers(0, 2**20, size=(1000, 3))
     from engine.octree import morton_decode
