@@ -18,7 +18,7 @@ import numpy as np
 import warp as wp
 
 from . import octree
-from .field import AdaptiveField, _bits, assemble_field, check_budget, level_layout, plan_domain
+from .field import AdaptiveField, _bits, assemble_field, available_memory, check_budget, level_layout, plan_domain
 from .octree import morton_encode, node_center
 from .sampling import FieldArg, clamp_to_domain, inside_domain, level_spacing, locate_leaf, sample_mls
 
@@ -375,9 +375,13 @@ def _keep_octets_kernel(
     near: wp.array[wp.int32],
     has_neg: wp.array[wp.int32],
     has_pos: wp.array[wp.int32],
+    dims: wp.vec3i,
+    signs: wp.array[wp.uint8],
     keep: wp.array[wp.int32],
 ):
-    """Keep an octet near the surface, or with a sign change inside it or towards one of its 26 neighbours."""
+    """Keep an octet near the surface, or with a sign change inside it or towards one of its 26 neighbours. The
+    neighbours' possible signs come from ``signs`` (the octet grid, x-fastest, see ``_octet_signs_kernel``) or, when
+    it is empty, by binary search among ``octets``."""
     t = first + wp.tid()
     keep[t] = 0
     if near[t] == 1 or (has_neg[t] == 1 and has_pos[t] == 1):
@@ -385,14 +389,36 @@ def _keep_octets_kernel(
         return
     c = octree.morton_decode(octets[t])
     n = octets.shape[0]
+    # the sign a neighbour must be able to have: bit 0 negative, bit 1 positive
+    other = wp.where(has_pos[t] == 1, 1, 0) + wp.where(has_neg[t] == 1, 2, 0)
     for o in range(27):
         q = c + wp.vec3i(o % 3 - 1, (o // 3) % 3 - 1, o // 9 - 1)
-        if o != 13 and q[0] >= 0 and q[1] >= 0 and q[2] >= 0:
-            j = octree.find_key(octets, 0, n, morton_encode(q))
-            if j >= 0:
-                if (has_neg[j] == 1 and has_pos[t] == 1) or (has_pos[j] == 1 and has_neg[t] == 1):
+        if o != 13 and q[0] >= 0 and q[1] >= 0 and q[2] >= 0 and q[0] < dims[0] and q[1] < dims[1] and q[2] < dims[2]:
+            if signs.shape[0] > 0:
+                if (int(signs[q[0] + dims[0] * (q[1] + dims[1] * q[2])]) & other) != 0:
                     keep[t] = 1
                     return
+            else:
+                j = octree.find_key(octets, 0, n, morton_encode(q))
+                if j >= 0:
+                    if (has_neg[j] == 1 and has_pos[t] == 1) or (has_pos[j] == 1 and has_neg[t] == 1):
+                        keep[t] = 1
+                        return
+
+
+@wp.kernel(enable_backward=False)
+def _octet_signs_kernel(
+    first: int,
+    octets: wp.array[wp.int64],
+    has_neg: wp.array[wp.int32],
+    has_pos: wp.array[wp.int32],
+    dims: wp.vec3i,
+    signs: wp.array[wp.uint8],
+):
+    """The signs octet ``first + tid`` may have (bit 0 negative, bit 1 positive) at its place in the octet grid."""
+    t = first + wp.tid()
+    c = octree.morton_decode(octets[t])
+    signs[c[0] + dims[0] * (c[1] + dims[1] * c[2])] = wp.uint8(has_neg[t] + 2 * has_pos[t])
 
 
 @wp.kernel(enable_backward=False)
@@ -572,8 +598,21 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         ],
         device,
     )
+    dims_v = wp.vec3i(*(int(d) for d in oct_dims))
+    grid_cells = int(np.prod(oct_dims))
+    if grid_cells <= min(octree.MASK_MAX_CELLS, available_memory() // 8):
+        # a byte per octet of the grid: the 26 neighbours are found by index rather than by binary search
+        signs = wp.zeros(grid_cells, dtype=wp.uint8, device=device)
+        octree.launch_split(
+            _octet_signs_kernel, n_oct, lambda start, n: [start, octets, has_neg, has_pos, dims_v, signs], device
+        )
+    else:
+        signs = wp.empty(0, dtype=wp.uint8, device=device)
     octree.launch_split(
-        _keep_octets_kernel, n_oct, lambda start, n: [start, octets, near, has_neg, has_pos, keep_wp], device
+        _keep_octets_kernel,
+        n_oct,
+        lambda start, n: [start, octets, near, has_neg, has_pos, dims_v, signs, keep_wp],
+        device,
     )
     keep = keep_wp.numpy().astype(bool)
     if not keep.all():
