@@ -3,8 +3,9 @@
 Pipeline of :func:`build_field`:
 
 1. finest level: one thread per triangle lists the octets (parents of finest cells) that a triangle-box test says
-   lie within ``padding`` cells of it (Eq. 4-5: whole octets, so every parent gets exactly 8 children); radix sort,
-   de-duplicate, expand to cells; exact closest points octet by octet (one BVH query at the octet centre bounds the
+   lie within ``padding`` cells of it (Eq. 4-5: whole octets, so every parent gets exactly 8 children), marked in a
+   byte per octet (or, for very large grids, all (triangle, octet) pairs radix-sorted), gathered, radix-sorted into
+   Morton order, expanded to cells; exact closest points octet by octet (one BVH query at the octet centre bounds the
    candidate triangles, one box query lists them), per cell from Warp's mesh BVH for meshes finer than the cells;
 2. intermediate levels: grandparents of the level below expanded to their 8 children (Eq. 6: parents plus the
    parents' siblings), de-duplicated; internal nodes take the nearest of their children's projection points, leaves
