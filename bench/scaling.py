@@ -11,6 +11,7 @@ of a mesh, through AASDF's whole pipeline and through the geometry-nodes SDF pip
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -68,7 +69,8 @@ def row(label: str, case: str, res: int) -> None:
     sys.stdout.flush()
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args(argv)  # no options; answers --help
     print("# Scaling — union of a mesh and a shifted copy, fresh process per measurement (peak RSS is the process's)\n")
     print(
         "| case | triangles (each) | res | AASDF s | GN SDF s | ratio | AASDF field nodes | AASDF peak MB "
