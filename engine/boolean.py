@@ -18,7 +18,7 @@ import numpy as np
 import warp as wp
 
 from . import octree
-from .field import AdaptiveField, _bits, assemble_field, available_memory, check_budget, level_layout, plan_domain
+from .field import AdaptiveField, _bits, assemble_field, byte_grid_fits, check_budget, level_layout, plan_domain
 from .octree import morton_encode, node_center
 from .sampling import FieldArg, clamp_to_domain, inside_domain, level_spacing, locate_leaf, sample_mls
 
@@ -599,10 +599,9 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         device,
     )
     dims_v = wp.vec3i(*(int(d) for d in oct_dims))
-    grid_cells = int(np.prod(oct_dims))
-    if grid_cells <= min(octree.MASK_MAX_CELLS, available_memory() // 8):
+    if byte_grid_fits(oct_dims):
         # a byte per octet of the grid: the 26 neighbours are found by index rather than by binary search
-        signs = wp.zeros(grid_cells, dtype=wp.uint8, device=device)
+        signs = wp.zeros(int(np.prod(oct_dims)), dtype=wp.uint8, device=device)
         octree.launch_split(
             _octet_signs_kernel, n_oct, lambda start, n: [start, octets, has_neg, has_pos, dims_v, signs], device
         )

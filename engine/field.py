@@ -1021,6 +1021,13 @@ def check_budget(fine_dims, top_count, fine_nodes_estimate, pairs=0):
         )
 
 
+def byte_grid_fits(dims) -> bool:
+    """Whether a dense grid of one byte per cell over ``dims`` is small enough to use (``octree.MASK_MAX_CELLS``, and
+    an eighth of the memory available)."""
+    cells = int(np.prod(np.asarray(dims, dtype=np.int64)))
+    return cells <= min(octree.MASK_MAX_CELLS, available_memory() // 8)
+
+
 def _device(device):
     return wp.get_device(device)
 
@@ -1155,7 +1162,7 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
             if k in errors:
                 raise errors[k]
         return fields
-    for module in (octree._iota_kernel.module, _mesh_sign_kernel.module):  # the modules a build launches
+    for module in (octree._mark_unique_kernel.module, _mesh_sign_kernel.module):  # the modules a build launches
         wp.load_module(module, device=device)  # compiled or loaded once, before the threads
     workers = min(len(meshes), os.cpu_count() or 1)
     # worker w builds meshes w, w + workers, ...
@@ -1245,28 +1252,26 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         verts_wp = wp.array(verts, dtype=wp.vec3, device=device)
         tris_wp = wp.array(tris, dtype=wp.int32, device=device)
         args = [verts_wp, tris_wp, wp.vec3(*origin), octet, padding * voxel_size, oct_dims]
-        mask_bytes = int(np.prod(fine_dims // 2))
-        if mask_bytes <= min(octree.MASK_MAX_CELLS, available_memory() // 8):
-            mask = wp.empty(mask_bytes, dtype=wp.uint8, device=device)
+        end_bit = 3 * _bits(fine_dims // 2)
+        if byte_grid_fits(fine_dims // 2):
             base_octets = octree.mark_then_compact(
                 _octets_per_triangle_kernel,
                 len(tris),
-                [*args, mask],
+                args,
                 fine_dims // 2,
                 device,
+                end_bit=end_bit,
                 check=lambda total: check_budget(fine_dims, top_count, 8 * total),
             )
-            del mask
         else:
-            no_mask = wp.empty(0, dtype=wp.uint8, device=device)
             octet_codes = octree.count_then_emit(
                 _octets_per_triangle_kernel,
                 len(tris),
-                [*args, no_mask],
+                [*args, wp.empty(0, dtype=wp.uint8, device=device)],  # no mask
                 device,
                 check=lambda total: check_budget(fine_dims, top_count, min(8 * total, plan["fine_nodes"]), pairs=total),
             )
-            base_octets = octree.sort_unique(octet_codes, end_bit=3 * _bits(fine_dims // 2))
+            base_octets = octree.sort_unique(octet_codes, end_bit=end_bit)
     timings["finest_cells"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

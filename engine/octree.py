@@ -97,14 +97,21 @@ def count_then_emit(kernel, dim: int, args, device, check=None) -> wp.array:
     dummy = wp.empty(1, dtype=wp.int64, device=device)
     # items (triangles, cells) each enumerate many octets: worth splitting from a few thousand on
     launch_split(kernel, dim, lambda lo, n: [lo, *args, counts, 0, counts, dummy], device, min_dim=EMIT_SPLIT_MIN_DIM)
+    offsets, total = _exclusive_offsets(counts, check)
+    codes = wp.empty(total, dtype=wp.int64, device=device)
+    launch_split(kernel, dim, lambda lo, n: [lo, *args, offsets, 1, counts, codes], device, min_dim=EMIT_SPLIT_MIN_DIM)
+    return codes
+
+
+def _exclusive_offsets(counts: wp.array, check=None) -> tuple[wp.array, int]:
+    """Where each item's output starts (exclusive scan of ``counts``) and the total, which ``check(total)`` may refuse
+    before anything that size is allocated."""
     counts_np = counts.numpy().astype(np.int64)
     total = int(counts_np.sum())
     if check is not None:
         check(total)
-    offsets = wp.array(np.concatenate([[0], np.cumsum(counts_np)[:-1]]).astype(np.int32), device=device)
-    codes = wp.empty(total, dtype=wp.int64, device=device)
-    launch_split(kernel, dim, lambda lo, n: [lo, *args, offsets, 1, counts, codes], device, min_dim=EMIT_SPLIT_MIN_DIM)
-    return codes
+    offsets = np.concatenate([[0], np.cumsum(counts_np)[:-1]]).astype(np.int32)
+    return wp.array(offsets, dtype=wp.int32, device=counts.device), total
 
 
 # Octet grids up to this many cells are de-duplicated in a dense byte mask (one byte per octet) instead of by sorting
@@ -113,29 +120,29 @@ def count_then_emit(kernel, dim: int, args, device, check=None) -> wp.array:
 MASK_MAX_CELLS = 1 << 28
 
 
-def mark_then_compact(kernel, dim: int, args, dims, device, check=None) -> wp.array:
+def mark_then_compact(kernel, dim: int, args, dims, device, end_bit: int = 63, check=None) -> wp.array:
     """Sorted unique octet codes marked by ``kernel`` (see :func:`count_then_emit`) called with ``emit=2``: item
-    ``first + tid`` sets ``mask[x + dims.x * (y + dims.y * z)] = 1`` for each of its octets, where ``mask`` (a uint8
-    array of ``prod(dims)`` bytes) is the last of ``args`` (setting a byte to 1 from two threads is harmless).
-    ``check(total)`` may refuse the count of unique octets before their codes are allocated."""
+    ``first + tid`` sets ``mask[x + dims.x * (y + dims.y * z)] = 1`` for each of its octets, ``mask`` being a uint8
+    array of ``prod(dims)`` bytes passed after ``args`` (setting a byte to 1 from two threads is harmless); the kernel
+    takes ``(first, *args, mask, offsets, emit, counts, codes)``. ``check(total)`` may refuse the count of unique
+    octets before their codes are allocated."""
     nx, ny, nz = (int(d) for d in dims)
-    mask = args[-1]
-    mask.zero_()
+    mask = wp.zeros(nx * ny * nz, dtype=wp.uint8, device=device)
     none_i32 = wp.empty(1, dtype=wp.int32, device=device)
     none_i64 = wp.empty(1, dtype=wp.int64, device=device)
     launch_split(
-        kernel, dim, lambda lo, n: [lo, *args, none_i32, 2, none_i32, none_i64], device, min_dim=EMIT_SPLIT_MIN_DIM
+        kernel,
+        dim,
+        lambda lo, n: [lo, *args, mask, none_i32, 2, none_i32, none_i64],
+        device,
+        min_dim=EMIT_SPLIT_MIN_DIM,
     )
     rows = ny * nz
     counts = wp.empty(rows, dtype=wp.int32, device=device)
     launch_split(
         _count_mask_rows_kernel, rows, lambda lo, n: [lo, mask, nx, counts], device, min_dim=EMIT_SPLIT_MIN_DIM
     )
-    counts_np = counts.numpy().astype(np.int64)
-    total = int(counts_np.sum())
-    if check is not None:
-        check(total)
-    offsets = wp.array(np.concatenate([[0], np.cumsum(counts_np)[:-1]]).astype(np.int32), device=device)
+    offsets, total = _exclusive_offsets(counts, check)
     codes = wp.empty(2 * total, dtype=wp.int64, device=device)  # the second half: the radix sort's buffer
     dims_v = wp.vec3i(nx, ny, nz)
     launch_split(
@@ -145,11 +152,7 @@ def mark_then_compact(kernel, dim: int, args, dims, device, check=None) -> wp.ar
         device,
         min_dim=EMIT_SPLIT_MIN_DIM,
     )
-    values = wp.empty(2 * total, dtype=wp.int32, device=device)
-    if total > 1:
-        bits = max(1, int(np.ceil(np.log2(float(max(nx, ny, nz)) + 1.0))))
-        wp.utils.radix_sort_pairs(codes, values, total, end_bit=max(1, min(63, 3 * bits)))
-    return codes[:total]
+    return _radix_sort(codes, total, end_bit)
 
 
 @wp.kernel(enable_backward=False)
@@ -262,12 +265,6 @@ def find_key(keys: wp.array[wp.int64], lo: int, hi: int, key: wp.int64) -> int:
 
 
 @wp.kernel(enable_backward=False)
-def _iota_kernel(first: int, out: wp.array[wp.int32]):
-    i = first + wp.tid()
-    out[i] = i
-
-
-@wp.kernel(enable_backward=False)
 def _mark_unique_kernel(first: int, keys: wp.array[wp.int64], flags: wp.array[wp.int32]):
     i = first + wp.tid()
     if i == 0:
@@ -287,6 +284,15 @@ def _compact_unique_kernel(
         out[slots[i]] = keys[i]
 
 
+def _radix_sort(work_keys: wp.array, n: int, end_bit: int) -> wp.array:
+    """The first ``n`` int64 keys of ``work_keys`` (which has room for 2 n: the sort's buffer) sorted in place on
+    their low ``end_bit`` bits; returns that sorted view."""
+    if n > 1:
+        values = wp.empty(2 * n, dtype=wp.int32, device=work_keys.device)  # the payload is not used
+        wp.utils.radix_sort_pairs(work_keys, values, n, end_bit=max(1, min(63, end_bit)))
+    return work_keys[:n]
+
+
 def sort_unique(keys: wp.array, end_bit: int = 63, *, presorted: bool = False) -> wp.array:
     """Sorted unique values of an int64 array (radix sort, mark first occurrences, exclusive scan, compact);
     ``presorted``: the keys are already non-decreasing, only duplicates go."""
@@ -299,10 +305,7 @@ def sort_unique(keys: wp.array, end_bit: int = 63, *, presorted: bool = False) -
     else:
         work_keys = wp.empty(2 * n, dtype=wp.int64, device=device)
         wp.copy(work_keys, keys, count=n)
-        work_vals = wp.empty(2 * n, dtype=wp.int32, device=device)
-        launch_split(_iota_kernel, n, lambda lo, _n: [lo, work_vals], device)
-        wp.utils.radix_sort_pairs(work_keys, work_vals, n, end_bit=max(1, min(63, end_bit)))
-        sorted_keys = work_keys[:n]
+        sorted_keys = _radix_sort(work_keys, n, end_bit)
     flags = wp.empty(n, dtype=wp.int32, device=device)
     launch_split(_mark_unique_kernel, n, lambda lo, _n: [lo, sorted_keys, flags], device)
     slots = wp.empty(n, dtype=wp.int32, device=device)
