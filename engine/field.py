@@ -314,6 +314,14 @@ def _finest_distance_kernel(
 # ---- signs ----
 
 
+@wp.func_native("return wp::mesh_query_winding_number(mesh, x, accuracy);")
+def _winding_number(mesh: wp.uint64, x: wp.vec3, accuracy: float) -> float:
+    """The mesh's fast winding number at ``x`` (Barill et al., Warp's native solid-angle tree): what
+    ``wp.mesh_query_point_sign_winding_number`` compares with its threshold, without the closest-point query it runs
+    first (a third of its cost; a node's distance is known already)."""
+    ...
+
+
 @wp.kernel(enable_backward=False)
 def _mesh_sign_kernel(
     mesh: wp.uint64,
@@ -321,15 +329,14 @@ def _mesh_sign_kernel(
     nodes: wp.array[wp.int32],
     origin: wp.vec3,
     spacing: float,
-    max_dist: float,
     sign: wp.array[wp.float32],
 ):
-    """Sign oracle: inside where the generalised winding number is >= 0.5 (robust on open and multi-shell meshes)."""
+    """Sign oracle: inside where the generalised winding number is above 0.5 (robust on open and multi-shell
+    meshes)."""
     t = wp.tid()
     i = nodes[t]
     x = node_center(origin, spacing, coords[i])
-    q = wp.mesh_query_point_sign_winding_number(mesh, x, max_dist, WINDING_ACCURACY, 0.5)
-    sign[i] = q.sign
+    sign[i] = wp.where(_winding_number(mesh, x, WINDING_ACCURACY) > 0.5, -1.0, 1.0)
 
 
 @wp.kernel(enable_backward=False)
@@ -419,13 +426,16 @@ def _sign_change_kernel(
 def _near_cap(
     x: wp.vec3, cap_lo: wp.array[wp.vec3], cap_hi: wp.array[wp.vec3], cap_radius: wp.array[wp.float32], margin: float
 ) -> bool:
-    """Whether ``x`` is within ``cap_radius[c] + margin`` of the box ``c`` holding one of the caps over an open mesh's
-    holes (see ``hole_caps``; no caps: a closed mesh)."""
+    """Whether the cones over an open mesh's holes (see ``hole_caps``; no caps: a closed mesh) may move the winding
+    number by 1/4 or more somewhere within ``margin`` of ``x``: sum over caps c of (radius_c / d_c)^2 >= 1, d_c the
+    distance from the box c to that ball."""
+    total = float(0.0)
     for c in range(cap_radius.shape[0]):
-        d = wp.max(wp.max(cap_lo[c] - x, x - cap_hi[c]), wp.vec3(0.0))
-        if wp.length(d) < cap_radius[c] + margin:
+        d = wp.length(wp.max(wp.max(cap_lo[c] - x, x - cap_hi[c]), wp.vec3(0.0))) - margin
+        if d <= cap_radius[c]:
             return True
-    return False
+        total += (cap_radius[c] / d) * (cap_radius[c] / d)
+    return total >= 1.0
 
 
 @wp.func
@@ -966,10 +976,11 @@ def hole_caps(vertices: np.ndarray, triangles: np.ndarray, edges: dict | None = 
     with multiplicity, split into its K connected pieces G_c, and C_c the cone over G_c from the centre of G_c's
     bounding box. Each piece is a closed 1-cycle, so the mesh minus all cones is closed: its winding number is an
     integer that changes only across the mesh or a cone, and the mesh's winding number differs from it by the cones',
-    each at most area(C_c) / (4 pi d_c^2) at distance d_c from C_c. Farther than ``radius_c = sqrt(K area(C_c) / pi)``
-    from every box c (which holds C_c) their sum is at most 1/4: there the winding number stays within 1/4 of an
-    integer, so two points joined by a segment that crosses no triangle are on the same side of 0.5, and signs may
-    spread between nodes as on a closed mesh. One cone per piece keeps the caps of holes far apart small; beyond
+    each at most area(C_c) / (4 pi d_c^2) at distance d_c from C_c. With ``radius_c = sqrt(area(C_c) / pi)``, where
+    the sum over c of (radius_c / d_c)^2 stays below 1, d_c now the distance to the box c (which holds C_c), their
+    sum is below 1/4: there the winding number stays within 1/4 of an integer, so two points joined by a segment that
+    crosses no triangle are on the same side of 0.5, and signs may spread between nodes as on a closed mesh (the
+    kernels' ``_near_cap`` test). One cone per piece keeps the caps of holes far apart small; beyond
     ``MAX_HOLE_CAPS`` pieces a single cone over the whole boundary is used. Returns None when every edge cancels
     (closed, consistently oriented, possibly non-manifold). ``edges``: ``edge_table(triangles, len(vertices))`` when
     already at hand.
@@ -992,7 +1003,7 @@ def hole_caps(vertices: np.ndarray, triangles: np.ndarray, edges: dict | None = 
     apex = 0.5 * (lo + hi)[piece]
     tri_area = 0.5 * np.linalg.norm(np.cross(a - apex, b - apex), axis=1) * np.abs(net[open_edges])
     area = np.bincount(piece, weights=tri_area, minlength=k)
-    return lo, hi, np.sqrt(k * area / math.pi)
+    return lo, hi, np.sqrt(area / math.pi)
 
 
 def plan_domain(lo, hi, voxel_size: float, levels: int, margin_cells: float):
@@ -1293,7 +1304,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         octree.launch_split(
             _mesh_sign_kernel,
             len(nodes_np),
-            lambda lo, n: [mesh.id, coords, nodes[lo : lo + n], origin_v, float(spacing), diag, sign],
+            lambda lo, n: [mesh.id, coords, nodes[lo : lo + n], origin_v, float(spacing), sign],
             device,
             min_dim=octree.EMIT_SPLIT_MIN_DIM,  # a winding number costs microseconds: split from a few thousand
         )

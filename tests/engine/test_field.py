@@ -175,10 +175,12 @@ def test_closed_meshes_sign_the_finest_level_without_winding_numbers(case):
 
 
 def _away_from_caps(caps, points):
-    """Whether each point is beyond every cap's radius from its box (``hole_caps``)."""
+    """Whether the caps' bound (``hole_caps``) holds at each point: sum of (radius / distance to box)^2 below 1."""
     lo, hi, radius = caps
     gap = np.maximum(np.maximum(lo[None] - points[:, None], points[:, None] - hi[None]), 0.0)
-    return np.all(np.linalg.norm(gap, axis=2) > radius[None], axis=1)
+    d = np.linalg.norm(gap, axis=2)
+    with np.errstate(divide="ignore"):
+        return np.all(d > radius[None], axis=1) & (((radius[None] / d) ** 2).sum(axis=1) < 1.0)
 
 
 def _winding_numbers(verts, tris, points):
@@ -199,8 +201,8 @@ def test_hole_caps_keep_the_winding_number_near_an_integer_outside_them():
     lo, hi, radius = engine.field.hole_caps(verts, open_box)
     assert len(radius) == 2
     np.testing.assert_allclose(np.sort(lo[:, 2]), [-1.0, 1.0], atol=1e-6)
-    # each cone is a 2 x 2 face; with two caps each radius covers half the budget: sqrt(2 * 4 / pi)
-    np.testing.assert_allclose(radius, np.sqrt(2 * 4.0 / np.pi), rtol=1e-6)
+    # each cone is a 2 x 2 face: radius sqrt(4 / pi); the bound sums both caps' shares
+    np.testing.assert_allclose(radius, np.sqrt(4.0 / np.pi), rtol=1e-6)
     points = np.random.default_rng(5).uniform(-6.0, 6.0, size=(4000, 3))
     away = _away_from_caps((lo, hi, radius), points)
     assert 500 < away.sum() < 4000  # both kinds of points are there
