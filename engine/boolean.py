@@ -20,7 +20,7 @@ import warp as wp
 from . import octree
 from .field import AdaptiveField, _bits, assemble_field, byte_grid_fits, check_budget, level_layout, plan_domain
 from .octree import morton_encode, node_center
-from .sampling import FieldArg, clamp_to_domain, inside_domain, level_spacing, locate_leaf, sample_mls
+from .sampling import FieldArg, clamp_to_domain, inside_domain, level_spacing, locate_leaf, locate_node, sample_mls
 
 OP_UNION, OP_INTERSECTION, OP_DIFFERENCE = 0, 1, 2
 # Finest octets are kept where some node is within this many voxels of the result's surface.
@@ -272,18 +272,20 @@ def _bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec
 def _octet_source(f: FieldArg, octet_mode: int, offset: wp.vec3i, oc: wp.vec3i, origin: wp.vec3, spacing: float):
     """Where an operand holds result octet ``oc`` when its lattice is aligned at octet granularity: (index of the
     octet's first child in its finest level, or -1; else the coarse leaf covering the whole octet, or -1; its level).
-    An operand's finest level is octet-complete and sorted, so the 8 children follow the first in Morton order."""
+    The octet is a level-1 cell of the operand: a descent from its dense top level finds the node of that cell, whose
+    8 children are the octet when it has any (an operand's finest level is octet-complete and every octet has its
+    parent), or the coarser leaf that covers it."""
     if octet_mode == 1:
-        c0 = wp.vec3i(2 * oc[0], 2 * oc[1], 2 * oc[2]) + offset
-        if c0[0] >= 0 and c0[1] >= 0 and c0[2] >= 0:
-            j = octree.find_key(f.codes, 0, f.fine_count, morton_encode(c0))
-            if j >= 0:
-                return j, -1, 0
         x = origin + 2.0 * spacing * wp.vec3(float(oc[0]) + 0.5, float(oc[1]) + 0.5, float(oc[2]) + 0.5)
-        if inside_domain(f, x):
-            leaf = locate_leaf(f, x)
-            if leaf[1] > 0:
-                return -1, leaf[0], leaf[1]
+        if not inside_domain(f, x):
+            return -1, -1, 0
+        if f.levels == 1:  # the dense top level is the finest: the octet's first child by its code
+            c0 = wp.vec3i(2 * oc[0], 2 * oc[1], 2 * oc[2]) + offset
+            return octree.find_key(f.codes, 0, f.fine_count, morton_encode(c0)), -1, 0
+        leaf = locate_node(f, x, 1)
+        if leaf[1] == 1 and f.child[leaf[0]] >= 0:
+            return f.child[leaf[0]], -1, 0
+        return -1, leaf[0], leaf[1]
     return -1, -1, 0
 
 

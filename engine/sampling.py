@@ -61,8 +61,9 @@ def inside_domain(f: FieldArg, x: wp.vec3) -> bool:
 
 
 @wp.func
-def locate_leaf(f: FieldArg, x: wp.vec3) -> wp.vec2i:
-    """(node index, level) of the leaf containing ``x`` (clamped into the domain)."""
+def locate_node(f: FieldArg, x: wp.vec3, lowest: int) -> wp.vec2i:
+    """(node index, level) of the node containing ``x`` (clamped into the domain) on level ``lowest``, or of the
+    coarser leaf containing it: a descent from the dense top level through the child links."""
     level = f.levels - 1
     s = level_spacing(f, level)
     rel = (x - f.origin) / s
@@ -70,7 +71,7 @@ def locate_leaf(f: FieldArg, x: wp.vec3) -> wp.vec2i:
     j = wp.clamp(int(wp.floor(rel[1])), 0, f.top_dims[1] - 1)
     k = wp.clamp(int(wp.floor(rel[2])), 0, f.top_dims[2] - 1)
     node = f.top_offset + i + f.top_dims[0] * (j + f.top_dims[1] * k)
-    while f.child[node] >= 0:
+    while level > lowest and f.child[node] >= 0:
         level = level - 1
         s = s * 0.5
         pc = f.coords[node]
@@ -80,6 +81,12 @@ def locate_leaf(f: FieldArg, x: wp.vec3) -> wp.vec2i:
         cz = wp.clamp(int(wp.floor(rel[2])) - 2 * pc[2], 0, 1)
         node = f.child[node] + cx + 2 * cy + 4 * cz
     return wp.vec2i(node, level)
+
+
+@wp.func
+def locate_leaf(f: FieldArg, x: wp.vec3) -> wp.vec2i:
+    """(node index, level) of the leaf containing ``x`` (clamped into the domain)."""
+    return locate_node(f, x, 0)
 
 
 @wp.func
