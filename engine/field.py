@@ -550,7 +550,10 @@ def _propagate_sign_kernel(
 def _propagate_sign_octet_kernel(
     first: int,
     codes: wp.array[wp.int64],
-    count: int,
+    parent: wp.array[wp.int32],
+    child: wp.array[wp.int32],
+    neighbours: wp.array2d[wp.int32],
+    row0: int,
     dist: wp.array[wp.float32],
     sign: wp.array[wp.float32],
     safety: float,
@@ -566,7 +569,8 @@ def _propagate_sign_octet_kernel(
 ):
     """The same on the finest level, which has no neighbour table: one thread per octet (8 consecutive nodes in
     Morton order; the launch covers octets [first, first + span)). Three face neighbours of a node are in its own
-    octet; the other three are the same child of the face-adjacent octets, each found once by binary search. With a
+    octet; the other three are the same child of the face-adjacent octets: the children of the octet's level-1 node's
+    face neighbour (``neighbours``, node ``i`` in row ``i - row0``), when it has any. With a
     mesh (``mesh`` != 0) a node also takes the sign of a neighbour when the segment between them crosses no triangle
     (``_take_sign_across``), which signs most of the nodes too near the surface for empty balls without a winding
     number."""
@@ -606,11 +610,11 @@ def _propagate_sign_octet_kernel(
                         bit = (k >> a) & 1
                         face = 2 * a + bit
                         if across[face] == -2:
-                            q = octet
-                            q[a] = q[a] + wp.where(bit == 0, -1, 1)
+                            # the octet's level-1 node's neighbour across the face, and its children if it has any
                             across[face] = -1
-                            if q[a] >= 0:
-                                across[face] = octree.find_key(codes, 0, count, morton_encode(q) << wp.int64(3))
+                            nb = neighbours[parent[base] - row0, face]
+                            if nb >= 0:
+                                across[face] = child[nb]
                         if across[face] >= 0:
                             got += _take_sign_across(
                                 i, across[face] + (k ^ (1 << a)), dist, sign, safety, spacing, mesh, x, x - step
@@ -1777,7 +1781,10 @@ def assemble_field(
                         lambda start, span, phase_mesh=phase_mesh, sweep=sweep: [
                             start,
                             codes,
-                            hi,
+                            parent,
+                            child,
+                            neighbours,
+                            n0,
                             dist,
                             sign,
                             SIGN_SAFETY * 1.0,
