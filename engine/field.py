@@ -21,6 +21,7 @@ Sign convention: negative inside, positive outside (Blender/OpenVDB); the paper 
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import threading
@@ -347,6 +348,7 @@ def _band_gap_kernel(
     near_hi: wp.array[wp.vec3],
     near_radius: wp.array[wp.float32],
     margin: float,
+    region: wp.array[wp.uint8],
     capacity: int,
     count: wp.array[wp.int32],
     out: wp.array[wp.int64],
@@ -360,6 +362,8 @@ def _band_gap_kernel(
     octet = wp.vec3i(f.coords[first][0] >> 1, f.coords[first][1] >> 1, f.coords[first][2] >> 1)
     size = 2.0 * f.voxel_size
     c = f.origin + size * wp.vec3(float(octet[0]) + 0.5, float(octet[1]) + 0.5, float(octet[2]) + 0.5)
+    if not _in_region(f, region, c):
+        return
     if margin >= 0.0 and not _near_cap(c, near_lo, near_hi, near_radius, margin):
         return
     for o in range(27):
@@ -395,6 +399,7 @@ def _sign_change_kernel(
     near_hi: wp.array[wp.vec3],
     near_radius: wp.array[wp.float32],
     margin: float,
+    region: wp.array[wp.uint8],
     marks: wp.array[wp.int32],
 ):
     """Mark coarse leaves that have a coarse face neighbour of the opposite sign: the zero set crosses them.
@@ -406,6 +411,8 @@ def _sign_change_kernel(
         return
     s = f.voxel_size * float(1 << node_level[i])
     c = node_center(f.origin, s, f.coords[i])
+    if not _in_region(f, region, c):
+        return
     if margin >= 0.0 and not _near_cap(c, near_lo, near_hi, near_radius, margin):
         return
     inside = f.values[i] < 0.0
@@ -420,6 +427,19 @@ def _sign_change_kernel(
             # sign changes next to the finest band are the band-gap kernel's business
             if nb[1] > 0 and (f.values[nb[0]] < 0.0) != inside:
                 marks[t] = 1
+
+
+@wp.func
+def _in_region(f: FieldArg, region: wp.array[wp.uint8], x: wp.vec3) -> bool:
+    """Whether the top-level cell holding ``x`` is flagged in ``region`` (one byte per top cell; empty: all are)."""
+    if region.shape[0] == 0:
+        return True
+    s = f.voxel_size * float(1 << (f.levels - 1))
+    rel = (x - f.origin) / s
+    i = wp.clamp(int(wp.floor(rel[0])), 0, f.top_dims[0] - 1)
+    j = wp.clamp(int(wp.floor(rel[1])), 0, f.top_dims[1] - 1)
+    k = wp.clamp(int(wp.floor(rel[2])), 0, f.top_dims[2] - 1)
+    return region[i + f.top_dims[0] * (j + f.top_dims[1] * k)] != wp.uint8(0)
 
 
 @wp.func
@@ -1420,15 +1440,17 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     # triangles, which the finest level covers: nothing to check.
     rounds = 0
     refine_seconds = 0.0
+    region = None
     while levels > 1 and not clean and rounds < MAX_SIGN_REFINEMENTS:
         t_refine = time.perf_counter()
         # off the caps over the holes the winding number stays near an integer (see hole_caps): the zero set can
         # only leave the band near them (no caps: the edges cancel, it never does)
-        extra = sign_change_octets(field, caps if caps is not None else NO_BOXES)
+        extra = sign_change_octets(field, caps if caps is not None else NO_BOXES, region)
         refine_seconds += time.perf_counter() - t_refine
         if len(extra) == 0:
             break
         rounds += 1
+        region = changed_top_cells(extra, top_dims, levels)
         check_budget(fine_dims, top_count, field.level_counts[0] + 8 * 27 * len(extra))
         t0 = time.perf_counter()
         # one octet around each: the zero set across a hole leaves coarse leaves in a sheet, and what the first
@@ -1452,6 +1474,21 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     return field
 
 
+def changed_top_cells(octets: np.ndarray, top_dims, levels: int) -> np.ndarray:
+    """(top_dims) bool: the top-level cells a refinement round that adds ``octets`` (codes, and the octets next to
+    them) may change, and their neighbours. The round changes nodes only in the top cells holding the added octets
+    (their parents, siblings and ancestors), every node elsewhere keeps its value and sign, and a sign change
+    involves a changed node and a face neighbour (or an octet next to it): the next check needs to look only there."""
+    top_dims = np.asarray(top_dims, dtype=np.int64)
+    cells = octree.morton_decode_np(octets) >> (levels - 2)  # octets are level-1 cells
+    hit = np.zeros(top_dims + 4, dtype=bool)  # a margin of two cells: the octets next to them, then the neighbours
+    hit[tuple((cells + 2).T)] = True
+    grown = np.zeros_like(hit)
+    for offset in itertools.product((-2, -1, 0, 1, 2), repeat=3):
+        grown |= np.roll(hit, offset, axis=(0, 1, 2))
+    return grown[2:-2, 2:-2, 2:-2]
+
+
 # No boxes, in the form of :func:`hole_caps`' result.
 NO_BOXES = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
 
@@ -1466,23 +1503,30 @@ def _box_arrays(boxes, device) -> list:
     ]
 
 
-def sign_change_octets(field: AdaptiveField, near=None) -> np.ndarray:
+def sign_change_octets(field: AdaptiveField, near=None, region=None) -> np.ndarray:
     """Octet codes the finest level lacks where the zero set leaves it: every coarse leaf whose face neighbour has
     the opposite sign, and every octet next to the band whose covering coarse leaf has another sign than a band node
     beside it (so every marching cube that straddles the zero set is complete).
 
     ``near``: boxes (lo (K, 3), hi (K, 3), radius (K,)) as from :func:`hole_caps`, outside which the zero set runs
     only through the band (no sign change away from a triangle): only leaves and octets within reach of them are
-    checked (none for K = 0). None checks everywhere."""
+    checked (none for K = 0). None checks everywhere. ``region``: (top_dims) bool, the top-level cells whose leaves
+    and octets are checked (None: all)."""
     n_coarse = field.node_count - field.level_counts[0]
     if n_coarse == 0:
         return np.zeros(0, dtype=np.int64)
     if near is not None and len(near[2]) == 0:
         return np.zeros(0, dtype=np.int64)
+    top, h = field.top_spacing, field.voxel_size
+    # Signs are compared between a leaf's centre and a face neighbour's (reached 0.5 s + h / 4 across a face), or an
+    # octet's node and the centre of the leaf one octet away: every point of either segment lies within
+    # sqrt(3) / 2 top + max(top / 2 + h / 4, 2 sqrt(3) h) of the leaf's or octet's centre (5 % slack).
+    reach = 1.05 * (0.866 * top + max(0.5 * top + 0.25 * h, 3.465 * h))
+    region_flags = np.zeros(0, dtype=np.uint8) if region is None else np.asarray(region, dtype=np.uint8)
     near_args = [
         *_box_arrays(near, field.device),
-        # a sign change shows between a leaf or octet and a neighbour's centre, at most a few top cells away
-        -1.0 if near is None else 2.5 * field.top_spacing,
+        -1.0 if near is None else reach,
+        wp.array(region_flags.T.reshape(-1), dtype=wp.uint8, device=field.device),  # x fastest, as in the kernels
     ]
     levels_np = field.level_of_nodes()
     marks = wp.empty(n_coarse, dtype=wp.int32, device=field.device)

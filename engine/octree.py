@@ -237,6 +237,16 @@ def morton_encode_np(coords: np.ndarray) -> np.ndarray:
     return out
 
 
+def morton_decode_np(codes: np.ndarray) -> np.ndarray:
+    """Host twin of :func:`morton_decode`: (N,) int64 -> (N,3) int64."""
+    codes = np.asarray(codes, dtype=np.int64)
+    out = np.zeros((len(codes), 3), dtype=np.int64)
+    for bit in range(MORTON_BITS):
+        for axis in range(3):
+            out[:, axis] |= ((codes >> (3 * bit + axis)) & 1) << bit
+    return out
+
+
 @wp.func
 def lower_bound(keys: wp.array[wp.int64], lo: int, hi: int, key: wp.int64) -> int:
     """First index in [lo, hi) whose key is >= ``key`` (keys sorted ascending)."""
