@@ -234,7 +234,8 @@ def _finest_octet_distance_kernel(
         octet_dist[base // 8] = wp.length(c - centre_foot)
         octet_proj[base // 8] = centre_foot
     if q.result and box_search == 1:
-        half_diagonal = 0.8661 * spacing * 1.001  # centre to node, with room for rounding
+        node_lo = c - wp.vec3(0.5 * spacing)  # the box of the 8 node centres
+        node_hi = c + wp.vec3(0.5 * spacing)
         # the centre's foot is a surface point: every node starts from its distance to it (an upper bound)
         best = wp.vector(UNSET_DISTANCE, length=8, dtype=float)
         foot = wp.matrix(0.0, shape=(8, 3), dtype=float)
@@ -257,15 +258,18 @@ def _finest_octet_distance_kernel(
             a = m.points[m.indices[3 * f]]
             b = m.points[m.indices[3 * f + 1]]
             cc = m.points[m.indices[3 * f + 2]]
-            # a node is at most half a diagonal from the centre, so no node is nearer this triangle than `lower`
-            lower = wp.max(wp.length(c - closest_on_triangle(c, a, b, cc)) - half_diagonal, 0.0)
-            if lower * lower < worst:
+            # no point of a triangle is nearer than its bounding box: the box's distance to the nodes' box bounds
+            # all 8 nodes at once, its distance to a node that node, before the exact test (an exact test at the
+            # centre, less half a diagonal, bounded them about as well at about the same cost)
+            tri_lo = wp.min(a, wp.min(b, cc))
+            tri_hi = wp.max(a, wp.max(b, cc))
+            gap = wp.max(wp.max(tri_lo - node_hi, node_lo - tri_hi), wp.vec3(0.0))
+            if wp.length_sq(gap) < worst:
                 worst = float(0.0)
                 for k in range(8):
-                    if lower * lower < best[k]:
-                        x = c + spacing * wp.vec3(
-                            float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5
-                        )
+                    x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
+                    gap = wp.max(wp.max(tri_lo - x, x - tri_hi), wp.vec3(0.0))
+                    if wp.length_sq(gap) < best[k]:
                         p = closest_on_triangle(x, a, b, cc)
                         d = wp.length_sq(x - p)
                         if d < best[k]:
@@ -283,6 +287,21 @@ def _finest_octet_distance_kernel(
                 dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
                 proj[base + k] = p
         return
+    if not q.result:
+        # an octet added where an open mesh's surface crosses a hole can be far from every triangle: the centre's
+        # closest point bounds each node's search
+        q = wp.mesh_query_point_no_sign(mesh, c, far_dist)
+        if q.result:
+            centre_foot = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+            octet_dist[base // 8] = wp.length(c - centre_foot)
+            octet_proj[base // 8] = centre_foot
+            for k in range(8):
+                x = node_center(origin, spacing, coords[base + k])
+                bound = wp.length(x - centre_foot)
+                found, p = _node_closest_point(mesh, x, bound * 1.0001 + 1.0e-4 * spacing, far_dist)
+                dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
+                proj[base + k] = p
+            return
     for k in range(8):
         x = node_center(origin, spacing, coords[base + k])
         found, p = _node_closest_point(mesh, x, max_dist, far_dist)
