@@ -221,8 +221,9 @@ def _finest_octet_distance_kernel(
     Morton order). One BVH query at the octet's centre gives its distance d; each node's closest triangle then lies
     within d + sqrt(3) h of the centre, so the triangles whose boxes meet that cube are all the candidates, and every
     node is tested against them directly — one BVH query per octet instead of eight. Octets far from the mesh (no
-    triangle within ``max_dist`` of the centre) query per node, and so does every octet when ``box_search`` is 0 (a
-    mesh whose triangles are much smaller than a cell would put hundreds in each box). The centre's closest point (the
+    triangle within ``max_dist`` of the centre) query per node, each bounded by the centre's closest point, and every
+    octet does when ``box_search`` is 0 (a mesh whose triangles are much smaller than a cell would put hundreds in
+    each box). The centre's closest point (the
     octet's parent node's) goes to ``octet_dist``/``octet_proj`` (UNSET_DISTANCE when not found)."""
     t = first + wp.tid()
     base = octet_nodes[t]
@@ -374,8 +375,9 @@ def _band_gap_kernel(
 ):
     """Octets next to the finest band whose covering coarse leaf has another sign than a node of the band octet
     beside them: a marching cube straddling the zero set there would be incomplete. One thread per band octet
-    (8 consecutive finest nodes, octet ``start + tid``), only within ``near_radius + margin`` of a ``near`` box when
-    ``margin >= 0``; found octet codes are appended to ``out``."""
+    (8 consecutive finest nodes, octet ``start + tid``), only where the ``near`` boxes' bound (``_near_cap``) fails
+    within ``margin`` when ``margin >= 0``, and only in the top cells flagged in ``region`` (empty: all); found octet
+    codes are appended to ``out``."""
     t = start + wp.tid()
     first = 8 * t
     octet = wp.vec3i(f.coords[first][0] >> 1, f.coords[first][1] >> 1, f.coords[first][2] >> 1)
@@ -422,7 +424,8 @@ def _sign_change_kernel(
     marks: wp.array[wp.int32],
 ):
     """Mark coarse leaves that have a coarse face neighbour of the opposite sign: the zero set crosses them.
-    Coarse node ``start + tid``; only within ``near_radius + margin`` of a ``near`` box when ``margin >= 0``."""
+    Coarse node ``start + tid``; only where the ``near`` boxes' bound (``_near_cap``) fails within ``margin`` when
+    ``margin >= 0``, and only in the top cells flagged in ``region`` (empty: all)."""
     t = start + wp.tid()
     i = f.fine_count + t
     marks[t] = 0

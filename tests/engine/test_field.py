@@ -500,6 +500,34 @@ def test_sign_changes_off_the_band_are_found_near_the_hole_caps_only(monkeypatch
     assert len(everywhere) > 100
     np.testing.assert_array_equal(near, everywhere)
     assert len(sign_change_octets(field, (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)))) == 0
+    # a region of top cells limits the search to them
+    caps = hole_caps(*weld_positions(verts, tris))
+    np.testing.assert_array_equal(sign_change_octets(field, caps, np.ones(field.top_dims, dtype=bool)), everywhere)
+    assert len(sign_change_octets(field, caps, np.zeros(field.top_dims, dtype=bool))) == 0
+    half = np.zeros(field.top_dims, dtype=bool)
+    half[: field.top_dims[0] // 2] = True
+    in_half = sign_change_octets(field, caps, half)
+    assert set(in_half) <= set(everywhere)
+    # found octets lie in a checked leaf or next to a checked octet: at most one top cell away from the region
+    top_x = lambda octets: engine.octree.morton_decode_np(octets)[:, 0] >> (field.levels - 2)  # noqa: E731
+    assert top_x(in_half).max() <= field.top_dims[0] // 2
+    assert set(everywhere[top_x(everywhere) <= field.top_dims[0] // 2 - 2]) <= set(in_half)
+    assert 0 < len(in_half) < len(everywhere)
+
+
+def test_a_refinement_round_looks_again_only_near_the_top_cells_it_changed():
+    from engine.field import changed_top_cells
+    from engine.octree import morton_encode_np
+
+    dims, levels = np.array([10, 8, 6]), 4  # octets per top cell: 4 per axis
+    octets = morton_encode_np(np.array([[0, 0, 0], [21, 17, 13]]))  # in top cells (0, 0, 0) and (5, 4, 3)
+    region = changed_top_cells(octets, dims, levels)
+    assert region.shape == tuple(dims)
+    flagged = np.argwhere(region)
+    # every cell within two (the octets next to the added ones, then their neighbours) of either, and no other
+    near = lambda c: np.abs(flagged - np.asarray(c)).max(axis=1) <= 2  # noqa: E731
+    assert np.all(near((0, 0, 0)) | near((5, 4, 3)))
+    assert len(flagged) == 3**3 + 5 * 5 * 5
 
 
 def test_a_refinement_round_reuses_the_nodes_of_the_build_before_it(monkeypatch):
