@@ -108,11 +108,13 @@ def _sample(f: FieldArg, x: wp.vec3) -> wp.vec4:
 
 
 @wp.func
-def _extrapolate(f: FieldArg, x: wp.vec3) -> wp.vec4:
-    """(phi, grad) from the leaf containing ``x``: its value carried along its exact gradient (the direction from its
-    closest point), i.e. the distance to its tangent plane. Cheap; used for the coarse levels of a result."""
+def _extrapolate(f: FieldArg, x: wp.vec3, spacing: float) -> wp.vec4:
+    """(phi, grad) from the operand's node containing ``x`` with the given spacing, or the coarser leaf containing it:
+    its value carried along its exact gradient (the direction from its closest point), i.e. the distance to its
+    tangent plane — exactly its own value where a node of the operand sits at ``x``. Cheap; used for the coarse levels
+    of a result (``spacing``: theirs)."""
     xc = clamp_to_domain(f, x)
-    leaf = locate_leaf(f, xc)
+    leaf = locate_node(f, xc, wp.max(int(wp.round(wp.log2(spacing / f.voxel_size))), 0))
     s = level_spacing(f, leaf[1])
     centre = node_center(f.origin, s, f.coords[leaf[0]])
     phi = f.values[leaf[0]]
@@ -186,11 +188,11 @@ def _combine_nodes_kernel(
     if precise == 0:
         # coarse levels: each operand's containing leaf, extrapolated along its gradient
         if fa == 0:
-            r = _extrapolate(a, x)
+            r = _extrapolate(a, x, spacing)
             va = r[0]
             ga = wp.vec3(r[1], r[2], r[3])
         if fb == 0:
-            r = _extrapolate(b, x)
+            r = _extrapolate(b, x, spacing)
             vb = r[0]
             gb = wp.vec3(r[1], r[2], r[3])
     else:

@@ -138,6 +138,36 @@ def test_boolean_results_keep_the_invariants():
     _check_structure(engine.union(a, b, blend=0.2))
 
 
+def _level_keys(field):
+    """Per node: its level and its cell on that level of the shared world lattice (so nodes of aligned fields match)."""
+    lv = field.level_of_nodes()
+    cells = np.rint(field.node_centers() / (field.voxel_size * 2.0**lv)[:, None] - 0.5).astype(np.int64)
+    return np.c_[lv, cells]
+
+
+def test_coarse_nodes_of_a_boolean_take_the_operands_own_nodes_where_they_coincide():
+    # Eq. 8 per node: where both operands have a node at a coarse node's place (same level, aligned lattices), the
+    # result's value there is the combination of theirs, not an extrapolation from a nearby leaf.
+    a, b = _sphere_field(1.0, (0, 0, 0), 1), _sphere_field(1.0, (1.0, 0, 0), 2)
+    for fn, combine in ((engine.union, np.minimum), (engine.difference, lambda u, v: np.maximum(u, -v))):
+        c = fn(a, b)
+        keys = [_level_keys(f) for f in (c, a, b)]
+        coarse = keys[0][:, 0] > 0
+        rows = [np.unique(k, axis=0, return_index=True) for k in keys]
+        shared, in_c, in_a = np.intersect1d(
+            rows[0][0].view([("", np.int64)] * 4), rows[1][0].view([("", np.int64)] * 4), return_indices=True
+        )
+        shared, in_cb, in_b = np.intersect1d(shared, rows[2][0].view([("", np.int64)] * 4), return_indices=True)
+        ic = rows[0][1][in_c[in_cb]]
+        ia = rows[1][1][in_a[in_cb]]
+        ib = rows[2][1][in_b]
+        keep = coarse[ic]
+        ic, ia, ib = ic[keep], ia[keep], ib[keep]
+        assert len(ic) > 1000
+        expected = combine(a.values.numpy()[ia], b.values.numpy()[ib])
+        np.testing.assert_allclose(c.values.numpy()[ic], expected, atol=1e-4 * H)  # float32 rounding
+
+
 # ---- smooth booleans ----
 
 
