@@ -587,10 +587,9 @@ def _nearest_projection(
 @wp.kernel(enable_backward=False)
 def _fim_sweep_kernel(
     coords: wp.array[wp.vec3i],
-    first_child: wp.array[wp.int32],
     neighbours: wp.array2d[wp.int32],
     row0: int,
-    lo: int,
+    nodes: wp.array[wp.int32],
     origin: wp.vec3,
     spacing: float,
     in0: int,
@@ -601,22 +600,18 @@ def _fim_sweep_kernel(
     dist_out: wp.array[wp.float32],
     proj_out: wp.array[wp.vec3],
     src_out: wp.array[wp.int32],
-    known: wp.array[wp.int32],
     changed: wp.array[wp.int32],
 ):
-    """One Jacobi sweep of the fast iterative method over a level: each leaf takes the nearest projection point
-    among its face neighbours (a closest-point Eikonal update); internal nodes stay fixed as sources. Node ``i`` is
-    entry ``i - in0`` of the inputs, ``i - out0`` of the outputs and row ``i - row0`` of ``neighbours``."""
-    i = lo + wp.tid()
-    best = dist_in[i - in0]
-    p = proj_in[i - in0]
-    s = src_in[i - in0]
-    if first_child[i] < 0 and known[i] == 0:
-        best, p, s = _nearest_projection(
-            node_center(origin, spacing, coords[i]), i, neighbours, row0, in0, dist_in, proj_in, src_in
-        )
-        if best < dist_in[i - in0]:
-            wp.atomic_add(changed, 0, 1)
+    """One Jacobi sweep of the fast iterative method over a level's unknown leaves (``nodes``, one thread each): each
+    takes the nearest projection point among its face neighbours (a closest-point Eikonal update); internal and
+    known nodes stay fixed as sources (the caller keeps them in both buffers). Node ``i`` is entry ``i - in0`` of the
+    inputs, ``i - out0`` of the outputs and row ``i - row0`` of ``neighbours``."""
+    i = nodes[wp.tid()]
+    best, p, s = _nearest_projection(
+        node_center(origin, spacing, coords[i]), i, neighbours, row0, in0, dist_in, proj_in, src_in
+    )
+    if best < dist_in[i - in0]:
+        wp.atomic_add(changed, 0, 1)
     dist_out[i - out0] = best
     proj_out[i - out0] = p
     src_out[i - out0] = s
@@ -751,31 +746,32 @@ def solve_level(
                 break
         _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device)
         return sweeps
-    # the second buffer of the Jacobi sweeps holds this level only (entry i - lo)
-    dist_b = wp.empty(n, dtype=wp.float32, device=device)
-    proj_b = wp.empty(n, dtype=wp.vec3, device=device)
-    src_b = wp.empty(n, dtype=wp.int32, device=device)
+    # only the unknown leaves change: the sweeps run over them alone
+    free = (first_child.numpy()[lo:hi] < 0) & (known.numpy()[lo:hi] == 0)
+    nodes = wp.array(lo + np.flatnonzero(free).astype(np.int32), dtype=wp.int32, device=device)
+    # the second buffer of the Jacobi sweeps holds this level only (entry i - lo), every other node as in the first
+    dist_b = wp.clone(dist[lo:hi])
+    proj_b = wp.clone(proj[lo:hi])
+    src_b = wp.clone(source[lo:hi])
     changed = wp.zeros(1, dtype=wp.int32, device=device)
     bufs = [(0, dist, proj, source), (lo, dist_b, proj_b, src_b)]
     sweeps = 0
-    while sweeps < max_sweeps:
+    while sweeps < max_sweeps and nodes.shape[0] > 0:
         changed.zero_()
         src_bufs, dst_bufs = bufs[sweeps % 2], bufs[(sweeps + 1) % 2]
         # Jacobi sweeps read one buffer and write the other: both cores may take half each
         launch_split(
             _fim_sweep_kernel,
-            n,
+            nodes.shape[0],
             lambda start, count, src_bufs=src_bufs, dst_bufs=dst_bufs: [
                 coords,
-                first_child,
                 neighbours,
                 row0,
-                lo + start,
+                nodes[start : start + count],
                 origin_v,
                 float(spacing),
                 *src_bufs,
                 *dst_bufs,
-                known,
                 changed,
             ],
             device,
