@@ -33,7 +33,7 @@ import warp as wp
 from . import octree
 from .errors import AasdfError
 from .octree import MAX_CELLS_PER_AXIS, UNSET_DISTANCE, morton_encode, node_center
-from .sampling import FieldArg, _sample_field_kernel, _source_ids_kernel, inside_domain, locate_leaf
+from .sampling import FieldArg, _sample_field_kernel, _source_ids_kernel, inside_domain, locate_leaf, top_cell
 
 # Bytes a finest node costs while building (codes, coords, distances, projections, links, sort buffers).
 BUILD_BYTES_PER_NODE = 160
@@ -223,18 +223,23 @@ def _finest_octet_distance_kernel(
     node is tested against them directly — one BVH query per octet instead of eight. Octets far from the mesh (no
     triangle within ``max_dist`` of the centre) query per node, each bounded by the centre's closest point, and every
     octet does when ``box_search`` is 0 (a mesh whose triangles are much smaller than a cell would put hundreds in
-    each box). The centre's closest point (the
-    octet's parent node's) goes to ``octet_dist``/``octet_proj`` (UNSET_DISTANCE when not found)."""
+    each box). The centre's closest point (the octet's parent node's) goes to ``octet_dist``/``octet_proj``
+    (UNSET_DISTANCE when not found)."""
     t = first + wp.tid()
     base = octet_nodes[t]
     c = node_center(origin, spacing, coords[base]) + wp.vec3(0.5 * spacing)
     q = wp.mesh_query_point_no_sign(mesh, c, max_dist)
+    near = q.result
+    if not near:
+        # an octet added where an open mesh's surface crosses a hole can be far from every triangle
+        q = wp.mesh_query_point_no_sign(mesh, c, far_dist)
     octet_dist[base // 8] = UNSET_DISTANCE
+    centre_foot = c
     if q.result:
         centre_foot = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
         octet_dist[base // 8] = wp.length(c - centre_foot)
         octet_proj[base // 8] = centre_foot
-    if q.result and box_search == 1:
+    if near and box_search == 1:
         node_lo = c - wp.vec3(0.5 * spacing)  # the box of the 8 node centres
         node_hi = c + wp.vec3(0.5 * spacing)
         # the centre's foot is a surface point: every node starts from its distance to it (an upper bound)
@@ -288,24 +293,12 @@ def _finest_octet_distance_kernel(
                 dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
                 proj[base + k] = p
         return
-    if not q.result:
-        # an octet added where an open mesh's surface crosses a hole can be far from every triangle: the centre's
-        # closest point bounds each node's search
-        q = wp.mesh_query_point_no_sign(mesh, c, far_dist)
-        if q.result:
-            centre_foot = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
-            octet_dist[base // 8] = wp.length(c - centre_foot)
-            octet_proj[base // 8] = centre_foot
-            for k in range(8):
-                x = node_center(origin, spacing, coords[base + k])
-                bound = wp.length(x - centre_foot)
-                found, p = _node_closest_point(mesh, x, bound * 1.0001 + 1.0e-4 * spacing, far_dist)
-                dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
-                proj[base + k] = p
-            return
     for k in range(8):
         x = node_center(origin, spacing, coords[base + k])
-        found, p = _node_closest_point(mesh, x, max_dist, far_dist)
+        bound = max_dist
+        if not near and q.result:  # far from the mesh: the centre's closest point bounds each node's search
+            bound = wp.length(x - centre_foot) * 1.0001 + 1.0e-4 * spacing
+        found, p = _node_closest_point(mesh, x, bound, far_dist)
         dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
         proj[base + k] = p
 
@@ -456,12 +449,7 @@ def _in_region(f: FieldArg, region: wp.array[wp.uint8], x: wp.vec3) -> bool:
     """Whether the top-level cell holding ``x`` is flagged in ``region`` (one byte per top cell; empty: all are)."""
     if region.shape[0] == 0:
         return True
-    s = f.voxel_size * float(1 << (f.levels - 1))
-    rel = (x - f.origin) / s
-    i = wp.clamp(int(wp.floor(rel[0])), 0, f.top_dims[0] - 1)
-    j = wp.clamp(int(wp.floor(rel[1])), 0, f.top_dims[1] - 1)
-    k = wp.clamp(int(wp.floor(rel[2])), 0, f.top_dims[2] - 1)
-    return region[i + f.top_dims[0] * (j + f.top_dims[1] * k)] != wp.uint8(0)
+    return region[top_cell(f, x)] != wp.uint8(0)
 
 
 @wp.func
@@ -1544,11 +1532,12 @@ def sign_change_octets(field: AdaptiveField, near=None, region=None) -> np.ndarr
     # octet's node and the centre of the leaf one octet away: every point of either segment lies within
     # sqrt(3) / 2 top + max(top / 2 + h / 4, 2 sqrt(3) h) of the leaf's or octet's centre (5 % slack).
     reach = 1.05 * (0.866 * top + max(0.5 * top + 0.25 * h, 3.465 * h))
-    region_flags = np.zeros(0, dtype=np.uint8) if region is None else np.asarray(region, dtype=np.uint8)
+    # one byte per top cell, x fastest as in the kernels (none: check everywhere)
+    flags = np.zeros(0, np.uint8) if region is None else np.asarray(region, np.uint8).T.reshape(-1)
     near_args = [
         *_box_arrays(near, field.device),
         -1.0 if near is None else reach,
-        wp.array(region_flags.T.reshape(-1), dtype=wp.uint8, device=field.device),  # x fastest, as in the kernels
+        wp.array(flags, dtype=wp.uint8, device=field.device),
     ]
     levels_np = field.level_of_nodes()
     marks = wp.empty(n_coarse, dtype=wp.int32, device=field.device)

@@ -747,7 +747,7 @@ def solve_level(
         _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device)
         return sweeps
     # only the unknown leaves change: the sweeps run over them alone
-    free = (first_child.numpy()[lo:hi] < 0) & (known.numpy()[lo:hi] == 0)
+    free = (first_child[lo:hi].numpy() < 0) & (known[lo:hi].numpy() == 0)
     nodes = wp.array(lo + np.flatnonzero(free).astype(np.int32), dtype=wp.int32, device=device)
     # the second buffer of the Jacobi sweeps holds this level only (entry i - lo), every other node as in the first
     dist_b = wp.clone(dist[lo:hi])

@@ -61,16 +61,22 @@ def inside_domain(f: FieldArg, x: wp.vec3) -> bool:
 
 
 @wp.func
+def top_cell(f: FieldArg, x: wp.vec3) -> int:
+    """Index within the dense top level (x fastest) of the top cell containing ``x`` (clamped into the domain)."""
+    rel = (x - f.origin) / level_spacing(f, f.levels - 1)
+    i = wp.clamp(int(wp.floor(rel[0])), 0, f.top_dims[0] - 1)
+    j = wp.clamp(int(wp.floor(rel[1])), 0, f.top_dims[1] - 1)
+    k = wp.clamp(int(wp.floor(rel[2])), 0, f.top_dims[2] - 1)
+    return i + f.top_dims[0] * (j + f.top_dims[1] * k)
+
+
+@wp.func
 def locate_node(f: FieldArg, x: wp.vec3, lowest: int) -> wp.vec2i:
     """(node index, level) of the node containing ``x`` (clamped into the domain) on level ``lowest``, or of the
     coarser leaf containing it: a descent from the dense top level through the child links."""
     level = f.levels - 1
     s = level_spacing(f, level)
-    rel = (x - f.origin) / s
-    i = wp.clamp(int(wp.floor(rel[0])), 0, f.top_dims[0] - 1)
-    j = wp.clamp(int(wp.floor(rel[1])), 0, f.top_dims[1] - 1)
-    k = wp.clamp(int(wp.floor(rel[2])), 0, f.top_dims[2] - 1)
-    node = f.top_offset + i + f.top_dims[0] * (j + f.top_dims[1] * k)
+    node = f.top_offset + top_cell(f, x)
     while level > lowest and f.child[node] >= 0:
         level = level - 1
         s = s * 0.5
