@@ -32,7 +32,7 @@ import warp as wp
 
 from . import octree
 from .errors import AasdfError
-from .octree import MAX_CELLS_PER_AXIS, UNSET_DISTANCE, morton_encode, node_center
+from .octree import MAX_CELLS_PER_AXIS, UNSET_DISTANCE, mesh_closest_point, morton_encode, node_center
 from .sampling import FieldArg, _sample_field_kernel, _source_ids_kernel, inside_domain, locate_leaf, top_cell
 
 # Bytes a finest node costs while building (codes, coords, distances, projections, links, sort buffers).
@@ -192,13 +192,11 @@ def closest_on_triangle(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.ve
 @wp.func
 def _node_closest_point(mesh: wp.uint64, x: wp.vec3, max_dist: float, far_dist: float):
     """(found, closest point) of one node by the mesh BVH: within ``max_dist``, else within ``far_dist``."""
-    q = wp.mesh_query_point_no_sign(mesh, x, max_dist)
-    if not q.result:
+    found, p = mesh_closest_point(mesh, x, max_dist)
+    if not found:
         # a node added where an open mesh's surface crosses a hole can be far from every triangle
-        q = wp.mesh_query_point_no_sign(mesh, x, far_dist)
-    if q.result:
-        return 1, wp.mesh_eval_position(mesh, q.face, q.u, q.v)
-    return 0, x
+        found, p = mesh_closest_point(mesh, x, far_dist)
+    return wp.where(found, 1, 0), p
 
 
 @wp.kernel(enable_backward=False)
@@ -228,15 +226,13 @@ def _finest_octet_distance_kernel(
     t = first + wp.tid()
     base = octet_nodes[t]
     c = node_center(origin, spacing, coords[base]) + wp.vec3(0.5 * spacing)
-    q = wp.mesh_query_point_no_sign(mesh, c, max_dist)
-    near = q.result
+    near, centre_foot = mesh_closest_point(mesh, c, max_dist)
+    has_foot = near
     if not near:
         # an octet added where an open mesh's surface crosses a hole can be far from every triangle
-        q = wp.mesh_query_point_no_sign(mesh, c, far_dist)
+        has_foot, centre_foot = mesh_closest_point(mesh, c, far_dist)
     octet_dist[base // 8] = UNSET_DISTANCE
-    centre_foot = c
-    if q.result:
-        centre_foot = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+    if has_foot:
         octet_dist[base // 8] = wp.length(c - centre_foot)
         octet_proj[base // 8] = centre_foot
     if near and box_search == 1:
@@ -296,7 +292,7 @@ def _finest_octet_distance_kernel(
     for k in range(8):
         x = node_center(origin, spacing, coords[base + k])
         bound = max_dist
-        if not near and q.result:  # far from the mesh: the centre's closest point bounds each node's search
+        if not near and has_foot:  # far from the mesh: the centre's closest point bounds each node's search
             bound = wp.length(x - centre_foot) * 1.0001 + 1.0e-4 * spacing
         found, p = _node_closest_point(mesh, x, bound, far_dist)
         dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)

@@ -183,6 +183,80 @@ def _emit_mask_rows_kernel(
             k += 1
 
 
+# ---- closest points on a mesh ----
+
+# Warp's BVH closest-point search (``mesh_query_point_no_sign``), returning the point itself: the same traversal
+# (nearest child first, boxes farther than the best distance so far skipped), without its per-triangle sliver test (a
+# square root and a division each): a sliver's points are surface points like any other, and the finest level's own
+# search tests every triangle too (Warp's closest-point routine keeps its result on the triangle, or yields NaN on a
+# degenerate edge, which no comparison takes). About a fifth faster where a query tests many triangles (far from
+# the surface).
+_CLOSEST_POINT_SNIPPET = r"""
+wp::Mesh m = wp::mesh_get(mesh);
+int stack[BVH_QUERY_STACK_SIZE];
+stack[0] = *m.bvh.root;
+int count = 1;
+float best = max_dist * max_dist;
+wp::vec4 out(x[0], x[1], x[2], -1.0f);
+while (count) {
+    const int node = stack[--count];
+    wp::BVHPackedNodeHalf lower = wp::bvh_load_node(m.bvh.node_lowers, node);
+    wp::BVHPackedNodeHalf upper = wp::bvh_load_node(m.bvh.node_uppers, node);
+    if (wp::distance_to_aabb_sq(x, wp::vec3(lower.x, lower.y, lower.z), wp::vec3(upper.x, upper.y, upper.z)) > best)
+        continue;
+    const int left = lower.i;
+    const int right = upper.i;
+    if (lower.b) {
+        for (int c = left; c < right; c++) {
+            const int t = wp::bvh_load_int(m.bvh.primitive_indices, c);
+            const wp::vec3 p = m.points[wp::bvh_load_int(m.indices, t * 3 + 0)];
+            const wp::vec3 q = m.points[wp::bvh_load_int(m.indices, t * 3 + 1)];
+            const wp::vec3 r = m.points[wp::bvh_load_int(m.indices, t * 3 + 2)];
+            const wp::vec2 b = wp::closest_point_to_triangle(p, q, r, x);
+            const wp::vec3 y = b[0] * p + b[1] * q + (1.0f - b[0] - b[1]) * r;
+            const float d = wp::length_sq(y - x);
+            if (d < best) {
+                best = d;
+                out = wp::vec4(y[0], y[1], y[2], d);
+            }
+        }
+    } else {
+        wp::BVHPackedNodeHalf ll = wp::bvh_load_node(m.bvh.node_lowers, left);
+        wp::BVHPackedNodeHalf lu = wp::bvh_load_node(m.bvh.node_uppers, left);
+        wp::BVHPackedNodeHalf rl = wp::bvh_load_node(m.bvh.node_lowers, right);
+        wp::BVHPackedNodeHalf ru = wp::bvh_load_node(m.bvh.node_uppers, right);
+        const float dl = wp::distance_to_aabb_sq(x, wp::vec3(ll.x, ll.y, ll.z), wp::vec3(lu.x, lu.y, lu.z));
+        const float dr = wp::distance_to_aabb_sq(x, wp::vec3(rl.x, rl.y, rl.z), wp::vec3(ru.x, ru.y, ru.z));
+        // the nearer child goes on the stack last, so it is searched first
+        const bool left_first = dl < dr;
+        const int far_node = left_first ? right : left;
+        const int near_node = left_first ? left : right;
+        if ((left_first ? dr : dl) < best)
+            stack[count++] = far_node;
+        if ((left_first ? dl : dr) < best)
+            stack[count++] = near_node;
+    }
+}
+return out;
+"""
+
+
+@wp.func_native(_CLOSEST_POINT_SNIPPET)
+def _closest_point_native(mesh: wp.uint64, x: wp.vec3, max_dist: float) -> wp.vec4:
+    """(closest point, squared distance) of ``x`` on the mesh within ``max_dist``; squared distance -1: none."""
+    ...
+
+
+@wp.func
+def mesh_closest_point(mesh: wp.uint64, x: wp.vec3, max_dist: float):
+    """(found, closest point on the mesh within ``max_dist`` of ``x``, or ``x``): Warp's closest-point query (the same
+    result, see ``_CLOSEST_POINT_SNIPPET``)."""
+    r = _closest_point_native(mesh, x, max_dist)
+    if r[3] < 0.0:
+        return False, x
+    return True, wp.vec3(r[0], r[1], r[2])
+
+
 # ---- Morton codes ----
 
 
@@ -546,9 +620,8 @@ def _init_from_children_kernel(
             proj[i] = octet_proj[c // 8]
             return
     if mesh != wp.uint64(0):
-        q = wp.mesh_query_point_no_sign(mesh, x, wp.min(best * 1.0001 + spacing * 1.0e-4, max_dist))
-        if q.result:
-            p = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+        found, p = mesh_closest_point(mesh, x, wp.min(best * 1.0001 + spacing * 1.0e-4, max_dist))
+        if found:
             d = wp.length(x - p)
             if d < best:
                 dist[i] = d
@@ -804,9 +877,8 @@ def _refine_leaves_kernel(
     if first_child[i] >= 0 or known[i] == 1:
         return
     x = node_center(origin, spacing, coords[i])
-    q = wp.mesh_query_point_no_sign(mesh, x, dist[i] * 1.0001 + spacing * 1.0e-4)
-    if q.result:
-        p = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+    found, p = mesh_closest_point(mesh, x, dist[i] * 1.0001 + spacing * 1.0e-4)
+    if found:
         d = wp.length(x - p)
         if d < dist[i]:
             dist[i] = d
