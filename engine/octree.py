@@ -898,15 +898,20 @@ def _inherit_sign_kernel(
     dist: wp.array[wp.float32],
     sign: wp.array[wp.float32],
     safety: float,
+    no_inherit: wp.array[wp.uint8],
 ):
     """A node takes its parent's sign when the two empty balls around them cover the segment between them (no
     surface can cross it); otherwise its sign stays 0 (undecided) for the caller's oracle. Near an open mesh's holes
     (``field.hole_caps``) a segment may cross the jump of the winding number over a hole without meeting a triangle:
-    there this is a heuristic, which the band refinement of open meshes checks where it matters."""
+    nodes flagged in ``no_inherit`` (empty: none) are left undecided there (``field.cap_sign_presets``), elsewhere near
+    the holes this is a heuristic, which the band refinement of open meshes checks where it matters."""
     i = lo + wp.tid()
     p = parent[i]
-    if sign[i] != 0.0:  # already known (a node kept from an earlier build of the same mesh)
+    if sign[i] != 0.0:  # already known (a node kept from an earlier build of the same mesh, or preset)
         return
+    if no_inherit.shape[0] > 0:
+        if no_inherit[i] != wp.uint8(0):
+            return
     if p >= 0:
         xi = node_center(origin, spacing, coords[i])
         xp = node_center(origin, 2.0 * spacing, coords[p])

@@ -472,7 +472,7 @@ def test_check_meshes_refuses_builds_that_do_not_fit_together(monkeypatch):
         engine.check_meshes([(verts, tris), (np.zeros((0, 3)), np.zeros((0, 3), int))], voxel_size=0.05)
 
 
-def test_closed_meshes_need_no_band_refinement_and_open_ones_close_their_holes():
+def test_closed_meshes_need_no_band_refinement_and_open_ones_close_their_holes(monkeypatch):
     from engine.field import sign_change_octets
     from tests.support import is_watertight
 
@@ -480,6 +480,8 @@ def test_closed_meshes_need_no_band_refinement_and_open_ones_close_their_holes()
     closed = engine.build_field(verts, tris, voxel_size=_voxel(verts, 128))
     assert closed.stats["sign_refinements"] == 0
     assert len(sign_change_octets(closed)) == 0  # skipping the check for closed meshes loses nothing
+    # the refinement rounds alone (no lattice around the caps, as for a hole about as large as the mesh)
+    monkeypatch.setattr(engine.field, "CAP_LATTICE_MAX_RATIO", 0.0)
     verts, tris = load_mesh("stanford-bunny.obj")
     opened = engine.build_field(verts, tris, voxel_size=_voxel(verts, 128))
     assert opened.stats["sign_refinements"] >= 1
@@ -493,6 +495,7 @@ def test_sign_changes_off_the_band_are_found_near_the_hole_caps_only(monkeypatch
     from engine.field import hole_caps, sign_change_octets, weld_positions
 
     monkeypatch.setattr(engine.field, "MAX_SIGN_REFINEMENTS", 0)
+    monkeypatch.setattr(engine.field, "CAP_LATTICE_MAX_RATIO", 0.0)  # the refinement rounds' own business
     verts, tris = load_mesh("stanford-bunny.obj")
     field = engine.build_field(verts, tris, voxel_size=_voxel(verts, 128))
     everywhere = sign_change_octets(field)
@@ -533,6 +536,7 @@ def test_a_refinement_round_looks_again_only_near_the_top_cells_it_changed():
 def test_a_refinement_round_reuses_the_nodes_of_the_build_before_it(monkeypatch):
     from engine.field import match_levels
 
+    monkeypatch.setattr(engine.field, "CAP_LATTICE_MAX_RATIO", 0.0)  # no lattice around the caps: the rounds
     verts, tris = load_mesh("stanford-bunny.obj")
     h = _voxel(verts, 128)
     refined = engine.build_field(verts, tris, voxel_size=h)
@@ -553,6 +557,55 @@ def test_a_refinement_round_reuses_the_nodes_of_the_build_before_it(monkeypatch)
     top = refined.levels - 1
     assert refined.stats["sign_queries"][top] == first.stats["sign_queries"][top]
     np.testing.assert_array_equal(np.sign(refined.values.numpy()[found]), np.sign(first.values.numpy()[where[found]]))
+
+
+@pytest.mark.parametrize("name", ["stanford-bunny.obj", "teapot.obj"])
+def test_open_meshes_find_the_surface_across_their_holes_before_the_first_build(name):
+    # Winding numbers sampled around the holes' caps place the surface across the holes, and sign the nodes next to
+    # it, in the first build: no refinement round, no sign change left off the band, and every node the sign of the
+    # build's own oracle (a refinement round alone leaves nodes signed by their parent across that surface)
+    from engine.field import sign_change_octets
+    from tests.support import is_watertight
+
+    verts, tris = load_mesh(name)
+    field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
+    assert field.stats["sign_refinements"] == 0
+    assert len(sign_change_octets(field)) == 0
+    values = field.values.numpy()
+    clear = np.abs(values) > 0.5 * field.voxel_size  # the sign of a node on the surface is ill-conditioned
+    oracle = winding_inside(
+        verts, tris, field.node_centers()[clear].astype(np.float32), accuracy=engine.field.WINDING_ACCURACY
+    )
+    assert np.count_nonzero((values[clear] < 0.0) != oracle) == 0
+    assert is_watertight(field.to_mesh()[1])
+
+
+def test_cap_lattices_find_the_surface_across_an_open_box_top():
+    from engine.field import cap_lattices, hole_caps
+
+    verts, tris = box_mesh(subdivisions=4)
+    normals = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])
+    tris = tris[~((normals[:, 2] > 0) & (verts[tris].mean(axis=1)[:, 2] > 0.99))]  # no top face
+    mesh = wp.Mesh(
+        points=wp.array(verts, dtype=wp.vec3),
+        indices=wp.array(tris.reshape(-1).astype(np.int32), dtype=wp.int32),
+        support_winding_number=True,
+    )
+    origin, octet = np.array([-2.0, -2.0, -2.0]), 0.1
+    found = cap_lattices(mesh.id, hole_caps(verts, tris), origin, (40, 40, 40), octet, 10**6, wp.get_device())
+    sheet = engine.octree.morton_decode_np(found["sheet"])
+    # the top's plane z = 1 runs between octets 29 and 30; the side walls and the bottom (crossed by the triangles,
+    # not by that surface) give none
+    assert set(np.unique(sheet[:, 2])) == {29, 30}
+    columns = {tuple(c) for c in sheet[:, :2]}
+    assert {(x, y) for x in range(10, 30) for y in range(10, 30)} <= columns  # the whole opening
+    assert sheet[:, :2].min() >= 9 and sheet[:, :2].max() <= 30
+    # the level-1 nodes there take the winding numbers sampled: inside below the opening, outside above it
+    ((corner, grid),) = found["lattices"]
+    assert (
+        grid[15 - corner[0], 15 - corner[1], 29 - corner[2]]
+        and not grid[15 - corner[0], 15 - corner[1], 30 - corner[2]]
+    )
 
 
 def test_seams_that_repeat_vertices_are_not_holes():
