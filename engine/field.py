@@ -51,6 +51,8 @@ CAP_LATTICE_MAX_RATIO = 1.0
 # ... and the least part of a box's octets that surface must cross, as seen from cells twice their size, for the box
 # to be sampled (Suzanne's eyes: 0.2 %, holes of the bunny and the teapot: 10-30 %)
 CAP_LATTICE_MIN_SHEET = 0.02
+# Relative error allowed to the closest points of the top level's leaves (0: exact).
+TOP_LEVEL_TOLERANCE = 0.01
 # Sweeps of same-level sign propagation, and the stride of oracle seeds on the dense top level.
 MAX_SIGN_SWEEPS = 64
 TOP_SEED_STRIDE = 16
@@ -2014,6 +2016,7 @@ def assemble_field(
             octet_points=octet_points if k == 1 else None,
             row0=n0,
             ordered_sweeps=k == levels - 1,  # the dense top level: far from the surface, information travels far
+            tolerance=TOP_LEVEL_TOLERANCE if k == levels - 1 else 0.0,
         )
         timings[f"{name}_neighbours"] = timings.get(f"{name}_neighbours", 0.0) + tn - tk
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk

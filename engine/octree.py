@@ -197,12 +197,13 @@ int stack[BVH_QUERY_STACK_SIZE];
 stack[0] = *m.bvh.root;
 int count = 1;
 float best = max_dist * max_dist;
+float reach = best * shrink;
 wp::vec4 out(x[0], x[1], x[2], -1.0f);
 while (count) {
     const int node = stack[--count];
     wp::BVHPackedNodeHalf lower = wp::bvh_load_node(m.bvh.node_lowers, node);
     wp::BVHPackedNodeHalf upper = wp::bvh_load_node(m.bvh.node_uppers, node);
-    if (wp::distance_to_aabb_sq(x, wp::vec3(lower.x, lower.y, lower.z), wp::vec3(upper.x, upper.y, upper.z)) > best)
+    if (wp::distance_to_aabb_sq(x, wp::vec3(lower.x, lower.y, lower.z), wp::vec3(upper.x, upper.y, upper.z)) > reach)
         continue;
     const int left = lower.i;
     const int right = upper.i;
@@ -217,6 +218,7 @@ while (count) {
             const float d = wp::length_sq(y - x);
             if (d < best) {
                 best = d;
+                reach = d * shrink;
                 out = wp::vec4(y[0], y[1], y[2], d);
             }
         }
@@ -231,9 +233,9 @@ while (count) {
         const bool left_first = dl < dr;
         const int far_node = left_first ? right : left;
         const int near_node = left_first ? left : right;
-        if ((left_first ? dr : dl) < best)
+        if ((left_first ? dr : dl) < reach)
             stack[count++] = far_node;
-        if ((left_first ? dl : dr) < best)
+        if ((left_first ? dl : dr) < reach)
             stack[count++] = near_node;
     }
 }
@@ -242,8 +244,9 @@ return out;
 
 
 @wp.func_native(_CLOSEST_POINT_SNIPPET)
-def _closest_point_native(mesh: wp.uint64, x: wp.vec3, max_dist: float) -> wp.vec4:
-    """(closest point, squared distance) of ``x`` on the mesh within ``max_dist``; squared distance -1: none."""
+def _closest_point_native(mesh: wp.uint64, x: wp.vec3, max_dist: float, shrink: float) -> wp.vec4:
+    """(closest point, squared distance) of ``x`` on the mesh within ``max_dist``; squared distance -1: none. Boxes
+    farther than sqrt(``shrink``) times the best distance so far are skipped (1: the exact closest point)."""
     ...
 
 
@@ -251,7 +254,18 @@ def _closest_point_native(mesh: wp.uint64, x: wp.vec3, max_dist: float) -> wp.ve
 def mesh_closest_point(mesh: wp.uint64, x: wp.vec3, max_dist: float):
     """(found, closest point on the mesh within ``max_dist`` of ``x``, or ``x``): Warp's closest-point query (the same
     result, see ``_CLOSEST_POINT_SNIPPET``)."""
-    r = _closest_point_native(mesh, x, max_dist)
+    r = _closest_point_native(mesh, x, max_dist, 1.0)
+    if r[3] < 0.0:
+        return False, x
+    return True, wp.vec3(r[0], r[1], r[2])
+
+
+@wp.func
+def mesh_near_point(mesh: wp.uint64, x: wp.vec3, max_dist: float, tolerance: float):
+    """``mesh_closest_point`` up to a relative ``tolerance``: a point of the mesh no more than 1 + ``tolerance`` times
+    as far from ``x`` as its closest point (boxes farther than the best distance so far over 1 + ``tolerance`` are
+    skipped); far from the surface a fraction of the search."""
+    r = _closest_point_native(mesh, x, max_dist, 1.0 / ((1.0 + tolerance) * (1.0 + tolerance)))
     if r[3] < 0.0:
         return False, x
     return True, wp.vec3(r[0], r[1], r[2])
@@ -727,8 +741,8 @@ def _fim_ordered_sweep_kernel(
     changed[0] = count
 
 
-def _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device):
-    """Exact closest points of a solved level's leaves (``_refine_leaves_kernel``), when there is a mesh."""
+def _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance=0.0):
+    """Closest points of a solved level's leaves (``_refine_leaves_kernel``), when there is a mesh."""
     if not mesh_id:
         return
     launch_split(
@@ -744,6 +758,7 @@ def _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known
             known,
             dist,
             proj,
+            float(tolerance),
         ],
         device,
         min_dim=EMIT_SPLIT_MIN_DIM,  # a BVH query per leaf: worth two threads from a few thousand
@@ -767,13 +782,15 @@ def solve_level(
     octet_points=None,
     row0=0,
     ordered_sweeps=False,
+    tolerance=0.0,
 ):
     """Initialise a level from its children (exactly from ``mesh_id`` when given) and run the fast iterative method
     until no leaf changes. Nodes flagged in ``known`` (N,) int32 keep their given distance and projection.
     ``octet_points``: (distances, closest points) of the octet centres of the level below, where already known.
     ``neighbours``: the level's rows of the table of :func:`level_neighbours` (node ``i`` in row ``i - row0``).
     ``ordered_sweeps``: on a CPU, sweep in place on one thread in alternating index order instead of Jacobi sweeps on
-    both cores (far fewer sweeps where information travels far, as on the dense top level)."""
+    both cores (far fewer sweeps where information travels far, as on the dense top level). ``tolerance``: relative
+    error allowed to the leaves' closest points (0: exact)."""
     n = hi - lo
     if n == 0:
         return 0
@@ -817,7 +834,7 @@ def solve_level(
             sweeps += 1
             if int(changed.numpy()[0]) == 0:
                 break
-        _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device)
+        _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance)
         return sweeps
     # only the unknown leaves change: the sweeps run over them alone
     free = (first_child[lo:hi].numpy() < 0) & (known[lo:hi].numpy() == 0)
@@ -856,7 +873,7 @@ def solve_level(
         wp.copy(dist, dist_b, dest_offset=lo, count=n)
         wp.copy(proj, proj_b, dest_offset=lo, count=n)
         wp.copy(source, src_b, dest_offset=lo, count=n)
-    _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device)
+    _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance)
     return sweeps
 
 
@@ -871,13 +888,15 @@ def _refine_leaves_kernel(
     known: wp.array[wp.int32],
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
+    tolerance: float,
 ):
-    """Exact closest point of a solved leaf: the FIM distance is an upper bound that caps the BVH search radius."""
+    """Closest point of a solved leaf, exact or within a relative ``tolerance`` (``mesh_near_point``): the FIM
+    distance is an upper bound that caps the BVH search radius."""
     i = lo + wp.tid()
     if first_child[i] >= 0 or known[i] == 1:
         return
     x = node_center(origin, spacing, coords[i])
-    found, p = mesh_closest_point(mesh, x, dist[i] * 1.0001 + spacing * 1.0e-4)
+    found, p = mesh_near_point(mesh, x, dist[i] * 1.0001 + spacing * 1.0e-4, tolerance)
     if found:
         d = wp.length(x - p)
         if d < dist[i]:

@@ -608,6 +608,21 @@ def test_cap_lattices_find_the_surface_across_an_open_box_top():
     )
 
 
+def test_node_distances_are_exact_below_the_top_level_and_within_its_tolerance_on_it():
+    verts, tris = load_mesh("spot.obj")
+    field = engine.build_field(verts, tris, voxel_size=_voxel(verts, 128))
+    got = np.abs(field.values.numpy())
+    exact = np.abs(exact_sdf(verts, tris, field.node_centers().astype(np.float32)))
+    top = field.level_slice(field.levels - 1)
+    below = slice(0, top.start)
+    np.testing.assert_allclose(got[below], exact[below], rtol=1e-4, atol=1e-4 * field.voxel_size)
+    # the top level's leaves: a point of the mesh no farther than 1 + tolerance times the closest
+    rel = got[top] / exact[top] - 1.0
+    assert rel.min() >= -1e-4
+    assert rel.max() <= engine.field.TOP_LEVEL_TOLERANCE + 1e-4
+    assert np.mean(rel > 1e-4) < 0.5  # most are exact all the same
+
+
 def test_seams_that_repeat_vertices_are_not_holes():
     # UV or patch seams repeat a vertex at one position: the index has open edges, the surface has none.
     verts, tris = load_mesh("spot.obj")
