@@ -85,7 +85,7 @@ def run(meshes, resolutions, repeat):
             levels = sum(v for k, v in t.items() if k.startswith("level_") and not k.endswith("neighbours"))
             levels += t.get("levels_structure", 0)
             neighbours = sum(v for k, v in t.items() if k.endswith("_neighbours"))
-            signs = t.get("signs", 0) + t.get("sign_check", 0)
+            signs = t.get("signs", 0) + t.get("sign_check", 0) + t.get("cap_lattices", 0)
             gn_s = statistics.median(baselines.gn_mesh_to_sdf((verts, tris), h)["seconds"] for _ in range(repeat))
             uniform = int(np.prod(field.fine_dims))
             dense = dense_grid_seconds(field, verts, tris) if res <= 256 else None
