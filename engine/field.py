@@ -56,6 +56,9 @@ TOP_LEVEL_TOLERANCE = 0.01
 # Sweeps of same-level sign propagation, and the stride of oracle seeds on the dense top level.
 MAX_SIGN_SWEEPS = 64
 TOP_SEED_STRIDE = 16
+# A sweep of the empty-ball phase that signs fewer than this share of a level's nodes ends it (another sweep over the
+# whole level would sign a handful; the next phase takes them).
+SIGN_SWEEP_SETTLED = 1e-3
 # Finest octets search their candidate triangles in a box (instead of 8 BVH queries) when the mean triangle area is
 # at least this many cell faces (measured break-even about 0.3 on this CPU).
 OCTET_SEARCH_MIN_AREA = 0.5
@@ -2092,7 +2095,12 @@ def assemble_field(
                         ],
                         device,
                     )
-                if int(changed.numpy()[0]) == 0:
+                got = int(changed.numpy()[0])
+                if got == 0:
+                    break
+                if phase_mesh != phases[-1] and (k == 0 or got < SIGN_SWEEP_SETTLED * (hi - lo)):
+                    # the empty balls have settled (on the finest level one in-place sweep leaves a handful): the
+                    # segments' phase signs the few nodes another sweep over the whole level would
                     break
             sweeps[phase_mesh] = sweep + 1
         sign_sweeps[k] = (sweeps[0], sweeps.get(int(mesh_id), 0))
