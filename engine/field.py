@@ -1364,12 +1364,13 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         # the surface across the holes, found before the first build instead of by a refinement round after it
         t0 = time.perf_counter()
         lattices = cap_lattices(mesh.id, caps, origin, fine_dims // 2, octet, base_octets.shape[0], device)
-        if lattices is not None:
+        if lattices is not None and base_octets.shape[0] > 0:
             band = base_octets.numpy()
             sheet = lattices["sheet"]
             at = np.minimum(np.searchsorted(band, sheet), len(band) - 1)
             sheet = sheet[band[at] != sheet]  # where the triangles' band does not hold that surface already
             if len(sheet):
+                check_budget(fine_dims, top_count, 8 * len(band) + 8 * 27 * len(sheet))
                 base_octets = add_octets(base_octets, sheet, fine_dims // 2, end_bit=3 * _bits(fine_dims // 2))
         timings["cap_lattices"] = time.perf_counter() - t0
 
