@@ -34,9 +34,13 @@ def _modules():
 def register():
     done = []
     try:
-        for cls in _classes():
-            bpy.utils.register_class(cls)
-            done.append(cls)
+        nodes.registering = True  # trees' updates wait until every node type is there
+        try:
+            for cls in _classes():
+                bpy.utils.register_class(cls)
+                done.append(cls)
+        finally:
+            nodes.registering = False
         for module in _modules():
             module.register()
     except Exception:

@@ -374,6 +374,24 @@ def test_unregister_removes_the_timer_and_the_menu_entry(addon, evaluated):
     assert bpy.types.NODE_MT_add._dyn_ui_initialize().count(node_editor.draw_add_menu) == 1
 
 
+def test_registering_again_leaves_existing_trees_alone_until_every_type_is_there(addon, evaluated, monkeypatch):
+    # Registering the tree type makes Blender update the trees saved with it while their node types are still
+    # missing; reading their nodes then can crash Blender, so those updates do nothing (and mark nothing dirty).
+    tree, _, _ = evaluated
+    tree.auto_update = True
+    seen = []
+    addon.unregister()
+    try:
+        monkeypatch.setattr(autoupdate, "tree_changed", lambda t: seen.append((t.name, nodes.registering)))
+        addon.register()
+    finally:
+        monkeypatch.undo()
+    assert all(not during for _, during in seen), seen
+    assert not nodes.registering
+    tree.links.remove(tree.nodes["Output"].inputs[0].links[0])  # after registering, changes are seen again
+    assert autoupdate.is_dirty(tree)
+
+
 # ---- a tree from the selection ----
 
 
