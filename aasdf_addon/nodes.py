@@ -21,9 +21,9 @@ OUTPUT = "AASDF_N_output"
 # Boolean node type -> operation identifier of ``properties.OPERATIONS``.
 BOOLEAN_NODES = {UNION: "UNION", INTERSECT: "INTERSECT", DIFFERENCE: "DIFFERENCE"}
 
-# True while the add-on's classes are being registered: Blender then calls the update of trees saved with the
-# add-on's types while their node types are not all registered yet, and reading a tree's nodes there can crash it.
-registering = False
+# True while the add-on's classes are being registered or unregistered: Blender then calls the update of trees of
+# the add-on's type while their node types are not all there, and reading a tree's nodes there can crash it.
+classes_changing = False
 
 
 def _changed(self, context):
@@ -70,7 +70,7 @@ class AASDF_NT_csg(bpy.types.NodeTree):
 
     def update(self):
         """Links or nodes changed."""
-        if registering:
+        if classes_changing:
             return
         if len(self.nodes) and not self.use_fake_user:
             self.use_fake_user = True  # 0 users would not be saved

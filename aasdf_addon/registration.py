@@ -34,13 +34,13 @@ def _modules():
 def register():
     done = []
     try:
-        nodes.registering = True  # trees' updates wait until every node type is there
+        nodes.classes_changing = True  # trees' updates wait until every node type is there
         try:
             for cls in _classes():
                 bpy.utils.register_class(cls)
                 done.append(cls)
         finally:
-            nodes.registering = False
+            nodes.classes_changing = False
         for module in _modules():
             module.register()
     except Exception:
@@ -55,6 +55,10 @@ def register():
 def unregister():
     for module in reversed(_modules()):
         module.unregister()
-    for cls in reversed(_classes()):
-        if cls.is_registered:
-            bpy.utils.unregister_class(cls)
+    nodes.classes_changing = True  # no tree update reads nodes whose types are going
+    try:
+        for cls in reversed(_classes()):
+            if cls.is_registered:
+                bpy.utils.unregister_class(cls)
+    finally:
+        nodes.classes_changing = False
