@@ -363,23 +363,6 @@ def _mesh_sign_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def _cells_inside_kernel(
-    first: int,
-    mesh: wp.uint64,
-    cells: wp.array[wp.vec3i],
-    origin: wp.vec3,
-    size: float,
-    inside: wp.array[wp.uint8],
-):
-    """Whether the centre of each cell (edge ``size``; cell ``first + tid``) is inside the mesh: generalised winding
-    number above 0.5, as the sign oracle."""
-    t = first + wp.tid()
-    ijk = cells[t]
-    x = origin + size * wp.vec3(float(ijk[0]) + 0.5, float(ijk[1]) + 0.5, float(ijk[2]) + 0.5)
-    inside[t] = wp.where(_winding_number(mesh, x, WINDING_ACCURACY) > 0.5, wp.uint8(1), wp.uint8(0))
-
-
-@wp.kernel(enable_backward=False)
 def _segments_clear_kernel(mesh: wp.uint64, p: wp.array[wp.vec3], q: wp.array[wp.vec3], clear: wp.array[wp.uint8]):
     """Whether each segment p[i] q[i] surely meets no triangle (``_segment_clear``)."""
     i = wp.tid()
@@ -1364,11 +1347,9 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         # the surface across the holes, found before the first build instead of by a refinement round after it
         t0 = time.perf_counter()
         lattices = cap_lattices(mesh.id, caps, origin, fine_dims // 2, octet, base_octets.shape[0], device)
-        if lattices is not None and base_octets.shape[0] > 0:
+        if lattices is not None:
             band = base_octets.numpy()
-            sheet = lattices["sheet"]
-            at = np.minimum(np.searchsorted(band, sheet), len(band) - 1)
-            sheet = sheet[band[at] != sheet]  # where the triangles' band does not hold that surface already
+            sheet = lattices["sheet"][~_in_sorted(band, lattices["sheet"])]  # where the band does not hold it already
             if len(sheet):
                 check_budget(fine_dims, top_count, 8 * len(band) + 8 * 27 * len(sheet))
                 base_octets = add_octets(base_octets, sheet, fine_dims // 2, end_bit=3 * _bits(fine_dims // 2))
@@ -1627,7 +1608,7 @@ _FORWARD_STEPS = [np.array(d) for d in itertools.product((-1, 0, 1), repeat=3) i
 def _merge_boxes(first: np.ndarray, last: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Integer boxes (K, 3) inclusive, overlapping ones replaced by the box around them until none overlap (loops
     of one hole, or holes close together, are sampled once)."""
-    boxes = [(a, b) for a, b in zip(first, last, strict=False)]
+    boxes = [(a, b) for a, b in zip(first, last, strict=True)]
     merged = True
     while merged:
         merged = False
@@ -1645,17 +1626,34 @@ def _merge_boxes(first: np.ndarray, last: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def _inside_at(mesh_id, cells: np.ndarray, origin, size: float, device) -> np.ndarray:
-    """(M,) bool: whether the centres of the cells (M, 3) of edge ``size`` are inside the mesh (the sign oracle)."""
-    inside = wp.empty(len(cells), dtype=wp.uint8, device=device)
+    """(M,) bool: whether the centres of the cells (M, 3) of edge ``size`` are inside the mesh (the sign oracle's
+    kernel, on every cell)."""
+    sign = wp.empty(len(cells), dtype=wp.float32, device=device)
     cells_wp = wp.array(cells.astype(np.int32), dtype=wp.vec3i, device=device)
+    every = wp.array(np.arange(len(cells), dtype=np.int32), dtype=wp.int32, device=device)
     octree.launch_split(
-        _cells_inside_kernel,
+        _mesh_sign_kernel,
         len(cells),
-        lambda start, _n: [start, wp.uint64(mesh_id), cells_wp, wp.vec3(*origin), float(size), inside],
+        lambda start, n: [wp.uint64(mesh_id), cells_wp, every[start : start + n], wp.vec3(*origin), float(size), sign],
         device,
         min_dim=octree.EMIT_SPLIT_MIN_DIM,  # a winding number each
     )
-    return inside.numpy().astype(bool)
+    return sign.numpy() < 0.0
+
+
+def _in_sorted(keys: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(len(values),) bool: whether each value is one of the sorted ``keys``."""
+    if len(keys) == 0:
+        return np.zeros(len(values), dtype=bool)
+    return keys[np.minimum(np.searchsorted(keys, values), len(keys) - 1)] == values
+
+
+def _in_box(columns, first, last) -> np.ndarray:
+    """Whether each point (``columns``: its x, y and z arrays) lies in the integer box [first, last] (inclusive)."""
+    hit = np.ones(len(columns[0]), dtype=bool)
+    for k in range(3):
+        hit &= (columns[k] >= first[k]) & (columns[k] <= last[k])
+    return hit
 
 
 def _box_cells(first, last) -> np.ndarray:
@@ -1667,8 +1665,8 @@ def _changes(grid: np.ndarray) -> np.ndarray:
     """Pairs (P, 2, 3) of 26-neighbour cells of a bool grid with different values."""
     pairs = []
     for step in _FORWARD_STEPS:
-        ends = tuple(slice(max(0, -d), n - max(0, d)) for d, n in zip(step, grid.shape, strict=False))
-        starts = tuple(slice(max(0, d), n - max(0, -d)) for d, n in zip(step, grid.shape, strict=False))
+        ends = tuple(slice(max(0, -d), n - max(0, d)) for d, n in zip(step, grid.shape, strict=True))
+        starts = tuple(slice(max(0, d), n - max(0, -d)) for d, n in zip(step, grid.shape, strict=True))
         at = np.argwhere(grid[ends] != grid[starts]) + np.maximum(0, -step)
         pairs.append(np.stack([at, at + step], axis=1))
     return np.concatenate(pairs)
@@ -1717,7 +1715,7 @@ def cap_lattices(mesh_id, caps, origin, octet_dims, octet: float, band_count: in
     if (last - first + 1).prod(axis=1).sum() > CAP_LATTICE_MAX_RATIO * band_count:
         return None
     lattices, sheet = [], []
-    for corner, end in zip(first, last, strict=False):
+    for corner, end in zip(first, last, strict=True):
         # cells of two octets first, an eighth of the cost: a box where they find little of that surface (a hole
         # mostly filled, its surface within the triangles' band) is left to the refinement rounds, which it would
         # rarely need
@@ -1763,30 +1761,20 @@ def cap_sign_presets(found: dict, layout: dict, levels: int):
     lo1, hi1 = int(offsets[1]), int(offsets[2])
     level1 = [coords[lo1:hi1, k] for k in range(3)]  # column by column: faster than reductions over (N, 3)
     for corner, grid in found["lattices"]:
-        within = np.ones(hi1 - lo1, dtype=bool)
-        for k in range(3):
-            within &= (level1[k] >= corner[k]) & (level1[k] < corner[k] + grid.shape[k])
-        within = np.flatnonzero(within)
+        within = np.flatnonzero(_in_box(level1, corner, corner + np.asarray(grid.shape) - 1))
         inside = grid[tuple(level1[k][within] - corner[k] for k in range(3))]
         sign[lo1 + within] = np.where(inside, -1.0, 1.0)
     # finest nodes in the sheet octets
-    sheet = found["sheet"]
     n0 = int(offsets[1])
-    if len(sheet):
-        octets = codes[:n0:8] >> 3
-        at = np.minimum(np.searchsorted(sheet, octets), len(sheet) - 1)
-        no_inherit[:n0] = np.repeat(sheet[at] == octets, 8)
+    no_inherit[:n0] = np.repeat(_in_sorted(found["sheet"], codes[:n0:8] >> 3), 8)
     # coarser nodes within a cell of a lattice
     for k in range(2, levels):
         a, b = int(offsets[k]), int(offsets[k + 1])
+        level = [coords[a:b, axis] for axis in range(3)]
         near = np.zeros(b - a, dtype=bool)
         for corner, grid in found["lattices"]:
-            first = (corner >> (k - 1)) - 1  # level-k cells hold 2^(k-1) octets per axis
-            last = ((corner + np.asarray(grid.shape) - 1) >> (k - 1)) + 1
-            hit = np.ones(b - a, dtype=bool)
-            for axis in range(3):
-                hit &= (coords[a:b, axis] >= first[axis]) & (coords[a:b, axis] <= last[axis])
-            near |= hit
+            # level-k cells hold 2^(k-1) octets per axis
+            near |= _in_box(level, (corner >> (k - 1)) - 1, ((corner + np.asarray(grid.shape) - 1) >> (k - 1)) + 1)
         no_inherit[a:b] = near
     return sign, no_inherit
 

@@ -251,24 +251,21 @@ def _closest_point_native(mesh: wp.uint64, x: wp.vec3, max_dist: float, shrink: 
 
 
 @wp.func
-def mesh_closest_point(mesh: wp.uint64, x: wp.vec3, max_dist: float):
-    """(found, closest point on the mesh within ``max_dist`` of ``x``, or ``x``): Warp's closest-point query (the same
-    result, see ``_CLOSEST_POINT_SNIPPET``)."""
-    r = _closest_point_native(mesh, x, max_dist, 1.0)
+def mesh_near_point(mesh: wp.uint64, x: wp.vec3, max_dist: float, tolerance: float):
+    """(found, a point of the mesh within ``max_dist`` of ``x`` no more than 1 + ``tolerance`` times as far as its
+    closest point, or ``x``): boxes farther than the best distance so far over 1 + ``tolerance`` are skipped, far
+    from the surface a fraction of the search."""
+    r = _closest_point_native(mesh, x, max_dist, 1.0 / ((1.0 + tolerance) * (1.0 + tolerance)))
     if r[3] < 0.0:
         return False, x
     return True, wp.vec3(r[0], r[1], r[2])
 
 
 @wp.func
-def mesh_near_point(mesh: wp.uint64, x: wp.vec3, max_dist: float, tolerance: float):
-    """``mesh_closest_point`` up to a relative ``tolerance``: a point of the mesh no more than 1 + ``tolerance`` times
-    as far from ``x`` as its closest point (boxes farther than the best distance so far over 1 + ``tolerance`` are
-    skipped); far from the surface a fraction of the search."""
-    r = _closest_point_native(mesh, x, max_dist, 1.0 / ((1.0 + tolerance) * (1.0 + tolerance)))
-    if r[3] < 0.0:
-        return False, x
-    return True, wp.vec3(r[0], r[1], r[2])
+def mesh_closest_point(mesh: wp.uint64, x: wp.vec3, max_dist: float):
+    """(found, closest point on the mesh within ``max_dist`` of ``x``, or ``x``): Warp's closest-point query (the same
+    result, see ``_CLOSEST_POINT_SNIPPET``)."""
+    return mesh_near_point(mesh, x, max_dist, 0.0)
 
 
 # ---- Morton codes ----
