@@ -934,6 +934,12 @@ def _triangle_areas(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
 
 def validate_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
     """Check a mesh before any kernel runs; return float32 vertices and the non-degenerate int32 triangles."""
+    verts, tris, _area = _validated_mesh(vertices, triangles)
+    return verts, tris
+
+
+def _validated_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`validate_mesh`, and the (T,) float64 areas of the triangles it keeps."""
     verts = np.asarray(vertices)
     tris = np.asarray(triangles)
     if verts.ndim != 2 or verts.shape[1] != 3:
@@ -959,14 +965,19 @@ def validate_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
     keep = area2 > (1e-12 * extent * extent)
     if not np.any(keep):
         raise AasdfError("The mesh is degenerate: all of its triangles have zero area.")
-    return np.ascontiguousarray(verts64, dtype=np.float32), np.ascontiguousarray(tris[keep])
+    return np.ascontiguousarray(verts64, dtype=np.float32), np.ascontiguousarray(tris[keep]), 0.5 * area2[keep]
 
 
 def weld_positions(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The same triangles over one vertex per distinct position: (P, 3) positions and (T, 3) int64 indices (the
-    geometry, and so every distance and winding number, is unchanged)."""
-    unique, index = np.unique(np.asarray(vertices), axis=0, return_inverse=True)
-    return unique, index.reshape(-1)[np.asarray(triangles, dtype=np.int64)]
+    """The same triangles over one vertex per distinct position: (P, 3) positions, sorted as ``np.unique(axis=0)``
+    sorts them, and (T, 3) int64 indices (the geometry, and so every distance and winding number, is unchanged)."""
+    verts = np.asarray(vertices)
+    order = np.lexsort((verts[:, 2], verts[:, 1], verts[:, 0]))
+    rows = verts[order]
+    first = np.r_[True, (rows[1:] != rows[:-1]).any(axis=1)]  # first row of each run of equal positions
+    index = np.empty(len(verts), dtype=np.int64)
+    index[order] = np.cumsum(first) - 1
+    return rows[first], index[np.asarray(triangles, dtype=np.int64)]
 
 
 def edge_table(tris: np.ndarray, n_verts: int) -> dict:
@@ -977,14 +988,16 @@ def edge_table(tris: np.ndarray, n_verts: int) -> dict:
         listing it low -> high}``.
     """
     t = np.asarray(tris, dtype=np.int64)
-    directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    key = directed.min(axis=1) * n_verts + directed.max(axis=1)
-    unique, group = np.unique(key, return_inverse=True)
-    forward = np.bincount(group, weights=directed[:, 0] < directed[:, 1], minlength=len(unique)).astype(np.int64)
+    a, b = t.ravel(), t[:, [1, 2, 0]].ravel()  # every directed edge a -> b
+    # one sort of the edges' keys with their direction in the lowest bit (no inverse permutation needed)
+    keys = np.sort((np.minimum(a, b) * n_verts + np.maximum(a, b)) * 2 + (a < b))
+    edge = keys >> 1
+    start = np.flatnonzero(np.r_[True, edge[1:] != edge[:-1]])
+    unique = edge[start]
     return {
         "pairs": np.stack([unique // n_verts, unique % n_verts], axis=1),
-        "faces": np.bincount(group, minlength=len(unique)),
-        "forward": forward,
+        "faces": np.diff(np.r_[start, len(keys)]),
+        "forward": np.add.reduceat(keys & 1, start),
     }
 
 
@@ -1102,7 +1115,7 @@ def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
     Returns:
         dict with the cleaned ``vertices``/``triangles``, the domain (``origin``, ``top_dims``, ``fine_dims``,
         ``top_count``), an upper bound of the finest nodes (``fine_nodes``) and of the bytes the build needs
-        (``bytes``).
+        (``bytes``), and the triangles' ``areas``.
     Raises:
         ValueError, AasdfError: As :func:`build_field` does for bad input.
     """
@@ -1114,7 +1127,7 @@ def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
     if int(padding) != padding or padding < 0:
         raise AasdfError(f"The padding must be a non-negative integer, but got {padding}.")
     levels, padding = int(levels), int(padding)
-    verts, tris = validate_mesh(vertices, triangles)
+    verts, tris, area = _validated_mesh(vertices, triangles)
     lo = np.array([verts[:, k].min() for k in range(3)])
     hi = np.array([verts[:, k].max() for k in range(3)])
     origin, top_dims = plan_domain(lo, hi, voxel_size, levels, padding + 2)
@@ -1128,7 +1141,6 @@ def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
         a, b, c = (v64[tris[:, m], k] for m in range(3))
         ext = (np.maximum(np.maximum(a, b), c) - np.minimum(np.minimum(a, b), c) + 2.0 * padding * voxel_size) / octet
         box_count *= np.ceil(ext + 1.0) + 1.0
-    area = _triangle_areas(v64, tris)
     area_count = (np.sqrt(area) / octet + 2.0 + padding) ** 2 * (3.0 + padding)
     per_triangle = 8.0 * float(np.minimum(box_count, area_count).sum())
     # Many small triangles share their octets: the band around the whole surface (both sides, padding plus octet
@@ -1148,6 +1160,7 @@ def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
         "top_count": top_count,
         "fine_nodes": fine_nodes,
         "bytes": int((fine_nodes + top_count) * BUILD_BYTES_PER_NODE),
+        "areas": area,
     }
 
 
@@ -1162,21 +1175,27 @@ def check_meshes(meshes, *, voxel_size, levels=4, padding=1) -> int:
     Raises:
         AasdfError: The first invalid mesh (its index in the message), or the total being too large.
     """
-    total = 0
+    return sum(plan["bytes"] for plan in _checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding))
+
+
+def _checked_plans(meshes, *, voxel_size, levels, padding) -> list[dict]:
+    """:func:`check_meshes`, returning each mesh's :func:`plan_field`."""
+    plans = []
     for k, (verts, tris) in enumerate(meshes):
         try:
             plan = plan_field(verts, tris, voxel_size=voxel_size, levels=levels, padding=padding)
             check_budget(plan["fine_dims"], plan["top_count"], plan["fine_nodes"])
         except AasdfError as err:
             raise AasdfError(f"Mesh {k}: {err}") from err
-        total += plan["bytes"]
+        plans.append(plan)
+    total = sum(plan["bytes"] for plan in plans)
     budget = available_memory() // 2
     if total > budget:
         raise AasdfError(
             f"These fields need about {total / 2**30:.1f} GiB together, more than the {budget / 2**30:.1f} GiB "
             "that can be used; use a larger voxel size."
         )
-    return total
+    return plans
 
 
 def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_ids=None) -> list[AdaptiveField]:
@@ -1201,16 +1220,14 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
     field_ids = list(range(len(meshes))) if field_ids is None else [int(k) for k in field_ids]
     if len(field_ids) != len(meshes):
         raise ValueError(f"build_fields got {len(field_ids)} field ids for {len(meshes)} meshes")
-    check_meshes(meshes, voxel_size=voxel_size, levels=levels, padding=padding)
+    plans = _checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding)
     device = _device(device)
     fields: list = [None] * len(meshes)
     errors: dict = {}
 
     def build(k):
         try:
-            fields[k] = build_field(
-                *meshes[k], voxel_size=voxel_size, levels=levels, padding=padding, device=device, field_id=field_ids[k]
-            )
+            fields[k] = _build_planned(plans[k], device=device, field_id=field_ids[k])
         except AasdfError as err:
             errors[k] = AasdfError(f"Mesh {k}: {err}")
             errors[k].__cause__ = err
@@ -1254,6 +1271,11 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
     """
     plan = plan_field(vertices, triangles, voxel_size=voxel_size, levels=levels, padding=padding)
     check_budget(plan["fine_dims"], plan["top_count"], plan["fine_nodes"])
+    return _build_planned(plan, device=device, field_id=field_id)
+
+
+def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
+    """:func:`build_field` of a checked :func:`plan_field`."""
     verts, tris, origin, top_dims = plan["vertices"], plan["triangles"], plan["origin"], plan["top_dims"]
     fine_dims, top_count = plan["fine_dims"], plan["top_count"]
     voxel_size, levels, padding = plan["voxel_size"], plan["levels"], plan["padding"]
@@ -1298,11 +1320,7 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         caps = None if clean else hole_caps(seam_verts, seam_tris, edges)
     diag = float(np.linalg.norm(fine_dims * voxel_size))
     # candidate triangles per octet grow as cell area / triangle area: search boxes only where that stays small
-    corners = verts[tris]
-    mean_area = float(
-        np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1).mean()
-    )
-    box_search = int(0.5 * mean_area >= OCTET_SEARCH_MIN_AREA * voxel_size**2)
+    box_search = int(float(plan["areas"].mean()) >= OCTET_SEARCH_MIN_AREA * voxel_size**2)
     timings["mesh_checks"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -249,6 +249,27 @@ def test_hole_caps_bound_the_boundary_of_open_meshes():
     assert engine.field.hole_caps(verts, flipped) is not None
 
 
+def test_mesh_checks_count_every_edge_and_weld_every_repeated_position():
+    # the bunny (open, 35,947 vertices) with a face repeated, one flipped and its vertices listed twice
+    verts, tris = load_mesh("stanford-bunny.obj")
+    tris = np.r_[tris, tris[:1], tris[1:2, ::-1]]
+    edges = engine.field.edge_table(tris, len(verts))
+    directed = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]).astype(np.int64)
+    pairs, group = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    np.testing.assert_array_equal(edges["pairs"], pairs)
+    np.testing.assert_array_equal(edges["faces"], np.bincount(group))
+    np.testing.assert_array_equal(edges["forward"], np.bincount(group, weights=directed[:, 0] < directed[:, 1]))
+    assert edges["faces"].max() == 3 and edges["faces"].min() == 1  # the repeated faces and the open base
+
+    doubled = np.r_[verts, verts[::-1]]
+    seams = np.where(np.arange(len(tris))[:, None] % 2 == 0, tris, 2 * len(verts) - 1 - tris)
+    positions, index = engine.field.weld_positions(doubled, seams)
+    unique, inverse = np.unique(doubled, axis=0, return_inverse=True)
+    np.testing.assert_array_equal(positions, unique)
+    np.testing.assert_array_equal(index, inverse.reshape(-1)[seams])
+    np.testing.assert_array_equal(positions[index], doubled[seams])  # the same triangles
+
 def test_level_neighbours_are_exactly_the_face_adjacent_nodes():
     verts, tris = uv_sphere(1.0, rings=24, segments=48)
     field = engine.build_field(verts, tris, voxel_size=0.08)
@@ -443,7 +464,7 @@ def test_build_fields_builds_several_meshes_at_once_as_build_field_does_one_by_o
 
 def test_build_fields_refuses_a_bad_mesh_before_building_any(monkeypatch):
     calls = []
-    monkeypatch.setattr(engine.field, "build_field", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(engine.field, "_build_planned", lambda *a, **k: calls.append(a))
     good = uv_sphere(1.0)
     with pytest.raises(engine.AasdfError, match="Mesh 1: The mesh is empty"):
         engine.build_fields([good, (np.zeros((0, 3)), np.zeros((0, 3), int)), good], voxel_size=0.05)
@@ -451,12 +472,12 @@ def test_build_fields_refuses_a_bad_mesh_before_building_any(monkeypatch):
         engine.build_fields([good], voxel_size=0.05, field_ids=[0, 1])
     assert calls == []
 
-    def fails_on_mesh_2(*args, field_id, **kwargs):
+    def fails_on_mesh_2(plan, *, device, field_id):
         if field_id == 2:
             raise engine.AasdfError("no memory left")
         return field_id
 
-    monkeypatch.setattr(engine.field, "build_field", fails_on_mesh_2)
+    monkeypatch.setattr(engine.field, "_build_planned", fails_on_mesh_2)
     with pytest.raises(engine.AasdfError, match="^Mesh 2: no memory left$"):
         engine.build_fields([good, good, good, good], voxel_size=0.05)
 
