@@ -531,7 +531,8 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     if spacing not in choices:
         raise ValueError(f"Expected 'spacing' to be one of {sorted(choices)}, but got {spacing!r}.")
     h = choices[spacing]
-    levels = max(a.levels, b.levels)
+    # a sparse finest level under a dense top one, even when both operands are dense (one level)
+    levels = max(a.levels, b.levels, 2)
     device = a.device
     timings = {}
     t0 = time.perf_counter()

@@ -10,8 +10,8 @@ tables, its passes run here split over the CPU cores), with the samples themselv
 the time and memory; it remains the fallback for other Warp versions). Vertices are shared between cubes, so the
 mesh is watertight wherever the zero set stays inside the band.
 :func:`extract_octree_level` does the same on a field's finest level as stored (Morton order, complete octets):
-each cube's corners come from its octet's +x/+y/+z neighbour octets, so nothing is sorted and nothing leaves the
-device. ``bench/extract_compare.py`` measures this against scikit-image's marching cubes run on dense 16^3 blocks.
+each cube's corners come from its octet's +x/+y/+z neighbour octets, found through the tree's child links, so
+nothing is sorted and nothing leaves the device. ``bench/extract_compare.py`` measures this against scikit-image's marching cubes run on dense 16^3 blocks.
 """
 
 from __future__ import annotations
@@ -243,10 +243,35 @@ _CORNER_BITS_Y = int(sum(int(_CORNER_OFFSETS[c][1]) << c for c in range(8)))
 _CORNER_BITS_Z = int(sum(int(_CORNER_OFFSETS[c][2]) << c for c in range(8)))
 
 
+@wp.func
+def _octet_first_node(
+    child: wp.array[wp.int32], top_offset: int, top_dims: wp.vec3i, levels: int, q: wp.vec3i
+) -> int:
+    """First finest node of the octet at octet coordinates ``q`` (level-1 lattice), or -1 when the tree has none there:
+    the top cell holding it, then the child links down to level 1 (children in Morton order)."""
+    shift = levels - 2
+    top = wp.vec3i(q[0] >> shift, q[1] >> shift, q[2] >> shift)
+    for a in range(3):
+        if q[a] < 0 or top[a] >= top_dims[a]:
+            return -1
+    node = top_offset + top[0] + top_dims[0] * (top[1] + top_dims[1] * top[2])
+    for s in range(shift):
+        first = child[node]
+        if first < 0:
+            return -1
+        b = shift - 1 - s
+        node = first + ((q[0] >> b) & 1) + 2 * ((q[1] >> b) & 1) + 4 * ((q[2] >> b) & 1)
+    return child[node]
+
+
 @wp.kernel(enable_backward=False)
 def _octet_cube_corners_kernel(
     first: int,
-    codes: wp.array[wp.int64],
+    coords: wp.array[wp.vec3i],
+    child: wp.array[wp.int32],
+    top_offset: int,
+    top_dims: wp.vec3i,
+    levels: int,
     values: wp.array[wp.float32],
     emit: int,
     neighbours: wp.array2d[wp.int32],
@@ -256,24 +281,18 @@ def _octet_cube_corners_kernel(
 ):
     """``_find_cube_corners_kernel`` on an octree's finest level (Morton-sorted, in complete octets): one thread per
     octet. With ``emit=0`` it finds the octet's 7 neighbours towards +x/+y/+z (first node, or -1) into
-    ``neighbours`` — their codes are larger, so a galloping search forward from the octet finds them — and flags
-    the active cubes whose minimum corner is one of its 8 nodes; with ``emit=1`` it writes those cubes' corners,
-    taken from the 8 octets by index arithmetic."""
+    ``neighbours`` through the tree's child links, and flags the active cubes whose minimum corner is one of its 8
+    nodes; with ``emit=1`` it writes those cubes' corners, taken from the 8 octets by index arithmetic."""
     t = first + wp.tid()
     base = 8 * t
-    n = codes.shape[0]
     nb = wp.vector(-1, -1, -1, -1, -1, -1, -1, -1, length=8, dtype=int)
     nb[0] = base
     if emit == 0:
-        octet = morton_decode(codes[base] >> wp.int64(3))
+        node = coords[base]
+        octet = wp.vec3i(node[0] >> 1, node[1] >> 1, node[2] >> 1)
         for d in range(1, 8):
-            key = morton_encode(octet + wp.vec3i(d & 1, (d >> 1) & 1, (d >> 2) & 1)) << wp.int64(3)
-            j = _gallop_lower_bound(codes, wp.int32(base + 8), key)
-            found = int(-1)
-            if j < n:
-                if codes[j] == key:
-                    found = int(j)
-            neighbours[t, d - 1] = found
+            q = octet + wp.vec3i(d & 1, (d >> 1) & 1, (d >> 2) & 1)
+            neighbours[t, d - 1] = _octet_first_node(child, top_offset, top_dims, levels, q)
     for d in range(1, 8):
         nb[d] = neighbours[t, d - 1]
     nodes = int(8)  # not unrolled (compile time)
@@ -334,18 +353,22 @@ def _used_node_points_kernel(
     point_values[out] = values[i]
 
 
-def extract_octree_level(codes, coords, values, *, origin, spacing, iso=0.0):
-    """:func:`extract_surface` for an octree's finest level as it is stored: Warp arrays of Morton codes (sorted, in
-    complete octets of 8 consecutive nodes), lattice coordinates and values (signed distances, finite), all on one
-    device. Same mesh as ``extract_surface(coords, values, ...)``, found without leaving the device: each cube's
-    corners come from its octet's neighbours (``_octet_cube_corners_kernel``), so nothing is sorted.
+def extract_octree_level(coords, values, tree, *, origin, spacing, iso=0.0):
+    """:func:`extract_surface` for an octree's finest level as it is stored: Warp arrays of lattice coordinates and
+    values (signed distances, finite; Morton order, in complete octets of 8 consecutive nodes), all on one device, and
+    ``tree`` = (child links of every node, index of the dense top level's first node, its dims, number of levels >= 2)
+    to find neighbour octets by. Same mesh as ``extract_surface(coords, values, ...)``, found without leaving the
+    device: each cube's corners come from its octet's neighbours (``_octet_cube_corners_kernel``), so nothing is
+    sorted.
 
     Returns and raises as :func:`extract_surface` (no ValueError: the level is valid by construction).
     """
-    n = codes.shape[0]
+    n = coords.shape[0]
     if n == 0:
         return _empty_mesh()
-    device = codes.device
+    device = coords.device
+    child, top_offset, top_dims, levels = tree
+    tree_args = [child, int(top_offset), wp.vec3i(*(int(d) for d in top_dims)), int(levels)]
     origin = np.asarray(origin, dtype=np.float64)
     spacing = float(spacing)
     coords_np = coords.numpy()
@@ -364,7 +387,7 @@ def extract_octree_level(codes, coords, values, *, origin, spacing, iso=0.0):
     launch_split(
         _octet_cube_corners_kernel,
         n // 8,
-        lambda s, c: [s, codes, shifted, 0, neighbours, active_scan, active, no_corners],
+        lambda s, c: [s, coords, *tree_args, shifted, 0, neighbours, active_scan, active, no_corners],
         device,
     )
     wp.utils.array_scan(active, active_scan, inclusive=True)
@@ -375,7 +398,7 @@ def extract_octree_level(codes, coords, values, *, origin, spacing, iso=0.0):
     launch_split(
         _octet_cube_corners_kernel,
         n // 8,
-        lambda s, c: [s, codes, shifted, 1, neighbours, active_scan, active, cube_corners],
+        lambda s, c: [s, coords, *tree_args, shifted, 1, neighbours, active_scan, active, cube_corners],
         device,
     )
     active = active_scan = neighbours = None

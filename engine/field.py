@@ -868,13 +868,17 @@ class AdaptiveField:
 
     def to_mesh(self, iso: float = 0.0):
         """Marching cubes over the finest level's narrow band: (V,3) float32 vertices, (F,3) int32 triangles."""
-        from .extract import extract_octree_level
+        from .extract import extract_octree_level, extract_surface
 
         n0 = self.level_counts[0]
+        if self.levels == 1:  # the dense top level is the finest: no octets to walk
+            return extract_surface(
+                self.coords.numpy(), self.values.numpy(), origin=self.origin, spacing=self.voxel_size, iso=float(iso)
+            )
         return extract_octree_level(
-            self.codes[:n0],
             self.coords[:n0],
             self.values[:n0],
+            (self.child, self.level_offsets[self.levels - 1], self.top_dims, self.levels),
             origin=self.origin,
             spacing=self.voxel_size,
             iso=float(iso),

@@ -138,6 +138,27 @@ def test_boolean_results_keep_the_invariants():
     _check_structure(engine.union(a, b, blend=0.2))
 
 
+def test_operands_of_one_level_give_a_sparse_level_under_a_dense_one():
+    # dense operands (levels=1): the result still keeps a sparse finest level under a dense top level, and says so
+    h = 0.04
+    a, b = uv_sphere(1.0, rings=24, segments=48), uv_sphere(1.0, rings=24, segments=48, center=(0.9, 0.2, -0.1))
+    fa, fb = (engine.build_field(*m, voxel_size=h, levels=1) for m in (a, b))
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(-1.2, 2.1, size=(4000, 3)).astype(np.float32)
+    va, vb = fa.sample(pts), fb.sample(pts)
+    for op, hard in ((engine.union, np.minimum(va, vb)), (engine.difference, np.maximum(va, -vb))):
+        result = op(fa, fb)
+        assert result.levels == 2 and len(result.level_counts) == 2
+        _check_structure(result)
+        got = result.sample(pts)
+        far = np.abs(hard) > h
+        assert np.array_equal(got[far] < 0, hard[far] < 0)  # inside where the hard operation is
+        assert np.percentile(np.abs(got - hard)[~far], 99) < 0.5 * h
+        # the same field in the band as the boolean of the usual 4-level operands (measured: 0.022 voxel at most)
+        usual = op(*(engine.build_field(*m, voxel_size=h) for m in (a, b))).sample(pts)
+        assert np.abs(got - usual)[~far].max() < 0.1 * h
+
+
 def _level_keys(field):
     """Per node: its level and its cell on that level of the shared world lattice (so nodes of aligned fields match)."""
     lv = field.level_of_nodes()

@@ -411,17 +411,18 @@ def test_invalid_arguments_raise(coords, values, kwargs, error, match):
         extract_surface(np.asarray(coords), values, **kwargs)
 
 
-@pytest.mark.parametrize("iso_voxels", [0.0, 1.5, -0.7])
-def test_octree_level_extraction_matches_the_generic_one(iso_voxels):
-    # to_mesh takes each cube's corners from its octet's +x/+y/+z neighbours, in Morton order, without sorting: the
-    # mesh must be the one extract_surface finds from the same samples.
+@pytest.mark.parametrize(("iso_voxels", "levels"), [(0.0, 4), (1.5, 4), (-0.7, 4), (0.0, 3), (0.0, 2), (0.0, 1)])
+def test_octree_level_extraction_matches_the_generic_one(iso_voxels, levels):
+    # to_mesh takes each cube's corners from its octet's +x/+y/+z neighbours, found through the child links from the
+    # dense top level (itself the octets' level with 2 levels, the finest with 1), without sorting: the mesh must be
+    # the one extract_surface finds from the same samples.
     import engine
     from tests.support import uv_sphere
 
     a = uv_sphere(1.0, rings=24, segments=48)
     b = (a[0] + np.float32([0.9, 0.2, -0.1]), a[1])
     h = 0.04
-    field = engine.union(engine.build_field(*a, voxel_size=h), engine.build_field(*b, voxel_size=h))
+    field = engine.union(*(engine.build_field(*m, voxel_size=h, levels=levels) for m in (a, b)))
     n0 = field.level_counts[0]
     iso = iso_voxels * h
     verts, tris = field.to_mesh(iso=iso)
