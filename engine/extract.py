@@ -372,9 +372,11 @@ def extract_octree_level(coords, values, tree, *, origin, spacing, iso=0.0):
     origin = np.asarray(origin, dtype=np.float64)
     spacing = float(spacing)
     coords_np = coords.numpy()
-    # column by column: numpy reduces an (N, 3) array along its first axis several times slower
-    lo = np.array([coords_np[:, k].min() for k in range(3)], dtype=np.int64)
-    hi = np.array([coords_np[:, k].max() for k in range(3)], dtype=np.int64)
+    # each octet spans its first node's coordinates plus 0 or 1 on every axis: the first nodes bound the level
+    # (column by column: numpy reduces an (N, 3) array along its first axis several times slower)
+    first_nodes = coords_np[::8]
+    lo = np.array([first_nodes[:, k].min() for k in range(3)], dtype=np.int64)
+    hi = np.array([first_nodes[:, k].max() + 1 for k in range(3)], dtype=np.int64)
     nudge = _iso_nudge(origin, lo, hi, spacing)
     shifted = wp.empty(n, dtype=wp.float32, device=device)
     launch_split(

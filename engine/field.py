@@ -1895,8 +1895,7 @@ def level_layout(octets, top_dims, levels: int, device, timings: dict | None = N
         # every level is sorted by code, so the parents of its octets come in order
         dims_k = fine_dims >> k
         level_octets.append(octree.parent_octets(level_octets[-1], 1, end_bit=3 * _bits(dims_k * 2), presorted=True))
-    top_coords, top_codes = octree.dense_level(top_dims)
-    sizes = [8 * o.shape[0] for o in level_octets] + [len(top_codes)]
+    sizes = [8 * o.shape[0] for o in level_octets] + [int(np.prod(top_dims))]
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     n = int(offsets[-1])
     codes = wp.empty(n, dtype=wp.int64, device=device)
@@ -1904,8 +1903,7 @@ def level_layout(octets, top_dims, levels: int, device, timings: dict | None = N
     for k, o in enumerate(level_octets):
         lo, hi = int(offsets[k]), int(offsets[k + 1])
         octree.expand_octets(o, codes[lo:hi], coords[lo:hi])
-    codes[int(offsets[-2]) :].assign(top_codes)
-    coords[int(offsets[-2]) :].assign(top_coords)
+    octree.dense_level(top_dims, codes[int(offsets[-2]) :], coords[int(offsets[-2]) :])
     child = wp.full(n, -1, dtype=wp.int32, device=device)
     parent = wp.full(n, -1, dtype=wp.int32, device=device)
     for k in range(1, len(sizes)):

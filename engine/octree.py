@@ -455,12 +455,21 @@ def parent_octets(codes: wp.array, levels_up: int, end_bit: int, *, presorted: b
     return sort_unique(shifted, end_bit=end_bit, presorted=presorted)
 
 
-def dense_level(dims) -> tuple[np.ndarray, np.ndarray]:
-    """Coordinates and codes of a dense (nx, ny, nz) level in x-fastest order (host arrays)."""
-    nx, ny, nz = (int(d) for d in dims)
-    idx = np.arange(nx * ny * nz, dtype=np.int64)
-    coords = np.stack([idx % nx, (idx // nx) % ny, idx // (nx * ny)], axis=1).astype(np.int32)
-    return coords, morton_encode_np(coords)
+@wp.kernel(enable_backward=False)
+def _dense_level_kernel(dims: wp.vec3i, codes: wp.array[wp.int64], coords: wp.array[wp.vec3i]):
+    """Node ``tid`` of a dense level in x-fastest order: its coordinates and Morton code."""
+    i = wp.tid()
+    c = wp.vec3i(i % dims[0], (i // dims[0]) % dims[1], i // (dims[0] * dims[1]))
+    coords[i] = c
+    codes[i] = morton_encode(c)
+
+
+def dense_level(dims, codes: wp.array, coords: wp.array) -> None:
+    """Coordinates and codes of a dense (nx, ny, nz) level in x-fastest order, written into ``codes``/``coords``."""
+    n = int(np.prod(np.asarray(dims, dtype=np.int64)))
+    if n:
+        dims_v = wp.vec3i(*(int(d) for d in dims))
+        wp.launch(_dense_level_kernel, dim=n, inputs=[dims_v, codes, coords], device=codes.device)
 
 
 @wp.kernel(enable_backward=False)
