@@ -20,7 +20,15 @@ import warp as wp
 from . import octree
 from .field import AdaptiveField, _bits, assemble_field, byte_grid_fits, check_budget, level_layout, plan_domain
 from .octree import morton_encode, node_center
-from .sampling import FieldArg, clamp_to_domain, inside_domain, level_spacing, locate_leaf, locate_node, sample_mls
+from .sampling import (
+    FieldArg,
+    clamp_to_domain,
+    inside_domain,
+    level_spacing,
+    locate_leaf,
+    locate_node,
+    sample_mls,
+)
 
 OP_UNION, OP_INTERSECTION, OP_DIFFERENCE = 0, 1, 2
 # Finest octets are kept where some node is within this many voxels of the result's surface.
@@ -108,11 +116,11 @@ def _sample(f: FieldArg, x: wp.vec3) -> wp.vec4:
 
 
 @wp.func
-def _extrapolate(f: FieldArg, x: wp.vec3, spacing: float) -> wp.vec4:
+def _extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
     """(phi, grad) from the operand's node containing ``x`` with the given spacing, or the coarser leaf containing it:
     its value carried along its exact gradient (the direction from its closest point), i.e. the distance to its
     tangent plane — exactly its own value where a node of the operand sits at ``x``. Cheap; used for the coarse levels
-    of a result (``spacing``: theirs)."""
+    of a result (``spacing``: theirs). Also returns that node."""
     xc = clamp_to_domain(f, x)
     leaf = locate_node(f, xc, wp.max(int(wp.round(wp.log2(spacing / f.voxel_size))), 0))
     s = level_spacing(f, leaf[1])
@@ -128,24 +136,25 @@ def _extrapolate(f: FieldArg, x: wp.vec3, spacing: float) -> wp.vec4:
     if out > 0.0:
         g = (x - xc) / out
         phi = wp.max(phi, 0.0) + out
-    return wp.vec4(phi, g[0], g[1], g[2])
+    return wp.vec4(phi, g[0], g[1], g[2]), leaf[0]
 
 
 @wp.func
 def _estimate(f: FieldArg, x: wp.vec3):
     """A cheap bracket of an operand's value: (phi, radius) from the coarse leaf containing ``x`` (the field is
-    1-Lipschitz, so the value at ``x`` lies within ``radius`` of the leaf's); radius -1 in the finest band."""
+    1-Lipschitz, so the value at ``x`` lies within ``radius`` of the leaf's); radius -1 in the finest band. Also
+    returns that leaf (``x`` clamped into the domain)."""
     xc = clamp_to_domain(f, x)
     leaf = locate_leaf(f, xc)
     if leaf[1] == 0:
-        return 0.0, -1.0
+        return 0.0, -1.0, leaf[0]
     s = level_spacing(f, leaf[1])
     centre = node_center(f.origin, s, f.coords[leaf[0]])
     phi = f.values[leaf[0]]
     out = wp.length(x - xc)
     if out > 0.0:
         phi = wp.max(phi, 0.0) + out
-    return phi, wp.length(xc - centre)
+    return phi, wp.length(xc - centre), leaf[0]
 
 
 @wp.kernel(enable_backward=False)
@@ -185,23 +194,27 @@ def _combine_nodes_kernel(
     # the MLS sample only when that operand can decide the result (its bracket overlaps the other's within blend).
     fa, va, ga, ja = _lookup_node(a, a_aligned, a_offset, c, x, a_octets, a_first, i)
     fb, vb, gb, jb = _lookup_node(b, b_aligned, b_offset, c, x, b_octets, b_first, i)
+    # each operand's node the value came from, where a look-up below finds one (for the source id): on coarse levels
+    # the operand's node of that level at x (or its coarser leaf), on the finest its leaf containing x
+    leaf_a = int(-1)
+    leaf_b = int(-1)
     if precise == 0:
         # coarse levels: each operand's containing leaf, extrapolated along its gradient
         if fa == 0:
-            r = _extrapolate(a, x, spacing)
+            r, leaf_a = _extrapolate(a, x, spacing)
             va = r[0]
             ga = wp.vec3(r[1], r[2], r[3])
         if fb == 0:
-            r = _extrapolate(b, x, spacing)
+            r, leaf_b = _extrapolate(b, x, spacing)
             vb = r[0]
             gb = wp.vec3(r[1], r[2], r[3])
     else:
         rad_a = float(0.0)
         rad_b = float(0.0)
         if fa == 0:
-            va, rad_a = _estimate(a, x)
+            va, rad_a, leaf_a = _estimate(a, x)
         if fb == 0:
-            vb, rad_b = _estimate(b, x)
+            vb, rad_b, leaf_b = _estimate(b, x)
         if rad_a < 0.0:
             r = _sample(a, x)
             va = r[0]
@@ -246,15 +259,19 @@ def _combine_nodes_kernel(
     r = rb
     follow = b
     node = jb
+    leaf = leaf_b
     if use_a:
         r = ra
         follow = a
         node = ja
+        leaf = leaf_a
     g = wp.vec3(r[1], r[2], r[3])
     proj[i] = x - r[0] * g
     dist[i] = wp.abs(phi)
     sign[i] = wp.where(phi < 0.0, -1.0, 1.0)
     values[t] = phi
+    if node < 0:
+        node = leaf
     if node < 0:
         node = locate_leaf(follow, clamp_to_domain(follow, x))[0]
     source[i] = follow.source[node]
@@ -267,7 +284,8 @@ def _bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec
     found, phi, g, j = _lookup(f, aligned, offset, c, x)
     if found == 1:
         return phi, 0.0
-    return _estimate(f, x)
+    phi, radius, leaf = _estimate(f, x)
+    return phi, radius
 
 
 @wp.func
