@@ -23,14 +23,19 @@ from .octree import morton_encode, node_center
 from .sampling import (
     FieldArg,
     clamp_to_domain,
+    coarse_mls,
+    coarse_neighbours,
     inside_domain,
     level_spacing,
     locate_leaf,
     locate_node,
     sample_mls,
+    vec27i,
 )
 
 OP_UNION, OP_INTERSECTION, OP_DIFFERENCE = 0, 1, 2
+# Consecutive nodes per thread of the combination (an octet on the sparse levels).
+COMBINE_GROUP = 8
 # Finest octets are kept where some node is within this many voxels of the result's surface.
 KEEP_BAND = 2.5
 
@@ -116,6 +121,19 @@ def _sample(f: FieldArg, x: wp.vec3) -> wp.vec4:
 
 
 @wp.func
+def _coarse_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, count: int, ids: vec27i, levels: vec27i) -> wp.vec4:
+    """:func:`_sample` where ``x`` (clamped into the domain) lies in coarse leaf ``leaf`` (index, level), whose
+    neighbours (:func:`coarse_neighbours`) are given: the same value, without gathering them again."""
+    xc = clamp_to_domain(f, x)
+    r = coarse_mls(f, count, ids, levels, xc, level_spacing(f, leaf[1]), f.values[leaf[0]])
+    out = wp.length(x - xc)
+    if out > 0.0:
+        gd = (x - xc) / out
+        return wp.vec4(wp.max(r[0], 0.0) + out, gd[0], gd[1], gd[2])
+    return r
+
+
+@wp.func
 def _extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
     """(phi, grad) from the operand's node containing ``x`` with the given spacing, or the coarser leaf containing it:
     its value carried along its exact gradient (the direction from its closest point), i.e. the distance to its
@@ -143,18 +161,18 @@ def _extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
 def _estimate(f: FieldArg, x: wp.vec3):
     """A cheap bracket of an operand's value: (phi, radius) from the coarse leaf containing ``x`` (the field is
     1-Lipschitz, so the value at ``x`` lies within ``radius`` of the leaf's); radius -1 in the finest band. Also
-    returns that leaf (``x`` clamped into the domain)."""
+    returns that leaf (index, level; ``x`` clamped into the domain)."""
     xc = clamp_to_domain(f, x)
     leaf = locate_leaf(f, xc)
     if leaf[1] == 0:
-        return 0.0, -1.0, leaf[0]
+        return 0.0, -1.0, leaf
     s = level_spacing(f, leaf[1])
     centre = node_center(f.origin, s, f.coords[leaf[0]])
     phi = f.values[leaf[0]]
     out = wp.length(x - xc)
     if out > 0.0:
         phi = wp.max(phi, 0.0) + out
-    return phi, wp.length(xc - centre), leaf[0]
+    return phi, wp.length(xc - centre), leaf
 
 
 @wp.kernel(enable_backward=False)
@@ -166,7 +184,10 @@ def _combine_nodes_kernel(
     a_offset: wp.vec3i,
     b_offset: wp.vec3i,
     coords: wp.array[wp.vec3i],
-    lo: int,
+    first: int,
+    end: int,
+    group: int,
+    values_lo: int,
     origin: wp.vec3,
     spacing: float,
     op: int,
@@ -182,99 +203,120 @@ def _combine_nodes_kernel(
     a_first: wp.array[wp.int32],
     b_first: wp.array[wp.int32],
 ):
-    """Value of the boolean at each node of one level: both operands looked up or sampled, then combined. The
-    operand whose value the combination follows gives the projection point and the source id. On the finest level,
-    ``a_first``/``b_first`` give each result octet's first node in an operand whose octets coincide with the
-    result's (``a_octets``/``b_octets``), found by the bracket pass."""
-    t = wp.tid()
-    i = lo + t
-    c = coords[i]
-    x = node_center(origin, spacing, c)
-    # Exact node values where the lattices align; elsewhere a cheap bracket from the containing coarse leaf, and
-    # the MLS sample only when that operand can decide the result (its bracket overlaps the other's within blend).
-    fa, va, ga, ja = _lookup_node(a, a_aligned, a_offset, c, x, a_octets, a_first, i)
-    fb, vb, gb, jb = _lookup_node(b, b_aligned, b_offset, c, x, b_octets, b_first, i)
-    # each operand's node the value came from, where a look-up below finds one (for the source id): on coarse levels
-    # the operand's node of that level at x (or its coarser leaf), on the finest its leaf containing x
-    leaf_a = int(-1)
-    leaf_b = int(-1)
-    if precise == 0:
-        # coarse levels: each operand's containing leaf, extrapolated along its gradient
-        if fa == 0:
-            r, leaf_a = _extrapolate(a, x, spacing)
-            va = r[0]
-            ga = wp.vec3(r[1], r[2], r[3])
-        if fb == 0:
-            r, leaf_b = _extrapolate(b, x, spacing)
-            vb = r[0]
-            gb = wp.vec3(r[1], r[2], r[3])
-    else:
-        rad_a = float(0.0)
-        rad_b = float(0.0)
-        if fa == 0:
-            va, rad_a, leaf_a = _estimate(a, x)
-        if fb == 0:
-            vb, rad_b, leaf_b = _estimate(b, x)
-        if rad_a < 0.0:
-            r = _sample(a, x)
-            va = r[0]
-            ga = wp.vec3(r[1], r[2], r[3])
-            rad_a = 0.0
-        if rad_b < 0.0:
-            r = _sample(b, x)
-            vb = r[0]
-            gb = wp.vec3(r[1], r[2], r[3])
-            rad_b = 0.0
-        # bracket of the second argument as the operation sees it (difference uses -b)
-        tb = vb
-        if op == 2:
-            tb = -vb
-        need_a = int(1)
-        need_b = int(1)
-        if op == 0:
-            if tb - rad_b >= va + rad_a + blend:
-                need_b = 0
-            elif va - rad_a >= tb + rad_b + blend:
-                need_a = 0
+    """Value of the boolean at nodes [first, end) of one level, ``group`` consecutive nodes per thread (an octet on
+    the sparse levels): both operands looked up or sampled, then combined. The operand whose value the
+    combination follows gives the projection point and the source id. On the finest level, ``a_first``/``b_first``
+    give each result octet's first node in an operand whose octets coincide with the result's
+    (``a_octets``/``b_octets``), found by the bracket pass. ``values`` holds the nodes from ``values_lo`` on. The
+    nodes of a group mostly share an operand's coarse leaf, whose neighbours an MLS sample reads: they are gathered
+    once per leaf."""
+    i0 = first + group * wp.tid()
+    i1 = wp.min(i0 + group, end)
+    cached_a = int(-1)
+    count_a = int(0)
+    ids_a = vec27i()
+    levels_a = vec27i()
+    cached_b = int(-1)
+    count_b = int(0)
+    ids_b = vec27i()
+    levels_b = vec27i()
+    for i in range(i0, i1):
+        c = coords[i]
+        x = node_center(origin, spacing, c)
+        # Exact node values where the lattices align; elsewhere a cheap bracket from the containing coarse leaf, and
+        # the MLS sample only when that operand can decide the result (its bracket overlaps the other's within
+        # blend).
+        fa, va, ga, ja = _lookup_node(a, a_aligned, a_offset, c, x, a_octets, a_first, i)
+        fb, vb, gb, jb = _lookup_node(b, b_aligned, b_offset, c, x, b_octets, b_first, i)
+        # each operand's node the value came from, where a look-up below finds one (for the source id): on coarse
+        # levels the operand's node of that level at x (or its coarser leaf), on the finest its leaf containing x
+        leaf_a = wp.vec2i(-1, 0)
+        leaf_b = wp.vec2i(-1, 0)
+        if precise == 0:
+            # coarse levels: each operand's containing leaf, extrapolated along its gradient
+            if fa == 0:
+                r, node_a = _extrapolate(a, x, spacing)
+                leaf_a = wp.vec2i(node_a, 0)
+                va = r[0]
+                ga = wp.vec3(r[1], r[2], r[3])
+            if fb == 0:
+                r, node_b = _extrapolate(b, x, spacing)
+                leaf_b = wp.vec2i(node_b, 0)
+                vb = r[0]
+                gb = wp.vec3(r[1], r[2], r[3])
         else:
-            if tb + rad_b <= va - rad_a - blend:
-                need_b = 0
-            elif va + rad_a <= tb - rad_b - blend:
-                need_a = 0
-        if need_a == 1 and rad_a > 0.0:
-            r = _sample(a, x)
-            va = r[0]
-            ga = wp.vec3(r[1], r[2], r[3])
-        if need_b == 1 and rad_b > 0.0:
-            r = _sample(b, x)
-            vb = r[0]
-            gb = wp.vec3(r[1], r[2], r[3])
-    ra = wp.vec4(va, ga[0], ga[1], ga[2])
-    rb = wp.vec4(vb, gb[0], gb[1], gb[2])
-    phi = sdf_combine(op, ra[0], rb[0], blend)
-    b_term = rb[0]
-    if op == 2:
-        b_term = -rb[0]
-    use_a = wp.abs(phi - ra[0]) <= wp.abs(phi - b_term)
-    r = rb
-    follow = b
-    node = jb
-    leaf = leaf_b
-    if use_a:
-        r = ra
-        follow = a
-        node = ja
-        leaf = leaf_a
-    g = wp.vec3(r[1], r[2], r[3])
-    proj[i] = x - r[0] * g
-    dist[i] = wp.abs(phi)
-    sign[i] = wp.where(phi < 0.0, -1.0, 1.0)
-    values[t] = phi
-    if node < 0:
-        node = leaf
-    if node < 0:
-        node = locate_leaf(follow, clamp_to_domain(follow, x))[0]
-    source[i] = follow.source[node]
+            rad_a = float(0.0)
+            rad_b = float(0.0)
+            if fa == 0:
+                va, rad_a, leaf_a = _estimate(a, x)
+            if fb == 0:
+                vb, rad_b, leaf_b = _estimate(b, x)
+            if rad_a < 0.0:
+                r = _sample(a, x)
+                va = r[0]
+                ga = wp.vec3(r[1], r[2], r[3])
+                rad_a = 0.0
+            if rad_b < 0.0:
+                r = _sample(b, x)
+                vb = r[0]
+                gb = wp.vec3(r[1], r[2], r[3])
+                rad_b = 0.0
+            # bracket of the second argument as the operation sees it (difference uses -b)
+            tb = vb
+            if op == 2:
+                tb = -vb
+            need_a = int(1)
+            need_b = int(1)
+            if op == 0:
+                if tb - rad_b >= va + rad_a + blend:
+                    need_b = 0
+                elif va - rad_a >= tb + rad_b + blend:
+                    need_a = 0
+            else:
+                if tb + rad_b <= va - rad_a - blend:
+                    need_b = 0
+                elif va + rad_a <= tb - rad_b - blend:
+                    need_a = 0
+            if need_a == 1 and rad_a > 0.0:
+                if leaf_a[0] != cached_a:
+                    count_a, ids_a, levels_a = coarse_neighbours(a, leaf_a[0], leaf_a[1])
+                    cached_a = leaf_a[0]
+                r = _coarse_sample(a, x, leaf_a, count_a, ids_a, levels_a)
+                va = r[0]
+                ga = wp.vec3(r[1], r[2], r[3])
+            if need_b == 1 and rad_b > 0.0:
+                if leaf_b[0] != cached_b:
+                    count_b, ids_b, levels_b = coarse_neighbours(b, leaf_b[0], leaf_b[1])
+                    cached_b = leaf_b[0]
+                r = _coarse_sample(b, x, leaf_b, count_b, ids_b, levels_b)
+                vb = r[0]
+                gb = wp.vec3(r[1], r[2], r[3])
+        ra = wp.vec4(va, ga[0], ga[1], ga[2])
+        rb = wp.vec4(vb, gb[0], gb[1], gb[2])
+        phi = sdf_combine(op, ra[0], rb[0], blend)
+        b_term = rb[0]
+        if op == 2:
+            b_term = -rb[0]
+        use_a = wp.abs(phi - ra[0]) <= wp.abs(phi - b_term)
+        r = rb
+        follow = b
+        node = jb
+        leaf = leaf_b[0]
+        if use_a:
+            r = ra
+            follow = a
+            node = ja
+            leaf = leaf_a[0]
+        g = wp.vec3(r[1], r[2], r[3])
+        proj[i] = x - r[0] * g
+        dist[i] = wp.abs(phi)
+        sign[i] = wp.where(phi < 0.0, -1.0, 1.0)
+        values[i - values_lo] = phi
+        if node < 0:
+            node = leaf
+        if node < 0:
+            node = locate_leaf(follow, clamp_to_domain(follow, x))[0]
+        source[i] = follow.source[node]
 
 
 @wp.func
@@ -284,7 +326,7 @@ def _bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec
     found, phi, g, j = _lookup(f, aligned, offset, c, x)
     if found == 1:
         return phi, 0.0
-    phi, radius, leaf = _estimate(f, x)
+    phi, radius, _leaf = _estimate(f, x)
     return phi, radius
 
 
@@ -656,9 +698,10 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
             a_first if finest else no_octets,
             b_first if finest else no_octets,
         ]
+        group = COMBINE_GROUP
         octree.launch_split(
             _combine_nodes_kernel,
-            hi_ - lo_,
+            (hi_ - lo_ + group - 1) // group,
             lambda start, n: [
                 a_arg,
                 b_arg,
@@ -666,7 +709,10 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
                 offs[0],
                 offs[1],
                 coords,
-                lo_ + start,
+                lo_ + group * start,
+                min(hi_, lo_ + group * (start + n)),
+                group,
+                lo_,
                 origin_v,
                 float(spacing_),
                 int(op),
@@ -676,7 +722,7 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
                 proj,
                 source,
                 sign,
-                values[start : start + n],
+                values,
                 *octet_args,
             ],
             device,

@@ -11,7 +11,8 @@ the time and memory; it remains the fallback for other Warp versions). Vertices 
 mesh is watertight wherever the zero set stays inside the band.
 :func:`extract_octree_level` does the same on a field's finest level as stored (Morton order, complete octets):
 each cube's corners come from its octet's +x/+y/+z neighbour octets, found through the tree's child links, so
-nothing is sorted and nothing leaves the device. ``bench/extract_compare.py`` measures this against scikit-image's marching cubes run on dense 16^3 blocks.
+nothing is sorted and nothing leaves the device. ``bench/extract_compare.py`` measures this against scikit-image's
+marching cubes run on dense 16^3 blocks.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import warp as wp
 import warp.geometry
 
 from .errors import AasdfError
-from .octree import launch_split, morton_decode, morton_encode
+from .octree import launch_split
 
 try:  # the marching-cubes core of Warp's sparse_marching_cubes_from_cells, given already shared corners
     from warp._src.geometry import sparse_marching_cubes as _warp_mc
@@ -244,9 +245,7 @@ _CORNER_BITS_Z = int(sum(int(_CORNER_OFFSETS[c][2]) << c for c in range(8)))
 
 
 @wp.func
-def _octet_first_node(
-    child: wp.array[wp.int32], top_offset: int, top_dims: wp.vec3i, levels: int, q: wp.vec3i
-) -> int:
+def _octet_first_node(child: wp.array[wp.int32], top_offset: int, top_dims: wp.vec3i, levels: int, q: wp.vec3i) -> int:
     """First finest node of the octet at octet coordinates ``q`` (level-1 lattice), or -1 when the tree has none there:
     the top cell holding it, then the child links down to level 1 (children in Morton order)."""
     shift = levels - 2

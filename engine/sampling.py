@@ -107,28 +107,95 @@ def cubic_spline(q: float) -> float:
 
 
 @wp.func
+def coarse_neighbours(f: FieldArg, leaf: int, level: int):
+    """The distinct leaves at the centres of coarse leaf ``leaf`` (on ``level`` > 0) and its 26 neighbour cells, as
+    :func:`coarse_mls` reads them: (count, their indices (27,), their levels (27,)). The same for every point of the
+    leaf, so callers with many points in one leaf find them once."""
+    s = level_spacing(f, level)
+    c = node_center(f.origin, s, f.coords[leaf])
+    ids = vec27i()
+    levels = vec27i()
+    count = int(0)
+    for o in range(27):
+        off = wp.vec3(float(o % 3 - 1), float((o // 3) % 3 - 1), float(o // 9 - 1))
+        q = c + s * off
+        if inside_domain(f, q):
+            nb = locate_leaf(f, q)
+            dup = int(0)
+            for t in range(count):
+                if ids[t] == nb[0]:
+                    dup = int(1)
+            if dup == 0:
+                ids[count] = nb[0]
+                levels[count] = nb[1]
+                count += 1
+    return count, ids, levels
+
+
+@wp.func
+def coarse_mls(
+    f: FieldArg, count: int, ids: vec27i, levels: vec27i, x: wp.vec3, s: float, leaf_value: float
+) -> wp.vec4:
+    """:func:`sample_mls` at ``x`` in a coarse leaf of spacing ``s`` and value ``leaf_value``, from its neighbours
+    (:func:`coarse_neighbours`). A coarser leaf holds no surface, so the whole cell has the leaf's sign; each
+    neighbour predicts the distance from ``x`` to its own exact closest point, and the MLS fit is of constant order
+    over those predictions: second-order accurate where the linear fit would smooth over curvature and medial axes."""
+    leaf_sign = wp.where(leaf_value < 0.0, -1.0, 1.0)
+    wsum = float(0.0)
+    gsum = wp.vec3(0.0)
+    best = float(1.0e30)
+    plane = float(1.0e30)
+    for t in range(count):
+        sn = level_spacing(f, levels[t])
+        xn = node_center(f.origin, sn, f.coords[ids[t]])
+        radius = 2.0 * wp.max(s, sn)
+        w = cubic_spline(2.0 * wp.length(xn - x) / radius)
+        if w > 0.0:
+            p = f.proj[ids[t]]
+            r = x - p
+            dist = wp.length(r)
+            if dist < best:
+                best = dist
+                # the neighbour's surface normal: from its closest point towards the node
+                nrm = xn - p
+                ln = wp.length(nrm)
+                gsum = r / wp.max(dist, 1.0e-20)
+                if ln > 0.0:
+                    gsum = nrm / ln
+                    plane = wp.abs(wp.dot(r, gsum))
+            wsum += w
+    if wsum <= 0.0:
+        return wp.vec4(leaf_value, 0.0, 0.0, 0.0)
+    g = leaf_sign * gsum
+    # The tangent plane of the nearest closest point corrects the point distance when x's foot on that plane is
+    # within a cell of it (a locally flat patch); beyond that the plane may run past the surface's edge.
+    est = float(best)
+    if plane < best:
+        tangential = wp.sqrt(wp.max(best * best - plane * plane, 0.0))
+        if tangential <= 0.5 * s:
+            est = plane
+    return wp.vec4(leaf_sign * est, g[0], g[1], g[2])
+
+
+@wp.func
 def sample_mls(f: FieldArg, x: wp.vec3) -> wp.vec4:
     """(phi, dphi/dx, dphi/dy, dphi/dz) at ``x`` inside the domain by moving least squares.
 
     In a finest leaf (the narrow band around the surface) this is the paper's linear MLS fit of the neighbours'
-    values (Eq. 9-10). A coarser leaf holds no surface, so the whole cell has the leaf's sign; there each neighbour
-    predicts the distance from ``x`` to its own exact closest point, and the MLS fit is of constant order over those
-    predictions: second-order accurate where the linear fit would smooth over curvature and medial axes.
+    values (Eq. 9-10); in a coarser leaf :func:`coarse_mls`.
     """
     leaf = locate_leaf(f, x)
     s = level_spacing(f, leaf[1])
+    if leaf[1] > 0:
+        count, ids, levels = coarse_neighbours(f, leaf[0], leaf[1])
+        return coarse_mls(f, count, ids, levels, x, s, f.values[leaf[0]])
     c = node_center(f.origin, s, f.coords[leaf[0]])
-    leaf_sign = wp.where(f.values[leaf[0]] < 0.0, -1.0, 1.0)
-    coarse = leaf[1] > 0
     ids = vec27i()
     count = int(0)
     ata = wp.mat44(0.0)
     atb = wp.vec4(0.0)
     wsum = float(0.0)
     vsum = float(0.0)
-    gsum = wp.vec3(0.0)
-    best = float(1.0e30)
-    plane = float(1.0e30)
     for o in range(27):
         off = wp.vec3(float(o % 3 - 1), float((o // 3) % 3 - 1), float(o // 9 - 1))
         q = c + s * off
@@ -146,39 +213,15 @@ def sample_mls(f: FieldArg, x: wp.vec3) -> wp.vec4:
                 radius = 2.0 * wp.max(s, sn)
                 w = cubic_spline(2.0 * wp.length(xn - x) / radius)
                 if w > 0.0:
-                    if coarse:
-                        p = f.proj[nb[0]]
-                        r = x - p
-                        dist = wp.length(r)
-                        if dist < best:
-                            best = dist
-                            # the neighbour's surface normal: from its closest point towards the node
-                            nrm = xn - p
-                            ln = wp.length(nrm)
-                            gsum = r / wp.max(dist, 1.0e-20)
-                            if ln > 0.0:
-                                gsum = nrm / ln
-                                plane = wp.abs(wp.dot(r, gsum))
-                    else:
-                        d = (xn - x) / s
-                        b = wp.vec4(1.0, d[0], d[1], d[2])
-                        ata += w * wp.outer(b, b)
-                        phi = f.values[nb[0]]
-                        atb += (w * phi) * b
-                        vsum += w * phi
+                    d = (xn - x) / s
+                    b = wp.vec4(1.0, d[0], d[1], d[2])
+                    ata += w * wp.outer(b, b)
+                    phi = f.values[nb[0]]
+                    atb += (w * phi) * b
+                    vsum += w * phi
                     wsum += w
     if wsum <= 0.0:
         return wp.vec4(f.values[leaf[0]], 0.0, 0.0, 0.0)
-    if coarse:
-        g = leaf_sign * gsum
-        # The tangent plane of the nearest closest point corrects the point distance when x's foot on that plane
-        # is within a cell of it (a locally flat patch); beyond that the plane may run past the surface's edge.
-        est = float(best)
-        if plane < best:
-            tangential = wp.sqrt(wp.max(best * best - plane * plane, 0.0))
-            if tangential <= 0.5 * s:
-                est = plane
-        return wp.vec4(leaf_sign * est, g[0], g[1], g[2])
     # A small ridge on the gradient keeps one-sided neighbourhoods well posed.
     ridge = 1.0e-4 * wsum
     ata[1, 1] += ridge

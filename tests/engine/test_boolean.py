@@ -159,6 +159,20 @@ def test_operands_of_one_level_give_a_sparse_level_under_a_dense_one():
         assert np.abs(got - usual)[~far].max() < 0.1 * h
 
 
+@pytest.mark.parametrize(("op", "b_spacing"), [("UNION", 1.0), ("DIFFERENCE", 1.5), ("UNION", 1.37)])
+def test_nodes_combined_in_groups_match_nodes_combined_one_by_one(op, b_spacing, monkeypatch):
+    # a thread combines a group of consecutive nodes and gathers an operand's coarse-leaf neighbours for its MLS
+    # samples once per leaf: the same field as one node per thread (with b coarser, b's leaves change within groups)
+    a, b = _pair("stanford-bunny.obj", "spot.obj", (0.2, 0.0, 0.05))
+    h = _voxel(a, b, res=160)
+    fa, fb = engine.build_field(*a, voxel_size=h), engine.build_field(*b, voxel_size=b_spacing * h)
+    grouped = OPS[op](fa, fb)
+    monkeypatch.setattr(engine.boolean, "COMBINE_GROUP", 1)
+    single = OPS[op](fa, fb)
+    for name in ("codes", "values", "proj", "source"):
+        np.testing.assert_array_equal(getattr(grouped, name).numpy(), getattr(single, name).numpy(), err_msg=name)
+
+
 def _level_keys(field):
     """Per node: its level and its cell on that level of the shared world lattice (so nodes of aligned fields match)."""
     lv = field.level_of_nodes()

@@ -270,6 +270,7 @@ def test_mesh_checks_count_every_edge_and_weld_every_repeated_position():
     np.testing.assert_array_equal(index, inverse.reshape(-1)[seams])
     np.testing.assert_array_equal(positions[index], doubled[seams])  # the same triangles
 
+
 def test_level_neighbours_are_exactly_the_face_adjacent_nodes():
     verts, tris = uv_sphere(1.0, rings=24, segments=48)
     field = engine.build_field(verts, tris, voxel_size=0.08)
