@@ -1891,10 +1891,16 @@ def level_layout(octets, top_dims, levels: int, device, timings: dict | None = N
     top_dims = np.asarray(top_dims, dtype=np.int64)
     fine_dims = top_dims * 2 ** (levels - 1)
     level_octets = [] if octets is None else [octets]
+    parent_index = []  # per octet of a level, its parent's octet among the next level's (all but the last)
     for k in range(1, levels - 1):
         # every level is sorted by code, so the parents of its octets come in order
         dims_k = fine_dims >> k
-        level_octets.append(octree.parent_octets(level_octets[-1], 1, end_bit=3 * _bits(dims_k * 2), presorted=True))
+        up, index = octree.parent_octets(
+            level_octets[-1], 1, end_bit=3 * _bits(dims_k * 2), presorted=True, return_index=True
+        )
+        level_octets.append(up)
+        parent_index.append(index)
+    parent_index.append(wp.empty(0, dtype=wp.int32, device=device))  # the dense top level: by coordinates
     sizes = [8 * o.shape[0] for o in level_octets] + [int(np.prod(top_dims))]
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     n = int(offsets[-1])
@@ -1906,17 +1912,22 @@ def level_layout(octets, top_dims, levels: int, device, timings: dict | None = N
     octree.dense_level(top_dims, codes[int(offsets[-2]) :], coords[int(offsets[-2]) :])
     child = wp.full(n, -1, dtype=wp.int32, device=device)
     parent = wp.full(n, -1, dtype=wp.int32, device=device)
-    for k in range(1, len(sizes)):
-        lo, hi = int(offsets[k]), int(offsets[k + 1])
-        child_lo = int(offsets[k - 1])
+    dims_v = wp.vec3i(*(int(d) for d in top_dims))
+    for k, o in enumerate(level_octets):
         octree.launch_split(
-            octree._link_children_kernel,
-            hi - lo,
-            lambda start, _n, child_lo=child_lo, lo=lo: [codes, codes, child_lo, lo, lo + start, child],
+            octree._link_octets_kernel,
+            o.shape[0],
+            lambda start, _n, k=k, o=o: [
+                start,
+                o,
+                parent_index[k],
+                int(offsets[k]),
+                int(offsets[k + 1]),
+                dims_v,
+                child,
+                parent,
+            ],
             device,
-        )
-        octree.launch_split(
-            octree._link_parents_kernel, hi - lo, lambda start, _n, lo=lo: [child, lo + start, parent], device
         )
     if timings is not None:
         timings["levels_structure"] = timings.get("levels_structure", 0.0) + time.perf_counter() - t0

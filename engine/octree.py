@@ -372,11 +372,19 @@ def _mark_unique_kernel(first: int, keys: wp.array[wp.int64], flags: wp.array[wp
 
 @wp.kernel(enable_backward=False)
 def _compact_unique_kernel(
-    first: int, keys: wp.array[wp.int64], flags: wp.array[wp.int32], slots: wp.array[wp.int32], out: wp.array[wp.int64]
+    first: int,
+    keys: wp.array[wp.int64],
+    flags: wp.array[wp.int32],
+    slots: wp.array[wp.int32],
+    out: wp.array[wp.int64],
+    index: wp.array[wp.int32],
 ):
+    """Key ``first + tid`` to its slot if it is the first of its run; its run's slot to ``index`` (when not empty)."""
     i = first + wp.tid()
     if flags[i] == 1:
         out[slots[i]] = keys[i]
+    if index.shape[0] > 0:
+        index[i] = slots[i] + flags[i] - 1
 
 
 def _radix_sort(work_keys: wp.array, n: int, end_bit: int) -> wp.array:
@@ -388,13 +396,17 @@ def _radix_sort(work_keys: wp.array, n: int, end_bit: int) -> wp.array:
     return work_keys[:n]
 
 
-def sort_unique(keys: wp.array, end_bit: int = 63, *, presorted: bool = False) -> wp.array:
+def sort_unique(keys: wp.array, end_bit: int = 63, *, presorted: bool = False, return_index: bool = False):
     """Sorted unique values of an int64 array (radix sort, mark first occurrences, exclusive scan, compact);
-    ``presorted``: the keys are already non-decreasing, only duplicates go."""
+    ``presorted``: the keys are already non-decreasing, only duplicates go, and ``return_index`` also returns where
+    each key went: ``(unique, index)`` with ``unique[index[i]] == keys[i]`` (int32)."""
     n = keys.shape[0]
     device = keys.device
+    if return_index and not presorted:
+        raise ValueError("sort_unique returns indices only for presorted keys")
     if n == 0:
-        return wp.empty(0, dtype=wp.int64, device=device)
+        out = wp.empty(0, dtype=wp.int64, device=device)
+        return (out, wp.empty(0, dtype=wp.int32, device=device)) if return_index else out
     if presorted:
         sorted_keys = keys
     else:
@@ -407,8 +419,9 @@ def sort_unique(keys: wp.array, end_bit: int = 63, *, presorted: bool = False) -
     wp.utils.array_scan(flags, slots, inclusive=False)
     count = int(slots.numpy()[-1] + flags.numpy()[-1])
     out = wp.empty(count, dtype=wp.int64, device=device)
-    launch_split(_compact_unique_kernel, n, lambda lo, _n: [lo, sorted_keys, flags, slots, out], device)
-    return out
+    index = wp.empty(n if return_index else 0, dtype=wp.int32, device=device)
+    launch_split(_compact_unique_kernel, n, lambda lo, _n: [lo, sorted_keys, flags, slots, out, index], device)
+    return (out, index) if return_index else out
 
 
 # ---- levels: parents, siblings, children ----
@@ -444,15 +457,16 @@ def expand_octets(octets: wp.array, codes: wp.array | None = None, coords: wp.ar
     return codes, coords
 
 
-def parent_octets(codes: wp.array, levels_up: int, end_bit: int, *, presorted: bool = False) -> wp.array:
+def parent_octets(codes: wp.array, levels_up: int, end_bit: int, *, presorted: bool = False, return_index=False):
     """Unique codes ``levels_up`` levels above (Eq. 6 with ``levels_up=2``: grandparents whose 8 children are the
-    parents and their siblings). ``presorted``: ``codes`` ascend, and so do their shifted codes: no sort needed."""
+    parents and their siblings). ``presorted``: ``codes`` ascend, and so do their shifted codes: no sort needed; then
+    ``return_index`` also returns each code's parent's index in the result (see :func:`sort_unique`)."""
     shifted = wp.empty_like(codes)
     if codes.shape[0]:
         launch_split(
             _shift_codes_kernel, codes.shape[0], lambda lo, _n: [lo, codes, 3 * levels_up, shifted], codes.device
         )
-    return sort_unique(shifted, end_bit=end_bit, presorted=presorted)
+    return sort_unique(shifted, end_bit=end_bit, presorted=presorted, return_index=return_index)
 
 
 @wp.kernel(enable_backward=False)
@@ -473,28 +487,31 @@ def dense_level(dims, codes: wp.array, coords: wp.array) -> None:
 
 
 @wp.kernel(enable_backward=False)
-def _link_children_kernel(
-    parent_codes: wp.array[wp.int64],
-    child_codes: wp.array[wp.int64],
+def _link_octets_kernel(
+    first: int,
+    octets: wp.array[wp.int64],
+    parent_index: wp.array[wp.int32],
     child_lo: int,
-    child_hi: int,
-    parent_base: int,
-    first_child: wp.array[wp.int32],
+    parent_lo: int,
+    top_dims: wp.vec3i,
+    child: wp.array[wp.int32],
+    parent: wp.array[wp.int32],
 ):
-    """First child of each node (global index) or -1 for a leaf; children of a node are 8 consecutive entries.
-    Node ``parent_base + tid``."""
-    i = wp.tid()
-    j = find_key(child_codes, child_lo, child_hi, parent_codes[parent_base + i] << wp.int64(3))
-    first_child[parent_base + i] = j
-
-
-@wp.kernel(enable_backward=False)
-def _link_parents_kernel(first_child: wp.array[wp.int32], lo: int, parent: wp.array[wp.int32]):
-    i = lo + wp.tid()
-    c = first_child[i]
-    if c >= 0:
-        for o in range(8):
-            parent[c + o] = i
+    """Octet ``first + tid`` of a level (its 8 nodes from ``child_lo``, in octet order) and the node it is the
+    children of on the level above (from ``parent_lo``): there node 8 * ``parent_index`` + its octant, where that
+    level is sparse (built from its parents' sorted codes, see :func:`parent_octets`), or its place in the dense top
+    level (x fastest; ``parent_index`` empty)."""
+    i = first + wp.tid()
+    code = octets[i]
+    p = int(0)
+    if parent_index.shape[0] > 0:
+        p = parent_lo + 8 * parent_index[i] + int(code & wp.int64(7))
+    else:
+        q = morton_decode(code)
+        p = parent_lo + q[0] + top_dims[0] * (q[1] + top_dims[1] * q[2])
+    child[p] = child_lo + 8 * i
+    for o in range(8):
+        parent[child_lo + 8 * i + o] = p
 
 
 @wp.kernel(enable_backward=False)

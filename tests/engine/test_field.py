@@ -271,6 +271,30 @@ def test_mesh_checks_count_every_edge_and_weld_every_repeated_position():
     np.testing.assert_array_equal(positions[index], doubled[seams])  # the same triangles
 
 
+@pytest.mark.parametrize("levels", [2, 3, 5])
+def test_level_layout_links_each_node_to_its_parent_and_children(levels):
+    # the links come from where each octet's parent went among the next level's octets (no search): every node
+    # below the top has the parent whose code is its own without the octant, which has it among its 8 children
+    verts, tris = torus_mesh(1.0, 0.35)
+    field = engine.build_field(verts, tris, voxel_size=0.05, levels=levels)
+    n0 = field.level_counts[0]
+    octets = wp.array(field.codes.numpy()[:n0:8] >> 3, dtype=wp.int64)
+    layout = engine.field.level_layout(octets, field.top_dims, levels, octets.device)
+    codes, coords = layout["codes"].numpy(), layout["coords"].numpy()
+    child, parent, offsets = layout["child"].numpy(), layout["parent"].numpy(), layout["offsets"]
+    np.testing.assert_array_equal(codes, field.codes.numpy())
+    top = slice(int(offsets[-2]), int(offsets[-1]))
+    assert np.all(parent[top] == -1)
+    below = np.arange(int(offsets[-2]))
+    p = parent[below]
+    lv = np.searchsorted(offsets, below, side="right") - 1
+    assert np.all(p >= offsets[lv + 1]) and np.all(p < offsets[lv + 2])  # on the next level
+    np.testing.assert_array_equal(coords[p], coords[below] // 2)
+    np.testing.assert_array_equal(child[p] + (codes[below] & 7), below)
+    internal = np.flatnonzero(child >= 0)
+    assert len(internal) * 8 == int(offsets[-2])  # every node below the top is one parent's child
+
+
 def test_level_neighbours_are_exactly_the_face_adjacent_nodes():
     verts, tris = uv_sphere(1.0, rings=24, segments=48)
     field = engine.build_field(verts, tris, voxel_size=0.08)
