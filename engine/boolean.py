@@ -333,14 +333,15 @@ def _bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec
 @wp.func
 def _octet_source(f: FieldArg, octet_mode: int, offset: wp.vec3i, oc: wp.vec3i, origin: wp.vec3, spacing: float):
     """Where an operand holds result octet ``oc`` when its lattice is aligned at octet granularity: (index of the
-    octet's first child in its finest level, or -1; else the coarse leaf covering the whole octet, or -1; its level).
+    octet's first child in its finest level, or -1; else the coarse leaf covering the whole octet, or -1; its level,
+    -1 when the octet lies outside the operand's domain).
     The octet is a level-1 cell of the operand: a descent from its dense top level finds the node of that cell, whose
     8 children are the octet when it has any (an operand's finest level is octet-complete and every octet has its
     parent), or the coarser leaf that covers it."""
     if octet_mode == 1:
         x = origin + 2.0 * spacing * wp.vec3(float(oc[0]) + 0.5, float(oc[1]) + 0.5, float(oc[2]) + 0.5)
         if not inside_domain(f, x):
-            return -1, -1, 0
+            return -1, -1, -1  # outside the operand's domain, so none of its octets
         if f.levels == 1:  # the dense top level is the finest: the octet's first child by its code
             c0 = wp.vec3i(2 * oc[0], 2 * oc[1], 2 * oc[2]) + offset
             return octree.find_key(f.codes, 0, f.fine_count, morton_encode(c0)), -1, 0
@@ -361,6 +362,9 @@ def _node_bracket(
     if leaf >= 0:
         centre = node_center(f.origin, level_spacing(f, level), f.coords[leaf])
         return f.values[leaf], wp.length(x - centre)
+    if level < 0:  # the octet lies outside the operand's domain: no node of it to look up
+        phi, radius, _leaf = _estimate(f, x)
+        return phi, radius
     return _bracket(f, aligned, offset, c, x)
 
 
