@@ -53,9 +53,10 @@ CAP_LATTICE_MAX_RATIO = 1.0
 CAP_LATTICE_MIN_SHEET = 0.02
 # Relative error allowed to the closest points of the top level's leaves (0: exact).
 TOP_LEVEL_TOLERANCE = 0.01
-# Sweeps of same-level sign propagation, and the stride of oracle seeds on the dense top level.
+# Sweeps of same-level sign propagation, and the stride along each axis of the oracle's seeds on the dense top level
+# (a lattice through the whole volume, so every region larger than a few top cells, inside or out, holds one).
 MAX_SIGN_SWEEPS = 64
-TOP_SEED_STRIDE = 16
+TOP_SEED_STRIDE = 4
 # A sweep of the empty-ball phase that signs fewer than this share of a level's nodes ends it (another sweep over the
 # whole level would sign a handful; the next phase takes them).
 SIGN_SWEEP_SETTLED = 1e-3
@@ -2129,7 +2130,10 @@ def assemble_field(
     if level_values is None and levels > 1:
         # Across a hole of an open mesh the sign changes where no triangle is near, so empty balls prove nothing
         # near it: signs spread only away from the holes' caps (``hole_caps``), the oracle decides the rest.
-        seeds = np.arange(top_lo, top_hi, TOP_SEED_STRIDE if spread_signs else 1)
+        stride = TOP_SEED_STRIDE if spread_signs else 1
+        nx, ny, nz = (int(d) for d in top_dims)
+        ix, iy, iz = (np.arange(min(stride // 2, n_axis - 1), n_axis, stride) for n_axis in (nx, ny, nz))
+        seeds = top_lo + (ix[None, None, :] + nx * (iy[None, :, None] + ny * iz[:, None, None])).ravel()
         seeds = seeds[sign.numpy()[seeds] == 0.0]
         oracle(coords, seeds, voxel_size * 2 ** (levels - 1), sign)
         rest = spread(levels - 1, top_lo, top_hi)
