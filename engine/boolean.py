@@ -24,8 +24,8 @@ from .sampling import (
     FieldArg,
     clamp_to_domain,
     coarse_mls,
-    coarse_neighbours,
     inside_domain,
+    leaf_neighbours,
     level_spacing,
     locate_leaf,
     locate_node,
@@ -109,10 +109,9 @@ def _lookup_node(
 
 
 @wp.func
-def _sample(f: FieldArg, x: wp.vec3) -> wp.vec4:
-    """(phi, grad) by MLS; outside the domain, the bound that grows with the distance to the domain."""
-    xc = clamp_to_domain(f, x)
-    r = sample_mls(f, xc)
+def _beyond_domain(r: wp.vec4, x: wp.vec3, xc: wp.vec3) -> wp.vec4:
+    """(phi, grad) ``r`` sampled at ``xc``, ``x`` clamped into the domain, as seen from ``x``: the bound that grows
+    with the distance to the domain."""
     out = wp.length(x - xc)
     if out > 0.0:
         gd = (x - xc) / out
@@ -121,16 +120,18 @@ def _sample(f: FieldArg, x: wp.vec3) -> wp.vec4:
 
 
 @wp.func
+def _sample(f: FieldArg, x: wp.vec3) -> wp.vec4:
+    """(phi, grad) by MLS; outside the domain, the bound that grows with the distance to the domain."""
+    xc = clamp_to_domain(f, x)
+    return _beyond_domain(sample_mls(f, xc), x, xc)
+
+
+@wp.func
 def _coarse_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, count: int, ids: vec27i, levels: vec27i) -> wp.vec4:
     """:func:`_sample` where ``x`` (clamped into the domain) lies in coarse leaf ``leaf`` (index, level), whose
-    neighbours (:func:`coarse_neighbours`) are given: the same value, without gathering them again."""
+    neighbours (:func:`leaf_neighbours`) are given: the same value, without gathering them again."""
     xc = clamp_to_domain(f, x)
-    r = coarse_mls(f, count, ids, levels, xc, level_spacing(f, leaf[1]), f.values[leaf[0]])
-    out = wp.length(x - xc)
-    if out > 0.0:
-        gd = (x - xc) / out
-        return wp.vec4(wp.max(r[0], 0.0) + out, gd[0], gd[1], gd[2])
-    return r
+    return _beyond_domain(coarse_mls(f, count, ids, levels, xc, level_spacing(f, leaf[1]), f.values[leaf[0]]), x, xc)
 
 
 @wp.func
@@ -279,14 +280,14 @@ def _combine_nodes_kernel(
                     need_a = 0
             if need_a == 1 and rad_a > 0.0:
                 if leaf_a[0] != cached_a:
-                    count_a, ids_a, levels_a = coarse_neighbours(a, leaf_a[0], leaf_a[1])
+                    count_a, ids_a, levels_a = leaf_neighbours(a, leaf_a[0], leaf_a[1])
                     cached_a = leaf_a[0]
                 r = _coarse_sample(a, x, leaf_a, count_a, ids_a, levels_a)
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
             if need_b == 1 and rad_b > 0.0:
                 if leaf_b[0] != cached_b:
-                    count_b, ids_b, levels_b = coarse_neighbours(b, leaf_b[0], leaf_b[1])
+                    count_b, ids_b, levels_b = leaf_neighbours(b, leaf_b[0], leaf_b[1])
                     cached_b = leaf_b[0]
                 r = _coarse_sample(b, x, leaf_b, count_b, ids_b, levels_b)
                 vb = r[0]

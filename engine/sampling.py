@@ -107,10 +107,10 @@ def cubic_spline(q: float) -> float:
 
 
 @wp.func
-def coarse_neighbours(f: FieldArg, leaf: int, level: int):
-    """The distinct leaves at the centres of coarse leaf ``leaf`` (on ``level`` > 0) and its 26 neighbour cells, as
-    :func:`coarse_mls` reads them: (count, their indices (27,), their levels (27,)). The same for every point of the
-    leaf, so callers with many points in one leaf find them once."""
+def leaf_neighbours(f: FieldArg, leaf: int, level: int):
+    """The distinct leaves at the centres of leaf ``leaf`` (on ``level``) and its 26 neighbour cells, in the order
+    the MLS fits read them: (count, their indices (27,), their levels (27,)). The same for every point of the leaf,
+    so callers with many points in one leaf find them once."""
     s = level_spacing(f, level)
     c = node_center(f.origin, s, f.coords[leaf])
     ids = vec27i()
@@ -133,11 +133,20 @@ def coarse_neighbours(f: FieldArg, leaf: int, level: int):
 
 
 @wp.func
+def _neighbour_weight(f: FieldArg, node: int, level: int, x: wp.vec3, s: float):
+    """(centre, MLS weight at ``x``) of neighbour ``node`` on ``level`` of a leaf of spacing ``s``: the cubic spline
+    over twice the larger of the two spacings."""
+    sn = level_spacing(f, level)
+    xn = node_center(f.origin, sn, f.coords[node])
+    return xn, cubic_spline(2.0 * wp.length(xn - x) / (2.0 * wp.max(s, sn)))
+
+
+@wp.func
 def coarse_mls(
     f: FieldArg, count: int, ids: vec27i, levels: vec27i, x: wp.vec3, s: float, leaf_value: float
 ) -> wp.vec4:
     """:func:`sample_mls` at ``x`` in a coarse leaf of spacing ``s`` and value ``leaf_value``, from its neighbours
-    (:func:`coarse_neighbours`). A coarser leaf holds no surface, so the whole cell has the leaf's sign; each
+    (:func:`leaf_neighbours`). A coarser leaf holds no surface, so the whole cell has the leaf's sign; each
     neighbour predicts the distance from ``x`` to its own exact closest point, and the MLS fit is of constant order
     over those predictions: second-order accurate where the linear fit would smooth over curvature and medial axes."""
     leaf_sign = wp.where(leaf_value < 0.0, -1.0, 1.0)
@@ -146,10 +155,7 @@ def coarse_mls(
     best = float(1.0e30)
     plane = float(1.0e30)
     for t in range(count):
-        sn = level_spacing(f, levels[t])
-        xn = node_center(f.origin, sn, f.coords[ids[t]])
-        radius = 2.0 * wp.max(s, sn)
-        w = cubic_spline(2.0 * wp.length(xn - x) / radius)
+        xn, w = _neighbour_weight(f, ids[t], levels[t], x, s)
         if w > 0.0:
             p = f.proj[ids[t]]
             r = x - p
@@ -186,40 +192,23 @@ def sample_mls(f: FieldArg, x: wp.vec3) -> wp.vec4:
     """
     leaf = locate_leaf(f, x)
     s = level_spacing(f, leaf[1])
+    count, ids, levels = leaf_neighbours(f, leaf[0], leaf[1])
     if leaf[1] > 0:
-        count, ids, levels = coarse_neighbours(f, leaf[0], leaf[1])
         return coarse_mls(f, count, ids, levels, x, s, f.values[leaf[0]])
-    c = node_center(f.origin, s, f.coords[leaf[0]])
-    ids = vec27i()
-    count = int(0)
     ata = wp.mat44(0.0)
     atb = wp.vec4(0.0)
     wsum = float(0.0)
     vsum = float(0.0)
-    for o in range(27):
-        off = wp.vec3(float(o % 3 - 1), float((o // 3) % 3 - 1), float(o // 9 - 1))
-        q = c + s * off
-        if inside_domain(f, q):
-            nb = locate_leaf(f, q)
-            dup = int(0)
-            for t in range(count):
-                if ids[t] == nb[0]:
-                    dup = int(1)
-            if dup == 0:
-                ids[count] = nb[0]
-                count += 1
-                sn = level_spacing(f, nb[1])
-                xn = node_center(f.origin, sn, f.coords[nb[0]])
-                radius = 2.0 * wp.max(s, sn)
-                w = cubic_spline(2.0 * wp.length(xn - x) / radius)
-                if w > 0.0:
-                    d = (xn - x) / s
-                    b = wp.vec4(1.0, d[0], d[1], d[2])
-                    ata += w * wp.outer(b, b)
-                    phi = f.values[nb[0]]
-                    atb += (w * phi) * b
-                    vsum += w * phi
-                    wsum += w
+    for t in range(count):
+        xn, w = _neighbour_weight(f, ids[t], levels[t], x, s)
+        if w > 0.0:
+            d = (xn - x) / s
+            b = wp.vec4(1.0, d[0], d[1], d[2])
+            ata += w * wp.outer(b, b)
+            phi = f.values[ids[t]]
+            atb += (w * phi) * b
+            vsum += w * phi
+            wsum += w
     if wsum <= 0.0:
         return wp.vec4(f.values[leaf[0]], 0.0, 0.0, 0.0)
     # A small ridge on the gradient keeps one-sided neighbourhoods well posed.
