@@ -127,11 +127,15 @@ def _sample(f: FieldArg, x: wp.vec3) -> wp.vec4:
 
 
 @wp.func
-def _coarse_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, count: int, ids: vec27i, levels: vec27i) -> wp.vec4:
-    """:func:`_sample` where ``x`` (clamped into the domain) lies in coarse leaf ``leaf`` (index, level), whose
-    neighbours (:func:`leaf_neighbours`) are given: the same value, without gathering them again."""
+def _coarse_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, cached: int, count: int, ids: vec27i, levels: vec27i):
+    """:func:`_sample` where ``x`` (clamped into the domain) lies in coarse leaf ``leaf`` (index, level), with the
+    neighbours (:func:`leaf_neighbours`) of leaf ``cached`` at hand: gathered again only for another leaf. Returns
+    the sample and the neighbours now at hand (cached leaf, count, indices, levels)."""
+    if leaf[0] != cached:
+        count, ids, levels = leaf_neighbours(f, leaf[0], leaf[1])
     xc = clamp_to_domain(f, x)
-    return _beyond_domain(coarse_mls(f, count, ids, levels, xc, level_spacing(f, leaf[1]), f.values[leaf[0]]), x, xc)
+    r = coarse_mls(f, count, ids, levels, xc, level_spacing(f, leaf[1]), f.values[leaf[0]])
+    return _beyond_domain(r, x, xc), leaf[0], count, ids, levels
 
 
 @wp.func
@@ -279,17 +283,11 @@ def _combine_nodes_kernel(
                 elif va + rad_a <= tb - rad_b - blend:
                     need_a = 0
             if need_a == 1 and rad_a > 0.0:
-                if leaf_a[0] != cached_a:
-                    count_a, ids_a, levels_a = leaf_neighbours(a, leaf_a[0], leaf_a[1])
-                    cached_a = leaf_a[0]
-                r = _coarse_sample(a, x, leaf_a, count_a, ids_a, levels_a)
+                r, cached_a, count_a, ids_a, levels_a = _coarse_sample(a, x, leaf_a, cached_a, count_a, ids_a, levels_a)
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
             if need_b == 1 and rad_b > 0.0:
-                if leaf_b[0] != cached_b:
-                    count_b, ids_b, levels_b = leaf_neighbours(b, leaf_b[0], leaf_b[1])
-                    cached_b = leaf_b[0]
-                r = _coarse_sample(b, x, leaf_b, count_b, ids_b, levels_b)
+                r, cached_b, count_b, ids_b, levels_b = _coarse_sample(b, x, leaf_b, cached_b, count_b, ids_b, levels_b)
                 vb = r[0]
                 gb = wp.vec3(r[1], r[2], r[3])
         ra = wp.vec4(va, ga[0], ga[1], ga[2])
