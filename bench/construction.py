@@ -4,17 +4,19 @@ For each mesh and finest spacing (bounding-box diagonal / 256 and / 512) it prin
 each stage of ``engine.build_field`` (finest level, each intermediate level, top level, signs), node counts per
 level, the geometry-nodes Mesh to SDF Grid node (OpenVDB, narrow band of 3 voxels) at the same voxel size, and a
 dense uniform grid of exact signed distances over the same domain (its node count, and its time where it fits).
-Times are medians of ``--repeat`` runs (default 3) after one warm-up; the machine is noted in the header.
+AASDF's build and Mesh to SDF Grid run in turns (``--repeat`` rounds, default 5, after a warm-up; see
+``bench/paired.py``): their times are medians, the ratio is the median of the per-round ratios with the smallest and
+largest beside it; the machine is noted in the header.
 
-    .venv/bin/python bench/construction.py [--meshes stanford-bunny.obj spot.obj rocker-arm.obj] [--repeat 3]
+    .venv/bin/python bench/construction.py [--meshes stanford-bunny.obj spot.obj rocker-arm.obj] [--repeat 5]
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import platform
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -29,6 +31,7 @@ import warp as wp  # noqa: E402
 
 import engine  # noqa: E402
 from bench import baselines  # noqa: E402
+from bench.paired import paired  # noqa: E402
 from tests.metrics import unsigned_distance  # noqa: E402
 from tests.support import load_mesh  # noqa: E402
 
@@ -39,13 +42,10 @@ def machine() -> str:
     return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, warp {wp.__version__} on cpu"
 
 
-def median_time(fn, repeat):
-    times, result = [], None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), result
+def timed_build(verts, tris, h) -> dict:
+    t0 = time.perf_counter()
+    field = engine.build_field(verts, tris, voxel_size=h)
+    return {"seconds": time.perf_counter() - t0, "field": field}
 
 
 def dense_grid_seconds(field, verts, tris):
@@ -65,7 +65,7 @@ def dense_grid_seconds(field, verts, tris):
 
 
 def run(meshes, resolutions, repeat):
-    print(f"# Construction benchmark — {machine()}; medians of {repeat} runs after a warm-up\n")
+    print(f"# Construction benchmark — {machine()}; AASDF and GN in {repeat} alternating rounds after a warm-up\n")
     header = (
         "| mesh | tris | res | voxel | AASDF build s | finest s | levels s | top s | neighbours s | signs s "
         "| nodes per level "
@@ -78,15 +78,18 @@ def run(meshes, resolutions, repeat):
         diag = float(np.linalg.norm(verts.max(0) - verts.min(0)))
         for res in resolutions:
             h = diag / res
-            engine.build_field(verts, tris, voxel_size=h)  # warm-up (kernel load)
-            build_s, field = median_time(lambda v=verts, t=tris, h=h: engine.build_field(v, t, voxel_size=h), repeat)
-            t = field.timings
+            pair = paired(
+                functools.partial(timed_build, verts, tris, h),
+                functools.partial(baselines.gn_mesh_to_sdf, (verts, tris), h),
+                repeat,
+            )
+            build_s, gn_s, field = pair["ours"]["seconds"], pair["theirs"]["seconds"], pair["ours"]["field"]
+            t = field.timings  # the stages of the median run
             finest = sum(t.get(k, 0) for k in ("mesh_checks", "mesh_bvh", "finest_cells", "finest_distance"))
             levels = sum(v for k, v in t.items() if k.startswith("level_") and not k.endswith("neighbours"))
             levels += t.get("levels_structure", 0)
             neighbours = sum(v for k, v in t.items() if k.endswith("_neighbours"))
             signs = t.get("signs", 0) + t.get("sign_check", 0) + t.get("cap_lattices", 0)
-            gn_s = statistics.median(baselines.gn_mesh_to_sdf((verts, tris), h)["seconds"] for _ in range(repeat))
             uniform = int(np.prod(field.fine_dims))
             dense = dense_grid_seconds(field, verts, tris) if res <= 256 else None
             dense_text = f"{dense:.2f}" if dense is not None else "—"
@@ -94,7 +97,7 @@ def run(meshes, resolutions, repeat):
                 f"| {name} | {len(tris):,} | /{res} | {h:.5f} | {build_s:.3f} | {finest:.3f} | {levels:.3f} "
                 f"| {t.get('top_level', 0):.3f} | {neighbours:.3f} | {signs:.3f} | {field.level_counts} "
                 f"| {field.node_count:,} | {uniform:,} | {uniform / field.node_count:.1f}x | {gn_s:.3f} "
-                f"| {build_s / gn_s:.2f}x | {dense_text} |"
+                f"| {pair['ratio']:.2f}x ({pair['low']:.2f}-{pair['high']:.2f}) | {dense_text} |"
             )
             sys.stdout.flush()
 
@@ -103,7 +106,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--meshes", nargs="+", default=["stanford-bunny.obj", "spot.obj", "rocker-arm.obj"])
     parser.add_argument("--resolutions", nargs="+", type=int, default=[256, 512])
-    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args(argv)
     wp.config.quiet = True
     run(args.meshes, args.resolutions, args.repeat)

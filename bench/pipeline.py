@@ -5,10 +5,12 @@ bounding-box diagonal / 256 and / 512) it prints, in one run: AASDF's time per s
 same time as the add-on builds them; boolean; to_mesh), Blender's geometry-nodes pipeline (Mesh to SDF Grid ×2 →
 SDF Grid Boolean → Grid to Mesh, threshold 0) at the same voxel size, and the Boolean modifier with its Exact and
 Manifold solvers; the result's triangles, its volume error and two-sided Hausdorff p95 (in voxels) against the exact
-boolean from manifold3d (where the inputs are closed), and whether it is watertight. Times are medians of
-``--repeat`` runs after a warm-up.
+boolean from manifold3d (where the inputs are closed), and whether it is watertight. AASDF and the geometry-nodes
+pipeline run in turns (``--repeat`` rounds after a warm-up, see ``bench/paired.py``): their times are medians, the
+ratio is the median of the per-round ratios, with the smallest and largest beside it. The modifier's times are
+medians of three runs of its own.
 
-    .venv/bin/python bench/pipeline.py [--cases ...] [--ops UNION DIFFERENCE] [--resolutions 256 512] [--repeat 3]
+    .venv/bin/python bench/pipeline.py [--cases ...] [--ops UNION DIFFERENCE] [--resolutions 256 512] [--repeat 5]
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import warp as wp  # noqa: E402
 
 import engine  # noqa: E402
 from bench import baselines  # noqa: E402
+from bench.paired import paired  # noqa: E402
 from tests.metrics import exact_boolean, hausdorff, mesh_volume  # noqa: E402
 from tests.support import box_mesh, is_watertight, load_mesh, uv_sphere  # noqa: E402
 
@@ -114,7 +117,7 @@ def quality(res, exact, h):
 
 
 def run(selected, ops, resolutions, repeat):
-    print(f"# Pipeline benchmark — {machine()}; medians of {repeat} runs after a warm-up\n")
+    print(f"# Pipeline benchmark — {machine()}; AASDF and GN in {repeat} alternating rounds after a warm-up\n")
     header = (
         "| case | op | res | method | seconds | stages (build a and b+boolean+mesh) | vs GN | triangles "
         "| volume err | Hausdorff p95 (voxels) | watertight |"
@@ -132,20 +135,26 @@ def run(selected, ops, resolutions, repeat):
                 exact = None  # an open operand: manifold3d has no exact answer
             modifier_rows = []
             for solver in ("EXACT", "MANIFOLD"):
-                r = _median(functools.partial(baselines.boolean_modifier, a, b, op, solver), repeat)
+                r = _median(functools.partial(baselines.boolean_modifier, a, b, op, solver), min(repeat, 3))
                 modifier_rows.append((solver, r))
             for res in resolutions:
                 h = diag / res
-                aasdf_pipeline(a, b, op, h)  # warm-up
-                ours = _median(functools.partial(aasdf_pipeline, a, b, op, h), repeat)
-                gn = _median(functools.partial(baselines.gn_sdf_boolean, a, b, op, h), repeat)
+                pair = paired(
+                    functools.partial(aasdf_pipeline, a, b, op, h),
+                    functools.partial(baselines.gn_sdf_boolean, a, b, op, h),
+                    repeat,
+                )
+                ours, gn = pair["ours"], pair["theirs"]
                 rows = [("AASDF", ours, ours["stages"]), ("GN SDF pipeline", gn, "")]
                 rows += [(f"Boolean {s.title()}", r, "") for s, r in modifier_rows]
                 for method, r, stages in rows:
                     vol, p95, closed = quality(r, exact, h)
-                    ratio = r["seconds"] / gn["seconds"]
+                    if r is ours:
+                        ratio = f"{pair['ratio']:.2f}x ({pair['low']:.2f}-{pair['high']:.2f})"
+                    else:
+                        ratio = f"{r['seconds'] / gn['seconds']:.2f}x"
                     print(
-                        f"| {name} | {op} | /{res} | {method} | {r['seconds']:.3f} | {stages} | {ratio:.2f}x "
+                        f"| {name} | {op} | /{res} | {method} | {r['seconds']:.3f} | {stages} | {ratio} "
                         f"| {len(r['tris']):,} | {vol} | {p95} | {'yes' if closed else 'no'} |"
                     )
                     sys.stdout.flush()
@@ -156,7 +165,7 @@ def main(argv=None):
     parser.add_argument("--cases", nargs="+", default=list(cases()))
     parser.add_argument("--ops", nargs="+", default=["UNION", "DIFFERENCE"])
     parser.add_argument("--resolutions", nargs="+", type=int, default=[256, 512])
-    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args(argv)
     wp.config.quiet = True
     run(args.cases, args.ops, args.resolutions, args.repeat)

@@ -1,0 +1,46 @@
+"""Paired timing: AASDF and the tool it is compared with, run alternately, compared round by round.
+
+This machine's speed drifts by 10-20 % within minutes (other tenants of the host). Timing all runs of one method and
+then all runs of the other puts that drift into the ratio; running them in turns, in alternating order (ours first in
+even rounds, theirs first in odd ones), and taking the median of the per-round ratios compares each pair of runs
+under the same conditions.
+"""
+
+from __future__ import annotations
+
+import statistics
+
+
+def paired(ours, theirs, repeat: int) -> dict:
+    """Time ``ours`` against ``theirs`` in ``repeat`` alternating rounds, after one warm-up call of each.
+
+    Args:
+        ours, theirs: Callables returning a dict with ``"seconds"`` (and anything else, kept).
+        repeat: Rounds (at least 1).
+    Returns:
+        ``ours`` and ``theirs``: the run of median time of each; ``ratio``: median of ours / theirs per round;
+        ``low`` and ``high``: the smallest and largest per-round ratio.
+    """
+    ours()
+    theirs()
+    runs_ours, runs_theirs = [], []
+    for k in range(max(1, repeat)):
+        if k % 2 == 0:
+            runs_ours.append(ours())
+            runs_theirs.append(theirs())
+        else:
+            runs_theirs.append(theirs())
+            runs_ours.append(ours())
+    ratios = [o["seconds"] / t["seconds"] for o, t in zip(runs_ours, runs_theirs, strict=True)]
+    return {
+        "ours": _median_run(runs_ours),
+        "theirs": _median_run(runs_theirs),
+        "ratio": statistics.median(ratios),
+        "low": min(ratios),
+        "high": max(ratios),
+    }
+
+
+def _median_run(runs: list) -> dict:
+    order = sorted(range(len(runs)), key=lambda i: runs[i]["seconds"])
+    return runs[order[len(runs) // 2]]
