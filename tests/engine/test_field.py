@@ -404,6 +404,23 @@ def test_octets_found_through_the_byte_mask_are_those_sorting_finds(name, monkey
     assert np.all(np.diff(octets) > 0)
 
 
+@pytest.mark.parametrize("name", ["stanford-bunny.obj", "spot.obj"])
+def test_finest_distances_by_octet_boxes_equal_those_node_by_node(name, monkeypatch):
+    # the bunny's triangles are about 0.4 cell faces here, spot's about 3: either search may be the one chosen
+    verts, tris = load_mesh(name)
+    h = _voxel(verts, 256)
+    monkeypatch.setattr(engine.field, "OCTET_SEARCH_MIN_AREA", 0.0)
+    boxes = engine.build_field(verts, tris, voxel_size=h)
+    monkeypatch.setattr(engine.field, "OCTET_SEARCH_MIN_AREA", np.inf)
+    nodes = engine.build_field(verts, tris, voxel_size=h)
+    n0 = boxes.level_counts[0]
+    assert boxes.level_counts == nodes.level_counts
+    np.testing.assert_array_equal(boxes.codes.numpy(), nodes.codes.numpy())
+    # both are the exact closest points, computed by different routines (float rounding; ties may pick another triangle)
+    np.testing.assert_allclose(np.abs(boxes.values.numpy()[:n0]), np.abs(nodes.values.numpy()[:n0]), atol=1e-4 * h)
+    assert np.mean(np.sign(boxes.values.numpy()) == np.sign(nodes.values.numpy())) > 0.9999
+
+
 def test_morton_codes_match_between_host_and_device():
     coords = np.random.default_rng(0).integers(0, 2**20, size=(1000, 3))
     from engine.octree import morton_decode
