@@ -143,11 +143,15 @@ def _octets_per_triangle_kernel(
             for x in range(i0[0], i1[0] + 1):
                 cell = wp.vec3i(x, y, z)
                 center = origin + octet_size * wp.vec3(float(x) + 0.5, float(y) + 0.5, float(z) + 0.5)
-                if tri_box_overlap(center, half, a, b, c):
+                if emit == 2:
+                    # an octet a neighbouring triangle marked already needs no test (races only write 1 twice)
+                    m = x + dims[0] * (y + dims[1] * z)
+                    if mask[m] == wp.uint8(0):
+                        if tri_box_overlap(center, half, a, b, c):
+                            mask[m] = wp.uint8(1)
+                elif tri_box_overlap(center, half, a, b, c):
                     if emit == 1:
                         codes[base + n] = morton_encode(cell)
-                    elif emit == 2:
-                        mask[x + dims[0] * (y + dims[1] * z)] = wp.uint8(1)
                     n += 1
     if emit == 0:
         counts[t] = n
