@@ -201,6 +201,7 @@ def _mark_used_corners_kernel(cube_corners: wp.array2d[wp.int32], used: wp.array
 
 @wp.kernel(enable_backward=False)
 def _used_corner_points_kernel(
+    first: int,
     used: wp.array[wp.int32],
     used_scan: wp.array[wp.int32],
     keys: wp.array[wp.int64],
@@ -212,8 +213,9 @@ def _used_corner_points_kernel(
     points: wp.array[wp.vec3],
     point_values: wp.array[wp.float32],
 ):
-    """Position (``base`` is the world position of key 0) and value of each used sample, at its compacted index."""
-    i = wp.tid()
+    """Position (``base`` is the world position of key 0) and value of used sample ``first + tid``, at its compacted
+    index."""
+    i = first + wp.tid()
     if used[i] == 0:
         return
     out = used_scan[i] - 1
@@ -332,6 +334,7 @@ def _shift_nudge_kernel(values: wp.array[wp.float32], iso: float, nudge: float, 
 
 @wp.kernel(enable_backward=False)
 def _used_node_points_kernel(
+    first: int,
     used: wp.array[wp.int32],
     used_scan: wp.array[wp.int32],
     coords: wp.array[wp.vec3i],
@@ -343,7 +346,7 @@ def _used_node_points_kernel(
     point_values: wp.array[wp.float32],
 ):
     """``_used_corner_points_kernel`` from lattice coordinates (``base``: world position of lattice point ``lo``)."""
-    i = wp.tid()
+    i = first + wp.tid()
     if used[i] == 0:
         return
     out = used_scan[i] - 1
@@ -424,9 +427,9 @@ def _shared_corner_surface(keys_wp, values_wp, cube_corners, lo, origin, spacing
 
 def _polygonise(cube_corners, n, point_kernel, point_inputs, lo, origin, spacing):
     """Warp's marching-cubes core on the active cubes (``cube_corners``: (M, 8) indices of ``n`` samples). Only the
-    samples some cube uses take part: they are compacted, and ``point_kernel(used, used_scan, *point_inputs, base,
-    spacing, points, point_values)`` writes their positions (``base``: world position of lattice point ``lo``, taken
-    in double precision) and values."""
+    samples some cube uses take part: they are compacted, and ``point_kernel(first, used, used_scan, *point_inputs,
+    base, spacing, points, point_values)`` writes the positions of samples ``first + tid`` (``base``: world position
+    of lattice point ``lo``, taken in double precision) and their values, split over the CPU cores."""
     device = cube_corners.device
     used = wp.zeros(n, dtype=wp.int32, device=device)
     n_cubes = cube_corners.shape[0]
@@ -437,12 +440,11 @@ def _polygonise(cube_corners, n, point_kernel, point_inputs, lo, origin, spacing
     base = wp.vec3(*(float(x) for x in origin + (np.asarray(lo, np.float64) + 0.5) * spacing))
     points = wp.empty(n_used, dtype=wp.vec3, device=device)
     point_values = wp.empty(n_used, dtype=wp.float32, device=device)
-    wp.launch(
+    launch_split(
         point_kernel,
-        dim=n,
-        inputs=[used, used_scan, *point_inputs, base, float(spacing)],
-        outputs=[points, point_values],
-        device=device,
+        n,
+        lambda s, _c: [s, used, used_scan, *point_inputs, base, float(spacing), points, point_values],
+        device,
     )
     launch_split(_renumber_corners_kernel, n_cubes, lambda s, c: [used_scan, cube_corners[s : s + c]], device)
     used = used_scan = None
