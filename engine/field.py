@@ -165,39 +165,8 @@ def _closest_on_segment(p: wp.vec3, a: wp.vec3, b: wp.vec3) -> wp.vec3:
 
 
 @wp.func
-def closest_on_triangle(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.vec3:
-    """Closest point to ``p`` on triangle (a, b, c) by Voronoi regions (Ericson, Real-Time Collision Detection
-    5.1.5); a degenerate triangle falls back to its nearest edge."""
-    ab = b - a
-    ac = c - a
-    ap = p - a
-    d1 = wp.dot(ab, ap)
-    d2 = wp.dot(ac, ap)
-    if d1 <= 0.0 and d2 <= 0.0:
-        return a
-    bp = p - b
-    d3 = wp.dot(ab, bp)
-    d4 = wp.dot(ac, bp)
-    if d3 >= 0.0 and d4 <= d3:
-        return b
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        return a + ab * (d1 / (d1 - d3))
-    cp = p - c
-    d5 = wp.dot(ab, cp)
-    d6 = wp.dot(ac, cp)
-    if d6 >= 0.0 and d5 <= d6:
-        return c
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        return a + ac * (d2 / (d2 - d6))
-    va = d3 * d6 - d5 * d4
-    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))
-    total = va + vb + vc
-    if total > 0.0:
-        return a + ab * (vb / total) + ac * (vc / total)
-    # degenerate: the nearest of the three edges
+def _closest_on_edges(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.vec3:
+    """The nearest point to ``p`` on the three edges of triangle (a, b, c)."""
     q = _closest_on_segment(p, a, b)
     r = _closest_on_segment(p, b, c)
     if wp.length_sq(p - r) < wp.length_sq(p - q):
@@ -206,6 +175,44 @@ def closest_on_triangle(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.ve
     if wp.length_sq(p - r) < wp.length_sq(p - q):
         q = r
     return q
+
+
+@wp.func
+def closest_on_triangle(
+    p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, ab: wp.vec3, ac: wp.vec3, d00: float, d01: float, d11: float
+) -> wp.vec3:
+    """Closest point to ``p`` on triangle (a, b, c) by Voronoi regions (Ericson, Real-Time Collision Detection
+    5.1.5), with the triangle's edges ``ab`` = b - a, ``ac`` = c - a and their products (``d00`` = ab.ab, ``d01`` =
+    ab.ac, ``d11`` = ac.ac) computed once for the many points tested against it: the six dot products of the regions
+    follow from two (ab.ap, ac.ap). A degenerate triangle (or one within float rounding of it) falls back to its
+    nearest edge."""
+    ap = p - a
+    d1 = wp.dot(ab, ap)
+    d2 = wp.dot(ac, ap)
+    if d1 <= 0.0 and d2 <= 0.0:
+        return a
+    d3 = d1 - d00  # ab.(p - b)
+    d4 = d2 - d01  # ac.(p - b)
+    if d3 >= 0.0 and d4 <= d3:
+        return b
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        return a + ab * (d1 / (d1 - d3))
+    d5 = d1 - d01  # ab.(p - c)
+    d6 = d2 - d11  # ac.(p - c)
+    if d6 >= 0.0 and d5 <= d6:
+        return c
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        return a + ac * (d2 / (d2 - d6))
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))
+    total = va + vb + vc  # |ab x ac|^2, up to rounding
+    if total > 1.0e-6 * d00 * d11:
+        return a + ab * (vb / total) + ac * (vc / total)
+    # degenerate, or so nearly (its two edges' angle under 1e-3) that float rounding would decide the point
+    return _closest_on_edges(p, a, b, c)
 
 
 @wp.func
@@ -287,11 +294,16 @@ def _finest_octet_distance_kernel(
             gap = wp.max(wp.max(tri_lo - node_hi, node_lo - tri_hi), wp.vec3(0.0))
             if wp.length_sq(gap) < worst:
                 worst = float(0.0)
+                ab = b - a
+                ac = cc - a
+                d00 = wp.dot(ab, ab)
+                d01 = wp.dot(ab, ac)
+                d11 = wp.dot(ac, ac)
                 for k in range(8):
                     x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
                     gap = wp.max(wp.max(tri_lo - x, x - tri_hi), wp.vec3(0.0))
                     if wp.length_sq(gap) < best[k]:
-                        p = closest_on_triangle(x, a, b, cc)
+                        p = closest_on_triangle(x, a, b, cc, ab, ac, d00, d01, d11)
                         d = wp.length_sq(x - p)
                         if d < best[k]:
                             best[k] = d

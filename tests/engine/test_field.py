@@ -421,6 +421,44 @@ def test_finest_distances_by_octet_boxes_equal_those_node_by_node(name, monkeypa
     assert np.mean(np.sign(boxes.values.numpy()) == np.sign(nodes.values.numpy())) > 0.9999
 
 
+def test_closest_point_on_a_triangle_matches_a_dense_sampling_of_it():
+    rng = np.random.default_rng(3)
+    n = 600
+    tri = rng.normal(size=(n, 3, 3)).astype(np.float32)
+    tri[: n // 10, 2] = tri[: n // 10, 0]  # degenerate: two corners at one point
+    tri[n // 10 : n // 5, 2] = 0.3 * tri[n // 10 : n // 5, 0] + 0.7 * tri[n // 10 : n // 5, 1]  # collinear
+    pts = rng.normal(scale=1.5, size=(n, 3)).astype(np.float32)
+
+    from engine.field import closest_on_triangle
+
+    @wp.kernel
+    def closest(t: wp.array[wp.vec3], x: wp.array[wp.vec3], out: wp.array[wp.vec3]):
+        i = wp.tid()
+        a = t[3 * i]
+        b = t[3 * i + 1]
+        c = t[3 * i + 2]
+        ab = b - a
+        ac = c - a
+        out[i] = closest_on_triangle(x[i], a, b, c, ab, ac, wp.dot(ab, ab), wp.dot(ab, ac), wp.dot(ac, ac))
+
+    out = wp.empty(n, dtype=wp.vec3)
+    wp.launch(closest, n, inputs=[wp.array(tri.reshape(-1, 3), dtype=wp.vec3), wp.array(pts, dtype=wp.vec3), out])
+    got = out.numpy()
+    # the point lies on the triangle (a convex combination of its corners) ...
+    u, v = np.meshgrid(np.linspace(0, 1, 101), np.linspace(0, 1, 101))
+    keep = u + v <= 1.0
+    bary = np.stack([1 - u[keep] - v[keep], u[keep], v[keep]], axis=1)  # (S, 3): a dense sampling of every triangle
+    samples = np.einsum("sk,nkd->nsd", bary, tri.astype(np.float64))
+    nearest = np.sqrt(((samples - pts[:, None, :]) ** 2).sum(-1)).min(axis=1)
+    on = np.sqrt(((samples - got[:, None, :]) ** 2).sum(-1)).min(axis=1)
+    edge = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
+    assert np.all(on <= 0.015 * edge + 1e-5)
+    # ... and is no farther than the nearest sample (within the sampling's resolution)
+    d = np.linalg.norm(got - pts, axis=1)
+    assert np.all(d <= nearest + 1e-5)  # a nearly collinear triangle's rounded face point failed this by 1e-4
+    assert np.all(d >= nearest - 0.015 * edge - 1e-5)
+
+
 def test_morton_codes_match_between_host_and_device():
     coords = np.random.default_rng(0).integers(0, 2**20, size=(1000, 3))
     from engine.octree import morton_decode
