@@ -32,7 +32,14 @@ import warp as wp
 
 from . import octree
 from .errors import AasdfError
-from .octree import MAX_CELLS_PER_AXIS, UNSET_DISTANCE, mesh_closest_point, morton_encode, node_center
+from .octree import (
+    MAX_CELLS_PER_AXIS,
+    UNSET_DISTANCE,
+    mesh_closest_face,
+    mesh_closest_point,
+    morton_encode,
+    node_center,
+)
 from .sampling import FieldArg, _sample_field_kernel, _source_ids_kernel, inside_domain, locate_leaf, top_cell
 
 # Bytes a finest node costs while building (codes, coords, distances, projections, links, sort buffers).
@@ -242,17 +249,19 @@ def _finest_octet_distance_kernel(
     box_search: int,
 ):
     """Exact closest points of the 8 nodes of one finest octet (first node ``octet_nodes[first + tid]``, children in
-    Morton order). One BVH query at the octet's centre gives its distance d; each node's closest triangle then lies
-    within d + sqrt(3) h of the centre, so the triangles whose boxes meet that cube are all the candidates, and every
-    node is tested against them directly — one BVH query per octet instead of eight. Octets far from the mesh (no
-    triangle within ``max_dist`` of the centre) query per node, each bounded by the centre's closest point, and every
-    octet does when ``box_search`` is 0 (a mesh whose triangles are much smaller than a cell would put hundreds in
-    each box). The centre's closest point (the octet's parent node's) goes to ``octet_dist``/``octet_proj``
-    (UNSET_DISTANCE when not found)."""
+    Morton order). One BVH query at the octet's centre gives its closest triangle; each node's distance to that
+    triangle bounds its own (tighter than its distance to the centre's closest point: a smaller box, and fewer
+    triangles pass the tests below), so the triangles whose boxes meet the box around those balls are all the
+    candidates, and every node is tested against them directly — one BVH query per octet instead of eight. Octets
+    far from the mesh (no triangle within ``max_dist`` of the centre) query per node, each bounded by the centre's
+    closest point, and every octet does when ``box_search`` is 0 (a mesh whose triangles are much smaller than a cell
+    would put hundreds in each box). The centre's closest point (the octet's parent node's) goes to
+    ``octet_dist``/``octet_proj`` (UNSET_DISTANCE when not found)."""
     t = first + wp.tid()
     base = octet_nodes[t]
     c = node_center(origin, spacing, coords[base]) + wp.vec3(0.5 * spacing)
-    near, centre_foot = mesh_closest_point(mesh, c, max_dist)
+    centre_foot, centre_face = mesh_closest_face(mesh, c, max_dist)
+    near = centre_face >= 0
     has_foot = near
     if not near:
         # an octet added where an open mesh's surface crosses a hole can be far from every triangle
@@ -264,25 +273,36 @@ def _finest_octet_distance_kernel(
     if near and box_search == 1:
         node_lo = c - wp.vec3(0.5 * spacing)  # the box of the 8 node centres
         node_hi = c + wp.vec3(0.5 * spacing)
-        # the centre's foot is a surface point: every node starts from its distance to it (an upper bound)
+        # every node starts from its closest point on the centre's closest triangle (an upper bound)
+        m = wp.mesh_get(mesh)
+        a0 = m.points[m.indices[3 * centre_face]]
+        b0 = m.points[m.indices[3 * centre_face + 1]]
+        c0 = m.points[m.indices[3 * centre_face + 2]]
+        ab0 = b0 - a0
+        ac0 = c0 - a0
+        d00 = wp.dot(ab0, ab0)
+        d01 = wp.dot(ab0, ac0)
+        d11 = wp.dot(ac0, ac0)
         best = wp.vector(UNSET_DISTANCE, length=8, dtype=float)
         foot = wp.matrix(0.0, shape=(8, 3), dtype=float)
         worst = float(0.0)
-        # each node's closest triangle lies in its ball through the centre's foot: search the box around those balls
+        # each node's closest triangle lies in its ball through that point: search the box around those balls
         box_lo = c
         box_hi = c  # grown around every ball below (starting at the centre can only widen it)
         for k in range(8):
             x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
-            best[k] = wp.length_sq(x - centre_foot)
-            foot[k] = centre_foot
+            p0 = closest_on_triangle(x, a0, b0, c0, ab0, ac0, d00, d01, d11)
+            best[k] = wp.length_sq(x - p0)
+            foot[k] = p0
             worst = wp.max(worst, best[k])
             r = wp.sqrt(best[k]) * 1.0001 + 1.0e-4 * spacing
             box_lo = wp.min(box_lo, x - wp.vec3(r))
             box_hi = wp.max(box_hi, x + wp.vec3(r))
-        m = wp.mesh_get(mesh)
         candidates = wp.mesh_query_aabb(mesh, box_lo, box_hi)
         f = int(0)
         while wp.mesh_query_aabb_next(candidates, f):
+            if f == centre_face:
+                continue
             a = m.points[m.indices[3 * f]]
             b = m.points[m.indices[3 * f + 1]]
             cc = m.points[m.indices[3 * f + 2]]

@@ -250,6 +250,26 @@ def _closest_point_native(mesh: wp.uint64, x: wp.vec3, max_dist: float, shrink: 
     ...
 
 
+# The same search returning the closest triangle's index (as a float: exact below 2**24 triangles) in place of the
+# squared distance.
+_CLOSEST_FACE_SNIPPET = _CLOSEST_POINT_SNIPPET.replace(
+    "out = wp::vec4(y[0], y[1], y[2], d);", "out = wp::vec4(y[0], y[1], y[2], (float)t);"
+)
+
+
+@wp.func_native(_CLOSEST_FACE_SNIPPET)
+def _closest_face_native(mesh: wp.uint64, x: wp.vec3, max_dist: float, shrink: float) -> wp.vec4:
+    """(closest point, index of its triangle) of ``x`` on the mesh within ``max_dist``; index -1: none."""
+    ...
+
+
+@wp.func
+def mesh_closest_face(mesh: wp.uint64, x: wp.vec3, max_dist: float):
+    """(closest point on the mesh within ``max_dist`` of ``x``, or ``x``; its triangle, or -1)."""
+    r = _closest_face_native(mesh, x, max_dist, 1.0)
+    return wp.vec3(r[0], r[1], r[2]), int(r[3])
+
+
 @wp.func
 def mesh_near_point(mesh: wp.uint64, x: wp.vec3, max_dist: float, tolerance: float):
     """(found, a point of the mesh within ``max_dist`` of ``x`` no more than 1 + ``tolerance`` times as far as its
