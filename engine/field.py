@@ -185,6 +185,14 @@ def _closest_on_edges(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.vec3
 
 
 @wp.func
+def triangle_edges(a: wp.vec3, b: wp.vec3, c: wp.vec3):
+    """(ab, ac, ab.ab, ab.ac, ac.ac): what ``closest_on_triangle`` needs of a triangle, once for many points."""
+    ab = b - a
+    ac = c - a
+    return ab, ac, wp.dot(ab, ab), wp.dot(ab, ac), wp.dot(ac, ac)
+
+
+@wp.func
 def closest_on_triangle(
     p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, ab: wp.vec3, ac: wp.vec3, d00: float, d01: float, d11: float
 ) -> wp.vec3:
@@ -278,11 +286,7 @@ def _finest_octet_distance_kernel(
         a0 = m.points[m.indices[3 * centre_face]]
         b0 = m.points[m.indices[3 * centre_face + 1]]
         c0 = m.points[m.indices[3 * centre_face + 2]]
-        ab0 = b0 - a0
-        ac0 = c0 - a0
-        d00 = wp.dot(ab0, ab0)
-        d01 = wp.dot(ab0, ac0)
-        d11 = wp.dot(ac0, ac0)
+        ab0, ac0, d00, d01, d11 = triangle_edges(a0, b0, c0)
         best = wp.vector(UNSET_DISTANCE, length=8, dtype=float)
         foot = wp.matrix(0.0, shape=(8, 3), dtype=float)
         worst = float(0.0)
@@ -314,11 +318,7 @@ def _finest_octet_distance_kernel(
             gap = wp.max(wp.max(tri_lo - node_hi, node_lo - tri_hi), wp.vec3(0.0))
             if wp.length_sq(gap) < worst:
                 worst = float(0.0)
-                ab = b - a
-                ac = cc - a
-                d00 = wp.dot(ab, ab)
-                d01 = wp.dot(ab, ac)
-                d11 = wp.dot(ac, ac)
+                ab, ac, d00, d01, d11 = triangle_edges(a, b, cc)
                 for k in range(8):
                     x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
                     gap = wp.max(wp.max(tri_lo - x, x - tri_hi), wp.vec3(0.0))

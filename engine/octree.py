@@ -250,8 +250,8 @@ def _closest_point_native(mesh: wp.uint64, x: wp.vec3, max_dist: float, shrink: 
     ...
 
 
-# The same search returning the closest triangle's index (as a float: exact below 2**24 triangles) in place of the
-# squared distance.
+# The same search returning the closest triangle's index in place of the squared distance (as a float: exact below
+# 2**24 triangles, a neighbouring index above).
 _CLOSEST_FACE_SNIPPET = _CLOSEST_POINT_SNIPPET.replace(
     "out = wp::vec4(y[0], y[1], y[2], d);", "out = wp::vec4(y[0], y[1], y[2], (float)t);"
 )
@@ -265,9 +265,10 @@ def _closest_face_native(mesh: wp.uint64, x: wp.vec3, max_dist: float, shrink: f
 
 @wp.func
 def mesh_closest_face(mesh: wp.uint64, x: wp.vec3, max_dist: float):
-    """(closest point on the mesh within ``max_dist`` of ``x``, or ``x``; its triangle, or -1)."""
+    """(closest point on the mesh within ``max_dist`` of ``x``, or ``x``; its triangle, or -1). On a mesh of 2**24
+    triangles or more the triangle may be one of the few next to it in the index (a triangle of the mesh still)."""
     r = _closest_face_native(mesh, x, max_dist, 1.0)
-    return wp.vec3(r[0], r[1], r[2]), int(r[3])
+    return wp.vec3(r[0], r[1], r[2]), wp.min(int(r[3]), wp.mesh_get(mesh).indices.shape[0] / 3 - 1)
 
 
 @wp.func

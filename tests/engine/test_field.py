@@ -429,7 +429,7 @@ def test_closest_point_on_a_triangle_matches_a_dense_sampling_of_it():
     tri[n // 10 : n // 5, 2] = 0.3 * tri[n // 10 : n // 5, 0] + 0.7 * tri[n // 10 : n // 5, 1]  # collinear
     pts = rng.normal(scale=1.5, size=(n, 3)).astype(np.float32)
 
-    from engine.field import closest_on_triangle
+    from engine.field import closest_on_triangle, triangle_edges
 
     @wp.kernel
     def closest(t: wp.array[wp.vec3], x: wp.array[wp.vec3], out: wp.array[wp.vec3]):
@@ -437,9 +437,8 @@ def test_closest_point_on_a_triangle_matches_a_dense_sampling_of_it():
         a = t[3 * i]
         b = t[3 * i + 1]
         c = t[3 * i + 2]
-        ab = b - a
-        ac = c - a
-        out[i] = closest_on_triangle(x[i], a, b, c, ab, ac, wp.dot(ab, ab), wp.dot(ab, ac), wp.dot(ac, ac))
+        ab, ac, d00, d01, d11 = triangle_edges(a, b, c)
+        out[i] = closest_on_triangle(x[i], a, b, c, ab, ac, d00, d01, d11)
 
     out = wp.empty(n, dtype=wp.vec3)
     wp.launch(closest, n, inputs=[wp.array(tri.reshape(-1, 3), dtype=wp.vec3), wp.array(pts, dtype=wp.vec3), out])
