@@ -59,7 +59,7 @@ CAP_LATTICE_MAX_RATIO = 1.0
 # to be sampled (Suzanne's eyes: 0.2 %, holes of the bunny and the teapot: 10-30 %)
 CAP_LATTICE_MIN_SHEET = 0.02
 # Relative error allowed to the closest points of the top level's leaves (0: exact).
-TOP_LEVEL_TOLERANCE = 0.01
+TOP_LEVEL_TOLERANCE = 0.05
 # Sweeps of same-level sign propagation, and the stride along each axis of the oracle's seeds on the dense top level
 # (a lattice through the whole volume, so every region larger than a few top cells, inside or out, holds one).
 MAX_SIGN_SWEEPS = 64
@@ -1429,6 +1429,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             lambda lo, n: [mesh.id, coords, nodes[lo : lo + n], origin_v, float(spacing), sign],
             device,
             min_dim=octree.EMIT_SPLIT_MIN_DIM,  # a winding number costs microseconds: split from a few thousand
+            balance=True,
         )
 
     def finest_signs(coords, sign, lo0, hi0):
@@ -1488,6 +1489,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
                 ],
                 device,
                 min_dim=octree.EMIT_SPLIT_MIN_DIM,
+                balance=True,  # octets near an open mesh's holes, or far from it, cost more
             )
         else:  # a single dense level: node by node
             octet_points = None
@@ -1644,7 +1646,7 @@ def sign_change_octets(field: AdaptiveField, near=None, region=None) -> np.ndarr
             capacity = found
 
     wp.load_module(_band_gap_kernel.module, device=field.device)
-    octree.run_split(gather_part, n_octets, field.device)
+    octree.run_split(gather_part, n_octets, field.device, balance=True)  # only octets near the holes cost
     gap_octets = np.unique(np.concatenate([parts[k] for k in sorted(parts)] or [np.zeros(0, np.int64)]))
     n0 = field.level_counts[0]
     marked = n0 + np.flatnonzero(marks.numpy())

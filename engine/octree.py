@@ -26,31 +26,47 @@ UNSET_DISTANCE = 1.0e30
 # Below this many threads a launch is not worth splitting across CPU cores.
 SPLIT_MIN_DIM = 20_000
 EMIT_SPLIT_MIN_DIM = 1_000
+# Pieces per core of a balanced split launch, taken by the cores in turn as they finish one (each piece is a launch
+# of its own, ~20 us: only for long launches whose items cost unevenly).
+BALANCE_PIECES_PER_CORE = 8
 
 
-def run_split(work, dim: int, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM) -> None:
-    """Call ``work(start, count)`` on consecutive parts of [0, dim), from one Python thread per CPU core (Warp CPU
-    launches release the GIL); one call on CUDA or for small ``dim``. The first error is re-raised in the caller."""
+def run_split(
+    work, dim: int, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM, balance: bool = False
+) -> None:
+    """Call ``work(start, count)`` on consecutive pieces of [0, dim) from one Python thread per CPU core (Warp CPU
+    launches release the GIL), or from ``parts`` threads, one piece each; one call on CUDA or for small ``dim``.
+    ``balance``: the work per item is uneven (items near an open mesh's holes, or far from the surface): each core
+    takes the next of ``BALANCE_PIECES_PER_CORE`` pieces per core as it finishes one, so none waits for the other.
+    The first error is re-raised in the caller."""
     if dim <= 0:
         return
     device = wp.get_device(device)
-    parts = parts or (os.cpu_count() or 1)
-    if device.is_cuda or parts < 2 or dim < min_dim:
+    threads_n = parts or os.cpu_count() or 1
+    if device.is_cuda or threads_n < 2 or dim < min_dim:
         work(0, dim)
         return
-    bounds = np.linspace(0, dim, parts + 1).astype(np.int64)
+    pieces = threads_n * BALANCE_PIECES_PER_CORE if balance and parts is None else threads_n
+    bounds = np.linspace(0, dim, pieces + 1).astype(np.int64)
     errors = []
+    taken = iter(range(pieces))
+    lock = threading.Lock()
 
-    def run(lo, hi):
-        try:
-            work(int(lo), int(hi - lo))
-        except Exception as err:  # re-raised below, in the caller's thread
-            errors.append(err)
+    def run():
+        while not errors:
+            with lock:
+                k = next(taken, None)
+            if k is None:
+                return
+            try:
+                work(int(bounds[k]), int(bounds[k + 1] - bounds[k]))
+            except Exception as err:  # re-raised below, in the caller's thread
+                errors.append(err)
 
-    threads = [threading.Thread(target=run, args=(bounds[k], bounds[k + 1])) for k in range(1, parts)]
+    threads = [threading.Thread(target=run) for _ in range(1, threads_n)]
     for t in threads:
         t.start()
-    run(bounds[0], bounds[1])
+    run()
     for t in threads:
         t.join()
     if errors:
@@ -67,12 +83,15 @@ def run_tasks(tasks, device) -> None:
     run_split(lambda k, _n: tasks[k](), len(tasks), device, parts=len(tasks), min_dim=0)
 
 
-def launch_split(kernel, dim: int, args, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM) -> None:
+def launch_split(
+    kernel, dim: int, args, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM, balance: bool = False
+) -> None:
     """Launch ``kernel`` over [0, dim) — on the CPU, as one launch per core from as many Python threads.
 
     A Warp CPU launch runs on one thread but releases the GIL, so launches from two threads use two cores. ``args``
     is called with (start, count) and returns the launch's ``inputs`` list (slices of per-thread arrays, or an
     offset the kernel adds to its thread id). On CUDA, or for small launches, this is one ordinary launch.
+    ``balance``: see :func:`run_split`.
     """
     if dim <= 0:
         return
@@ -83,6 +102,7 @@ def launch_split(kernel, dim: int, args, device, *, parts: int | None = None, mi
         device,
         parts=parts,
         min_dim=min_dim,
+        balance=balance,
     )
 
 
@@ -806,6 +826,7 @@ def _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known
         ],
         device,
         min_dim=EMIT_SPLIT_MIN_DIM,  # a BVH query per leaf: worth two threads from a few thousand
+        balance=True,  # far from the surface a query costs more
     )
 
 

@@ -1,5 +1,7 @@
 """Construction of the adaptive field: accuracy against analytic and exact SDFs, structure, sparsity, validation."""
 
+import os
+
 import numpy as np
 import pytest
 import warp as wp
@@ -471,6 +473,27 @@ def test_morton_codes_match_between_host_and_device():
     out = wp.empty(len(codes), dtype=wp.vec3i)
     wp.launch(decode, dim=len(codes), inputs=[wp.array(codes, dtype=wp.int64)], outputs=[out])
     np.testing.assert_array_equal(out.numpy(), coords)
+
+
+@pytest.mark.parametrize("balance", [False, True])
+def test_split_launches_cover_every_item_once_and_pass_errors_on(balance):
+    from engine.octree import BALANCE_PIECES_PER_CORE, run_split
+
+    seen = []
+    run_split(lambda lo, n: seen.append((lo, n)), 100_003, "cpu", min_dim=1, balance=balance)
+    covered = np.zeros(100_003, dtype=int)
+    for lo, n in seen:
+        covered[lo : lo + n] += 1
+    assert np.all(covered == 1)
+    cores = os.cpu_count() or 1
+    assert len(seen) == (cores * BALANCE_PIECES_PER_CORE if balance and cores > 1 else cores)
+
+    def fail(lo, n):
+        if lo + n == 1000:  # the last piece, from whichever thread takes it
+            raise ValueError(f"piece at {lo}")
+
+    with pytest.raises(ValueError, match="piece at"):
+        run_split(fail, 1000, "cpu", min_dim=1, balance=balance, parts=None if balance else 2)
 
 
 @pytest.mark.parametrize("name", ["stanford-bunny.obj", "spot.obj"])
