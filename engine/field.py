@@ -1699,6 +1699,7 @@ def _inside_at(mesh_id, cells: np.ndarray, origin, size: float, device) -> np.nd
         lambda start, n: [wp.uint64(mesh_id), cells_wp, every[start : start + n], wp.vec3(*origin), float(size), sign],
         device,
         min_dim=octree.EMIT_SPLIT_MIN_DIM,  # a winding number each
+        balance=True,  # cells near the mesh cost more
     )
     return sign.numpy() < 0.0
 
@@ -1741,16 +1742,14 @@ def _clear_pairs(mesh_id, pairs: np.ndarray, origin, size: float, device) -> np.
         return pairs
     centres = (origin + size * (pairs + 0.5)).astype(np.float32)
     clear = wp.empty(len(pairs), dtype=wp.uint8, device=device)
-    wp.launch(
+    p, q = (wp.array(np.ascontiguousarray(centres[:, k]), dtype=wp.vec3, device=device) for k in (0, 1))
+    octree.launch_split(
         _segments_clear_kernel,
-        dim=len(pairs),
-        inputs=[
-            wp.uint64(mesh_id),
-            wp.array(centres[:, 0], dtype=wp.vec3, device=device),
-            wp.array(centres[:, 1], dtype=wp.vec3, device=device),
-        ],
-        outputs=[clear],
-        device=device,
+        len(pairs),
+        lambda s, n: [wp.uint64(mesh_id), p[s : s + n], q[s : s + n], clear[s : s + n]],
+        device,
+        min_dim=octree.EMIT_SPLIT_MIN_DIM,  # a box query each
+        balance=True,  # pairs next to the mesh test many triangles
     )
     return pairs[clear.numpy() == 1]
 
