@@ -10,10 +10,12 @@ size so that moving an operand does not change it), in one ``bpy`` process with 
 - **GN SDF**: Mesh to SDF Grid ×2 → SDF Grid Boolean → Grid to Mesh on fresh objects (geometry nodes keeps no
   per-operand grid, so moving an operand re-evaluates all of it).
 
-Times are medians of ``--repeat`` runs (default 3) after a warm-up, wall clock around the operator call (it includes
-reading the evaluated meshes and writing the result object). Ratios are against the GN SDF time of the same row.
+Each round runs all four, GN first in odd rounds and last in even ones (``bench/paired.py``: the machine's speed drifts
+within minutes); times are medians of ``--repeat`` rounds (default 5) after a warm-up, wall clock around the operator
+call (it includes reading the evaluated meshes and writing the result object). Ratios are the median of the rounds'
+ratios to that round's GN SDF time, with the smallest and largest in brackets.
 
-    .venv/bin/python bench/addon.py [--cases bunny-spot spheres] [--resolutions 256 512] [--repeat 3]
+    .venv/bin/python bench/addon.py [--cases bunny-spot spheres] [--resolutions 256 512] [--repeat 5]
 """
 
 from __future__ import annotations
@@ -95,7 +97,16 @@ def measure(a, b, voxel_size, repeat):
     out = {"cold": [], "warm": [], "rerun": [], "gn": []}
     built = {}
     step = 0
+
+    def gn_run(k):
+        moved = (b[0] + np.float32([second.location.x, 0.0, 0.0]), b[1])
+        gn = baselines.gn_sdf_boolean(a, moved, OPERATION, voxel_size)
+        if k:
+            out["gn"].append(gn["seconds"])
+
     for k in range(repeat + 1):  # the first round warms up
+        if k % 2 == 1:
+            gn_run(k)
         _clear_cache()
         seconds, numbers = _run_operator(first, second, voxel_size)
         built["cold"] = numbers["fields_built"]
@@ -112,11 +123,12 @@ def measure(a, b, voxel_size, repeat):
         built["rerun"] = numbers["fields_built"]
         if k:
             out["rerun"].append(seconds)
-        moved = (b[0] + np.float32([second.location.x, 0.0, 0.0]), b[1])
-        gn = baselines.gn_sdf_boolean(a, moved, OPERATION, voxel_size)
-        if k:
-            out["gn"].append(gn["seconds"])
+        if k % 2 == 0:
+            gn_run(k)
     medians = {key: statistics.median(v) for key, v in out.items()}
+    for key in ("cold", "warm", "rerun"):
+        ratios = [t / g for t, g in zip(out[key], out["gn"], strict=True)]
+        medians[f"{key}_ratio"] = (statistics.median(ratios), min(ratios), max(ratios))
     return medians, built
 
 
@@ -128,11 +140,11 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", nargs="+", default=["bunny-spot", "spheres"])
     parser.add_argument("--resolutions", nargs="+", type=int, default=[256, 512])
-    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args(argv)
     register()
     all_cases = cases()
-    print(f"# Add-on benchmark — {machine()}; {OPERATION.lower()}, medians of {args.repeat} runs after a warm-up\n")
+    print(f"# Add-on benchmark — {machine()}; {OPERATION.lower()}, {args.repeat} rounds after a warm-up\n")
     header = (
         "| case | res | GN SDF s | cold s | cold / GN | warm s (one field rebuilt) | warm / GN "
         "| re-run s | re-run / GN | fields built cold / warm / re-run |"
@@ -145,13 +157,18 @@ def main(argv=None):
         diag = float(np.linalg.norm(pts.max(0) - pts.min(0)))
         for res in args.resolutions:
             m, built = measure(a, b, diag / res, args.repeat)
-            gn = m["gn"]
+            cold, warm, rerun = (m[f"{key}_ratio"] for key in ("cold", "warm", "rerun"))
             print(
-                f"| {name} | /{res} | {gn:.2f} | {m['cold']:.2f} | {m['cold'] / gn:.2f}× | {m['warm']:.2f} "
-                f"| {m['warm'] / gn:.2f}× | {m['rerun']:.3f} | {m['rerun'] / gn:.3f}× "
+                f"| {name} | /{res} | {m['gn']:.2f} | {m['cold']:.2f} | {_ratio(cold, 2)} | {m['warm']:.2f} "
+                f"| {_ratio(warm, 2)} | {m['rerun']:.3f} | {_ratio(rerun, 3)} "
                 f"| {built['cold']} / {built['warm']} / {built['rerun']} |",
                 flush=True,
             )
+
+
+def _ratio(r, digits: int) -> str:
+    """ "0.91× (0.80–1.02)": the median of the rounds' ratios, then the smallest and largest."""
+    return f"{r[0]:.{digits}f}× ({r[1]:.{digits}f}–{r[2]:.{digits}f})"
 
 
 if __name__ == "__main__":

@@ -18,7 +18,16 @@ import numpy as np
 import warp as wp
 
 from . import octree
-from .field import AdaptiveField, _bits, assemble_field, byte_grid_fits, check_budget, level_layout, plan_domain
+from .field import (
+    TOP_LEVEL_TOLERANCE,
+    AdaptiveField,
+    _bits,
+    assemble_field,
+    byte_grid_fits,
+    check_budget,
+    level_layout,
+    plan_domain,
+)
 from .octree import morton_encode, node_center
 from .sampling import (
     FieldArg,
@@ -38,6 +47,9 @@ OP_UNION, OP_INTERSECTION, OP_DIFFERENCE = 0, 1, 2
 COMBINE_GROUP = 8
 # Finest octets are kept where some node is within this many voxels of the result's surface.
 KEEP_BAND = 2.5
+# A coarse leaf's value may exceed its distance by this share (a built field's top level, see TOP_LEVEL_TOLERANCE):
+# the brackets below widen by it, so they hold the exact value.
+LEAF_SLACK = wp.constant(TOP_LEVEL_TOLERANCE)
 
 
 # ---- point operators ----
@@ -165,8 +177,8 @@ def _extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
 @wp.func
 def _estimate(f: FieldArg, x: wp.vec3):
     """A cheap bracket of an operand's value: (phi, radius) from the coarse leaf containing ``x`` (the field is
-    1-Lipschitz, so the value at ``x`` lies within ``radius`` of the leaf's); radius -1 in the finest band. Also
-    returns that leaf (index, level; ``x`` clamped into the domain)."""
+    1-Lipschitz, so the value at ``x`` lies within ``radius`` of the leaf's, widened by ``LEAF_SLACK``); radius -1 in
+    the finest band. Also returns that leaf (index, level; ``x`` clamped into the domain)."""
     xc = clamp_to_domain(f, x)
     leaf = locate_leaf(f, xc)
     if leaf[1] == 0:
@@ -177,7 +189,7 @@ def _estimate(f: FieldArg, x: wp.vec3):
     out = wp.length(x - xc)
     if out > 0.0:
         phi = wp.max(phi, 0.0) + out
-    return phi, wp.length(xc - centre), leaf
+    return phi, wp.length(xc - centre) + LEAF_SLACK * wp.abs(f.values[leaf[0]]), leaf
 
 
 @wp.kernel(enable_backward=False)
@@ -360,7 +372,8 @@ def _node_bracket(
         return f.values[first + k], 0.0
     if leaf >= 0:
         centre = node_center(f.origin, level_spacing(f, level), f.coords[leaf])
-        return f.values[leaf], wp.length(x - centre)
+        phi = f.values[leaf]
+        return phi, wp.length(x - centre) + LEAF_SLACK * wp.abs(phi)
     if level < 0:  # the octet lies outside the operand's domain: no node of it to look up
         phi, radius, _leaf = _estimate(f, x)
         return phi, radius

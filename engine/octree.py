@@ -27,8 +27,9 @@ UNSET_DISTANCE = 1.0e30
 SPLIT_MIN_DIM = 20_000
 EMIT_SPLIT_MIN_DIM = 1_000
 # Pieces per core of a balanced split launch, taken by the cores in turn as they finish one (each piece is a launch
-# of its own, ~20 us: only for long launches whose items cost unevenly).
+# of its own, ~60 us of Python: only for long launches whose items cost unevenly), of at least BALANCE_MIN_PIECE items.
 BALANCE_PIECES_PER_CORE = 8
+BALANCE_MIN_PIECE = 512
 
 
 def run_split(
@@ -46,7 +47,9 @@ def run_split(
     if device.is_cuda or threads_n < 2 or dim < min_dim:
         work(0, dim)
         return
-    pieces = threads_n * BALANCE_PIECES_PER_CORE if balance and parts is None else threads_n
+    pieces = threads_n
+    if balance and parts is None:
+        pieces = min(threads_n * BALANCE_PIECES_PER_CORE, max(threads_n, dim // BALANCE_MIN_PIECE))
     bounds = np.linspace(0, dim, pieces + 1).astype(np.int64)
     errors = []
     taken = iter(range(pieces))

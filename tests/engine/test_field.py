@@ -477,7 +477,7 @@ def test_morton_codes_match_between_host_and_device():
 
 @pytest.mark.parametrize("balance", [False, True])
 def test_split_launches_cover_every_item_once_and_pass_errors_on(balance):
-    from engine.octree import BALANCE_PIECES_PER_CORE, run_split
+    from engine.octree import BALANCE_MIN_PIECE, BALANCE_PIECES_PER_CORE, run_split
 
     seen = []
     run_split(lambda lo, n: seen.append((lo, n)), 100_003, "cpu", min_dim=1, balance=balance)
@@ -487,6 +487,9 @@ def test_split_launches_cover_every_item_once_and_pass_errors_on(balance):
     assert np.all(covered == 1)
     cores = os.cpu_count() or 1
     assert len(seen) == (cores * BALANCE_PIECES_PER_CORE if balance and cores > 1 else cores)
+    seen.clear()  # small launches: pieces of at least BALANCE_MIN_PIECE items
+    run_split(lambda lo, n: seen.append((lo, n)), 3 * BALANCE_MIN_PIECE, "cpu", min_dim=1, balance=balance)
+    assert len(seen) == (max(cores, 3) if balance and cores > 1 else cores)
 
     def fail(lo, n):
         if lo + n == 1000:  # the last piece, from whichever thread takes it
@@ -749,6 +752,8 @@ def test_node_distances_are_exact_below_the_top_level_and_within_its_tolerance_o
     assert rel.min() >= -1e-4
     assert rel.max() <= engine.field.TOP_LEVEL_TOLERANCE + 1e-4
     assert np.mean(rel > 1e-4) < 0.5  # most are exact all the same
+    # a sign spreads through two empty balls that cover a segment with SIGN_SAFETY to spare: more than the tolerance
+    assert (1.0 + engine.field.TOP_LEVEL_TOLERANCE) * engine.field.SIGN_SAFETY < 0.96
 
 
 def test_seams_that_repeat_vertices_are_not_holes():
