@@ -28,8 +28,8 @@ SPLIT_MIN_DIM = 20_000
 EMIT_SPLIT_MIN_DIM = 1_000
 # Pieces per core of a balanced split launch, taken by the cores in turn as they finish one (each piece is a launch
 # of its own, ~60 us of Python: only for long launches whose items cost unevenly), of at least BALANCE_MIN_PIECE items.
-BALANCE_PIECES_PER_CORE = 8
-BALANCE_MIN_PIECE = 512
+BALANCE_PIECES_PER_CORE = 4
+BALANCE_MIN_PIECE = 1024
 
 
 def run_split(
