@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import warp as wp
@@ -32,14 +33,38 @@ BALANCE_PIECES_PER_CORE = 4
 BALANCE_MIN_PIECE = 1024
 
 
+_helpers = None
+_helpers_lock = threading.Lock()
+
+
+def _helper_pool() -> ThreadPoolExecutor:
+    """The threads that take pieces of split launches beside the caller's (starting a thread costs ~0.2 ms, more than
+    many launches)."""
+    global _helpers
+    with _helpers_lock:
+        if _helpers is None:
+            # two builds may split launches at the same time (build_fields)
+            _helpers = ThreadPoolExecutor(max_workers=2 * (os.cpu_count() or 1), thread_name_prefix="aasdf-split")
+        return _helpers
+
+
 def run_split(
-    work, dim: int, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM, balance: bool = False
+    work,
+    dim: int,
+    device,
+    *,
+    parts: int | None = None,
+    min_dim: int = SPLIT_MIN_DIM,
+    balance: bool = False,
+    own_threads: bool = False,
 ) -> None:
-    """Call ``work(start, count)`` on consecutive pieces of [0, dim) from one Python thread per CPU core (Warp CPU
-    launches release the GIL), or from ``parts`` threads, one piece each; one call on CUDA or for small ``dim``.
-    ``balance``: the work per item is uneven (items near an open mesh's holes, or far from the surface): each core
-    takes the next of ``BALANCE_PIECES_PER_CORE`` pieces per core as it finishes one, so none waits for the other.
-    The first error is re-raised in the caller."""
+    """Call ``work(start, count)`` on consecutive pieces of [0, dim) from the caller's and one more Python thread per
+    further CPU core (Warp CPU launches release the GIL), or from ``parts`` threads, one piece each; one call on CUDA
+    or for small ``dim``. ``balance``: the work per item is uneven (items near an open mesh's holes, or far from the
+    surface): each core takes the next of ``BALANCE_PIECES_PER_CORE`` pieces per core as it finishes one, so none
+    waits for the other. The helper threads come from a pool, and whichever thread is free takes the next piece (so a
+    busy pool only slows a split down); ``work`` that splits work itself needs ``own_threads`` (a thread started for
+    each piece). The first error is re-raised in the caller."""
     if dim <= 0:
         return
     device = wp.get_device(device)
@@ -66,12 +91,18 @@ def run_split(
             except Exception as err:  # re-raised below, in the caller's thread
                 errors.append(err)
 
-    threads = [threading.Thread(target=run) for _ in range(1, threads_n)]
-    for t in threads:
-        t.start()
-    run()
-    for t in threads:
-        t.join()
+    if own_threads:
+        threads = [threading.Thread(target=run) for _ in range(1, threads_n)]
+        for t in threads:
+            t.start()
+        run()
+        for t in threads:
+            t.join()
+    else:
+        helpers = [_helper_pool().submit(run) for _ in range(1, threads_n)]
+        run()
+        for h in helpers:
+            h.result()
     if errors:
         raise errors[0]
 
@@ -83,7 +114,7 @@ def run_tasks(tasks, device) -> None:
         for task in tasks:
             task()
         return
-    run_split(lambda k, _n: tasks[k](), len(tasks), device, parts=len(tasks), min_dim=0)
+    run_split(lambda k, _n: tasks[k](), len(tasks), device, parts=len(tasks), min_dim=0, own_threads=True)
 
 
 def launch_split(

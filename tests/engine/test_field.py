@@ -497,6 +497,11 @@ def test_split_launches_cover_every_item_once_and_pass_errors_on(balance):
 
     with pytest.raises(ValueError, match="piece at"):
         run_split(fail, 1000, "cpu", min_dim=1, balance=balance, parts=None if balance else 2)
+    # pieces from the helper pool and from threads of their own cover the same items
+    for own in (False, True):
+        seen.clear()
+        run_split(lambda lo, n: seen.append((lo, n)), 50_000, "cpu", min_dim=1, balance=balance, own_threads=own)
+        assert sorted(seen)[0][0] == 0 and sum(n for _lo, n in seen) == 50_000
 
 
 @pytest.mark.parametrize("name", ["stanford-bunny.obj", "spot.obj"])
