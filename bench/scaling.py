@@ -1,12 +1,13 @@
 """Scaling and memory: time against resolution and triangle count, and peak memory against Blender's SDF pipeline.
 
 Each measurement runs in a fresh process (so its peak resident memory is its own): a union of two overlapping copies
-of a mesh, through AASDF's whole pipeline and through the geometry-nodes SDF pipeline at the same voxel size.
+of a mesh, through AASDF's whole pipeline and through the geometry-nodes SDF pipeline at the same voxel size; each
+process runs it once to warm up (kernels, node tree) and then ``--repeat`` times (default 3), and reports the median.
 
 - vs resolution: spot ∪ spot(+0.3 x) at diagonal / 128, 256, 512, 1024;
 - vs triangles at diagonal / 256: UV spheres of about 5 k, 80 k and 1 M triangles, and the Stanford bunny (69 k).
 
-    .venv/bin/python bench/scaling.py
+    .venv/bin/python bench/scaling.py [--repeat 3]
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from bench.child import run_child  # noqa: E402
 CHILD = r"""
 import json, resource, sys, time
 sys.path.insert(0, sys.argv[1])
-method, case, res = sys.argv[2], sys.argv[3], int(sys.argv[4])
+method, case, res, repeat = sys.argv[2], sys.argv[3], int(sys.argv[4]), int(sys.argv[5])
 import numpy as np
 from tests.support import load_mesh, uv_sphere
 if case == "spot":
@@ -40,28 +41,32 @@ if method == "aasdf":
     import warp as wp
     wp.config.quiet = True
     import engine
-    fa, fb = engine.build_fields([a, b], voxel_size=h * 4)
-    engine.union(fa, fb).to_mesh()  # loads the kernels
-    t0 = time.perf_counter()
-    fa, fb = engine.build_fields([a, b], voxel_size=h)  # at the same time, as the add-on does
-    verts, tris = engine.union(fa, fb).to_mesh()
-    seconds = time.perf_counter() - t0
-    nodes = fa.node_count + fb.node_count
+
+    def run():
+        t0 = time.perf_counter()
+        fa, fb = engine.build_fields([a, b], voxel_size=h)  # at the same time, as the add-on does
+        verts, tris = engine.union(fa, fb).to_mesh()
+        return time.perf_counter() - t0, tris, fa.node_count + fb.node_count
 else:
     from bench import baselines
-    r = baselines.gn_sdf_boolean(a, b, "UNION", h)
-    tris, seconds, nodes = r["tris"], r["seconds"], 0
+
+    def run():
+        r = baselines.gn_sdf_boolean(a, b, "UNION", h)
+        return r["seconds"], r["tris"], 0
+run()  # warm-up: kernels loaded, node tree set up
+runs = sorted((run() for _ in range(repeat)), key=lambda r: r[0])
+seconds, tris, nodes = runs[len(runs) // 2]
 print("RESULT " + json.dumps({"seconds": seconds, "triangles": int(len(tris)), "input_triangles": int(len(a[1])),
                                "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "nodes": nodes}))
 """
 
 
-def measure(method: str, case: str, res: int) -> dict:
-    return run_child(CHILD, method, case, res)
+def measure(method: str, case: str, res: int, repeat: int) -> dict:
+    return run_child(CHILD, method, case, res, repeat)
 
 
-def row(label: str, case: str, res: int) -> None:
-    ours, gn = measure("aasdf", case, res), measure("gn", case, res)
+def row(label: str, case: str, res: int, repeat: int) -> None:
+    ours, gn = measure("aasdf", case, res, repeat), measure("gn", case, res, repeat)
     print(
         f"| {label} | {ours['input_triangles']:,} | /{res} | {ours['seconds']:.2f} | {gn['seconds']:.2f} "
         f"| {ours['seconds'] / gn['seconds']:.2f}x | {ours['nodes']:,} | {ours['rss_mb']:.0f} | {gn['rss_mb']:.0f} |"
@@ -70,18 +75,23 @@ def row(label: str, case: str, res: int) -> None:
 
 
 def main(argv=None) -> None:
-    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args(argv)  # no options; answers --help
-    print("# Scaling — union of a mesh and a shifted copy, fresh process per measurement (peak RSS is the process's)\n")
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=3)
+    repeat = parser.parse_args(argv).repeat
+    print(
+        "# Scaling — union of a mesh and a shifted copy, fresh process per measurement (peak RSS is the process's), "
+        f"median of {repeat} runs after a warm-up\n"
+    )
     print(
         "| case | triangles (each) | res | AASDF s | GN SDF s | ratio | AASDF field nodes | AASDF peak MB "
         "| GN peak MB |"
     )
     print("|---|---|---|---|---|---|---|---|---|")
     for res in (128, 256, 512, 1024):
-        row("spot ∪ spot", "spot", res)
+        row("spot ∪ spot", "spot", res, repeat)
     for rings in (48, 200, 700):
-        row("sphere ∪ sphere", f"sphere:{rings}", 256)
-    row("bunny ∪ bunny", "bunny", 256)
+        row("sphere ∪ sphere", f"sphere:{rings}", 256, repeat)
+    row("bunny ∪ bunny", "bunny", 256, repeat)
 
 
 if __name__ == "__main__":
