@@ -11,8 +11,9 @@ from __future__ import annotations
 import statistics
 
 
-def paired(ours, theirs, repeat: int) -> dict:
-    """Time ``ours`` against ``theirs`` in ``repeat`` alternating rounds, after one warm-up call of each.
+def paired(ours, theirs, repeat: int, *, warm_up: bool = True) -> dict:
+    """Time ``ours`` against ``theirs`` in ``repeat`` alternating rounds, after one warm-up call of each (``warm_up``;
+    callables that warm up on their own, in processes of their own, need none).
 
     Args:
         ours, theirs: Callables returning a dict with ``"seconds"`` (and anything else, kept).
@@ -21,8 +22,9 @@ def paired(ours, theirs, repeat: int) -> dict:
         ``ours`` and ``theirs``: the run of median time of each; ``ratio``: median of ours / theirs per round;
         ``low`` and ``high``: the smallest and largest per-round ratio.
     """
-    ours()
-    theirs()
+    if warm_up:
+        ours()
+        theirs()
     runs_ours, runs_theirs = [], []
     for k in range(max(1, repeat)):
         if k % 2 == 0:

@@ -2,7 +2,10 @@
 
 Each measurement runs in a fresh process (so its peak resident memory is its own): a union of two overlapping copies
 of a mesh, through AASDF's whole pipeline and through the geometry-nodes SDF pipeline at the same voxel size; each
-process runs it once to warm up (kernels, node tree) and then ``--repeat`` times (default 3), and reports the median.
+process runs it once to warm up (kernels, node tree) and then once timed. The two methods' processes run in turns,
+``--repeat`` rounds (default 3), AASDF first in even rounds and GN first in odd ones (``bench/paired.py``): the run
+of median time gives the time and the peak, the ratio is the median of the rounds' ratios (smallest and largest in
+brackets).
 
 - vs resolution: spot ∪ spot(+0.3 x) at diagonal / 128, 256, 512, 1024;
 - vs triangles at diagonal / 256: UV spheres of about 5 k, 80 k and 1 M triangles, and the Stanford bunny (69 k).
@@ -13,6 +16,7 @@ process runs it once to warm up (kernels, node tree) and then ``--repeat`` times
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
@@ -20,11 +24,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.child import run_child  # noqa: E402
+from bench.paired import paired  # noqa: E402
 
 CHILD = r"""
 import json, resource, sys, time
 sys.path.insert(0, sys.argv[1])
-method, case, res, repeat = sys.argv[2], sys.argv[3], int(sys.argv[4]), int(sys.argv[5])
+method, case, res = sys.argv[2], sys.argv[3], int(sys.argv[4])
 import numpy as np
 from tests.support import load_mesh, uv_sphere
 if case == "spot":
@@ -54,22 +59,28 @@ else:
         r = baselines.gn_sdf_boolean(a, b, "UNION", h)
         return r["seconds"], r["tris"], 0
 run()  # warm-up: kernels loaded, node tree set up
-runs = sorted((run() for _ in range(repeat)), key=lambda r: r[0])
-seconds, tris, nodes = runs[len(runs) // 2]
+seconds, tris, nodes = run()
 print("RESULT " + json.dumps({"seconds": seconds, "triangles": int(len(tris)), "input_triangles": int(len(a[1])),
                                "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "nodes": nodes}))
 """
 
 
-def measure(method: str, case: str, res: int, repeat: int) -> dict:
-    return run_child(CHILD, method, case, res, repeat)
+def measure(method: str, case: str, res: int) -> dict:
+    return run_child(CHILD, method, case, res)
 
 
 def row(label: str, case: str, res: int, repeat: int) -> None:
-    ours, gn = measure("aasdf", case, res, repeat), measure("gn", case, res, repeat)
+    pair = paired(
+        functools.partial(measure, "aasdf", case, res),
+        functools.partial(measure, "gn", case, res),
+        repeat,
+        warm_up=False,
+    )
+    ours, gn = pair["ours"], pair["theirs"]
     print(
         f"| {label} | {ours['input_triangles']:,} | /{res} | {ours['seconds']:.2f} | {gn['seconds']:.2f} "
-        f"| {ours['seconds'] / gn['seconds']:.2f}x | {ours['nodes']:,} | {ours['rss_mb']:.0f} | {gn['rss_mb']:.0f} |"
+        f"| {pair['ratio']:.2f}x ({pair['low']:.2f}-{pair['high']:.2f}) | {ours['nodes']:,} | {ours['rss_mb']:.0f} "
+        f"| {gn['rss_mb']:.0f} |"
     )
     sys.stdout.flush()
 
@@ -80,7 +91,7 @@ def main(argv=None) -> None:
     repeat = parser.parse_args(argv).repeat
     print(
         "# Scaling — union of a mesh and a shifted copy, fresh process per measurement (peak RSS is the process's), "
-        f"median of {repeat} runs after a warm-up\n"
+        f"AASDF and GN processes in {repeat} alternating rounds\n"
     )
     print(
         "| case | triangles (each) | res | AASDF s | GN SDF s | ratio | AASDF field nodes | AASDF peak MB "
