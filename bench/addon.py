@@ -36,6 +36,7 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bench import baselines  # noqa: E402
+from bench.paired import round_ratios  # noqa: E402
 from bench.pipeline import cases as pipeline_cases  # noqa: E402
 from tests.conftest import load_addon_package  # noqa: E402
 
@@ -127,8 +128,7 @@ def measure(a, b, voxel_size, repeat):
             gn_run(k)
     medians = {key: statistics.median(v) for key, v in out.items()}
     for key in ("cold", "warm", "rerun"):
-        ratios = [t / g for t, g in zip(out[key], out["gn"], strict=True)]
-        medians[f"{key}_ratio"] = (statistics.median(ratios), min(ratios), max(ratios))
+        medians[f"{key}_ratio"] = round_ratios(out[key], out["gn"])
     return medians, built
 
 

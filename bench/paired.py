@@ -33,14 +33,20 @@ def paired(ours, theirs, repeat: int, *, warm_up: bool = True) -> dict:
         else:
             runs_theirs.append(theirs())
             runs_ours.append(ours())
-    ratios = [o["seconds"] / t["seconds"] for o, t in zip(runs_ours, runs_theirs, strict=True)]
+    ratio, low, high = round_ratios([r["seconds"] for r in runs_ours], [r["seconds"] for r in runs_theirs])
     return {
         "ours": _median_run(runs_ours),
         "theirs": _median_run(runs_theirs),
-        "ratio": statistics.median(ratios),
-        "low": min(ratios),
-        "high": max(ratios),
+        "ratio": ratio,
+        "low": low,
+        "high": high,
     }
+
+
+def round_ratios(ours: list, theirs: list) -> tuple[float, float, float]:
+    """(median, smallest, largest) of the per-round ratios ours[k] / theirs[k] of two lists of seconds."""
+    ratios = [o / t for o, t in zip(ours, theirs, strict=True)]
+    return statistics.median(ratios), min(ratios), max(ratios)
 
 
 def _median_run(runs: list) -> dict:

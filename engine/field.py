@@ -1421,9 +1421,6 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     def oracle(coords, nodes_np, spacing, sign):
         if len(nodes_np) == 0:
             return
-        # winding numbers cost most near holes, which a Morton-ordered list bunches: every other node to each half
-        # of the split launch keeps the two halves even
-        nodes_np = np.concatenate([nodes_np[0::2], nodes_np[1::2]])
         nodes = wp.array(nodes_np.astype(np.int32), dtype=wp.int32, device=device)
         origin_v = wp.vec3(*origin)
         octree.launch_split(
@@ -1432,7 +1429,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             lambda lo, n: [mesh.id, coords, nodes[lo : lo + n], origin_v, float(spacing), sign],
             device,
             min_dim=octree.EMIT_SPLIT_MIN_DIM,  # a winding number costs microseconds: split from a few thousand
-            balance=True,
+            balance=True,  # winding numbers cost most near holes, which a Morton-ordered list bunches
         )
 
     def finest_signs(coords, sign, lo0, hi0):
