@@ -6,8 +6,10 @@ passed as ``device`` (CPU here, CUDA wherever an NVIDIA GPU is present). Negativ
 
 from . import kernels
 from .boolean import difference, intersection, union
+from .build import build_field, build_fields
 from .errors import AasdfError
-from .field import AdaptiveField, build_field, build_fields, check_meshes, plan_field
+from .field import AdaptiveField
+from .plan import check_meshes, plan_field
 
 kernels.configure_modules(__name__)
 

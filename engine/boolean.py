@@ -16,43 +16,33 @@ import time
 
 import numpy as np
 import warp as wp
+import warp.geometry
 
-from . import octree
-from .field import (
-    TOP_LEVEL_TOLERANCE,
-    AdaptiveField,
-    _bits,
-    assemble_field,
-    byte_grid_fits,
-    check_budget,
-    level_layout,
-    plan_domain,
+from . import octree, parallel
+from .build import assemble_field
+from .field import AdaptiveField
+from .octree import code_bits, level_layout, morton_encode, node_center
+from .operands import (
+    coarse_sample,
+    estimate,
+    extrapolate,
+    lookup_node,
+    node_bracket,
+    octet_source,
+    sample_operand,
 )
-from .octree import morton_encode, node_center
-from .sampling import (
-    FieldArg,
-    clamp_to_domain,
-    coarse_mls,
-    inside_domain,
-    leaf_neighbours,
-    level_spacing,
-    locate_leaf,
-    locate_node,
-    sample_mls,
-    vec27i,
-)
+from .plan import byte_grid_fits, check_budget, plan_domain
+from .sampling import FieldArg, clamp_to_domain, locate_leaf, vec27i
 
 OP_UNION, OP_INTERSECTION, OP_DIFFERENCE = 0, 1, 2
+
+
 # Consecutive nodes per thread of the combination (an octet on the sparse levels).
 COMBINE_GROUP = 8
+
+
 # Finest octets are kept where some node is within this many voxels of the result's surface.
 KEEP_BAND = 2.5
-# A coarse leaf's value may exceed its distance by this share (a built field's top level, see TOP_LEVEL_TOLERANCE):
-# the brackets below widen by it, so they hold the exact value.
-LEAF_SLACK = wp.constant(TOP_LEVEL_TOLERANCE)
-
-
-# ---- point operators ----
 
 
 @wp.func
@@ -72,124 +62,6 @@ def sdf_combine(op: int, a: float, b: float, k: float) -> float:
     if op == 1:
         return -sdf_smooth_min(-a, -b, k)
     return -sdf_smooth_min(-a, b, k)
-
-
-@wp.func
-def _node_of(f: FieldArg, j: int, x: wp.vec3):
-    """(1, phi, grad, j) of an operand's finest node ``j`` seen from ``x`` (its position)."""
-    g = x - f.proj[j]
-    ln = wp.length(g)
-    phi = f.values[j]
-    if ln > 0.0:
-        g = g / ln
-    if phi < 0.0:
-        g = -g
-    return 1, phi, g, j
-
-
-@wp.func
-def _lookup(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3):
-    """An operand's own finest node at result node ``c`` when the lattices are aligned: (found, phi, grad, index)."""
-    if aligned == 1:
-        oc = c + offset
-        if oc[0] >= 0 and oc[1] >= 0 and oc[2] >= 0:
-            j = octree.find_key(f.codes, 0, f.fine_count, morton_encode(oc))
-            if j >= 0:
-                return _node_of(f, j, x)
-    return 0, 0.0, wp.vec3(0.0), -1
-
-
-@wp.func
-def _lookup_node(
-    f: FieldArg,
-    aligned: int,
-    offset: wp.vec3i,
-    c: wp.vec3i,
-    x: wp.vec3,
-    octet_mode: int,
-    octet_first: wp.array[wp.int32],
-    i: int,
-):
-    """:func:`_lookup` for result finest node ``i`` (child ``i % 8`` of octet ``i // 8``), through the octet's first
-    node in the operand when the octets coincide (``octet_mode``; -1 there: the operand lacks the octet)."""
-    if octet_mode == 1:
-        j0 = octet_first[i // 8]
-        if j0 >= 0:
-            return _node_of(f, j0 + i % 8, x)
-        return 0, 0.0, wp.vec3(0.0), -1
-    return _lookup(f, aligned, offset, c, x)
-
-
-@wp.func
-def _beyond_domain(r: wp.vec4, x: wp.vec3, xc: wp.vec3) -> wp.vec4:
-    """(phi, grad) ``r`` sampled at ``xc``, ``x`` clamped into the domain, as seen from ``x``: the bound that grows
-    with the distance to the domain."""
-    out = wp.length(x - xc)
-    if out > 0.0:
-        gd = (x - xc) / out
-        return wp.vec4(wp.max(r[0], 0.0) + out, gd[0], gd[1], gd[2])
-    return r
-
-
-@wp.func
-def _sample(f: FieldArg, x: wp.vec3) -> wp.vec4:
-    """(phi, grad) by MLS; outside the domain, the bound that grows with the distance to the domain."""
-    xc = clamp_to_domain(f, x)
-    return _beyond_domain(sample_mls(f, xc), x, xc)
-
-
-@wp.func
-def _coarse_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, cached: int, count: int, ids: vec27i, levels: vec27i):
-    """:func:`_sample` where ``x`` (clamped into the domain) lies in coarse leaf ``leaf`` (index, level), with the
-    neighbours (:func:`leaf_neighbours`) of leaf ``cached`` at hand: gathered again only for another leaf. Returns
-    the sample and the neighbours now at hand (cached leaf, count, indices, levels)."""
-    if leaf[0] != cached:
-        count, ids, levels = leaf_neighbours(f, leaf[0], leaf[1])
-    xc = clamp_to_domain(f, x)
-    r = coarse_mls(f, count, ids, levels, xc, level_spacing(f, leaf[1]), f.values[leaf[0]])
-    return _beyond_domain(r, x, xc), leaf[0], count, ids, levels
-
-
-@wp.func
-def _extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
-    """(phi, grad) from the operand's node containing ``x`` with the given spacing, or the coarser leaf containing it:
-    its value carried along its exact gradient (the direction from its closest point), i.e. the distance to its
-    tangent plane — exactly its own value where a node of the operand sits at ``x``. Cheap; used for the coarse levels
-    of a result (``spacing``: theirs). Also returns that node."""
-    xc = clamp_to_domain(f, x)
-    leaf = locate_node(f, xc, wp.max(int(wp.round(wp.log2(spacing / f.voxel_size))), 0))
-    s = level_spacing(f, leaf[1])
-    centre = node_center(f.origin, s, f.coords[leaf[0]])
-    phi = f.values[leaf[0]]
-    n = centre - f.proj[leaf[0]]
-    ln = wp.length(n)
-    g = wp.vec3(0.0)
-    if ln > 0.0:
-        g = wp.where(phi < 0.0, -1.0, 1.0) * n / ln
-    phi = phi + wp.dot(g, xc - centre)
-    out = wp.length(x - xc)
-    if out > 0.0:
-        g = (x - xc) / out
-        phi = wp.max(phi, 0.0) + out
-    return wp.vec4(phi, g[0], g[1], g[2]), leaf[0]
-
-
-@wp.func
-def _estimate(f: FieldArg, x: wp.vec3):
-    """A cheap bracket of an operand's value: (phi, radius) from the coarse leaf containing ``x`` (the field is
-    1-Lipschitz, so the value at ``x`` lies within ``radius`` of the leaf's, widened by ``LEAF_SLACK``); radius -1 in
-    the finest band. Also returns that leaf (index, level; ``x`` clamped into the domain)."""
-    xc = clamp_to_domain(f, x)
-    leaf = locate_leaf(f, xc)
-    if leaf[1] == 0:
-        return 0.0, -1.0, leaf
-    s = level_spacing(f, leaf[1])
-    centre = node_center(f.origin, s, f.coords[leaf[0]])
-    phi = f.values[leaf[0]]
-    out = wp.length(x - xc)
-    if out > 0.0:
-        phi = wp.max(phi, 0.0) + out
-    return phi, wp.length(xc - centre) + LEAF_SLACK * wp.abs(f.values[leaf[0]]), leaf
 
 
 @wp.kernel(enable_backward=False)
@@ -243,8 +115,8 @@ def _combine_nodes_kernel(
         # Exact node values where the lattices align; elsewhere a cheap bracket from the containing coarse leaf, and
         # the MLS sample only when that operand can decide the result (its bracket overlaps the other's within
         # blend).
-        fa, va, ga, ja = _lookup_node(a, a_aligned, a_offset, c, x, a_octets, a_first, i)
-        fb, vb, gb, jb = _lookup_node(b, b_aligned, b_offset, c, x, b_octets, b_first, i)
+        fa, va, ga, ja = lookup_node(a, a_aligned, a_offset, c, x, a_octets, a_first, i)
+        fb, vb, gb, jb = lookup_node(b, b_aligned, b_offset, c, x, b_octets, b_first, i)
         # each operand's node the value came from, where a look-up below finds one (for the source id): on coarse
         # levels the operand's node of that level at x (or its coarser leaf), on the finest its leaf containing x
         leaf_a = wp.vec2i(-1, 0)
@@ -252,12 +124,12 @@ def _combine_nodes_kernel(
         if precise == 0:
             # coarse levels: each operand's containing leaf, extrapolated along its gradient
             if fa == 0:
-                r, node_a = _extrapolate(a, x, spacing)
+                r, node_a = extrapolate(a, x, spacing)
                 leaf_a = wp.vec2i(node_a, 0)
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
             if fb == 0:
-                r, node_b = _extrapolate(b, x, spacing)
+                r, node_b = extrapolate(b, x, spacing)
                 leaf_b = wp.vec2i(node_b, 0)
                 vb = r[0]
                 gb = wp.vec3(r[1], r[2], r[3])
@@ -265,16 +137,16 @@ def _combine_nodes_kernel(
             rad_a = float(0.0)
             rad_b = float(0.0)
             if fa == 0:
-                va, rad_a, leaf_a = _estimate(a, x)
+                va, rad_a, leaf_a = estimate(a, x)
             if fb == 0:
-                vb, rad_b, leaf_b = _estimate(b, x)
+                vb, rad_b, leaf_b = estimate(b, x)
             if rad_a < 0.0:
-                r = _sample(a, x)
+                r = sample_operand(a, x)
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
                 rad_a = 0.0
             if rad_b < 0.0:
-                r = _sample(b, x)
+                r = sample_operand(b, x)
                 vb = r[0]
                 gb = wp.vec3(r[1], r[2], r[3])
                 rad_b = 0.0
@@ -295,11 +167,11 @@ def _combine_nodes_kernel(
                 elif va + rad_a <= tb - rad_b - blend:
                     need_a = 0
             if need_a == 1 and rad_a > 0.0:
-                r, cached_a, count_a, ids_a, levels_a = _coarse_sample(a, x, leaf_a, cached_a, count_a, ids_a, levels_a)
+                r, cached_a, count_a, ids_a, levels_a = coarse_sample(a, x, leaf_a, cached_a, count_a, ids_a, levels_a)
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
             if need_b == 1 and rad_b > 0.0:
-                r, cached_b, count_b, ids_b, levels_b = _coarse_sample(b, x, leaf_b, cached_b, count_b, ids_b, levels_b)
+                r, cached_b, count_b, ids_b, levels_b = coarse_sample(b, x, leaf_b, cached_b, count_b, ids_b, levels_b)
                 vb = r[0]
                 gb = wp.vec3(r[1], r[2], r[3])
         ra = wp.vec4(va, ga[0], ga[1], ga[2])
@@ -330,56 +202,6 @@ def _combine_nodes_kernel(
         source[i] = follow.source[node]
 
 
-@wp.func
-def _bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3):
-    """(phi, radius): an operand's value at result node ``c`` lies within ``radius`` of ``phi`` — exact (radius 0)
-    where the lattices align, the containing coarse leaf's bracket elsewhere; radius -1 in a non-aligned finest band."""
-    found, phi, g, j = _lookup(f, aligned, offset, c, x)
-    if found == 1:
-        return phi, 0.0
-    phi, radius, _leaf = _estimate(f, x)
-    return phi, radius
-
-
-@wp.func
-def _octet_source(f: FieldArg, octet_mode: int, offset: wp.vec3i, oc: wp.vec3i, origin: wp.vec3, spacing: float):
-    """Where an operand holds result octet ``oc`` when its lattice is aligned at octet granularity: (index of the
-    octet's first child in its finest level, or -1; else the coarse leaf covering the whole octet, or -1; its level,
-    -1 when the octet lies outside the operand's domain).
-    The octet is a level-1 cell of the operand: a descent from its dense top level finds the node of that cell, whose
-    8 children are the octet when it has any (an operand's finest level is octet-complete and every octet has its
-    parent), or the coarser leaf that covers it."""
-    if octet_mode == 1:
-        x = origin + 2.0 * spacing * wp.vec3(float(oc[0]) + 0.5, float(oc[1]) + 0.5, float(oc[2]) + 0.5)
-        if not inside_domain(f, x):
-            return -1, -1, -1  # outside the operand's domain, so none of its octets
-        if f.levels == 1:  # the dense top level is the finest: the octet's first child by its code
-            c0 = wp.vec3i(2 * oc[0], 2 * oc[1], 2 * oc[2]) + offset
-            return octree.find_key(f.codes, 0, f.fine_count, morton_encode(c0)), -1, 0
-        leaf = locate_node(f, x, 1)
-        if leaf[1] == 1 and f.child[leaf[0]] >= 0:
-            return f.child[leaf[0]], -1, 0
-        return -1, leaf[0], leaf[1]
-    return -1, -1, 0
-
-
-@wp.func
-def _node_bracket(
-    f: FieldArg, first: int, leaf: int, level: int, k: int, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3
-):
-    """(phi, radius) of an operand at child ``k`` of an octet located by :func:`_octet_source`."""
-    if first >= 0:
-        return f.values[first + k], 0.0
-    if leaf >= 0:
-        centre = node_center(f.origin, level_spacing(f, level), f.coords[leaf])
-        phi = f.values[leaf]
-        return phi, wp.length(x - centre) + LEAF_SLACK * wp.abs(phi)
-    if level < 0:  # the octet lies outside the operand's domain: no node of it to look up
-        phi, radius, _leaf = _estimate(f, x)
-        return phi, radius
-    return _bracket(f, aligned, offset, c, x)
-
-
 @wp.kernel(enable_backward=False)
 def _octet_bracket_kernel(
     first: int,
@@ -407,16 +229,16 @@ def _octet_bracket_kernel(
     within ``band`` of the result's surface, and which signs its nodes may have."""
     t = first + wp.tid()
     oc = octree.morton_decode(octets[t])
-    a_first, a_leaf, a_level = _octet_source(a, a_octets, a_offset, oc, origin, spacing)
-    b_first, b_leaf, b_level = _octet_source(b, b_octets, b_offset, oc, origin, spacing)
+    a_first, a_leaf, a_level = octet_source(a, a_octets, a_offset, oc, origin, spacing)
+    b_first, b_leaf, b_level = octet_source(b, b_octets, b_offset, oc, origin, spacing)
     n_near = int(0)
     neg = int(0)
     pos = int(0)
     for k in range(8):
         c = wp.vec3i(2 * oc[0] + (k & 1), 2 * oc[1] + ((k >> 1) & 1), 2 * oc[2] + ((k >> 2) & 1))
         x = node_center(origin, spacing, c)
-        va, ra = _node_bracket(a, a_first, a_leaf, a_level, k, a_aligned, a_offset, c, x)
-        vb, rb = _node_bracket(b, b_first, b_leaf, b_level, k, b_aligned, b_offset, c, x)
+        va, ra = node_bracket(a, a_first, a_leaf, a_level, k, a_aligned, a_offset, c, x)
+        vb, rb = node_bracket(b, b_first, b_leaf, b_level, k, b_aligned, b_offset, c, x)
         if ra < 0.0 or rb < 0.0:
             n_near = 1
             neg = 1
@@ -545,9 +367,6 @@ def _octets_of_cells_kernel(
         counts[t] = n
 
 
-# ---- host side ----
-
-
 def _check_operands(a, b, blend):
     for name, f in (("a", a), ("b", b)):
         if not isinstance(f, AdaptiveField):
@@ -627,11 +446,11 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     all_codes = wp.empty(parts[0].shape[0] + parts[1].shape[0], dtype=wp.int64, device=device)
     wp.copy(all_codes, parts[0], count=parts[0].shape[0])
     wp.copy(all_codes, parts[1], dest_offset=parts[0].shape[0], count=parts[1].shape[0])
-    octets = octree.sort_unique(all_codes, end_bit=3 * _bits(oct_dims))
+    octets = octree.sort_unique(all_codes, end_bit=3 * code_bits(oct_dims))
     radius = int(math.ceil(0.25 * blend / (2.0 * h))) if blend > 0.0 else 0
     for _ in range(radius):  # grow one octet at a time: 27x the set, then de-duplicate
         check_budget(fine_dims, 0, 8 * 27 * octets.shape[0])
-        octets = octree.dilate_octets(octets, oct_dims, end_bit=3 * _bits(oct_dims))
+        octets = octree.dilate_octets(octets, oct_dims, end_bit=3 * code_bits(oct_dims))
     timings["finest_cells"] = time.perf_counter() - t0
 
     a_arg, b_arg = a.arg(), b.arg()
@@ -654,7 +473,7 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     flags = [int(aligned[0]), int(aligned[1])]
     # octet-granular look-ups need the operand's octets to coincide with the result's (even lattice offsets)
     octet_flags = [int(al and not (_offset_to(f, origin, h) % 2).any()) for f, al in zip((a, b), aligned, strict=False)]
-    octree.launch_split(
+    parallel.launch_split(
         _octet_bracket_kernel,
         n_oct,
         lambda start, n: [
@@ -683,12 +502,12 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     if byte_grid_fits(oct_dims):
         # a byte per octet of the grid: the 26 neighbours are found by index rather than by binary search
         signs = wp.zeros(int(np.prod(oct_dims)), dtype=wp.uint8, device=device)
-        octree.launch_split(
+        parallel.launch_split(
             _octet_signs_kernel, n_oct, lambda start, n: [start, octets, has_neg, has_pos, dims_v, signs], device
         )
     else:
         signs = wp.empty(0, dtype=wp.uint8, device=device)
-    octree.launch_split(
+    parallel.launch_split(
         _keep_octets_kernel,
         n_oct,
         lambda start, n: [start, octets, near, has_neg, has_pos, dims_v, signs, keep_wp],
@@ -715,7 +534,7 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
             b_first if finest else no_octets,
         ]
         group = COMBINE_GROUP
-        octree.launch_split(
+        parallel.launch_split(
             _combine_nodes_kernel,
             (hi_ - lo_ + group - 1) // group,
             lambda start, n: [

@@ -245,7 +245,7 @@ def sample_linear(f: FieldArg, x: wp.vec3) -> float:
 
 
 @wp.kernel(enable_backward=False)
-def _sample_field_kernel(
+def sample_field_kernel(
     f: FieldArg, points: wp.array[wp.vec3], method: int, values: wp.array[wp.float32], grads: wp.array[wp.vec3]
 ):
     """Signed distance (negative inside) and gradient at each point; outside the domain the value grows with the
@@ -273,7 +273,7 @@ def _sample_field_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def _source_ids_kernel(f: FieldArg, points: wp.array[wp.vec3], ids: wp.array[wp.int32]):
+def source_ids_kernel(f: FieldArg, points: wp.array[wp.vec3], ids: wp.array[wp.int32]):
     i = wp.tid()
     leaf = locate_leaf(f, clamp_to_domain(f, points[i]))
     ids[i] = f.source[leaf[0]]

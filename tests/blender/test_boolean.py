@@ -407,12 +407,12 @@ def test_degenerate_operand_is_reported_with_its_name(fresh_cache):
 
 
 def test_operands_that_fit_alone_but_not_together_are_refused_before_any_build(fresh_cache, monkeypatch):
-    import aasdf.engine.field as engine_field
+    import aasdf.engine.plan as engine_plan
 
     a, b = spot_pair()
     verts, tris = load_mesh("spot.obj")
-    one = engine_field.plan_field(verts, tris, voxel_size=0.02)["bytes"]
-    monkeypatch.setattr(engine_field, "available_memory", lambda: 3 * one)  # half usable: 1.5 fields
+    one = engine_plan.plan_field(verts, tris, voxel_size=0.02)["bytes"]
+    monkeypatch.setattr(engine_plan, "available_memory", lambda: 3 * one)  # half usable: 1.5 fields
     select(a, b)
     with pytest.raises(RuntimeError, match="together"):
         bpy.ops.aasdf.boolean(operation="UNION", voxel_size=0.02)

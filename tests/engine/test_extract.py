@@ -268,14 +268,14 @@ def test_shared_corner_path_matches_warps_public_marching_cubes(monkeypatch, cas
     # Samples are the shared corners themselves; Warp's public entry point finds them again by sorting cube corners.
     import engine.extract as extract
 
-    assert extract._shared_corner_marching_cubes is not None  # the pinned Warp has the core this path calls
+    assert extract.HAS_SHARED_CORNER_CORE  # the pinned Warp has the core this path calls
     if case == "sphere":
         coords, values = sphere_band(spacing=0.05)
     else:
         coords = lattice((-3, 5, -7), (9, 17, 5))
         values = np.random.default_rng(3).standard_normal(len(coords)).astype(np.float32)
     verts, tris = extract_surface(coords, values, origin=(0.1, -0.2, 0.3), spacing=0.05)
-    monkeypatch.setattr(extract, "_shared_corner_marching_cubes", None)
+    monkeypatch.setattr(extract, "HAS_SHARED_CORNER_CORE", False)
     public_verts, public_tris = extract_surface(coords, values, origin=(0.1, -0.2, 0.3), spacing=0.05)
     assert len(tris) > 100 and len(verts) == len(public_verts) and len(tris) == len(public_tris)
     np.testing.assert_array_equal(
@@ -285,15 +285,17 @@ def test_shared_corner_path_matches_warps_public_marching_cubes(monkeypatch, cas
 
 def test_marching_cubes_split_over_the_cores_gives_warps_mesh_in_warps_order(monkeypatch):
     # Every pass of the polygonisation is launched in parts (enough cubes here to split): same arrays, same order.
-    import engine.extract as extract
+    import engine.marching as marching
 
     coords, values = sphere_band(spacing=R / 60)
     verts, tris = extract_surface(coords, values, origin=(0.1, -0.2, 0.3), spacing=R / 60)
     assert len(tris) > 40_000
     monkeypatch.setattr(
-        extract,
+        marching,
         "_split_marching_cubes",
-        lambda cubes, points, values, device: extract._shared_corner_marching_cubes(cubes, points, values, 0.0, device),
+        lambda cubes, points, values, device: marching._shared_corner_marching_cubes(
+            cubes, points, values, 0.0, device
+        ),
     )
     warp_verts, warp_tris = extract_surface(coords, values, origin=(0.1, -0.2, 0.3), spacing=R / 60)
     np.testing.assert_array_equal(verts, warp_verts)

@@ -164,7 +164,7 @@ def test_closed_meshes_sign_the_finest_level_without_winding_numbers(case):
     n0 = field.level_counts[0]
     assert field.stats["sign_queries"][0] <= 0.001 * n0, field.stats["sign_queries"]
     # the dense top level: a lattice of seeds through the volume leaves almost nothing for the oracle after them
-    stride = engine.field.TOP_SEED_STRIDE
+    stride = engine.signs.TOP_SEED_STRIDE
     seeds = int(np.prod([len(range(min(stride // 2, d - 1), d, stride)) for d in field.top_dims]))
     top = field.levels - 1
     assert field.stats["sign_queries"][top] <= seeds + 0.02 * field.level_counts[top], field.stats["sign_queries"]
@@ -205,7 +205,7 @@ def test_hole_caps_keep_the_winding_number_near_an_integer_outside_them():
     verts, tris = box_mesh(subdivisions=3)
     centres = verts[tris].mean(axis=1)[:, 2]
     open_box = tris[np.abs(centres) < 0.99]
-    lo, hi, radius = engine.field.hole_caps(verts, open_box)
+    lo, hi, radius = engine.meshcheck.hole_caps(verts, open_box)
     assert len(radius) == 2
     np.testing.assert_allclose(np.sort(lo[:, 2]), [-1.0, 1.0], atol=1e-6)
     # each cone is a 2 x 2 face: radius sqrt(4 / pi); the bound sums both caps' shares
@@ -231,8 +231,8 @@ def test_open_meshes_coarse_node_signs_agree_with_the_winding_number(name):
     clear = np.abs(values) > 0.5 * field.voxel_size  # the sign of a node on the surface is ill-conditioned
     centres, inside_field = centres[clear], values[clear] < 0.0
     # away from the caps: exactly what the build's own oracle says
-    away = _away_from_caps(engine.field.hole_caps(verts, tris), centres)
-    oracle = winding_inside(verts, tris, centres[away], accuracy=engine.field.WINDING_ACCURACY)
+    away = _away_from_caps(engine.meshcheck.hole_caps(verts, tris), centres)
+    oracle = winding_inside(verts, tris, centres[away], accuracy=engine.signs.WINDING_ACCURACY)
     assert np.array_equal(inside_field[away], oracle), np.count_nonzero(inside_field[away] != oracle)
     # everywhere: the accurate winding number but for a few nodes
     accurate = winding_inside(verts, tris, centres, accuracy=4.0)
@@ -241,11 +241,11 @@ def test_open_meshes_coarse_node_signs_agree_with_the_winding_number(name):
 
 def test_hole_caps_bound_the_boundary_of_open_meshes():
     verts, tris = box_mesh(subdivisions=2)
-    assert engine.field.hole_caps(verts, tris) is None
+    assert engine.meshcheck.hole_caps(verts, tris) is None
     top = (verts[tris].mean(axis=1)[:, 2] > 0.99) & (
         np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])[:, 2] > 0
     )
-    lo, hi, radius = engine.field.hole_caps(verts, tris[~top])
+    lo, hi, radius = engine.meshcheck.hole_caps(verts, tris[~top])
     np.testing.assert_allclose(lo, [[-1.0, -1.0, 1.0]], atol=1e-6)
     np.testing.assert_allclose(hi, [[1.0, 1.0, 1.0]], atol=1e-6)
     # the cone over the square rim from its centre is the 2 x 2 top face: radius sqrt(4 / pi)
@@ -253,14 +253,14 @@ def test_hole_caps_bound_the_boundary_of_open_meshes():
     # a flipped face makes its edges count twice where the orientations disagree
     flipped = tris.copy()
     flipped[0] = flipped[0, ::-1]
-    assert engine.field.hole_caps(verts, flipped) is not None
+    assert engine.meshcheck.hole_caps(verts, flipped) is not None
 
 
 def test_mesh_checks_count_every_edge_and_weld_every_repeated_position():
     # the bunny (open, 35,947 vertices) with a face repeated, one flipped and its vertices listed twice
     verts, tris = load_mesh("stanford-bunny.obj")
     tris = np.r_[tris, tris[:1], tris[1:2, ::-1]]
-    edges = engine.field.edge_table(tris, len(verts))
+    edges = engine.meshcheck.edge_table(tris, len(verts))
     directed = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]).astype(np.int64)
     pairs, group = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True)
     group = group.reshape(-1)
@@ -271,7 +271,7 @@ def test_mesh_checks_count_every_edge_and_weld_every_repeated_position():
 
     doubled = np.r_[verts, verts[::-1]]
     seams = np.where(np.arange(len(tris))[:, None] % 2 == 0, tris, 2 * len(verts) - 1 - tris)
-    positions, index = engine.field.weld_positions(doubled, seams)
+    positions, index = engine.meshcheck.weld_positions(doubled, seams)
     unique, inverse = np.unique(doubled, axis=0, return_inverse=True)
     np.testing.assert_array_equal(positions, unique)
     np.testing.assert_array_equal(index, inverse.reshape(-1)[seams])
@@ -286,7 +286,7 @@ def test_level_layout_links_each_node_to_its_parent_and_children(levels):
     field = engine.build_field(verts, tris, voxel_size=0.05, levels=levels)
     n0 = field.level_counts[0]
     octets = wp.array(field.codes.numpy()[:n0:8] >> 3, dtype=wp.int64)
-    layout = engine.field.level_layout(octets, field.top_dims, levels, octets.device)
+    layout = engine.octree.level_layout(octets, field.top_dims, levels, octets.device)
     codes, coords = layout["codes"].numpy(), layout["coords"].numpy()
     child, parent, offsets = layout["child"].numpy(), layout["parent"].numpy(), layout["offsets"]
     np.testing.assert_array_equal(codes, field.codes.numpy())
@@ -411,9 +411,9 @@ def test_finest_distances_by_octet_boxes_equal_those_node_by_node(name, monkeypa
     # the bunny's triangles are about 0.4 cell faces here, spot's about 3: either search may be the one chosen
     verts, tris = load_mesh(name)
     h = _voxel(verts, 256)
-    monkeypatch.setattr(engine.field, "OCTET_SEARCH_MIN_AREA", 0.0)
+    monkeypatch.setattr(engine.build, "OCTET_SEARCH_MIN_AREA", 0.0)
     boxes = engine.build_field(verts, tris, voxel_size=h)
-    monkeypatch.setattr(engine.field, "OCTET_SEARCH_MIN_AREA", np.inf)
+    monkeypatch.setattr(engine.build, "OCTET_SEARCH_MIN_AREA", np.inf)
     nodes = engine.build_field(verts, tris, voxel_size=h)
     n0 = boxes.level_counts[0]
     assert boxes.level_counts == nodes.level_counts
@@ -431,7 +431,7 @@ def test_closest_point_on_a_triangle_matches_a_dense_sampling_of_it():
     tri[n // 10 : n // 5, 2] = 0.3 * tri[n // 10 : n // 5, 0] + 0.7 * tri[n // 10 : n // 5, 1]  # collinear
     pts = rng.normal(scale=1.5, size=(n, 3)).astype(np.float32)
 
-    from engine.field import closest_on_triangle, triangle_edges
+    from engine.geometry import closest_on_triangle, triangle_edges
 
     @wp.kernel
     def closest(t: wp.array[wp.vec3], x: wp.array[wp.vec3], out: wp.array[wp.vec3]):
@@ -477,7 +477,7 @@ def test_morton_codes_match_between_host_and_device():
 
 @pytest.mark.parametrize("balance", [False, True])
 def test_split_launches_cover_every_item_once_and_pass_errors_on(balance):
-    from engine.octree import BALANCE_MIN_PIECE, BALANCE_PIECES_PER_CORE, run_split
+    from engine.parallel import BALANCE_MIN_PIECE, BALANCE_PIECES_PER_CORE, run_split
 
     seen = []
     run_split(lambda lo, n: seen.append((lo, n)), 100_003, "cpu", min_dim=1, balance=balance)
@@ -579,7 +579,7 @@ def test_build_fields_builds_several_meshes_at_once_as_build_field_does_one_by_o
 
 def test_build_fields_refuses_a_bad_mesh_before_building_any(monkeypatch):
     calls = []
-    monkeypatch.setattr(engine.field, "_build_planned", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(engine.build, "_build_planned", lambda *a, **k: calls.append(a))
     good = uv_sphere(1.0)
     with pytest.raises(engine.AasdfError, match="Mesh 1: The mesh is empty"):
         engine.build_fields([good, (np.zeros((0, 3)), np.zeros((0, 3), int)), good], voxel_size=0.05)
@@ -592,7 +592,7 @@ def test_build_fields_refuses_a_bad_mesh_before_building_any(monkeypatch):
             raise engine.AasdfError("no memory left")
         return field_id
 
-    monkeypatch.setattr(engine.field, "_build_planned", fails_on_mesh_2)
+    monkeypatch.setattr(engine.build, "_build_planned", fails_on_mesh_2)
     with pytest.raises(engine.AasdfError, match="^Mesh 2: no memory left$"):
         engine.build_fields([good, good, good, good], voxel_size=0.05)
 
@@ -600,7 +600,7 @@ def test_build_fields_refuses_a_bad_mesh_before_building_any(monkeypatch):
 def test_check_meshes_refuses_builds_that_do_not_fit_together(monkeypatch):
     verts, tris = uv_sphere(1.0)
     one = engine.plan_field(verts, tris, voxel_size=0.05)["bytes"]
-    monkeypatch.setattr(engine.field, "available_memory", lambda: 3 * one)  # half of it can be used: 1.5 builds
+    monkeypatch.setattr(engine.plan, "available_memory", lambda: 3 * one)  # half of it can be used: 1.5 builds
     assert engine.check_meshes([(verts, tris)], voxel_size=0.05) == one
     with pytest.raises(engine.AasdfError, match="together"):
         engine.check_meshes([(verts, tris), (verts, tris)], voxel_size=0.05)
@@ -609,7 +609,7 @@ def test_check_meshes_refuses_builds_that_do_not_fit_together(monkeypatch):
 
 
 def test_closed_meshes_need_no_band_refinement_and_open_ones_close_their_holes(monkeypatch):
-    from engine.field import sign_change_octets
+    from engine.holes import sign_change_octets
     from tests.support import is_watertight
 
     verts, tris = load_mesh("spot.obj")
@@ -617,7 +617,7 @@ def test_closed_meshes_need_no_band_refinement_and_open_ones_close_their_holes(m
     assert closed.stats["sign_refinements"] == 0
     assert len(sign_change_octets(closed)) == 0  # skipping the check for closed meshes loses nothing
     # the refinement rounds alone (no lattice around the caps, as for a hole about as large as the mesh)
-    monkeypatch.setattr(engine.field, "CAP_LATTICE_MAX_RATIO", 0.0)
+    monkeypatch.setattr(engine.holes, "CAP_LATTICE_MAX_RATIO", 0.0)
     verts, tris = load_mesh("stanford-bunny.obj")
     opened = engine.build_field(verts, tris, voxel_size=_voxel(verts, 128))
     assert opened.stats["sign_refinements"] >= 1
@@ -628,10 +628,11 @@ def test_closed_meshes_need_no_band_refinement_and_open_ones_close_their_holes(m
 def test_sign_changes_off_the_band_are_found_near_the_hole_caps_only(monkeypatch):
     # The refinement looks for the zero set leaving the band only near the caps over the holes: on the first build
     # of an open mesh (before any refinement) that finds exactly what a search of the whole field finds.
-    from engine.field import hole_caps, sign_change_octets, weld_positions
+    from engine.holes import sign_change_octets
+    from engine.meshcheck import hole_caps, weld_positions
 
-    monkeypatch.setattr(engine.field, "MAX_SIGN_REFINEMENTS", 0)
-    monkeypatch.setattr(engine.field, "CAP_LATTICE_MAX_RATIO", 0.0)  # the refinement rounds' own business
+    monkeypatch.setattr(engine.build, "MAX_SIGN_REFINEMENTS", 0)
+    monkeypatch.setattr(engine.holes, "CAP_LATTICE_MAX_RATIO", 0.0)  # the refinement rounds' own business
     verts, tris = load_mesh("stanford-bunny.obj")
     field = engine.build_field(verts, tris, voxel_size=_voxel(verts, 128))
     everywhere = sign_change_octets(field)
@@ -655,7 +656,7 @@ def test_sign_changes_off_the_band_are_found_near_the_hole_caps_only(monkeypatch
 
 
 def test_a_refinement_round_looks_again_only_near_the_top_cells_it_changed():
-    from engine.field import changed_top_cells
+    from engine.holes import changed_top_cells
     from engine.octree import morton_encode_np
 
     dims, levels = np.array([10, 8, 6]), 4  # octets per top cell: 4 per axis
@@ -670,14 +671,14 @@ def test_a_refinement_round_looks_again_only_near_the_top_cells_it_changed():
 
 
 def test_a_refinement_round_reuses_the_nodes_of_the_build_before_it(monkeypatch):
-    from engine.field import match_levels
+    from engine.octree import match_levels
 
-    monkeypatch.setattr(engine.field, "CAP_LATTICE_MAX_RATIO", 0.0)  # no lattice around the caps: the rounds
+    monkeypatch.setattr(engine.holes, "CAP_LATTICE_MAX_RATIO", 0.0)  # no lattice around the caps: the rounds
     verts, tris = load_mesh("stanford-bunny.obj")
     h = _voxel(verts, 128)
     refined = engine.build_field(verts, tris, voxel_size=h)
     assert refined.stats["sign_refinements"] == 1
-    monkeypatch.setattr(engine.field, "MAX_SIGN_REFINEMENTS", 0)
+    monkeypatch.setattr(engine.build, "MAX_SIGN_REFINEMENTS", 0)
     first = engine.build_field(verts, tris, voxel_size=h)
     where = match_levels(refined.codes, refined.level_offsets, first).numpy()
     codes, first_codes = refined.codes.numpy(), first.codes.numpy()
@@ -700,7 +701,7 @@ def test_open_meshes_find_the_surface_across_their_holes_before_the_first_build(
     # Winding numbers sampled around the holes' caps place the surface across the holes, and sign the nodes next to
     # it, in the first build: no refinement round, no sign change left off the band, and every node the sign of the
     # build's own oracle (a refinement round alone leaves nodes signed by their parent across that surface)
-    from engine.field import sign_change_octets
+    from engine.holes import sign_change_octets
     from tests.support import is_watertight
 
     verts, tris = load_mesh(name)
@@ -710,14 +711,15 @@ def test_open_meshes_find_the_surface_across_their_holes_before_the_first_build(
     values = field.values.numpy()
     clear = np.abs(values) > 0.5 * field.voxel_size  # the sign of a node on the surface is ill-conditioned
     oracle = winding_inside(
-        verts, tris, field.node_centers()[clear].astype(np.float32), accuracy=engine.field.WINDING_ACCURACY
+        verts, tris, field.node_centers()[clear].astype(np.float32), accuracy=engine.signs.WINDING_ACCURACY
     )
     assert np.count_nonzero((values[clear] < 0.0) != oracle) == 0
     assert is_watertight(field.to_mesh()[1])
 
 
 def test_cap_lattices_find_the_surface_across_an_open_box_top():
-    from engine.field import cap_lattices, hole_caps
+    from engine.holes import cap_lattices
+    from engine.meshcheck import hole_caps
 
     verts, tris = box_mesh(subdivisions=4)
     normals = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])
@@ -755,10 +757,10 @@ def test_node_distances_are_exact_below_the_top_level_and_within_its_tolerance_o
     # the top level's leaves: a point of the mesh no farther than 1 + tolerance times the closest
     rel = got[top] / exact[top] - 1.0
     assert rel.min() >= -1e-4
-    assert rel.max() <= engine.field.TOP_LEVEL_TOLERANCE + 1e-4
+    assert rel.max() <= engine.build.TOP_LEVEL_TOLERANCE + 1e-4
     assert np.mean(rel > 1e-4) < 0.5  # most are exact all the same
     # a sign spreads through two empty balls that cover a segment with SIGN_SAFETY to spare: more than the tolerance
-    assert (1.0 + engine.field.TOP_LEVEL_TOLERANCE) * engine.field.SIGN_SAFETY < 0.96
+    assert (1.0 + engine.build.TOP_LEVEL_TOLERANCE) * engine.signs.SIGN_SAFETY < 0.96
 
 
 def test_seams_that_repeat_vertices_are_not_holes():
@@ -770,7 +772,7 @@ def test_seams_that_repeat_vertices_are_not_holes():
     copies[used] = len(verts) + np.arange(len(used))
     seamed_verts = np.vstack([verts, verts[used]])
     seamed_tris = np.where(upper[:, None], copies[tris], tris)
-    assert engine.field.problem_faces(seamed_tris, len(seamed_verts)).any()  # open in the index
+    assert engine.meshcheck.problem_faces(seamed_tris, len(seamed_verts)).any()  # open in the index
     h = _voxel(verts, 128)
     seamed = engine.build_field(seamed_verts, seamed_tris, voxel_size=h)
     plain = engine.build_field(verts, tris, voxel_size=h)

@@ -1,0 +1,277 @@
+"""Geometric primitives as Warp functions, shared by the build's kernels: triangle/box overlap, closest points on
+triangles and on a mesh (through Warp's BVH), the fast winding number, segment/triangle tests, and the bound of the
+caps over an open mesh's holes. Nothing here launches a kernel.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+# Distance of a node whose closest point is not known (yet).
+UNSET_DISTANCE = 1.0e30
+
+
+@wp.func
+def _axis_test(axis: wp.vec3, v0: wp.vec3, v1: wp.vec3, v2: wp.vec3, half: wp.vec3) -> bool:
+    """True when ``axis`` separates the triangle (box-centred) from the box."""
+    if wp.length_sq(axis) < 1.0e-30:
+        return False
+    p0 = wp.dot(v0, axis)
+    p1 = wp.dot(v1, axis)
+    p2 = wp.dot(v2, axis)
+    r = half[0] * wp.abs(axis[0]) + half[1] * wp.abs(axis[1]) + half[2] * wp.abs(axis[2])
+    return wp.min(p0, wp.min(p1, p2)) > r or wp.max(p0, wp.max(p1, p2)) < -r
+
+
+@wp.func
+def tri_box_overlap(center: wp.vec3, half: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> bool:
+    """Separating-axis triangle/box overlap test (Akenine-Moller); the triangle's AABB is tested by the caller."""
+    v0 = a - center
+    v1 = b - center
+    v2 = c - center
+    e0 = v1 - v0
+    e1 = v2 - v1
+    e2 = v0 - v2
+    # the triangle's plane first: it rejects most boxes near a triangle
+    if _axis_test(wp.cross(e0, e1), v0, v1, v2, half):
+        return False
+    for k in range(3):
+        unit = wp.vec3(0.0)
+        unit[k] = 1.0
+        if _axis_test(wp.cross(unit, e0), v0, v1, v2, half):
+            return False
+        if _axis_test(wp.cross(unit, e1), v0, v1, v2, half):
+            return False
+        if _axis_test(wp.cross(unit, e2), v0, v1, v2, half):
+            return False
+    return True
+
+
+@wp.func
+def _closest_on_segment(p: wp.vec3, a: wp.vec3, b: wp.vec3) -> wp.vec3:
+    ab = b - a
+    t = wp.dot(p - a, ab) / wp.max(wp.dot(ab, ab), 1.0e-30)
+    return a + ab * wp.clamp(t, 0.0, 1.0)
+
+
+@wp.func
+def _closest_on_edges(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.vec3:
+    """The nearest point to ``p`` on the three edges of triangle (a, b, c)."""
+    q = _closest_on_segment(p, a, b)
+    r = _closest_on_segment(p, b, c)
+    if wp.length_sq(p - r) < wp.length_sq(p - q):
+        q = r
+    r = _closest_on_segment(p, c, a)
+    if wp.length_sq(p - r) < wp.length_sq(p - q):
+        q = r
+    return q
+
+
+@wp.func
+def triangle_edges(a: wp.vec3, b: wp.vec3, c: wp.vec3):
+    """(ab, ac, ab.ab, ab.ac, ac.ac): what ``closest_on_triangle`` needs of a triangle, once for many points."""
+    ab = b - a
+    ac = c - a
+    return ab, ac, wp.dot(ab, ab), wp.dot(ab, ac), wp.dot(ac, ac)
+
+
+@wp.func
+def closest_on_triangle(
+    p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, ab: wp.vec3, ac: wp.vec3, d00: float, d01: float, d11: float
+) -> wp.vec3:
+    """Closest point to ``p`` on triangle (a, b, c) by Voronoi regions (Ericson, Real-Time Collision Detection
+    5.1.5), with the triangle's edges ``ab`` = b - a, ``ac`` = c - a and their products (``d00`` = ab.ab, ``d01`` =
+    ab.ac, ``d11`` = ac.ac) computed once for the many points tested against it: the six dot products of the regions
+    follow from two (ab.ap, ac.ap). A degenerate triangle (or one within float rounding of it) falls back to its
+    nearest edge."""
+    ap = p - a
+    d1 = wp.dot(ab, ap)
+    d2 = wp.dot(ac, ap)
+    if d1 <= 0.0 and d2 <= 0.0:
+        return a
+    d3 = d1 - d00  # ab.(p - b)
+    d4 = d2 - d01  # ac.(p - b)
+    if d3 >= 0.0 and d4 <= d3:
+        return b
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        return a + ab * (d1 / (d1 - d3))
+    d5 = d1 - d01  # ab.(p - c)
+    d6 = d2 - d11  # ac.(p - c)
+    if d6 >= 0.0 and d5 <= d6:
+        return c
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        return a + ac * (d2 / (d2 - d6))
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))
+    total = va + vb + vc  # |ab x ac|^2, up to rounding
+    if total > 1.0e-6 * d00 * d11:
+        return a + ab * (vb / total) + ac * (vc / total)
+    # degenerate, or so nearly (its two edges' angle under 1e-3) that float rounding would decide the point
+    return _closest_on_edges(p, a, b, c)
+
+
+@wp.func_native("return wp::mesh_query_winding_number(mesh, x, accuracy);")
+def winding_number(mesh: wp.uint64, x: wp.vec3, accuracy: float) -> float:
+    """The mesh's fast winding number at ``x`` (Barill et al., Warp's native solid-angle tree): what
+    ``wp.mesh_query_point_sign_winding_number`` compares with its threshold, without the closest-point query it runs
+    first (a third of its cost; a node's distance is known already)."""
+    ...
+
+
+@wp.func
+def near_cap(
+    x: wp.vec3, cap_lo: wp.array[wp.vec3], cap_hi: wp.array[wp.vec3], cap_radius: wp.array[wp.float32], margin: float
+) -> bool:
+    """Whether the cones over an open mesh's holes (see ``hole_caps``; no caps: a closed mesh) may move the winding
+    number by 1/4 or more somewhere within ``margin`` of ``x``: sum over caps c of (radius_c / d_c)^2 >= 1, d_c the
+    distance from the box c to that ball."""
+    total = float(0.0)
+    for c in range(cap_radius.shape[0]):
+        d = wp.length(wp.max(wp.max(cap_lo[c] - x, x - cap_hi[c]), wp.vec3(0.0))) - margin
+        if d <= cap_radius[c]:
+            return True
+        total += (cap_radius[c] / d) * (cap_radius[c] / d)
+    return total >= 1.0
+
+
+@wp.func
+def _may_cross(p: wp.vec3, q: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> bool:
+    """Whether segment pq may meet triangle abc: False only when it surely does not (both ends clearly on one side of
+    the plane, or the segment's line clearly outside an edge); touching, grazing and degenerate cases count as
+    meeting."""
+    n = wp.cross(b - a, c - a)
+    d = q - p
+    reach = wp.max(wp.length(a - p), wp.max(wp.length(b - p), wp.length(c - p))) + wp.length(d)
+    # margins 10x above float32 rounding of the products they bound (all lengths cubed)
+    tol = 1.0e-5 * wp.length(n) * reach
+    sp = wp.dot(p - a, n)
+    sq = wp.dot(q - a, n)
+    if (sp > tol and sq > tol) or (sp < -tol and sq < -tol):
+        return False
+    tol = 1.0e-5 * reach * reach * wp.length(d)
+    v0 = wp.dot(wp.cross(a - p, b - p), d)
+    v1 = wp.dot(wp.cross(b - p, c - p), d)
+    v2 = wp.dot(wp.cross(c - p, a - p), d)
+    if (v0 > tol or v1 > tol or v2 > tol) and (v0 < -tol or v1 < -tol or v2 < -tol):
+        return False
+    return True
+
+
+@wp.func
+def segment_clear(mesh: wp.uint64, p: wp.vec3, q: wp.vec3) -> bool:
+    """Whether segment pq surely meets no triangle of the mesh."""
+    pad = wp.vec3(1.0e-3 * wp.length(q - p))
+    candidates = wp.mesh_query_aabb(mesh, wp.min(p, q) - pad, wp.max(p, q) + pad)
+    m = wp.mesh_get(mesh)
+    f = int(0)
+    while wp.mesh_query_aabb_next(candidates, f):
+        if _may_cross(p, q, m.points[m.indices[3 * f]], m.points[m.indices[3 * f + 1]], m.points[m.indices[3 * f + 2]]):
+            return False
+    return True
+
+
+# Warp's BVH closest-point search (``mesh_query_point_no_sign``), returning the point itself: the same traversal
+# (nearest child first, boxes farther than the best distance so far skipped), without its per-triangle sliver test (a
+# square root and a division each): a sliver's points are surface points like any other, and the finest level's own
+# search tests every triangle too (Warp's closest-point routine keeps its result on the triangle, or yields NaN on a
+# degenerate edge, which no comparison takes). About a fifth faster where a query tests many triangles (far from
+# the surface).
+_CLOSEST_POINT_SNIPPET = r"""
+wp::Mesh m = wp::mesh_get(mesh);
+int stack[BVH_QUERY_STACK_SIZE];
+stack[0] = *m.bvh.root;
+int count = 1;
+float best = max_dist * max_dist;
+float reach = best * shrink;
+wp::vec4 out(x[0], x[1], x[2], -1.0f);
+while (count) {
+    const int node = stack[--count];
+    wp::BVHPackedNodeHalf lower = wp::bvh_load_node(m.bvh.node_lowers, node);
+    wp::BVHPackedNodeHalf upper = wp::bvh_load_node(m.bvh.node_uppers, node);
+    if (wp::distance_to_aabb_sq(x, wp::vec3(lower.x, lower.y, lower.z), wp::vec3(upper.x, upper.y, upper.z)) > reach)
+        continue;
+    const int left = lower.i;
+    const int right = upper.i;
+    if (lower.b) {
+        for (int c = left; c < right; c++) {
+            const int t = wp::bvh_load_int(m.bvh.primitive_indices, c);
+            const wp::vec3 p = m.points[wp::bvh_load_int(m.indices, t * 3 + 0)];
+            const wp::vec3 q = m.points[wp::bvh_load_int(m.indices, t * 3 + 1)];
+            const wp::vec3 r = m.points[wp::bvh_load_int(m.indices, t * 3 + 2)];
+            const wp::vec2 b = wp::closest_point_to_triangle(p, q, r, x);
+            const wp::vec3 y = b[0] * p + b[1] * q + (1.0f - b[0] - b[1]) * r;
+            const float d = wp::length_sq(y - x);
+            if (d < best) {
+                best = d;
+                reach = d * shrink;
+                out = wp::vec4(y[0], y[1], y[2], d);
+            }
+        }
+    } else {
+        wp::BVHPackedNodeHalf ll = wp::bvh_load_node(m.bvh.node_lowers, left);
+        wp::BVHPackedNodeHalf lu = wp::bvh_load_node(m.bvh.node_uppers, left);
+        wp::BVHPackedNodeHalf rl = wp::bvh_load_node(m.bvh.node_lowers, right);
+        wp::BVHPackedNodeHalf ru = wp::bvh_load_node(m.bvh.node_uppers, right);
+        const float dl = wp::distance_to_aabb_sq(x, wp::vec3(ll.x, ll.y, ll.z), wp::vec3(lu.x, lu.y, lu.z));
+        const float dr = wp::distance_to_aabb_sq(x, wp::vec3(rl.x, rl.y, rl.z), wp::vec3(ru.x, ru.y, ru.z));
+        // the nearer child goes on the stack last, so it is searched first
+        const bool left_first = dl < dr;
+        const int far_node = left_first ? right : left;
+        const int near_node = left_first ? left : right;
+        if ((left_first ? dr : dl) < reach)
+            stack[count++] = far_node;
+        if ((left_first ? dl : dr) < reach)
+            stack[count++] = near_node;
+    }
+}
+return out;
+"""
+
+
+@wp.func_native(_CLOSEST_POINT_SNIPPET)
+def _closest_point_native(mesh: wp.uint64, x: wp.vec3, max_dist: float, shrink: float) -> wp.vec4:
+    """(closest point, squared distance) of ``x`` on the mesh within ``max_dist``; squared distance -1: none. Boxes
+    farther than sqrt(``shrink``) times the best distance so far are skipped (1: the exact closest point)."""
+    ...
+
+
+# The same search returning the closest triangle's index in place of the squared distance (as a float: exact below
+# 2**24 triangles, a neighbouring index above).
+_CLOSEST_FACE_SNIPPET = _CLOSEST_POINT_SNIPPET.replace(
+    "out = wp::vec4(y[0], y[1], y[2], d);", "out = wp::vec4(y[0], y[1], y[2], (float)t);"
+)
+
+
+@wp.func_native(_CLOSEST_FACE_SNIPPET)
+def _closest_face_native(mesh: wp.uint64, x: wp.vec3, max_dist: float, shrink: float) -> wp.vec4:
+    """(closest point, index of its triangle) of ``x`` on the mesh within ``max_dist``; index -1: none."""
+    ...
+
+
+@wp.func
+def mesh_closest_face(mesh: wp.uint64, x: wp.vec3, max_dist: float):
+    """(closest point on the mesh within ``max_dist`` of ``x``, or ``x``; its triangle, or -1). On a mesh of 2**24
+    triangles or more the triangle may be one of the few next to it in the index (a triangle of the mesh still)."""
+    r = _closest_face_native(mesh, x, max_dist, 1.0)
+    return wp.vec3(r[0], r[1], r[2]), wp.min(int(r[3]), wp.mesh_get(mesh).indices.shape[0] / 3 - 1)
+
+
+@wp.func
+def mesh_near_point(mesh: wp.uint64, x: wp.vec3, max_dist: float, tolerance: float):
+    """(found, a point of the mesh within ``max_dist`` of ``x`` no more than 1 + ``tolerance`` times as far as its
+    closest point, or ``x``): boxes farther than the best distance so far over 1 + ``tolerance`` are skipped, far
+    from the surface a fraction of the search."""
+    r = _closest_point_native(mesh, x, max_dist, 1.0 / ((1.0 + tolerance) * (1.0 + tolerance)))
+    if r[3] < 0.0:
+        return False, x
+    return True, wp.vec3(r[0], r[1], r[2])
+
+
+@wp.func
+def mesh_closest_point(mesh: wp.uint64, x: wp.vec3, max_dist: float):
+    """(found, closest point on the mesh within ``max_dist`` of ``x``, or ``x``): Warp's closest-point query (the same
+    result, see ``_CLOSEST_POINT_SNIPPET``)."""
+    return mesh_near_point(mesh, x, max_dist, 0.0)

@@ -1,0 +1,305 @@
+"""The core of marching cubes on cubes whose corners are shared samples: Warp's sparse marching cubes tables and
+passes, each pass split over the CPU cores.
+
+:func:`polygonise` takes the active cubes as (M, 8) indices of samples and returns shared vertices and triangles (the
+passes of Warp's ``_extract_from_dedup``, run here so a launch can be split over the cores, and so Warp's own module
+with its other kernels is never generated). Also the helpers both extractions share: the empty mesh and the nudge
+that keeps vertices off lattice samples.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+import warp.geometry
+
+from .errors import AasdfError
+from .parallel import launch_split
+
+try:  # the marching-cubes core of Warp's sparse_marching_cubes_from_cells, given already shared corners
+    from warp._src.geometry import sparse_marching_cubes as _warp_mc
+    from warp._src.geometry.sparse_marching_cubes import _extract_from_dedup as _shared_corner_marching_cubes
+except ImportError:  # another Warp version: the public entry point, which sorts to share corners
+    _warp_mc = _shared_corner_marching_cubes = None
+
+# Whether Warp's marching-cubes core can be run on corners this module shares (else: Warp's public entry point).
+HAS_SHARED_CORNER_CORE = _shared_corner_marching_cubes is not None
+
+
+# Corner c of a cube with minimum corner (i, j, k) is the sample (i, j, k) + CORNER_OFFSETS[c], in the order Warp's
+# sparse marching cubes expects its (M, 8) corner values.
+CORNER_OFFSETS = np.asarray(warp.geometry.IsoSurfaceMarchingCubes.CUBE_CORNER_OFFSETS, dtype=np.int64)
+
+
+# Samples closer to ``iso`` than this fraction of ``spacing`` are pushed to exactly that distance (keeping their side),
+# so that no marching cubes vertex lands on, or within float32 noise of, a lattice sample, which would make vertices
+# of different edges coincide and triangles collapse. It moves vertices by at most about this fraction of a cell.
+_ISO_NUDGE = 1.0e-3
+
+
+# ... and never less than this many float32 ulps of the largest world coordinate, for lattices far from the origin.
+_ISO_NUDGE_ULPS = 4.0
+
+
+# Refuse lattices so far from the world origin that float32 resolves less than this fraction of a cell there.
+_MIN_ULPS_PER_CELL = 32.0
+
+
+@wp.kernel(enable_backward=False)
+def _mark_used_corners_kernel(cube_corners: wp.array2d[wp.int32], used: wp.array[wp.int32]):
+    """Flag the samples some active cube uses (every writer writes 1, so races are harmless)."""
+    o = wp.tid()
+    for c in range(8):
+        used[cube_corners[o, c]] = 1
+
+
+@wp.kernel(enable_backward=False)
+def _renumber_corners_kernel(used_scan: wp.array[wp.int32], cube_corners: wp.array2d[wp.int32]):
+    o = wp.tid()
+    for c in range(8):
+        cube_corners[o, c] = used_scan[cube_corners[o, c]] - 1
+
+
+def polygonise(cube_corners, n, point_kernel, point_inputs, lo, origin, spacing):
+    """Warp's marching-cubes core on the active cubes (``cube_corners``: (M, 8) indices of ``n`` samples). Only the
+    samples some cube uses take part: they are compacted, and ``point_kernel(first, used, used_scan, *point_inputs,
+    base, spacing, points, point_values)`` writes the positions of samples ``first + tid`` (``base``: world position
+    of lattice point ``lo``, taken in double precision) and their values, split over the CPU cores."""
+    device = cube_corners.device
+    used = wp.zeros(n, dtype=wp.int32, device=device)
+    n_cubes = cube_corners.shape[0]
+    launch_split(_mark_used_corners_kernel, n_cubes, lambda s, c: [cube_corners[s : s + c], used], device)
+    used_scan = wp.empty(n, dtype=wp.int32, device=device)
+    wp.utils.array_scan(used, used_scan, inclusive=True)
+    n_used = int(used_scan[-1:].numpy()[0])
+    base = wp.vec3(*(float(x) for x in origin + (np.asarray(lo, np.float64) + 0.5) * spacing))
+    points = wp.empty(n_used, dtype=wp.vec3, device=device)
+    point_values = wp.empty(n_used, dtype=wp.float32, device=device)
+    launch_split(
+        point_kernel,
+        n,
+        lambda s, _c: [s, used, used_scan, *point_inputs, base, float(spacing), points, point_values],
+        device,
+    )
+    launch_split(_renumber_corners_kernel, n_cubes, lambda s, c: [used_scan, cube_corners[s : s + c]], device)
+    used = used_scan = None
+    return _split_marching_cubes(cube_corners, points, point_values, device)
+
+
+@wp.func
+def _cube_case(cube_corners: wp.array2d[wp.int32], corner_values: wp.array[wp.float32], iso: wp.float32, cube: int):
+    """The 8-bit marching-cubes case of a cube: bit c set when corner c is at or above ``iso``."""
+    case = int(0)
+    for c in range(8):
+        if corner_values[cube_corners[cube, c]] >= iso:
+            case = case | (1 << c)
+    return case
+
+
+@wp.func
+def _edge_slot(
+    cube_corners: wp.array2d[wp.int32],
+    cube: int,
+    local_edge: int,
+    edge_owner: wp.array[wp.int32],
+    edge_axis: wp.array[wp.int32],
+):
+    """Slot of a cube's local edge among all edges: its owner corner * 3 + axis (shared by the cubes around it)."""
+    return cube_corners[cube, edge_owner[local_edge]] * 3 + edge_axis[local_edge]
+
+
+@wp.kernel(enable_backward=False)
+def _mark_active_edges_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    corner_values: wp.array[wp.float32],
+    iso: wp.float32,
+    case_to_tri_range: wp.array[wp.int32],
+    tri_local_inds: wp.array[wp.int32],
+    edge_owner: wp.array[wp.int32],
+    edge_upper: wp.array[wp.int32],
+    edge_axis: wp.array[wp.int32],
+    edge_active: wp.array[wp.int32],
+    edge_upper_corner: wp.array[wp.int32],
+):
+    """Mark the edges cube ``first + tid``'s triangles cross, each as slot owner corner * 3 + axis (cubes sharing an
+    edge write the same values to its slot: a harmless race)."""
+    cube = first + wp.tid()
+    case = _cube_case(cube_corners, corner_values, iso, cube)
+    for k in range(case_to_tri_range[case], case_to_tri_range[case + 1]):
+        local_edge = tri_local_inds[k]
+        slot = _edge_slot(cube_corners, cube, local_edge, edge_owner, edge_axis)
+        edge_active[slot] = 1
+        edge_upper_corner[slot] = cube_corners[cube, edge_upper[local_edge]]
+
+
+@wp.kernel(enable_backward=False)
+def _count_faces_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    corner_values: wp.array[wp.float32],
+    iso: wp.float32,
+    case_to_tri_range: wp.array[wp.int32],
+    face_count: wp.array[wp.int32],
+):
+    """Triangles of cube ``first + tid``."""
+    cube = first + wp.tid()
+    case = _cube_case(cube_corners, corner_values, iso, cube)
+    face_count[cube] = (case_to_tri_range[case + 1] - case_to_tri_range[case]) // 3
+
+
+@wp.kernel(enable_backward=False)
+def _emit_vertices_kernel(
+    first: int,
+    edge_active: wp.array[wp.int32],
+    edge_vertex_index: wp.array[wp.int32],
+    edge_upper_corner: wp.array[wp.int32],
+    corner_positions: wp.array[wp.vec3],
+    corner_values: wp.array[wp.float32],
+    iso: wp.float32,
+    verts: wp.array[wp.vec3],
+):
+    """Warp's ``_emit_vertices_kernel`` for edge slot ``first + tid`` (slot = owner corner * 3 + axis)."""
+    slot = first + wp.tid()
+    if edge_active[slot] == 0:
+        return
+    lower = slot // 3
+    upper = edge_upper_corner[slot]
+    t = wp.clamp((iso - corner_values[lower]) / (corner_values[upper] - corner_values[lower]), 0.0, 1.0)
+    verts[edge_vertex_index[slot] - 1] = wp.lerp(corner_positions[lower], corner_positions[upper], t)
+
+
+@wp.kernel(enable_backward=False)
+def _emit_faces_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    corner_values: wp.array[wp.float32],
+    iso: wp.float32,
+    case_to_tri_range: wp.array[wp.int32],
+    tri_local_inds: wp.array[wp.int32],
+    edge_owner: wp.array[wp.int32],
+    edge_axis: wp.array[wp.int32],
+    edge_vertex_index: wp.array[wp.int32],
+    face_scan: wp.array[wp.int32],
+    indices: wp.array[wp.int32],
+):
+    """Warp's ``_emit_faces_kernel`` for cube ``first + tid`` (``face_scan``: inclusive scan of faces per cube)."""
+    cube = first + wp.tid()
+    case = _cube_case(cube_corners, corner_values, iso, cube)
+    tri_start = case_to_tri_range[case]
+    n_tri = (case_to_tri_range[case + 1] - tri_start) // 3
+    if n_tri == 0:
+        return
+    out = int(0)
+    if cube > 0:
+        out = face_scan[cube - 1]
+    for tri in range(n_tri):
+        for k in range(3):
+            local_edge = tri_local_inds[tri_start + 3 * tri + k]
+            slot = _edge_slot(cube_corners, cube, local_edge, edge_owner, edge_axis)
+            indices[3 * (out + tri) + k] = edge_vertex_index[slot] - 1
+
+
+def _split_marching_cubes(cube_corners, corner_positions, corner_values, device):
+    """Warp's marching-cubes core (``_extract_from_dedup``, threshold 0, its case and edge tables) with every pass
+    split over the CPU cores (see ``launch_split``). Same vertices and triangles, in the same order."""
+    n_cubes = cube_corners.shape[0]
+    n_slots = 3 * corner_positions.shape[0]
+    case_table = _warp_mc._get_mc_case_to_tri_range_table(device)
+    tri_table = _warp_mc._get_mc_tri_local_inds_table(device)
+    owner = _warp_mc._get_edge_owner_table(device)
+    upper = _warp_mc._get_edge_upper_table(device)
+    axis = _warp_mc._get_edge_axis_table(device)
+    iso = wp.float32(0.0)
+    # one vertex per crossed edge; cubes sharing an edge write the same values to its slot (a harmless race)
+    edge_active = wp.zeros(n_slots, dtype=wp.int32, device=device)
+    edge_upper_corner = wp.empty(n_slots, dtype=wp.int32, device=device)
+    launch_split(
+        _mark_active_edges_kernel,
+        n_cubes,
+        lambda s, c: [
+            s,
+            cube_corners,
+            corner_values,
+            iso,
+            case_table,
+            tri_table,
+            owner,
+            upper,
+            axis,
+            edge_active,
+            edge_upper_corner,
+        ],
+        device,
+    )
+    edge_vertex_index = wp.empty(n_slots, dtype=wp.int32, device=device)
+    wp.utils.array_scan(edge_active, edge_vertex_index, inclusive=True)
+    n_verts = int(edge_vertex_index[-1:].numpy()[0])
+    verts = wp.empty(n_verts, dtype=wp.vec3, device=device)
+    if n_verts == 0:
+        return verts, wp.empty(0, dtype=wp.int32, device=device)
+    launch_split(
+        _emit_vertices_kernel,
+        n_slots,
+        lambda s, c: [
+            s,
+            edge_active,
+            edge_vertex_index,
+            edge_upper_corner,
+            corner_positions,
+            corner_values,
+            iso,
+            verts,
+        ],
+        device,
+    )
+    edge_active = edge_upper_corner = None
+    face_count = wp.empty(n_cubes, dtype=wp.int32, device=device)
+    launch_split(
+        _count_faces_kernel, n_cubes, lambda s, c: [s, cube_corners, corner_values, iso, case_table, face_count], device
+    )
+    face_scan = wp.empty(n_cubes, dtype=wp.int32, device=device)
+    wp.utils.array_scan(face_count, face_scan, inclusive=True)
+    n_faces = int(face_scan[-1:].numpy()[0])
+    indices = wp.empty(3 * n_faces, dtype=wp.int32, device=device)
+    launch_split(
+        _emit_faces_kernel,
+        n_cubes,
+        lambda s, c: [
+            s,
+            cube_corners,
+            corner_values,
+            iso,
+            case_table,
+            tri_table,
+            owner,
+            axis,
+            edge_vertex_index,
+            face_scan,
+            indices,
+        ],
+        device,
+    )
+    return verts, indices
+
+
+def empty_mesh() -> tuple[np.ndarray, np.ndarray]:
+    """``verts`` (0, 3) float32 and ``tris`` (0, 3) int32."""
+    return np.zeros((0, 3), dtype=np.float32), np.zeros((0, 3), dtype=np.int32)
+
+
+def iso_nudge(origin: np.ndarray, lo: np.ndarray, hi: np.ndarray, spacing: float) -> float:
+    """How far samples are pushed off the level (see ``_ISO_NUDGE``) for a lattice spanning ``lo``..``hi``.
+
+    Vertices are float32 world positions: their resolution where the lattice lies bounds the nudge from below, and
+    refuses (AasdfError) lattices so far from the origin that float32 cannot resolve a fraction of a cell there.
+    """
+    extent = float(np.abs([origin + (lo + 0.5) * spacing, origin + (hi + 1.5) * spacing]).max())
+    ulp = float(np.spacing(np.float32(extent)))
+    if ulp * _MIN_ULPS_PER_CELL > spacing:
+        raise AasdfError(
+            f"The surface lies too far from the world origin for its voxel size: float32 positions {extent:.4g} "
+            f"away resolve only {ulp:.3g}, more than 1/{_MIN_ULPS_PER_CELL:g} of the voxel size {spacing:.3g}. "
+            "Move the objects closer to the origin or use a coarser resolution."
+        )
+    return max(_ISO_NUDGE * spacing, _ISO_NUDGE_ULPS * ulp)

@@ -1,0 +1,202 @@
+"""How a boolean reads an operand at the result's nodes (Warp functions for :mod:`.boolean`'s kernels).
+
+An operand aligned with the result's lattice gives its own node values (:func:`lookup`, :func:`lookup_node`); elsewhere
+it is sampled by moving least squares (:func:`sample_operand`, :func:`coarse_sample` reusing a leaf's gathered
+neighbours), extrapolated along its gradient on coarse levels (:func:`extrapolate`), or only bracketed from its
+containing coarse leaf, the field being 1-Lipschitz (:func:`estimate`, :func:`bracket`, :func:`node_bracket`), so the
+boolean pays for interpolation only where an operand can decide the result. Outside its domain an operand is the
+bound that grows with the distance to the domain.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+import warp.geometry
+
+from . import octree
+from .build import TOP_LEVEL_TOLERANCE
+from .octree import morton_encode, node_center
+from .sampling import (
+    FieldArg,
+    clamp_to_domain,
+    coarse_mls,
+    inside_domain,
+    leaf_neighbours,
+    level_spacing,
+    locate_leaf,
+    locate_node,
+    sample_mls,
+    vec27i,
+)
+
+# A coarse leaf's value may exceed its distance by this share (a built field's top level, see TOP_LEVEL_TOLERANCE):
+# the brackets below widen by it, so they hold the exact value.
+LEAF_SLACK = wp.constant(TOP_LEVEL_TOLERANCE)
+
+
+@wp.func
+def _node_of(f: FieldArg, j: int, x: wp.vec3):
+    """(1, phi, grad, j) of an operand's finest node ``j`` seen from ``x`` (its position)."""
+    g = x - f.proj[j]
+    ln = wp.length(g)
+    phi = f.values[j]
+    if ln > 0.0:
+        g = g / ln
+    if phi < 0.0:
+        g = -g
+    return 1, phi, g, j
+
+
+@wp.func
+def lookup(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3):
+    """An operand's own finest node at result node ``c`` when the lattices are aligned: (found, phi, grad, index)."""
+    if aligned == 1:
+        oc = c + offset
+        if oc[0] >= 0 and oc[1] >= 0 and oc[2] >= 0:
+            j = octree.find_key(f.codes, 0, f.fine_count, morton_encode(oc))
+            if j >= 0:
+                return _node_of(f, j, x)
+    return 0, 0.0, wp.vec3(0.0), -1
+
+
+@wp.func
+def lookup_node(
+    f: FieldArg,
+    aligned: int,
+    offset: wp.vec3i,
+    c: wp.vec3i,
+    x: wp.vec3,
+    octet_mode: int,
+    octet_first: wp.array[wp.int32],
+    i: int,
+):
+    """:func:`lookup` for result finest node ``i`` (child ``i % 8`` of octet ``i // 8``), through the octet's first
+    node in the operand when the octets coincide (``octet_mode``; -1 there: the operand lacks the octet)."""
+    if octet_mode == 1:
+        j0 = octet_first[i // 8]
+        if j0 >= 0:
+            return _node_of(f, j0 + i % 8, x)
+        return 0, 0.0, wp.vec3(0.0), -1
+    return lookup(f, aligned, offset, c, x)
+
+
+@wp.func
+def _beyond_domain(r: wp.vec4, x: wp.vec3, xc: wp.vec3) -> wp.vec4:
+    """(phi, grad) ``r`` sampled at ``xc``, ``x`` clamped into the domain, as seen from ``x``: the bound that grows
+    with the distance to the domain."""
+    out = wp.length(x - xc)
+    if out > 0.0:
+        gd = (x - xc) / out
+        return wp.vec4(wp.max(r[0], 0.0) + out, gd[0], gd[1], gd[2])
+    return r
+
+
+@wp.func
+def sample_operand(f: FieldArg, x: wp.vec3) -> wp.vec4:
+    """(phi, grad) by MLS; outside the domain, the bound that grows with the distance to the domain."""
+    xc = clamp_to_domain(f, x)
+    return _beyond_domain(sample_mls(f, xc), x, xc)
+
+
+@wp.func
+def coarse_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, cached: int, count: int, ids: vec27i, levels: vec27i):
+    """:func:`sample_operand` where ``x`` (clamped into the domain) lies in coarse leaf ``leaf`` (index, level), with
+    the neighbours (:func:`leaf_neighbours`) of leaf ``cached`` at hand: gathered again only for another leaf. Returns
+    the sample and the neighbours now at hand (cached leaf, count, indices, levels)."""
+    if leaf[0] != cached:
+        count, ids, levels = leaf_neighbours(f, leaf[0], leaf[1])
+    xc = clamp_to_domain(f, x)
+    r = coarse_mls(f, count, ids, levels, xc, level_spacing(f, leaf[1]), f.values[leaf[0]])
+    return _beyond_domain(r, x, xc), leaf[0], count, ids, levels
+
+
+@wp.func
+def extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
+    """(phi, grad) from the operand's node containing ``x`` with the given spacing, or the coarser leaf containing it:
+    its value carried along its exact gradient (the direction from its closest point), i.e. the distance to its
+    tangent plane — exactly its own value where a node of the operand sits at ``x``. Cheap; used for the coarse levels
+    of a result (``spacing``: theirs). Also returns that node."""
+    xc = clamp_to_domain(f, x)
+    leaf = locate_node(f, xc, wp.max(int(wp.round(wp.log2(spacing / f.voxel_size))), 0))
+    s = level_spacing(f, leaf[1])
+    centre = node_center(f.origin, s, f.coords[leaf[0]])
+    phi = f.values[leaf[0]]
+    n = centre - f.proj[leaf[0]]
+    ln = wp.length(n)
+    g = wp.vec3(0.0)
+    if ln > 0.0:
+        g = wp.where(phi < 0.0, -1.0, 1.0) * n / ln
+    phi = phi + wp.dot(g, xc - centre)
+    out = wp.length(x - xc)
+    if out > 0.0:
+        g = (x - xc) / out
+        phi = wp.max(phi, 0.0) + out
+    return wp.vec4(phi, g[0], g[1], g[2]), leaf[0]
+
+
+@wp.func
+def estimate(f: FieldArg, x: wp.vec3):
+    """A cheap bracket of an operand's value: (phi, radius) from the coarse leaf containing ``x`` (the field is
+    1-Lipschitz, so the value at ``x`` lies within ``radius`` of the leaf's, widened by ``LEAF_SLACK``); radius -1 in
+    the finest band. Also returns that leaf (index, level; ``x`` clamped into the domain)."""
+    xc = clamp_to_domain(f, x)
+    leaf = locate_leaf(f, xc)
+    if leaf[1] == 0:
+        return 0.0, -1.0, leaf
+    s = level_spacing(f, leaf[1])
+    centre = node_center(f.origin, s, f.coords[leaf[0]])
+    phi = f.values[leaf[0]]
+    out = wp.length(x - xc)
+    if out > 0.0:
+        phi = wp.max(phi, 0.0) + out
+    return phi, wp.length(xc - centre) + LEAF_SLACK * wp.abs(f.values[leaf[0]]), leaf
+
+
+@wp.func
+def bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3):
+    """(phi, radius): an operand's value at result node ``c`` lies within ``radius`` of ``phi`` — exact (radius 0)
+    where the lattices align, the containing coarse leaf's bracket elsewhere; radius -1 in a non-aligned finest band."""
+    found, phi, g, j = lookup(f, aligned, offset, c, x)
+    if found == 1:
+        return phi, 0.0
+    phi, radius, _leaf = estimate(f, x)
+    return phi, radius
+
+
+@wp.func
+def octet_source(f: FieldArg, octet_mode: int, offset: wp.vec3i, oc: wp.vec3i, origin: wp.vec3, spacing: float):
+    """Where an operand holds result octet ``oc`` when its lattice is aligned at octet granularity: (index of the
+    octet's first child in its finest level, or -1; else the coarse leaf covering the whole octet, or -1; its level,
+    -1 when the octet lies outside the operand's domain).
+    The octet is a level-1 cell of the operand: a descent from its dense top level finds the node of that cell, whose
+    8 children are the octet when it has any (an operand's finest level is octet-complete and every octet has its
+    parent), or the coarser leaf that covers it."""
+    if octet_mode == 1:
+        x = origin + 2.0 * spacing * wp.vec3(float(oc[0]) + 0.5, float(oc[1]) + 0.5, float(oc[2]) + 0.5)
+        if not inside_domain(f, x):
+            return -1, -1, -1  # outside the operand's domain, so none of its octets
+        if f.levels == 1:  # the dense top level is the finest: the octet's first child by its code
+            c0 = wp.vec3i(2 * oc[0], 2 * oc[1], 2 * oc[2]) + offset
+            return octree.find_key(f.codes, 0, f.fine_count, morton_encode(c0)), -1, 0
+        leaf = locate_node(f, x, 1)
+        if leaf[1] == 1 and f.child[leaf[0]] >= 0:
+            return f.child[leaf[0]], -1, 0
+        return -1, leaf[0], leaf[1]
+    return -1, -1, 0
+
+
+@wp.func
+def node_bracket(
+    f: FieldArg, first: int, leaf: int, level: int, k: int, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3
+):
+    """(phi, radius) of an operand at child ``k`` of an octet located by :func:`octet_source`."""
+    if first >= 0:
+        return f.values[first + k], 0.0
+    if leaf >= 0:
+        centre = node_center(f.origin, level_spacing(f, level), f.coords[leaf])
+        phi = f.values[leaf]
+        return phi, wp.length(x - centre) + LEAF_SLACK * wp.abs(phi)
+    if level < 0:  # the octet lies outside the operand's domain: no node of it to look up
+        phi, radius, _leaf = estimate(f, x)
+        return phi, radius
+    return bracket(f, aligned, offset, c, x)

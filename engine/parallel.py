@@ -1,0 +1,139 @@
+"""Splitting Warp launches over the CPU cores.
+
+A Warp launch on the CPU runs on one thread but releases the GIL, so launches of consecutive pieces of a range from
+several Python threads use several cores. :func:`launch_split` does that for one kernel (pieces taken from a shared
+counter by the caller and pooled helper threads), :func:`run_split` for any work on ranges, and :func:`run_tasks`
+runs independent tasks side by side. On CUDA each is one ordinary launch (or the tasks one after the other).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import warp as wp
+
+# Below this many threads a launch is not worth splitting across CPU cores.
+SPLIT_MIN_DIM = 20_000
+
+
+EMIT_SPLIT_MIN_DIM = 1_000
+
+
+# Pieces per core of a balanced split launch, taken by the cores in turn as they finish one (each piece is a launch
+# of its own, ~60 us of Python: only for long launches whose items cost unevenly), of at least BALANCE_MIN_PIECE items.
+BALANCE_PIECES_PER_CORE = 4
+
+
+BALANCE_MIN_PIECE = 1024
+
+
+_helpers = None
+
+
+_helpers_lock = threading.Lock()
+
+
+def _helper_pool() -> ThreadPoolExecutor:
+    """The threads that take pieces of split launches beside the caller's (starting a thread costs ~0.2 ms, more than
+    many launches)."""
+    global _helpers
+    with _helpers_lock:
+        if _helpers is None:
+            # two builds may split launches at the same time (build_fields)
+            _helpers = ThreadPoolExecutor(max_workers=2 * (os.cpu_count() or 1), thread_name_prefix="aasdf-split")
+        return _helpers
+
+
+def run_split(
+    work,
+    dim: int,
+    device,
+    *,
+    parts: int | None = None,
+    min_dim: int = SPLIT_MIN_DIM,
+    balance: bool = False,
+    own_threads: bool = False,
+) -> None:
+    """Call ``work(start, count)`` on consecutive pieces of [0, dim) from the caller's and one more Python thread per
+    further CPU core (Warp CPU launches release the GIL), or from ``parts`` threads, one piece each; one call on CUDA
+    or for small ``dim``. ``balance``: the work per item is uneven (items near an open mesh's holes, or far from the
+    surface): each core takes the next of ``BALANCE_PIECES_PER_CORE`` pieces per core as it finishes one, so none
+    waits for the other. The helper threads come from a pool, and whichever thread is free takes the next piece (so a
+    busy pool only slows a split down); ``work`` that splits work itself needs ``own_threads`` (a thread started for
+    each piece). The first error is re-raised in the caller."""
+    if dim <= 0:
+        return
+    device = wp.get_device(device)
+    threads_n = parts or os.cpu_count() or 1
+    if device.is_cuda or threads_n < 2 or dim < min_dim:
+        work(0, dim)
+        return
+    pieces = threads_n
+    if balance and parts is None:
+        pieces = min(threads_n * BALANCE_PIECES_PER_CORE, max(threads_n, dim // BALANCE_MIN_PIECE))
+    bounds = np.linspace(0, dim, pieces + 1).astype(np.int64)
+    errors = []
+    taken = iter(range(pieces))
+    lock = threading.Lock()
+
+    def run():
+        while not errors:
+            with lock:
+                k = next(taken, None)
+            if k is None:
+                return
+            try:
+                work(int(bounds[k]), int(bounds[k + 1] - bounds[k]))
+            except Exception as err:  # re-raised below, in the caller's thread
+                errors.append(err)
+
+    if own_threads:
+        threads = [threading.Thread(target=run) for _ in range(1, threads_n)]
+        for t in threads:
+            t.start()
+        run()
+        for t in threads:
+            t.join()
+    else:
+        helpers = [_helper_pool().submit(run) for _ in range(1, threads_n)]
+        run()
+        for h in helpers:
+            h.result()
+    if errors:
+        raise errors[0]
+
+
+def run_tasks(tasks, device) -> None:
+    """Call each of ``tasks`` (callables without arguments that launch independent work) from a Python thread of its
+    own on the CPU, one after the other on CUDA. The first error is re-raised in the caller."""
+    if wp.get_device(device).is_cuda or len(tasks) < 2 or (os.cpu_count() or 1) < 2:
+        for task in tasks:
+            task()
+        return
+    run_split(lambda k, _n: tasks[k](), len(tasks), device, parts=len(tasks), min_dim=0, own_threads=True)
+
+
+def launch_split(
+    kernel, dim: int, args, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM, balance: bool = False
+) -> None:
+    """Launch ``kernel`` over [0, dim) — on the CPU, as one launch per core from as many Python threads.
+
+    A Warp CPU launch runs on one thread but releases the GIL, so launches from two threads use two cores. ``args``
+    is called with (start, count) and returns the launch's ``inputs`` list (slices of per-thread arrays, or an
+    offset the kernel adds to its thread id). On CUDA, or for small launches, this is one ordinary launch.
+    ``balance``: see :func:`run_split`.
+    """
+    if dim <= 0:
+        return
+    wp.load_module(kernel.module, device=device)  # compile (or load) once, before threads race for it
+    run_split(
+        lambda lo, n: wp.launch(kernel, dim=n, inputs=args(lo, n), device=device),
+        dim,
+        device,
+        parts=parts,
+        min_dim=min_dim,
+        balance=balance,
+    )

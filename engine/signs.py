@@ -1,0 +1,267 @@
+"""Signs of a mesh's field, top-down: inside means generalised winding number >= 0.5.
+
+A node takes its parent's or a same-level neighbour's sign when their empty balls (unsigned distances) cover the
+segment between them, or when that segment crosses no triangle (away from an open mesh's holes, where the winding
+number changes only across triangles); only nodes left undecided pay the winding number (Warp's fast winding number,
+:func:`mesh_sign_kernel`): a lattice of seeds on the dense top level and a few nodes next to the surface.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from . import octree
+from .geometry import near_cap, segment_clear, winding_number
+from .octree import node_center
+
+SIGN_SAFETY = 0.9
+
+
+# Fast winding number accuracy (Barill et al.'s beta): 1 is 3x faster than Warp's default 2 near the surface and
+# agreed with it on 99.996 % of points around the Stanford bunny.
+WINDING_ACCURACY = 1.0
+
+
+# Sweeps of same-level sign propagation, and the stride along each axis of the oracle's seeds on the dense top level
+# (a lattice through the whole volume, so every region larger than a few top cells, inside or out, holds one).
+MAX_SIGN_SWEEPS = 64
+
+
+TOP_SEED_STRIDE = 4
+
+
+# A sweep of the empty-ball phase that signs fewer than this share of a level's nodes ends it (another sweep over the
+# whole level would sign a handful; the next phase takes them).
+SIGN_SWEEP_SETTLED = 1e-3
+
+
+@wp.kernel(enable_backward=False)
+def mesh_sign_kernel(
+    mesh: wp.uint64,
+    coords: wp.array[wp.vec3i],
+    nodes: wp.array[wp.int32],
+    origin: wp.vec3,
+    spacing: float,
+    sign: wp.array[wp.float32],
+):
+    """Sign oracle: inside where the generalised winding number is above 0.5 (robust on open and multi-shell
+    meshes)."""
+    t = wp.tid()
+    i = nodes[t]
+    x = node_center(origin, spacing, coords[i])
+    sign[i] = wp.where(winding_number(mesh, x, WINDING_ACCURACY) > 0.5, -1.0, 1.0)
+
+
+@wp.func
+def _take_sign(i: int, j: int, dist: wp.array[wp.float32], sign: wp.array[wp.float32], safety: float, spacing: float):
+    """Give unsigned node ``i`` the sign of face neighbour ``j`` when their empty balls cover the edge between them."""
+    if sign[j] != 0.0 and (dist[i] + dist[j]) * safety > spacing:
+        sign[i] = sign[j]
+        return 1
+    return 0
+
+
+@wp.func
+def _take_sign_across(
+    i: int,
+    j: int,
+    dist: wp.array[wp.float32],
+    sign: wp.array[wp.float32],
+    safety: float,
+    spacing: float,
+    mesh: wp.uint64,
+    x: wp.vec3,
+    y: wp.vec3,
+):
+    """``_take_sign``, or with a mesh (``mesh`` != 0) also when the segment between the nodes (at ``x`` and ``y``)
+    surely crosses no triangle: away from an open mesh's holes the winding number changes only across triangles."""
+    if _take_sign(i, j, dist, sign, safety, spacing) == 1:
+        return 1
+    if mesh != wp.uint64(0) and sign[j] != 0.0:
+        if segment_clear(mesh, x, y):
+            sign[i] = sign[j]
+            return 1
+    return 0
+
+
+@wp.kernel(enable_backward=False)
+def propagate_sign_kernel(
+    neighbours: wp.array2d[wp.int32],
+    row0: int,
+    lo: int,
+    dist: wp.array[wp.float32],
+    sign: wp.array[wp.float32],
+    safety: float,
+    spacing: float,
+    coords: wp.array[wp.vec3i],
+    origin: wp.vec3,
+    cap_lo: wp.array[wp.vec3],
+    cap_hi: wp.array[wp.vec3],
+    cap_radius: wp.array[wp.float32],
+    mesh: wp.uint64,
+    changed: wp.array[wp.int32],
+    span: int,
+    reverse: int,
+):
+    """An unsigned node takes a signed face neighbour's sign when their empty balls cover the edge between them, or
+    with a mesh (``mesh`` != 0) when the segment between them crosses no triangle. Signs only ever go from 0 to
+    final, so sweeps may read and write in place (a sign travels along the launch's order within one sweep: sweeps
+    alternate ``reverse``). Not near an open mesh's holes (see ``hole_caps``). Node ``i``'s neighbours are in row
+    ``i - row0``; the launch covers nodes [lo, lo + span)."""
+    i = lo + wp.where(reverse == 1, span - 1 - wp.tid(), wp.tid())
+    if sign[i] != 0.0:
+        return
+    x = node_center(origin, spacing, coords[i])
+    if near_cap(x, cap_lo, cap_hi, cap_radius, spacing):
+        return
+    faces = int(6)  # not unrolled: one copy of the segment test (compile time)
+    for k in range(faces):
+        j = neighbours[i - row0, k]
+        if j >= 0:
+            y = node_center(origin, spacing, coords[j])
+            if _take_sign_across(i, j, dist, sign, safety, spacing, mesh, x, y) == 1:
+                wp.atomic_add(changed, 0, 1)
+                return
+
+
+@wp.kernel(enable_backward=False)
+def propagate_sign_octet_kernel(
+    first: int,
+    codes: wp.array[wp.int64],
+    parent: wp.array[wp.int32],
+    child: wp.array[wp.int32],
+    neighbours: wp.array2d[wp.int32],
+    row0: int,
+    dist: wp.array[wp.float32],
+    sign: wp.array[wp.float32],
+    safety: float,
+    spacing: float,
+    origin: wp.vec3,
+    cap_lo: wp.array[wp.vec3],
+    cap_hi: wp.array[wp.vec3],
+    cap_radius: wp.array[wp.float32],
+    mesh: wp.uint64,
+    changed: wp.array[wp.int32],
+    span: int,
+    reverse: int,
+):
+    """The same on the finest level, which has no neighbour table: one thread per octet (8 consecutive nodes in
+    Morton order; the launch covers octets [first, first + span)). Three face neighbours of a node are in its own
+    octet; the other three are the same child of the face-adjacent octets: the children of the octet's level-1 node's
+    face neighbour (``neighbours``, node ``i`` in row ``i - row0``), when it has any. With a
+    mesh (``mesh`` != 0) a node also takes the sign of a neighbour when the segment between them crosses no triangle
+    (``_take_sign_across``), which signs most of the nodes too near the surface for empty balls without a winding
+    number."""
+    t = first + wp.where(reverse == 1, span - 1 - wp.tid(), wp.tid())
+    base = 8 * t
+    unset = int(0)
+    for k in range(8):
+        if sign[base + k] == 0.0:
+            unset += 1
+    if unset == 0:
+        return
+    octet = octree.morton_decode(codes[base] >> wp.int64(3))
+    centre = origin + 2.0 * spacing * wp.vec3(float(octet[0]) + 0.5, float(octet[1]) + 0.5, float(octet[2]) + 0.5)
+    if near_cap(centre, cap_lo, cap_hi, cap_radius, 2.0 * spacing):
+        return
+    # first node of the octet across each face (-x, +x, -y, +y, -z, +z); -2: not looked up yet
+    across = wp.vector(-2, -2, -2, -2, -2, -2, length=6, dtype=int)
+    got = int(0)
+    # loop bounds held in variables keep Warp from unrolling 2 x 8 x 3 copies of the segment test (compile time)
+    sweeps = int(2)
+    nodes = int(8)
+    axes = int(3)
+    for _sweep in range(sweeps):
+        for k in range(nodes):
+            i = base + k
+            if sign[i] == 0.0:
+                x = centre + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
+                for a in range(axes):
+                    bit = (k >> a) & 1
+                    step = wp.vec3(0.0)
+                    step[a] = wp.where(bit == 0, spacing, -spacing)
+                    if sign[i] == 0.0:
+                        got += _take_sign_across(
+                            i, base + (k ^ (1 << a)), dist, sign, safety, spacing, mesh, x, x + step
+                        )
+                    if sign[i] == 0.0:
+                        bit = (k >> a) & 1
+                        face = 2 * a + bit
+                        if across[face] == -2:
+                            # the octet's level-1 node's neighbour across the face, and its children if it has any
+                            across[face] = -1
+                            nb = neighbours[parent[base] - row0, face]
+                            if nb >= 0:
+                                across[face] = child[nb]
+                        if across[face] >= 0:
+                            got += _take_sign_across(
+                                i, across[face] + (k ^ (1 << a)), dist, sign, safety, spacing, mesh, x, x - step
+                            )
+    if got > 0:
+        wp.atomic_add(changed, 0, got)
+
+
+@wp.kernel(enable_backward=False)
+def apply_sign_kernel(first: int, dist: wp.array[wp.float32], sign: wp.array[wp.float32], values: wp.array[wp.float32]):
+    i = first + wp.tid()
+    s = sign[i]
+    if s == 0.0:
+        s = 1.0
+    values[i] = s * dist[i]
+
+
+# No boxes, in the form of :func:`hole_caps`' result.
+NO_BOXES = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+
+
+def box_arrays(boxes, device) -> list:
+    """Warp arrays (lo, hi, radius) of boxes in the form of :func:`hole_caps`' result (None: no boxes)."""
+    lo, hi, radius = NO_BOXES if boxes is None else boxes
+    return [
+        wp.array(np.asarray(lo, np.float32).reshape(-1, 3), dtype=wp.vec3, device=device),
+        wp.array(np.asarray(hi, np.float32).reshape(-1, 3), dtype=wp.vec3, device=device),
+        wp.array(np.asarray(radius, np.float32).reshape(-1), dtype=wp.float32, device=device),
+    ]
+
+
+@wp.kernel(enable_backward=False)
+def take_known_sign_kernel(
+    first: int, where: wp.array[wp.int32], prev_values: wp.array[wp.float32], sign: wp.array[wp.float32]
+):
+    """Node ``first + tid`` found in an earlier build takes its sign."""
+    i = first + wp.tid()
+    j = where[i]
+    if j >= 0:
+        sign[i] = wp.where(prev_values[j] < 0.0, -1.0, 1.0)
+
+
+@wp.kernel(enable_backward=False)
+def inherit_sign_kernel(
+    coords: wp.array[wp.vec3i],
+    parent: wp.array[wp.int32],
+    lo: int,
+    origin: wp.vec3,
+    spacing: float,
+    dist: wp.array[wp.float32],
+    sign: wp.array[wp.float32],
+    safety: float,
+    no_inherit: wp.array[wp.uint8],
+):
+    """A node takes its parent's sign when the two empty balls around them cover the segment between them (no
+    surface can cross it); otherwise its sign stays 0 (undecided) for the caller's oracle. Near an open mesh's holes
+    (``field.hole_caps``) a segment may cross the jump of the winding number over a hole without meeting a triangle:
+    nodes flagged in ``no_inherit`` (empty: none) are left undecided there (``field.cap_sign_presets``), elsewhere near
+    the holes this is a heuristic, which the band refinement of open meshes checks where it matters."""
+    i = lo + wp.tid()
+    p = parent[i]
+    if sign[i] != 0.0:  # already known (a node kept from an earlier build of the same mesh, or preset)
+        return
+    if no_inherit.shape[0] > 0:
+        if no_inherit[i] != wp.uint8(0):
+            return
+    if p >= 0:
+        xi = node_center(origin, spacing, coords[i])
+        xp = node_center(origin, 2.0 * spacing, coords[p])
+        if (dist[i] + dist[p]) * safety > wp.length(xi - xp):
+            sign[i] = sign[p]
