@@ -13,14 +13,13 @@ from __future__ import annotations
 
 import math
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 import warp as wp
 import warp.geometry
 
 from . import octree, parallel
-from .build import assemble_field
-from .field import AdaptiveField
 from .octree import code_bits, level_layout, morton_encode, node_center
 from .operands import (
     coarse_sample,
@@ -33,6 +32,9 @@ from .operands import (
 )
 from .plan import byte_grid_fits, check_budget, plan_domain
 from .sampling import FieldArg, clamp_to_domain, locate_leaf, vec27i
+
+if TYPE_CHECKING:  # the field type imports this module for its operators
+    from .field import AdaptiveField
 
 OP_UNION, OP_INTERSECTION, OP_DIFFERENCE = 0, 1, 2
 
@@ -76,16 +78,13 @@ def _combine_nodes_kernel(
     first: int,
     end: int,
     group: int,
-    values_lo: int,
     origin: wp.vec3,
     spacing: float,
     op: int,
     blend: float,
     precise: int,
-    dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
-    sign: wp.array[wp.float32],
     values: wp.array[wp.float32],
     a_octets: int,
     b_octets: int,
@@ -96,7 +95,7 @@ def _combine_nodes_kernel(
     the sparse levels): both operands looked up or sampled, then combined. The operand whose value the
     combination follows gives the projection point and the source id. On the finest level, ``a_first``/``b_first``
     give each result octet's first node in an operand whose octets coincide with the result's
-    (``a_octets``/``b_octets``), found by the bracket pass. ``values`` holds the nodes from ``values_lo`` on. The
+    (``a_octets``/``b_octets``), found by the bracket pass. The
     nodes of a group mostly share an operand's coarse leaf, whose neighbours an MLS sample reads: they are gathered
     once per leaf."""
     i0 = first + group * wp.tid()
@@ -192,9 +191,9 @@ def _combine_nodes_kernel(
             leaf = leaf_a[0]
         g = wp.vec3(r[1], r[2], r[3])
         proj[i] = x - r[0] * g
-        dist[i] = wp.abs(phi)
-        sign[i] = wp.where(phi < 0.0, -1.0, 1.0)
-        values[i - values_lo] = phi
+        values[i] = phi
+        if precise == 0:  # a coarse node: signed zero is positive (no surface to take a side of)
+            values[i] = wp.where(phi < 0.0, -1.0, 1.0) * wp.abs(phi)
         if node < 0:
             node = leaf
         if node < 0:
@@ -369,7 +368,7 @@ def _octets_of_cells_kernel(
 
 def _check_operands(a, b, blend):
     for name, f in (("a", a), ("b", b)):
-        if not isinstance(f, AdaptiveField):
+        if not callable(getattr(f, "arg", None)) or not hasattr(f, "level_offsets"):
             raise TypeError(f"Expected '{name}' to be an AdaptiveField, but got {type(f).__name__}.")
     blend = float(blend)
     if not math.isfinite(blend) or blend < 0.0:
@@ -524,9 +523,9 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
 
     no_octets = wp.empty(0, dtype=wp.int32, device=device)
 
-    def run(coords, lo_, hi_, spacing_, dist, proj, source, sign, values):
-        flags = [int(aligned[0] and spacing_ == h), int(aligned[1] and spacing_ == h)]
+    def run(coords, lo_, hi_, spacing_, proj, source, values):
         finest = spacing_ == h
+        flags = [int(aligned[0] and finest), int(aligned[1] and finest)]
         octet_args = [
             octet_flags[0] if finest else 0,
             octet_flags[1] if finest else 0,
@@ -547,53 +546,43 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
                 lo_ + group * start,
                 min(hi_, lo_ + group * (start + n)),
                 group,
-                lo_,
                 origin_v,
                 float(spacing_),
                 int(op),
                 blend,
-                int(spacing_ == h),
-                dist,
+                int(finest),
                 proj,
                 source,
-                sign,
                 values,
                 *octet_args,
             ],
             device,
         )
 
-    t0 = time.perf_counter()
-    n, n0 = int(layout["offsets"][-1]), int(layout["offsets"][1])
-    dist = wp.empty(n, dtype=wp.float32, device=device)
+    # Every node, level by level: the finest from the operands' nodes or MLS samples, the coarser levels from the
+    # operands' own nodes there or their leaves extrapolated (Eq. 8 per node: a result is a field like any other).
+    offsets = layout["offsets"]
+    n = int(offsets[-1])
     proj = wp.empty(n, dtype=wp.vec3, device=device)
     source = wp.empty(n, dtype=wp.int32, device=device)
     values = wp.empty(n, dtype=wp.float32, device=device)
-    fine_sign = wp.empty(n0, dtype=wp.float32, device=device)
-    run(layout["coords"], 0, n0, h, dist, proj, source, fine_sign, values)
-    fine_sign = octets = a_first = b_first = None
-    timings["finest_values"] = time.perf_counter() - t0
-
-    def level_values(coords, lo_, hi_, spacing_, dist, proj, source, sign):
-        scratch = wp.empty(hi_ - lo_, dtype=wp.float32, device=device)
-        run(coords, lo_, hi_, spacing_, dist, proj, source, sign, scratch)
-
-    return assemble_field(
-        origin=origin,
-        top_dims=top_dims,
+    for k in range(levels):
+        tk = time.perf_counter()
+        run(layout["coords"], int(offsets[k]), int(offsets[k + 1]), h * 2**k, proj, source, values)
+        timings["finest_values" if k == 0 else "top_level" if k == levels - 1 else f"level_{k}"] = (
+            time.perf_counter() - tk
+        )
+        if k == 0:
+            octets = a_first = b_first = None  # the pruning's arrays are not needed above the finest level
+    return type(a).from_layout(
+        layout,
         voxel_size=h,
-        levels=levels,
-        layout=layout,
-        dist=dist,
+        origin=origin,
+        values=values,
         proj=proj,
         source=source,
-        fine_values=values,
-        oracle=None,
-        finest_signs=None,
-        device=device,
         field_ids=a.field_ids + b.field_ids,
         timings=timings,
-        level_values=level_values,
     )
 
 

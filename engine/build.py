@@ -23,8 +23,7 @@ import time
 import numpy as np
 import warp as wp
 
-from . import distance, geometry, holes, octree, parallel, signs
-from .distance import finest_distance_kernel, finest_octet_distance_kernel, take_known_kernel
+from . import distance, fim, holes, octree, parallel, signs
 from .errors import AasdfError
 from .field import AdaptiveField
 from .geometry import tri_box_overlap
@@ -32,29 +31,13 @@ from .holes import cap_lattices, cap_sign_presets, changed_top_cells, sign_chang
 from .meshcheck import edge_table, hole_caps, problem_faces, weld_positions
 from .octree import add_octets, code_bits, in_sorted, level_layout, match_levels, morton_encode
 from .plan import byte_grid_fits, check_budget, checked_plans, plan_field
+from .sampling import LEAF_TOLERANCE
 from .signs import (
-    MAX_SIGN_SWEEPS,
     NO_BOXES,
-    SIGN_SAFETY,
-    SIGN_SWEEP_SETTLED,
-    TOP_SEED_STRIDE,
-    apply_sign_kernel,
-    box_arrays,
-    mesh_sign_kernel,
-    propagate_sign_kernel,
-    propagate_sign_octet_kernel,
-    take_known_sign_kernel,
 )
 
 # Rounds of refining coarse leaves the zero set crosses (open meshes: the surface across a hole).
 MAX_SIGN_REFINEMENTS = 4
-
-
-# Relative error allowed to the closest points of the top level's leaves (0: exact). Far from the surface it is the
-# bulk of a query's work (bunny /512: 0.32 s of thread time at 1 %, 0.15 s at 5 %), while the far field's error stays
-# the interpolation's (p95 2.79 % exact, 2.85 % at 5 %). A value up to this share above the distance must keep the
-# empty balls of the signs within SIGN_SAFETY (a test checks) and widens the booleans' brackets (``LEAF_SLACK``).
-TOP_LEVEL_TOLERANCE = 0.05
 
 
 # Finest octets search their candidate triangles in a box (instead of 8 BVH queries) when the mean triangle area is
@@ -161,7 +144,7 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
             if k in errors:
                 raise errors[k]
         return fields
-    for module in (octree, distance, signs, holes, sys.modules[__name__]):  # the modules a build launches
+    for module in (octree, distance, fim, signs, holes, sys.modules[__name__]):  # the modules a build launches
         wp.load_module(module, device=device)  # compiled or loaded once, before the threads
     workers = min(len(meshes), os.cpu_count() or 1)
     # worker w builds meshes w, w + workers, ...
@@ -241,7 +224,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
         caps = None if clean else hole_caps(seam_verts, seam_tris, edges)
     diag = float(np.linalg.norm(fine_dims * voxel_size))
     # candidate triangles per octet grow as cell area / triangle area: search boxes only where that stays small
-    box_search = int(float(plan["areas"].mean()) >= OCTET_SEARCH_MIN_AREA * voxel_size**2)
+    box_search = float(plan["areas"].mean()) >= OCTET_SEARCH_MIN_AREA * voxel_size**2
     timings["mesh_checks"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -294,118 +277,62 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
                 base_octets = add_octets(base_octets, sheet, fine_dims // 2, end_bit=3 * code_bits(fine_dims // 2))
         timings["cap_lattices"] = time.perf_counter() - t0
 
-    def oracle(coords, nodes_np, spacing, sign):
-        if len(nodes_np) == 0:
-            return
-        nodes = wp.array(nodes_np.astype(np.int32), dtype=wp.int32, device=device)
-        origin_v = wp.vec3(*origin)
-        parallel.launch_split(
-            mesh_sign_kernel,
-            len(nodes_np),
-            lambda lo, n: [mesh.id, coords, nodes[lo : lo + n], origin_v, float(spacing), sign],
-            device,
-            min_dim=parallel.EMIT_SPLIT_MIN_DIM,  # a winding number costs microseconds: split from a few thousand
-            balance=True,  # winding numbers cost most near holes, which a Morton-ordered list bunches
-        )
-
-    def finest_signs(coords, sign, lo0, hi0):
-        # Undecided finest nodes lie within about half a voxel of the surface, where the pseudo-normal sign is wrong
-        # near open edges and where shells intersect or touch: they pay the winding number.
-        idx = lo0 + np.flatnonzero(sign.numpy()[lo0:hi0] == 0.0)
-        oracle(coords, idx, voxel_size, sign)
-        return len(idx)
-
     def build(octets, query_radius, previous=None):
         # every node's place first, so each level's values are computed where they are kept
         layout = level_layout(octets, top_dims, levels, device, timings)
         t0 = time.perf_counter()
-        n, n0 = int(layout["offsets"][-1]), int(layout["offsets"][1])
-        fine_codes, fine_coords = layout["codes"][:n0], layout["coords"][:n0]
-        dist = wp.empty(n, dtype=wp.float32, device=device)
-        proj = wp.empty(n, dtype=wp.vec3, device=device)
-        source = wp.empty(n, dtype=wp.int32, device=device)
-        dist0, proj0, src0 = dist[:n0], proj[:n0], source[:n0]
-        # Octets an earlier build of this mesh already has keep their closest points; only new ones are queried.
-        first_nodes = np.arange(0, n0, 8)
-        if previous is not None:
-            where = match_levels(fine_codes, [0, n0], previous)
-            no_known = wp.empty(0, dtype=wp.int32, device=device)
-            parallel.launch_split(
-                take_known_kernel,
-                n0,
-                lambda s, _n: [s, where, previous.values, previous.proj, previous.source, no_known, dist0, proj0, src0],
-                device,
-            )
-            first_nodes = 8 * np.flatnonzero(where.numpy()[::8] < 0)  # matched octet by octet
-        src0.fill_(int(field_id))
-        origin_v = wp.vec3(*origin)
-        if octets is not None:
-            # octet by octet, in place
-            octet_nodes = wp.array(first_nodes.astype(np.int32), dtype=wp.int32, device=device)
-            octet_dist = wp.full(n0 // 8, geometry.UNSET_DISTANCE, dtype=wp.float32, device=device)
-            octet_proj = wp.empty(n0 // 8, dtype=wp.vec3, device=device)
-            octet_points = (octet_dist, octet_proj)
-            parallel.launch_split(
-                finest_octet_distance_kernel,
-                len(first_nodes),
-                lambda lo, n: [
-                    lo,
-                    mesh.id,
-                    fine_coords,
-                    octet_nodes,
-                    origin_v,
-                    voxel_size,
-                    float(query_radius),
-                    diag,
-                    dist0,
-                    proj0,
-                    octet_dist,
-                    octet_proj,
-                    box_search,
-                ],
-                device,
-                min_dim=parallel.EMIT_SPLIT_MIN_DIM,
-                balance=True,  # octets near an open mesh's holes, or far from it, cost more
-            )
-        else:  # a single dense level: node by node
-            octet_points = None
-            parallel.launch_split(
-                finest_distance_kernel,
-                n0,
-                lambda lo, n: [
-                    mesh.id,
-                    fine_coords[lo : lo + n],
-                    origin_v,
-                    voxel_size,
-                    float(query_radius),
-                    diag,
-                    int(field_id),
-                    dist0[lo : lo + n],
-                    proj0[lo : lo + n],
-                    src0[lo : lo + n],
-                ],
-                device,
-            )
-        timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
-        return assemble_field(
+        # each node's index in the earlier build (-1: new), shared by distances and signs
+        prev_index = None if previous is None else match_levels(layout["codes"], layout["offsets"], previous)
+        dist, proj, source, octet_points = distance.finest_distances(
+            mesh.id,
+            layout,
             origin=origin,
-            top_dims=top_dims,
             voxel_size=voxel_size,
-            levels=levels,
-            layout=layout,
-            dist=dist,
+            query_radius=query_radius,
+            far_dist=diag,
+            field_id=field_id,
+            box_search=box_search,
+            previous=previous,
+            prev_index=prev_index,
+        )
+        timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
+        neighbours, sweeps = fim.solve_levels(
+            mesh.id,
+            layout,
+            dist,
+            proj,
+            source,
+            origin=origin,
+            voxel_size=voxel_size,
+            top_tolerance=LEAF_TOLERANCE,
+            octet_points=octet_points,
+            previous=previous,
+            prev_index=prev_index,
+            timings=timings,
+        )
+        values, sign_stats = signs.sign_levels(
+            mesh.id,
+            layout,
+            dist,
+            neighbours,
+            origin=origin,
+            voxel_size=voxel_size,
+            hole_caps=caps,
+            presets=None if lattices is None else cap_sign_presets(lattices, layout, levels),
+            previous=previous,
+            prev_index=prev_index,
+            timings=timings,
+        )
+        return AdaptiveField.from_layout(
+            layout,
+            voxel_size=voxel_size,
+            origin=origin,
+            values=values,
             proj=proj,
             source=source,
-            known_signs=previous,
-            oracle=oracle,
-            finest_signs=finest_signs,
-            device=device,
             field_ids=(field_id,),
             timings=timings,
-            mesh_id=mesh.id,
-            octet_points=octet_points,
-            hole_caps=caps,
-            sign_presets=None if lattices is None else lambda layout: cap_sign_presets(lattices, layout, levels),
+            stats={"fim_sweeps": sweeps, **sign_stats},
         )
 
     # a band node lies within (padding + 1) cells (L-inf) of a triangle; misses fall back to the domain diagonal
@@ -439,264 +366,4 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     field.timings["sign_check"] = refine_seconds
     field.stats["clean_mesh"] = clean
     field.stats["problem_faces"] = int(problem.sum())
-    field._mesh = mesh  # keeps the BVH alive for callers that want exact queries
     return field
-
-
-def assemble_field(
-    *,
-    origin,
-    top_dims,
-    voxel_size,
-    levels,
-    layout,
-    dist,
-    proj,
-    source,
-    oracle,
-    finest_signs,
-    device,
-    field_ids,
-    timings,
-    mesh_id=0,
-    level_values=None,
-    spread_signs=True,
-    known_signs=None,
-    hole_caps=None,
-    octet_points=None,
-    fine_values=None,
-    sign_presets=None,
-):
-    """Solve the intermediate and top levels above a finest level and sign every node (shared by construction
-    and booleans).
-
-    ``layout``: every node's place (:func:`level_layout`); ``dist``/``proj`` (unsigned distances and projection
-    points) and ``source``: one entry per node, the finest level's filled in. Signs are assigned top-down:
-    ``oracle(coords, nodes, spacing, sign)`` writes the sign of the given nodes of one level; ``finest_signs(coords,
-    sign, lo, hi)`` decides the finest nodes the parent left undecided. When ``fine_values`` (one entry per node, the
-    finest level's signed values filled in) is given the finest level keeps those values (and the array becomes the
-    field's values). When ``level_values(coords, lo,
-    hi, spacing, dist, proj, source, sign)`` is given (booleans: the operands are sampled), it sets every coarse
-    node's distance, projection, source and sign directly, in place of the FIM solve and the sign oracles.
-    ``spread_signs`` lets signs spread between same-level neighbours; ``hole_caps`` (boxes lo, boxes hi, radii, from
-    :func:`hole_caps`) keeps them from spreading near an open mesh's holes. ``octet_points`` (distances, closest
-    points) of the finest octets' centres, where the finest level's computation found them: the level-1 nodes there.
-    ``known_signs``: an earlier field of the same mesh and domain whose nodes' signs are reused where nodes match.
-    ``sign_presets(layout)``: (signs (N,) float32, 0 where undecided; no_inherit (N,) uint8, nodes that must not take
-    their parent's sign) set before the top-down pass (see :func:`cap_sign_presets`).
-    """
-    top_dims = np.asarray(top_dims, dtype=np.int64)
-    fine_dims = top_dims * 2 ** (levels - 1)
-    codes, coords, offsets = layout["codes"], layout["coords"], layout["offsets"]
-    child, parent = layout["child"], layout["parent"]
-    n, n0 = int(offsets[-1]), int(offsets[1])
-    # same-level neighbours of the coarse nodes (node i in row i - n0): the finest level finds its own by octet, and
-    # booleans sample their operands instead of solving
-    neighbours = wp.full((n - n0 if level_values is None else 0, 6), -1, dtype=wp.int32, device=device)
-    # Coarse nodes an earlier build of the same mesh and domain has keep their distances (refinement rounds).
-    known = wp.zeros(n, dtype=wp.int32, device=device)
-    # each node's index in the earlier build (-1: new), shared by distances and signs
-    prev_index = match_levels(codes, offsets, known_signs) if known_signs is not None else None
-    if known_signs is not None and level_values is None:
-        parallel.launch_split(
-            take_known_kernel,
-            n - n0,
-            lambda s, _n: [
-                n0 + s,
-                prev_index,
-                known_signs.values,
-                known_signs.proj,
-                known_signs.source,
-                known,
-                dist,
-                proj,
-                source,
-            ],
-            device,
-        )
-    sweeps = {}
-    origin_t = tuple(float(x) for x in origin)
-    sign = wp.zeros(n, dtype=wp.float32, device=device)
-    no_inherit = wp.empty(0, dtype=wp.uint8, device=device)
-    if sign_presets is not None:
-        preset, flags = sign_presets(layout)
-        sign = wp.array(preset, dtype=wp.float32, device=device)
-        no_inherit = wp.array(flags, dtype=wp.uint8, device=device)
-    for k in range(1, levels):
-        tk = time.perf_counter()
-        lo, hi = int(offsets[k]), int(offsets[k + 1])
-        name = "top_level" if k == levels - 1 else f"level_{k}"
-        if level_values is not None:
-            level_values(coords, lo, hi, voxel_size * 2**k, dist, proj, source, sign)
-            timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk
-            continue
-        octree.level_neighbours(coords, lo, hi, fine_dims >> k, neighbours, row0=n0)
-        tn = time.perf_counter()
-        sweeps[k] = distance.solve_level(
-            coords,
-            child,
-            neighbours,
-            lo,
-            hi,
-            origin_t,
-            voxel_size * 2**k,
-            dist,
-            proj,
-            source,
-            mesh_id=mesh_id,
-            known=known,
-            octet_points=octet_points if k == 1 else None,
-            row0=n0,
-            ordered_sweeps=k == levels - 1,  # the dense top level: far from the surface, information travels far
-            tolerance=TOP_LEVEL_TOLERANCE if k == levels - 1 else 0.0,
-        )
-        timings[f"{name}_neighbours"] = timings.get(f"{name}_neighbours", 0.0) + tn - tk
-        timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk
-
-    # Signs, top-down: the top level from a sparse set of oracle seeds, every lower level from its parents; then
-    # within each level from already signed neighbours (empty balls again); the oracle only for what is left.
-    t0 = time.perf_counter()
-    if known_signs is not None:
-        parallel.launch_split(
-            take_known_sign_kernel, n, lambda s, _n: [s, prev_index, known_signs.values, sign], device
-        )
-    top_lo, top_hi = int(offsets[levels - 1]), int(offsets[levels])
-    oracle_counts = {}
-    sign_sweeps = {}
-    origin_v = wp.vec3(*origin_t)
-
-    cap_args = box_arrays(hole_caps, device)
-
-    def spread(k, lo, hi):
-        if not spread_signs:
-            return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
-        changed = wp.zeros(1, dtype=wp.int32, device=device)
-        # the finest level first spreads by empty balls alone, then (with a mesh) across segments that cross no
-        # triangle, which costs a box query each and so runs only once the cheap test is exhausted
-        phases = [0, int(mesh_id)] if mesh_id else [0]
-        sweeps = {}
-        for phase_mesh in phases:
-            for sweep in range(MAX_SIGN_SWEEPS):  # noqa: B007 (the count is kept)
-                changed.zero_()
-                if k == 0:
-                    # in place from two threads: a sign only ever goes from unset to final, so races are harmless
-                    parallel.launch_split(
-                        propagate_sign_octet_kernel,
-                        (hi - lo) // 8,
-                        lambda start, span, phase_mesh=phase_mesh, sweep=sweep: [
-                            start,
-                            codes,
-                            parent,
-                            child,
-                            neighbours,
-                            n0,
-                            dist,
-                            sign,
-                            SIGN_SAFETY * 1.0,
-                            float(voxel_size),
-                            origin_v,
-                            *cap_args,
-                            wp.uint64(phase_mesh),
-                            changed,
-                            span,
-                            sweep % 2,
-                        ],
-                        device,
-                    )
-                else:
-                    # split the same way (racing increments from two threads still leave ``changed`` nonzero)
-                    parallel.launch_split(
-                        propagate_sign_kernel,
-                        hi - lo,
-                        lambda start, span, phase_mesh=phase_mesh, sweep=sweep: [
-                            neighbours,
-                            n0,
-                            lo + start,
-                            dist,
-                            sign,
-                            SIGN_SAFETY,
-                            float(voxel_size * 2**k),
-                            coords,
-                            origin_v,
-                            *cap_args,
-                            wp.uint64(phase_mesh),
-                            changed,
-                            span,
-                            sweep % 2,
-                        ],
-                        device,
-                    )
-                got = int(changed.numpy()[0])
-                if got == 0:
-                    break
-                if phase_mesh != phases[-1] and (k == 0 or got < SIGN_SWEEP_SETTLED * (hi - lo)):
-                    # the empty balls have settled (on the finest level one in-place sweep leaves a handful): the
-                    # segments' phase signs the few nodes another sweep over the whole level would
-                    break
-            sweeps[phase_mesh] = sweep + 1
-        sign_sweeps[k] = (sweeps[0], sweeps.get(int(mesh_id), 0))
-        return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
-
-    if level_values is None and levels > 1:
-        # Across a hole of an open mesh the sign changes where no triangle is near, so empty balls prove nothing
-        # near it: signs spread only away from the holes' caps (``hole_caps``), the oracle decides the rest.
-        stride = TOP_SEED_STRIDE if spread_signs else 1
-        nx, ny, nz = (int(d) for d in top_dims)
-        ix, iy, iz = (np.arange(min(stride // 2, n_axis - 1), n_axis, stride) for n_axis in (nx, ny, nz))
-        seeds = top_lo + (ix[None, None, :] + nx * (iy[None, :, None] + ny * iz[:, None, None])).ravel()
-        seeds = seeds[sign.numpy()[seeds] == 0.0]
-        oracle(coords, seeds, voxel_size * 2 ** (levels - 1), sign)
-        rest = spread(levels - 1, top_lo, top_hi)
-        oracle(coords, rest, voxel_size * 2 ** (levels - 1), sign)
-        oracle_counts[levels - 1] = len(seeds) + len(rest)
-    for k in range(levels - 2, -1, -1) if level_values is None else ():
-        lo, hi = int(offsets[k]), int(offsets[k + 1])
-        parallel.launch_split(
-            signs.inherit_sign_kernel,
-            hi - lo,
-            lambda start, _n, k=k, lo=lo: [
-                coords,
-                parent,
-                lo + start,
-                origin_v,
-                voxel_size * 2**k,
-                dist,
-                sign,
-                SIGN_SAFETY,
-                no_inherit,
-            ],
-            device,
-        )
-        if k > 0:
-            idx = spread(k, lo, hi)
-            oracle(coords, idx, voxel_size * 2**k, sign)
-            oracle_counts[k] = len(idx)
-    if fine_values is None:
-        if levels > 1:
-            spread(0, 0, n0)
-        oracle_counts[0] = finest_signs(coords, sign, 0, n0)
-    if fine_values is None:
-        values = wp.empty(n, dtype=wp.float32, device=device)
-        parallel.launch_split(apply_sign_kernel, n, lambda start, _n: [start, dist, sign, values], device)
-    else:  # the finest values are in place already
-        values = fine_values
-        parallel.launch_split(apply_sign_kernel, n - n0, lambda start, _n: [n0 + start, dist, sign, values], device)
-    timings["signs"] = timings.get("signs", 0.0) + time.perf_counter() - t0
-
-    return AdaptiveField(
-        voxel_size=voxel_size,
-        levels=levels,
-        origin=origin,
-        top_dims=top_dims,
-        level_offsets=offsets,
-        codes=codes,
-        coords=coords,
-        values=values,
-        proj=proj,
-        child=child,
-        source=source,
-        field_ids=field_ids,
-        device=device,
-        timings=timings,
-        stats={"fim_sweeps": sweeps, "sign_queries": oracle_counts, "sign_sweeps": sign_sweeps},
-    )

@@ -1,11 +1,10 @@
-"""Unsigned distances and closest points of a mesh's field, level by level (Ren et al., Sec. 4.2).
+"""Exact closest points of a mesh's field on its finest level (Ren et al., Sec. 4.2).
 
-The finest level takes exact closest points octet by octet (:func:`finest_octet_distance_kernel`: one BVH query at
-the octet's centre bounds where the 8 nodes' closest triangles can be, one box query lists them). Each coarser level
-(:func:`solve_level`) takes its internal nodes from their children (made exact by a bounded BVH query), solves its
-leaves by the fast iterative method over same-level neighbours (closest points propagated, Jacobi sweeps on both
-cores, or ordered in-place sweeps on the dense top level), and refines every leaf by a BVH search bounded by that
-estimate: exact below the top level, within a tolerance on it.
+The finest level takes exact closest points octet by octet (:func:`finest_distances`): one BVH query at the octet's
+centre gives its closest triangle, whose distance to each of the 8 nodes bounds where their closest triangles can be,
+one box query lists those candidates and each node is tested against them. Meshes far finer than the cells query the
+BVH node by node, and a dense single level does throughout. The octet centres' closest points are kept: they are the
+level-1 nodes' (:mod:`.fim`).
 """
 
 from __future__ import annotations
@@ -18,7 +17,6 @@ from .geometry import (
     closest_on_triangle,
     mesh_closest_face,
     mesh_closest_point,
-    mesh_near_point,
     triangle_edges,
 )
 from .octree import node_center
@@ -36,7 +34,7 @@ def _node_closest_point(mesh: wp.uint64, x: wp.vec3, max_dist: float, far_dist: 
 
 
 @wp.kernel(enable_backward=False)
-def finest_octet_distance_kernel(
+def _finest_octet_distance_kernel(
     first: int,
     mesh: wp.uint64,
     coords: wp.array[wp.vec3i],
@@ -146,7 +144,7 @@ def finest_octet_distance_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def finest_distance_kernel(
+def _finest_distance_kernel(
     mesh: wp.uint64,
     coords: wp.array[wp.vec3i],
     origin: wp.vec3,
@@ -192,318 +190,111 @@ def take_known_kernel(
         known[i] = 1
 
 
-@wp.kernel(enable_backward=False)
-def _init_from_children_kernel(
-    coords: wp.array[wp.vec3i],
-    first_child: wp.array[wp.int32],
-    lo: int,
-    origin: wp.vec3,
-    spacing: float,
-    mesh: wp.uint64,
-    max_dist: float,
-    known: wp.array[wp.int32],
-    octet_dist: wp.array[wp.float32],
-    octet_proj: wp.array[wp.vec3],
-    dist: wp.array[wp.float32],
-    proj: wp.array[wp.vec3],
-    source: wp.array[wp.int32],
-):
-    """Internal nodes are sources: the nearest of their children's projection points (Ren et al.), which with a
-    mesh is then made exact by a BVH query bounded by that distance. Leaves start unset. Nodes marked ``known`` keep
-    the values they were given. ``octet_dist``/``octet_proj`` (per octet of the level below, empty if none): exact
-    closest points of octet centres already found (UNSET_DISTANCE where not), which are this level's node centres."""
-    i = lo + wp.tid()
-    if known[i] == 1:
-        return
-    c = first_child[i]
-    if c < 0:
-        dist[i] = UNSET_DISTANCE
-        return
-    x = node_center(origin, spacing, coords[i])
-    best = float(UNSET_DISTANCE)
-    best_j = c
-    for o in range(8):
-        j = c + o
-        if dist[j] < UNSET_DISTANCE:
-            dj = wp.length(x - proj[j])
-            if dj < best:
-                best = dj
-                best_j = j
-    dist[i] = best
-    proj[i] = proj[best_j]
-    source[i] = source[best_j]
-    if octet_dist.shape[0] > 0:
-        if octet_dist[c // 8] < UNSET_DISTANCE:
-            dist[i] = octet_dist[c // 8]
-            proj[i] = octet_proj[c // 8]
-            return
-    if mesh != wp.uint64(0):
-        found, p = mesh_closest_point(mesh, x, wp.min(best * 1.0001 + spacing * 1.0e-4, max_dist))
-        if found:
-            d = wp.length(x - p)
-            if d < best:
-                dist[i] = d
-                proj[i] = p
-
-
-@wp.func
-def _nearest_projection(
-    x: wp.vec3,
-    i: int,
-    neighbours: wp.array2d[wp.int32],
-    row0: int,
-    in0: int,
-    dist: wp.array[wp.float32],
-    proj: wp.array[wp.vec3],
-    source: wp.array[wp.int32],
-):
-    """The closest-point Eikonal update of node ``i`` (at ``x``): (distance, projection point, source) of the nearest
-    projection point among its own and its face neighbours' (node ``j`` at entry ``j - in0``, its neighbours in row
-    ``i - row0``); a neighbour's point must be nearer by a relative 1e-5 to win."""
-    best = dist[i - in0]
-    p = proj[i - in0]
-    s = source[i - in0]
-    for k in range(6):
-        j = neighbours[i - row0, k]
-        if j >= 0:
-            if dist[j - in0] < UNSET_DISTANCE:
-                dj = wp.length(x - proj[j - in0])
-                if dj < best * 0.99999:
-                    best = dj
-                    p = proj[j - in0]
-                    s = source[j - in0]
-    return best, p, s
-
-
-@wp.kernel(enable_backward=False)
-def _fim_sweep_kernel(
-    coords: wp.array[wp.vec3i],
-    neighbours: wp.array2d[wp.int32],
-    row0: int,
-    nodes: wp.array[wp.int32],
-    origin: wp.vec3,
-    spacing: float,
-    in0: int,
-    dist_in: wp.array[wp.float32],
-    proj_in: wp.array[wp.vec3],
-    src_in: wp.array[wp.int32],
-    out0: int,
-    dist_out: wp.array[wp.float32],
-    proj_out: wp.array[wp.vec3],
-    src_out: wp.array[wp.int32],
-    changed: wp.array[wp.int32],
-):
-    """One Jacobi sweep of the fast iterative method over a level's unknown leaves (``nodes``, one thread each): each
-    takes the nearest projection point among its face neighbours (a closest-point Eikonal update); internal and
-    known nodes stay fixed as sources (the caller keeps them in both buffers). Node ``i`` is entry ``i - in0`` of the
-    inputs, ``i - out0`` of the outputs and row ``i - row0`` of ``neighbours``."""
-    i = nodes[wp.tid()]
-    best, p, s = _nearest_projection(
-        node_center(origin, spacing, coords[i]), i, neighbours, row0, in0, dist_in, proj_in, src_in
-    )
-    if best < dist_in[i - in0]:
-        wp.atomic_add(changed, 0, 1)
-    dist_out[i - out0] = best
-    proj_out[i - out0] = p
-    src_out[i - out0] = s
-
-
-@wp.kernel(enable_backward=False)
-def _fim_ordered_sweep_kernel(
-    coords: wp.array[wp.vec3i],
-    first_child: wp.array[wp.int32],
-    neighbours: wp.array2d[wp.int32],
-    row0: int,
-    lo: int,
-    hi: int,
-    reverse: int,
-    origin: wp.vec3,
-    spacing: float,
-    dist: wp.array[wp.float32],
-    proj: wp.array[wp.vec3],
-    source: wp.array[wp.int32],
-    known: wp.array[wp.int32],
-    changed: wp.array[wp.int32],
-):
-    """The same update in place, one thread visiting the level's nodes in index order (``reverse``: backwards), so an
-    update reaches the next nodes within the sweep (Gauss-Seidel): on the dense top level, whose index order is
-    x-fastest, alternating directions converge in a few sweeps where Jacobi sweeps need one per cell of distance."""
-    count = int(0)
-    for t in range(hi - lo):
-        i = lo + t
-        if reverse == 1:
-            i = hi - 1 - t
-        if first_child[i] < 0 and known[i] == 0:
-            best, p, s = _nearest_projection(
-                node_center(origin, spacing, coords[i]), i, neighbours, row0, 0, dist, proj, source
-            )
-            if best < dist[i]:
-                dist[i] = best
-                proj[i] = p
-                source[i] = s
-                count += 1
-    changed[0] = count
-
-
-def _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance=0.0):
-    """Closest points of a solved level's leaves (``_refine_leaves_kernel``), when there is a mesh."""
-    if not mesh_id:
-        return
-    launch_split(
-        _refine_leaves_kernel,
-        n,
-        lambda start, count: [
-            coords,
-            first_child,
-            lo + start,
-            origin_v,
-            float(spacing),
-            wp.uint64(mesh_id),
-            known,
-            dist,
-            proj,
-            float(tolerance),
-        ],
-        device,
-        min_dim=EMIT_SPLIT_MIN_DIM,  # a BVH query per leaf: worth two threads from a few thousand
-        balance=True,  # far from the surface a query costs more
-    )
-
-
-def solve_level(
-    coords,
-    first_child,
-    neighbours,
-    lo,
-    hi,
+def finest_distances(
+    mesh_id,
+    layout: dict,
+    *,
     origin,
-    spacing,
-    dist,
-    proj,
-    source,
-    mesh_id=0,
-    known=None,
-    max_sweeps=4096,
-    octet_points=None,
-    row0=0,
-    ordered_sweeps=False,
-    tolerance=0.0,
+    voxel_size: float,
+    query_radius: float,
+    far_dist: float,
+    field_id: int,
+    box_search: bool,
+    previous=None,
+    prev_index=None,
 ):
-    """Initialise a level from its children (exactly from ``mesh_id`` when given) and run the fast iterative method
-    until no leaf changes. Nodes flagged in ``known`` (N,) int32 keep their given distance and projection.
-    ``octet_points``: (distances, closest points) of the octet centres of the level below, where already known.
-    ``neighbours``: the level's rows of the table of :func:`level_neighbours` (node ``i`` in row ``i - row0``).
-    ``ordered_sweeps``: on a CPU, sweep in place on one thread in alternating index order instead of Jacobi sweeps on
-    both cores (far fewer sweeps where information travels far, as on the dense top level). ``tolerance``: relative
-    error allowed to the leaves' closest points (0: exact)."""
-    n = hi - lo
-    if n == 0:
-        return 0
-    device = coords.device
-    if known is None:
-        known = wp.zeros(dist.shape[0], dtype=wp.int32, device=device)
-    origin_v = wp.vec3(*origin)
-    if octet_points is None:
-        octet_points = (wp.empty(0, dtype=wp.float32, device=device), wp.empty(0, dtype=wp.vec3, device=device))
-    launch_split(
-        _init_from_children_kernel,
-        n,
-        lambda start, count: [
-            coords,
-            first_child,
-            lo + start,
-            origin_v,
-            float(spacing),
-            wp.uint64(mesh_id),
-            4.0 * float(spacing),
-            known,
-            *octet_points,
-            dist,
-            proj,
-            source,
-        ],
-        device,
-    )
-    if ordered_sweeps and device.is_cpu:
-        # one CPU thread, in place, alternating directions (see _fim_ordered_sweep_kernel)
-        changed = wp.zeros(1, dtype=wp.int32, device=device)
-        sweeps = 0
-        while sweeps < max_sweeps:
-            wp.launch(
-                _fim_ordered_sweep_kernel,
-                dim=1,
-                inputs=[coords, first_child, neighbours, row0, lo, hi, sweeps % 2, origin_v, float(spacing)],
-                outputs=[dist, proj, source, known, changed],
-                device=device,
-            )
-            sweeps += 1
-            if int(changed.numpy()[0]) == 0:
-                break
-        _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance)
-        return sweeps
-    # only the unknown leaves change: the sweeps run over them alone
-    free = (first_child[lo:hi].numpy() < 0) & (known[lo:hi].numpy() == 0)
-    nodes = wp.array(lo + np.flatnonzero(free).astype(np.int32), dtype=wp.int32, device=device)
-    # the second buffer of the Jacobi sweeps holds this level only (entry i - lo), every other node as in the first
-    dist_b = wp.clone(dist[lo:hi])
-    proj_b = wp.clone(proj[lo:hi])
-    src_b = wp.clone(source[lo:hi])
-    changed = wp.zeros(1, dtype=wp.int32, device=device)
-    bufs = [(0, dist, proj, source), (lo, dist_b, proj_b, src_b)]
-    sweeps = 0
-    while sweeps < max_sweeps and nodes.shape[0] > 0:
-        changed.zero_()
-        src_bufs, dst_bufs = bufs[sweeps % 2], bufs[(sweeps + 1) % 2]
-        # Jacobi sweeps read one buffer and write the other: both cores may take half each
+    """Exact closest points of the finest level of ``layout`` (:func:`.octree.level_layout`) on a mesh.
+
+    Args:
+        mesh_id: ``wp.Mesh.id`` of the mesh.
+        layout: Every node's place; its finest level is complete octets (or, with one level, the dense top level).
+        origin, voxel_size: The field's lattice.
+        query_radius: Radius within which every finest node has a triangle (larger searches fall back to
+            ``far_dist``, the domain's diagonal).
+        field_id: Source id written to the finest nodes.
+        box_search: Octets search a box of candidate triangles (meshes whose triangles are not much smaller than a
+            cell), else query the BVH node by node.
+        previous, prev_index: An earlier field of the same mesh and domain and each node's index in it (-1: new;
+            :func:`.octree.match_levels`): its octets keep their closest points.
+    Returns:
+        ``(dist, proj, source, octet_points)``: (N,) float32 unsigned distances, (N,) vec3 closest points and (N,)
+        int32 source ids for every node of the layout, the finest level's filled in; ``octet_points`` the (distance,
+        closest point) arrays of every finest octet's centre (UNSET_DISTANCE where not found), or None for a dense
+        single level.
+    """
+    offsets, device = layout["offsets"], layout["codes"].device
+    n, n0 = int(offsets[-1]), int(offsets[1])
+    fine_coords = layout["coords"][:n0]
+    dist = wp.empty(n, dtype=wp.float32, device=device)
+    proj = wp.empty(n, dtype=wp.vec3, device=device)
+    source = wp.empty(n, dtype=wp.int32, device=device)
+    dist0, proj0, src0 = dist[:n0], proj[:n0], source[:n0]
+    # Octets an earlier build of this mesh already has keep their closest points; only new ones are queried.
+    first_nodes = np.arange(0, n0, 8)
+    if previous is not None:
+        no_known = wp.empty(0, dtype=wp.int32, device=device)
         launch_split(
-            _fim_sweep_kernel,
-            nodes.shape[0],
-            lambda start, count, src_bufs=src_bufs, dst_bufs=dst_bufs: [
-                coords,
-                neighbours,
-                row0,
-                nodes[start : start + count],
-                origin_v,
-                float(spacing),
-                *src_bufs,
-                *dst_bufs,
-                changed,
+            take_known_kernel,
+            n0,
+            lambda s, _n: [
+                s,
+                prev_index,
+                previous.values,
+                previous.proj,
+                previous.source,
+                no_known,
+                dist0,
+                proj0,
+                src0,
             ],
             device,
         )
-        sweeps += 1
-        if int(changed.numpy()[0]) == 0:
-            break
-    if sweeps % 2 == 1:
-        wp.copy(dist, dist_b, dest_offset=lo, count=n)
-        wp.copy(proj, proj_b, dest_offset=lo, count=n)
-        wp.copy(source, src_b, dest_offset=lo, count=n)
-    _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance)
-    return sweeps
-
-
-@wp.kernel(enable_backward=False)
-def _refine_leaves_kernel(
-    coords: wp.array[wp.vec3i],
-    first_child: wp.array[wp.int32],
-    lo: int,
-    origin: wp.vec3,
-    spacing: float,
-    mesh: wp.uint64,
-    known: wp.array[wp.int32],
-    dist: wp.array[wp.float32],
-    proj: wp.array[wp.vec3],
-    tolerance: float,
-):
-    """Closest point of a solved leaf, exact or within a relative ``tolerance`` (``mesh_near_point``): the FIM
-    distance is an upper bound that caps the BVH search radius."""
-    i = lo + wp.tid()
-    if first_child[i] >= 0 or known[i] == 1:
-        return
-    x = node_center(origin, spacing, coords[i])
-    found, p = mesh_near_point(mesh, x, dist[i] * 1.0001 + spacing * 1.0e-4, tolerance)
-    if found:
-        d = wp.length(x - p)
-        if d < dist[i]:
-            dist[i] = d
-            proj[i] = p
+        first_nodes = 8 * np.flatnonzero(prev_index.numpy()[:n0:8] < 0)  # matched octet by octet
+    src0.fill_(int(field_id))
+    origin_v = wp.vec3(*origin)
+    if len(offsets) == 2:  # a single dense level: node by node
+        launch_split(
+            _finest_distance_kernel,
+            n0,
+            lambda lo, k: [
+                mesh_id,
+                fine_coords[lo : lo + k],
+                origin_v,
+                float(voxel_size),
+                float(query_radius),
+                float(far_dist),
+                int(field_id),
+                dist0[lo : lo + k],
+                proj0[lo : lo + k],
+                src0[lo : lo + k],
+            ],
+            device,
+        )
+        return dist, proj, source, None
+    # octet by octet, in place
+    octet_nodes = wp.array(first_nodes.astype(np.int32), dtype=wp.int32, device=device)
+    octet_dist = wp.full(n0 // 8, UNSET_DISTANCE, dtype=wp.float32, device=device)
+    octet_proj = wp.empty(n0 // 8, dtype=wp.vec3, device=device)
+    launch_split(
+        _finest_octet_distance_kernel,
+        len(first_nodes),
+        lambda lo, k: [
+            lo,
+            mesh_id,
+            fine_coords,
+            octet_nodes,
+            origin_v,
+            float(voxel_size),
+            float(query_radius),
+            float(far_dist),
+            dist0,
+            proj0,
+            octet_dist,
+            octet_proj,
+            int(box_search),
+        ],
+        device,
+        min_dim=EMIT_SPLIT_MIN_DIM,
+        balance=True,  # octets near an open mesh's holes, or far from it, cost more
+    )
+    return dist, proj, source, (octet_dist, octet_proj)

@@ -12,8 +12,9 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from . import parallel
+from . import boolean, parallel
 from .errors import AasdfError
+from .extract import extract_octree_level, extract_surface
 from .plan import available_memory
 from .sampling import FieldArg, sample_field_kernel, source_ids_kernel
 
@@ -55,6 +56,58 @@ class AdaptiveField:
         self.device = device
         self.timings = dict(timings or {})
         self.stats = dict(stats or {})
+
+    @classmethod
+    def from_layout(
+        cls, layout: dict, *, voxel_size, origin, values, proj, source, field_ids, timings=None, stats=None
+    ):
+        """The field whose nodes are placed by ``layout`` (:func:`.octree.level_layout`: codes, coordinates, level
+        offsets, child links, top-level dims) with these (N,) node arrays: ``values`` float32 signed distances,
+        ``proj`` vec3 closest surface points, ``source`` int32 ids of the operand each node's value came from."""
+        offsets = np.asarray(layout["offsets"], dtype=np.int64)
+        return cls(
+            voxel_size=voxel_size,
+            levels=len(offsets) - 1,
+            origin=origin,
+            top_dims=layout["top_dims"],
+            level_offsets=offsets,
+            codes=layout["codes"],
+            coords=layout["coords"],
+            values=values,
+            proj=proj,
+            child=layout["child"],
+            source=source,
+            field_ids=field_ids,
+            device=values.device,
+            timings=timings,
+            stats=stats,
+        )
+
+    def relabel(self, field_id: int) -> AdaptiveField:
+        """This field with every node's source id ``field_id``: a new field sharing every other array (the field
+        itself when it already has that id alone)."""
+        field_id = int(field_id)
+        if self.field_ids == (field_id,):
+            return self
+        source = wp.full(self.source.shape[0], field_id, dtype=wp.int32, device=self.source.device)
+        relabelled = AdaptiveField.from_layout(
+            {
+                "offsets": self.level_offsets,
+                "top_dims": self.top_dims,
+                "codes": self.codes,
+                "coords": self.coords,
+                "child": self.child,
+            },
+            voxel_size=self.voxel_size,
+            origin=self.origin,
+            values=self.values,
+            proj=self.proj,
+            source=source,
+            field_ids=(field_id,),
+            timings=self.timings,
+            stats=self.stats,
+        )
+        return relabelled
 
     # -- geometry of the domain --
     @property
@@ -203,8 +256,6 @@ class AdaptiveField:
 
     def to_mesh(self, iso: float = 0.0):
         """Marching cubes over the finest level's narrow band: (V,3) float32 vertices, (F,3) int32 triangles."""
-        from .extract import extract_octree_level, extract_surface
-
         n0 = self.level_counts[0]
         if self.levels == 1:  # the dense top level is the finest: no octets to walk
             return extract_surface(
@@ -221,19 +272,13 @@ class AdaptiveField:
 
     # -- booleans as operators --
     def __or__(self, other):
-        from .boolean import union
-
-        return union(self, other)
+        return boolean.union(self, other)
 
     def __and__(self, other):
-        from .boolean import intersection
-
-        return intersection(self, other)
+        return boolean.intersection(self, other)
 
     def __sub__(self, other):
-        from .boolean import difference
-
-        return difference(self, other)
+        return boolean.difference(self, other)
 
 
 def _as_points(points) -> np.ndarray:

@@ -10,16 +10,19 @@ for the zero set leaving the band near the caps, and the build refines what it f
 from __future__ import annotations
 
 import itertools
+from typing import TYPE_CHECKING
 
 import numpy as np
 import warp as wp
 
 from . import octree, parallel
-from .field import AdaptiveField
 from .geometry import near_cap, segment_clear
 from .octree import in_sorted, morton_encode, node_center
 from .sampling import FieldArg, inside_domain, locate_leaf, top_cell
 from .signs import box_arrays, mesh_sign_kernel
+
+if TYPE_CHECKING:
+    from .field import AdaptiveField
 
 # Octets around the caps of an open mesh's holes whose centres' winding numbers locate the surface across the holes
 # before the first build, and the most such octets per band octet that is worth (beyond it, a hole about as large

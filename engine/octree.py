@@ -521,7 +521,8 @@ def level_layout(octets, top_dims, levels: int, device, timings: dict | None = N
     The finest level is the children of ``octets`` (sorted unique octet codes), or with ``octets`` None (and
     ``levels`` 1) the dense top level itself. Each level above holds the parents of the level below and their
     siblings (Eq. 6), sorted by code; the top level is dense. Returns ``codes`` and ``coords`` of all levels in one
-    pair of arrays (finest first), the level ``offsets``, each node's first ``child`` and ``parent`` (-1: none).
+    pair of arrays (finest first), the level ``offsets``, each node's first ``child`` and ``parent`` (-1: none), and
+    ``top_dims``.
     """
     t0 = time.perf_counter()
     top_dims = np.asarray(top_dims, dtype=np.int64)
@@ -567,4 +568,11 @@ def level_layout(octets, top_dims, levels: int, device, timings: dict | None = N
         )
     if timings is not None:
         timings["levels_structure"] = timings.get("levels_structure", 0.0) + time.perf_counter() - t0
-    return {"codes": codes, "coords": coords, "offsets": offsets, "child": child, "parent": parent}
+    return {
+        "codes": codes,
+        "coords": coords,
+        "offsets": offsets,
+        "child": child,
+        "parent": parent,
+        "top_dims": top_dims,
+    }

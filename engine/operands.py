@@ -14,9 +14,9 @@ import warp as wp
 import warp.geometry
 
 from . import octree
-from .build import TOP_LEVEL_TOLERANCE
 from .octree import morton_encode, node_center
 from .sampling import (
+    LEAF_TOLERANCE,
     FieldArg,
     clamp_to_domain,
     coarse_mls,
@@ -29,9 +29,9 @@ from .sampling import (
     vec27i,
 )
 
-# A coarse leaf's value may exceed its distance by this share (a built field's top level, see TOP_LEVEL_TOLERANCE):
+# A coarse leaf's value may exceed its distance by this share (the field type's LEAF_TOLERANCE):
 # the brackets below widen by it, so they hold the exact value.
-LEAF_SLACK = wp.constant(TOP_LEVEL_TOLERANCE)
+LEAF_SLACK = wp.constant(LEAF_TOLERANCE)
 
 
 @wp.func

@@ -15,6 +15,13 @@ from .octree import node_center
 
 vec27i = wp.types.vector(length=27, dtype=wp.int32)
 
+# A coarse leaf's value may exceed its distance by this share. A built field's dense top level takes a point of the
+# mesh within this much of its closest: far from the surface proving the closest point is the bulk of a query's work
+# (bunny /512: 0.32 s of thread time exact within 1 %, 0.15 s within 5 %), while the far field's error stays the
+# interpolation's (p95 2.79 % exact, 2.85 % at 5 %). Whatever takes values as exact distances allows for it: the
+# signs' empty balls stay within SIGN_SAFETY (a test checks), the booleans' brackets widen by it.
+LEAF_TOLERANCE = 0.05
+
 
 @wp.struct
 class FieldArg:

@@ -8,13 +8,19 @@ number changes only across triangles); only nodes left undecided pay the winding
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import warp as wp
 
 from . import octree
 from .geometry import near_cap, segment_clear, winding_number
 from .octree import node_center
+from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
 
+# Two empty balls prove a segment crosses no surface when their radii, times this, cover it: the margin allows for
+# float rounding and for the top level's leaf values, up to LEAF_TOLERANCE above their distances ((1 + 0.05) * 0.9
+# = 0.945 < 1).
 SIGN_SAFETY = 0.9
 
 
@@ -86,7 +92,7 @@ def _take_sign_across(
 
 
 @wp.kernel(enable_backward=False)
-def propagate_sign_kernel(
+def _propagate_sign_kernel(
     neighbours: wp.array2d[wp.int32],
     row0: int,
     lo: int,
@@ -126,7 +132,7 @@ def propagate_sign_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def propagate_sign_octet_kernel(
+def _propagate_sign_octet_kernel(
     first: int,
     codes: wp.array[wp.int64],
     parent: wp.array[wp.int32],
@@ -203,7 +209,9 @@ def propagate_sign_octet_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def apply_sign_kernel(first: int, dist: wp.array[wp.float32], sign: wp.array[wp.float32], values: wp.array[wp.float32]):
+def _apply_sign_kernel(
+    first: int, dist: wp.array[wp.float32], sign: wp.array[wp.float32], values: wp.array[wp.float32]
+):
     i = first + wp.tid()
     s = sign[i]
     if s == 0.0:
@@ -226,7 +234,7 @@ def box_arrays(boxes, device) -> list:
 
 
 @wp.kernel(enable_backward=False)
-def take_known_sign_kernel(
+def _take_known_sign_kernel(
     first: int, where: wp.array[wp.int32], prev_values: wp.array[wp.float32], sign: wp.array[wp.float32]
 ):
     """Node ``first + tid`` found in an earlier build takes its sign."""
@@ -237,7 +245,7 @@ def take_known_sign_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def inherit_sign_kernel(
+def _inherit_sign_kernel(
     coords: wp.array[wp.vec3i],
     parent: wp.array[wp.int32],
     lo: int,
@@ -265,3 +273,198 @@ def inherit_sign_kernel(
         xp = node_center(origin, 2.0 * spacing, coords[p])
         if (dist[i] + dist[p]) * safety > wp.length(xi - xp):
             sign[i] = sign[p]
+
+
+# ---- host side: the top-down pass ----
+
+
+def _winding_signs(mesh_id, coords, nodes_np: np.ndarray, origin, spacing: float, sign) -> None:
+    """The oracle: the sign of each of ``nodes_np`` (indices of one level's nodes) from the winding number."""
+    if len(nodes_np) == 0:
+        return
+    device = coords.device
+    nodes = wp.array(nodes_np.astype(np.int32), dtype=wp.int32, device=device)
+    origin_v = wp.vec3(*origin)
+    launch_split(
+        mesh_sign_kernel,
+        len(nodes_np),
+        lambda lo, n: [wp.uint64(mesh_id), coords, nodes[lo : lo + n], origin_v, float(spacing), sign],
+        device,
+        min_dim=EMIT_SPLIT_MIN_DIM,  # a winding number costs microseconds: split from a few thousand
+        balance=True,  # winding numbers cost most near holes, which a Morton-ordered list bunches
+    )
+
+
+def sign_levels(
+    mesh_id,
+    layout: dict,
+    dist,
+    neighbours,
+    *,
+    origin,
+    voxel_size: float,
+    hole_caps=None,
+    presets=None,
+    previous=None,
+    prev_index=None,
+    timings: dict,
+):
+    """Sign every node of a mesh's field, top-down, and return its signed values.
+
+    The top level from a lattice of oracle seeds, spread between neighbours; every lower level from its parents, then
+    from already signed neighbours (empty balls, then segments that cross no triangle); the oracle (the winding
+    number) only for what is left.
+
+    Args:
+        mesh_id: ``wp.Mesh.id`` of the mesh (built with winding-number support).
+        layout: Every node's place (:func:`.octree.level_layout`).
+        dist: (N,) float32 unsigned distances of every node.
+        neighbours: (N - N0, 6) same-level neighbours of the coarse nodes (:func:`.distance.solve_levels`).
+        origin, voxel_size: The field's lattice.
+        hole_caps: (boxes lo, boxes hi, radii) of an open mesh's holes (:func:`.meshcheck.hole_caps`), near which
+            signs do not spread; None for a closed mesh.
+        presets: (sign (N,) float32, 0 where undecided; no_inherit (N,) uint8, nodes that must not take their parent's
+            sign) set before the pass (:func:`.holes.cap_sign_presets`), or None.
+        previous, prev_index: An earlier field of the same mesh and domain and each node's index in it: matching
+            nodes keep its signs.
+        timings: ``signs`` seconds are added here.
+    Returns:
+        ``(values, stats)``: (N,) float32 signed distances, and ``{"sign_queries": winding numbers per level,
+        "sign_sweeps": (empty-ball, segment) sweeps per level}``.
+    """
+    t0 = time.perf_counter()
+    codes, coords, offsets = layout["codes"], layout["coords"], layout["offsets"]
+    child, parent = layout["child"], layout["parent"]
+    device = codes.device
+    levels = len(offsets) - 1
+    top_dims = np.asarray(layout["top_dims"], dtype=np.int64)
+    n, n0 = int(offsets[-1]), int(offsets[1])
+    sign = wp.zeros(n, dtype=wp.float32, device=device)
+    no_inherit = wp.empty(0, dtype=wp.uint8, device=device)
+    if presets is not None:
+        sign = wp.array(presets[0], dtype=wp.float32, device=device)
+        no_inherit = wp.array(presets[1], dtype=wp.uint8, device=device)
+    if previous is not None:
+        launch_split(_take_known_sign_kernel, n, lambda s, _n: [s, prev_index, previous.values, sign], device)
+    top_lo, top_hi = int(offsets[levels - 1]), int(offsets[levels])
+    oracle_counts = {}
+    sign_sweeps = {}
+    origin_t = tuple(float(x) for x in origin)
+    origin_v = wp.vec3(*origin_t)
+    cap_args = box_arrays(hole_caps, device)
+
+    def oracle(nodes_np, k):
+        _winding_signs(mesh_id, coords, nodes_np, origin_t, voxel_size * 2**k, sign)
+
+    def spread(k, lo, hi):
+        changed = wp.zeros(1, dtype=wp.int32, device=device)
+        # the finest level first spreads by empty balls alone, then across segments that cross no triangle, which
+        # costs a box query each and so runs only once the cheap test is exhausted
+        phases = [0, int(mesh_id)]
+        sweeps = {}
+        for phase_mesh in phases:
+            for sweep in range(MAX_SIGN_SWEEPS):  # noqa: B007 (the count is kept)
+                changed.zero_()
+                if k == 0:
+                    # in place from two threads: a sign only ever goes from unset to final, so races are harmless
+                    launch_split(
+                        _propagate_sign_octet_kernel,
+                        (hi - lo) // 8,
+                        lambda start, span, phase_mesh=phase_mesh, sweep=sweep: [
+                            start,
+                            codes,
+                            parent,
+                            child,
+                            neighbours,
+                            n0,
+                            dist,
+                            sign,
+                            SIGN_SAFETY * 1.0,
+                            float(voxel_size),
+                            origin_v,
+                            *cap_args,
+                            wp.uint64(phase_mesh),
+                            changed,
+                            span,
+                            sweep % 2,
+                        ],
+                        device,
+                    )
+                else:
+                    # split the same way (racing increments from two threads still leave ``changed`` nonzero)
+                    launch_split(
+                        _propagate_sign_kernel,
+                        hi - lo,
+                        lambda start, span, phase_mesh=phase_mesh, sweep=sweep: [
+                            neighbours,
+                            n0,
+                            lo + start,
+                            dist,
+                            sign,
+                            SIGN_SAFETY,
+                            float(voxel_size * 2**k),
+                            coords,
+                            origin_v,
+                            *cap_args,
+                            wp.uint64(phase_mesh),
+                            changed,
+                            span,
+                            sweep % 2,
+                        ],
+                        device,
+                    )
+                got = int(changed.numpy()[0])
+                if got == 0:
+                    break
+                if phase_mesh != phases[-1] and (k == 0 or got < SIGN_SWEEP_SETTLED * (hi - lo)):
+                    # the empty balls have settled (on the finest level one in-place sweep leaves a handful): the
+                    # segments' phase signs the few nodes another sweep over the whole level would
+                    break
+            sweeps[phase_mesh] = sweep + 1
+        sign_sweeps[k] = (sweeps[0], sweeps.get(int(mesh_id), 0))
+        return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
+
+    if levels > 1:
+        # Across a hole of an open mesh the sign changes where no triangle is near, so empty balls prove nothing
+        # near it: signs spread only away from the holes' caps (``hole_caps``), the oracle decides the rest.
+        nx, ny, nz = (int(d) for d in top_dims)
+        ix, iy, iz = (np.arange(min(TOP_SEED_STRIDE // 2, m - 1), m, TOP_SEED_STRIDE) for m in (nx, ny, nz))
+        seeds = top_lo + (ix[None, None, :] + nx * (iy[None, :, None] + ny * iz[:, None, None])).ravel()
+        seeds = seeds[sign.numpy()[seeds] == 0.0]
+        oracle(seeds, levels - 1)
+        rest = spread(levels - 1, top_lo, top_hi)
+        oracle(rest, levels - 1)
+        oracle_counts[levels - 1] = len(seeds) + len(rest)
+    for k in range(levels - 2, -1, -1):
+        lo, hi = int(offsets[k]), int(offsets[k + 1])
+        launch_split(
+            _inherit_sign_kernel,
+            hi - lo,
+            lambda start, _n, k=k, lo=lo: [
+                coords,
+                parent,
+                lo + start,
+                origin_v,
+                voxel_size * 2**k,
+                dist,
+                sign,
+                SIGN_SAFETY,
+                no_inherit,
+            ],
+            device,
+        )
+        if k > 0:
+            idx = spread(k, lo, hi)
+            oracle(idx, k)
+            oracle_counts[k] = len(idx)
+    if levels > 1:
+        spread(0, 0, n0)
+    # Undecided finest nodes lie within about half a voxel of the surface, where the pseudo-normal sign is wrong near
+    # open edges and where shells intersect or touch: they pay the winding number.
+    idx = np.flatnonzero(sign.numpy()[:n0] == 0.0)
+    oracle(idx, 0)
+    oracle_counts[0] = len(idx)
+    values = wp.empty(n, dtype=wp.float32, device=device)
+    launch_split(_apply_sign_kernel, n, lambda start, _n: [start, dist, sign, values], device)
+    timings["signs"] = timings.get("signs", 0.0) + time.perf_counter() - t0
+    return values, {"sign_queries": oracle_counts, "sign_sweeps": sign_sweeps}

@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 BLENDER_MODULES = {"bpy", "bmesh", "mathutils", "bpy_extras", "gpu", "addon_utils"}
 ADDON_MODULES = {"aasdf", "aasdf_addon", "operators", "ui", "tests"}
@@ -85,3 +87,78 @@ def test_engine_source_imports_nothing_from_blender_or_above_itself():
     assert parents == [], "engine/ must not reach out with '..'"
     assert blender == [], "engine/ must not import Blender modules"
     assert addon == [], "engine/ must import its own modules relatively and nothing of the add-on"
+
+
+# ---- the engine's files: one stage each ----
+
+MAX_LINES = 620  # "about 600": a stage that outgrows it is split
+
+
+def _modules(folder: str) -> dict:
+    """{module name: parsed tree} of the .py files of a package folder."""
+    return {p.stem: ast.parse(p.read_text(encoding="utf-8")) for p in sorted((ROOT / folder).glob("*.py"))}
+
+
+def _runtime_imports(tree) -> list:
+    """(level, module, names) of the imports that run: at module level or in a function, not under TYPE_CHECKING."""
+    skip = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and getattr(node.test, "id", "") == "TYPE_CHECKING":
+            skip |= {id(n) for child in node.body for n in ast.walk(child)}
+    found = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.ImportFrom):
+            found.append((node.level, node.module or "", [alias.name for alias in node.names]))
+    return found
+
+
+def test_engine_files_stay_small():
+    sizes = {p.name: len(p.read_text(encoding="utf-8").splitlines()) for p in (ROOT / "engine").glob("*.py")}
+    assert {name: n for name, n in sizes.items() if n > MAX_LINES} == {}
+
+
+@pytest.mark.parametrize("folder", ["engine", "aasdf_addon", "operators", "ui"])
+def test_no_private_name_is_imported_from_another_file(folder):
+    private = []
+    for name, tree in _modules(folder).items():
+        for level, module, names in _runtime_imports(tree):
+            if level >= 1:  # the project's own files (another library's internals are its business)
+                private += [f"{name}: from {'.' * level}{module} import {n}" for n in names if n.startswith("_")]
+        imported = set()  # modules bound by `from . import x`, whose private attributes are off limits too
+        for level, module, names in _runtime_imports(tree):
+            if level >= 1 and module in ("", "engine"):
+                imported |= set(names)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in imported:
+                if node.attr.startswith("_") and not node.attr.startswith("__"):
+                    private.append(f"{name}: {node.value.id}.{node.attr}")
+    assert private == []
+
+
+def test_engine_modules_import_each_other_without_a_cycle():
+    modules = _modules("engine")
+    graph = {
+        name: {
+            m.split(".")[0]
+            for level, module, names in _runtime_imports(tree)
+            if level == 1
+            for m in ([module] if module else names)
+        }
+        & set(modules)
+        for name, tree in modules.items()
+    }
+    state = {}
+
+    def visit(node, path):
+        if state.get(node) == "done":
+            return
+        assert state.get(node) != "open", f"import cycle: {' -> '.join([*path, node])}"
+        state[node] = "open"
+        for nxt in sorted(graph[node]):
+            visit(nxt, [*path, node])
+        state[node] = "done"
+
+    for name in sorted(graph):
+        visit(name, [])
