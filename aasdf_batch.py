@@ -3,14 +3,15 @@
 Run it with Blender or with the ``bpy`` module::
 
     blender -b [scene.blend] -P aasdf_batch.py -- --operation union --inputs a.obj b.stl --resolution 256 \\
-        --output out.ply [--debug-volume out.vdb] [--objects NAME ...]
+        --output out.ply [--debug-volume out.vdb] [--objects NAME ...] [--verbose | --quiet]
     python aasdf_batch.py --operation difference --inputs a.obj b.ply --output out.blend [--blend scene.blend]
 
 Operands are the imported files (``.obj``, ``.ply``, ``.stl``; a file holding several meshes becomes one operand),
 then the named objects, in the order given: the first is the active object, so DIFFERENCE is the first operand
 minus all the others. The output is ``.ply``, ``.obj``, ``.stl`` or ``.blend``. The boolean runs through
 ``bpy.ops.aasdf.boolean``; when AASDF is not already enabled, the repository this script sits in is registered as
-the package ``aasdf``. Prints a one-line summary; exits with 2 on bad arguments or input and with 1 when the
+the package ``aasdf``. Prints each step as it goes (``--quiet``: only the summary; ``--verbose``: Warp's own start-up
+and kernel-loading lines too) and a one-line summary; exits with 2 on bad arguments or input and with 1 when the
 boolean fails or is empty, with the reason on stderr.
 """
 
@@ -20,6 +21,7 @@ import os
 import shutil
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent
@@ -51,6 +53,8 @@ def parse_args(args):
     parser.add_argument("--blend-radius", type=float, default=0.0, help="smooth blend radius (0: sharp)")
     parser.add_argument("--debug-volume", metavar="FILE", help="also write the result's field as a .vdb")
     parser.add_argument("--blend", metavar="FILE", help="open this .blend first (with the bpy module)")
+    parser.add_argument("--verbose", action="store_true", help="also print Warp's start-up and kernel-loading lines")
+    parser.add_argument("--quiet", action="store_true", help="print only the summary, not each step")
     return parser.parse_args(args)
 
 
@@ -134,8 +138,50 @@ def export_result(args):
     return path
 
 
+# Where this script prints its own lines (the terminal, even while Blender's output is silenced).
+out = sys.stdout
+
+
+@contextmanager
+def blender_output_silenced(active: bool):
+    """Send what Blender prints to stdout (importers' timings, operator reports) to the null device, while this
+    script's own lines (``out``) still reach the terminal."""
+    global out
+    if not active:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 1)
+    os.close(null)
+    stdout = sys.stdout
+    out = os.fdopen(saved, "w", buffering=1)
+    sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (closed below)
+    try:
+        yield
+    finally:
+        sys.stdout.close()
+        sys.stdout = stdout
+        out.flush()
+        os.dup2(saved, 1)
+        out.close()
+        out = stdout
+
+
+def progress_printer(start: float):
+    """A pipeline listener printing each step of the run with the seconds since ``start``."""
+
+    def show(text):
+        print(f"aasdf_batch: {time.perf_counter() - start:6.2f} s  {text}", file=out, flush=True)
+
+    return show
+
+
 def run(args) -> int:
     check_args(args)
+    if args.verbose:
+        os.environ["AASDF_VERBOSE"] = "1"
     import bpy
 
     if args.blend is not None:
@@ -156,6 +202,10 @@ def run(args) -> int:
         obj.select_set(True)
     bpy.context.view_layer.objects.active = operands[0]
     start = time.perf_counter()
+    pipeline = sys.modules[operator_module.__name__.rpartition(".operators")[0] + ".aasdf_addon.pipeline"]
+    listener = progress_printer(start)
+    if not args.quiet:
+        pipeline.progress_listeners.append(listener)
     try:
         status = bpy.ops.aasdf.boolean(
             operation=OPERATIONS[args.operation],
@@ -170,6 +220,9 @@ def run(args) -> int:
     except RuntimeError as err:  # the operator's ERROR report
         print(f"aasdf_batch: the boolean failed: {err}", file=sys.stderr)
         return 1
+    finally:
+        if listener in pipeline.progress_listeners:
+            pipeline.progress_listeners.remove(listener)
     if status != {"FINISHED"}:
         print("aasdf_batch: the boolean result is empty: nothing written", file=sys.stderr)
         return 1
@@ -188,7 +241,8 @@ def run(args) -> int:
         f"{summary['triangles']:,} triangles, {summary['nodes']:,} field nodes, "
         f"voxel size {summary['voxel_size']:.5g}, boolean {summary['seconds']:.2f} s, "
         f"total {time.perf_counter() - start:.2f} s"
-        + (f"; debug volume {args.debug_volume}" if args.debug_volume else "")
+        + (f"; debug volume {args.debug_volume}" if args.debug_volume else ""),
+        file=out,
     )
     return 0
 
@@ -196,7 +250,8 @@ def run(args) -> int:
 def main(argv=None) -> int:
     args = parse_args(script_args(sys.argv if argv is None else argv))
     try:
-        return run(args)
+        with blender_output_silenced(not args.verbose):
+            return run(args)
     except BatchError as err:
         print(f"aasdf_batch: error: {err}", file=sys.stderr)
         return 2

@@ -1,18 +1,44 @@
-"""Between Blender objects and the engine's arrays: evaluated meshes out as world-space numpy, results back in.
+"""Between Blender objects and numpy arrays: operands read out, results written back. The only module of the
+pipeline that touches Blender's mesh data.
 
-``evaluated_mesh`` reads an object's evaluated geometry (modifiers applied) with ``foreach_get`` and moves it to
-world space in one matrix product; ``combine`` folds fields with the engine's booleans as a balanced tree; and
+``read_operands`` reads each object's evaluated geometry (modifiers applied) in its local space with ``foreach_get``,
+with its world matrix, into an :class:`Operand`; ``to_world`` moves vertices to world space in one matrix product.
 ``write_result_object`` builds a new mesh object with ``foreach_set`` (``update_result_object`` gives an existing one
 new mesh data, in place). Nothing here loops over vertices in Python.
 """
 
+from dataclasses import dataclass
+
 import bpy
 import numpy as np
 
-from . import runtime
 
-# operation identifier -> name of the engine's binary boolean
-_ENGINE_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
+@dataclass(eq=False)
+class Operand:
+    """One input object as read for a run: its evaluated local geometry and world matrix."""
+
+    obj: object  # the original object
+    uid: int  # its session_uid: the cache's key for the object
+    verts: np.ndarray  # (V, 3) float32, local space
+    tris: np.ndarray  # (T, 3) int32
+    matrix: np.ndarray  # (4, 4) float64 world matrix
+
+    @property
+    def name(self) -> str:
+        return self.obj.name
+
+    def world(self) -> tuple[np.ndarray, np.ndarray]:
+        """(V, 3) float32 world-space vertices and (T, 3) int32 triangles, outward as in local space."""
+        return to_world(self.verts, self.tris, self.matrix)
+
+
+def read_operands(objects, depsgraph) -> list[Operand]:
+    """The evaluated geometry and world matrix of each mesh object, in order."""
+    operands = []
+    for obj in objects:
+        verts, tris = evaluated_local_mesh(obj, depsgraph)
+        operands.append(Operand(obj.original, obj.original.session_uid, verts, tris, world_matrix(obj, depsgraph)))
+    return operands
 
 
 def evaluated_local_mesh(obj, depsgraph) -> tuple[np.ndarray, np.ndarray]:
@@ -71,72 +97,6 @@ def world_bounds(objects, depsgraph) -> tuple[np.ndarray, np.ndarray]:
         corners.append(to_world(local, np.zeros((0, 3), np.int32), evaluated.matrix_world)[0])
     points = np.concatenate(corners).astype(np.float64)
     return points.min(axis=0), points.max(axis=0)
-
-
-def combine(operation: str, fields, blend: float = 0.0, *, progress=None):
-    """Fold fields with one boolean, as a balanced binary tree (depth ``ceil(log2 n)``).
-
-    Args:
-        operation: ``"UNION"``, ``"INTERSECT"`` or ``"DIFFERENCE"``. DIFFERENCE is the first field minus the union
-            of all the others (that union is sharp; ``blend`` rounds the final cut only).
-        fields: Sequence of at least one ``AdaptiveField``.
-        blend: Smooth-blend radius of the booleans (0 keeps sharp edges).
-        progress: Optional callable, called once after each binary boolean.
-    Returns:
-        The combined ``AdaptiveField`` (the field itself when only one is given).
-    Raises:
-        ValueError: On an unknown operation or an empty ``fields``.
-    """
-    if operation not in _ENGINE_OPS:
-        raise ValueError(f"Expected 'operation' in {tuple(_ENGINE_OPS)}, but got {operation!r}.")
-    fields = list(fields)
-    if not fields:
-        raise ValueError("Expected at least one field, but got none.")
-    # The same operation on the same fields (nothing changed since the last run) gives the same result: reuse it.
-    # Fields are compared by their node arrays (a relabelled cached field shares them) and their source ids.
-    key = (operation, float(blend), tuple((id(f.codes), f.field_ids) for f in fields))
-    if _last_combine and _last_combine[0] == key:
-        memo_stats["hits"] += 1
-        return _last_combine[2]
-    result = _combine(operation, fields, blend, progress)
-    _last_combine[:] = [key, fields, result]  # the fields stay referenced, so their ids cannot be reused
-    return result
-
-
-# [key, operand fields, result] of the last ``combine``, and how often it was reused.
-_last_combine: list = []
-memo_stats = {"hits": 0}
-
-
-def clear_memo() -> None:
-    """Forget the last combined result (with the field cache)."""
-    _last_combine.clear()
-
-
-def _combine(operation: str, fields, blend: float, progress):
-    engine = runtime.engine()
-    tick = progress or (lambda: None)
-
-    def fold(op, items, k):
-        items = list(items)
-        while len(items) > 1:
-            paired = []
-            for i in range(0, len(items) - 1, 2):
-                paired.append(op(items[i], items[i + 1], blend=k))
-                tick()
-            if len(items) % 2:
-                paired.append(items[-1])
-            items = paired
-        return items[0]
-
-    if operation == "DIFFERENCE":
-        if len(fields) == 1:
-            return fields[0]
-        cutter = fold(engine.union, fields[1:], 0.0)
-        result = engine.difference(fields[0], cutter, blend=blend)
-        tick()
-        return result
-    return fold(getattr(engine, _ENGINE_OPS[operation]), fields, blend)
 
 
 def operand_materials(objects) -> tuple[list, np.ndarray]:

@@ -1,30 +1,31 @@
-"""Per-object cache of input fields, so re-running a boolean on unchanged objects builds no field.
+"""The field cache: stores and finds fields; reads nothing from Blender.
 
-An entry belongs to one object (``obj.session_uid``) and is valid for one key: a hash of the object's evaluated
-local geometry (vertex and triangle bytes), its world matrix and the field settings (voxel size, levels, padding,
-device). A changed key rebuilds that object's field only. Entries are kept in least-recently-used order within the
-memory limit of the add-on preferences (``cache_limit_mb``; 0 turns the cache off). A ``depsgraph_update_post``
-handler drops the entries of objects whose geometry changed, ``load_pre`` empties the cache, and ``unregister()``
-removes the handlers and empties it too.
+An operand's field is stored under its object (``session_uid``) with a key: a hash of the object's evaluated local
+geometry, its world matrix and the field settings (``geometry_key``). ``find`` returns the field only for an equal key,
+so a changed key rebuilds that object's field only. Entries are kept in least-recently-used order within the memory
+limit of the add-on preferences (``cache_limit_mb``; 0 turns the cache off). The last combined result is kept too
+(``find_result``), with its surface, so a run on unchanged inputs repeats neither the booleans nor the extraction.
 
-Undo and redo re-evaluate every object as if its geometry had changed. The update that follows ``undo_post`` or
-``redo_post`` is therefore not taken as an edit, so the redo panel re-runs an operator on cached fields (the key,
-not the handler, is what keeps entries correct: a field is only ever reused for the same geometry hash).
+A ``depsgraph_update_post`` handler drops the entries of objects whose geometry changed, ``load_pre`` empties the
+cache, and ``unregister()`` removes the handlers and empties it too. Undo and redo re-evaluate every object as if its
+geometry had changed: the update that follows ``undo_post`` or ``redo_post`` is not taken as an edit, so the redo
+panel re-runs an operator on cached fields (the key, not the handler, is what keeps entries correct: a field is only
+ever reused for the same geometry hash).
 """
 
-import copy
 import hashlib
 from collections import OrderedDict
 
 import bpy
 import numpy as np
 
-from . import bridge, preferences, runtime
+from . import preferences
 
 _entries: OrderedDict = OrderedDict()  # session_uid -> (key, field, nbytes), least recently used first
-_stats = {"hits": 0, "builds": 0, "evictions": 0, "invalidations": 0}
+_stats = {"hits": 0, "builds": 0, "evictions": 0, "invalidations": 0, "result_hits": 0}
 _skip_next_update = False  # set by undo/redo: their re-evaluation is not an edit
 _bytes = 0  # sum of the entries' nbytes, kept up to date so the sidebar reads it without summing
+_result: dict = {}  # the last combined result: {"key", "fields", "field", "surface"}
 
 DEFAULT_LIMIT_MB = 1024
 
@@ -54,96 +55,23 @@ def geometry_key(verts, tris, matrix, *, voxel_size, levels, padding, device) ->
     return digest.hexdigest()
 
 
-def with_field_id(field, field_id: int):
-    """The field with every node's source id set to ``field_id`` (a shallow copy; the field itself when equal)."""
-    if tuple(field.field_ids) == (int(field_id),):
-        return field
-    import warp as wp
-
-    relabelled = copy.copy(field)
-    relabelled.source = wp.full(field.source.shape[0], int(field_id), dtype=wp.int32, device=field.source.device)
-    relabelled.field_ids = (int(field_id),)
-    return relabelled
-
-
-def uncached_meshes(objects, depsgraph, *, voxel_size, levels, padding, device=None, context=None) -> list:
-    """(object, (verts, tris) in world space, cache key) for each object whose field is not cached for these
-    settings, to check and build them together (``build_together``)."""
-    device = device or runtime.device(context)
-    meshes = []
-    for obj in objects:
-        verts, tris = bridge.evaluated_local_mesh(obj, depsgraph)
-        matrix = bridge.world_matrix(obj, depsgraph)
-        key = geometry_key(verts, tris, matrix, voxel_size=voxel_size, levels=levels, padding=padding, device=device)
-        entry = _entries.get(obj.original.session_uid)
-        if entry is None or entry[0] != key:
-            meshes.append((obj, bridge.to_world(verts, tris, matrix), key))
-    return meshes
-
-
-def build_together(pending, *, voxel_size, levels, padding, device=None, context=None) -> dict:
-    """Build the fields of ``uncached_meshes``' objects at the same time (``engine.build_fields``) and cache them
-    (those the memory limit allows).
-
-    Returns:
-        ``{session_uid: field}`` (``field_id`` 0) for every object of ``pending``.
-    Raises:
-        AasdfError: From ``engine.build_fields`` ("Mesh <k>: ..." names the k-th of ``pending``).
-    """
-    if not pending:
-        return {}
-    engine = runtime.engine()
-    device = device or runtime.device(context)
-    fields = engine.build_fields(
-        [mesh for _, mesh, _ in pending], voxel_size=voxel_size, levels=levels, padding=padding, device=device
-    )
-    limit = limit_bytes(context)
-    built = {}
-    for (obj, _, key), field in zip(pending, fields, strict=True):
-        _stats["builds"] += 1
-        _store(obj.original.session_uid, key, field, limit)
-        built[obj.original.session_uid] = field
-    return built
-
-
-def field_for(obj, depsgraph, *, voxel_size, levels, padding, field_id=0, device=None, context=None):
-    """The adaptive field of a mesh object's evaluated world-space geometry, from the cache or newly built.
-
-    Args:
-        obj: A mesh object (original).
-        depsgraph: The evaluated depsgraph.
-        voxel_size, levels, padding: Field settings, as for ``engine.build_field``.
-        field_id: Source id of the returned field's nodes (cached fields are relabelled, not rebuilt).
-        device: Warp device (``None``: the preferred device).
-        context: For the preferences (memory limit, device).
-    Returns:
-        ``AdaptiveField``.
-    Raises:
-        AasdfError: From ``engine.build_field`` (empty or degenerate geometry, too fine for memory).
-    """
-    engine = runtime.engine()
-    device = device or runtime.device(context)
-    verts, tris = bridge.evaluated_local_mesh(obj, depsgraph)
-    matrix = bridge.world_matrix(obj, depsgraph)
-    key = geometry_key(verts, tris, matrix, voxel_size=voxel_size, levels=levels, padding=padding, device=device)
-    uid = obj.original.session_uid
+def find(uid: int, key: str):
+    """The field stored for object ``uid`` under ``key`` (counted as a hit), or None; an entry under another key is
+    stale and is dropped."""
     entry = _entries.get(uid)
     if entry is not None and entry[0] == key:
         _entries.move_to_end(uid)
         _stats["hits"] += 1
-        return with_field_id(entry[1], field_id)
+        return entry[1]
     _pop(uid)
-    world, world_tris = bridge.to_world(verts, tris, matrix)
-    field = engine.build_field(
-        world, world_tris, voxel_size=voxel_size, levels=levels, padding=padding, device=device, field_id=field_id
-    )
-    _stats["builds"] += 1
-    _store(uid, key, field, limit_bytes(context))
-    return field
+    return None
 
 
-def _store(uid, key, field, limit):
+def store(uid: int, key: str, field, limit: int) -> None:
+    """Keep a newly built field (counted as a build) within ``limit`` bytes, least recently used entries first out; a
+    field larger than the whole limit is not kept."""
     global _bytes
+    _stats["builds"] += 1
     nbytes = field_nbytes(field)
     if nbytes > limit:
         return
@@ -153,6 +81,33 @@ def _store(uid, key, field, limit):
     while _bytes > limit:
         _bytes -= _entries.popitem(last=False)[1][2]
         _stats["evictions"] += 1
+
+
+def entry_uids() -> list:
+    """The objects with a stored field, least recently used first."""
+    return list(_entries)
+
+
+def find_result(key):
+    """``(field, surface)`` of the last combined result when it was combined under ``key`` (counted as a hit), else
+    None. ``surface`` is the dict the pipeline keeps with it (filled as it goes)."""
+    if _result and _result["key"] == key:
+        _stats["result_hits"] += 1
+        return _result["field"], _result["surface"]
+    return None
+
+
+def store_result(key, fields, field) -> dict:
+    """Keep ``field``, combined under ``key`` from ``fields`` (held, so the ids in the key stay theirs); returns the
+    empty surface dict kept with it."""
+    _result.clear()
+    _result.update(key=key, fields=list(fields), field=field, surface={})
+    return _result["surface"]
+
+
+def last_result() -> dict:
+    """The last combined result as kept: ``{"key", "fields", "field", "surface"}``, or empty."""
+    return dict(_result)
 
 
 def _pop(uid):
@@ -170,7 +125,8 @@ def total_bytes() -> int:
 
 
 def stats() -> dict:
-    """Counters since the last ``reset_stats()``: hits, builds, evictions, invalidations; plus entries and bytes."""
+    """Counters since the last ``reset_stats()``: hits, builds, evictions, invalidations, result_hits; plus entries and
+    bytes."""
     return {**_stats, "entries": len(_entries), "bytes": total_bytes()}
 
 
@@ -188,11 +144,11 @@ def invalidate(session_uid: int) -> bool:
 
 
 def clear():
-    """Drop every cached field (and the last combined result, which holds fields)."""
+    """Drop every cached field and the last combined result."""
     global _bytes
     _entries.clear()
     _bytes = 0
-    bridge.clear_memo()
+    _result.clear()
 
 
 # ---- handlers ----

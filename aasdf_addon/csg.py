@@ -6,16 +6,15 @@ not their own inputs. Problems are written on their nodes (``node.message``) and
 so the previous results stay as they are. A valid output becomes a plan: nested ``("field", k)``, ``("union", [...])``
 and ``(operation, blend, [...])`` over its operands, the distinct mesh objects below it in depth-first order.
 
-``evaluate_tree`` then asks ``pipeline.operand_fields`` (the field cache) for each operand, folds the plan with
-``bridge.combine`` (n-ary inputs as balanced binary trees), extracts the surface with the operands' materials and
-writes or updates the result object in place: the same calls ``aasdf.boolean`` makes.
+``evaluate_tree`` then runs each output's plan through ``pipeline.run`` (read, key, cache, build, combine, extract,
+write), writing or updating the result object in place: the path ``aasdf.boolean`` takes.
 """
 
 from dataclasses import dataclass, field
 
 import bpy
 
-from . import bridge, nodes, pipeline, runtime
+from . import nodes, pipeline, runtime
 
 
 @dataclass
@@ -168,14 +167,6 @@ def _set_messages(tree, errors):
         tree.message = ""
 
 
-def fold(plan, fields):
-    """The field of a plan: ``("field", k)`` is ``fields[k]``; other tuples combine their children."""
-    if plan[0] == "field":
-        return fields[plan[1]]
-    operation, blend, children = plan
-    return bridge.combine(operation, [fold(child, fields) for child in children], blend)
-
-
 def evaluate_tree(context, tree) -> list[dict]:
     """Evaluate every Output node of a CSG tree and write its result object.
 
@@ -190,61 +181,26 @@ def evaluate_tree(context, tree) -> list[dict]:
     """
     engine = runtime.engine()
     plans = plan_tree(tree)
-    depsgraph = context.evaluated_depsgraph_get()
+    settings = pipeline.FieldSettings.of(tree)
     runs = []
     for plan in plans:
         out = tree.nodes[plan.node_name]
-        run = pipeline.Run()
+        output = pipeline.Output(
+            plan.object_name,
+            target=bpy.data.objects.get(plan.object_name),
+            collection=plan.collection,
+            select=False,
+            hide_inputs=tree.hide_inputs,
+        )
         try:
-            voxel_size = pipeline.voxel_size_for(plan.operands, depsgraph, tree.voxel_size, tree.resolution)
-            if not voxel_size > 0.0:
-                raise engine.AasdfError("the inputs have no extent: set a Voxel Size")
-            with run.stage("fields"):
-                fields = pipeline.operand_fields(
-                    context,
-                    plan.operands,
-                    depsgraph,
-                    voxel_size=voxel_size,
-                    levels=tree.levels,
-                    padding=tree.padding,
-                )
-            with run.stage("booleans"):
-                result_field = fold(plan.plan, fields)
-            with run.stage("surface"):
-                result = pipeline.surface(result_field, plan.operands)
+            numbers = pipeline.run(
+                context, plan.operands, plan.plan, settings, output, source=tree.name, operation="TREE"
+            )
         except engine.AasdfError as err:
             out.message = str(err)
             tree.message = f"{out.name}: {err}"
             raise engine.AasdfError(f"{out.name}: {err}") from err
-        if len(result["tris"]) == 0:
+        if numbers.get("empty"):
             out.message = "The result is empty: the previous result is kept"
-            runs.append({"object": plan.object_name, "empty": True})
-            continue
-        with run.stage("write"):
-            target = bpy.data.objects.get(plan.object_name)
-            if target is not None and not target.users_collection:  # an orphan: show it again
-                (plan.collection or context.scene.collection).objects.link(target)
-            obj = pipeline.write_result(
-                context,
-                plan.object_name,
-                result,
-                smooth=bridge.is_smooth(plan.operands[0]),
-                target=target,
-                collection=plan.collection,
-                select=False,
-            )
-        if tree.hide_inputs:
-            for operand in plan.operands:
-                operand.hide_set(True)
-        numbers = pipeline.record(
-            run,
-            result_field,
-            result,
-            source=tree.name,
-            object=obj.name,
-            operation="TREE",
-            operands=len(plan.operands),
-            voxel_size=voxel_size,
-        )
-        runs.append(dict(numbers))
+        runs.append(numbers)
     return runs

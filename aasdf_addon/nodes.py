@@ -8,10 +8,19 @@ nodes, so it is saved with the .blend even when no editor shows it.
 """
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProperty
+from bpy.props import PointerProperty, StringProperty
 
 from .properties import CSG_TREE as TREE
-from .properties import levels_property, padding_property, resolution_property, voxel_size_property
+from .properties import (
+    auto_update_property,
+    blend_property,
+    hide_inputs_property,
+    levels_property,
+    message_property,
+    padding_property,
+    resolution_property,
+    voxel_size_property,
+)
 
 SOCKET = "AASDF_NS_field"
 OBJECT, COLLECTION = "AASDF_N_object", "AASDF_N_collection"
@@ -43,26 +52,12 @@ class AASDF_NT_csg(bpy.types.NodeTree):
     bl_idname, bl_label, bl_icon = TREE, "AASDF CSG", "MOD_BOOLEAN"
 
     voxel_size: voxel_size_property(update=_changed)
-    resolution: resolution_property(
-        description="Finest voxels along the diagonal of each output's combined input bounding box "
-        "(used when Voxel Size is 0)",
-        default=128,
-        update=_changed,
-    )
+    resolution: resolution_property(default=128, update=_changed)
     levels: levels_property(default=5, update=_changed)
     padding: padding_property(default=2, update=_changed)
-    auto_update: BoolProperty(
-        name="Auto Update",
-        description="Evaluate the tree again shortly after an input object or a node setting changes",
-        default=False,
-        update=_changed,
-    )
-    hide_inputs: BoolProperty(
-        name="Hide Inputs",
-        description="Hide (never delete) the input objects after each evaluation",
-        default=False,
-    )
-    message: StringProperty(name="Message", description="Problem found by the last evaluation")
+    auto_update: auto_update_property(update=_changed)
+    hide_inputs: hide_inputs_property(default=False)
+    message: message_property()
 
     @classmethod
     def poll(cls, context):
@@ -93,7 +88,7 @@ class AASDF_NS_field(bpy.types.NodeSocket):
 class CsgNode:
     """Mix-in of all CSG nodes: only in CSG trees, with the message of the last evaluation shown on the node."""
 
-    message: StringProperty(name="Message", description="Problem found by the last evaluation")
+    message: message_property()
 
     @classmethod
     def poll(cls, ntree):
@@ -148,16 +143,7 @@ class AASDF_N_collection(CsgNode, bpy.types.Node):
 
 
 class BooleanNode(CsgNode):
-    blend: FloatProperty(
-        name="Blend",
-        description="Radius of the smooth blend along the seams; 0 keeps sharp edges",
-        default=0.0,
-        min=0.0,
-        soft_max=1.0,
-        precision=3,
-        subtype="DISTANCE",
-        update=_changed,
-    )
+    blend: blend_property(update=_changed)
 
     def draw_settings(self, layout):
         layout.prop(self, "blend")

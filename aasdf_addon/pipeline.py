@@ -1,14 +1,23 @@
-"""The one path from mesh objects to a boolean result, shared by ``aasdf.boolean`` and the CSG node tree.
+"""The one path from mesh objects to a result object, shared by ``aasdf.boolean``, ``aasdf.debug_volume`` and the CSG
+tree: read → key → cache → build → combine → extract → write, in that order and only that way.
 
-``voxel_size_for`` picks the finest spacing, ``operand_fields`` asks ``cache`` for one field per operand (operand ``k``
-gets ``field_id=k``), ``bridge.combine`` folds fields, ``surface`` extracts the result's triangles and gives each face
-the material slot of the operand it came from, and ``write_result`` creates or updates the result object. ``Run``
-times these stages; ``record`` keeps the numbers of the last successful run in ``last_run`` for the sidebar and for
-scripts. Nothing here loops over vertices or triangles in Python.
+1. read: ``bridge.read_operands`` gives each object's evaluated local geometry and world matrix;
+2. key: ``cache.geometry_key`` per operand (geometry, transform, field settings, device);
+3. cache: ``cache.find`` returns the fields it has;
+4. build: the missing ones are built together (``engine.build_fields``, checked together first) and ``cache.store``d;
+   each field is relabelled with its operand's index (``field_id`` = position in the plan's operand list);
+5. combine: a plan (``("field", k)`` leaves, ``(operation, blend, [children])`` nodes) folded with the engine's
+   booleans as balanced binary trees; the last result is reused when nothing changed (``cache.find_result``);
+6. extract: the result's zero surface, each face taking the material slot of the operand it came from;
+7. write: a new object, or new mesh data for an existing one, plus debug objects and hidden inputs when asked.
+
+``run`` does all of it, owns the progress bar and the status text, and returns the numbers of the run, also kept in
+``last_run`` for the sidebar and for scripts. Nothing here loops over vertices or triangles in Python.
 """
 
 import time
 from contextlib import contextmanager
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -17,10 +26,76 @@ from . import bridge, cache, runtime
 # Numbers of the last successful run (``aasdf.boolean`` or a CSG tree): read by the sidebar and by scripts.
 last_run: dict = {}
 
-STAGES = ("fields", "booleans", "surface", "write")
+STAGES = ("read", "fields", "booleans", "surface", "write")
+
+# Callables ``listener(text)`` told each step of a run (the batch script prints them).
+progress_listeners: list = []
+
+_ENGINE_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
 
 
-class Run:
+@dataclass(frozen=True)
+class FieldSettings:
+    """How operands become fields: ``voxel_size`` (0: the inputs' diagonal / ``resolution``), ``levels``,
+    ``padding``."""
+
+    voxel_size: float = 0.0
+    resolution: int = 256
+    levels: int = 4
+    padding: int = 1
+
+    @classmethod
+    def of(cls, props) -> "FieldSettings":
+        """The settings of anything that declares them (an operator, ``Scene.aasdf``, a CSG tree)."""
+        return cls(float(props.voxel_size), int(props.resolution), int(props.levels), int(props.padding))
+
+
+@dataclass
+class Output:
+    """Where and how a run writes its result: a new object ``name`` (in ``collection``, default the first
+    operand's), or ``target``'s mesh data replaced in place."""
+
+    name: str
+    target: object = None
+    collection: object = None
+    select: bool = True
+    hide_inputs: bool = False
+    debug_volume: bool = False
+
+
+def boolean_plan(operation: str, count: int, blend: float = 0.0) -> tuple:
+    """The plan of ``aasdf.boolean`` over ``count`` operands: DIFFERENCE is the first minus all the others (their
+    union is sharp; ``blend`` rounds the final cut only), UNION and INTERSECT take them all."""
+    if operation not in _ENGINE_OPS:
+        raise ValueError(f"Expected 'operation' in {tuple(_ENGINE_OPS)}, but got {operation!r}.")
+    leaves = [("field", k) for k in range(count)]
+    return (operation, float(blend), leaves)
+
+
+class Progress:
+    """The window manager's progress bar and the workspace's status text over the steps of a run (both harmless
+    no-ops headless), and the ``progress_listeners``."""
+
+    def __init__(self, context, steps: int):
+        self.context, self.done = context, 0
+        self.wm = context.window_manager
+        self.wm.progress_begin(0, max(1, steps))
+
+    def step(self, text: str):
+        self.done += 1
+        self.wm.progress_update(self.done)
+        if self.context.workspace is not None:
+            self.context.workspace.status_text_set(f"SDF boolean: {text}")
+        for listener in progress_listeners:
+            listener(text)
+
+    def end(self):
+        self.wm.progress_end()
+        if self.context.workspace is not None:
+            self.context.workspace.status_text_set(None)
+
+
+class Timer:
     """Wall-clock seconds per stage of one run, and the cache counters at its start."""
 
     def __init__(self):
@@ -46,103 +121,111 @@ class Run:
         return after["hits"] - self.cache_before["hits"], after["builds"] - self.cache_before["builds"]
 
 
-def voxel_size_for(objects, depsgraph, voxel_size: float, resolution: int) -> float:
-    """``voxel_size`` when positive, else the diagonal of the objects' combined world bounding box / ``resolution``.
-
-    Returns 0.0 when the objects have no extent (the caller reports it).
-    """
-    if voxel_size > 0.0:
-        return float(voxel_size)
-    lo, hi = bridge.world_bounds(objects, depsgraph)
-    return float(np.linalg.norm(hi - lo)) / int(resolution)
+# ---- the stages ----
 
 
-def operand_fields(context, objects, depsgraph, *, voxel_size, levels, padding, progress=None) -> list:
-    """One field per object, from the cache or newly built; object ``k`` gets ``field_id=k``.
+def voxel_size_for(objects, depsgraph, settings: FieldSettings) -> float:
+    """``settings.voxel_size`` when positive, else the diagonal of the objects' combined world bounding box /
+    ``settings.resolution``.
 
-    Args:
-        context: For the preferences (device, memory limit).
-        objects: Mesh objects (originals).
-        depsgraph: The evaluated depsgraph.
-        voxel_size, levels, padding: Field settings.
-        progress: Optional callable ``progress(k, obj)`` called before each object's field.
-    Returns:
-        List of ``AdaptiveField``.
     Raises:
-        AasdfError: From the engine, its message prefixed with the object's name.
+        AasdfError: When the objects have no extent and no voxel size is set.
+    """
+    if settings.voxel_size > 0.0:
+        return float(settings.voxel_size)
+    lo, hi = bridge.world_bounds(objects, depsgraph)
+    voxel_size = float(np.linalg.norm(hi - lo)) / int(settings.resolution)
+    if not voxel_size > 0.0:
+        raise runtime.engine().AasdfError("The inputs have no extent: set a Voxel Size")
+    return voxel_size
+
+
+def operand_fields(context, operands, settings: FieldSettings, voxel_size: float, progress=None) -> list:
+    """Key → cache → build for read operands (``bridge.read_operands``): one field per operand, operand ``k``'s
+    with ``field_id`` k. What is missing is checked together first and built at the same time.
+
+    Raises:
+        AasdfError: From the engine, its message naming the object.
     """
     engine = runtime.engine()
-    # Everything that must be built is checked together first: an impossible request builds nothing.
-    pending = cache.uncached_meshes(
-        objects, depsgraph, voxel_size=voxel_size, levels=levels, padding=padding, context=context
-    )
-    if pending and progress is not None:
-        progress(list(objects).index(pending[0][0]), pending[0][0])
-    try:
-        # checked together (build_fields does) and built at the same time
-        built = cache.build_together(pending, voxel_size=voxel_size, levels=levels, padding=padding, context=context)
-    except engine.AasdfError as err:
-        message = str(err)
-        if message.startswith("Mesh "):  # "Mesh <k>: ..." counts the pending meshes: name the object instead
-            head, _, rest = message.partition(": ")
-            message = f"{pending[int(head.split()[1])][0].name}: {rest}"
-        raise engine.AasdfError(message) from err
-    fields = []
-    for k, obj in enumerate(objects):
+    device = runtime.device(context)
+    options = {"voxel_size": voxel_size, "levels": settings.levels, "padding": settings.padding}
+    keys = [cache.geometry_key(op.verts, op.tris, op.matrix, **options, device=device) for op in operands]
+    fields = [cache.find(op.uid, key) for op, key in zip(operands, keys, strict=True)]
+    missing = [k for k, field in enumerate(fields) if field is None]
+    if missing:
         if progress is not None:
-            progress(k, obj)
-        field = built.get(obj.original.session_uid)
-        if field is not None:
-            fields.append(cache.with_field_id(field, k))
-            continue
+            progress.step(f"building the fields of {', '.join(operands[k].name for k in missing)}")
         try:
-            field = cache.field_for(
-                obj, depsgraph, voxel_size=voxel_size, levels=levels, padding=padding, field_id=k, context=context
-            )
+            built = engine.build_fields([operands[k].world() for k in missing], **options, device=device)
         except engine.AasdfError as err:
-            raise engine.AasdfError(f"{obj.name}: {err}") from err
-        fields.append(field)
-    return fields
+            message = str(err)
+            if message.startswith("Mesh "):  # "Mesh <j>: ..." counts the missing meshes: name the object instead
+                head, _, rest = message.partition(": ")
+                message = f"{operands[missing[int(head.split()[1])]].name}: {rest}"
+            raise engine.AasdfError(message) from err
+        limit = cache.limit_bytes(context)
+        for k, field in zip(missing, built, strict=True):
+            cache.store(operands[k].uid, keys[k], field, limit)
+            fields[k] = field
+    return [field.relabel(k) for k, field in enumerate(fields)]
 
 
-def surface(field, operands) -> dict:
-    """The zero surface of ``field`` with the operands' materials.
+def combine(plan: tuple, fields: list, progress=None):
+    """The field of a plan: ``("field", k)`` is ``fields[k]``; ``(operation, blend, children)`` combines its
+    children as a balanced binary tree (depth ``ceil(log2 n)``), DIFFERENCE as the first child minus the union of
+    the others."""
+    if plan[0] == "field":
+        return fields[plan[1]]
+    engine = runtime.engine()
+    operation, blend, children = plan
+    items = [combine(child, fields, progress) for child in children]
+    if operation == "DIFFERENCE" and len(items) > 1:
+        cutter = _fold(engine.union, items[1:], 0.0, progress)
+        result = engine.difference(items[0], cutter, blend=blend)
+        if progress is not None:
+            progress.step("combining fields")
+        return result
+    return _fold(getattr(engine, _ENGINE_OPS[operation]), items, blend, progress)
 
-    Args:
-        field: The combined ``AdaptiveField``; its source ids index ``operands``.
-        operands: The mesh objects, in ``field_id`` order.
+
+def _fold(op, items, blend, progress):
+    items = list(items)
+    while len(items) > 1:
+        paired = []
+        for i in range(0, len(items) - 1, 2):
+            paired.append(op(items[i], items[i + 1], blend=blend))
+            if progress is not None:
+                progress.step("combining fields")
+        if len(items) % 2:
+            paired.append(items[-1])
+        items = paired
+    return items[0]
+
+
+def extract(field, surface: dict, objects) -> dict:
+    """The zero surface of ``field`` with the operands' materials, computed once per result (``surface`` is the dict
+    the cache keeps with it).
+
     Returns:
         ``{"verts": (V,3) float32, "tris": (F,3) int32, "materials": [...], "face_slots": (F,) int32 or None,
         "edges": the surface's edge cache (see ``bridge.result_mesh``)}``.
     """
-    faces = getattr(field, "_faces", None)  # a reused result (see bridge.combine) keeps its surface
-    if faces is None:
-        field._faces = faces = {"verts_tris": field.to_mesh()}
-    verts, tris = faces["verts_tris"]
-    materials, slot_of = bridge.operand_materials(operands)
+    if "verts" not in surface:
+        surface["verts"], surface["tris"] = field.to_mesh()
+    verts, tris = surface["verts"], surface["tris"]
+    materials, slot_of = bridge.operand_materials(objects)
     face_slots = None
     if materials and len(tris):
-        if "ids" not in faces:  # which operand each face came from: only needed for materials
-            faces["ids"] = field.source_ids(verts[tris].mean(axis=1))
-        face_slots = slot_of[faces["ids"].clip(0, len(operands) - 1)]
-    edges = faces.setdefault("edges", {})  # filled by the first write, reused by the next ones
+        if "ids" not in surface:  # which operand each face came from: only needed for materials
+            surface["ids"] = field.source_ids(verts[tris].mean(axis=1))
+        face_slots = slot_of[surface["ids"].clip(0, len(objects) - 1)]
+    edges = surface.setdefault("edges", {})  # filled by the first write, reused by the next ones
     return {"verts": verts, "tris": tris, "materials": materials, "face_slots": face_slots, "edges": edges}
 
 
-def write_result(context, name, result: dict, *, smooth: bool, target=None, collection=None, select=True):
-    """Write a ``surface()`` result: into ``target``'s new mesh data (in place), or as a new object ``name``.
-
-    Args:
-        context: The caller's context.
-        name: Name of a new object (ignored when ``target`` is given).
-        result: From ``surface()``.
-        smooth: Smooth shading for all faces.
-        target: An existing mesh object to update in place (same object, new mesh data), or ``None``.
-        collection: Collection for a new object (default: the active object's, as ``aasdf.boolean`` does).
-        select: Make a new object the active one and the only selection.
-    Returns:
-        The result object.
-    """
+def write(context, result: dict, output: Output, *, smooth: bool):
+    """Write an ``extract`` result: into ``output.target``'s new mesh data (in place), or as a new object."""
     arrays = (result["verts"], result["tris"])
     options = {
         "materials": result["materials"],
@@ -150,28 +233,99 @@ def write_result(context, name, result: dict, *, smooth: bool, target=None, coll
         "smooth": smooth,
         "edge_cache": result.get("edges"),
     }
-    if target is not None:
-        return bridge.update_result_object(target, *arrays, **options)
-    return bridge.write_result_object(context, name, *arrays, collection=collection, select=select, **options)
+    if output.target is not None:
+        if not output.target.users_collection:  # an orphan: show it again
+            (output.collection or context.scene.collection).objects.link(output.target)
+        return bridge.update_result_object(output.target, *arrays, **options)
+    return bridge.write_result_object(
+        context, output.name, *arrays, collection=output.collection, select=output.select, **options
+    )
 
 
-def record(run: Run, field, result: dict, **numbers) -> dict:
-    """Replace ``last_run`` with the numbers of a finished run and return it.
+# ---- a whole run ----
 
-    Keys: ``seconds``, ``stages`` (seconds per stage), ``nodes``, ``level_counts`` (field nodes per level, finest
-    first), ``vertices``, ``triangles``, ``cache_hits``, ``fields_built``, plus ``numbers`` (object, operation, ...).
+
+def run(context, objects, plan, settings: FieldSettings, output: Output, *, source: str, operation: str) -> dict:
+    """Evaluate ``plan`` over ``objects`` (``("field", k)`` is ``objects[k]``) and write the result.
+
+    Returns:
+        The numbers of the run (also in ``last_run`` unless the result is empty): ``seconds``, ``stages``, ``nodes``,
+        ``level_counts``, ``vertices``, ``triangles``, ``cache_hits``, ``fields_built``, ``voxel_size``, ``object``,
+        ``source``, ``operation``, ``operands``, ``warnings`` (list of messages); ``{"object": name, "empty": True}``
+        when the result has no surface (nothing is written).
+    Raises:
+        AasdfError: Bad input or too fine for memory, the object named; nothing is written.
     """
-    hits, builds = run.cache_delta()
+    engine = runtime.engine()
+    timer = Timer()
+    progress = Progress(context, len(objects) + 5)
+    warnings = []
+    try:
+        with timer.stage("read"):
+            progress.step(f"reading {len(objects)} objects")
+            depsgraph = context.evaluated_depsgraph_get()
+            voxel_size = voxel_size_for(objects, depsgraph, settings)
+            operands = bridge.read_operands(objects, depsgraph)
+        with timer.stage("fields"):
+            fields = operand_fields(context, operands, settings, voxel_size, progress)
+        with timer.stage("booleans"):
+            key = (plan, tuple((id(f.codes), f.field_ids) for f in fields))
+            found = cache.find_result(key)
+            if found is None:
+                field = combine(plan, fields, progress)
+                surface = cache.store_result(key, fields, field)
+            else:
+                field, surface = found
+        with timer.stage("surface"):
+            progress.step("extracting the surface")
+            result = extract(field, surface, objects)
+        if len(result["tris"]) == 0:
+            return {"object": output.target.name if output.target is not None else output.name, "empty": True}
+        with timer.stage("write"):
+            progress.step("writing the result")
+            obj = write(context, result, output, smooth=bridge.is_smooth(objects[0]))
+            if output.debug_volume:
+                from . import debug
+
+                progress.step("writing the debug volume")
+                try:
+                    debug.add_debug_objects(context, field, obj.name)
+                except engine.AasdfError as err:  # too large for memory: the result stays
+                    warnings.append(f"No debug volume: {err}")
+                if output.select:
+                    context.view_layer.objects.active = obj
+            if output.hide_inputs:
+                for operand in objects:
+                    operand.hide_set(True)
+    finally:
+        progress.end()
+    hits, builds = timer.cache_delta()
     last_run.clear()
     last_run.update(
-        numbers,
-        seconds=run.seconds,
-        stages=dict(run.stages),
+        seconds=timer.seconds,
+        stages=dict(timer.stages),
         nodes=field.node_count,
         level_counts=field.level_counts,
         vertices=len(result["verts"]),
         triangles=len(result["tris"]),
         cache_hits=hits,
         fields_built=builds,
+        voxel_size=voxel_size,
+        object=obj.name,
+        source=source,
+        operation=operation,
+        operands=len(objects),
+        warnings=warnings,
     )
-    return last_run
+    return dict(last_run)
+
+
+def object_field(context, obj, settings: FieldSettings):
+    """One object's field (read → key → cache → build), for views of a single field (``aasdf.debug_volume``).
+
+    Raises:
+        AasdfError: As ``operand_fields``.
+    """
+    depsgraph = context.evaluated_depsgraph_get()
+    voxel_size = voxel_size_for([obj], depsgraph, settings)
+    return operand_fields(context, bridge.read_operands([obj], depsgraph), settings, voxel_size)[0]

@@ -1,21 +1,41 @@
-"""Scene settings of AASDF (``Scene.aasdf``) and the enum items shared by operators and panels."""
+"""Every AASDF setting, declared once: property factories used by the scene's settings (``Scene.aasdf``), the
+operators, the CSG tree and its nodes, so a setting has one name and one description wherever it appears. A caller may
+change a factory's default or add an ``update`` callback, never its description.
+"""
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 # (identifier, label, description) items for the boolean operation; ``sdf_difference(a, b)`` is *a minus b*.
 OPERATIONS = (
-    ("UNION", "Union", ""),
-    ("INTERSECT", "Intersect", ""),
-    ("DIFFERENCE", "Difference", ""),
+    ("UNION", "Union", "Everything inside any operand"),
+    ("INTERSECT", "Intersect", "Only what is inside every operand"),
+    ("DIFFERENCE", "Difference", "The active (first) operand minus all the others"),
 )
 
 
 CSG_TREE = "AASDF_NT_csg"  # bl_idname of the node tree (``aasdf_addon.nodes``)
 
+_ALLOWED = {"default", "update"}
 
-# The field settings, defined once for the scene's settings, the operators and the CSG tree (``overrides`` adjust
-# a default, a description or add an update callback).
+
+def _make(kind, options, overrides):
+    unknown = set(overrides) - _ALLOWED
+    if unknown:
+        raise TypeError(f"A setting's {sorted(unknown)} are declared once, in aasdf_addon.properties")
+    return kind(**{**options, **overrides})
+
+
+def operation_property(**overrides):
+    options = {
+        "name": "Operation",
+        "description": "Boolean to apply; Difference subtracts the other operands from the active (first) one",
+        "items": OPERATIONS,
+        "default": "DIFFERENCE",
+    }
+    return _make(EnumProperty, options, overrides)
+
+
 def voxel_size_property(**overrides):
     options = {
         "name": "Voxel Size",
@@ -26,7 +46,7 @@ def voxel_size_property(**overrides):
         "precision": 4,
         "subtype": "DISTANCE",
     }
-    return FloatProperty(**{**options, **overrides})
+    return _make(FloatProperty, options, overrides)
 
 
 def resolution_property(**overrides):
@@ -39,7 +59,7 @@ def resolution_property(**overrides):
         "soft_max": 1024,
         "max": 8192,
     }
-    return IntProperty(**{**options, **overrides})
+    return _make(IntProperty, options, overrides)
 
 
 def levels_property(**overrides):
@@ -50,7 +70,7 @@ def levels_property(**overrides):
         "min": 1,
         "max": 12,
     }
-    return IntProperty(**{**options, **overrides})
+    return _make(IntProperty, options, overrides)
 
 
 def padding_property(**overrides):
@@ -61,7 +81,7 @@ def padding_property(**overrides):
         "min": 0,
         "max": 32,
     }
-    return IntProperty(**{**options, **overrides})
+    return _make(IntProperty, options, overrides)
 
 
 def blend_property(**overrides):
@@ -74,7 +94,39 @@ def blend_property(**overrides):
         "precision": 3,
         "subtype": "DISTANCE",
     }
-    return FloatProperty(**{**options, **overrides})
+    return _make(FloatProperty, options, overrides)
+
+
+def hide_inputs_property(**overrides):
+    options = {
+        "name": "Hide Inputs",
+        "description": "Hide (never delete) the input objects once the result is written",
+        "default": True,
+    }
+    return _make(BoolProperty, options, overrides)
+
+
+def debug_volume_property(**overrides):
+    options = {
+        "name": "Debug Volume",
+        "description": "Also add the result's field as a Volume object and its octree cells as points",
+        "default": False,
+    }
+    return _make(BoolProperty, options, overrides)
+
+
+def auto_update_property(**overrides):
+    options = {
+        "name": "Auto Update",
+        "description": "Evaluate the CSG tree again shortly after an input object or a node setting changes",
+        "default": False,
+    }
+    return _make(BoolProperty, options, overrides)
+
+
+def message_property(**overrides):
+    options = {"name": "Message", "description": "Problem found by the last evaluation", "default": ""}
+    return _make(StringProperty, options, overrides)
 
 
 class AASDF_PG_scene(bpy.types.PropertyGroup):
@@ -85,16 +137,8 @@ class AASDF_PG_scene(bpy.types.PropertyGroup):
     levels: levels_property()
     padding: padding_property()
     blend: blend_property()
-    hide_inputs: BoolProperty(
-        name="Hide Inputs",
-        description="Hide the input objects once the result is created",
-        default=True,
-    )
-    debug_volume: BoolProperty(
-        name="Debug Volume",
-        description="Also create a volume object showing the adaptive field's cells and distances",
-        default=False,
-    )
+    hide_inputs: hide_inputs_property()
+    debug_volume: debug_volume_property()
     tree: PointerProperty(
         name="CSG Tree",
         description="The AASDF CSG node tree shown in the sidebar",

@@ -7,6 +7,7 @@ is launched.
 
 import os
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
 import bpy
@@ -34,12 +35,39 @@ def kernel_cache_dir() -> str:
     return path or os.environ.get("WARP_CACHE_PATH") or os.path.join(tempfile.gettempdir(), "aasdf-warp-cache")
 
 
+def verbose() -> bool:
+    """Whether Warp may print its start-up banner and a line per module it loads: ``AASDF_VERBOSE=1`` (the batch
+    script's ``--verbose``). Quiet by default."""
+    return os.environ.get("AASDF_VERBOSE", "") not in ("", "0")
+
+
+@contextmanager
+def _native_stderr_silenced(active: bool):
+    """Send what native code writes to stderr to the null device (Warp's library warns at start-up when a machine has
+    no CUDA driver, which is no news on a CPU-only machine)."""
+    try:
+        fd = os.dup(2) if active else None
+    except OSError:
+        fd = None
+    if fd is None:
+        yield
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 2)
+    os.close(null)
+    try:
+        yield
+    finally:
+        os.dup2(fd, 2)
+        os.close(fd)
+
+
 def engine():
     """The engine package (``<addon>.engine``), imported on first call.
 
     Before the import, ``warp.config.kernel_cache_dir`` is set to ``kernel_cache_dir()`` unless Warp was already
     configured or initialised by someone else in this Blender session (another add-on sharing the same Warp); Warp
-    then keeps the folder it has.
+    then keeps the folder it has. Unless ``verbose()``, Warp logs warnings only.
     """
     global _engine
     if _engine is None:
@@ -47,10 +75,14 @@ def engine():
 
         if warp.config.kernel_cache_dir is None:  # None until warp.init() or a user sets it
             warp.config.kernel_cache_dir = kernel_cache_dir()
+        quiet = not verbose()
+        if quiet and warp.config.log_level == warp.LOG_INFO:  # Warp's default: nobody chose another
+            warp.config.log_level = warp.LOG_WARNING
         from .. import engine as module
 
         # Kernels compiled when the zip was built, so that the first boolean loads them instead of compiling.
-        warp.init()
+        with _native_stderr_silenced(quiet):
+            warp.init()
         module.kernels.install_prebuilt(PREBUILT_KERNELS, warp.config.kernel_cache_dir, module.__name__)
         _engine = module
     return _engine

@@ -7,10 +7,10 @@ error report and writes nothing.
 """
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, StringProperty
+from bpy.props import BoolProperty, StringProperty
 
 from ..aasdf_addon import autoupdate, nodes, runtime
-from ..aasdf_addon.properties import OPERATIONS
+from ..aasdf_addon.properties import auto_update_property, operation_property
 from .boolean import mesh_operands
 
 
@@ -79,17 +79,8 @@ class AASDF_OT_tree_from_selection(bpy.types.Operator):
 
     bl_idname, bl_label, bl_options = "aasdf.tree_from_selection", "New CSG Tree from Selection", {"REGISTER", "UNDO"}
 
-    operation: EnumProperty(
-        name="Operation",
-        description="Boolean node of the new tree; Difference subtracts the other selected meshes from the active one",
-        items=OPERATIONS,
-        default="DIFFERENCE",
-    )
-    auto_update: BoolProperty(
-        name="Auto Update",
-        description="Evaluate the tree again when its inputs change",
-        default=True,
-    )
+    operation: operation_property()
+    auto_update: auto_update_property(default=True)
     evaluate: BoolProperty(name="Evaluate", description="Evaluate the new tree right away", default=True)
 
     @classmethod

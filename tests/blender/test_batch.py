@@ -77,6 +77,9 @@ def test_mesh_files_in_ply_and_debug_volume_out(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     summary = [line for line in done.stdout.splitlines() if line.startswith("aasdf_batch: union of 2 operands")]
     assert len(summary) == 1, done.stdout[-3000:]
+    # quiet by default: its own lines only (each step, then the summary), none of Warp's or Blender's
+    assert all(line.startswith("aasdf_batch: ") for line in done.stdout.splitlines()), done.stdout[-3000:]
+    assert "building the fields of spot, shifted" in done.stdout and done.stderr == "", done.stderr[-3000:]
     result_verts, result_tris = imported_arrays(out)
     assert is_watertight(result_tris)
     assert f"{len(result_tris):,} triangles" in summary[0]
@@ -90,9 +93,10 @@ def test_objects_of_a_blend_in_blend_out(scene_blend, tmp_path):
     out = tmp_path / "result.blend"
     done = run_batch(
         "--blend", scene_blend, "--objects", "A", "B", "--operation", "difference", "--resolution", 48,
-        "--output", out,
+        "--output", out, "--verbose",
     )  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
+    assert "Module " in done.stdout and "load on device 'cpu'" in done.stdout  # --verbose: Warp's lines too
     bpy.ops.wm.open_mainfile(filepath=str(out))
     result = bpy.data.objects["A.aasdf"]
     assert len(result.data.polygons) > 0

@@ -181,14 +181,14 @@ def test_rerun_with_nothing_changed_reuses_the_boolean_and_its_surface(fresh_cac
     select(a, b)
     bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=64, hide_inputs=False)
     first = bpy.context.active_object
-    hits = bridge.memo_stats["hits"]
+    hits = cache.stats()["result_hits"]
     select(a, b)
     bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=64, hide_inputs=False)
-    assert bridge.memo_stats["hits"] == hits + 1
+    assert cache.stats()["result_hits"] == hits + 1
     second = bpy.context.active_object
     np.testing.assert_array_equal(world_arrays(second)[1], world_arrays(first)[1])
     # the second mesh took the edges cached from the first: the same edges, and a mesh validate() finds nothing in
-    cached = bridge._last_combine[2]._faces["edges"]
+    cached = cache.last_result()["surface"]["edges"]
     assert len(cached["corner_edge"]) == 3 * len(second.data.polygons)
     for mesh in (first.data, second.data):
         assert not mesh.validate(verbose=False)
@@ -199,9 +199,9 @@ def test_rerun_with_nothing_changed_reuses_the_boolean_and_its_surface(fresh_cac
     np.testing.assert_array_equal(pairs[0], pairs[1])
     select(a, b)  # another operation is another boolean
     bpy.ops.aasdf.boolean(operation="UNION", resolution=64, hide_inputs=False)
-    assert bridge.memo_stats["hits"] == hits + 1
+    assert cache.stats()["result_hits"] == hits + 1
     bpy.ops.aasdf.clear_cache()
-    assert bridge._last_combine == []
+    assert cache.last_result() == {}
 
 
 def test_moving_one_operand_rebuilds_only_its_field(fresh_cache):
@@ -271,27 +271,28 @@ def test_cache_evicts_least_recently_used_fields_beyond_its_limit(fresh_cache):
 
     limit = 3 * 2**20
     for uid in (1, 2, 3):
-        cache._store(uid, f"key{uid}", fake_field(1), limit)
-    assert list(cache._entries) == [1, 2, 3] and cache.total_bytes() == limit
-    cache._entries.move_to_end(1)  # a hit on 1 makes 2 the least recently used
-    cache._store(4, "key4", fake_field(1), limit)
-    assert list(cache._entries) == [3, 1, 4] and cache.stats()["evictions"] == 1
-    cache._store(5, "key5", fake_field(4), limit)  # larger than the whole limit: not kept, nothing evicted
-    assert list(cache._entries) == [3, 1, 4] and cache.total_bytes() <= limit
+        cache.store(uid, f"key{uid}", fake_field(1), limit)
+    assert cache.entry_uids() == [1, 2, 3] and cache.total_bytes() == limit
+    assert cache.find(1, "key1") is not None  # a hit on 1 makes 2 the least recently used
+    cache.store(4, "key4", fake_field(1), limit)
+    assert cache.entry_uids() == [3, 1, 4] and cache.stats()["evictions"] == 1
+    cache.store(5, "key5", fake_field(4), limit)  # larger than the whole limit: not kept, nothing evicted
+    assert cache.entry_uids() == [3, 1, 4] and cache.total_bytes() <= limit
+    assert cache.find(4, "another key") is None and cache.entry_uids() == [3, 1]  # a stale entry goes
     assert cache.invalidate(3) and not cache.invalidate(3)
-    assert list(cache._entries) == [1, 4]
+    assert cache.entry_uids() == [1]
 
 
 def test_relabelled_field_shares_everything_but_its_source_ids():
     engine = runtime.engine()
     field = engine.build_field(*uv_sphere(1.0, rings=16, segments=32), voxel_size=0.1, levels=3, field_id=0)
-    relabelled = cache.with_field_id(field, 3)
-    assert cache.with_field_id(field, 0) is field
+    relabelled = field.relabel(3)
+    assert field.relabel(0) is field
     points = np.array([[0.0, 0.0, 0.0], [0.9, 0.1, 0.0], [2.0, 0.0, 0.0]], dtype=np.float32)
     assert relabelled.field_ids == (3,) and list(relabelled.source_ids(points)) == [3, 3, 3]
     assert field.field_ids == (0,) and list(field.source_ids(points)) == [0, 0, 0]
     np.testing.assert_array_equal(relabelled.sample(points), field.sample(points))
-    union = engine.union(field, cache.with_field_id(field, 1))
+    union = engine.union(field, field.relabel(1))
     assert union.field_ids == (0, 1)
 
 
@@ -423,7 +424,7 @@ def test_operands_that_fit_alone_but_not_together_are_refused_before_any_build(f
 def test_operands_without_extent_need_a_voxel_size(fresh_cache):
     point = ([[0.0, 0.0, 0.0]] * 3, [[0, 1, 2]])
     select(add_mesh_object("P", *point), add_mesh_object("Q", *point))
-    with pytest.raises(RuntimeError, match="The selected meshes have no extent: set a Voxel Size"):
+    with pytest.raises(RuntimeError, match="The inputs have no extent: set a Voxel Size"):
         bpy.ops.aasdf.boolean(operation="UNION")
     assert len(bpy.data.objects) == 2
 

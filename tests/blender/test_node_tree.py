@@ -250,7 +250,7 @@ def test_inputs_without_extent_need_a_voxel_size(fresh_cache):
     p, q = add_mesh_object("P", *point), add_mesh_object("Q", *point)
     select(p, q)
     bpy.ops.aasdf.tree_from_selection(operation="UNION", evaluate=False)
-    with pytest.raises(RuntimeError, match="Output: the inputs have no extent: set a Voxel Size"):
+    with pytest.raises(RuntimeError, match="Output: The inputs have no extent: set a Voxel Size"):
         bpy.ops.aasdf.evaluate_tree(tree="P CSG")
     assert "P.csg" not in bpy.data.objects
 

@@ -12,7 +12,7 @@ import bpy
 import numpy as np
 import pytest
 
-from aasdf.aasdf_addon import bridge, cache, nodes, pipeline, preferences, runtime
+from aasdf.aasdf_addon import cache, nodes, pipeline, preferences, runtime
 from aasdf.ui import node_editor
 from aasdf.ui import panel as sidebar
 from tests.support import uv_sphere
@@ -115,9 +115,9 @@ def no_work(monkeypatch):
         raise AssertionError("draw() must not compute")
 
     monkeypatch.setattr(runtime, "engine", forbidden)
-    monkeypatch.setattr(cache, "field_for", forbidden)
-    monkeypatch.setattr(bridge, "combine", forbidden)
-    monkeypatch.setattr(pipeline, "surface", forbidden)
+    monkeypatch.setattr(pipeline, "operand_fields", forbidden)
+    monkeypatch.setattr(pipeline, "combine", forbidden)
+    monkeypatch.setattr(pipeline, "extract", forbidden)
 
 
 @pytest.fixture
@@ -195,7 +195,7 @@ def test_sidebar_with_a_result_and_its_statistics(monkeypatch, no_complaints):
         raise AssertionError("draw() must not compute")
 
     monkeypatch.setattr(runtime, "engine", forbidden)
-    monkeypatch.setattr(cache, "field_for", forbidden)
+    monkeypatch.setattr(pipeline, "operand_fields", forbidden)
     drawn = draw_sidebar()
     stats = drawn["AASDF_PT_main_stats"]["texts"]
     assert "A.csg (A CSG)" in stats

@@ -139,3 +139,30 @@ def test_device_follows_preferences(monkeypatch):
         prefs.device = "CPU"
         monkeypatch.undo()
         preferences.reset_devices()
+
+
+def test_each_setting_has_one_name_and_one_description_everywhere():
+    # Scene settings, operators, the CSG tree and its nodes declare their settings through properties.py's factories:
+    # a setting shown in two places is the same setting.
+    seen = {}
+    for cls in registration._classes():
+        rna = cls.bl_rna
+        if issubclass(cls, bpy.types.Operator):  # an operator's settings are on its properties' type
+            rna = getattr(bpy.ops.aasdf, cls.bl_idname.split(".")[1]).get_rna_type()
+        base = next(b for b in cls.__mro__[1:] if b.__module__ in ("bpy.types", "_bpy_types"))  # Blender's own aside
+        inherited = {prop.identifier for prop in base.bl_rna.properties}
+        for prop in rna.properties:
+            if prop.identifier in inherited or prop.identifier == "rna_type":
+                continue
+            seen.setdefault(prop.identifier, set()).add((prop.name, prop.description, cls.__name__))
+    shared = {ident: found for ident, found in seen.items() if len(found) > 1}
+    assert {"voxel_size", "resolution", "levels", "padding", "blend", "hide_inputs", "operation"} <= set(shared)
+    differing = {ident: found for ident, found in shared.items() if len({(n, d) for n, d, _ in found}) > 1}
+    # one identifier, two settings: the sidebar's tree (a pointer) and the tree aasdf.evaluate_tree names (a string)
+    assert differing.pop("tree", None) is not None
+    assert differing == {}
+
+
+def test_a_setting_factory_refuses_another_description():
+    with pytest.raises(TypeError, match="declared once"):
+        properties.blend_property(description="something else")
