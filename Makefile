@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.requirements-dev.stamp
 PYTEST_ARGS ?=
 
-.PHONY: venv test test-fast lint extension demo bench clean
+.PHONY: venv test test-fast lint extension demo bench pictures clean
 
 venv: $(STAMP)
 
@@ -37,14 +37,13 @@ demo: venv
 	$(PY) aasdf_batch.py --operation difference --inputs samples/cow.obj samples/sphere.obj --resolution 256 \
 		--output demo-output/cow-minus-sphere.ply --debug-volume demo-output/cow-minus-sphere.vdb
 
-# Side-by-side benchmarks against Blender's own tools (tables for README.md); minutes, not seconds.
+# Side-by-side benchmarks against Blender's own tools, written to bench/RESULTS.md; tens of minutes.
 bench: venv
-	$(PY) bench/construction.py
-	$(PY) bench/pipeline.py
-	$(PY) bench/addon.py
-	$(PY) bench/cold_start.py
-	$(PY) bench/scaling.py
-	$(PY) bench/breakdown.py
+	$(PY) bench/run_all.py
+
+# The README's pictures (docs/images/*.png), rendered headless with Cycles on the CPU.
+pictures: venv
+	$(PY) tools/render_pictures.py
 
 clean:
 	rm -rf build dist .warp-cache .pytest_cache .ruff_cache

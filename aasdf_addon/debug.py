@@ -93,14 +93,21 @@ def add_volume_object(context, name, filepath):
 
 
 def add_cells_object(context, name, field):
-    """A mesh of loose vertices, one per stored octree node, with point attributes ``level``, ``sdf``, ``size``."""
+    """A mesh of loose vertices, one per stored octree node, with point attributes ``level``, ``sdf``, ``size`` and
+    ``leaf`` (the leaves tile the domain)."""
     cells = field.debug_cells()
     centers = np.ascontiguousarray(cells["centers"], dtype=np.float32)
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(len(centers))
     mesh.vertices.foreach_set("co", centers.ravel())
-    for attr, kind, key in (("level", "INT", "levels"), ("sdf", "FLOAT", "sdf"), ("size", "FLOAT", "sizes")):
-        dtype = np.int32 if kind == "INT" else np.float32
+    kinds = (
+        ("level", "INT", "levels"),
+        ("sdf", "FLOAT", "sdf"),
+        ("size", "FLOAT", "sizes"),
+        ("leaf", "BOOLEAN", "leaf"),
+    )
+    for attr, kind, key in kinds:
+        dtype = {"INT": np.int32, "FLOAT": np.float32, "BOOLEAN": bool}[kind]
         mesh.attributes.new(attr, kind, "POINT").data.foreach_set("value", np.ascontiguousarray(cells[key], dtype))
     mesh.update()
     obj = bpy.data.objects.new(name, mesh)

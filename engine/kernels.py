@@ -16,7 +16,9 @@ import re
 import shutil
 from pathlib import Path
 
-# The engine's Warp modules, relative to the engine package, and Warp's own modules the engine launches.
+# The engine's Warp modules with kernels, relative to the engine package (modules of Warp functions only are compiled
+# into the modules whose kernels call them). Warp's own sparse marching cubes module is launched only on Warp versions
+# other than the pinned one (extract.py's fallback), where prebuilt kernels cannot match anyway: not prebuilt.
 ENGINE_MODULES = ("octree", "distance", "fim", "signs", "holes", "build", "sampling", "boolean", "marching", "extract")
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.
@@ -31,26 +33,28 @@ PORTABLE_CPU_FLAGS = (
 _MODULE_FILE = re.compile(r"^(wp_.+_[0-9a-f]{7})(\..*)?$")
 
 
-def warp_modules(engine_package: str) -> list:
-    """The Python modules whose Warp kernels the engine launches."""
-    names = [f"{engine_package}.{name}" for name in ENGINE_MODULES] + list(WARP_MODULES)
-    return [importlib.import_module(name) for name in names]
+def warp_modules(engine_package: str, names=None) -> list:
+    """The engine's Python modules with Warp kernels (``names``: only these of ``ENGINE_MODULES``)."""
+    chosen = ENGINE_MODULES if names is None else [name for name in ENGINE_MODULES if name in names]
+    return [importlib.import_module(f"{engine_package}.{name}") for name in chosen]
 
 
 def configure_modules(engine_package: str) -> None:
     """Give every module the engine launches the portable CPU flags (before any of them loads)."""
     import warp as wp
 
-    for module in warp_modules(engine_package):
+    for module in warp_modules(engine_package) + [importlib.import_module(name) for name in WARP_MODULES]:
         wp.set_module_options({"cpu_compiler_flags": PORTABLE_CPU_FLAGS}, module)
 
 
-def compile_prebuilt(out_dir, *, cuda: bool = True) -> list[Path]:
+def compile_prebuilt(out_dir, *, cuda: bool = True, modules=None) -> list[Path]:
     """Compile the engine's modules (imported as the top-level package ``engine``) into ``out_dir``.
 
     Args:
         out_dir: Folder for the compiled files (created).
         cuda: Also emit PTX for ``CUDA_ARCHS`` (works without a GPU, through NVRTC).
+        modules: Names among ``ENGINE_MODULES`` to compile (default: all), so that several processes can share the
+            work.
     Returns:
         The files written.
     """
@@ -58,7 +62,7 @@ def compile_prebuilt(out_dir, *, cuda: bool = True) -> list[Path]:
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    modules = warp_modules(GENERIC_PACKAGE)
+    modules = warp_modules(GENERIC_PACKAGE, modules)
     configure_modules(GENERIC_PACKAGE)
     written = []
     for module in modules:

@@ -66,7 +66,8 @@ def test_narrowed_manifest_replaces_only_platforms_and_wheels():
 def test_stage_copies_the_package_files_and_nothing_else(tmp_path):
     wheel = tmp_path / "warp_lang-1.19.0-py3-none-manylinux_2_28_x86_64.whl"
     wheel.write_bytes(b"not a real wheel")
-    stage = build_extension.stage(["linux-x64"], [wheel], stage_dir=tmp_path / "stage")
+    # the kernels it compiles into the stage are the install test's business (it builds and installs the real zip)
+    stage = build_extension.stage(["linux-x64"], [wheel], stage_dir=tmp_path / "stage", kernels=False)
     staged = {p.relative_to(stage).as_posix() for p in stage.rglob("*") if p.is_file()}
     assert package_files() <= staged
     assert unexpected_in_package(staged) == []

@@ -41,8 +41,9 @@ def narrowed_manifest(text: str, platforms, wheels) -> str:
     return text
 
 
-def stage(platforms, wheel_paths, stage_dir: Path = STAGE_DIR) -> Path:
-    """Copy the package files into ``stage_dir`` as the builder would select them; return ``stage_dir``."""
+def stage(platforms, wheel_paths, stage_dir: Path = STAGE_DIR, *, kernels: bool = True) -> Path:
+    """Copy the package files into ``stage_dir`` as the builder would select them, and (``kernels``) compile the
+    prebuilt kernels into it; return ``stage_dir``."""
     builder = blender_ext()
     manifest = fetch_wheels.read_manifest()
     excluded = builder.PathPatternMatch(manifest.get("build", {}).get("paths_exclude_pattern", []))
@@ -69,20 +70,36 @@ def stage(platforms, wheel_paths, stage_dir: Path = STAGE_DIR) -> Path:
         rel_wheels.append(f"./wheels/{path.name}")
     text = narrowed_manifest(MANIFEST.read_text(encoding="utf-8"), platforms, rel_wheels)
     (stage_dir / MANIFEST.name).write_text(text, encoding="utf-8")
-    compile_kernels(stage_dir / "kernels")
+    if kernels:
+        compile_kernels(stage_dir / "kernels")
     return stage_dir
 
 
 def compile_kernels(out_dir: Path) -> list[Path]:
     """Prebuilt Warp kernels for the zip (CPU objects for this platform, PTX for common CUDA architectures),
-    compiled in a fresh process with an empty kernel cache; sources are left out. See ``engine/kernels.py``."""
+    compiled in fresh processes with empty kernel caches, one per CPU core, each taking every n-th module; sources
+    are left out. See ``engine/kernels.py``."""
+    sys.path.insert(0, str(ROOT))
+    try:
+        from engine.kernels import ENGINE_MODULES
+    finally:
+        sys.path.remove(str(ROOT))
     code = (
-        "import sys; sys.path.insert(0, sys.argv[1]); import warp; warp.config.quiet = True; "
-        "from engine import kernels; kernels.compile_prebuilt(sys.argv[2])"
+        "import sys; sys.path.insert(0, sys.argv[1]); import warp; warp.config.log_level = warp.LOG_WARNING; "
+        "from engine import kernels; "
+        "kernels.compile_prebuilt(sys.argv[2], modules=sys.argv[3].split(','))"
     )
-    with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "WARP_CACHE_PATH": cache}
-        subprocess.run([sys.executable, "-c", code, str(ROOT), str(out_dir)], check=True, env=env)
+    workers = max(1, min(os.cpu_count() or 1, len(ENGINE_MODULES)))
+    shares = [",".join(ENGINE_MODULES[k::workers]) for k in range(workers)]
+    with tempfile.TemporaryDirectory() as caches:
+        running = []
+        for k, share in enumerate(shares):
+            env = {**os.environ, "WARP_CACHE_PATH": os.path.join(caches, str(k))}
+            cmd = [sys.executable, "-c", code, str(ROOT), str(out_dir), share]
+            running.append(subprocess.Popen(cmd, env=env))
+        failed = [proc.args for proc in running if proc.wait() != 0]
+        if failed:
+            raise subprocess.CalledProcessError(1, failed[0])
     for path in out_dir.iterdir():
         if path.suffix in (".cpp", ".cu"):
             path.unlink()

@@ -22,6 +22,17 @@ def addon():
     aasdf.unregister()
 
 
+@pytest.fixture
+def fresh_cache():
+    """An empty field cache with its counters at zero, emptied again after the test."""
+    from aasdf.aasdf_addon import cache
+
+    cache.clear()
+    cache.reset_stats()
+    yield cache
+    cache.clear()
+
+
 @pytest.fixture(autouse=True)
 def empty_scene(addon):
     """Start each test from an empty scene; fetch ``bpy.context`` references again after this."""

@@ -29,14 +29,6 @@ def spot_pair():
     return a, b
 
 
-@pytest.fixture
-def fresh_cache():
-    cache.clear()
-    cache.reset_stats()
-    yield cache
-    cache.clear()
-
-
 # ---- results ----
 
 

@@ -58,14 +58,6 @@ def build_tree(a, b, cutters, name="Tree", result="Result"):
 
 
 @pytest.fixture
-def fresh_cache():
-    cache.clear()
-    cache.reset_stats()
-    yield cache
-    cache.clear()
-
-
-@pytest.fixture
 def evaluated(fresh_cache):
     """The scene and its tree, evaluated once."""
     a, b, cutters, c1, c2 = scene()

@@ -26,13 +26,14 @@ def _voxel(*meshes, res=256):
     return float(np.linalg.norm(pts.max(0) - pts.min(0)) / res)
 
 
-def _assert_close_to_exact(result_mesh, exact_mesh, h, vol_tol=0.01):
+def _assert_close_to_exact(result_mesh, exact_mesh, h, *, p95, vol_tol=0.01):
+    """Watertight, the exact volume within ``vol_tol`` and a Hausdorff p95 within ``p95`` voxels of size ``h``."""
     verts, tris = result_mesh
     assert is_watertight(tris)
     vol, vol_exact = mesh_volume(verts, tris), mesh_volume(*exact_mesh)
     assert abs(vol / vol_exact - 1.0) <= vol_tol, (vol, vol_exact)
     dist = hausdorff(verts, tris, *exact_mesh, n=50_000)
-    assert dist["p95"] <= h, (dist, h)
+    assert dist["p95"] <= p95 * h, (dist, h)
 
 
 @pytest.mark.parametrize("op", sorted(OPS))
@@ -46,7 +47,8 @@ def test_booleans_match_exact_mesh_booleans(op, name_a, name_b, shift):
     fa = engine.build_field(*a, voxel_size=h, field_id=1)
     fb = engine.build_field(*b, voxel_size=h, field_id=2)
     result = OPS[op](fa, fb)
-    _assert_close_to_exact(result.to_mesh(), exact_boolean(op, *a, *b), h)
+    # measured at /256: p95 0.058-0.144 voxel, volume within 0.05-0.34 %
+    _assert_close_to_exact(result.to_mesh(), exact_boolean(op, *a, *b), h, p95=0.17)
 
 
 def test_three_deep_chain_keeps_accuracy():
@@ -57,12 +59,13 @@ def test_three_deep_chain_keeps_accuracy():
     fa, fb, fc, fd = (engine.build_field(*m, voxel_size=h, field_id=i) for i, m in enumerate((a, b, c, d)))
     result = engine.intersection(engine.difference(engine.union(fa, fb), fc), fd)
     exact = exact_boolean("INTERSECT", *exact_boolean("DIFFERENCE", *exact_boolean("UNION", *a, *b), *c), *d)
-    _assert_close_to_exact(result.to_mesh(), exact, h)
+    _assert_close_to_exact(result.to_mesh(), exact, h, p95=0.25)  # measured p95 0.095 voxel, volume 0.07 %
     _check_structure(result)
 
 
-@pytest.mark.parametrize("op", sorted(OPS))
-def test_operands_of_different_spacings(op):
+# Hausdorff p95 measured against the coarser operand's voxel: difference 0.084, intersection 0.276, union 0.123
+@pytest.mark.parametrize(("op", "p95"), [("DIFFERENCE", 0.25), ("INTERSECT", 0.8), ("UNION", 0.35)])
+def test_operands_of_different_spacings(op, p95):
     a, b = _pair("spot.obj", "cow.obj", (0.2, 0.0, 0.1))
     h = _voxel(a, b)
     fa = engine.build_field(*a, voxel_size=h)
@@ -70,7 +73,7 @@ def test_operands_of_different_spacings(op):
     result = OPS[op](fa, fb)
     assert result.voxel_size == pytest.approx(h)
     # the coarser operand limits accuracy: compare within its voxel
-    _assert_close_to_exact(result.to_mesh(), exact_boolean(op, *a, *b), 1.7 * h, vol_tol=0.015)
+    _assert_close_to_exact(result.to_mesh(), exact_boolean(op, *a, *b), 1.7 * h, p95=p95, vol_tol=0.015)
     coarse = OPS[op](fa, fb, spacing="coarser")
     assert coarse.voxel_size == pytest.approx(1.7 * h)
     _check_structure(coarse)
@@ -225,19 +228,18 @@ def test_octets_kept_through_the_sign_grid_are_those_binary_search_keeps(op, mon
 def test_blend_grows_the_union_monotonically_and_stays_near_the_hard_result():
     a, b = _sphere_field(1.0, (0, 0, 0)), _sphere_field(1.0, (1.5, 0, 0))
     hard = engine.union(a, b)
-    hard_v, hard_t = hard.to_mesh()
     volumes = []
     for k in (0.0, 0.1, 0.2, 0.4):
         field = engine.union(a, b, blend=k)
         verts, tris = field.to_mesh()
         assert is_watertight(tris)
         volumes.append(mesh_volume(verts, tris))
-        # every smooth surface point lies within blend (plus a voxel) of the hard surface
-        assert np.abs(hard.sample(verts)).max() <= k + H
+        # the polynomial smooth minimum lies within k / 4 below the minimum: every smooth surface point is outside
+        # the hard surface by at most k / 4, up to the interpolation of both fields (measured: from -0.23 voxel, the
+        # hard surface's own vertices, to k / 4 + 0.33 voxel at k = 0.4, where the hard field is sampled 5 voxels out)
+        d = hard.sample(verts)
+        assert d.min() >= -0.7 * H and d.max() <= 0.25 * k + H, (k, d.min() / H, d.max() / H)
     assert all(v1 < v2 for v1, v2 in zip(volumes, volumes[1:], strict=False)), volumes
-    zero_v, zero_t = engine.union(a, b, blend=0.0).to_mesh()
-    np.testing.assert_array_equal(zero_t, hard_t)
-    np.testing.assert_allclose(zero_v, hard_v)
 
 
 def test_smooth_difference_and_intersection_are_watertight():

@@ -1,0 +1,283 @@
+"""Render the README's pictures headless with the ``bpy`` module (Cycles on the CPU) into ``docs/images/``.
+
+Each picture is made from a fresh empty scene: the add-on registered from this repository (as the batch script
+does), the inputs built, ``bpy.ops.aasdf.boolean`` run as a user would, and a fixed camera framing the result.
+Small sizes, few samples and Cycles' denoiser keep each PNG under 200 KB; the seed, the sample count and every
+placement are fixed, so an unchanged result renders an unchanged picture.
+
+    .venv/bin/python tools/render_pictures.py [--only demo open-bunny blend octree] [--samples 24]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import math
+import sys
+import time
+from pathlib import Path
+
+import bpy
+import numpy as np
+from mathutils import Vector
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench import baselines  # noqa: E402
+from tests.support import load_mesh, uv_sphere  # noqa: E402
+
+OUT = ROOT / "docs" / "images"
+SIZE = (640, 400)
+PICTURES = ("demo", "open-bunny", "blend", "octree")
+
+
+# ---- scene ----
+
+
+def register_addon():
+    """The add-on from this repository, registered as the package ``aasdf`` (as ``aasdf_batch.py`` does)."""
+    if hasattr(bpy.types, "AASDF_OT_boolean"):
+        return
+    spec = importlib.util.spec_from_file_location("aasdf", ROOT / "__init__.py", submodule_search_locations=[str(ROOT)])
+    package = importlib.util.module_from_spec(spec)
+    sys.modules["aasdf"] = package
+    spec.loader.exec_module(package)
+    if "aasdf" not in bpy.context.preferences.addons:
+        bpy.context.preferences.addons.new().module = "aasdf"
+    package.register()
+
+
+def fresh_scene(samples: int):
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = samples
+    scene.cycles.seed = 0
+    scene.cycles.use_denoising = True
+    scene.render.resolution_x, scene.render.resolution_y = SIZE
+    scene.render.resolution_percentage = 100
+    scene.render.film_transparent = False
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_mode = "RGB"
+    scene.render.image_settings.compression = 100
+    world = bpy.data.worlds.new("World")
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.32, 0.33, 0.35, 1.0)
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.6
+    scene.world = world
+    for name, rotation, energy in (("Key", (0.7, 0.2, 0.8), 3.5), ("Fill", (1.1, -0.4, -2.2), 1.2)):
+        light = bpy.data.lights.new(name, "SUN")
+        light.energy = energy
+        light.angle = 0.15
+        sun = bpy.data.objects.new(name, light)
+        sun.rotation_euler = rotation
+        scene.collection.objects.link(sun)
+    return scene
+
+
+def material(name: str, color, roughness: float = 0.45, attribute: str | None = None):
+    mat = bpy.data.materials.new(name)
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (*color, 1.0)
+    bsdf.inputs["Roughness"].default_value = roughness
+    if attribute is not None:  # colour from a face-corner attribute
+        node = mat.node_tree.nodes.new("ShaderNodeAttribute")
+        node.attribute_name = attribute
+        mat.node_tree.links.new(node.outputs["Color"], bsdf.inputs["Base Color"])
+    return mat
+
+
+def assign(obj, mat):
+    obj.data.materials.clear()
+    obj.data.materials.append(mat)
+    if "material_index" in obj.data.attributes:
+        obj.data.attributes.remove(obj.data.attributes["material_index"])
+
+
+def frame(objects, direction=(1.0, -1.3, 0.8), distance=2.9, ortho=False):
+    """A camera looking along ``-direction`` at the objects' bounding box, ``distance`` half-diagonals away."""
+    scene = bpy.context.scene
+    corners = np.concatenate([[o.matrix_world @ Vector(c) for c in o.bound_box] for o in objects])
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    centre, radius = Vector((lo + hi) / 2.0), float(np.linalg.norm(hi - lo)) / 2.0
+    cam = bpy.data.cameras.new("Camera")
+    cam.lens = 50.0
+    if ortho:  # the box seen along z, filling the frame
+        cam.type = "ORTHO"
+        aspect = scene.render.resolution_x / scene.render.resolution_y
+        cam.ortho_scale = 1.04 * max(hi[0] - lo[0], (hi[1] - lo[1]) * aspect)
+    camera = bpy.data.objects.new("Camera", cam)
+    camera.location = centre + Vector(direction).normalized() * distance * radius
+    camera.rotation_euler = (centre - camera.location).to_track_quat("-Z", "Y").to_euler()
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+
+
+def label(text: str, location, size: float):
+    curve = bpy.data.curves.new(text, "FONT")
+    curve.body, curve.size, curve.align_x = text, size, "CENTER"
+    obj = bpy.data.objects.new(text, curve)
+    obj.location = location
+    obj.rotation_euler = (math.radians(90.0), 0.0, 0.0)
+    bpy.context.scene.collection.objects.link(obj)
+    obj.data.materials.append(material(f"{text} ink", (1.0, 1.0, 1.0), 0.8))
+    return obj
+
+
+def render(name: str):
+    path = OUT / f"{name}.png"
+    bpy.context.scene.render.filepath = str(path)
+    began = time.perf_counter()
+    bpy.ops.render.render(write_still=True)
+    print(
+        f"render_pictures: {path.relative_to(ROOT)} ({path.stat().st_size / 1024:.0f} KB, "
+        f"{time.perf_counter() - began:.1f} s)"
+    )
+
+
+def boolean(operation: str, objects, **settings):
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in objects)
+    bpy.context.view_layer.objects.active = objects[0]
+    assert bpy.ops.aasdf.boolean(operation=operation, **settings) == {"FINISHED"}
+    return bpy.context.active_object
+
+
+def z_up(verts):
+    """An OBJ's y-up coordinates turned z-up (a rotation about x: triangles keep their orientation)."""
+    return np.ascontiguousarray(verts[:, [0, 2, 1]] * np.float32([1.0, -1.0, 1.0]))
+
+
+def hide_inputs_from_render(*objects):
+    for obj in objects:
+        obj.hide_render = True
+
+
+def mesh(name, verts, tris):
+    obj = baselines.mesh_object(name, verts, tris)
+    obj.data.shade_smooth()
+    bpy.context.view_layer.update()  # the view layer lists the new object
+    return obj
+
+
+# ---- pictures ----
+
+
+def picture_demo(samples):
+    """``make demo``: the cow minus a sphere."""
+    fresh_scene(samples)
+    cow_v, cow_t = load_mesh("cow.obj")
+    sphere_v, sphere_t = load_mesh("sphere.obj")
+    cow, sphere = mesh("cow", z_up(cow_v), cow_t), mesh("sphere", z_up(sphere_v), sphere_t)
+    result = boolean("DIFFERENCE", [cow, sphere], resolution=256)
+    hide_inputs_from_render(cow, sphere)
+    result.data.shade_smooth()
+    assign(result, material("clay", (0.75, 0.52, 0.36)))
+    frame([result], direction=(0.8, -1.2, 1.0), distance=2.4)
+    render("demo")
+
+
+def picture_open_bunny(samples):
+    """The open Stanford bunny united with a ball, by AASDF (left) and by Blender's SDF nodes (right): the holes in
+    the bunny's base make it a thin shell for the SDF nodes, which their boolean drops."""
+    fresh_scene(samples)
+    verts, tris = load_mesh("stanford-bunny.obj")
+    verts = z_up((verts - verts.mean(axis=0)) * 10.0)  # about 1.5 units across
+    lo, hi = verts.min(axis=0), verts.max(axis=0)
+    ball_v, ball_t = uv_sphere(0.38, center=(hi[0] + 0.05, lo[1] + 0.2, lo[2] + 0.38), rings=48, segments=96)
+    bunny, ball = mesh("bunny", verts, tris), mesh("ball", ball_v, ball_t)
+    voxel = float(np.linalg.norm(np.maximum(hi, ball_v.max(0)) - np.minimum(lo, ball_v.min(0)))) / 256
+    ours = boolean("UNION", [bunny, ball], voxel_size=voxel)
+    ours.data.shade_smooth()
+    hide_inputs_from_render(bunny, ball)
+    theirs = baselines.gn_sdf_boolean((verts, tris), (ball_v, ball_t), "UNION", voxel)
+    shift = np.float32([2.3, 0.0, 0.0])
+    gn = mesh("Blender SDF nodes", theirs["verts"] + shift, theirs["tris"])
+    clay = material("clay", (0.72, 0.70, 0.66))
+    assign(ours, clay)
+    assign(gn, clay)
+    z = float(lo[2]) - 0.3
+    middle = 0.5 * float(lo[0] + ball_v[:, 0].max())
+    texts = [label("AASDF", (middle, 0.0, z), 0.2), label("Blender SDF nodes", (middle + shift[0], 0.0, z), 0.2)]
+    frame([ours, gn, *texts], direction=(0.1, -1.0, 0.25), distance=2.9)
+    render("open-bunny")
+
+
+def baselines_box(center, half):
+    from tests.support import box_mesh
+
+    return box_mesh(half=half, center=center, subdivisions=2)
+
+
+def picture_blend(samples):
+    """A blended union: spot and a sphere, blend radius 0.15."""
+    fresh_scene(samples)
+    verts, tris = load_mesh("spot.obj")
+    spot = mesh("spot", z_up(verts), tris)
+    sphere = mesh("ball", *uv_sphere(0.3, center=(0.0, 0.25, 0.72), rings=48, segments=96))
+    result = boolean("UNION", [spot, sphere], resolution=256, blend=0.15)
+    hide_inputs_from_render(spot, sphere)
+    result.data.shade_smooth()
+    assign(result, material("glaze", (0.30, 0.50, 0.72), 0.3))
+    frame([result], direction=(1.6, -0.5, 0.5), distance=3.1)
+    render("blend")
+
+
+def picture_octree(samples):
+    """The debug cells of spot's field at /128, cut by the plane through its middle: finest cells along the surface,
+    coarser ones away from it; inside cells warm, outside cells cool, lighter for coarser levels."""
+    fresh_scene(samples)
+    verts, tris = load_mesh("spot.obj")
+    verts = z_up(verts)
+    spot = mesh("spot", verts, tris)
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj == spot)
+    bpy.context.view_layer.objects.active = spot
+    assert bpy.ops.aasdf.debug_volume(resolution=128) == {"FINISHED"}
+    cells = bpy.data.objects["spot.cells"]
+    n = len(cells.data.vertices)
+    centres = np.empty(3 * n, np.float32)
+    cells.data.vertices.foreach_get("co", centres)
+    centres = centres.reshape(-1, 3)
+    sizes, levels, sdf, leaf = (np.empty(n, dt) for dt in (np.float32, np.int32, np.float32, bool))
+    for name, values in (("size", sizes), ("level", levels), ("sdf", sdf), ("leaf", leaf)):
+        cells.data.attributes[name].data.foreach_get("value", values)
+    # the leaves crossing the plane z = z0 tile the slice
+    z0 = float(np.median(verts[:, 2]))
+    keep = np.flatnonzero((np.abs(centres[:, 2] - z0) < 0.5 * sizes) & leaf)
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.float32) * 0.46
+    quad_v = np.empty((len(keep), 4, 3), np.float32)
+    quad_v[:, :, :2] = centres[keep, None, :2] + corners[None] * sizes[keep, None, None]
+    quad_v[:, :, 2] = z0
+    inside = sdf[keep] < 0.0
+    shade = 1.0 - 0.75 * levels[keep] / max(1, levels.max())
+    colour = np.where(inside[:, None], [0.85, 0.42, 0.18], [0.16, 0.42, 0.80]) * (0.45 + 0.55 * (1 - shade))[:, None]
+    slab = bpy.data.meshes.new("slice")
+    slab.from_pydata(quad_v.reshape(-1, 3), [], np.arange(4 * len(keep)).reshape(-1, 4))
+    attr = slab.color_attributes.new("level", "FLOAT_COLOR", "CORNER")
+    rgba = np.concatenate([np.repeat(colour, 4, axis=0), np.ones((4 * len(keep), 1))], axis=1).astype(np.float32)
+    attr.data.foreach_set("color", rgba.ravel())
+    obj = bpy.data.objects.new("slice", slab)
+    bpy.context.scene.collection.objects.link(obj)
+    obj.data.materials.append(material("cells", (1, 1, 1), 0.9, attribute="level"))
+    for other in (spot, cells, bpy.data.objects["spot.sdf"]):
+        other.hide_render = True
+    frame([obj], direction=(0.0, -0.0001, 1.0), ortho=True)
+    bpy.context.scene.cycles.samples = min(samples, 8)  # flat colours: few samples, and a smaller PNG
+    render("octree")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", nargs="+", choices=PICTURES, default=list(PICTURES))
+    parser.add_argument("--samples", type=int, default=24)
+    args = parser.parse_args(argv)
+    OUT.mkdir(parents=True, exist_ok=True)
+    register_addon()
+    for name in args.only:
+        globals()[f"picture_{name.replace('-', '_')}"](args.samples)
+
+
+if __name__ == "__main__":
+    main()
