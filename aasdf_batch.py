@@ -134,7 +134,11 @@ def export_result(args):
     if suffix == ".blend":
         bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
     else:
-        getattr(bpy.ops.wm, EXPORTERS[suffix])(filepath=path, export_selected_objects=True)
+        # what each format can hold of what the result carries: UVs and materials in .obj, UVs and colours in .ply
+        options = {".obj": {"export_uv": True, "export_materials": True}, ".ply": {"export_uv": True}}
+        if suffix == ".ply":
+            options[".ply"]["export_colors"] = "SRGB"
+        getattr(bpy.ops.wm, EXPORTERS[suffix])(filepath=path, export_selected_objects=True, **options.get(suffix, {}))
     return path
 
 

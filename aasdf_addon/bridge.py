@@ -7,21 +7,32 @@ with its world matrix, into an :class:`Operand`; ``to_world`` moves vertices to 
 new mesh data, in place). Nothing here loops over vertices in Python.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
 
+from .transfer import OPERAND_ATTRIBUTE
+
 
 @dataclass(eq=False)
 class Operand:
-    """One input object as read for a run: its evaluated local geometry and world matrix."""
+    """One input object as read for a run: its evaluated local geometry and world matrix, and what its result faces
+    carry over (per triangle of ``tris``: its face and its three corners; per face: material slot and shading; UV
+    maps and colour attributes by name)."""
 
     obj: object  # the original object
     uid: int  # its session_uid: the cache's key for the object
     verts: np.ndarray  # (V, 3) float32, local space
-    tris: np.ndarray  # (T, 3) int32
+    tris: np.ndarray  # (T, 3) int32 vertex indices of the loop triangles
     matrix: np.ndarray  # (4, 4) float64 world matrix
+    corners: np.ndarray = None  # (T, 3) int32 face-corner (loop) indices of each triangle
+    faces: np.ndarray = None  # (T,) int32 face (polygon) of each triangle
+    face_material: np.ndarray = None  # (P,) int32 material slot of each face
+    face_smooth: np.ndarray = None  # (P,) bool smooth shading of each face
+    materials: list = field(default_factory=list)  # the object's slots' materials (None: an empty slot)
+    uv_maps: dict = field(default_factory=dict)  # name -> (L, 2) float32 per corner
+    colors: dict = field(default_factory=dict)  # name -> (domain "POINT" | "CORNER", data type, (N, 4) float32)
 
     @property
     def name(self) -> str:
@@ -33,12 +44,50 @@ class Operand:
 
 
 def read_operands(objects, depsgraph) -> list[Operand]:
-    """The evaluated geometry and world matrix of each mesh object, in order."""
+    """The evaluated geometry (modifiers applied), world matrix and carried attributes of each mesh object."""
     operands = []
     for obj in objects:
-        verts, tris = evaluated_local_mesh(obj, depsgraph)
-        operands.append(Operand(obj.original, obj.original.session_uid, verts, tris, world_matrix(obj, depsgraph)))
+        evaluated = obj.evaluated_get(depsgraph)
+        mesh = evaluated.to_mesh()
+        try:
+            mesh.calc_loop_triangles()
+            operand = Operand(
+                obj.original,
+                obj.original.session_uid,
+                _get(mesh.vertices, "co", np.float32, 3),
+                _get(mesh.loop_triangles, "vertices", np.int32, 3),
+                np.array(evaluated.matrix_world, dtype=np.float64),
+                corners=_get(mesh.loop_triangles, "loops", np.int32, 3),
+                faces=_get(mesh.loop_triangles, "polygon_index", np.int32),
+                face_material=_attribute(mesh, "material_index", "value", np.int32, len(mesh.polygons)),
+                face_smooth=~_attribute(mesh, "sharp_face", "value", bool, len(mesh.polygons)),
+                materials=[slot.material for slot in obj.original.material_slots],
+            )
+            for layer in mesh.uv_layers:
+                operand.uv_maps[layer.name] = _attribute(mesh, layer.name, "vector", np.float32, len(mesh.loops), 2)
+            for attr in mesh.color_attributes:
+                if attr.domain in ("POINT", "CORNER"):
+                    values = _get(attr.data, "color", np.float32, 4)
+                    operand.colors[attr.name] = (attr.domain, attr.data_type, values)
+        finally:
+            evaluated.to_mesh_clear()
+        operands.append(operand)
     return operands
+
+
+def _get(collection, prop, dtype, width=1) -> np.ndarray:
+    """One property of every item of an RNA collection, by ``foreach_get``."""
+    values = np.empty(len(collection) * width, dtype=dtype)
+    collection.foreach_get(prop, values)
+    return values.reshape(-1, width) if width > 1 else values
+
+
+def _attribute(mesh, name, prop, dtype, count, width=1) -> np.ndarray:
+    """A mesh attribute's values (zeros when the mesh has no such attribute)."""
+    attribute = mesh.attributes.get(name)
+    if attribute is None:
+        return np.zeros((count, width) if width > 1 else count, dtype=dtype)
+    return _get(attribute.data, prop, dtype, width)
 
 
 def evaluated_local_mesh(obj, depsgraph) -> tuple[np.ndarray, np.ndarray]:
@@ -99,39 +148,6 @@ def world_bounds(objects, depsgraph) -> tuple[np.ndarray, np.ndarray]:
     return points.min(axis=0), points.max(axis=0)
 
 
-def operand_materials(objects) -> tuple[list, np.ndarray]:
-    """Material slots for a result and the slot of each operand.
-
-    Returns:
-        The distinct materials of all operands' slots, in order (plus one empty slot when some operand has no
-        material but others do), and (len(objects),) int32: the slot of each operand's first material.
-    """
-    materials, slot_of = [], []
-    firsts = [next((slot.material for slot in obj.material_slots if slot.material), None) for obj in objects]
-    for obj in objects:
-        for slot in obj.material_slots:
-            if slot.material is not None and slot.material not in materials:
-                materials.append(slot.material)
-    for first in firsts:
-        if first is None:
-            if materials and None not in materials:
-                materials.append(None)
-            slot_of.append(materials.index(None) if None in materials else 0)
-        else:
-            slot_of.append(materials.index(first))
-    return materials, np.asarray(slot_of, dtype=np.int32)
-
-
-def is_smooth(obj) -> bool:
-    """Whether most faces of a mesh object are smooth-shaded."""
-    polygons = obj.data.polygons
-    if not len(polygons):
-        return False
-    smooth = np.empty(len(polygons), dtype=bool)
-    polygons.foreach_get("use_smooth", smooth)
-    return bool(smooth.mean() >= 0.5)
-
-
 def _set_attribute(mesh, name, prop, values, collection, rna_prop):
     """Fill a built-in attribute from a numpy array, or the RNA collection where the attribute is not exposed."""
     attribute = mesh.attributes.get(name)
@@ -167,21 +183,23 @@ def _set_cached_edges(mesh, edge_cache) -> bool:
     return True
 
 
-def result_mesh(name, verts, tris, materials=(), face_material_index=None, smooth=False, edge_cache=None):
+def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
     """A new mesh datablock from arrays.
 
     Args:
         name: Name of the mesh.
         verts: (V, 3) float32 vertices.
         tris: (F, 3) int32 triangles.
-        materials: Materials for the slots, in order (``None`` gives an empty slot).
-        face_material_index: Optional (F,) int slot index of each face.
-        smooth: Smooth shading for all faces.
+        attributes: What the faces carry (``transfer.face_attributes``): ``materials`` (the slots, ``None`` an empty
+            one), ``material_index`` (F,), ``smooth`` (F,) bool, ``operand`` (F,) int (written as the face attribute
+            ``transfer.OPERAND_ATTRIBUTE``), ``uv_maps`` {name: (3F, 2)} and ``colors`` {name: (data type, (3F, 4))}
+            per corner; any may be missing (default: flat faces, no materials).
         edge_cache: Optional dict kept with these triangles: an empty one receives the edges Blender derives, a filled
             one gives them back, so writing the same triangles again skips deriving them.
     Returns:
         The new ``bpy.types.Mesh``.
     """
+    attributes = attributes or {}
     verts = np.ascontiguousarray(verts, dtype=np.float32).reshape(-1, 3)
     tris = np.ascontiguousarray(tris, dtype=np.int32).reshape(-1, 3)
     mesh = bpy.data.meshes.new(name)
@@ -192,34 +210,39 @@ def result_mesh(name, verts, tris, materials=(), face_material_index=None, smoot
     _set_attribute(mesh, ".corner_vert", "value", tris, mesh.loops, "vertex_index")
     mesh.polygons.add(len(tris))
     mesh.polygons.foreach_set("loop_start", np.arange(0, tris.size, 3, dtype=np.int32))
-    for material in materials:
+    for material in attributes.get("materials", ()):
         mesh.materials.append(material)
-    if face_material_index is not None and len(tris):
-        index = mesh.attributes.get("material_index") or mesh.attributes.new("material_index", "INT", "FACE")
-        index.data.foreach_set("value", np.ascontiguousarray(face_material_index, dtype=np.int32))
     if not _set_cached_edges(mesh, edge_cache):
         mesh.update(calc_edges=True)
         _cache_edges(mesh, edge_cache)
-    if len(tris) and not smooth:  # meshes without a "sharp_face" attribute are smooth
+    if not len(tris):
+        return mesh
+    if attributes.get("material_index") is not None:
+        _new_attribute(mesh, "material_index", "INT", "FACE", "value", attributes["material_index"], np.int32)
+    smooth = attributes.get("smooth")
+    if smooth is None or not np.all(smooth):  # meshes without a "sharp_face" attribute are smooth
         # the attribute directly: Mesh.shade_flat() takes ~0.2 s on a million faces
-        sharp = mesh.attributes.get("sharp_face") or mesh.attributes.new("sharp_face", "BOOLEAN", "FACE")
-        sharp.data.foreach_set("value", np.ones(len(tris), dtype=bool))
+        sharp = np.ones(len(tris), dtype=bool) if smooth is None else ~np.asarray(smooth, dtype=bool)
+        _new_attribute(mesh, "sharp_face", "BOOLEAN", "FACE", "value", sharp, bool)
+    if attributes.get("operand") is not None:
+        _new_attribute(mesh, OPERAND_ATTRIBUTE, "INT", "FACE", "value", attributes["operand"], np.int32)
+    for uv_name, values in attributes.get("uv_maps", {}).items():
+        _new_attribute(mesh, uv_name, "FLOAT2", "CORNER", "vector", values, np.float32)
+    for color_name, (kind, values) in attributes.get("colors", {}).items():
+        layer = mesh.color_attributes.new(color_name, kind, "CORNER")
+        layer.data.foreach_set("color", np.ascontiguousarray(values, dtype=np.float32).ravel())
+    if len(mesh.color_attributes):  # what exporters and the viewport show: the first one
+        mesh.color_attributes.active_color_index = mesh.color_attributes.render_color_index = 0
     return mesh
 
 
-def write_result_object(
-    context,
-    name,
-    verts,
-    tris,
-    materials=(),
-    face_material_index=None,
-    smooth=False,
-    *,
-    collection=None,
-    select=True,
-    edge_cache=None,
-):
+def _new_attribute(mesh, name, kind, domain, prop, values, dtype):
+    """Fill attribute ``name`` (created when missing) from a numpy array."""
+    attribute = mesh.attributes.get(name) or mesh.attributes.new(name, kind, domain)
+    attribute.data.foreach_set(prop, np.ascontiguousarray(values, dtype=dtype).ravel())
+
+
+def write_result_object(context, name, verts, tris, attributes=None, *, collection=None, select=True, edge_cache=None):
     """Create a mesh object from arrays, linked next to the active object, made active and the only selection.
 
     Args:
@@ -227,16 +250,14 @@ def write_result_object(
         name: Name of the new object and mesh.
         verts: (V, 3) float32 world-space vertices (the object gets the identity transform).
         tris: (F, 3) int32 triangles.
-        materials: Materials for the slots, in order (``None`` gives an empty slot).
-        face_material_index: Optional (F,) int slot index of each face.
-        smooth: Smooth shading for all faces.
+        attributes: As for ``result_mesh``.
         collection: Collection receiving the object instead of the active object's (or the scene's).
         select: Make the new object active and the only selection; ``False`` leaves the selection alone.
         edge_cache: As for ``result_mesh``.
     Returns:
         The new ``bpy.types.Object``.
     """
-    mesh = result_mesh(name, verts, tris, materials, face_material_index, smooth, edge_cache)
+    mesh = result_mesh(name, verts, tris, attributes, edge_cache)
     obj = bpy.data.objects.new(name, mesh)
     if collection is None:
         active = context.active_object
@@ -250,7 +271,7 @@ def write_result_object(
     return obj
 
 
-def update_result_object(obj, verts, tris, materials=(), face_material_index=None, smooth=False, edge_cache=None):
+def update_result_object(obj, verts, tris, attributes=None, edge_cache=None):
     """Give an existing mesh object new mesh data from world-space arrays, in place (same object, new mesh).
 
     The vertices are moved into the object's local space, so the result sits where the booleans put it whatever the
@@ -258,7 +279,7 @@ def update_result_object(obj, verts, tris, materials=(), face_material_index=Non
 
     Args:
         obj: A mesh object.
-        verts, tris, materials, face_material_index, smooth, edge_cache: As for ``write_result_object``.
+        verts, tris, attributes, edge_cache: As for ``write_result_object``.
     Returns:
         ``obj``.
     """
@@ -267,7 +288,7 @@ def update_result_object(obj, verts, tris, materials=(), face_material_index=Non
         verts, tris = to_world(verts, tris, np.linalg.inv(matrix))
     old = obj.data
     name = old.name
-    obj.data = result_mesh(name, verts, tris, materials, face_material_index, smooth, edge_cache)
+    obj.data = result_mesh(name, verts, tris, attributes, edge_cache)
     if old.users == 0:
         bpy.data.meshes.remove(old)
         obj.data.name = name

@@ -33,8 +33,9 @@ _FIELD_ARRAYS = ("codes", "coords", "values", "proj", "child", "source")
 
 
 def field_nbytes(field) -> int:
-    """Bytes held by a field's arrays."""
-    return int(sum(getattr(getattr(field, name, None), "capacity", 0) or 0 for name in _FIELD_ARRAYS))
+    """Bytes held by a field's arrays and the source meshes it keeps."""
+    arrays = sum(getattr(getattr(field, name, None), "capacity", 0) or 0 for name in _FIELD_ARRAYS)
+    return int(arrays + sum(source.nbytes for source in getattr(field, "sources", {}).values()))
 
 
 def limit_bytes(context=None) -> int:

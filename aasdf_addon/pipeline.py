@@ -8,7 +8,8 @@ tree: read → key → cache → build → combine → extract → write, in tha
    each field is relabelled with its operand's index (``field_id`` = position in the plan's operand list);
 5. combine: a plan (``("field", k)`` leaves, ``(operation, blend, [children])`` nodes) folded with the engine's
    booleans as balanced binary trees; the last result is reused when nothing changed (``cache.find_result``);
-6. extract: the result's zero surface, each face taking the material slot of the operand it came from;
+6. extract: the result's zero surface, each face carrying over its source face's material, shading, UV maps and
+   colours (``transfer``);
 7. write: a new object, or new mesh data for an existing one, plus debug objects and hidden inputs when asked.
 
 ``run`` does all of it, owns the progress bar and the status text, and returns the numbers of the run, also kept in
@@ -21,12 +22,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import bridge, cache, runtime
+from . import bridge, cache, runtime, transfer
 
 # Numbers of the last successful run (``aasdf.boolean`` or a CSG tree): read by the sidebar and by scripts.
 last_run: dict = {}
 
-STAGES = ("read", "fields", "booleans", "surface", "write")
+STAGES = ("read", "fields", "booleans", "surface", "attributes", "write")
 
 # Callables ``listener(text)`` told each step of a run (the batch script prints them).
 progress_listeners: list = []
@@ -203,42 +204,39 @@ def _fold(op, items, blend, progress):
     return items[0]
 
 
-def extract(field, surface: dict, objects) -> dict:
-    """The zero surface of ``field`` with the operands' materials, computed once per result (``surface`` is the dict
-    the cache keeps with it).
+def extract(field, surface: dict) -> dict:
+    """The zero surface of ``field``, computed once per result (``surface`` is the dict the cache keeps with it).
 
     Returns:
-        ``{"verts": (V,3) float32, "tris": (F,3) int32, "materials": [...], "face_slots": (F,) int32 or None,
-        "edges": the surface's edge cache (see ``bridge.result_mesh``)}``.
+        ``{"verts": (V,3) float32, "tris": (F,3) int32, "edges": the surface's edge cache (see
+        ``bridge.result_mesh``)}``.
     """
     if "verts" not in surface:
         surface["verts"], surface["tris"] = field.to_mesh()
-    verts, tris = surface["verts"], surface["tris"]
-    materials, slot_of = bridge.operand_materials(objects)
-    face_slots = None
-    if materials and len(tris):
-        if "ids" not in surface:  # which operand each face came from: only needed for materials
-            surface["ids"] = field.source_ids(verts[tris].mean(axis=1))
-        face_slots = slot_of[surface["ids"].clip(0, len(objects) - 1)]
     edges = surface.setdefault("edges", {})  # filled by the first write, reused by the next ones
-    return {"verts": verts, "tris": tris, "materials": materials, "face_slots": face_slots, "edges": edges}
+    return {"verts": surface["verts"], "tris": surface["tris"], "edges": edges}
 
 
-def write(context, result: dict, output: Output, *, smooth: bool):
+def carry_over(field, surface: dict, operands) -> dict:
+    """What each face of the extracted ``surface`` carries over from its operand (``transfer.face_attributes``); each
+    face's source is found once per result and kept in ``surface``."""
+    verts, tris = surface["verts"], surface["tris"]
+    if not len(tris):
+        return {}
+    if "sources" not in surface:  # every corner on its face's source triangle, so the source's seams stay seams
+        surface["sources"] = field.face_sources(verts, tris)
+    return transfer.face_attributes(operands, *surface["sources"])
+
+
+def write(context, result: dict, output: Output):
     """Write an ``extract`` result: into ``output.target``'s new mesh data (in place), or as a new object."""
-    arrays = (result["verts"], result["tris"])
-    options = {
-        "materials": result["materials"],
-        "face_material_index": result["face_slots"],
-        "smooth": smooth,
-        "edge_cache": result.get("edges"),
-    }
+    arrays = (result["verts"], result["tris"], result["attributes"])
     if output.target is not None:
         if not output.target.users_collection:  # an orphan: show it again
             (output.collection or context.scene.collection).objects.link(output.target)
-        return bridge.update_result_object(output.target, *arrays, **options)
+        return bridge.update_result_object(output.target, *arrays, edge_cache=result["edges"])
     return bridge.write_result_object(
-        context, output.name, *arrays, collection=output.collection, select=output.select, **options
+        context, output.name, *arrays, collection=output.collection, select=output.select, edge_cache=result["edges"]
     )
 
 
@@ -278,12 +276,14 @@ def run(context, objects, plan, settings: FieldSettings, output: Output, *, sour
                 field, surface = found
         with timer.stage("surface"):
             progress.step("extracting the surface")
-            result = extract(field, surface, objects)
+            result = extract(field, surface)
         if len(result["tris"]) == 0:
             return {"object": output.target.name if output.target is not None else output.name, "empty": True}
+        with timer.stage("attributes"):
+            result["attributes"] = carry_over(field, surface, operands)
         with timer.stage("write"):
             progress.step("writing the result")
-            obj = write(context, result, output, smooth=bridge.is_smooth(objects[0]))
+            obj = write(context, result, output)
             if output.debug_volume:
                 from . import debug
 

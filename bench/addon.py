@@ -44,9 +44,29 @@ OPERATION = "DIFFERENCE"
 
 
 def cases() -> dict:
-    """Two of the pipeline benchmark's cases, the same meshes placed the same way."""
+    """Two of the pipeline benchmark's cases, the same meshes placed the same way, and a pair of 100 k-triangle
+    spheres."""
+    from tests.support import uv_sphere
+
     every = pipeline_cases()
-    return {"bunny-spot": every["bunny+spot"], "spheres": every["two spheres"]}
+    dense = uv_sphere(1.0, rings=224, segments=224), uv_sphere(1.0, center=(0.9, 0.2, 0.1), rings=224, segments=224)
+    return {"bunny-spot": every["bunny+spot"], "spheres": every["two spheres"], "spheres-100k": dense}
+
+
+def _decorate(obj, name):
+    """What a modelled object carries: two materials (half the faces each) and a UV map, so the result's faces have
+    something to carry over."""
+    mesh = obj.data
+    for k in range(2):
+        mesh.materials.append(bpy.data.materials.new(f"{name}.{k}"))
+    index = (np.arange(len(mesh.polygons)) % 2).astype(np.int32)
+    mesh.attributes.new("material_index", "INT", "FACE").data.foreach_set("value", index)
+    corner_vert = np.empty(len(mesh.loops), np.int32)
+    mesh.attributes[".corner_vert"].data.foreach_get("value", corner_vert)
+    co = np.empty(3 * len(mesh.vertices), np.float32)
+    mesh.vertices.foreach_get("co", co)
+    uv = co.reshape(-1, 3)[corner_vert, :2]
+    mesh.attributes.new("UVMap", "FLOAT2", "CORNER").data.foreach_set("vector", uv.ravel())
 
 
 def register():
@@ -92,9 +112,11 @@ def measure(a, b, voxel_size, repeat):
     bpy.ops.wm.read_homefile(use_empty=True)
     first = baselines.mesh_object("operand_a", *a)
     second = baselines.mesh_object("operand_b", *b)
+    _decorate(first, "a")
+    _decorate(second, "b")
     bpy.context.view_layer.update()
     diag = float(np.linalg.norm(b[0].max(0) - b[0].min(0)))
-    out = {"cold": [], "warm": [], "rerun": [], "gn": []}
+    out = {"cold": [], "warm": [], "rerun": [], "gn": [], "attributes": []}
     built = {}
     step = 0
 
@@ -112,6 +134,7 @@ def measure(a, b, voxel_size, repeat):
         built["cold"] = numbers["fields_built"]
         if k:
             out["cold"].append(seconds)
+            out["attributes"].append(numbers["stages"]["attributes"] / seconds)
         step += 1
         second.location.x = 1.0e-3 * diag * step
         bpy.context.view_layer.update()
@@ -146,7 +169,7 @@ def main(argv=None):
     print(f"# Add-on benchmark — {machine()}; {OPERATION.lower()}, {args.repeat} rounds after a warm-up\n")
     header = (
         "| case | res | GN SDF s | cold s | cold / GN | warm s (one field rebuilt) | warm / GN "
-        "| re-run s | re-run / GN | fields built cold / warm / re-run |"
+        "| re-run s | re-run / GN | fields built cold / warm / re-run | attributes (share of cold) |"
     )
     print(header)
     print("|" + "|".join(["---"] * (header.count("|") - 1)) + "|")
@@ -160,7 +183,7 @@ def main(argv=None):
             print(
                 f"| {name} | /{res} | {m['gn']:.2f} | {m['cold']:.2f} | {_ratio(cold, 2)} | {m['warm']:.2f} "
                 f"| {_ratio(warm, 2)} | {m['rerun']:.3f} | {_ratio(rerun, 3)} "
-                f"| {built['cold']} / {built['warm']} / {built['rerun']} |",
+                f"| {built['cold']} / {built['warm']} / {built['rerun']} | {100 * m['attributes']:.1f} % |",
                 flush=True,
             )
 

@@ -86,6 +86,7 @@ def _combine_nodes_kernel(
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
     values: wp.array[wp.float32],
+    tri: wp.array[wp.int32],
     a_octets: int,
     b_octets: int,
     a_first: wp.array[wp.int32],
@@ -199,6 +200,10 @@ def _combine_nodes_kernel(
         if node < 0:
             node = locate_leaf(follow, clamp_to_domain(follow, x))[0]
         source[i] = follow.source[node]
+        if precise == 1:  # a finest node: the closest triangle of the operand's node the value came from
+            tri[i] = -1
+            if node < follow.fine_count and follow.tri.shape[0] > 0:
+                tri[i] = follow.tri[node]
 
 
 @wp.kernel(enable_backward=False)
@@ -523,7 +528,7 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
 
     no_octets = wp.empty(0, dtype=wp.int32, device=device)
 
-    def run(coords, lo_, hi_, spacing_, proj, source, values):
+    def run(coords, lo_, hi_, spacing_, proj, source, values, tri):
         finest = spacing_ == h
         flags = [int(aligned[0] and finest), int(aligned[1] and finest)]
         octet_args = [
@@ -554,6 +559,7 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
                 proj,
                 source,
                 values,
+                tri,
                 *octet_args,
             ],
             device,
@@ -566,9 +572,10 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     proj = wp.empty(n, dtype=wp.vec3, device=device)
     source = wp.empty(n, dtype=wp.int32, device=device)
     values = wp.empty(n, dtype=wp.float32, device=device)
+    tri = wp.empty(int(offsets[1]), dtype=wp.int32, device=device)
     for k in range(levels):
         tk = time.perf_counter()
-        run(layout["coords"], int(offsets[k]), int(offsets[k + 1]), h * 2**k, proj, source, values)
+        run(layout["coords"], int(offsets[k]), int(offsets[k + 1]), h * 2**k, proj, source, values, tri)
         timings["finest_values" if k == 0 else "top_level" if k == levels - 1 else f"level_{k}"] = (
             time.perf_counter() - tk
         )
@@ -583,6 +590,8 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         source=source,
         field_ids=a.field_ids + b.field_ids,
         timings=timings,
+        sources={**a.sources, **b.sources},
+        triangles=tri,
     )
 
 

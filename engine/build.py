@@ -35,6 +35,7 @@ from .sampling import LEAF_TOLERANCE
 from .signs import (
     NO_BOXES,
 )
+from .sources import SourceMesh
 
 # Rounds of refining coarse leaves the zero set crosses (open meshes: the surface across a hole).
 MAX_SIGN_REFINEMENTS = 4
@@ -283,7 +284,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
         t0 = time.perf_counter()
         # each node's index in the earlier build (-1: new), shared by distances and signs
         prev_index = None if previous is None else match_levels(layout["codes"], layout["offsets"], previous)
-        dist, proj, source, octet_points = distance.finest_distances(
+        dist, proj, source, tri, octet_points = distance.finest_distances(
             mesh.id,
             layout,
             origin=origin,
@@ -330,6 +331,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             values=values,
             proj=proj,
             source=source,
+            triangles=tri,
             field_ids=(field_id,),
             timings=timings,
             stats={"fim_sweeps": sweeps, **sign_stats},
@@ -366,4 +368,5 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     field.timings["sign_check"] = refine_seconds
     field.stats["clean_mesh"] = clean
     field.stats["problem_faces"] = int(problem.sum())
+    field.sources = {field_id: SourceMesh(verts, tris, plan["triangle_ids"])}
     return field

@@ -25,12 +25,13 @@ from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
 
 @wp.func
 def _node_closest_point(mesh: wp.uint64, x: wp.vec3, max_dist: float, far_dist: float):
-    """(found, closest point) of one node by the mesh BVH: within ``max_dist``, else within ``far_dist``."""
-    found, p = mesh_closest_point(mesh, x, max_dist)
-    if not found:
+    """(found, closest point, its triangle or -1) of one node by the mesh BVH: within ``max_dist``, else within
+    ``far_dist``."""
+    p, face = mesh_closest_face(mesh, x, max_dist)
+    if face < 0:
         # a node added where an open mesh's surface crosses a hole can be far from every triangle
-        found, p = mesh_closest_point(mesh, x, far_dist)
-    return wp.where(found, 1, 0), p
+        p, face = mesh_closest_face(mesh, x, far_dist)
+    return wp.where(face >= 0, 1, 0), p, face
 
 
 @wp.kernel(enable_backward=False)
@@ -45,6 +46,7 @@ def _finest_octet_distance_kernel(
     far_dist: float,
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
+    tri: wp.array[wp.int32],
     octet_dist: wp.array[wp.float32],
     octet_proj: wp.array[wp.vec3],
     box_search: int,
@@ -57,7 +59,7 @@ def _finest_octet_distance_kernel(
     far from the mesh (no triangle within ``max_dist`` of the centre) query per node, each bounded by the centre's
     closest point, and every octet does when ``box_search`` is 0 (a mesh whose triangles are much smaller than a cell
     would put hundreds in each box). The centre's closest point (the octet's parent node's) goes to
-    ``octet_dist``/``octet_proj`` (UNSET_DISTANCE when not found)."""
+    ``octet_dist``/``octet_proj`` (UNSET_DISTANCE when not found). Each node's closest triangle goes to ``tri``."""
     t = first + wp.tid()
     base = octet_nodes[t]
     c = node_center(origin, spacing, coords[base]) + wp.vec3(0.5 * spacing)
@@ -82,6 +84,7 @@ def _finest_octet_distance_kernel(
         ab0, ac0, d00, d01, d11 = triangle_edges(a0, b0, c0)
         best = wp.vector(UNSET_DISTANCE, length=8, dtype=float)
         foot = wp.matrix(0.0, shape=(8, 3), dtype=float)
+        face = wp.vector(centre_face, length=8, dtype=int)
         worst = float(0.0)
         # each node's closest triangle lies in its ball through that point: search the box around those balls
         box_lo = c
@@ -121,6 +124,7 @@ def _finest_octet_distance_kernel(
                         if d < best[k]:
                             best[k] = d
                             foot[k] = p
+                            face[k] = f
                     worst = wp.max(worst, best[k])
         for k in range(8):
             x = node_center(origin, spacing, coords[base + k])
@@ -128,19 +132,22 @@ def _finest_octet_distance_kernel(
                 p = wp.vec3(foot[k, 0], foot[k, 1], foot[k, 2])
                 dist[base + k] = wp.length(x - p)
                 proj[base + k] = p
+                tri[base + k] = face[k]
             else:  # cannot happen but for rounding: the node's own query
-                found, p = _node_closest_point(mesh, x, max_dist, far_dist)
+                found, p, node_face = _node_closest_point(mesh, x, max_dist, far_dist)
                 dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
                 proj[base + k] = p
+                tri[base + k] = node_face
         return
     for k in range(8):
         x = node_center(origin, spacing, coords[base + k])
         bound = max_dist
         if not near and has_foot:  # far from the mesh: the centre's closest point bounds each node's search
             bound = wp.length(x - centre_foot) * 1.0001 + 1.0e-4 * spacing
-        found, p = _node_closest_point(mesh, x, bound, far_dist)
+        found, p, node_face = _node_closest_point(mesh, x, bound, far_dist)
         dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
         proj[base + k] = p
+        tri[base + k] = node_face
 
 
 @wp.kernel(enable_backward=False)
@@ -155,14 +162,16 @@ def _finest_distance_kernel(
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
+    tri: wp.array[wp.int32],
 ):
-    """Exact closest point of each node of a dense finest level (Warp's mesh BVH)."""
+    """Exact closest point (and its triangle) of each node of a dense finest level (Warp's mesh BVH)."""
     i = wp.tid()
     x = node_center(origin, spacing, coords[i])
-    found, p = _node_closest_point(mesh, x, max_dist, far_dist)
+    found, p, face = _node_closest_point(mesh, x, max_dist, far_dist)
     source[i] = source_id
     dist[i] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
     proj[i] = p
+    tri[i] = face
 
 
 @wp.kernel(enable_backward=False)
@@ -188,6 +197,17 @@ def take_known_kernel(
     source[i] = prev_source[j]
     if known.shape[0] > 0:
         known[i] = 1
+
+
+@wp.kernel(enable_backward=False)
+def _take_known_triangles_kernel(
+    first: int, where: wp.array[wp.int32], prev_tri: wp.array[wp.int32], tri: wp.array[wp.int32]
+):
+    """Finest node ``first + tid`` found in an earlier build takes its closest triangle."""
+    i = first + wp.tid()
+    j = where[i]
+    if j >= 0:
+        tri[i] = prev_tri[j]
 
 
 def finest_distances(
@@ -217,10 +237,10 @@ def finest_distances(
         previous, prev_index: An earlier field of the same mesh and domain and each node's index in it (-1: new;
             :func:`.octree.match_levels`): its octets keep their closest points.
     Returns:
-        ``(dist, proj, source, octet_points)``: (N,) float32 unsigned distances, (N,) vec3 closest points and (N,)
-        int32 source ids for every node of the layout, the finest level's filled in; ``octet_points`` the (distance,
-        closest point) arrays of every finest octet's centre (UNSET_DISTANCE where not found), or None for a dense
-        single level.
+        ``(dist, proj, source, tri, octet_points)``: (N,) float32 unsigned distances, (N,) vec3 closest points and (N,)
+        int32 source ids for every node of the layout, the finest level's filled in; (N0,) int32 the triangle (index
+        into the mesh) of each finest node's closest point; ``octet_points`` the (distance, closest point) arrays of
+        every finest octet's centre (UNSET_DISTANCE where not found), or None for a dense single level.
     """
     offsets, device = layout["offsets"], layout["codes"].device
     n, n0 = int(offsets[-1]), int(offsets[1])
@@ -229,9 +249,11 @@ def finest_distances(
     proj = wp.empty(n, dtype=wp.vec3, device=device)
     source = wp.empty(n, dtype=wp.int32, device=device)
     dist0, proj0, src0 = dist[:n0], proj[:n0], source[:n0]
+    tri = wp.empty(n0, dtype=wp.int32, device=device)
     # Octets an earlier build of this mesh already has keep their closest points; only new ones are queried.
     first_nodes = np.arange(0, n0, 8)
     if previous is not None:
+        launch_split(_take_known_triangles_kernel, n0, lambda s, _n: [s, prev_index, previous.tri, tri], device)
         no_known = wp.empty(0, dtype=wp.int32, device=device)
         launch_split(
             take_known_kernel,
@@ -267,10 +289,11 @@ def finest_distances(
                 dist0[lo : lo + k],
                 proj0[lo : lo + k],
                 src0[lo : lo + k],
+                tri[lo : lo + k],
             ],
             device,
         )
-        return dist, proj, source, None
+        return dist, proj, source, tri, None
     # octet by octet, in place
     octet_nodes = wp.array(first_nodes.astype(np.int32), dtype=wp.int32, device=device)
     octet_dist = wp.full(n0 // 8, UNSET_DISTANCE, dtype=wp.float32, device=device)
@@ -289,6 +312,7 @@ def finest_distances(
             float(far_dist),
             dist0,
             proj0,
+            tri,
             octet_dist,
             octet_proj,
             int(box_search),
@@ -297,4 +321,4 @@ def finest_distances(
         min_dim=EMIT_SPLIT_MIN_DIM,
         balance=True,  # octets near an open mesh's holes, or far from it, cost more
     )
-    return dist, proj, source, (octet_dist, octet_proj)
+    return dist, proj, source, tri, (octet_dist, octet_proj)

@@ -12,11 +12,11 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from . import boolean, parallel
+from . import boolean, parallel, sources
 from .errors import AasdfError
 from .extract import extract_octree_level, extract_surface
 from .plan import available_memory
-from .sampling import FieldArg, sample_field_kernel, source_ids_kernel
+from .sampling import FieldArg, face_nodes_kernel, sample_field_kernel, source_ids_kernel
 
 
 class AdaptiveField:
@@ -44,6 +44,8 @@ class AdaptiveField:
         device,
         timings=None,
         stats=None,
+        sources=None,
+        triangles=None,
     ):
         self.voxel_size = float(voxel_size)
         self.levels = int(levels)
@@ -56,14 +58,33 @@ class AdaptiveField:
         self.device = device
         self.timings = dict(timings or {})
         self.stats = dict(stats or {})
+        # field id -> SourceMesh: the triangles each operand's field was built from (see closest_sources)
+        self.sources = dict(sources or {})
+        # (N0,) int32 per finest node: its closest point's triangle in the source mesh of its source id (-1 or None:
+        # unknown); 4 bytes a finest node
+        self.tri = triangles
 
     @classmethod
     def from_layout(
-        cls, layout: dict, *, voxel_size, origin, values, proj, source, field_ids, timings=None, stats=None
+        cls,
+        layout: dict,
+        *,
+        voxel_size,
+        origin,
+        values,
+        proj,
+        source,
+        field_ids,
+        timings=None,
+        stats=None,
+        sources=None,
+        triangles=None,
     ):
         """The field whose nodes are placed by ``layout`` (:func:`.octree.level_layout`: codes, coordinates, level
         offsets, child links, top-level dims) with these (N,) node arrays: ``values`` float32 signed distances,
-        ``proj`` vec3 closest surface points, ``source`` int32 ids of the operand each node's value came from."""
+        ``proj`` vec3 closest surface points, ``source`` int32 ids of the operand each node's value came from;
+        ``sources`` maps field ids to the :class:`.sources.SourceMesh` each was built from, ``triangles`` (N0,) int32
+        gives each finest node's closest triangle there (None: not known)."""
         offsets = np.asarray(layout["offsets"], dtype=np.int64)
         return cls(
             voxel_size=voxel_size,
@@ -81,6 +102,8 @@ class AdaptiveField:
             device=values.device,
             timings=timings,
             stats=stats,
+            sources=sources,
+            triangles=triangles,
         )
 
     def relabel(self, field_id: int) -> AdaptiveField:
@@ -106,6 +129,8 @@ class AdaptiveField:
             field_ids=(field_id,),
             timings=self.timings,
             stats=self.stats,
+            sources={field_id: next(iter(self.sources.values()))} if len(self.sources) == 1 else None,
+            triangles=self.tri,
         )
         return relabelled
 
@@ -151,6 +176,7 @@ class AdaptiveField:
         f.coords, f.child, f.values, f.source, f.proj = self.coords, self.child, self.values, self.source, self.proj
         f.codes = self.codes
         f.fine_count = int(self.level_offsets[1])
+        f.tri = self.tri if self.tri is not None else wp.empty(0, dtype=wp.int32, device=self.device)
         return f
 
     def __repr__(self) -> str:
@@ -203,6 +229,101 @@ class AdaptiveField:
                 self.device,
             )
         return ids.numpy()
+
+    def closest_sources(self, points):
+        """Where the surface near each point came from: the operand whose value decides there (``source_ids``), the
+        closest triangle of the mesh that operand was built from, and the barycentric coordinates of the closest
+        point on it.
+
+        Args:
+            points: (N, 3) array-like of world-space points on or near the surface.
+        Returns:
+            ``(field_ids, triangle_ids, barycentrics)``: (N,) int32 field ids, (N,) int32 triangle indices among the
+            triangles that operand's field was built from (-1 where the field keeps no source mesh for that id), and
+            (N, 3) float32 weights of the triangle's corners.
+        Raises:
+            ValueError: If ``points`` is not (N, 3).
+        """
+        pts = _as_points(points)
+        ids = self.source_ids(pts)
+        tris = np.full(len(pts), -1, dtype=np.int32)
+        bary = np.zeros((len(pts), 3), dtype=np.float32)
+        for field_id in np.unique(ids):
+            source = self.sources.get(int(field_id))
+            if source is not None:
+                rows = np.flatnonzero(ids == field_id)
+                tris[rows], bary[rows] = sources.closest_triangles(source, pts[rows], self.device)
+        return ids, tris, bary
+
+    def face_sources(self, verts, tris):
+        """Where each face of a surface of this field came from, and where each of its corners lies on that one source
+        triangle, so that what corners read off it (UVs, colours) keeps the source's seams. The source is the
+        operand of the leaf holding the face's centre (``source_ids``) and, where that leaf is a finest node, the
+        triangle of its closest point (found by the build; for a boolean, the operand's node the value came from),
+        else the triangle closest to the centre (``closest_sources``).
+
+        Args:
+            verts: (V, 3) float32 vertices, e.g. from ``to_mesh``.
+            tris: (F, 3) int triangles.
+        Returns:
+            ``(field_ids, triangle_ids, corner_barycentrics)``: (F,) int32, (F,) int32 (-1 where the field keeps no
+            source mesh for that id) and (F, 3, 3) float32 (per corner, the weights of the triangle's corners,
+            projected onto its plane and not clamped).
+        """
+        verts = _as_points(verts)
+        tris = np.asarray(tris)
+        if tris.ndim != 2 or tris.shape[1] != 3:
+            raise ValueError(f"Expected 'tris' of shape (F, 3), but got {tris.shape}.")
+        corners = np.ascontiguousarray(verts[tris])
+        n = len(tris)
+        ids = wp.empty(n, dtype=wp.int32, device=self.device)
+        node_tri = wp.empty(n, dtype=wp.int32, device=self.device)
+        if n:
+            arg, pts = self.arg(), wp.array(corners.reshape(-1, 3), dtype=wp.vec3, device=self.device)
+            parallel.launch_split(
+                face_nodes_kernel,
+                n,
+                lambda lo, k: [arg, pts[3 * lo : 3 * (lo + k)], ids[lo : lo + k], node_tri[lo : lo + k]],
+                self.device,
+            )
+        ids, node_tri = ids.numpy(), node_tri.numpy()
+        tri_ids = np.full(n, -1, dtype=np.int32)
+        bary = np.zeros((n, 3, 3), dtype=np.float32)
+        for field_id in np.unique(ids):
+            source = self.sources.get(int(field_id))
+            if source is None:
+                continue
+            rows = np.flatnonzero(ids == field_id)
+            # the triangle of the finest node holding the face's centre: found by the build, no search needed
+            known = rows[node_tri[rows] >= 0]
+            tri_ids[known] = source.triangle_ids[node_tri[known]]
+            bary[known] = sources.corner_barycentrics(source, node_tri[known], corners[known], self.device)
+            # elsewhere (a field that does not keep its finest nodes' triangles): the closest one, by the BVH
+            unknown = rows[node_tri[rows] < 0]
+            if len(unknown):
+                near = 0.5 * self.voxel_size  # a face lies within a fraction of a voxel of its source, but in fillets
+                tri_ids[unknown], bary[unknown] = sources.face_sources(source, corners[unknown], near, self.device)
+        return ids, tri_ids, bary
+
+    def source_barycentrics(self, field_ids, triangle_ids, points) -> np.ndarray:
+        """(N, 3) float32 barycentric coordinates of each point projected onto a given source triangle (the plane of
+        triangle ``triangle_ids[i]`` of operand ``field_ids[i]``, not clamped: see :func:`.sources.barycentrics`);
+        zeros where the field keeps no such source."""
+        pts = _as_points(points)
+        field_ids = np.asarray(field_ids).reshape(-1)
+        triangle_ids = np.asarray(triangle_ids).reshape(-1)
+        if len(field_ids) != len(pts) or len(triangle_ids) != len(pts):
+            raise ValueError(
+                f"Expected one field id and one triangle id per point ({len(pts)}), but got {len(field_ids)} and "
+                f"{len(triangle_ids)}."
+            )
+        out = np.zeros((len(pts), 3), dtype=np.float32)
+        for field_id in np.unique(field_ids):
+            source = self.sources.get(int(field_id))
+            if source is not None:
+                rows = np.flatnonzero(field_ids == field_id)
+                out[rows] = sources.barycentrics(source, triangle_ids[rows], pts[rows])
+        return out
 
     def level_of_nodes(self) -> np.ndarray:
         return np.repeat(np.arange(self.levels, dtype=np.int32), np.diff(self.level_offsets))

@@ -19,7 +19,19 @@ from pathlib import Path
 # The engine's Warp modules with kernels, relative to the engine package (modules of Warp functions only are compiled
 # into the modules whose kernels call them). Warp's own sparse marching cubes module is launched only on Warp versions
 # other than the pinned one (extract.py's fallback), where prebuilt kernels cannot match anyway: not prebuilt.
-ENGINE_MODULES = ("octree", "distance", "fim", "signs", "holes", "build", "sampling", "boolean", "marching", "extract")
+ENGINE_MODULES = (
+    "octree",
+    "distance",
+    "fim",
+    "signs",
+    "holes",
+    "build",
+    "sampling",
+    "boolean",
+    "marching",
+    "extract",
+    "sources",
+)
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.
 GENERIC_PACKAGE = "engine"

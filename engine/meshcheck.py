@@ -28,12 +28,13 @@ def _triangle_areas(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
 
 def validate_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
     """Check a mesh before any kernel runs; return float32 vertices and the non-degenerate int32 triangles."""
-    verts, tris, _area = checked_mesh(vertices, triangles)
+    verts, tris, _area, _kept = checked_mesh(vertices, triangles)
     return verts, tris
 
 
-def checked_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`validate_mesh`, and the (T,) float64 areas of the triangles it keeps."""
+def checked_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`validate_mesh`, the (K,) float64 areas of the K triangles it keeps and their (K,) int32 indices among
+    the given ones."""
     verts = np.asarray(vertices)
     tris = np.asarray(triangles)
     if verts.ndim != 2 or verts.shape[1] != 3:
@@ -59,7 +60,8 @@ def checked_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray, np.ndarra
     keep = area2 > (1e-12 * extent * extent)
     if not np.any(keep):
         raise AasdfError("The mesh is degenerate: all of its triangles have zero area.")
-    return np.ascontiguousarray(verts64, dtype=np.float32), np.ascontiguousarray(tris[keep]), 0.5 * area2[keep]
+    verts32 = np.ascontiguousarray(verts64, dtype=np.float32)
+    return verts32, np.ascontiguousarray(tris[keep]), 0.5 * area2[keep], np.flatnonzero(keep).astype(np.int32)
 
 
 def weld_positions(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -87,7 +87,7 @@ def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
     if int(padding) != padding or padding < 0:
         raise AasdfError(f"The padding must be a non-negative integer, but got {padding}.")
     levels, padding = int(levels), int(padding)
-    verts, tris, area = checked_mesh(vertices, triangles)
+    verts, tris, area, kept = checked_mesh(vertices, triangles)
     lo = np.array([verts[:, k].min() for k in range(3)])
     hi = np.array([verts[:, k].max() for k in range(3)])
     origin, top_dims = plan_domain(lo, hi, voxel_size, levels, padding + 2)
@@ -121,6 +121,7 @@ def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
         "fine_nodes": fine_nodes,
         "bytes": int((fine_nodes + top_count) * BUILD_BYTES_PER_NODE),
         "areas": area,
+        "triangle_ids": kept,
     }
 
 

@@ -41,6 +41,7 @@ class FieldArg:
     source: wp.array[wp.int32]
     codes: wp.array[wp.int64]
     fine_count: int
+    tri: wp.array[wp.int32]  # per finest node, its closest point's triangle (empty: not known)
 
 
 @wp.func
@@ -284,3 +285,16 @@ def source_ids_kernel(f: FieldArg, points: wp.array[wp.vec3], ids: wp.array[wp.i
     i = wp.tid()
     leaf = locate_leaf(f, clamp_to_domain(f, points[i]))
     ids[i] = f.source[leaf[0]]
+
+
+@wp.kernel(enable_backward=False)
+def face_nodes_kernel(f: FieldArg, corners: wp.array[wp.vec3], source: wp.array[wp.int32], tri: wp.array[wp.int32]):
+    """For face ``tid`` of a surface (corners 3 tid .. 3 tid + 2): the source id of the leaf holding its centre, and
+    that leaf's closest triangle when it is a finest node whose triangle the field knows (else -1)."""
+    i = wp.tid()
+    centre = (corners[3 * i] + corners[3 * i + 1] + corners[3 * i + 2]) / 3.0
+    leaf = locate_leaf(f, clamp_to_domain(f, centre))
+    source[i] = f.source[leaf[0]]
+    tri[i] = -1
+    if leaf[1] == 0 and f.tri.shape[0] > 0:
+        tri[i] = f.tri[leaf[0]]

@@ -292,3 +292,42 @@ def hausdorff(verts_a, tris_a, verts_b, tris_b, n: int = 200_000, seed: int = 0,
     result = {k: max(directed["a_to_b"][k], directed["b_to_a"][k]) for k in ("p95", "max", "mean")}
     result.update(directed)
     return result
+
+
+@wp.kernel
+def _closest_triangle_kernel(
+    mesh: wp.uint64,
+    points: wp.array[wp.vec3],
+    max_dist: float,
+    faces: wp.array[wp.int32],
+    bary: wp.array[wp.vec3],
+):
+    i = wp.tid()
+    q = wp.mesh_query_point_no_sign(mesh, points[i], max_dist)
+    faces[i] = -1
+    if q.result:
+        faces[i] = q.face
+        bary[i] = wp.vec3(q.u, q.v, 1.0 - q.u - q.v)
+
+
+def closest_triangles(verts, tris, points, *, device=None) -> tuple[np.ndarray, np.ndarray]:
+    """The nearest triangle of the mesh to each point and the barycentric coordinates of the nearest point on it.
+
+    Returns:
+        (N,) int32 triangle indices and (N, 3) float32 weights of each triangle's corners (in ``tris`` order).
+    """
+    points = _check_points(points)
+    mesh = _wp_mesh(verts, tris, winding=False, device=device)
+    n = len(points)
+    faces = wp.empty(n, dtype=wp.int32, device=mesh.device)
+    bary = wp.zeros(n, dtype=wp.vec3, device=mesh.device)
+    if n:
+        wp_points = wp.array(points, dtype=wp.vec3, device=mesh.device)
+        wp.launch(
+            _closest_triangle_kernel,
+            dim=n,
+            device=mesh.device,
+            inputs=[mesh.id, wp_points, _search_radius(mesh, points)],
+            outputs=[faces, bary],
+        )
+    return faces.numpy(), bary.numpy()

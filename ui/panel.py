@@ -11,7 +11,14 @@ from ..aasdf_addon import cache, pipeline, preferences
 from ..aasdf_addon.properties import OPERATIONS
 
 OPERATION_ICONS = {"UNION": "SELECT_EXTEND", "INTERSECT": "SELECT_INTERSECT", "DIFFERENCE": "SELECT_SUBTRACT"}
-STAGE_LABELS = {"read": "Read", "fields": "Fields", "booleans": "Booleans", "surface": "Surface", "write": "Write"}
+STAGE_LABELS = {
+    "read": "Read",
+    "fields": "Fields",
+    "booleans": "Booleans",
+    "surface": "Surface",
+    "attributes": "Attributes",
+    "write": "Write",
+}
 
 
 class SidebarPanel:

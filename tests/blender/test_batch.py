@@ -8,6 +8,7 @@ import bpy
 import numpy as np
 import pytest
 
+from tests.metrics import merge_vertices
 from tests.support import is_watertight, load_mesh, mesh_path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -81,7 +82,8 @@ def test_mesh_files_in_ply_and_debug_volume_out(tmp_path):
     assert all(line.startswith("aasdf_batch: ") for line in done.stdout.splitlines()), done.stdout[-3000:]
     assert "building the fields of spot, shifted" in done.stdout and done.stderr == "", done.stderr[-3000:]
     result_verts, result_tris = imported_arrays(out)
-    assert is_watertight(result_tris)
+    # the .ply carries spot's UVs, so vertices are split along UV seams: watertight once merged by position
+    assert is_watertight(merge_vertices(result_verts, result_tris)[1])
     assert f"{len(result_tris):,} triangles" in summary[0]
     assert vdb.stat().st_size > 0
     volume = bpy.data.volumes.new("Debug")
@@ -137,3 +139,43 @@ def test_engine_error_exits_1_and_writes_nothing(tmp_path):
     assert done.returncode == 1, done.stdout[-2000:] + done.stderr[-2000:]
     assert "aasdf_batch: the boolean failed: Error: spot: " in done.stderr
     assert "use a larger voxel size" in done.stderr and not out.exists()
+
+
+def write_colored_ply(path, verts, tris, colors):
+    """An ASCII PLY with per-vertex 8-bit colours."""
+    header = [
+        "ply",
+        "format ascii 1.0",
+        f"element vertex {len(verts)}",
+        "property float x",
+        "property float y",
+        "property float z",
+        "property uchar red",
+        "property uchar green",
+        "property uchar blue",
+        f"element face {len(tris)}",
+        "property list uchar int vertex_indices",
+        "end_header",
+    ]
+    rows = [f"{x:.6f} {y:.6f} {z:.6f} {r} {g} {b}" for (x, y, z), (r, g, b) in zip(verts, colors, strict=True)]
+    faces = [f"3 {a} {b} {c}" for a, b, c in tris]
+    path.write_text("\n".join(header + rows + faces) + "\n", encoding="ascii")
+
+
+def test_uvs_reach_an_obj_and_colours_a_ply(tmp_path):
+    from tests.support import uv_sphere
+
+    verts, tris = load_mesh("spot.obj")  # spot has UVs
+    ball_v, ball_t = uv_sphere(0.4, center=(0.3, 0.2, 0.5), rings=16, segments=32)
+    ball_c = np.c_[np.full(len(ball_v), 200), np.full(len(ball_v), 30), np.full(len(ball_v), 60)]
+    ply = tmp_path / "ball.ply"
+    write_colored_ply(ply, ball_v, ball_t, ball_c)
+    for out in (tmp_path / "result.obj", tmp_path / "result.ply"):
+        done = run_batch(
+            "--operation", "union", "--inputs", mesh_path("spot.obj"), ply, "--resolution", 48, "--output", out
+        )
+        assert done.returncode == 0, done.stderr[-3000:]
+    uvs = [line.split()[1:] for line in (tmp_path / "result.obj").read_text().splitlines() if line.startswith("vt ")]
+    assert len(uvs) > 100 and np.ptp(np.asarray(uvs, dtype=float), axis=0).min() > 0.1  # spot's texture coordinates
+    header = (tmp_path / "result.ply").read_bytes().split(b"end_header")[0].decode("ascii")
+    assert "property uchar red" in header  # the ball's colour, carried by the faces it gave

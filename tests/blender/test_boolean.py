@@ -118,7 +118,16 @@ def test_operands_are_evaluated_with_their_modifiers(fresh_cache):
     assert len(arrayed.data.vertices) == len(sphere[0]) and len(arrayed.modifiers) == 1  # the input is untouched
 
 
-def test_faces_take_the_material_of_their_operand_and_shading_of_the_active(fresh_cache):
+def sharp_faces(obj) -> np.ndarray:
+    mesh = obj.data
+    if "sharp_face" not in mesh.attributes:
+        return np.zeros(len(mesh.polygons), dtype=bool)
+    sharp = np.empty(len(mesh.polygons), dtype=bool)
+    mesh.attributes["sharp_face"].data.foreach_get("value", sharp)
+    return sharp
+
+
+def test_faces_take_the_material_and_shading_of_their_source_face(fresh_cache):
     red, blue = bpy.data.materials.new("Red"), bpy.data.materials.new("Blue")
     a = add_mesh_object("A", *uv_sphere(1.0, center=(-0.6, 0, 0), rings=24, segments=48), materials=[red])
     b = add_mesh_object("B", *uv_sphere(1.0, center=(0.6, 0, 0), rings=24, segments=48), materials=[blue])
@@ -134,13 +143,14 @@ def test_faces_take_the_material_of_their_operand_and_shading_of_the_active(fres
     mesh.polygons.foreach_get("center", centers)
     x = centers.reshape(-1, 3)[:, 0]
     assert np.all(slots[x < -0.2] == 0) and np.all(slots[x > 0.2] == 1)
-    assert bridge.is_smooth(result)
+    sharp = sharp_faces(result)
+    assert not sharp[x < -0.2].any() and sharp[x > 0.2].all()  # a is smooth-shaded, b flat
 
     b.hide_set(False), a.hide_set(False)
-    select(b, a)  # flat-shaded active object: flat result, its material first
+    select(b, a)  # the other order: b's material first, the same shading per face
     bpy.ops.aasdf.boolean(operation="UNION", resolution=64)
     result = bpy.context.active_object
-    assert not bridge.is_smooth(result)
+    sharp = sharp_faces(result)
     assert [slot.material for slot in result.material_slots] == [blue, red]
     assert boolean_op.last_run["cache_hits"] == 2  # cached fields, relabelled with the new operand order
     mesh = result.data
@@ -150,6 +160,7 @@ def test_faces_take_the_material_of_their_operand_and_shading_of_the_active(fres
     mesh.polygons.foreach_get("center", centers)
     x = centers.reshape(-1, 3)[:, 0]
     assert np.all(slots[x < -0.2] == 1) and np.all(slots[x > 0.2] == 0)
+    assert not sharp[x < -0.2].any() and sharp[x > 0.2].all()
 
 
 # ---- cache ----

@@ -1,0 +1,275 @@
+"""Where a field's surface came from: the triangles each operand's field was built from, and queries on them.
+
+A built field keeps its mesh as a :class:`SourceMesh` (the world-space triangles it was built from, and their indices
+among the caller's triangles, degenerate ones having been dropped); a boolean result keeps its operands' by field id.
+:func:`closest_triangles` finds, for points on or near a surface, the closest triangle of one source mesh and the
+barycentric coordinates of the closest point on it (Warp's BVH, built on first use and kept); :func:`barycentrics`
+gives the coordinates of points on given triangles, so the corners of one result face can all be read off the one
+source triangle their face came from (a source's UV seams then stay seams).
+
+Memory: 28 bytes per triangle and 12 per vertex held with the field (positions, indices, index map), and once
+queried the BVH of Warp's mesh, about 64 bytes per triangle more.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .geometry import mesh_closest_face
+from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
+
+
+class SourceMesh:
+    """An operand's triangles as its field was built from them.
+
+    Attributes:
+        verts: (V, 3) float32 world-space vertices.
+        tris: (T, 3) int32 triangles (the non-degenerate ones).
+        triangle_ids: (T,) int32 index of each among the triangles the field was built from.
+    """
+
+    def __init__(self, verts, tris, triangle_ids):
+        self.verts = np.ascontiguousarray(verts, dtype=np.float32)
+        self.tris = np.ascontiguousarray(tris, dtype=np.int32)
+        self.triangle_ids = np.ascontiguousarray(triangle_ids, dtype=np.int32)
+        self._bvh = {}  # device -> wp.Mesh
+        self._arrays = {}  # device -> (points, flat indices) as Warp arrays
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held: the arrays, and the BVHs built so far (estimated)."""
+        held = self.verts.nbytes + self.tris.nbytes + self.triangle_ids.nbytes
+        held += len(self._arrays) * (self.verts.nbytes + self.tris.nbytes)
+        return held + len(self._bvh) * (self.verts.nbytes + self.tris.nbytes + 64 * len(self.tris))
+
+    def arrays(self, device) -> tuple:
+        """(points (V,) vec3, flat indices (3T,) int32) on ``device``, made on first use."""
+        device = wp.get_device(device)
+        if device.alias not in self._arrays:
+            self._arrays[device.alias] = (
+                wp.array(self.verts, dtype=wp.vec3, device=device),
+                wp.array(self.tris.reshape(-1), dtype=wp.int32, device=device),
+            )
+        return self._arrays[device.alias]
+
+    def bvh(self, device) -> wp.Mesh:
+        """Warp's mesh (with its BVH) of these triangles on ``device``, built on first use."""
+        device = wp.get_device(device)
+        if device.alias not in self._bvh:
+            self._bvh[device.alias] = wp.Mesh(
+                points=wp.array(self.verts, dtype=wp.vec3, device=device),
+                indices=wp.array(self.tris.reshape(-1), dtype=wp.int32, device=device),
+            )
+        return self._bvh[device.alias]
+
+
+@wp.kernel(enable_backward=False)
+def _closest_triangles_kernel(
+    mesh: wp.uint64,
+    points: wp.array[wp.vec3],
+    max_dist: float,
+    faces: wp.array[wp.int32],
+    bary: wp.array[wp.vec3],
+):
+    """The closest triangle of the mesh to each point (-1 beyond ``max_dist``) and the barycentric coordinates of the
+    closest point on it, in the order of the triangle's corners."""
+    i = wp.tid()
+    q = wp.mesh_query_point_no_sign(mesh, points[i], max_dist)
+    faces[i] = -1
+    bary[i] = wp.vec3(0.0)
+    if q.result:
+        faces[i] = q.face
+        # Warp's (u, v) weigh the first and second corners: p = u a + v b + (1 - u - v) c
+        bary[i] = wp.vec3(q.u, q.v, 1.0 - q.u - q.v)
+
+
+@wp.func
+def _plane_barycentrics(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.vec3:
+    """Weights of a, b, c for the projection of ``p`` onto their plane (not clamped; zeros for a degenerate one)."""
+    e0 = b - a
+    e1 = c - a
+    d = p - a
+    d00 = wp.dot(e0, e0)
+    d01 = wp.dot(e0, e1)
+    d11 = wp.dot(e1, e1)
+    den = d00 * d11 - d01 * d01
+    if den <= 0.0:
+        return wp.vec3(0.0)
+    v = (d11 * wp.dot(d, e0) - d01 * wp.dot(d, e1)) / den
+    w = (d00 * wp.dot(d, e1) - d01 * wp.dot(d, e0)) / den
+    return wp.vec3(1.0 - v - w, v, w)
+
+
+@wp.kernel(enable_backward=False)
+def _face_sources_kernel(
+    mesh: wp.uint64,
+    corners: wp.array[wp.vec3],
+    near: float,
+    far: float,
+    faces: wp.array[wp.int32],
+    bary: wp.array[wp.vec3],
+):
+    """For face ``tid`` (corners 3 tid .. 3 tid + 2): the triangle of the mesh closest to its centre (searched within
+    ``near``, then ``far``), and each corner's barycentric coordinates on that triangle."""
+    f = wp.tid()
+    a = corners[3 * f]
+    b = corners[3 * f + 1]
+    c = corners[3 * f + 2]
+    centre = (a + b + c) / 3.0
+    _foot, face = mesh_closest_face(mesh, centre, near)
+    if face < 0:
+        _foot, face = mesh_closest_face(mesh, centre, far)
+    faces[f] = face
+    for k in range(3):
+        bary[3 * f + k] = wp.vec3(0.0)
+    if face >= 0:
+        m = wp.mesh_get(mesh)
+        p0 = m.points[m.indices[3 * face]]
+        p1 = m.points[m.indices[3 * face + 1]]
+        p2 = m.points[m.indices[3 * face + 2]]
+        bary[3 * f] = _plane_barycentrics(a, p0, p1, p2)
+        bary[3 * f + 1] = _plane_barycentrics(b, p0, p1, p2)
+        bary[3 * f + 2] = _plane_barycentrics(c, p0, p1, p2)
+
+
+@wp.kernel(enable_backward=False)
+def _corner_barycentrics_kernel(
+    points: wp.array[wp.vec3],
+    indices: wp.array[wp.int32],
+    corners: wp.array[wp.vec3],
+    faces: wp.array[wp.int32],
+    bary: wp.array[wp.vec3],
+):
+    """The barycentric coordinates of face ``tid``'s three corners on triangle ``faces[tid]`` of the mesh."""
+    f = wp.tid()
+    t = faces[f]
+    p0 = points[indices[3 * t]]
+    p1 = points[indices[3 * t + 1]]
+    p2 = points[indices[3 * t + 2]]
+    for k in range(3):
+        bary[3 * f + k] = _plane_barycentrics(corners[3 * f + k], p0, p1, p2)
+
+
+def corner_barycentrics(source: SourceMesh, faces, corners, device) -> np.ndarray:
+    """(F, 3, 3) float32: each face's corners' barycentric coordinates on triangle ``faces[f]`` (an index into
+    ``source.tris``), projected onto its plane and not clamped. ``corners``: (F, 3, 3) world-space points."""
+    corners = np.ascontiguousarray(corners, dtype=np.float32).reshape(-1, 3)
+    n = len(corners) // 3
+    if n == 0:
+        return np.zeros((0, 3, 3), np.float32)
+    points, indices = source.arrays(device)
+    pts = wp.array(corners, dtype=wp.vec3, device=device)
+    faces_wp = wp.array(np.ascontiguousarray(faces, dtype=np.int32), dtype=wp.int32, device=device)
+    bary = wp.empty(3 * n, dtype=wp.vec3, device=device)
+    wp.launch(_corner_barycentrics_kernel, dim=n, inputs=[points, indices, pts, faces_wp, bary], device=device)
+    return bary.numpy().reshape(n, 3, 3)
+
+
+def face_sources(source: SourceMesh, corners, near: float, device) -> tuple[np.ndarray, np.ndarray]:
+    """The triangle of ``source`` closest to each face's centre and its corners' barycentric coordinates on it.
+
+    Args:
+        source: The mesh.
+        corners: (F, 3, 3) float32 world-space corners of F faces.
+        near: Radius the closest triangle is searched within first (faces farther away search the whole mesh).
+        device: Warp device.
+    Returns:
+        (F,) int32 triangle indices among the caller's triangles (``source.triangle_ids``, -1 where none), and
+        (F, 3, 3) float32 weights of that triangle's corners for each of the face's corners (projected onto its plane,
+        not clamped: an affine map over the triangle extends linearly).
+    """
+    corners = np.ascontiguousarray(corners, dtype=np.float32).reshape(-1, 3)
+    n = len(corners) // 3
+    if n == 0:
+        return np.zeros(0, np.int32), np.zeros((0, 3, 3), np.float32)
+    mesh = source.bvh(device)
+    pts = wp.array(corners, dtype=wp.vec3, device=device)
+    faces = wp.empty(n, dtype=wp.int32, device=device)
+    bary = wp.empty(3 * n, dtype=wp.vec3, device=device)
+    lo = np.minimum(source.verts.min(axis=0), corners.min(axis=0))
+    hi = np.maximum(source.verts.max(axis=0), corners.max(axis=0))
+    far = 2.0 * float(np.linalg.norm(hi - lo)) + 1.0
+    launch_split(
+        _face_sources_kernel,
+        n,
+        lambda lo, k: [
+            mesh.id,
+            pts[3 * lo : 3 * (lo + k)],
+            float(near),
+            far,
+            faces[lo : lo + k],
+            bary[3 * lo : 3 * (lo + k)],
+        ],
+        device,
+        min_dim=EMIT_SPLIT_MIN_DIM,  # a BVH query each
+    )
+    local = faces.numpy()
+    tri_ids = np.where(local >= 0, source.triangle_ids[np.maximum(local, 0)], -1).astype(np.int32)
+    return tri_ids, bary.numpy().reshape(n, 3, 3)
+
+
+def closest_triangles(source: SourceMesh, points, device) -> tuple[np.ndarray, np.ndarray]:
+    """The closest triangle of ``source`` to each point and the barycentric coordinates of the closest point on it.
+
+    Args:
+        source: The mesh.
+        points: (N, 3) float32 world-space points.
+        device: Warp device.
+    Returns:
+        (N,) int32 triangle indices among the caller's triangles (``source.triangle_ids``), and (N, 3) float32
+        barycentric coordinates (weights of the triangle's three corners, summing to 1).
+    """
+    points = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
+    n = len(points)
+    faces = wp.empty(n, dtype=wp.int32, device=device)
+    bary = wp.empty(n, dtype=wp.vec3, device=device)
+    if n == 0:
+        return np.zeros(0, np.int32), np.zeros((0, 3), np.float32)
+    mesh = source.bvh(device)
+    pts = wp.array(points, dtype=wp.vec3, device=device)
+    reach = 2.0 * float(np.linalg.norm(np.ptp(np.concatenate([source.verts, points]), axis=0))) + 1.0
+    launch_split(
+        _closest_triangles_kernel,
+        n,
+        lambda lo, k: [mesh.id, pts[lo : lo + k], reach, faces[lo : lo + k], bary[lo : lo + k]],
+        device,
+        min_dim=EMIT_SPLIT_MIN_DIM,  # a BVH query each
+    )
+    local = faces.numpy()
+    found = local >= 0
+    tri_ids = np.where(found, source.triangle_ids[np.maximum(local, 0)], -1).astype(np.int32)
+    return tri_ids, bary.numpy()
+
+
+def barycentrics(source: SourceMesh, triangle_ids, points) -> np.ndarray:
+    """Barycentric coordinates of each point's projection onto the plane of its triangle (not clamped to the triangle,
+    so an affine map over the triangle, such as its UVs, extends linearly).
+
+    Args:
+        source: The mesh.
+        triangle_ids: (N,) int indices among the caller's triangles (``source.triangle_ids``); -1 gives zeros.
+        points: (N, 3) world-space points.
+    Returns:
+        (N, 3) float32 weights of each triangle's corners, summing to 1.
+    """
+    triangle_ids = np.asarray(triangle_ids, dtype=np.int64)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    out = np.zeros((len(points), 3), dtype=np.float32)
+    # from the caller's triangle indices back to the kept triangles
+    lookup = np.full(int(source.triangle_ids.max()) + 1 if len(source.triangle_ids) else 0, -1, dtype=np.int64)
+    lookup[source.triangle_ids] = np.arange(len(source.triangle_ids))
+    valid = (triangle_ids >= 0) & (triangle_ids < len(lookup))
+    local = np.where(valid, lookup[np.clip(triangle_ids, 0, max(len(lookup) - 1, 0))], -1)
+    valid &= local >= 0
+    corners = source.verts.astype(np.float64)[source.tris[local[valid]]]  # (M, 3, 3)
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    e0, e1, d = b - a, c - a, points[valid] - a
+    d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
+    d20, d21 = (d * e0).sum(1), (d * e1).sum(1)
+    den = d00 * d11 - d01 * d01
+    den = np.where(np.abs(den) > 0.0, den, 1.0)
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    out[valid] = np.stack([1.0 - v - w, v, w], axis=1)
+    return out
