@@ -29,7 +29,7 @@ from tests.support import load_mesh, uv_sphere  # noqa: E402
 
 OUT = ROOT / "docs" / "images"
 SIZE = (640, 400)
-PICTURES = ("demo", "open-bunny", "blend", "octree")
+PICTURES = ("demo", "open-bunny", "blend", "octree", "textured")
 
 
 # ---- scene ----
@@ -202,6 +202,43 @@ def picture_open_bunny(samples):
     texts = [label("AASDF", (middle, 0.0, z), 0.2), label("Blender SDF nodes", (middle + shift[0], 0.0, z), 0.2)]
     frame([ours, gn, *texts], direction=(0.1, -1.0, 0.25), distance=2.9)
     render("open-bunny")
+
+
+def checker(name: str, colors, scale: float):
+    """A material whose colour is a checker pattern over the mesh's UV map."""
+    mat = bpy.data.materials.new(name)
+    tree = mat.node_tree
+    bsdf = tree.nodes["Principled BSDF"]
+    bsdf.inputs["Roughness"].default_value = 0.5
+    pattern = tree.nodes.new("ShaderNodeTexChecker")
+    pattern.inputs["Scale"].default_value = scale
+    pattern.inputs["Color1"].default_value = (*colors[0], 1.0)
+    pattern.inputs["Color2"].default_value = (*colors[1], 1.0)
+    coords = tree.nodes.new("ShaderNodeUVMap")
+    coords.uv_map = "UVMap"
+    tree.links.new(coords.outputs["UV"], pattern.inputs["Vector"])
+    tree.links.new(pattern.outputs["Color"], bsdf.inputs["Base Color"])
+    return mat
+
+
+def picture_textured(samples):
+    """Spot, textured through its UV map, minus a textured ball: before (left) and after (right). The result's faces
+    keep their source faces' materials and UVs, so both textures continue across the cut."""
+    fresh_scene(samples)
+    bpy.ops.wm.obj_import(filepath=str(ROOT / "samples" / "spot.obj"))  # with its UV map
+    spot = bpy.context.selected_objects[0]
+    spot.data.shade_smooth()
+    spot.data.materials.append(checker("cow hide", [(0.85, 0.82, 0.75), (0.15, 0.12, 0.10)], 12.0))
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.45, location=(0.25, -0.25, 0.55), segments=48, ring_count=24)
+    ball = bpy.context.active_object
+    ball.data.shade_smooth()
+    ball.data.materials.append(checker("ball", [(0.85, 0.35, 0.10), (0.95, 0.85, 0.30)], 8.0))
+    bpy.context.view_layer.update()
+    result = boolean("DIFFERENCE", [spot, ball], resolution=256)
+    result.location.x += 1.4  # after, on the right; the inputs stay where they were, before
+    bpy.context.view_layer.update()
+    frame([spot, ball, result], direction=(0.35, -1.0, 0.4), distance=2.9)
+    render("textured")
 
 
 def baselines_box(center, half):

@@ -95,6 +95,10 @@ def test_result_faces_take_the_material_of_their_operand(evaluated):
     assert np.all(slots[centers[:, 0] < -0.5] == 0) and np.all(slots[centers[:, 0] > 1.5] == 1)
     cut = (np.abs(centers[:, 0] - 0.5) < 0.2) & (np.abs(centers[:, 2]) > 0.2) & (np.abs(centers[:, 1]) < 0.2)
     assert cut.any() and np.all(slots[cut] == 2)  # the cut surfaces come from the collection's spheres
+    operand = np.empty(len(result.data.polygons), dtype=np.int32)
+    result.data.attributes["aasdf_operand"].data.foreach_get("value", operand)
+    assert np.all(operand[centers[:, 0] < -0.5] == 0) and np.all(operand[centers[:, 0] > 1.5] == 1)
+    assert set(np.unique(operand[cut])) <= {2, 3}  # the collection's two spheres
 
 
 def test_output_updates_its_object_in_place_and_rebuilds_only_the_moved_input(evaluated):
