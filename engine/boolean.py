@@ -31,7 +31,7 @@ from .operands import (
     sample_operand,
 )
 from .plan import byte_grid_fits, check_budget, plan_domain
-from .sampling import FieldArg, clamp_to_domain, locate_leaf, vec27i
+from .sampling import FieldArg, clamp_to_domain, locate_leaf, to_frame, vec27i
 
 if TYPE_CHECKING:  # the field type imports this module for its operators
     from .field import AdaptiveField
@@ -198,7 +198,7 @@ def _combine_nodes_kernel(
         if node < 0:
             node = leaf
         if node < 0:
-            node = locate_leaf(follow, clamp_to_domain(follow, x))[0]
+            node = locate_leaf(follow, clamp_to_domain(follow, to_frame(follow, x)))[0]
         source[i] = follow.source[node]
         if precise == 1:  # a finest node: the closest triangle of the operand's node the value came from
             tri[i] = -1
@@ -348,10 +348,14 @@ def _octets_of_cells_kernel(
     counts: wp.array[wp.int32],
     codes: wp.array[wp.int64],
 ):
-    """Result octets overlapping each finest cell of an operand (cells as primitives), counted or written."""
+    """Result octets overlapping each finest cell of an operand (cells as primitives), counted or written; the cells
+    of a placed operand where it is placed (a turned cell's box: up to sqrt(3) times as wide)."""
     t = first + wp.tid()
     x = node_center(f.origin, f.voxel_size, f.coords[t])
     half = 0.5 * f.voxel_size + pad
+    if f.moved == 1:
+        x = f.scale * (f.rotation @ x) + f.translation
+        half = 0.5 * f.voxel_size * f.scale * 1.7321 + pad
     i0 = wp.vec3i(0)
     i1 = wp.vec3i(0)
     for k in range(3):
@@ -413,7 +417,8 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         a, b: Operands (any built field or boolean result).
         op: Which operation.
         blend: Smoothing radius (world units) of a polynomial smooth union / intersection / difference; 0 = hard.
-        spacing: ``"finer"`` (default), ``"coarser"``, ``"a"`` or ``"b"``: whose finest spacing the result takes.
+        spacing: ``"finer"`` (default), ``"coarser"``, ``"a"`` or ``"b"``: whose finest spacing the result takes
+            (where the operands are placed: ``world_voxel_size``).
     Returns:
         A new AdaptiveField whose node sources carry the operands' field ids.
     Raises:
@@ -422,10 +427,10 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     """
     blend = _check_operands(a, b, blend)
     choices = {
-        "finer": min(a.voxel_size, b.voxel_size),
-        "coarser": max(a.voxel_size, b.voxel_size),
-        "a": a.voxel_size,
-        "b": b.voxel_size,
+        "finer": min(a.world_voxel_size, b.world_voxel_size),
+        "coarser": max(a.world_voxel_size, b.world_voxel_size),
+        "a": a.world_voxel_size,
+        "b": b.world_voxel_size,
     }
     if spacing not in choices:
         raise ValueError(f"Expected 'spacing' to be one of {sorted(choices)}, but got {spacing!r}.")
@@ -440,8 +445,10 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     origin, top_dims = plan_domain(lo, hi, h, levels, 0.0)
     fine_dims = top_dims * 2 ** (levels - 1)
     check_budget(fine_dims, int(np.prod(top_dims)), 8 * (a.level_counts[0] + b.level_counts[0]))
+    # a placed operand is resampled from its cells, never aligned
     aligned = [
-        bool(np.isclose(f.voxel_size, h, rtol=1e-6, atol=0.0))
+        f.placement is None
+        and bool(np.isclose(f.voxel_size, h, rtol=1e-6, atol=0.0))
         and np.allclose((f.origin - origin) / h, np.rint((f.origin - origin) / h), atol=1e-3)
         for f in (a, b)
     ]
@@ -590,7 +597,7 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         source=source,
         field_ids=a.field_ids + b.field_ids,
         timings=timings,
-        sources={**a.sources, **b.sources},
+        sources={**a.world_sources(), **b.world_sources()},
         triangles=tri,
     )
 

@@ -9,12 +9,15 @@ extracts the zero surface from the finest band (:mod:`.extract`); ``|``, ``&`` a
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import warp as wp
 
 from . import boolean, parallel, sources
 from .errors import AasdfError
 from .extract import extract_octree_level, extract_surface
+from .placement import Placement
 from .plan import available_memory
 from .sampling import FieldArg, face_nodes_kernel, sample_field_kernel, source_ids_kernel
 
@@ -46,6 +49,7 @@ class AdaptiveField:
         stats=None,
         sources=None,
         triangles=None,
+        placement=None,
     ):
         self.voxel_size = float(voxel_size)
         self.levels = int(levels)
@@ -63,6 +67,8 @@ class AdaptiveField:
         # (N0,) int32 per finest node: its closest point's triangle in the source mesh of its source id (-1 or None:
         # unknown); 4 bytes a finest node
         self.tri = triangles
+        # where the field's own frame sits in the world (None: it is the world; see ``transformed``)
+        self.placement = placement
 
     @classmethod
     def from_layout(
@@ -132,7 +138,39 @@ class AdaptiveField:
             sources={field_id: next(iter(self.sources.values()))} if len(self.sources) == 1 else None,
             triangles=self.tri,
         )
+        relabelled.placement = self.placement
         return relabelled
+
+    def transformed(self, matrix) -> AdaptiveField:
+        """This field moved by a similarity (rotation or reflection, uniform scale, translation): a new field sharing
+        every array, nothing rebuilt. Queries, ``to_mesh`` and booleans see it in its new place; a boolean resamples
+        it onto the result's lattice from its own cells.
+
+        Args:
+            matrix: (4, 4) array-like, applied after the field's current placement.
+        Returns:
+            The placed field (the field itself for the identity).
+        Raises:
+            ValueError: If ``matrix`` is not a finite (4, 4) similarity (uneven scales and shears need a new field).
+        """
+        matrix = np.asarray(matrix, dtype=np.float64)
+        placement = Placement(matrix) if self.placement is None else self.placement.then(matrix)
+        if placement.is_identity and self.placement is None:
+            return self
+        moved = copy.copy(self)
+        moved.placement = None if placement.is_identity else placement
+        return moved
+
+    @property
+    def world_voxel_size(self) -> float:
+        """The finest spacing where the field is placed (``voxel_size`` times the placement's scale)."""
+        return self.voxel_size * (self.placement.scale if self.placement is not None else 1.0)
+
+    def world_sources(self) -> dict:
+        """``sources`` with their vertices where the field is placed (the same objects when it is not)."""
+        if self.placement is None:
+            return dict(self.sources)
+        return {k: source.placed(self.placement.to_world) for k, source in self.sources.items()}
 
     # -- geometry of the domain --
     @property
@@ -140,9 +178,15 @@ class AdaptiveField:
         return self.voxel_size * 2 ** (self.levels - 1)
 
     @property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(min, max) corners of the domain, world space."""
+    def frame_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) corners of the domain in the field's own frame."""
         return self.origin.copy(), self.origin + self.top_dims * self.top_spacing
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) world corners of the box around the domain (the domain itself unless the field is placed)."""
+        lo, hi = self.frame_bounds
+        return (lo, hi) if self.placement is None else self.placement.box(lo, hi)
 
     @property
     def fine_dims(self) -> np.ndarray:
@@ -170,9 +214,14 @@ class AdaptiveField:
         f.levels = self.levels
         f.top_dims = wp.vec3i(*(int(d) for d in self.top_dims))
         f.top_offset = int(self.level_offsets[self.levels - 1])
-        lo, hi = self.bounds
+        lo, hi = self.frame_bounds
         f.domain_min = wp.vec3(*lo)
         f.domain_max = wp.vec3(*hi)
+        placed = self.placement
+        f.moved = int(placed is not None)
+        f.rotation = wp.mat33(*(placed.rotation.ravel() if placed is not None else np.eye(3).ravel()))
+        f.translation = wp.vec3(*(placed.translation if placed is not None else np.zeros(3)))
+        f.scale = float(placed.scale if placed is not None else 1.0)
         f.coords, f.child, f.values, f.source, f.proj = self.coords, self.child, self.values, self.source, self.proj
         f.codes = self.codes
         f.fine_count = int(self.level_offsets[1])
@@ -198,7 +247,7 @@ class AdaptiveField:
         Raises:
             ValueError: If ``points`` is not (N, 3) or ``method`` is unknown.
         """
-        pts = _as_points(points)
+        pts = self._frame_points(points)
         if method not in ("mls", "linear"):
             raise ValueError(f"Expected 'method' to be 'mls' or 'linear', but got {method!r}.")
         n = len(pts)
@@ -212,13 +261,19 @@ class AdaptiveField:
                 lambda lo, k: [arg, pts_wp[lo : lo + k], mode, values[lo : lo + k], grads[lo : lo + k]],
                 self.device,
             )
+        values = values.numpy()
+        if self.placement is not None:
+            values = values * np.float32(self.placement.scale)
         if return_gradient:
-            return values.numpy(), grads.numpy()
-        return values.numpy()
+            grads = grads.numpy()
+            if self.placement is not None:
+                grads = (grads @ self.placement.rotation.T).astype(np.float32)
+            return values, grads
+        return values
 
     def source_ids(self, points) -> np.ndarray:
         """(N,) int32: the id of the input field whose surface determines the value at each point."""
-        pts = _as_points(points)
+        pts = self._frame_points(points)
         ids = wp.empty(len(pts), dtype=wp.int32, device=self.device)
         if len(pts):
             arg, pts_wp = self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device)
@@ -244,8 +299,8 @@ class AdaptiveField:
         Raises:
             ValueError: If ``points`` is not (N, 3).
         """
-        pts = _as_points(points)
-        ids = self.source_ids(pts)
+        ids = self.source_ids(points)
+        pts = self._frame_points(points)  # the sources are kept in the field's own frame
         tris = np.full(len(pts), -1, dtype=np.int32)
         bary = np.zeros((len(pts), 3), dtype=np.float32)
         for field_id in np.unique(ids):
@@ -270,7 +325,7 @@ class AdaptiveField:
             source mesh for that id) and (F, 3, 3) float32 (per corner, the weights of the triangle's corners,
             projected onto its plane and not clamped).
         """
-        verts = _as_points(verts)
+        verts = self._frame_points(verts)  # barycentric coordinates do not change with a similarity
         tris = np.asarray(tris)
         if tris.ndim != 2 or tris.shape[1] != 3:
             raise ValueError(f"Expected 'tris' of shape (F, 3), but got {tris.shape}.")
@@ -332,16 +387,17 @@ class AdaptiveField:
         """(N, 3) float64 world-space centres of all nodes, finest level first."""
         lv = self.level_of_nodes()
         spacing = self.voxel_size * (2.0**lv)
-        return self.origin + (self.coords.numpy().astype(np.float64) + 0.5) * spacing[:, None]
+        centres = self.origin + (self.coords.numpy().astype(np.float64) + 0.5) * spacing[:, None]
+        return centres if self.placement is None else self.placement.to_world(centres)
 
     def debug_cells(self) -> dict:
         """Every stored node: centres (N,3) float32, sizes (N,), levels (N,), sdf (N,), leaf (N,) bool."""
         lv = self.level_of_nodes()
         return {
             "centers": self.node_centers().astype(np.float32),
-            "sizes": (self.voxel_size * (2.0**lv)).astype(np.float32),
+            "sizes": (self.world_voxel_size * (2.0**lv)).astype(np.float32),
             "levels": lv,
-            "sdf": self.values.numpy().copy(),
+            "sdf": self.values.numpy() * np.float32(self.placement.scale if self.placement is not None else 1.0),
             "leaf": self.child.numpy() < 0,
         }
 
@@ -377,6 +433,8 @@ class AdaptiveField:
 
     def to_mesh(self, iso: float = 0.0):
         """Marching cubes over the finest level's narrow band: (V,3) float32 vertices, (F,3) int32 triangles."""
+        if self.placement is not None:
+            return self._placed_mesh(self.in_frame().to_mesh(float(iso) / self.placement.scale))
         n0 = self.level_counts[0]
         if self.levels == 1:  # the dense top level is the finest: no octets to walk
             return extract_surface(
@@ -390,6 +448,30 @@ class AdaptiveField:
             spacing=self.voxel_size,
             iso=float(iso),
         )
+
+    def in_frame(self) -> AdaptiveField:
+        """This field in its own frame (unplaced): the same arrays."""
+        if self.placement is None:
+            return self
+        frame = copy.copy(self)
+        frame.placement = None
+        return frame
+
+    def _placed_mesh(self, mesh):
+        """A surface extracted in the field's own frame, placed: (verts, tris, ...) with the vertices moved and, for a
+        reflection, every triangle turned over so it still faces out."""
+        verts, tris, *rest = mesh
+        verts = self.placement.to_world(verts).astype(np.float32)
+        if self.placement.mirrors:
+            tris = np.ascontiguousarray(tris[:, ::-1])
+        return (verts, tris, *rest)
+
+    def _frame_points(self, points) -> np.ndarray:
+        """(N, 3) float32 points (validated) in the field's own frame."""
+        pts = _as_points(points)
+        if self.placement is None:
+            return pts
+        return np.ascontiguousarray(self.placement.to_local(pts), dtype=np.float32)
 
     # -- booleans as operators --
     def __or__(self, other):

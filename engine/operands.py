@@ -5,7 +5,8 @@ it is sampled by moving least squares (:func:`sample_operand`, :func:`coarse_sam
 neighbours), extrapolated along its gradient on coarse levels (:func:`extrapolate`), or only bracketed from its
 containing coarse leaf, the field being 1-Lipschitz (:func:`estimate`, :func:`bracket`, :func:`node_bracket`), so the
 boolean pays for interpolation only where an operand can decide the result. Outside its domain an operand is the
-bound that grows with the distance to the domain.
+bound that grows with the distance to the domain. A placed operand (``AdaptiveField.transformed``) is read in its own
+frame and its distances scaled back; it is never aligned, so only the sampled paths meet it.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ from .sampling import (
     locate_leaf,
     locate_node,
     sample_mls,
+    to_frame,
+    to_world_sample,
     vec27i,
 )
 
@@ -93,9 +96,11 @@ def _beyond_domain(r: wp.vec4, x: wp.vec3, xc: wp.vec3) -> wp.vec4:
 
 @wp.func
 def sample_operand(f: FieldArg, x: wp.vec3) -> wp.vec4:
-    """(phi, grad) by MLS; outside the domain, the bound that grows with the distance to the domain."""
-    xc = clamp_to_domain(f, x)
-    return _beyond_domain(sample_mls(f, xc), x, xc)
+    """(phi, grad) by MLS at world point ``x``; outside the domain, the bound that grows with the distance to the
+    domain."""
+    xf = to_frame(f, x)
+    xc = clamp_to_domain(f, xf)
+    return to_world_sample(f, _beyond_domain(sample_mls(f, xc), xf, xc))
 
 
 @wp.func
@@ -105,9 +110,10 @@ def coarse_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, cached: int, count: i
     the sample and the neighbours now at hand (cached leaf, count, indices, levels)."""
     if leaf[0] != cached:
         count, ids, levels = leaf_neighbours(f, leaf[0], leaf[1])
-    xc = clamp_to_domain(f, x)
+    xf = to_frame(f, x)
+    xc = clamp_to_domain(f, xf)
     r = coarse_mls(f, count, ids, levels, xc, level_spacing(f, leaf[1]), f.values[leaf[0]])
-    return _beyond_domain(r, x, xc), leaf[0], count, ids, levels
+    return to_world_sample(f, _beyond_domain(r, xf, xc)), leaf[0], count, ids, levels
 
 
 @wp.func
@@ -116,8 +122,9 @@ def extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
     its value carried along its exact gradient (the direction from its closest point), i.e. the distance to its
     tangent plane — exactly its own value where a node of the operand sits at ``x``. Cheap; used for the coarse levels
     of a result (``spacing``: theirs). Also returns that node."""
-    xc = clamp_to_domain(f, x)
-    leaf = locate_node(f, xc, wp.max(int(wp.round(wp.log2(spacing / f.voxel_size))), 0))
+    xf = to_frame(f, x)
+    xc = clamp_to_domain(f, xf)
+    leaf = locate_node(f, xc, wp.max(int(wp.round(wp.log2(spacing / (f.voxel_size * f.scale)))), 0))
     s = level_spacing(f, leaf[1])
     centre = node_center(f.origin, s, f.coords[leaf[0]])
     phi = f.values[leaf[0]]
@@ -127,29 +134,31 @@ def extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
     if ln > 0.0:
         g = wp.where(phi < 0.0, -1.0, 1.0) * n / ln
     phi = phi + wp.dot(g, xc - centre)
-    out = wp.length(x - xc)
+    out = wp.length(xf - xc)
     if out > 0.0:
-        g = (x - xc) / out
+        g = (xf - xc) / out
         phi = wp.max(phi, 0.0) + out
-    return wp.vec4(phi, g[0], g[1], g[2]), leaf[0]
+    return to_world_sample(f, wp.vec4(phi, g[0], g[1], g[2])), leaf[0]
 
 
 @wp.func
 def estimate(f: FieldArg, x: wp.vec3):
     """A cheap bracket of an operand's value: (phi, radius) from the coarse leaf containing ``x`` (the field is
     1-Lipschitz, so the value at ``x`` lies within ``radius`` of the leaf's, widened by ``LEAF_SLACK``); radius -1 in
-    the finest band. Also returns that leaf (index, level; ``x`` clamped into the domain)."""
-    xc = clamp_to_domain(f, x)
+    the finest band. Also returns that leaf (index, level; ``x`` clamped into the domain). World units for a placed
+    field."""
+    xf = to_frame(f, x)
+    xc = clamp_to_domain(f, xf)
     leaf = locate_leaf(f, xc)
     if leaf[1] == 0:
         return 0.0, -1.0, leaf
     s = level_spacing(f, leaf[1])
     centre = node_center(f.origin, s, f.coords[leaf[0]])
     phi = f.values[leaf[0]]
-    out = wp.length(x - xc)
+    out = wp.length(xf - xc)
     if out > 0.0:
         phi = wp.max(phi, 0.0) + out
-    return phi, wp.length(xc - centre) + LEAF_SLACK * wp.abs(f.values[leaf[0]]), leaf
+    return phi * f.scale, (wp.length(xc - centre) + LEAF_SLACK * wp.abs(f.values[leaf[0]])) * f.scale, leaf
 
 
 @wp.func

@@ -42,6 +42,28 @@ class FieldArg:
     codes: wp.array[wp.int64]
     fine_count: int
     tri: wp.array[wp.int32]  # per finest node, its closest point's triangle (empty: not known)
+    # world = scale * rotation @ frame + translation, when the field is placed (``moved`` 1)
+    moved: int
+    rotation: wp.mat33
+    translation: wp.vec3
+    scale: float
+
+
+@wp.func
+def to_frame(f: FieldArg, x: wp.vec3) -> wp.vec3:
+    """A world point in the field's own frame."""
+    if f.moved == 0:
+        return x
+    return wp.transpose(f.rotation) @ (x - f.translation) / f.scale
+
+
+@wp.func
+def to_world_sample(f: FieldArg, r: wp.vec4) -> wp.vec4:
+    """(phi, grad) read in the field's own frame, as seen in the world (distances scale, directions turn)."""
+    if f.moved == 0:
+        return r
+    g = f.rotation @ wp.vec3(r[1], r[2], r[3])
+    return wp.vec4(r[0] * f.scale, g[0], g[1], g[2])
 
 
 @wp.func

@@ -43,6 +43,10 @@ class SourceMesh:
         held += len(self._arrays) * (self.verts.nbytes + self.tris.nbytes)
         return held + len(self._bvh) * (self.verts.nbytes + self.tris.nbytes + 64 * len(self.tris))
 
+    def placed(self, to_world) -> SourceMesh:
+        """These triangles with their vertices moved by ``to_world`` ((N, 3) -> (N, 3)): a placed field's source."""
+        return SourceMesh(to_world(self.verts), self.tris, self.triangle_ids)
+
     def arrays(self, device) -> tuple:
         """(points (V,) vec3, flat indices (3T,) int32) on ``device``, made on first use."""
         device = wp.get_device(device)
