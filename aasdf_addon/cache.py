@@ -1,16 +1,18 @@
 """The field cache: stores and finds fields; reads nothing from Blender.
 
-An operand's field is stored under its object (``session_uid``) with a key: a hash of the object's evaluated local
-geometry, its world matrix and the field settings (``geometry_key``). ``find`` returns the field only for an equal key,
-so a changed key rebuilds that object's field only. Entries are kept in least-recently-used order within the memory
-limit of the add-on preferences (``cache_limit_mb``; 0 turns the cache off). The last combined result is kept too
-(``find_result``), with its surface, so a run on unchanged inputs repeats neither the booleans nor the extraction.
+A field is stored under a key: a hash of a mesh's evaluated geometry in its object's own frame and of the field
+settings (``geometry_key``), with the world matrix it was built under. Objects with the same geometry (linked
+duplicates, copies) find the same entry, and an object that moved, turned or was scaled finds its own: the pipeline
+places the field where the object now is (``AdaptiveField.transformed``) instead of building it again. Entries are
+kept in least-recently-used order within the memory limit of the add-on preferences (``cache_limit_mb``; 0 turns the
+cache off). The last combined result is kept too (``find_result``), with its surface, so a run on unchanged inputs
+repeats neither the booleans nor the extraction.
 
-A ``depsgraph_update_post`` handler drops the entries of objects whose geometry changed, ``load_pre`` empties the
-cache, and ``unregister()`` removes the handlers and empties it too. Undo and redo re-evaluate every object as if its
-geometry had changed: the update that follows ``undo_post`` or ``redo_post`` is not taken as an edit, so the redo
-panel re-runs an operator on cached fields (the key, not the handler, is what keeps entries correct: a field is only
-ever reused for the same geometry hash).
+A ``depsgraph_update_post`` handler drops the entry of an object whose geometry changed (``note_object`` says which
+entry an object uses), ``load_pre`` empties the cache, and ``unregister()`` removes the handlers and empties it too.
+Undo and redo re-evaluate every object as if its geometry had changed: the update that follows ``undo_post`` or
+``redo_post`` is not taken as an edit, so the redo panel re-runs an operator on cached fields (the key, not the
+handler, is what keeps entries correct: a field is only ever reused for the same geometry).
 """
 
 import hashlib
@@ -21,7 +23,8 @@ import numpy as np
 
 from . import preferences
 
-_entries: OrderedDict = OrderedDict()  # session_uid -> (key, field, nbytes), least recently used first
+_entries: OrderedDict = OrderedDict()  # key -> (field, world matrix it was built under, nbytes), least recent first
+_objects: dict = {}  # session_uid -> the key of the entry the object used last
 _stats = {"hits": 0, "builds": 0, "evictions": 0, "invalidations": 0, "result_hits": 0}
 _skip_next_update = False  # set by undo/redo: their re-evaluation is not an edit
 _bytes = 0  # sum of the entries' nbytes, kept up to date so the sidebar reads it without summing
@@ -45,10 +48,11 @@ def limit_bytes(context=None) -> int:
     return int(mb) * 2**20
 
 
-def geometry_key(verts, tris, matrix, *, voxel_size, levels, padding, device) -> str:
-    """Hash of local geometry, world matrix and field settings: equal keys give equal fields."""
+def geometry_key(verts, tris, *, voxel_size, levels, padding, device) -> str:
+    """Hash of a mesh in its own frame and of the field settings: equal keys give the same field, up to where it is
+    placed."""
     digest = hashlib.blake2b(digest_size=20)
-    for array in (verts, tris, np.asarray(matrix, dtype=np.float64)):
+    for array in (verts, tris):
         array = np.ascontiguousarray(array)
         digest.update(str(array.shape).encode())
         digest.update(array.tobytes())
@@ -56,36 +60,39 @@ def geometry_key(verts, tris, matrix, *, voxel_size, levels, padding, device) ->
     return digest.hexdigest()
 
 
-def find(uid: int, key: str):
-    """The field stored for object ``uid`` under ``key`` (counted as a hit), or None; an entry under another key is
-    stale and is dropped."""
-    entry = _entries.get(uid)
-    if entry is not None and entry[0] == key:
-        _entries.move_to_end(uid)
-        _stats["hits"] += 1
-        return entry[1]
-    _pop(uid)
-    return None
+def find(key: str):
+    """``(field, world matrix it was built under)`` stored under ``key`` (counted as a hit), or None."""
+    entry = _entries.get(key)
+    if entry is None:
+        return None
+    _entries.move_to_end(key)
+    _stats["hits"] += 1
+    return entry[0], entry[1]
 
 
-def store(uid: int, key: str, field, limit: int) -> None:
-    """Keep a newly built field (counted as a build) within ``limit`` bytes, least recently used entries first out; a
-    field larger than the whole limit is not kept."""
+def store(key: str, field, matrix, limit: int) -> None:
+    """Keep a newly built field (counted as a build) with the world matrix it was built under, within ``limit`` bytes,
+    least recently used entries first out; a field larger than the whole limit is not kept."""
     global _bytes
     _stats["builds"] += 1
     nbytes = field_nbytes(field)
     if nbytes > limit:
         return
-    _pop(uid)
-    _entries[uid] = (key, field, nbytes)
+    _pop(key)
+    _entries[key] = (field, np.asarray(matrix, dtype=np.float64), nbytes)
     _bytes += nbytes
     while _bytes > limit:
         _bytes -= _entries.popitem(last=False)[1][2]
         _stats["evictions"] += 1
 
 
-def entry_uids() -> list:
-    """The objects with a stored field, least recently used first."""
+def note_object(session_uid: int, key: str) -> None:
+    """Object ``session_uid`` uses the entry under ``key`` (dropped when its geometry is edited)."""
+    _objects[session_uid] = key
+
+
+def entry_keys() -> list:
+    """The keys of the stored fields, least recently used first."""
     return list(_entries)
 
 
@@ -111,10 +118,10 @@ def last_result() -> dict:
     return dict(_result)
 
 
-def _pop(uid):
+def _pop(key):
     """Remove one entry (if any) and return it."""
     global _bytes
-    entry = _entries.pop(uid, None)
+    entry = _entries.pop(key, None)
     if entry is not None:
         _bytes -= entry[2]
     return entry
@@ -137,8 +144,8 @@ def reset_stats():
 
 
 def invalidate(session_uid: int) -> bool:
-    """Drop one object's entry; returns whether there was one."""
-    if _pop(session_uid) is None:
+    """Drop the entry an object used (its geometry changed); returns whether there was one."""
+    if _pop(_objects.pop(session_uid, None)) is None:
         return False
     _stats["invalidations"] += 1
     return True
@@ -148,6 +155,7 @@ def clear():
     """Drop every cached field and the last combined result."""
     global _bytes
     _entries.clear()
+    _objects.clear()
     _bytes = 0
     _result.clear()
 

@@ -16,6 +16,7 @@ tree: read → key → cache → build → combine → extract → write, in tha
 ``last_run`` for the sidebar and for scripts. Nothing here loops over vertices or triangles in Python.
 """
 
+import hashlib
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -125,25 +126,61 @@ class Timer:
 # ---- the stages ----
 
 
+# Voxel sizes derived from a resolution are snapped to this ladder (steps of 2^(1/4), about 19 %), and a run keeps
+# the step the previous run on the same objects took while the raw size stays within VOXEL_HOLD of it: dragging an
+# operand changes the combined bounding box a little, which must not change the voxel size of every field.
+VOXEL_STEPS_PER_OCTAVE = 4
+VOXEL_HOLD_STEPS = 0.75
+_voxel_steps: dict = {}  # frozenset of object uids -> the ladder step their last run took
+# A cached field is placed where its object now is when that takes a rigid motion and a uniform scale within this
+# factor of the one it was built under; beyond it (or under an uneven scale or shear) the field is built again.
+PLACE_MAX_SCALE = 2.0 ** (0.5 / VOXEL_STEPS_PER_OCTAVE)
+
+
 def voxel_size_for(objects, depsgraph, settings: FieldSettings) -> float:
     """``settings.voxel_size`` when positive, else the diagonal of the objects' combined world bounding box /
-    ``settings.resolution``.
+    ``settings.resolution``, snapped to a ladder of sizes (``VOXEL_STEPS_PER_OCTAVE`` a factor of 2, never coarser
+    than asked) and held at the objects' previous step while the box changes little (``VOXEL_HOLD_STEPS``).
 
     Raises:
         AasdfError: When the objects have no extent and no voxel size is set.
     """
     if settings.voxel_size > 0.0:
-        return float(settings.voxel_size)
+        return float(np.float32(settings.voxel_size))
     lo, hi = bridge.world_bounds(objects, depsgraph)
-    voxel_size = float(np.linalg.norm(hi - lo)) / int(settings.resolution)
-    if not voxel_size > 0.0:
+    raw = float(np.linalg.norm(hi - lo)) / int(settings.resolution)
+    if not raw > 0.0:
         raise runtime.engine().AasdfError("The inputs have no extent: set a Voxel Size")
-    return voxel_size
+    step = int(np.floor(np.log2(raw) * VOXEL_STEPS_PER_OCTAVE))
+    group = frozenset(obj.original.session_uid for obj in objects)
+    previous = _voxel_steps.get(group)
+    position = np.log2(raw) * VOXEL_STEPS_PER_OCTAVE  # the step itself while in [step, step + 1)
+    if previous is not None and previous - VOXEL_HOLD_STEPS <= position < previous + 1 + VOXEL_HOLD_STEPS:
+        step = previous
+    _voxel_steps[group] = step
+    # single precision, as a Voxel Size setting holds it: the same size typed in finds the same fields
+    return float(np.float32(2.0 ** (step / VOXEL_STEPS_PER_OCTAVE)))
+
+
+def _placement(matrix_now, matrix_built):
+    """The similarity moving a field built under ``matrix_built`` to where ``matrix_now`` puts its object, or None
+    when that needs an uneven scale, a shear or too large a scale (``PLACE_MAX_SCALE``)."""
+    relative = np.asarray(matrix_now, dtype=np.float64) @ np.linalg.inv(np.asarray(matrix_built, dtype=np.float64))
+    linear = relative[:3, :3]
+    scale = float(np.cbrt(abs(np.linalg.det(linear))))
+    if not scale > 0.0 or max(scale, 1.0 / scale) > PLACE_MAX_SCALE:
+        return None
+    rotation = linear / scale
+    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
+        return None
+    return relative
 
 
 def operand_fields(context, operands, settings: FieldSettings, voxel_size: float, progress=None) -> list:
     """Key → cache → build for read operands (``bridge.read_operands``): one field per operand, operand ``k``'s
-    with ``field_id`` k. What is missing is checked together first and built at the same time.
+    with ``field_id`` k, placed where its object is. A cached field of the same geometry and settings (the object's
+    own, or a duplicate's) is placed by the rigid motion and uniform scale from where it was built; what is missing
+    is checked together first and built at the same time, one field per distinct geometry.
 
     Raises:
         AasdfError: From the engine, its message naming the object.
@@ -151,25 +188,44 @@ def operand_fields(context, operands, settings: FieldSettings, voxel_size: float
     engine = runtime.engine()
     device = runtime.device(context)
     options = {"voxel_size": voxel_size, "levels": settings.levels, "padding": settings.padding}
-    keys = [cache.geometry_key(op.verts, op.tris, op.matrix, **options, device=device) for op in operands]
-    fields = [cache.find(op.uid, key) for op, key in zip(operands, keys, strict=True)]
-    missing = [k for k, field in enumerate(fields) if field is None]
+    placed = [None] * len(operands)
+    missing = {}  # key -> the operands that need it built
+    for k, operand in enumerate(operands):
+        key = cache.geometry_key(operand.verts, operand.tris, **options, device=device)
+        found = cache.find(key) if key not in missing else None
+        relative = _placement(operand.matrix, found[1]) if found is not None else None
+        if relative is None and (found is not None or key in missing):
+            # the geometry's field sits where no similarity moves it to this object: a field of its own, keyed by
+            # its world matrix too (an unevenly scaled or sheared copy)
+            ref = found[1] if found is not None else operands[missing[key][0]].matrix
+            if _placement(operand.matrix, ref) is None:
+                key = f"{key}:{hashlib.blake2b(operand.matrix.tobytes(), digest_size=8).hexdigest()}"
+                found = cache.find(key) if key not in missing else None
+                relative = _placement(operand.matrix, found[1]) if found is not None else None
+        cache.note_object(operand.uid, key)
+        if relative is None:
+            missing.setdefault(key, []).append(k)
+        else:
+            placed[k] = found[0].transformed(relative)
     if missing:
+        first = [ks[0] for ks in missing.values()]  # one build per distinct geometry, under its first object's matrix
         if progress is not None:
-            progress.step(f"building the fields of {', '.join(operands[k].name for k in missing)}")
+            progress.step(f"building the fields of {', '.join(operands[k].name for k in first)}")
         try:
-            built = engine.build_fields([operands[k].world() for k in missing], **options, device=device)
+            built = engine.build_fields([operands[k].world() for k in first], **options, device=device)
         except engine.AasdfError as err:
             message = str(err)
-            if message.startswith("Mesh "):  # "Mesh <j>: ..." counts the missing meshes: name the object instead
+            if message.startswith("Mesh "):  # "Mesh <j>: ..." counts the meshes built: name the object instead
                 head, _, rest = message.partition(": ")
-                message = f"{operands[missing[int(head.split()[1])]].name}: {rest}"
+                message = f"{operands[first[int(head.split()[1])]].name}: {rest}"
             raise engine.AasdfError(message) from err
         limit = cache.limit_bytes(context)
-        for k, field in zip(missing, built, strict=True):
-            cache.store(operands[k].uid, keys[k], field, limit)
-            fields[k] = field
-    return [field.relabel(k) for k, field in enumerate(fields)]
+        for (key, ks), field in zip(missing.items(), built, strict=True):
+            cache.store(key, field, operands[ks[0]].matrix, limit)
+            for k in ks:
+                relative = _placement(operands[k].matrix, operands[ks[0]].matrix)
+                placed[k] = field if k == ks[0] else field.transformed(relative)
+    return [field.relabel(k) for k, field in enumerate(placed)]
 
 
 def combine(plan: tuple, fields: list, progress=None):
@@ -188,6 +244,11 @@ def combine(plan: tuple, fields: list, progress=None):
             progress.step("combining fields")
         return result
     return _fold(getattr(engine, _ENGINE_OPS[operation]), items, blend, progress)
+
+
+def _matrix_bytes(field) -> bytes:
+    """Where a field is placed, as a key (empty when it is not)."""
+    return b"" if field.placement is None else field.placement.matrix.tobytes()
 
 
 def _fold(op, items, blend, progress):
@@ -267,7 +328,7 @@ def run(context, objects, plan, settings: FieldSettings, output: Output, *, sour
         with timer.stage("fields"):
             fields = operand_fields(context, operands, settings, voxel_size, progress)
         with timer.stage("booleans"):
-            key = (plan, tuple((id(f.codes), f.field_ids) for f in fields))
+            key = (plan, tuple((id(f.codes), f.field_ids, _matrix_bytes(f)) for f in fields))
             found = cache.find_result(key)
             if found is None:
                 field = combine(plan, fields, progress)

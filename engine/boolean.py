@@ -343,24 +343,33 @@ def _octets_of_cells_kernel(
     octet_size: float,
     pad: float,
     dims: wp.vec3i,
+    per_cell: int,
+    mask: wp.array[wp.uint8],
     offsets: wp.array[wp.int32],
     emit: int,
     counts: wp.array[wp.int32],
     codes: wp.array[wp.int64],
 ):
-    """Result octets overlapping each finest cell of an operand (cells as primitives), counted or written; the cells
-    of a placed operand where it is placed (a turned cell's box: up to sqrt(3) times as wide)."""
+    """Result octets within ``pad`` of each finest octet of an operand (its cells as primitives, 8 at a time, or one
+    at a time for a dense single level: ``per_cell``; those of a placed operand where it is placed, a turned box),
+    counted (``emit`` 0), written (1) or marked in ``mask`` (2, see ``octree.mark_then_compact``)."""
     t = first + wp.tid()
-    x = node_center(f.origin, f.voxel_size, f.coords[t])
-    half = 0.5 * f.voxel_size + pad
+    c = node_center(f.origin, f.voxel_size, f.coords[t])
+    size = f.voxel_size  # the primitive's half width: a cell's half, or an octet's
+    if per_cell == 0:
+        c = node_center(f.origin, f.voxel_size, f.coords[8 * t]) + wp.vec3(0.5 * f.voxel_size)
+        size = 2.0 * f.voxel_size
+    half = wp.vec3(0.5 * size + pad)
     if f.moved == 1:
-        x = f.scale * (f.rotation @ x) + f.translation
-        half = 0.5 * f.voxel_size * f.scale * 1.7321 + pad
+        c = f.scale * (f.rotation @ c) + f.translation
+        for k in range(3):
+            reach = wp.abs(f.rotation[k, 0]) + wp.abs(f.rotation[k, 1]) + wp.abs(f.rotation[k, 2])
+            half[k] = 0.5 * size * f.scale * reach + pad
     i0 = wp.vec3i(0)
     i1 = wp.vec3i(0)
     for k in range(3):
-        i0[k] = wp.clamp(int(wp.floor((x[k] - half - origin[k]) / octet_size)), 0, dims[k] - 1)
-        i1[k] = wp.clamp(int(wp.floor((x[k] + half - origin[k]) / octet_size)), 0, dims[k] - 1)
+        i0[k] = wp.clamp(int(wp.floor((c[k] - half[k] - origin[k]) / octet_size)), 0, dims[k] - 1)
+        i1[k] = wp.clamp(int(wp.floor((c[k] + half[k] - origin[k]) / octet_size)), 0, dims[k] - 1)
     n = int(0)
     base = int(0)
     if emit == 1:
@@ -368,7 +377,9 @@ def _octets_of_cells_kernel(
     for z in range(i0[2], i1[2] + 1):
         for y in range(i0[1], i1[1] + 1):
             for xx in range(i0[0], i1[0] + 1):
-                if emit == 1:
+                if emit == 2:
+                    mask[xx + dims[0] * (y + dims[1] * z)] = wp.uint8(1)
+                elif emit == 1:
                     codes[base + n] = morton_encode(wp.vec3i(xx, y, z))
                 n += 1
     if emit == 0:
@@ -404,9 +415,25 @@ def _octets_of(f: AdaptiveField, origin, spacing, oct_dims, aligned, device) -> 
             _aligned_octets_kernel, dim=n0 // step, inputs=[f.coords, offset, step], outputs=[codes], device=device
         )
         return codes
-    args = [f.arg(), wp.vec3(*origin), 2.0 * spacing, 1.0 * spacing, wp.vec3i(*(int(d) for d in oct_dims))]
+    per_cell = int(f.levels == 1)  # a dense single level is not stored in octets
+    args = [f.arg(), wp.vec3(*origin), 2.0 * spacing, 1.0 * spacing, wp.vec3i(*(int(d) for d in oct_dims)), per_cell]
+    n_octets = n0 if per_cell else n0 // 8
+    if byte_grid_fits(oct_dims):  # each result octet marked once in a byte per octet, no (cell, octet) pairs sorted
+        return octree.mark_then_compact(
+            _octets_of_cells_kernel,
+            n_octets,
+            args,
+            oct_dims,
+            device,
+            end_bit=3 * code_bits(oct_dims),
+            check=lambda total: check_budget(oct_dims * 2, 0, 8 * total),
+        )
     return octree.count_then_emit(
-        _octets_of_cells_kernel, n0, args, device, check=lambda total: check_budget(oct_dims * 2, 0, 8 * total)
+        _octets_of_cells_kernel,
+        n_octets,
+        [*args, wp.empty(0, dtype=wp.uint8, device=device)],
+        device,
+        check=lambda total: check_budget(oct_dims * 2, 0, 0, pairs=total),
     )
 
 

@@ -10,7 +10,7 @@ import pytest
 from aasdf.aasdf_addon import autoupdate, bridge, cache, preferences, runtime
 from aasdf.operators import boolean as boolean_op
 from tests.blender.scene import add_mesh_object, select, world_arrays
-from tests.metrics import exact_boolean, mesh_volume
+from tests.metrics import exact_boolean, hausdorff, mesh_volume
 from tests.support import is_watertight, load_mesh, uv_sphere
 
 SHIFT = np.array([0.3, 0.1, 0.05])
@@ -23,9 +23,10 @@ def local_vertices(obj):
 
 
 def spot_pair():
+    """Spot, and spot shifted in its vertices (another geometry, so each has a field of its own)."""
     verts, tris = load_mesh("spot.obj")
     a = add_mesh_object("Spot", verts, tris)
-    b = add_mesh_object("Shifted", verts, tris, location=tuple(SHIFT))
+    b = add_mesh_object("Shifted", verts + SHIFT.astype(np.float32), tris)
     return a, b
 
 
@@ -71,7 +72,10 @@ def test_operator_result_equals_direct_engine_call(fresh_cache):
     assert len(result_tris) == len(tris)
     np.testing.assert_allclose(np.sort(result_verts, axis=0), np.sort(verts, axis=0), atol=1e-5)
     lo, hi = bridge.world_bounds((a, b), bpy.context.evaluated_depsgraph_get())
-    assert voxel_size == pytest.approx(np.linalg.norm(hi - lo) / 64)
+    # the diagonal over the resolution, snapped to the ladder of 4 sizes an octave (never coarser)
+    raw = np.linalg.norm(hi - lo) / 64
+    assert voxel_size == pytest.approx(2.0 ** (np.floor(4 * np.log2(raw)) / 4))
+    assert 0.84 * raw < voxel_size <= raw
 
 
 def test_difference_is_active_minus_all_others_and_union_is_n_ary(fresh_cache):
@@ -207,24 +211,61 @@ def test_rerun_with_nothing_changed_reuses_the_boolean_and_its_surface(fresh_cac
     assert cache.last_result() == {}
 
 
-def test_moving_one_operand_rebuilds_only_its_field(fresh_cache):
+def test_moving_turning_or_scaling_an_operand_builds_no_field(fresh_cache):
     a, b = spot_pair()
     select(a, b)
-    bpy.ops.aasdf.boolean(operation="UNION", voxel_size=0.04, hide_inputs=False)
-    b.location.x += 0.2
-    select(a, b)
-    bpy.ops.aasdf.boolean(operation="UNION", voxel_size=0.04, hide_inputs=False)
-    assert boolean_op.last_run["cache_hits"] == 1 and boolean_op.last_run["fields_built"] == 1
-    select(a, b)  # other settings: a new field for both
-    bpy.ops.aasdf.boolean(operation="UNION", voxel_size=0.04, levels=3, hide_inputs=False)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96, hide_inputs=False)
     assert boolean_op.last_run["fields_built"] == 2
-    # With the voxel size from the resolution, moving an operand changes the combined box, hence both fields.
+    voxel = boolean_op.last_run["voxel_size"]
+    # a small move changes the combined box a little: the voxel size holds, nothing is built
+    b.location.x += 0.03
+    bpy.context.view_layer.update()
     select(a, b)
-    bpy.ops.aasdf.boolean(operation="UNION", resolution=64, hide_inputs=False)
-    b.location.x += 0.2
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96, hide_inputs=False)
+    assert boolean_op.last_run["voxel_size"] == voxel
+    assert boolean_op.last_run["fields_built"] == 0 and boolean_op.last_run["cache_hits"] == 2
+    # moved, turned 17 degrees about two axes, scaled uniformly: the cached field is placed, nothing is built
+    b.location = (0.05, -0.03, 0.02)
+    b.rotation_euler = (np.radians(17.0), np.radians(17.0), 0.0)
+    b.scale = (1.04, 1.04, 1.04)
+    bpy.context.view_layer.update()
     select(a, b)
-    bpy.ops.aasdf.boolean(operation="UNION", resolution=64, hide_inputs=False)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", voxel_size=voxel, hide_inputs=False)
+    assert boolean_op.last_run["fields_built"] == 0 and boolean_op.last_run["cache_hits"] == 2
+    placed = world_arrays(bpy.context.active_object)
+    # ... and the same result, within the accuracy of a resampled operand, as with every field built afresh
+    bpy.ops.aasdf.clear_cache()
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", voxel_size=voxel, hide_inputs=False)
     assert boolean_op.last_run["fields_built"] == 2
+    rebuilt = world_arrays(bpy.context.active_object)
+    assert mesh_volume(*placed) == pytest.approx(mesh_volume(*rebuilt), rel=0.005)
+    assert hausdorff(*placed, *rebuilt, n=20_000)["p95"] <= 0.25 * voxel
+    # an uneven scale needs a field of its own; other settings, new fields for both
+    b.scale = (1.0, 1.3, 1.0)
+    bpy.context.view_layer.update()
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", voxel_size=voxel, hide_inputs=False)
+    assert boolean_op.last_run["fields_built"] == 1
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", voxel_size=voxel, levels=3, hide_inputs=False)
+    assert boolean_op.last_run["fields_built"] == 2
+
+
+def test_duplicates_of_one_geometry_share_one_field(fresh_cache):
+    spot = add_mesh_object("Spot", *load_mesh("spot.obj"))
+    ball = add_mesh_object("Ball", *uv_sphere(0.15, rings=16, segments=32))
+    copies = []
+    for k in range(10):  # ten linked duplicates of the ball along the spot
+        copy = ball.copy()
+        copy.location = (0.2 * np.cos(k), 0.6 * np.sin(k), 0.1 * k - 0.4)
+        bpy.context.scene.collection.objects.link(copy)
+        copies.append(copy)
+    bpy.context.view_layer.update()
+    select(spot, *copies)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96, hide_inputs=False) == {"FINISHED"}
+    assert boolean_op.last_run["fields_built"] == 2  # the spot and one ball
+    assert cache.stats()["entries"] == 2
 
 
 def test_geometry_edit_drops_the_cached_field(fresh_cache):
@@ -273,17 +314,18 @@ def test_cache_evicts_least_recently_used_fields_beyond_its_limit(fresh_cache):
         return SimpleNamespace(values=SimpleNamespace(capacity=megabytes * 2**20))
 
     limit = 3 * 2**20
-    for uid in (1, 2, 3):
-        cache.store(uid, f"key{uid}", fake_field(1), limit)
-    assert cache.entry_uids() == [1, 2, 3] and cache.total_bytes() == limit
-    assert cache.find(1, "key1") is not None  # a hit on 1 makes 2 the least recently used
-    cache.store(4, "key4", fake_field(1), limit)
-    assert cache.entry_uids() == [3, 1, 4] and cache.stats()["evictions"] == 1
-    cache.store(5, "key5", fake_field(4), limit)  # larger than the whole limit: not kept, nothing evicted
-    assert cache.entry_uids() == [3, 1, 4] and cache.total_bytes() <= limit
-    assert cache.find(4, "another key") is None and cache.entry_uids() == [3, 1]  # a stale entry goes
-    assert cache.invalidate(3) and not cache.invalidate(3)
-    assert cache.entry_uids() == [1]
+    for k in (1, 2, 3):
+        cache.store(f"key{k}", fake_field(1), np.eye(4), limit)
+        cache.note_object(k, f"key{k}")  # object k uses entry k
+    assert cache.entry_keys() == ["key1", "key2", "key3"] and cache.total_bytes() == limit
+    assert cache.find("key1") is not None  # a hit on 1 makes 2 the least recently used
+    cache.store("key4", fake_field(1), np.eye(4), limit)
+    assert cache.entry_keys() == ["key3", "key1", "key4"] and cache.stats()["evictions"] == 1
+    cache.store("key5", fake_field(4), np.eye(4), limit)  # larger than the whole limit: not kept, nothing evicted
+    assert cache.entry_keys() == ["key3", "key1", "key4"] and cache.total_bytes() <= limit
+    assert cache.find("another key") is None
+    assert cache.invalidate(3) and not cache.invalidate(3)  # object 3's geometry changed: its entry goes
+    assert cache.entry_keys() == ["key1", "key4"]
 
 
 def test_relabelled_field_shares_everything_but_its_source_ids():

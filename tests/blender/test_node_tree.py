@@ -73,7 +73,8 @@ def test_tree_equals_the_chain_of_boolean_operators(evaluated):
     tree, result, (a, b, _, c1, c2) = evaluated
     verts, tris = world_arrays(result)
     assert is_watertight(tris)
-    assert pipeline.last_run["source"] == "Tree" and pipeline.last_run["fields_built"] == 4
+    # A and B share one geometry, C1 and C2 another: two fields, each placed for both of its objects
+    assert pipeline.last_run["source"] == "Tree" and pipeline.last_run["fields_built"] == 2
     assert pipeline.last_run["level_counts"][0] > 0 and set(pipeline.last_run["stages"]) == set(pipeline.STAGES)
 
     select(a, b)
@@ -85,7 +86,7 @@ def test_tree_equals_the_chain_of_boolean_operators(evaluated):
     assert len(verts) == len(chain_verts)
     assert mesh_volume(verts, tris) == pytest.approx(mesh_volume(chain_verts, chain_tris), rel=1e-3)
     # The fields of A, B, C1 and C2 came from the tree's evaluation: the chain built only its intermediate result's.
-    assert cache.stats()["builds"] == 5
+    assert cache.stats()["builds"] == 3
 
 
 def test_result_faces_take_the_material_of_their_operand(evaluated):
@@ -101,22 +102,22 @@ def test_result_faces_take_the_material_of_their_operand(evaluated):
     assert set(np.unique(operand[cut])) <= {2, 3}  # the collection's two spheres
 
 
-def test_output_updates_its_object_in_place_and_rebuilds_only_the_moved_input(evaluated):
+def test_output_updates_its_object_in_place_and_moved_inputs_build_nothing(evaluated):
     tree, result, (a, b, _, c1, _) = evaluated
     pointer, old_mesh, meshes = result.as_pointer(), result.data.name, len(bpy.data.meshes)
     before = world_arrays(result)[0]
     b.location.x += 0.2
     bpy.context.view_layer.update()
     assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
-    assert pipeline.last_run["fields_built"] == 1 and pipeline.last_run["cache_hits"] == 3
+    assert pipeline.last_run["fields_built"] == 0 and pipeline.last_run["cache_hits"] == 4  # B's field, placed
     result = bpy.data.objects["Result"]
     assert result.as_pointer() == pointer and result.data.name == old_mesh and len(bpy.data.meshes) == meshes
     after = world_arrays(result)[0]
     assert after[:, 0].max() == pytest.approx(before[:, 0].max() + 0.2, abs=VOXEL)
-    c1.location.z += 0.1  # a collection member moves: only its field
+    c1.location.z += 0.1  # a collection member moves: its field is placed too
     bpy.context.view_layer.update()
     bpy.ops.aasdf.evaluate_tree(tree=tree.name)
-    assert pipeline.last_run["fields_built"] == 1 and pipeline.last_run["cache_hits"] == 3
+    assert pipeline.last_run["fields_built"] == 0 and pipeline.last_run["cache_hits"] == 4
 
 
 def test_moved_result_object_still_shows_the_boolean_in_place(evaluated):
@@ -148,7 +149,7 @@ def test_tree_is_saved_with_the_blend_and_evaluates_after_reload(evaluated, tmp_
     bpy.data.objects["Result"].data.clear_geometry()
     assert bpy.ops.aasdf.evaluate_tree(tree="Tree") == {"FINISHED"}
     assert len(bpy.data.objects["Result"].data.vertices) == vertices
-    assert pipeline.last_run["fields_built"] == 4
+    assert pipeline.last_run["fields_built"] == 2
 
 
 def test_two_outputs_write_two_objects_from_shared_fields(evaluated):
@@ -320,7 +321,7 @@ def test_auto_update_marks_dirty_in_the_handler_and_evaluates_in_the_debounced_t
     clock[0] += autoupdate.DEBOUNCE + 0.01
     assert autoupdate._on_timer() is None  # evaluates, then stops
     assert not autoupdate.is_dirty(tree)
-    assert pipeline.last_run["fields_built"] == 1 and pipeline.last_run["source"] == "Tree"
+    assert pipeline.last_run["fields_built"] == 0 and pipeline.last_run["source"] == "Tree"  # B's field, placed
     assert world_arrays(bpy.data.objects["Result"])[0][:, 0].max() == pytest.approx(2.2, abs=VOXEL)
     bpy.context.view_layer.update()  # the evaluation's own writes do not mark the tree again
     assert not autoupdate.is_dirty(tree)
@@ -329,12 +330,12 @@ def test_auto_update_marks_dirty_in_the_handler_and_evaluates_in_the_debounced_t
     bpy.context.view_layer.update()
     assert autoupdate.is_dirty(tree)
     bpy.ops.aasdf.evaluate_tree(tree=tree.name)  # headless: the explicit evaluation does the timer's work
-    assert not autoupdate.is_dirty(tree) and pipeline.last_run["fields_built"] == 1
+    assert not autoupdate.is_dirty(tree) and pipeline.last_run["fields_built"] == 0
 
     add_mesh_object("C3", *SMALL, location=(0.5, 0.8, 0.0), collection=bpy.data.collections["Cutters"])
     assert autoupdate.is_dirty(tree)  # a new member of an input collection
     bpy.ops.aasdf.evaluate_tree(tree=tree.name)
-    assert pipeline.last_run["operands"] == 5 and pipeline.last_run["fields_built"] == 1
+    assert pipeline.last_run["operands"] == 5 and pipeline.last_run["fields_built"] == 0  # C3: C1's geometry
 
 
 def test_node_settings_mark_an_auto_update_tree_dirty(evaluated, clock):
