@@ -303,3 +303,17 @@ def iso_nudge(origin: np.ndarray, lo: np.ndarray, hi: np.ndarray, spacing: float
             "Move the objects closer to the origin or use a coarser resolution."
         )
     return max(_ISO_NUDGE * spacing, _ISO_NUDGE_ULPS * ulp)
+
+
+def case_tables() -> dict:
+    """Warp's marching-cubes tables as numpy int32 arrays: ``case_to_tri_range`` (257,), ``tri_local_inds`` (local
+    edges of each case's triangles, 3 per triangle), and per local edge ``edge_owner`` / ``edge_upper`` (its lower
+    and upper corner) and ``edge_axis`` (12,). Needs Warp's marching-cubes core (``HAS_SHARED_CORNER_CORE``)."""
+    device = "cpu"
+    return {
+        "case_to_tri_range": _warp_mc._get_mc_case_to_tri_range_table(device).numpy(),
+        "tri_local_inds": _warp_mc._get_mc_tri_local_inds_table(device).numpy(),
+        "edge_owner": _warp_mc._get_edge_owner_table(device).numpy(),
+        "edge_upper": _warp_mc._get_edge_upper_table(device).numpy(),
+        "edge_axis": _warp_mc._get_edge_axis_table(device).numpy(),
+    }

@@ -1,0 +1,617 @@
+"""Feature-preserving surface extraction: dual marching cubes whose vertices minimise a quadric of exact tangent planes.
+
+Marching cubes puts its vertices on the lattice edges and so cuts every crease and corner of the surface. This module
+contours the same active cubes dually (Nielson's dual marching cubes, the uniform-grid case of Schaefer et al.'s
+manifold dual contouring): one vertex per marching-cubes patch of a cube (a cube's triangles that share edges), one
+quad per crossed lattice edge joining the patches of the four cubes around it. The mesh is the dual of the marching
+cubes mesh, so it is closed and oriented where that one is, with as many quads as marching cubes has vertices.
+
+Each vertex is placed as in dual contouring (Ju et al. 2002): the minimiser of the squared distances to tangent planes
+(a quadric error function), taken relative to the mass point of the patch's edge crossings, with small eigenvalues
+truncated. The tangent planes are Hermite data the field already holds: every finest node stores the exact closest
+point ``proj`` of its source surface (for a boolean, of the operand that decides there), so the plane through
+``proj`` with normal ``(x - proj) / |x - proj|`` times the sign of the value is exact, and at a node whose closest
+point lies on a crease it contains the crease line. Where a node's value is not its distance to ``proj`` (blended
+booleans, where the value is a smooth minimum) the plane is taken at the edge crossing with the gradient of the cube's
+trilinear interpolant instead, so smooth blends get no crease. Vertices stay in their cube: a crease line found
+outside it is clipped to the cube, a corner outside it gives way to the crease through the cube, and anything left
+outside is clamped.
+
+Each quad is split along the diagonal whose midpoint fits its two vertices' planes best, which keeps crease lines
+(both ends on the crease) as mesh edges. Vertices whose quadric has two or more significant eigenvalues lie on a
+crease or corner; :func:`crease_edges` returns the mesh edges between two of them where the surface folds.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import warp as wp
+
+from .extract import lattice_cubes, octree_level_cubes
+from .marching import CORNER_OFFSETS, case_tables, empty_mesh
+from .parallel import launch_split
+
+if TYPE_CHECKING:  # the field type imports this module for its surface
+    from .field import AdaptiveField
+
+# Eigenvalues of a patch's plane quadric below this fraction of the largest are dropped (Ju et al. truncate singular
+# values below 0.1; the eigenvalues of A^T A are their squares): normals less than about 16 degrees apart make no
+# crease.
+EIGEN_CUTOFF = 0.02
+
+
+# A node's plane is used when its value is its distance to its closest point within this fraction of a voxel.
+HERMITE_TOLERANCE = 0.02
+
+
+# Vertices keep this fraction of a voxel from their cube's faces, so vertices of neighbouring cubes never coincide.
+CELL_MARGIN = 1.0e-3
+
+
+# Crease edges fold by more than this angle (degrees) between their two triangles' normals.
+CREASE_ANGLE = 25.0
+
+
+# ---- tables ----
+
+
+def _patch_tables() -> tuple[np.ndarray, np.ndarray]:
+    """Per marching-cubes case: the patch (connected set of triangles sharing local edges) each crossed local edge
+    belongs to, (256, 12) int32 with -1 for edges the case does not cross, and the number of patches (256,) int32."""
+    tables = case_tables()
+    ranges, local = tables["case_to_tri_range"], tables["tri_local_inds"]
+    patch = np.full((256, 12), -1, dtype=np.int32)
+    count = np.zeros(256, dtype=np.int32)
+    for case in range(256):  # a one-off walk over the 256 table entries
+        tris = local[ranges[case] : ranges[case + 1]].reshape(-1, 3)
+        label = np.arange(12)
+        for _ in range(12):  # propagate the smallest label along each triangle until nothing changes
+            low = label[tris].min(axis=1)
+            new = label.copy()
+            np.minimum.at(new, tris.ravel(), np.repeat(low, 3))
+            if np.array_equal(new, label):
+                break
+            label = new
+        used = np.unique(tris)
+        roots = np.unique(label[used])
+        patch[case, used] = np.searchsorted(roots, label[used])
+        count[case] = len(roots)
+    return patch, count
+
+
+_TABLE_CACHE: dict = {}
+
+
+def _tables(device) -> dict:
+    """Warp arrays of the dual tables on ``device`` (built once per device)."""
+    key = str(device)
+    if key not in _TABLE_CACHE:
+        tables = case_tables()
+        patch, count = _patch_tables()
+        owner, upper, axis = tables["edge_owner"], tables["edge_upper"], tables["edge_axis"]
+        # the cube's place around each of its edges: its offsets along the edge's two other axes (b, c), numbered
+        # counter-clockwise about the edge's axis
+        place = {(0, 0): 0, (1, 0): 1, (1, 1): 2, (0, 1): 3}
+        position = np.array(
+            [
+                place[(int(CORNER_OFFSETS[o][(a + 1) % 3]), int(CORNER_OFFSETS[o][(a + 2) % 3]))]
+                for o, a in zip(owner, axis, strict=False)
+            ],
+            dtype=np.int32,
+        )
+        # the corner one step from corner 0 along each axis
+        step = np.array(
+            [int(np.flatnonzero((CORNER_OFFSETS == np.eye(3, dtype=np.int64)[a]).all(1))[0]) for a in range(3)]
+        )
+        _TABLE_CACHE[key] = {
+            "patch": wp.array(patch.ravel(), dtype=wp.int32, device=device),
+            "count": wp.array(count, dtype=wp.int32, device=device),
+            "owner": wp.array(owner, dtype=wp.int32, device=device),
+            "upper": wp.array(upper, dtype=wp.int32, device=device),
+            "axis": wp.array(axis, dtype=wp.int32, device=device),
+            "position": wp.array(position, dtype=wp.int32, device=device),
+            "offsets": wp.array(CORNER_OFFSETS.astype(np.float32), dtype=wp.vec3, device=device),
+            "step": wp.array(step.astype(np.int32), dtype=wp.int32, device=device),
+        }
+    return _TABLE_CACHE[key]
+
+
+# ---- patches and their vertices ----
+
+
+@wp.func
+def _case(cube_corners: wp.array2d[wp.int32], values: wp.array[wp.float32], cube: int):
+    """Marching-cubes case of a cube: bit c set when corner c is at or above the level (as ``marching``)."""
+    case = int(0)
+    for c in range(8):
+        if values[cube_corners[cube, c]] >= 0.0:
+            case = case | (1 << c)
+    return case
+
+
+@wp.kernel(enable_backward=False)
+def _count_patches_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    values: wp.array[wp.float32],
+    patch_count: wp.array[wp.int32],
+    counts: wp.array[wp.int32],
+):
+    cube = first + wp.tid()
+    counts[cube] = patch_count[_case(cube_corners, values, cube)]
+
+
+@wp.func
+def _trilinear_gradient(
+    v: wp.array[wp.float32], cube_corners: wp.array2d[wp.int32], cube: int, p: wp.vec3, offsets: wp.array[wp.vec3]
+):
+    """Gradient of the trilinear interpolant of a cube's corner values at local point ``p`` (unit cube)."""
+    g = wp.vec3(0.0)
+    for c in range(8):
+        o = offsets[c]
+        wx = wp.where(o[0] > 0.5, p[0], 1.0 - p[0])
+        wy = wp.where(o[1] > 0.5, p[1], 1.0 - p[1])
+        wz = wp.where(o[2] > 0.5, p[2], 1.0 - p[2])
+        f = v[cube_corners[cube, c]]
+        g += f * wp.vec3((2.0 * o[0] - 1.0) * wy * wz, (2.0 * o[1] - 1.0) * wx * wz, (2.0 * o[2] - 1.0) * wx * wy)
+    return g
+
+
+@wp.func
+def _clip_line(x: wp.vec3, d: wp.vec3, lo: float, hi: float):
+    """Parameter interval [s0, s1] of the line x + s d inside the box [lo, hi]^3 (s0 > s1 when it misses)."""
+    s0 = float(-1.0e30)
+    s1 = float(1.0e30)
+    for a in range(3):
+        if wp.abs(d[a]) < 1.0e-8:
+            if x[a] < lo or x[a] > hi:
+                s0 = 1.0
+                s1 = -1.0
+        else:
+            t0 = (lo - x[a]) / d[a]
+            t1 = (hi - x[a]) / d[a]
+            s0 = wp.max(s0, wp.min(t0, t1))
+            s1 = wp.min(s1, wp.max(t0, t1))
+    return wp.vec2(s0, s1)
+
+
+@wp.func
+def _inside(x: wp.vec3, lo: float, hi: float):
+    return x[0] >= lo and x[0] <= hi and x[1] >= lo and x[1] <= hi and x[2] >= lo and x[2] <= hi
+
+
+@wp.func
+def _solve_in_cube(ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, cutoff: float, lo: float, hi: float):
+    """Minimiser of |A x - b|^2 in the box [lo, hi]^3 near the mass point (``rhs = A^T b - A^T A mass``): the
+    truncated pseudo-inverse solution; if outside, the solution line of the two largest eigenvalues clipped to the
+    box; else the clamped point. Returns (x, rank used)."""
+    q, d = wp.eig3(ata)
+    # order the eigenvalues, largest first
+    i0 = int(0)
+    i2 = int(0)
+    for k in range(3):
+        if d[k] > d[i0]:
+            i0 = k
+        if d[k] < d[i2]:
+            i2 = k
+    if i0 == i2:
+        i2 = (i0 + 1) % 3
+    i1 = 3 - i0 - i2
+    top = d[i0]
+    x = mass
+    if top <= 0.0:
+        return wp.vec3(wp.clamp(x[0], lo, hi), wp.clamp(x[1], lo, hi), wp.clamp(x[2], lo, hi)), 0
+    e0 = wp.vec3(q[0, i0], q[1, i0], q[2, i0])
+    e1 = wp.vec3(q[0, i1], q[1, i1], q[2, i1])
+    e2 = wp.vec3(q[0, i2], q[1, i2], q[2, i2])
+    rank = int(1)
+    if d[i1] > cutoff * top:
+        rank = 2
+    if d[i2] > cutoff * top:
+        rank = 3
+    x1 = mass + e0 * (wp.dot(e0, rhs) / top)
+    x2 = x1
+    if rank >= 2:
+        x2 = x1 + e1 * (wp.dot(e1, rhs) / d[i1])
+    x3 = x2
+    if rank == 3:
+        x3 = x2 + e2 * (wp.dot(e2, rhs) / d[i2])
+        if _inside(x3, lo, hi):
+            return x3, 3
+    if rank >= 2:
+        if _inside(x2, lo, hi):
+            return x2, 2
+        s = _clip_line(x2, e2, lo, hi)
+        if s[0] <= s[1]:
+            t = wp.clamp(0.0, s[0], s[1])
+            return x2 + t * e2, 2
+    x = x1
+    if rank >= 2:
+        rank = 1
+    return wp.vec3(wp.clamp(x[0], lo, hi), wp.clamp(x[1], lo, hi), wp.clamp(x[2], lo, hi)), rank
+
+
+@wp.kernel(enable_backward=False)
+def _place_vertices_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    values: wp.array[wp.float32],
+    raw: wp.array[wp.float32],
+    coords: wp.array[wp.vec3i],
+    proj: wp.array[wp.vec3],
+    origin: wp.vec3,
+    spacing: float,
+    iso: float,
+    patch: wp.array[wp.int32],
+    edge_owner: wp.array[wp.int32],
+    edge_upper: wp.array[wp.int32],
+    edge_axis: wp.array[wp.int32],
+    edge_position: wp.array[wp.int32],
+    offsets: wp.array[wp.vec3],
+    vertex_start: wp.array[wp.int32],
+    cutoff: float,
+    tolerance: float,
+    margin: float,
+    verts: wp.array[wp.vec3],
+    ranks: wp.array[wp.int32],
+    quadrics: wp.array[wp.mat33],
+    linear: wp.array[wp.vec4],
+    edge_vertex: wp.array[wp.int32],
+):
+    """One vertex per patch of cube ``first + tid``: its plane quadric (node planes, or crossing planes where a
+    node's Hermite data does not hold), solved in the cube; its id written into the slots of the patch's edges."""
+    cube = first + wp.tid()
+    case = _case(cube_corners, values, cube)
+    base_vertex = int(0)
+    if cube > 0:
+        base_vertex = vertex_start[cube - 1]
+    n_patches = vertex_start[cube] - base_vertex
+    c0 = coords[cube_corners[cube, 0]]
+    corner = origin + spacing * wp.vec3(float(c0[0]) + 0.5, float(c0[1]) + 0.5, float(c0[2]) + 0.5)
+    inv = 1.0 / spacing
+    for p in range(n_patches):
+        ata = wp.mat33(0.0)
+        atb = wp.vec3(0.0)
+        btb = float(0.0)
+        mass = wp.vec3(0.0)
+        crossings = float(0.0)
+        planes = float(0.0)
+        vid = base_vertex + p
+        for e in range(12):
+            if patch[case * 12 + e] != p:
+                continue
+            ca = edge_owner[e]
+            cb = edge_upper[e]
+            ia = cube_corners[cube, ca]
+            ib = cube_corners[cube, cb]
+            va = values[ia]
+            vb = values[ib]
+            t = va / (va - vb)
+            xe = offsets[ca] + t * (offsets[cb] - offsets[ca])
+            mass += xe
+            crossings += 1.0
+            g = _trilinear_gradient(values, cube_corners, cube, xe, offsets)
+            gl = wp.length(g)
+            gn = wp.vec3(0.0)
+            if gl > 0.0:
+                gn = g / gl
+            for k in range(2):
+                c = ca
+                node = ia
+                if k == 1:
+                    c = cb
+                    node = ib
+                x = offsets[c]
+                q = (proj[node] - corner) * inv
+                d = x - q
+                dl = wp.length(d)
+                n = wp.vec3(0.0)
+                b = float(0.0)
+                use = int(0)
+                if dl > 1.0e-3 and wp.abs(dl - wp.abs(raw[node]) * inv) <= tolerance:
+                    n = d / dl
+                    if raw[node] < 0.0:
+                        n = -n
+                    if wp.dot(n, gn) > 0.0:
+                        b = wp.dot(n, q) + iso * inv
+                        use = 1
+                if use == 0 and gl > 0.0:
+                    n = gn
+                    b = wp.dot(n, xe)
+                    use = 1
+                if use == 1:
+                    ata += wp.outer(n, n)
+                    atb += n * b
+                    btb += b * b
+                    planes += 1.0
+        mass = mass / wp.max(crossings, 1.0)
+        lo = margin
+        hi = 1.0 - margin
+        x = mass
+        rank = int(0)
+        if planes > 0.0:
+            x, rank = _solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi)
+            # the quadric about the vertex, per plane: E(x + d) = d^T A d + 2 d . r + E(x)
+            w = 1.0 / planes
+            r = ata * x - atb
+            ex = wp.dot(x, ata * x) - 2.0 * wp.dot(x, atb) + btb
+            quadrics[vid] = ata * w
+            linear[vid] = wp.vec4(r[0] * w, r[1] * w, r[2] * w, wp.max(ex * w, 0.0))
+        else:
+            x = wp.vec3(wp.clamp(x[0], lo, hi), wp.clamp(x[1], lo, hi), wp.clamp(x[2], lo, hi))
+            quadrics[vid] = wp.mat33(0.0)
+            linear[vid] = wp.vec4(0.0)
+        verts[vid] = corner + spacing * x
+        ranks[vid] = rank
+        for e in range(12):
+            if patch[case * 12 + e] == p:
+                slot = cube_corners[cube, edge_owner[e]] * 3 + edge_axis[e]
+                edge_vertex[slot * 4 + edge_position[e]] = vid
+
+
+# ---- quads ----
+
+
+@wp.func
+def _quadric_at(
+    quadrics: wp.array[wp.mat33], linear: wp.array[wp.vec4], verts: wp.array[wp.vec3], v: int, y: wp.vec3, inv: float
+):
+    """Mean squared distance (in voxels^2) of point ``y`` to vertex ``v``'s planes."""
+    d = (y - verts[v]) * inv
+    r = linear[v]
+    return wp.dot(d, quadrics[v] * d) + 2.0 * (d[0] * r[0] + d[1] * r[1] + d[2] * r[2]) + r[3]
+
+
+@wp.kernel(enable_backward=False)
+def _quads_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    values: wp.array[wp.float32],
+    step: wp.array[wp.int32],
+    edge_vertex: wp.array[wp.int32],
+    emit: int,
+    quad_scan: wp.array[wp.int32],
+    verts: wp.array[wp.vec3],
+    quadrics: wp.array[wp.mat33],
+    linear: wp.array[wp.vec4],
+    inv: float,
+    counts: wp.array[wp.int32],
+    tris: wp.array2d[wp.int32],
+):
+    """The quads of the crossed edges leaving cube ``first + tid``'s corner 0 (each crossed edge has exactly one such
+    cube): with ``emit=0`` counted, with ``emit=1`` written as two triangles, outward, split along the diagonal
+    whose midpoint its two vertices' planes fit best."""
+    cube = first + wp.tid()
+    n0 = cube_corners[cube, 0]
+    v0 = values[n0]
+    out = int(0)
+    if emit == 1:
+        if cube > 0:
+            out = quad_scan[cube - 1]
+    count = int(0)
+    for a in range(3):
+        v1 = values[cube_corners[cube, step[a]]]
+        if (v0 < 0.0) == (v1 < 0.0):
+            continue
+        slot = (n0 * 3 + a) * 4
+        q0 = edge_vertex[slot]
+        q1 = edge_vertex[slot + 1]
+        q2 = edge_vertex[slot + 2]
+        q3 = edge_vertex[slot + 3]
+        if q0 < 0 or q1 < 0 or q2 < 0 or q3 < 0:
+            continue
+        if emit == 1:
+            if v0 >= 0.0:  # inside above: the outward normal is -axis, so turn the other way round
+                t = q1
+                q1 = q3
+                q3 = t
+            m02 = 0.5 * (verts[q0] + verts[q2])
+            m13 = 0.5 * (verts[q1] + verts[q3])
+            e02 = _quadric_at(quadrics, linear, verts, q0, m02, inv) + _quadric_at(
+                quadrics, linear, verts, q2, m02, inv
+            )
+            e13 = _quadric_at(quadrics, linear, verts, q1, m13, inv) + _quadric_at(
+                quadrics, linear, verts, q3, m13, inv
+            )
+            row = 2 * (out + count)
+            if e02 <= e13:
+                tris[row, 0] = q0
+                tris[row, 1] = q1
+                tris[row, 2] = q2
+                tris[row + 1, 0] = q0
+                tris[row + 1, 1] = q2
+                tris[row + 1, 2] = q3
+            else:
+                tris[row, 0] = q0
+                tris[row, 1] = q1
+                tris[row, 2] = q3
+                tris[row + 1, 0] = q1
+                tris[row + 1, 1] = q2
+                tris[row + 1, 2] = q3
+        count += 1
+    if emit == 0:
+        counts[cube] = count
+
+
+def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, iso=0.0):
+    """Dual marching cubes over active cubes, each vertex at its patch's plane-quadric minimiser within its cube.
+
+    Args:
+        cube_corners: (M, 8) int32 Warp array: node indices of each active cube's corners (``CORNER_OFFSETS`` order).
+        values: (N,) float32 Warp array of node values minus ``iso``, none exactly 0 (the nudged values marching
+            cubes uses, so both agree on every cube's case).
+        raw: (N,) float32 Warp array of the nodes' signed distances (before ``iso``).
+        coords: (N,) vec3i Warp array of the nodes' lattice coordinates (node at ``origin + (c + 0.5) * spacing``).
+        proj: (N,) vec3 Warp array of each node's closest point on the surface its value came from.
+        origin: (3,) world position of lattice point (0, 0, 0)'s cell minimum.
+        spacing: Lattice spacing.
+        iso: Level extracted (planes are moved by it along their normals).
+    Returns:
+        ``verts`` (V, 3) float32, ``tris`` (T, 3) int32 (outward, counter-clockwise), ``ranks`` (V,) int32 (number
+        of significant eigenvalues of each vertex's quadric: 1 smooth, 2 crease, 3 corner; 0 without planes).
+    """
+    device = cube_corners.device
+    tables = _tables(device)
+    m, n = cube_corners.shape[0], values.shape[0]
+    counts = wp.empty(m, dtype=wp.int32, device=device)
+    launch_split(_count_patches_kernel, m, lambda s, c: [s, cube_corners, values, tables["count"], counts], device)
+    vertex_start = wp.empty(m, dtype=wp.int32, device=device)
+    wp.utils.array_scan(counts, vertex_start, inclusive=True)
+    n_verts = int(vertex_start[-1:].numpy()[0])
+    verts = wp.empty(n_verts, dtype=wp.vec3, device=device)
+    ranks = wp.empty(n_verts, dtype=wp.int32, device=device)
+    quadrics = wp.empty(n_verts, dtype=wp.mat33, device=device)
+    linear = wp.empty(n_verts, dtype=wp.vec4, device=device)
+    edge_vertex = wp.full(12 * n, -1, dtype=wp.int32, device=device)
+    origin_wp = wp.vec3(*(float(x) for x in origin))
+    launch_split(
+        _place_vertices_kernel,
+        m,
+        lambda s, c: [
+            s,
+            cube_corners,
+            values,
+            raw,
+            coords,
+            proj,
+            origin_wp,
+            float(spacing),
+            float(iso),
+            tables["patch"],
+            tables["owner"],
+            tables["upper"],
+            tables["axis"],
+            tables["position"],
+            tables["offsets"],
+            vertex_start,
+            EIGEN_CUTOFF,
+            HERMITE_TOLERANCE,
+            CELL_MARGIN,
+            verts,
+            ranks,
+            quadrics,
+            linear,
+            edge_vertex,
+        ],
+        device,
+    )
+    inv = 1.0 / float(spacing)
+    no_tris = wp.empty((0, 3), dtype=wp.int32, device=device)
+
+    def quads(emit, scan, out_counts, tris):
+        launch_split(
+            _quads_kernel,
+            m,
+            lambda s, c: [
+                s,
+                cube_corners,
+                values,
+                tables["step"],
+                edge_vertex,
+                emit,
+                scan,
+                verts,
+                quadrics,
+                linear,
+                inv,
+                out_counts,
+                tris,
+            ],
+            device,
+        )
+
+    quads(0, counts, counts, no_tris)
+    quad_scan = wp.empty(m, dtype=wp.int32, device=device)
+    wp.utils.array_scan(counts, quad_scan, inclusive=True)
+    n_quads = int(quad_scan[-1:].numpy()[0])
+    tris = wp.empty((2 * n_quads, 3), dtype=wp.int32, device=device)
+    quads(1, quad_scan, counts, tris)
+    return verts.numpy().reshape(-1, 3), tris.numpy(), ranks.numpy()
+
+
+# ---- creases and the entry point ----
+
+
+def crease_edges(verts, tris, ranks, angle: float = CREASE_ANGLE) -> np.ndarray:
+    """The edges of a closed mesh along which it folds at a reconstructed crease.
+
+    Args:
+        verts: (V, 3) float vertex positions.
+        tris: (T, 3) int triangles of a closed, consistently oriented mesh.
+        ranks: (V,) int quadric ranks from :func:`contour_dual` (2 or more: on a crease or corner).
+        angle: Smallest angle (degrees) between the two triangles' normals.
+    Returns:
+        (E, 2) int32 vertex index pairs (smaller index first), each an edge of ``tris`` between two crease or corner
+        vertices whose triangles' normals differ by more than ``angle``.
+    """
+    tris = np.asarray(tris, dtype=np.int64)
+    feature = np.asarray(ranks) >= 2
+    if len(tris) == 0 or not feature.any():
+        return np.zeros((0, 2), dtype=np.int32)
+    # the triangle sides between two feature vertices, each undirected edge seen from both of its triangles
+    sides = np.stack([tris, np.roll(tris, -1, axis=1)], axis=-1).reshape(-1, 2)
+    face = np.repeat(np.arange(len(tris)), 3)
+    keep = feature[sides[:, 0]] & feature[sides[:, 1]]
+    sides, face = sides[keep], face[keep]
+    key = np.sort(sides, axis=1)
+    code = key[:, 0] * np.int64(len(verts)) + key[:, 1]
+    order = np.argsort(code, kind="stable")
+    code, key, face = code[order], key[order], face[order]
+    pair = np.flatnonzero(code[1:] == code[:-1])
+    if len(pair) == 0:
+        return np.zeros((0, 2), dtype=np.int32)
+    v = np.asarray(verts, dtype=np.float64)
+    fa, fb = face[pair], face[pair + 1]
+    na = np.cross(v[tris[fa, 1]] - v[tris[fa, 0]], v[tris[fa, 2]] - v[tris[fa, 0]])
+    nb = np.cross(v[tris[fb, 1]] - v[tris[fb, 0]], v[tris[fb, 2]] - v[tris[fb, 0]])
+    cos = np.einsum("ij,ij->i", na, nb) / np.maximum(np.linalg.norm(na, axis=1) * np.linalg.norm(nb, axis=1), 1e-300)
+    fold = cos < np.cos(np.radians(angle))
+    return key[pair[fold]].astype(np.int32)
+
+
+def extract_sharp(field: AdaptiveField, iso: float = 0.0):
+    """Feature-preserving surface of a field's finest level (see the module docstring).
+
+    Args:
+        field: An AdaptiveField.
+        iso: Level to extract (world units).
+    Returns:
+        ``verts`` (V, 3) float32, ``tris`` (T, 3) int32 (outward, counter-clockwise) and ``creases`` (E, 2) int32
+        vertex index pairs of the crease edges (:func:`crease_edges`).
+    """
+    n0 = field.level_counts[0]
+    coords, values, proj = field.coords[:n0], field.values[:n0], field.proj[:n0]
+    if field.levels == 1:
+        coords_np = field.coords.numpy()
+        cubes = lattice_cubes(
+            coords_np,
+            field.values.numpy().astype(np.float64),
+            origin=field.origin,
+            spacing=field.voxel_size,
+            iso=iso,
+            device=field.device,
+        )
+        if cubes is not None and cubes["order"] is not None:
+            order = cubes["order"]
+            coords = wp.array(coords_np[order], dtype=wp.vec3i, device=field.device)
+            values = wp.array(field.values.numpy()[order], dtype=wp.float32, device=field.device)
+            proj = wp.array(field.proj.numpy()[order], dtype=wp.vec3, device=field.device)
+    else:
+        tree = (field.child, field.level_offsets[field.levels - 1], field.top_dims, field.levels)
+        cubes = octree_level_cubes(coords, values, tree, origin=field.origin, spacing=field.voxel_size, iso=iso)
+    if cubes is None:
+        verts, tris = empty_mesh()
+        return verts, tris, np.zeros((0, 2), dtype=np.int32)
+    verts, tris, ranks = contour_dual(
+        cubes["cube_corners"],
+        cubes["shifted"],
+        values,
+        coords,
+        proj,
+        origin=field.origin,
+        spacing=field.voxel_size,
+        iso=iso,
+    )
+    return verts, tris, crease_edges(verts, tris, ranks)
