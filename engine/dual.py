@@ -42,6 +42,11 @@ if TYPE_CHECKING:  # the field type imports this module for its surface
 EIGEN_CUTOFF = 0.02
 
 
+# A patch whose normals all lie within this cosine of its first one is smooth: solved along their mean normal
+# without an eigen decomposition (8 degrees, well inside EIGEN_CUTOFF's).
+SMOOTH_COS = 0.99
+
+
 # A node's plane is used when its value is its distance to its closest point within this fraction of a voxel.
 HERMITE_TOLERANCE = 0.02
 
@@ -91,29 +96,43 @@ def _tables(device) -> dict:
         tables = case_tables()
         patch, count = _patch_tables()
         owner, upper, axis = tables["edge_owner"], tables["edge_upper"], tables["edge_axis"]
-        # the cube's place around each of its edges: its offsets along the edge's two other axes (b, c), numbered
-        # counter-clockwise about the edge's axis
-        place = {(0, 0): 0, (1, 0): 1, (1, 1): 2, (0, 1): 3}
-        position = np.array(
-            [
-                place[(int(CORNER_OFFSETS[o][(a + 1) % 3]), int(CORNER_OFFSETS[o][(a + 2) % 3]))]
-                for o, a in zip(owner, axis, strict=False)
-            ],
-            dtype=np.int32,
-        )
-        # the corner one step from corner 0 along each axis
-        step = np.array(
-            [int(np.flatnonzero((CORNER_OFFSETS == np.eye(3, dtype=np.int64)[a]).all(1))[0]) for a in range(3)]
-        )
+        # A crossed edge along axis a is shared by the four cubes whose minimum corners are its lower end minus
+        # s_b e_b + s_c e_c (b, c the other axes, s in {0, 1}), numbered counter-clockwise about the axis:
+        # (0, 0), (1, 0), (1, 1), (0, 1). Its quad is written by the cube at (1, 1), whose corners are the others'
+        # minimum corners: per axis and place, that corner (quad_corner) and the edge in that cube (quad_edge).
+        places = ((0, 0), (1, 0), (1, 1), (0, 1))
+
+        def corner_at(off):
+            return int(np.flatnonzero((CORNER_OFFSETS == np.asarray(off)).all(1))[0])
+
+        def edge_at(axis_, off):
+            return int(next(e for e in range(12) if axis[e] == axis_ and corner_at(off) == owner[e]))
+
+        quad_corner, quad_edge, quad_ends = [], [], []
+        for ax in range(3):
+            b_, c_ = (ax + 1) % 3, (ax + 2) % 3
+            for sb, sc in places:
+                off = np.zeros(3, dtype=np.int64)
+                off[b_], off[c_] = 1 - sb, 1 - sc
+                quad_corner.append(corner_at(off))
+                local = np.zeros(3, dtype=np.int64)
+                local[b_], local[c_] = sb, sc
+                quad_edge.append(edge_at(ax, local))
+            end = np.zeros(3, dtype=np.int64)
+            end[b_], end[c_] = 1, 1
+            quad_ends.append(corner_at(end))
+            end[ax] = 1
+            quad_ends.append(corner_at(end))
         _TABLE_CACHE[key] = {
             "patch": wp.array(patch.ravel(), dtype=wp.int32, device=device),
             "count": wp.array(count, dtype=wp.int32, device=device),
             "owner": wp.array(owner, dtype=wp.int32, device=device),
             "upper": wp.array(upper, dtype=wp.int32, device=device),
             "axis": wp.array(axis, dtype=wp.int32, device=device),
-            "position": wp.array(position, dtype=wp.int32, device=device),
             "offsets": wp.array(CORNER_OFFSETS.astype(np.float32), dtype=wp.vec3, device=device),
-            "step": wp.array(step.astype(np.int32), dtype=wp.int32, device=device),
+            "quad_corner": wp.array(quad_corner, dtype=wp.int32, device=device),
+            "quad_edge": wp.array(quad_edge, dtype=wp.int32, device=device),
+            "quad_ends": wp.array(quad_ends, dtype=wp.int32, device=device),
         }
     return _TABLE_CACHE[key]
 
@@ -137,25 +156,38 @@ def _count_patches_kernel(
     cube_corners: wp.array2d[wp.int32],
     values: wp.array[wp.float32],
     patch_count: wp.array[wp.int32],
+    quad_ends: wp.array[wp.int32],
     counts: wp.array[wp.int32],
+    quad_counts: wp.array[wp.int32],
+    cube_of_node: wp.array[wp.int32],
 ):
+    """Patches of cube ``first + tid``, and the crossed edges whose quads it writes (see ``_quads_kernel``); the
+    cube's index at its minimum corner's node."""
     cube = first + wp.tid()
     counts[cube] = patch_count[_case(cube_corners, values, cube)]
+    cube_of_node[cube_corners[cube, 0]] = cube
+    quads = int(0)
+    for a in range(3):
+        v0 = values[cube_corners[cube, quad_ends[2 * a]]]
+        v1 = values[cube_corners[cube, quad_ends[2 * a + 1]]]
+        if (v0 < 0.0) != (v1 < 0.0):
+            quads += 1
+    quad_counts[cube] = quads
+
+
+vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
 
 @wp.func
-def _trilinear_gradient(
-    v: wp.array[wp.float32], cube_corners: wp.array2d[wp.int32], cube: int, p: wp.vec3, offsets: wp.array[wp.vec3]
-):
-    """Gradient of the trilinear interpolant of a cube's corner values at local point ``p`` (unit cube)."""
+def _trilinear_gradient(v: vec8, p: wp.vec3, offsets: wp.array[wp.vec3]):
+    """Gradient of the trilinear interpolant of a cube's corner values ``v`` at local point ``p`` (unit cube)."""
     g = wp.vec3(0.0)
     for c in range(8):
         o = offsets[c]
         wx = wp.where(o[0] > 0.5, p[0], 1.0 - p[0])
         wy = wp.where(o[1] > 0.5, p[1], 1.0 - p[1])
         wz = wp.where(o[2] > 0.5, p[2], 1.0 - p[2])
-        f = v[cube_corners[cube, c]]
-        g += f * wp.vec3((2.0 * o[0] - 1.0) * wy * wz, (2.0 * o[1] - 1.0) * wx * wz, (2.0 * o[2] - 1.0) * wx * wy)
+        g += v[c] * wp.vec3((2.0 * o[0] - 1.0) * wy * wz, (2.0 * o[1] - 1.0) * wx * wz, (2.0 * o[2] - 1.0) * wx * wy)
     return g
 
 
@@ -233,6 +265,16 @@ def _solve_in_cube(ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, cutoff: float, lo
     return wp.vec3(wp.clamp(x[0], lo, hi), wp.clamp(x[1], lo, hi), wp.clamp(x[2], lo, hi)), rank
 
 
+@wp.func
+def _solve_smooth(ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, normal_sum: wp.vec3):
+    """The rank-1 minimiser when all normals nearly agree: the mass point moved along their mean normal."""
+    e0 = wp.normalize(normal_sum)
+    lam = wp.dot(e0, ata * e0)
+    if lam <= 0.0:
+        return mass
+    return mass + e0 * (wp.dot(e0, rhs) / lam)
+
+
 @wp.kernel(enable_backward=False)
 def _place_vertices_kernel(
     first: int,
@@ -248,10 +290,10 @@ def _place_vertices_kernel(
     edge_owner: wp.array[wp.int32],
     edge_upper: wp.array[wp.int32],
     edge_axis: wp.array[wp.int32],
-    edge_position: wp.array[wp.int32],
     offsets: wp.array[wp.vec3],
     vertex_start: wp.array[wp.int32],
     cutoff: float,
+    smooth_cos: float,
     tolerance: float,
     margin: float,
     verts: wp.array[wp.vec3],
@@ -263,92 +305,109 @@ def _place_vertices_kernel(
     """One vertex per patch of cube ``first + tid``: its plane quadric (node planes, or crossing planes where a
     node's Hermite data does not hold), solved in the cube; its id written into the slots of the patch's edges."""
     cube = first + wp.tid()
-    case = _case(cube_corners, values, cube)
     base_vertex = int(0)
     if cube > 0:
         base_vertex = vertex_start[cube - 1]
     n_patches = vertex_start[cube] - base_vertex
-    c0 = coords[cube_corners[cube, 0]]
+    ids = wp.vector(0, 0, 0, 0, 0, 0, 0, 0, length=8, dtype=int)
+    vals = vec8()
+    case = int(0)
+    for c in range(8):
+        ids[c] = cube_corners[cube, c]
+        vals[c] = values[ids[c]]
+        if vals[c] >= 0.0:
+            case = case | (1 << c)
+    c0 = coords[ids[0]]
     corner = origin + spacing * wp.vec3(float(c0[0]) + 0.5, float(c0[1]) + 0.5, float(c0[2]) + 0.5)
     inv = 1.0 / spacing
+    lo = margin
+    hi = 1.0 - margin
     for p in range(n_patches):
+        # the mass point of the patch's edge crossings, the corners at their ends, and the interpolant's gradient
+        mass = wp.vec3(0.0)
+        crossings = float(0.0)
+        ends = int(0)
+        for e in range(12):
+            if patch[case * 12 + e] == p:
+                ca = edge_owner[e]
+                cb = edge_upper[e]
+                t = vals[ca] / (vals[ca] - vals[cb])
+                mass += offsets[ca] + t * (offsets[cb] - offsets[ca])
+                crossings += 1.0
+                ends = ends | (1 << ca) | (1 << cb)
+        mass = mass / crossings
+        g_mass = _trilinear_gradient(vals, mass, offsets)
         ata = wp.mat33(0.0)
         atb = wp.vec3(0.0)
         btb = float(0.0)
-        mass = wp.vec3(0.0)
-        crossings = float(0.0)
         planes = float(0.0)
-        vid = base_vertex + p
-        for e in range(12):
-            if patch[case * 12 + e] != p:
+        normal_sum = wp.vec3(0.0)
+        first_normal = wp.vec3(0.0)
+        min_cos = float(1.0)
+        fallback = float(0.0)
+        for c in range(8):
+            if (ends >> c) & 1 == 0:
                 continue
-            ca = edge_owner[e]
-            cb = edge_upper[e]
-            ia = cube_corners[cube, ca]
-            ib = cube_corners[cube, cb]
-            va = values[ia]
-            vb = values[ib]
-            t = va / (va - vb)
-            xe = offsets[ca] + t * (offsets[cb] - offsets[ca])
-            mass += xe
-            crossings += 1.0
-            g = _trilinear_gradient(values, cube_corners, cube, xe, offsets)
-            gl = wp.length(g)
-            gn = wp.vec3(0.0)
-            if gl > 0.0:
-                gn = g / gl
-            for k in range(2):
-                c = ca
-                node = ia
-                if k == 1:
-                    c = cb
-                    node = ib
-                x = offsets[c]
-                q = (proj[node] - corner) * inv
-                d = x - q
-                dl = wp.length(d)
-                n = wp.vec3(0.0)
-                b = float(0.0)
-                use = int(0)
-                if dl > 1.0e-3 and wp.abs(dl - wp.abs(raw[node]) * inv) <= tolerance:
-                    n = d / dl
-                    if raw[node] < 0.0:
-                        n = -n
-                    if wp.dot(n, gn) > 0.0:
-                        b = wp.dot(n, q) + iso * inv
-                        use = 1
-                if use == 0 and gl > 0.0:
-                    n = gn
-                    b = wp.dot(n, xe)
-                    use = 1
-                if use == 1:
+            node = ids[c]
+            q = (proj[node] - corner) * inv
+            d = offsets[c] - q
+            dl = wp.length(d)
+            r = raw[node]
+            use = int(0)
+            if dl > 1.0e-3 and wp.abs(dl - wp.abs(r) * inv) <= tolerance:
+                n = d / dl
+                if r < 0.0:
+                    n = -n
+                if wp.dot(n, g_mass) > 0.0:  # not the far side of a plate thinner than a cell
+                    b = wp.dot(n, q) + iso * inv
                     ata += wp.outer(n, n)
                     atb += n * b
                     btb += b * b
                     planes += 1.0
-        mass = mass / wp.max(crossings, 1.0)
-        lo = margin
-        hi = 1.0 - margin
+                    normal_sum += n
+                    if planes == 1.0:
+                        first_normal = n
+                    min_cos = wp.min(min_cos, wp.dot(n, first_normal))
+                    use = 1
+            if use == 0:
+                fallback += 1.0
+        gl = wp.length(g_mass)
+        if fallback > 0.0 and gl > 0.0:
+            # corners whose Hermite data does not hold: the interpolant's tangent plane through the mass point
+            n = g_mass / gl
+            b = wp.dot(n, mass)
+            ata += fallback * wp.outer(n, n)
+            atb += fallback * n * b
+            btb += fallback * b * b
+            planes += fallback
+            normal_sum += fallback * n
+            if planes == fallback:
+                first_normal = n
+            min_cos = wp.min(min_cos, wp.dot(n, first_normal))
+        vid = base_vertex + p
         x = mass
         rank = int(0)
         if planes > 0.0:
-            x, rank = _solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi)
+            if min_cos >= smooth_cos:
+                x = _solve_smooth(ata, atb - ata * mass, mass, normal_sum)
+                rank = 1
+                x = wp.vec3(wp.clamp(x[0], lo, hi), wp.clamp(x[1], lo, hi), wp.clamp(x[2], lo, hi))
+            else:
+                x, rank = _solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi)
             # the quadric about the vertex, per plane: E(x + d) = d^T A d + 2 d . r + E(x)
             w = 1.0 / planes
-            r = ata * x - atb
+            grad = ata * x - atb
             ex = wp.dot(x, ata * x) - 2.0 * wp.dot(x, atb) + btb
             quadrics[vid] = ata * w
-            linear[vid] = wp.vec4(r[0] * w, r[1] * w, r[2] * w, wp.max(ex * w, 0.0))
+            linear[vid] = wp.vec4(grad[0] * w, grad[1] * w, grad[2] * w, wp.max(ex * w, 0.0))
         else:
-            x = wp.vec3(wp.clamp(x[0], lo, hi), wp.clamp(x[1], lo, hi), wp.clamp(x[2], lo, hi))
             quadrics[vid] = wp.mat33(0.0)
             linear[vid] = wp.vec4(0.0)
         verts[vid] = corner + spacing * x
         ranks[vid] = rank
         for e in range(12):
             if patch[case * 12 + e] == p:
-                slot = cube_corners[cube, edge_owner[e]] * 3 + edge_axis[e]
-                edge_vertex[slot * 4 + edge_position[e]] = vid
+                edge_vertex[cube * 12 + e] = vid
 
 
 # ---- quads ----
@@ -369,70 +428,71 @@ def _quads_kernel(
     first: int,
     cube_corners: wp.array2d[wp.int32],
     values: wp.array[wp.float32],
-    step: wp.array[wp.int32],
+    cube_of_node: wp.array[wp.int32],
+    quad_corner: wp.array[wp.int32],
+    quad_edge: wp.array[wp.int32],
+    quad_ends: wp.array[wp.int32],
     edge_vertex: wp.array[wp.int32],
-    emit: int,
     quad_scan: wp.array[wp.int32],
     verts: wp.array[wp.vec3],
     quadrics: wp.array[wp.mat33],
     linear: wp.array[wp.vec4],
     inv: float,
-    counts: wp.array[wp.int32],
     tris: wp.array2d[wp.int32],
 ):
-    """The quads of the crossed edges leaving cube ``first + tid``'s corner 0 (each crossed edge has exactly one such
-    cube): with ``emit=0`` counted, with ``emit=1`` written as two triangles, outward, split along the diagonal
-    whose midpoint its two vertices' planes fit best."""
+    """The quads of the crossed edges whose four cubes cube ``first + tid`` completes as the one below both other
+    axes (each crossed edge has exactly one such cube), as two triangles, outward, split along the diagonal whose
+    midpoint its two vertices' planes fit best; -1 rows where one of the four cubes is missing (the band's edge)."""
     cube = first + wp.tid()
-    n0 = cube_corners[cube, 0]
-    v0 = values[n0]
     out = int(0)
-    if emit == 1:
-        if cube > 0:
-            out = quad_scan[cube - 1]
+    if cube > 0:
+        out = quad_scan[cube - 1]
     count = int(0)
     for a in range(3):
-        v1 = values[cube_corners[cube, step[a]]]
+        v0 = values[cube_corners[cube, quad_ends[2 * a]]]
+        v1 = values[cube_corners[cube, quad_ends[2 * a + 1]]]
         if (v0 < 0.0) == (v1 < 0.0):
             continue
-        slot = (n0 * 3 + a) * 4
-        q0 = edge_vertex[slot]
-        q1 = edge_vertex[slot + 1]
-        q2 = edge_vertex[slot + 2]
-        q3 = edge_vertex[slot + 3]
-        if q0 < 0 or q1 < 0 or q2 < 0 or q3 < 0:
-            continue
-        if emit == 1:
-            if v0 >= 0.0:  # inside above: the outward normal is -axis, so turn the other way round
-                t = q1
-                q1 = q3
-                q3 = t
-            m02 = 0.5 * (verts[q0] + verts[q2])
-            m13 = 0.5 * (verts[q1] + verts[q3])
-            e02 = _quadric_at(quadrics, linear, verts, q0, m02, inv) + _quadric_at(
-                quadrics, linear, verts, q2, m02, inv
-            )
-            e13 = _quadric_at(quadrics, linear, verts, q1, m13, inv) + _quadric_at(
-                quadrics, linear, verts, q3, m13, inv
-            )
-            row = 2 * (out + count)
-            if e02 <= e13:
-                tris[row, 0] = q0
-                tris[row, 1] = q1
-                tris[row, 2] = q2
-                tris[row + 1, 0] = q0
-                tris[row + 1, 1] = q2
-                tris[row + 1, 2] = q3
+        q = wp.vector(-1, -1, -1, -1, length=4, dtype=int)
+        complete = int(1)
+        for k in range(4):
+            other = cube_of_node[cube_corners[cube, quad_corner[4 * a + k]]]
+            if other < 0:
+                complete = 0
             else:
-                tris[row, 0] = q0
-                tris[row, 1] = q1
-                tris[row, 2] = q3
-                tris[row + 1, 0] = q1
-                tris[row + 1, 1] = q2
-                tris[row + 1, 2] = q3
+                q[k] = edge_vertex[other * 12 + quad_edge[4 * a + k]]
+        row = 2 * (out + count)
         count += 1
-    if emit == 0:
-        counts[cube] = count
+        if complete == 0:
+            for k in range(3):
+                tris[row, k] = -1
+                tris[row + 1, k] = -1
+            continue
+        q0 = q[0]
+        q1 = q[1]
+        q2 = q[2]
+        q3 = q[3]
+        if v0 >= 0.0:  # inside above: the outward normal is -axis, so turn the other way round
+            q1 = q[3]
+            q3 = q[1]
+        m02 = 0.5 * (verts[q0] + verts[q2])
+        m13 = 0.5 * (verts[q1] + verts[q3])
+        e02 = _quadric_at(quadrics, linear, verts, q0, m02, inv) + _quadric_at(quadrics, linear, verts, q2, m02, inv)
+        e13 = _quadric_at(quadrics, linear, verts, q1, m13, inv) + _quadric_at(quadrics, linear, verts, q3, m13, inv)
+        if e02 <= e13:
+            tris[row, 0] = q0
+            tris[row, 1] = q1
+            tris[row, 2] = q2
+            tris[row + 1, 0] = q0
+            tris[row + 1, 1] = q2
+            tris[row + 1, 2] = q3
+        else:
+            tris[row, 0] = q0
+            tris[row, 1] = q1
+            tris[row, 2] = q3
+            tris[row + 1, 0] = q1
+            tris[row + 1, 1] = q2
+            tris[row + 1, 2] = q3
 
 
 def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, iso=0.0):
@@ -456,15 +516,25 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
     tables = _tables(device)
     m, n = cube_corners.shape[0], values.shape[0]
     counts = wp.empty(m, dtype=wp.int32, device=device)
-    launch_split(_count_patches_kernel, m, lambda s, c: [s, cube_corners, values, tables["count"], counts], device)
+    quad_counts = wp.empty(m, dtype=wp.int32, device=device)
+    cube_of_node = wp.full(n, -1, dtype=wp.int32, device=device)
+    launch_split(
+        _count_patches_kernel,
+        m,
+        lambda s, c: [s, cube_corners, values, tables["count"], tables["quad_ends"], counts, quad_counts, cube_of_node],
+        device,
+    )
     vertex_start = wp.empty(m, dtype=wp.int32, device=device)
     wp.utils.array_scan(counts, vertex_start, inclusive=True)
+    quad_scan = counts  # reused
+    wp.utils.array_scan(quad_counts, quad_scan, inclusive=True)
     n_verts = int(vertex_start[-1:].numpy()[0])
+    n_quads = int(quad_scan[-1:].numpy()[0])
     verts = wp.empty(n_verts, dtype=wp.vec3, device=device)
     ranks = wp.empty(n_verts, dtype=wp.int32, device=device)
     quadrics = wp.empty(n_verts, dtype=wp.mat33, device=device)
     linear = wp.empty(n_verts, dtype=wp.vec4, device=device)
-    edge_vertex = wp.full(12 * n, -1, dtype=wp.int32, device=device)
+    edge_vertex = wp.empty(12 * m, dtype=wp.int32, device=device)
     origin_wp = wp.vec3(*(float(x) for x in origin))
     launch_split(
         _place_vertices_kernel,
@@ -483,10 +553,10 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             tables["owner"],
             tables["upper"],
             tables["axis"],
-            tables["position"],
             tables["offsets"],
             vertex_start,
             EIGEN_CUTOFF,
+            SMOOTH_COS,
             HERMITE_TOLERANCE,
             CELL_MARGIN,
             verts,
@@ -497,38 +567,32 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
         ],
         device,
     )
-    inv = 1.0 / float(spacing)
-    no_tris = wp.empty((0, 3), dtype=wp.int32, device=device)
-
-    def quads(emit, scan, out_counts, tris):
-        launch_split(
-            _quads_kernel,
-            m,
-            lambda s, c: [
-                s,
-                cube_corners,
-                values,
-                tables["step"],
-                edge_vertex,
-                emit,
-                scan,
-                verts,
-                quadrics,
-                linear,
-                inv,
-                out_counts,
-                tris,
-            ],
-            device,
-        )
-
-    quads(0, counts, counts, no_tris)
-    quad_scan = wp.empty(m, dtype=wp.int32, device=device)
-    wp.utils.array_scan(counts, quad_scan, inclusive=True)
-    n_quads = int(quad_scan[-1:].numpy()[0])
     tris = wp.empty((2 * n_quads, 3), dtype=wp.int32, device=device)
-    quads(1, quad_scan, counts, tris)
-    return verts.numpy().reshape(-1, 3), tris.numpy(), ranks.numpy()
+    launch_split(
+        _quads_kernel,
+        m,
+        lambda s, c: [
+            s,
+            cube_corners,
+            values,
+            cube_of_node,
+            tables["quad_corner"],
+            tables["quad_edge"],
+            tables["quad_ends"],
+            edge_vertex,
+            quad_scan,
+            verts,
+            quadrics,
+            linear,
+            1.0 / float(spacing),
+            tris,
+        ],
+        device,
+    )
+    tris_np = tris.numpy()
+    if n_quads and tris_np[:, 0].min() < 0:  # quads at the band's edge, where a cube is missing (open surface)
+        tris_np = tris_np[tris_np[:, 0] >= 0]
+    return verts.numpy().reshape(-1, 3), tris_np, ranks.numpy()
 
 
 # ---- creases and the entry point ----
@@ -551,8 +615,9 @@ def crease_edges(verts, tris, ranks, angle: float = CREASE_ANGLE) -> np.ndarray:
     if len(tris) == 0 or not feature.any():
         return np.zeros((0, 2), dtype=np.int32)
     # the triangle sides between two feature vertices, each undirected edge seen from both of its triangles
-    sides = np.stack([tris, np.roll(tris, -1, axis=1)], axis=-1).reshape(-1, 2)
-    face = np.repeat(np.arange(len(tris)), 3)
+    candidates = np.flatnonzero(feature[tris].sum(axis=1) >= 2)
+    sides = np.stack([tris[candidates], np.roll(tris[candidates], -1, axis=1)], axis=-1).reshape(-1, 2)
+    face = np.repeat(candidates, 3)
     keep = feature[sides[:, 0]] & feature[sides[:, 1]]
     sides, face = sides[keep], face[keep]
     key = np.sort(sides, axis=1)
@@ -571,12 +636,13 @@ def crease_edges(verts, tris, ranks, angle: float = CREASE_ANGLE) -> np.ndarray:
     return key[pair[fold]].astype(np.int32)
 
 
-def extract_sharp(field: AdaptiveField, iso: float = 0.0):
+def extract_sharp(field: AdaptiveField, iso: float = 0.0, *, creases: bool = True):
     """Feature-preserving surface of a field's finest level (see the module docstring).
 
     Args:
         field: An AdaptiveField.
         iso: Level to extract (world units).
+        creases: Find the crease edges (else ``creases`` is empty).
     Returns:
         ``verts`` (V, 3) float32, ``tris`` (T, 3) int32 (outward, counter-clockwise) and ``creases`` (E, 2) int32
         vertex index pairs of the crease edges (:func:`crease_edges`).
@@ -614,4 +680,6 @@ def extract_sharp(field: AdaptiveField, iso: float = 0.0):
         spacing=field.voxel_size,
         iso=iso,
     )
+    if not creases:
+        return verts, tris, np.zeros((0, 2), dtype=np.int32)
     return verts, tris, crease_edges(verts, tris, ranks)

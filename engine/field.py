@@ -275,7 +275,7 @@ class AdaptiveField:
         if not np.isfinite(iso):
             raise ValueError(f"Expected a finite 'iso', but got {iso}.")
         if sharp:
-            verts, tris, creases = extract_sharp(self, iso)
+            verts, tris, creases = extract_sharp(self, iso, creases=return_creases)
         else:
             verts, tris = self._marching_cubes(iso)
             creases = np.zeros((0, 2), dtype=np.int32)
