@@ -30,7 +30,7 @@ import numpy as np
 import warp as wp
 
 from .extract import lattice_cubes, octree_level_cubes
-from .marching import CORNER_OFFSETS, case_tables, empty_mesh
+from .marching import CORNER_OFFSETS, HAS_SHARED_CORNER_CORE, case_tables, empty_mesh
 from .parallel import launch_split
 
 if TYPE_CHECKING:  # the field type imports this module for its surface
@@ -95,44 +95,18 @@ def _tables(device) -> dict:
     if key not in _TABLE_CACHE:
         tables = case_tables()
         patch, count = _patch_tables()
-        owner, upper, axis = tables["edge_owner"], tables["edge_upper"], tables["edge_axis"]
-        # A crossed edge along axis a is shared by the four cubes whose minimum corners are its lower end minus
-        # s_b e_b + s_c e_c (b, c the other axes, s in {0, 1}), numbered counter-clockwise about the axis:
-        # (0, 0), (1, 0), (1, 1), (0, 1). Its quad is written by the cube at (1, 1), whose corners are the others'
-        # minimum corners: per axis and place, that corner (quad_corner) and the edge in that cube (quad_edge).
-        places = ((0, 0), (1, 0), (1, 1), (0, 1))
-
-        def corner_at(off):
-            return int(np.flatnonzero((CORNER_OFFSETS == np.asarray(off)).all(1))[0])
-
-        def edge_at(axis_, off):
-            return int(next(e for e in range(12) if axis[e] == axis_ and corner_at(off) == owner[e]))
-
-        quad_corner, quad_edge, quad_ends = [], [], []
-        for ax in range(3):
-            b_, c_ = (ax + 1) % 3, (ax + 2) % 3
-            for sb, sc in places:
-                off = np.zeros(3, dtype=np.int64)
-                off[b_], off[c_] = 1 - sb, 1 - sc
-                quad_corner.append(corner_at(off))
-                local = np.zeros(3, dtype=np.int64)
-                local[b_], local[c_] = sb, sc
-                quad_edge.append(edge_at(ax, local))
-            end = np.zeros(3, dtype=np.int64)
-            end[b_], end[c_] = 1, 1
-            quad_ends.append(corner_at(end))
-            end[ax] = 1
-            quad_ends.append(corner_at(end))
+        owner, upper = tables["edge_owner"], tables["edge_upper"]
+        # per case and patch (4 at most): the bit mask of its local edges and of the corners at their ends
+        edge_mask = np.zeros((256, 4), dtype=np.int32)
+        end_mask = np.zeros((256, 4), dtype=np.int32)
+        for e in range(12):
+            rows = np.flatnonzero(patch[:, e] >= 0)
+            np.bitwise_or.at(edge_mask, (rows, patch[rows, e]), 1 << e)
+            np.bitwise_or.at(end_mask, (rows, patch[rows, e]), (1 << int(owner[e])) | (1 << int(upper[e])))
         _TABLE_CACHE[key] = {
-            "patch": wp.array(patch.ravel(), dtype=wp.int32, device=device),
+            "edge_mask": wp.array(edge_mask.ravel(), dtype=wp.int32, device=device),
+            "end_mask": wp.array(end_mask.ravel(), dtype=wp.int32, device=device),
             "count": wp.array(count, dtype=wp.int32, device=device),
-            "owner": wp.array(owner, dtype=wp.int32, device=device),
-            "upper": wp.array(upper, dtype=wp.int32, device=device),
-            "axis": wp.array(axis, dtype=wp.int32, device=device),
-            "offsets": wp.array(CORNER_OFFSETS.astype(np.float32), dtype=wp.vec3, device=device),
-            "quad_corner": wp.array(quad_corner, dtype=wp.int32, device=device),
-            "quad_edge": wp.array(quad_edge, dtype=wp.int32, device=device),
-            "quad_ends": wp.array(quad_ends, dtype=wp.int32, device=device),
         }
     return _TABLE_CACHE[key]
 
@@ -156,7 +130,6 @@ def _count_patches_kernel(
     cube_corners: wp.array2d[wp.int32],
     values: wp.array[wp.float32],
     patch_count: wp.array[wp.int32],
-    quad_ends: wp.array[wp.int32],
     counts: wp.array[wp.int32],
     quad_counts: wp.array[wp.int32],
     cube_of_node: wp.array[wp.int32],
@@ -168,8 +141,9 @@ def _count_patches_kernel(
     cube_of_node[cube_corners[cube, 0]] = cube
     quads = int(0)
     for a in range(3):
-        v0 = values[cube_corners[cube, quad_ends[2 * a]]]
-        v1 = values[cube_corners[cube, quad_ends[2 * a + 1]]]
+        ea, eb = _quad_ends(a)
+        v0 = values[cube_corners[cube, ea]]
+        v1 = values[cube_corners[cube, eb]]
         if (v0 < 0.0) != (v1 < 0.0):
             quads += 1
     quad_counts[cube] = quads
@@ -178,12 +152,113 @@ def _count_patches_kernel(
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
 
+# Bit c of these is corner c's offset along x, y, z (CORNER_OFFSETS as integer constants, no table reads).
+_BITS_X = int(sum(int(CORNER_OFFSETS[c][0]) << c for c in range(8)))
+_BITS_Y = int(sum(int(CORNER_OFFSETS[c][1]) << c for c in range(8)))
+_BITS_Z = int(sum(int(CORNER_OFFSETS[c][2]) << c for c in range(8)))
+
+
+_EDGES = case_tables() if HAS_SHARED_CORNER_CORE else None
+
+
+def _pack(entries, bits: int) -> tuple[int, int]:
+    """Small non-negative integers packed ``bits`` apiece into two int32 constants (first half, second half)."""
+    half = (len(entries) + 1) // 2
+    low = sum(int(x) << (bits * k) for k, x in enumerate(entries[:half]))
+    high = sum(int(x) << (bits * k) for k, x in enumerate(entries[half:]))
+    return low, high
+
+
+_OWNER_LOW, _OWNER_HIGH = _pack(_EDGES["edge_owner"], 3) if _EDGES else (0, 0)
+_UPPER_LOW, _UPPER_HIGH = _pack(_EDGES["edge_upper"], 3) if _EDGES else (0, 0)
+
+
 @wp.func
-def _trilinear_gradient(v: vec8, p: wp.vec3, offsets: wp.array[wp.vec3]):
+def _unpack(low: int, high: int, bits: int, half: int, k: int):
+    """Entry ``k`` of a table packed by ``_pack`` (``half`` entries in ``low``)."""
+    if k < half:
+        return (low >> (bits * k)) & ((1 << bits) - 1)
+    return (high >> (bits * (k - half))) & ((1 << bits) - 1)
+
+
+@wp.func
+def _edge_ends(e: int):
+    """Lower and upper corner of local edge ``e``."""
+    return _unpack(_OWNER_LOW, _OWNER_HIGH, 3, 6, e), _unpack(_UPPER_LOW, _UPPER_HIGH, 3, 6, e)
+
+
+def _quad_tables() -> tuple[list, list, list]:
+    """Where each crossed edge's quad comes from.
+
+    A crossed edge along axis a is shared by the four cubes whose minimum corners are its lower end minus
+    s_b e_b + s_c e_c (b, c the other axes, s in {0, 1}), numbered counter-clockwise about the axis: (0, 0), (1, 0),
+    (1, 1), (0, 1). Its quad is written by the cube at (1, 1), whose corners are the others' minimum corners.
+
+    Returns:
+        Per axis and place (12): the writing cube's corner that is that cube's minimum corner, and the edge's index
+        in that cube; per axis (6): the writing cube's corners at the edge's two ends.
+    """
+    owner, axis = _EDGES["edge_owner"], _EDGES["edge_axis"]
+    places = ((0, 0), (1, 0), (1, 1), (0, 1))
+
+    def corner_at(off):
+        return int(np.flatnonzero((CORNER_OFFSETS == np.asarray(off)).all(1))[0])
+
+    def edge_at(axis_, off):
+        return int(next(e for e in range(12) if axis[e] == axis_ and corner_at(off) == owner[e]))
+
+    quad_corner, quad_edge, quad_ends = [], [], []
+    for ax in range(3):
+        b_, c_ = (ax + 1) % 3, (ax + 2) % 3
+        for sb, sc in places:
+            off = np.zeros(3, dtype=np.int64)
+            off[b_], off[c_] = 1 - sb, 1 - sc
+            quad_corner.append(corner_at(off))
+            local = np.zeros(3, dtype=np.int64)
+            local[b_], local[c_] = sb, sc
+            quad_edge.append(edge_at(ax, local))
+        end = np.zeros(3, dtype=np.int64)
+        end[b_], end[c_] = 1, 1
+        quad_ends.append(corner_at(end))
+        end[ax] = 1
+        quad_ends.append(corner_at(end))
+    return quad_corner, quad_edge, quad_ends
+
+
+_QUADS = _quad_tables() if _EDGES else ([0] * 12, [0] * 12, [0] * 6)
+_QCORNER_LOW, _QCORNER_HIGH = _pack(_QUADS[0], 3)
+_QEDGE_LOW, _QEDGE_HIGH = _pack(_QUADS[1], 4)
+_QENDS_LOW, _QENDS_HIGH = _pack(_QUADS[2], 3)
+
+
+@wp.func
+def _quad_corner(k: int):
+    return _unpack(_QCORNER_LOW, _QCORNER_HIGH, 3, 6, k)
+
+
+@wp.func
+def _quad_edge(k: int):
+    return _unpack(_QEDGE_LOW, _QEDGE_HIGH, 4, 6, k)
+
+
+@wp.func
+def _quad_ends(a: int):
+    """The two corners (lower, upper) of the edge along axis ``a`` whose quad a cube writes."""
+    return _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a), _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a + 1)
+
+
+@wp.func
+def _corner(c: int):
+    """Local position of cube corner ``c`` (its ``CORNER_OFFSETS`` row)."""
+    return wp.vec3(float((_BITS_X >> c) & 1), float((_BITS_Y >> c) & 1), float((_BITS_Z >> c) & 1))
+
+
+@wp.func
+def _trilinear_gradient(v: vec8, p: wp.vec3):
     """Gradient of the trilinear interpolant of a cube's corner values ``v`` at local point ``p`` (unit cube)."""
     g = wp.vec3(0.0)
     for c in range(8):
-        o = offsets[c]
+        o = _corner(c)
         wx = wp.where(o[0] > 0.5, p[0], 1.0 - p[0])
         wy = wp.where(o[1] > 0.5, p[1], 1.0 - p[1])
         wz = wp.where(o[2] > 0.5, p[2], 1.0 - p[2])
@@ -286,11 +361,8 @@ def _place_vertices_kernel(
     origin: wp.vec3,
     spacing: float,
     iso: float,
-    patch: wp.array[wp.int32],
-    edge_owner: wp.array[wp.int32],
-    edge_upper: wp.array[wp.int32],
-    edge_axis: wp.array[wp.int32],
-    offsets: wp.array[wp.vec3],
+    edge_mask: wp.array[wp.int32],
+    end_mask: wp.array[wp.int32],
     vertex_start: wp.array[wp.int32],
     cutoff: float,
     smooth_cos: float,
@@ -326,17 +398,16 @@ def _place_vertices_kernel(
         # the mass point of the patch's edge crossings, the corners at their ends, and the interpolant's gradient
         mass = wp.vec3(0.0)
         crossings = float(0.0)
-        ends = int(0)
+        edges = edge_mask[case * 4 + p]
+        ends = end_mask[case * 4 + p]
         for e in range(12):
-            if patch[case * 12 + e] == p:
-                ca = edge_owner[e]
-                cb = edge_upper[e]
+            if (edges >> e) & 1 == 1:
+                ca, cb = _edge_ends(e)
                 t = vals[ca] / (vals[ca] - vals[cb])
-                mass += offsets[ca] + t * (offsets[cb] - offsets[ca])
+                mass += _corner(ca) + t * (_corner(cb) - _corner(ca))
                 crossings += 1.0
-                ends = ends | (1 << ca) | (1 << cb)
         mass = mass / crossings
-        g_mass = _trilinear_gradient(vals, mass, offsets)
+        g_mass = _trilinear_gradient(vals, mass)
         ata = wp.mat33(0.0)
         atb = wp.vec3(0.0)
         btb = float(0.0)
@@ -350,7 +421,7 @@ def _place_vertices_kernel(
                 continue
             node = ids[c]
             q = (proj[node] - corner) * inv
-            d = offsets[c] - q
+            d = _corner(c) - q
             dl = wp.length(d)
             r = raw[node]
             use = int(0)
@@ -406,7 +477,7 @@ def _place_vertices_kernel(
         verts[vid] = corner + spacing * x
         ranks[vid] = rank
         for e in range(12):
-            if patch[case * 12 + e] == p:
+            if (edges >> e) & 1 == 1:
                 edge_vertex[cube * 12 + e] = vid
 
 
@@ -429,9 +500,6 @@ def _quads_kernel(
     cube_corners: wp.array2d[wp.int32],
     values: wp.array[wp.float32],
     cube_of_node: wp.array[wp.int32],
-    quad_corner: wp.array[wp.int32],
-    quad_edge: wp.array[wp.int32],
-    quad_ends: wp.array[wp.int32],
     edge_vertex: wp.array[wp.int32],
     quad_scan: wp.array[wp.int32],
     verts: wp.array[wp.vec3],
@@ -449,18 +517,19 @@ def _quads_kernel(
         out = quad_scan[cube - 1]
     count = int(0)
     for a in range(3):
-        v0 = values[cube_corners[cube, quad_ends[2 * a]]]
-        v1 = values[cube_corners[cube, quad_ends[2 * a + 1]]]
+        ea, eb = _quad_ends(a)
+        v0 = values[cube_corners[cube, ea]]
+        v1 = values[cube_corners[cube, eb]]
         if (v0 < 0.0) == (v1 < 0.0):
             continue
         q = wp.vector(-1, -1, -1, -1, length=4, dtype=int)
         complete = int(1)
         for k in range(4):
-            other = cube_of_node[cube_corners[cube, quad_corner[4 * a + k]]]
+            other = cube_of_node[cube_corners[cube, _quad_corner(4 * a + k)]]
             if other < 0:
                 complete = 0
             else:
-                q[k] = edge_vertex[other * 12 + quad_edge[4 * a + k]]
+                q[k] = edge_vertex[other * 12 + _quad_edge(4 * a + k)]
         row = 2 * (out + count)
         count += 1
         if complete == 0:
@@ -521,7 +590,7 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
     launch_split(
         _count_patches_kernel,
         m,
-        lambda s, c: [s, cube_corners, values, tables["count"], tables["quad_ends"], counts, quad_counts, cube_of_node],
+        lambda s, c: [s, cube_corners, values, tables["count"], counts, quad_counts, cube_of_node],
         device,
     )
     vertex_start = wp.empty(m, dtype=wp.int32, device=device)
@@ -549,11 +618,8 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             origin_wp,
             float(spacing),
             float(iso),
-            tables["patch"],
-            tables["owner"],
-            tables["upper"],
-            tables["axis"],
-            tables["offsets"],
+            tables["edge_mask"],
+            tables["end_mask"],
             vertex_start,
             EIGEN_CUTOFF,
             SMOOTH_COS,
@@ -576,9 +642,6 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             cube_corners,
             values,
             cube_of_node,
-            tables["quad_corner"],
-            tables["quad_edge"],
-            tables["quad_ends"],
             edge_vertex,
             quad_scan,
             verts,
