@@ -51,6 +51,11 @@ SMOOTH_COS = 0.99
 HERMITE_TOLERANCE = 0.02
 
 
+# A crease or corner vertex whose planes meet outside its cube may go this many voxels past a face whose neighbouring
+# cube the surface does not cross (the tip of a wedge more acute than the lattice resolves lies there).
+EMPTY_REACH = 1.0
+
+
 # Vertices keep this fraction of a voxel from their cube's faces, so vertices of neighbouring cubes never coincide.
 CELL_MARGIN = 1.0e-3
 
@@ -147,6 +152,25 @@ def _count_patches_kernel(
         if (v0 < 0.0) != (v1 < 0.0):
             quads += 1
     quad_counts[cube] = quads
+
+
+@wp.kernel(enable_backward=False)
+def _face_neighbours_kernel(
+    first: int, cube_corners: wp.array2d[wp.int32], cube_of_node: wp.array[wp.int32], neighbours: wp.array[wp.int32]
+):
+    """Flag, for cube ``first + tid`` and each axis, whether its + neighbour is active, and in that neighbour that its
+    - neighbour is (``neighbours`` (M, 6) flat, zeroed: -x, +x, -y, +y, -z, +z; each entry has one writer)."""
+    cube = first + wp.tid()
+    for a in range(3):
+        c = int(1)
+        if a == 1:
+            c = 3
+        elif a == 2:
+            c = 4
+        other = cube_of_node[cube_corners[cube, c]]
+        if other >= 0:
+            neighbours[cube * 6 + 2 * a + 1] = 1
+            neighbours[other * 6 + 2 * a] = 1
 
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
@@ -267,33 +291,40 @@ def _trilinear_gradient(v: vec8, p: wp.vec3):
 
 
 @wp.func
-def _clip_line(x: wp.vec3, d: wp.vec3, lo: float, hi: float):
-    """Parameter interval [s0, s1] of the line x + s d inside the box [lo, hi]^3 (s0 > s1 when it misses)."""
+def _clip_line(x: wp.vec3, d: wp.vec3, lo: wp.vec3, hi: wp.vec3):
+    """Parameter interval [s0, s1] of the line x + s d inside the box [lo, hi] (s0 > s1 when it misses)."""
     s0 = float(-1.0e30)
     s1 = float(1.0e30)
     for a in range(3):
         if wp.abs(d[a]) < 1.0e-8:
-            if x[a] < lo or x[a] > hi:
+            if x[a] < lo[a] or x[a] > hi[a]:
                 s0 = 1.0
                 s1 = -1.0
         else:
-            t0 = (lo - x[a]) / d[a]
-            t1 = (hi - x[a]) / d[a]
+            t0 = (lo[a] - x[a]) / d[a]
+            t1 = (hi[a] - x[a]) / d[a]
             s0 = wp.max(s0, wp.min(t0, t1))
             s1 = wp.min(s1, wp.max(t0, t1))
     return wp.vec2(s0, s1)
 
 
 @wp.func
-def _inside(x: wp.vec3, lo: float, hi: float):
-    return x[0] >= lo and x[0] <= hi and x[1] >= lo and x[1] <= hi and x[2] >= lo and x[2] <= hi
+def _inside(x: wp.vec3, lo: wp.vec3, hi: wp.vec3):
+    return x[0] >= lo[0] and x[0] <= hi[0] and x[1] >= lo[1] and x[1] <= hi[1] and x[2] >= lo[2] and x[2] <= hi[2]
 
 
 @wp.func
-def _solve_in_cube(ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, cutoff: float, lo: float, hi: float):
-    """Minimiser of |A x - b|^2 in the box [lo, hi]^3 near the mass point (``rhs = A^T b - A^T A mass``): the
-    truncated pseudo-inverse solution; if outside, the solution line of the two largest eigenvalues clipped to the
-    box; else the clamped point. Returns (x, rank used)."""
+def _clamp(x: wp.vec3, lo: float, hi: float):
+    return wp.vec3(wp.clamp(x[0], lo, hi), wp.clamp(x[1], lo, hi), wp.clamp(x[2], lo, hi))
+
+
+@wp.func
+def _solve_in_cube(
+    ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, cutoff: float, lo: float, hi: float, wide_lo: wp.vec3, wide_hi: wp.vec3
+):
+    """Minimiser of |A x - b|^2 near the mass point (``rhs = A^T b - A^T A mass``): the truncated pseudo-inverse
+    solution if it lies in the box [wide_lo, wide_hi]; else the solution line of the two largest eigenvalues clipped
+    to that box; else the point of rank 1 clamped to the cube [lo, hi]^3. Returns (x, rank used)."""
     q, d = wp.eig3(ata)
     # order the eigenvalues, largest first
     i0 = int(0)
@@ -309,7 +340,7 @@ def _solve_in_cube(ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, cutoff: float, lo
     top = d[i0]
     x = mass
     if top <= 0.0:
-        return wp.vec3(wp.clamp(x[0], lo, hi), wp.clamp(x[1], lo, hi), wp.clamp(x[2], lo, hi)), 0
+        return _clamp(x, lo, hi), 0
     e0 = wp.vec3(q[0, i0], q[1, i0], q[2, i0])
     e1 = wp.vec3(q[0, i1], q[1, i1], q[2, i1])
     e2 = wp.vec3(q[0, i2], q[1, i2], q[2, i2])
@@ -325,19 +356,24 @@ def _solve_in_cube(ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, cutoff: float, lo
     x3 = x2
     if rank == 3:
         x3 = x2 + e2 * (wp.dot(e2, rhs) / d[i2])
-        if _inside(x3, lo, hi):
+        if _inside(x3, wp.vec3(lo), wp.vec3(hi)):
             return x3, 3
     if rank >= 2:
-        if _inside(x2, lo, hi):
+        cube_lo = wp.vec3(lo)
+        cube_hi = wp.vec3(hi)
+        if _inside(x2, cube_lo, cube_hi):
             return x2, 2
-        s = _clip_line(x2, e2, lo, hi)
+        # the crease line through the cube; else through the box that reaches into the empty neighbours
+        s = _clip_line(x2, e2, cube_lo, cube_hi)
+        if s[0] > s[1]:
+            s = _clip_line(x2, e2, wide_lo, wide_hi)
         if s[0] <= s[1]:
             t = wp.clamp(0.0, s[0], s[1])
             return x2 + t * e2, 2
     x = x1
     if rank >= 2:
         rank = 1
-    return wp.vec3(wp.clamp(x[0], lo, hi), wp.clamp(x[1], lo, hi), wp.clamp(x[2], lo, hi)), rank
+    return _clamp(x, lo, hi), rank
 
 
 @wp.func
@@ -364,6 +400,8 @@ def _place_vertices_kernel(
     edge_mask: wp.array[wp.int32],
     end_mask: wp.array[wp.int32],
     vertex_start: wp.array[wp.int32],
+    neighbours: wp.array[wp.int32],
+    reach: float,
     cutoff: float,
     smooth_cos: float,
     tolerance: float,
@@ -394,6 +432,14 @@ def _place_vertices_kernel(
     inv = 1.0 / spacing
     lo = margin
     hi = 1.0 - margin
+    # crease and corner vertices may reach this far into a face neighbour the surface does not cross
+    wide_lo = wp.vec3(lo)
+    wide_hi = wp.vec3(hi)
+    for a in range(3):
+        if neighbours[cube * 6 + 2 * a] == 0:
+            wide_lo[a] = lo - reach
+        if neighbours[cube * 6 + 2 * a + 1] == 0:
+            wide_hi[a] = hi + reach
     for p in range(n_patches):
         # the mass point of the patch's edge crossings, the corners at their ends, and the interpolant's gradient
         mass = wp.vec3(0.0)
@@ -462,9 +508,9 @@ def _place_vertices_kernel(
             if min_cos >= smooth_cos:
                 x = _solve_smooth(ata, atb - ata * mass, mass, normal_sum)
                 rank = 1
-                x = wp.vec3(wp.clamp(x[0], lo, hi), wp.clamp(x[1], lo, hi), wp.clamp(x[2], lo, hi))
+                x = _clamp(x, lo, hi)
             else:
-                x, rank = _solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi)
+                x, rank = _solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
             # the quadric about the vertex, per plane: E(x + d) = d^T A d + 2 d . r + E(x)
             w = 1.0 / planes
             grad = ata * x - atb
@@ -593,6 +639,8 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
         lambda s, c: [s, cube_corners, values, tables["count"], counts, quad_counts, cube_of_node],
         device,
     )
+    neighbours = wp.zeros(6 * m, dtype=wp.int32, device=device)
+    launch_split(_face_neighbours_kernel, m, lambda s, c: [s, cube_corners, cube_of_node, neighbours], device)
     vertex_start = wp.empty(m, dtype=wp.int32, device=device)
     wp.utils.array_scan(counts, vertex_start, inclusive=True)
     quad_scan = counts  # reused
@@ -621,6 +669,8 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             tables["edge_mask"],
             tables["end_mask"],
             vertex_start,
+            neighbours,
+            EMPTY_REACH,
             EIGEN_CUTOFF,
             SMOOTH_COS,
             HERMITE_TOLERANCE,

@@ -172,28 +172,30 @@ def normalised(mesh, center=(0.0, 0.0, 0.0), diagonal: float = 1.0, matrix=None)
 
 
 def cad_pairs() -> dict:
-    """The CAD-like boolean cases of the sharp-edge extraction, each operand normalised to bounding-box diagonal 1:
-    name -> (operation, operand a, operand b), with ``DIFFERENCE`` meaning a minus b."""
+    """The CAD-like boolean cases of the sharp-edge extraction, each operand normalised to bounding-box diagonal 1
+    (creases at angles the lattice resolves: no wedge sharper than about 45 degrees): name -> (operation, operand a,
+    operand b), ``DIFFERENCE`` meaning a minus b."""
     cube = box_mesh()
     tilt = rotation(0, 30.0) @ rotation(1, 30.0)
-    r = 0.12
-    bore = normalised(cylinder_mesh(r, 2.0 * np.sqrt(1.0 - 8.0 * r * r) / 2.0, segments=128), diagonal=1.0)
+    r = 0.12  # a cylinder of radius r and diagonal 1 along z
+    bore = normalised(cylinder_mesh(r, np.sqrt(1.0 - 8.0 * r * r), segments=128))
+    turn = rotation(2, 20.0) @ rotation(0, 10.0)
     return {
         "fandisk - cylinder": (
             "DIFFERENCE",
             normalised(load_mesh("fandisk.obj")),
-            normalised(bore, matrix=rotation(1, 90.0)),
+            normalised(bore, center=(0.0, 0.05, -0.05), matrix=rotation(1, 90.0)),
         ),
         "rocker-arm - cube": (
             "DIFFERENCE",
             normalised(load_mesh("rocker-arm.obj")),
-            normalised(cube, center=(0.1, 0.25, 0.3), diagonal=0.6, matrix=rotation(2, 20.0)),
+            normalised(cube, center=(0.0, -0.25, -0.3), diagonal=0.6, matrix=rotation(2, 10.0) @ rotation(0, 15.0)),
         ),
         "cube | tilted cube": ("UNION", normalised(cube), normalised(cube, matrix=tilt)),
-        "cube - bore": ("DIFFERENCE", normalised(cube), bore),
+        "cube - bore": ("DIFFERENCE", normalised(cube, matrix=turn), normalised(bore, matrix=turn)),
         "hex prism & sphere": (
             "INTERSECT",
-            normalised(hex_prism_mesh(1.0, 4.0)),
+            normalised(hex_prism_mesh(1.0, 4.0), matrix=rotation(0, 25.0) @ rotation(2, 10.0)),
             normalised(uv_sphere(1.0, rings=96, segments=192)),
         ),
     }
