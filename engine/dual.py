@@ -30,8 +30,9 @@ import numpy as np
 import warp as wp
 
 from .extract import lattice_cubes, octree_level_cubes
-from .marching import CORNER_OFFSETS, HAS_SHARED_CORNER_CORE, case_tables, empty_mesh
+from .marching import CORNER_OFFSETS, HAS_SHARED_CORNER_CORE, case_tables, empty_mesh, patch_tables
 from .parallel import launch_split
+from .quadric import clamp_box, crease_edges, cube_corner, quadric_at, solve_in_cube, solve_smooth, trilinear, vec8
 
 if TYPE_CHECKING:  # the field type imports this module for its surface
     from .field import AdaptiveField
@@ -60,35 +61,7 @@ EMPTY_REACH = 1.0
 CELL_MARGIN = 1.0e-3
 
 
-# Crease edges fold by more than this angle (degrees) between their two triangles' normals.
-CREASE_ANGLE = 25.0
-
-
 # ---- tables ----
-
-
-def _patch_tables() -> tuple[np.ndarray, np.ndarray]:
-    """Per marching-cubes case: the patch (connected set of triangles sharing local edges) each crossed local edge
-    belongs to, (256, 12) int32 with -1 for edges the case does not cross, and the number of patches (256,) int32."""
-    tables = case_tables()
-    ranges, local = tables["case_to_tri_range"], tables["tri_local_inds"]
-    patch = np.full((256, 12), -1, dtype=np.int32)
-    count = np.zeros(256, dtype=np.int32)
-    for case in range(256):  # a one-off walk over the 256 table entries
-        tris = local[ranges[case] : ranges[case + 1]].reshape(-1, 3)
-        label = np.arange(12)
-        for _ in range(12):  # propagate the smallest label along each triangle until nothing changes
-            low = label[tris].min(axis=1)
-            new = label.copy()
-            np.minimum.at(new, tris.ravel(), np.repeat(low, 3))
-            if np.array_equal(new, label):
-                break
-            label = new
-        used = np.unique(tris)
-        roots = np.unique(label[used])
-        patch[case, used] = np.searchsorted(roots, label[used])
-        count[case] = len(roots)
-    return patch, count
 
 
 _TABLE_CACHE: dict = {}
@@ -99,7 +72,7 @@ def _tables(device) -> dict:
     key = str(device)
     if key not in _TABLE_CACHE:
         tables = case_tables()
-        patch, count = _patch_tables()
+        patch, count = patch_tables()
         owner, upper = tables["edge_owner"], tables["edge_upper"]
         # per case and patch (4 at most): the bit mask of its local edges and of the corners at their ends
         edge_mask = np.zeros((256, 4), dtype=np.int32)
@@ -171,15 +144,6 @@ def _face_neighbours_kernel(
         if other >= 0:
             neighbours[cube * 6 + 2 * a + 1] = 1
             neighbours[other * 6 + 2 * a] = 1
-
-
-vec8 = wp.types.vector(length=8, dtype=wp.float32)
-
-
-# Bit c of these is corner c's offset along x, y, z (CORNER_OFFSETS as integer constants, no table reads).
-_BITS_X = int(sum(int(CORNER_OFFSETS[c][0]) << c for c in range(8)))
-_BITS_Y = int(sum(int(CORNER_OFFSETS[c][1]) << c for c in range(8)))
-_BITS_Z = int(sum(int(CORNER_OFFSETS[c][2]) << c for c in range(8)))
 
 
 _EDGES = case_tables() if HAS_SHARED_CORNER_CORE else None
@@ -256,7 +220,7 @@ _QENDS_LOW, _QENDS_HIGH = _pack(_QUADS[2], 3)
 
 
 @wp.func
-def _quad_corner(k: int):
+def _quadcube_corner(k: int):
     return _unpack(_QCORNER_LOW, _QCORNER_HIGH, 3, 6, k)
 
 
@@ -269,121 +233,6 @@ def _quad_edge(k: int):
 def _quad_ends(a: int):
     """The two corners (lower, upper) of the edge along axis ``a`` whose quad a cube writes."""
     return _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a), _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a + 1)
-
-
-@wp.func
-def _corner(c: int):
-    """Local position of cube corner ``c`` (its ``CORNER_OFFSETS`` row)."""
-    return wp.vec3(float((_BITS_X >> c) & 1), float((_BITS_Y >> c) & 1), float((_BITS_Z >> c) & 1))
-
-
-@wp.func
-def _trilinear_gradient(v: vec8, p: wp.vec3):
-    """Gradient of the trilinear interpolant of a cube's corner values ``v`` at local point ``p`` (unit cube)."""
-    g = wp.vec3(0.0)
-    for c in range(8):
-        o = _corner(c)
-        wx = wp.where(o[0] > 0.5, p[0], 1.0 - p[0])
-        wy = wp.where(o[1] > 0.5, p[1], 1.0 - p[1])
-        wz = wp.where(o[2] > 0.5, p[2], 1.0 - p[2])
-        g += v[c] * wp.vec3((2.0 * o[0] - 1.0) * wy * wz, (2.0 * o[1] - 1.0) * wx * wz, (2.0 * o[2] - 1.0) * wx * wy)
-    return g
-
-
-@wp.func
-def _clip_line(x: wp.vec3, d: wp.vec3, lo: wp.vec3, hi: wp.vec3):
-    """Parameter interval [s0, s1] of the line x + s d inside the box [lo, hi] (s0 > s1 when it misses)."""
-    s0 = float(-1.0e30)
-    s1 = float(1.0e30)
-    for a in range(3):
-        if wp.abs(d[a]) < 1.0e-8:
-            if x[a] < lo[a] or x[a] > hi[a]:
-                s0 = 1.0
-                s1 = -1.0
-        else:
-            t0 = (lo[a] - x[a]) / d[a]
-            t1 = (hi[a] - x[a]) / d[a]
-            s0 = wp.max(s0, wp.min(t0, t1))
-            s1 = wp.min(s1, wp.max(t0, t1))
-    return wp.vec2(s0, s1)
-
-
-@wp.func
-def _inside(x: wp.vec3, lo: wp.vec3, hi: wp.vec3):
-    return x[0] >= lo[0] and x[0] <= hi[0] and x[1] >= lo[1] and x[1] <= hi[1] and x[2] >= lo[2] and x[2] <= hi[2]
-
-
-@wp.func
-def _clamp(x: wp.vec3, lo: float, hi: float):
-    return wp.vec3(wp.clamp(x[0], lo, hi), wp.clamp(x[1], lo, hi), wp.clamp(x[2], lo, hi))
-
-
-@wp.func
-def _solve_in_cube(
-    ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, cutoff: float, lo: float, hi: float, wide_lo: wp.vec3, wide_hi: wp.vec3
-):
-    """Minimiser of |A x - b|^2 near the mass point (``rhs = A^T b - A^T A mass``): the truncated pseudo-inverse
-    solution if it lies in the box [wide_lo, wide_hi]; else the solution line of the two largest eigenvalues clipped
-    to that box; else the point of rank 1 clamped to the cube [lo, hi]^3. Returns (x, rank used)."""
-    q, d = wp.eig3(ata)
-    # order the eigenvalues, largest first
-    i0 = int(0)
-    i2 = int(0)
-    for k in range(3):
-        if d[k] > d[i0]:
-            i0 = k
-        if d[k] < d[i2]:
-            i2 = k
-    if i0 == i2:
-        i2 = (i0 + 1) % 3
-    i1 = 3 - i0 - i2
-    top = d[i0]
-    x = mass
-    if top <= 0.0:
-        return _clamp(x, lo, hi), 0
-    e0 = wp.vec3(q[0, i0], q[1, i0], q[2, i0])
-    e1 = wp.vec3(q[0, i1], q[1, i1], q[2, i1])
-    e2 = wp.vec3(q[0, i2], q[1, i2], q[2, i2])
-    rank = int(1)
-    if d[i1] > cutoff * top:
-        rank = 2
-    if d[i2] > cutoff * top:
-        rank = 3
-    x1 = mass + e0 * (wp.dot(e0, rhs) / top)
-    x2 = x1
-    if rank >= 2:
-        x2 = x1 + e1 * (wp.dot(e1, rhs) / d[i1])
-    x3 = x2
-    if rank == 3:
-        x3 = x2 + e2 * (wp.dot(e2, rhs) / d[i2])
-        if _inside(x3, wp.vec3(lo), wp.vec3(hi)):
-            return x3, 3
-    if rank >= 2:
-        cube_lo = wp.vec3(lo)
-        cube_hi = wp.vec3(hi)
-        if _inside(x2, cube_lo, cube_hi):
-            return x2, 2
-        # the crease line through the cube; else through the box that reaches into the empty neighbours
-        s = _clip_line(x2, e2, cube_lo, cube_hi)
-        if s[0] > s[1]:
-            s = _clip_line(x2, e2, wide_lo, wide_hi)
-        if s[0] <= s[1]:
-            t = wp.clamp(0.0, s[0], s[1])
-            return x2 + t * e2, 2
-    x = x1
-    if rank >= 2:
-        rank = 1
-    return _clamp(x, lo, hi), rank
-
-
-@wp.func
-def _solve_smooth(ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, normal_sum: wp.vec3):
-    """The rank-1 minimiser when all normals nearly agree: the mass point moved along their mean normal."""
-    e0 = wp.normalize(normal_sum)
-    lam = wp.dot(e0, ata * e0)
-    if lam <= 0.0:
-        return mass
-    return mass + e0 * (wp.dot(e0, rhs) / lam)
 
 
 @wp.kernel(enable_backward=False)
@@ -408,6 +257,7 @@ def _place_vertices_kernel(
     margin: float,
     verts: wp.array[wp.vec3],
     ranks: wp.array[wp.int32],
+    cells: wp.array[wp.int32],
     quadrics: wp.array[wp.mat33],
     linear: wp.array[wp.vec4],
     edge_vertex: wp.array[wp.int32],
@@ -450,10 +300,10 @@ def _place_vertices_kernel(
             if (edges >> e) & 1 == 1:
                 ca, cb = _edge_ends(e)
                 t = vals[ca] / (vals[ca] - vals[cb])
-                mass += _corner(ca) + t * (_corner(cb) - _corner(ca))
+                mass += cube_corner(ca) + t * (cube_corner(cb) - cube_corner(ca))
                 crossings += 1.0
         mass = mass / crossings
-        g_mass = _trilinear_gradient(vals, mass)
+        f_mass, g_mass = trilinear(vals, mass)
         ata = wp.mat33(0.0)
         atb = wp.vec3(0.0)
         btb = float(0.0)
@@ -467,7 +317,7 @@ def _place_vertices_kernel(
                 continue
             node = ids[c]
             q = (proj[node] - corner) * inv
-            d = _corner(c) - q
+            d = cube_corner(c) - q
             dl = wp.length(d)
             r = raw[node]
             use = int(0)
@@ -490,9 +340,10 @@ def _place_vertices_kernel(
                 fallback += 1.0
         gl = wp.length(g_mass)
         if fallback > 0.0 and gl > 0.0:
-            # corners whose Hermite data does not hold: the interpolant's tangent plane through the mass point
+            # corners whose Hermite data does not hold: the interpolant's tangent plane at the mass point moved onto
+            # its zero set (one Newton step; values are in world units, positions in voxels)
             n = g_mass / gl
-            b = wp.dot(n, mass)
+            b = wp.dot(n, mass) - f_mass / gl
             ata += fallback * wp.outer(n, n)
             atb += fallback * n * b
             btb += fallback * b * b
@@ -506,11 +357,11 @@ def _place_vertices_kernel(
         rank = int(0)
         if planes > 0.0:
             if min_cos >= smooth_cos:
-                x = _solve_smooth(ata, atb - ata * mass, mass, normal_sum)
+                x = solve_smooth(ata, atb - ata * mass, mass, normal_sum)
                 rank = 1
-                x = _clamp(x, lo, hi)
+                x = clamp_box(x, lo, hi)
             else:
-                x, rank = _solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
+                x, rank = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
             # the quadric about the vertex, per plane: E(x + d) = d^T A d + 2 d . r + E(x)
             w = 1.0 / planes
             grad = ata * x - atb
@@ -522,22 +373,13 @@ def _place_vertices_kernel(
             linear[vid] = wp.vec4(0.0)
         verts[vid] = corner + spacing * x
         ranks[vid] = rank
+        cells[vid] = cube
         for e in range(12):
             if (edges >> e) & 1 == 1:
                 edge_vertex[cube * 12 + e] = vid
 
 
 # ---- quads ----
-
-
-@wp.func
-def _quadric_at(
-    quadrics: wp.array[wp.mat33], linear: wp.array[wp.vec4], verts: wp.array[wp.vec3], v: int, y: wp.vec3, inv: float
-):
-    """Mean squared distance (in voxels^2) of point ``y`` to vertex ``v``'s planes."""
-    d = (y - verts[v]) * inv
-    r = linear[v]
-    return wp.dot(d, quadrics[v] * d) + 2.0 * (d[0] * r[0] + d[1] * r[1] + d[2] * r[2]) + r[3]
 
 
 @wp.kernel(enable_backward=False)
@@ -571,7 +413,7 @@ def _quads_kernel(
         q = wp.vector(-1, -1, -1, -1, length=4, dtype=int)
         complete = int(1)
         for k in range(4):
-            other = cube_of_node[cube_corners[cube, _quad_corner(4 * a + k)]]
+            other = cube_of_node[cube_corners[cube, _quadcube_corner(4 * a + k)]]
             if other < 0:
                 complete = 0
             else:
@@ -592,8 +434,8 @@ def _quads_kernel(
             q3 = q[1]
         m02 = 0.5 * (verts[q0] + verts[q2])
         m13 = 0.5 * (verts[q1] + verts[q3])
-        e02 = _quadric_at(quadrics, linear, verts, q0, m02, inv) + _quadric_at(quadrics, linear, verts, q2, m02, inv)
-        e13 = _quadric_at(quadrics, linear, verts, q1, m13, inv) + _quadric_at(quadrics, linear, verts, q3, m13, inv)
+        e02 = quadric_at(quadrics, linear, verts, q0, m02, inv) + quadric_at(quadrics, linear, verts, q2, m02, inv)
+        e13 = quadric_at(quadrics, linear, verts, q1, m13, inv) + quadric_at(quadrics, linear, verts, q3, m13, inv)
         if e02 <= e13:
             tris[row, 0] = q0
             tris[row, 1] = q1
@@ -624,8 +466,9 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
         spacing: Lattice spacing.
         iso: Level extracted (planes are moved by it along their normals).
     Returns:
-        ``verts`` (V, 3) float32, ``tris`` (T, 3) int32 (outward, counter-clockwise), ``ranks`` (V,) int32 (number
-        of significant eigenvalues of each vertex's quadric: 1 smooth, 2 crease, 3 corner; 0 without planes).
+        dict: ``verts`` (V, 3) float32, ``tris`` (T, 3) int32 (outward, counter-clockwise), ``ranks`` (V,) int32
+        (significant eigenvalues of each vertex's quadric: 1 smooth, 2 crease, 3 corner; 0 without planes) and
+        ``cells`` (V,) int32 (the active cube each vertex belongs to, a row of ``cube_corners``).
     """
     device = cube_corners.device
     tables = _tables(device)
@@ -649,6 +492,7 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
     n_quads = int(quad_scan[-1:].numpy()[0])
     verts = wp.empty(n_verts, dtype=wp.vec3, device=device)
     ranks = wp.empty(n_verts, dtype=wp.int32, device=device)
+    cells = wp.empty(n_verts, dtype=wp.int32, device=device)
     quadrics = wp.empty(n_verts, dtype=wp.mat33, device=device)
     linear = wp.empty(n_verts, dtype=wp.vec4, device=device)
     edge_vertex = wp.empty(12 * m, dtype=wp.int32, device=device)
@@ -677,6 +521,7 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             CELL_MARGIN,
             verts,
             ranks,
+            cells,
             quadrics,
             linear,
             edge_vertex,
@@ -705,48 +550,15 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
     tris_np = tris.numpy()
     if n_quads and tris_np[:, 0].min() < 0:  # quads at the band's edge, where a cube is missing (open surface)
         tris_np = tris_np[tris_np[:, 0] >= 0]
-    return verts.numpy().reshape(-1, 3), tris_np, ranks.numpy()
+    return {
+        "verts": verts.numpy().reshape(-1, 3),
+        "tris": tris_np,
+        "ranks": ranks.numpy(),
+        "cells": cells.numpy(),
+    }
 
 
 # ---- creases and the entry point ----
-
-
-def crease_edges(verts, tris, ranks, angle: float = CREASE_ANGLE) -> np.ndarray:
-    """The edges of a closed mesh along which it folds at a reconstructed crease.
-
-    Args:
-        verts: (V, 3) float vertex positions.
-        tris: (T, 3) int triangles of a closed, consistently oriented mesh.
-        ranks: (V,) int quadric ranks from :func:`contour_dual` (2 or more: on a crease or corner).
-        angle: Smallest angle (degrees) between the two triangles' normals.
-    Returns:
-        (E, 2) int32 vertex index pairs (smaller index first), each an edge of ``tris`` between two crease or corner
-        vertices whose triangles' normals differ by more than ``angle``.
-    """
-    tris = np.asarray(tris, dtype=np.int64)
-    feature = np.asarray(ranks) >= 2
-    if len(tris) == 0 or not feature.any():
-        return np.zeros((0, 2), dtype=np.int32)
-    # the triangle sides between two feature vertices, each undirected edge seen from both of its triangles
-    candidates = np.flatnonzero(feature[tris].sum(axis=1) >= 2)
-    sides = np.stack([tris[candidates], np.roll(tris[candidates], -1, axis=1)], axis=-1).reshape(-1, 2)
-    face = np.repeat(candidates, 3)
-    keep = feature[sides[:, 0]] & feature[sides[:, 1]]
-    sides, face = sides[keep], face[keep]
-    key = np.sort(sides, axis=1)
-    code = key[:, 0] * np.int64(len(verts)) + key[:, 1]
-    order = np.argsort(code, kind="stable")
-    code, key, face = code[order], key[order], face[order]
-    pair = np.flatnonzero(code[1:] == code[:-1])
-    if len(pair) == 0:
-        return np.zeros((0, 2), dtype=np.int32)
-    v = np.asarray(verts, dtype=np.float64)
-    fa, fb = face[pair], face[pair + 1]
-    na = np.cross(v[tris[fa, 1]] - v[tris[fa, 0]], v[tris[fa, 2]] - v[tris[fa, 0]])
-    nb = np.cross(v[tris[fb, 1]] - v[tris[fb, 0]], v[tris[fb, 2]] - v[tris[fb, 0]])
-    cos = np.einsum("ij,ij->i", na, nb) / np.maximum(np.linalg.norm(na, axis=1) * np.linalg.norm(nb, axis=1), 1e-300)
-    fold = cos < np.cos(np.radians(angle))
-    return key[pair[fold]].astype(np.int32)
 
 
 def extract_sharp(field: AdaptiveField, iso: float = 0.0, *, creases: bool = True):
@@ -783,7 +595,7 @@ def extract_sharp(field: AdaptiveField, iso: float = 0.0, *, creases: bool = Tru
     if cubes is None:
         verts, tris = empty_mesh()
         return verts, tris, np.zeros((0, 2), dtype=np.int32)
-    verts, tris, ranks = contour_dual(
+    surface = contour_dual(
         cubes["cube_corners"],
         cubes["shifted"],
         values,
@@ -793,6 +605,7 @@ def extract_sharp(field: AdaptiveField, iso: float = 0.0, *, creases: bool = Tru
         spacing=field.voxel_size,
         iso=iso,
     )
+    verts, tris = surface["verts"], surface["tris"]
     if not creases:
         return verts, tris, np.zeros((0, 2), dtype=np.int32)
-    return verts, tris, crease_edges(verts, tris, ranks)
+    return verts, tris, crease_edges(verts, tris, surface["ranks"])

@@ -317,3 +317,27 @@ def case_tables() -> dict:
         "edge_upper": _warp_mc._get_edge_upper_table(device).numpy(),
         "edge_axis": _warp_mc._get_edge_axis_table(device).numpy(),
     }
+
+
+def patch_tables() -> tuple[np.ndarray, np.ndarray]:
+    """Per marching-cubes case: the patch (connected set of triangles sharing local edges) each crossed local edge
+    belongs to, (256, 12) int32 with -1 for edges the case does not cross, and the number of patches (256,) int32."""
+    tables = case_tables()
+    ranges, local = tables["case_to_tri_range"], tables["tri_local_inds"]
+    patch = np.full((256, 12), -1, dtype=np.int32)
+    count = np.zeros(256, dtype=np.int32)
+    for case in range(256):  # a one-off walk over the 256 table entries
+        tris = local[ranges[case] : ranges[case + 1]].reshape(-1, 3)
+        label = np.arange(12)
+        for _ in range(12):  # propagate the smallest label along each triangle until nothing changes
+            low = label[tris].min(axis=1)
+            new = label.copy()
+            np.minimum.at(new, tris.ravel(), np.repeat(low, 3))
+            if np.array_equal(new, label):
+                break
+            label = new
+        used = np.unique(tris)
+        roots = np.unique(label[used])
+        patch[case, used] = np.searchsorted(roots, label[used])
+        count[case] = len(roots)
+    return patch, count
