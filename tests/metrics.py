@@ -345,8 +345,8 @@ def _self_intersections_kernel(
     p1 = points[b]
     p2 = points[c]
     query = wp.mesh_query_aabb(mesh_id, wp.min(wp.min(p0, p1), p2), wp.max(wp.max(p0, p1), p2))
-    other = 0
-    count = 0
+    other = int(0)  # noqa: UP018 (a dynamic Warp variable)
+    count = int(0)  # noqa: UP018
     while wp.mesh_query_aabb_next(query, other):
         if other <= t:
             continue
