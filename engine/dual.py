@@ -57,6 +57,12 @@ HERMITE_TOLERANCE = 0.02
 EMPTY_REACH = 1.0
 
 
+# A quad is split along the diagonal its vertices' planes fit best unless that gives a triangle of less than this
+# twice-area (voxels^2) seen along the quad's edge and the other diagonal does better: so no triangle folds back or
+# lies along a crease line through three of its vertices.
+MIN_SPLIT_AREA = 0.1
+
+
 # Vertices keep this fraction of a voxel from their cube's faces, so vertices of neighbouring cubes never coincide.
 CELL_MARGIN = 1.0e-3
 
@@ -394,6 +400,7 @@ def _quads_kernel(
     quadrics: wp.array[wp.mat33],
     linear: wp.array[wp.vec4],
     inv: float,
+    min_area: float,
     tris: wp.array2d[wp.int32],
 ):
     """The quads of the crossed edges whose four cubes cube ``first + tid`` completes as the one below both other
@@ -432,11 +439,26 @@ def _quads_kernel(
         if v0 >= 0.0:  # inside above: the outward normal is -axis, so turn the other way round
             q1 = q[3]
             q3 = q[1]
-        m02 = 0.5 * (verts[q0] + verts[q2])
-        m13 = 0.5 * (verts[q1] + verts[q3])
+        p0 = verts[q0]
+        p1 = verts[q1]
+        p2 = verts[q2]
+        p3 = verts[q3]
+        # each split's smaller triangle area seen along the edge (outward), in voxels^2 (twice the area)
+        axis = wp.vec3(0.0)
+        axis[a] = wp.where(v0 < 0.0, inv * inv, -inv * inv)
+        area02 = wp.min(wp.dot(wp.cross(p1 - p0, p2 - p0), axis), wp.dot(wp.cross(p2 - p0, p3 - p0), axis))
+        area13 = wp.min(wp.dot(wp.cross(p1 - p0, p3 - p0), axis), wp.dot(wp.cross(p2 - p1, p3 - p1), axis))
+        # the diagonal whose midpoint its two vertices' planes fit best, unless that folds a triangle the other does not
+        m02 = 0.5 * (p0 + p2)
+        m13 = 0.5 * (p1 + p3)
         e02 = quadric_at(quadrics, linear, verts, q0, m02, inv) + quadric_at(quadrics, linear, verts, q2, m02, inv)
         e13 = quadric_at(quadrics, linear, verts, q1, m13, inv) + quadric_at(quadrics, linear, verts, q3, m13, inv)
-        if e02 <= e13:
+        split02 = e02 <= e13
+        if split02 and area02 < min_area and area13 > area02:
+            split02 = False
+        elif not split02 and area13 < min_area and area02 > area13:
+            split02 = True
+        if split02:
             tris[row, 0] = q0
             tris[row, 1] = q1
             tris[row, 2] = q2
@@ -543,6 +565,7 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             quadrics,
             linear,
             1.0 / float(spacing),
+            MIN_SPLIT_AREA,
             tris,
         ],
         device,

@@ -115,16 +115,15 @@ def solve_in_cube(
         if inside_box(x3, wp.vec3(lo), wp.vec3(hi)):
             return x3, 3
     if rank >= 2:
-        cube_lo = wp.vec3(lo)
-        cube_hi = wp.vec3(hi)
-        if inside_box(x2, cube_lo, cube_hi):
-            return x2, 2
-        # the crease line through the cube; else through the box that reaches into the empty neighbours
-        s = clip_line(x2, e2, cube_lo, cube_hi)
+        # the crease line through the cube, else through the box that reaches into the empty neighbours: the point
+        # nearest the mass point within the middle half of the part inside, so that the crease vertices of
+        # neighbouring cubes never crowd together at the face between them
+        s = clip_line(x2, e2, wp.vec3(0.0), wp.vec3(1.0))
         if s[0] > s[1]:
             s = clip_line(x2, e2, wide_lo, wide_hi)
         if s[0] <= s[1]:
-            t = wp.clamp(0.0, s[0], s[1])
+            quarter = 0.25 * (s[1] - s[0])
+            t = wp.clamp(0.0, s[0] + quarter, s[1] - quarter)
             return x2 + t * e2, 2
     x = x1
     if rank >= 2:
