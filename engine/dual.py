@@ -30,7 +30,15 @@ import numpy as np
 import warp as wp
 
 from .extract import lattice_cubes, octree_level_cubes
-from .marching import CORNER_OFFSETS, HAS_SHARED_CORNER_CORE, case_tables, empty_mesh, patch_tables
+from .marching import (
+    case_tables,
+    edge_ends,
+    empty_mesh,
+    patch_tables,
+    quad_corner,
+    quad_edge,
+    quad_ends,
+)
 from .parallel import launch_split
 from .quadric import clamp_box, crease_edges, cube_corner, quadric_at, solve_in_cube, solve_smooth, trilinear, vec8
 
@@ -125,7 +133,7 @@ def _count_patches_kernel(
     cube_of_node[cube_corners[cube, 0]] = cube
     quads = int(0)
     for a in range(3):
-        ea, eb = _quad_ends(a)
+        ea, eb = quad_ends(a)
         v0 = values[cube_corners[cube, ea]]
         v1 = values[cube_corners[cube, eb]]
         if (v0 < 0.0) != (v1 < 0.0):
@@ -150,95 +158,6 @@ def _face_neighbours_kernel(
         if other >= 0:
             neighbours[cube * 6 + 2 * a + 1] = 1
             neighbours[other * 6 + 2 * a] = 1
-
-
-_EDGES = case_tables() if HAS_SHARED_CORNER_CORE else None
-
-
-def _pack(entries, bits: int) -> tuple[int, int]:
-    """Small non-negative integers packed ``bits`` apiece into two int32 constants (first half, second half)."""
-    half = (len(entries) + 1) // 2
-    low = sum(int(x) << (bits * k) for k, x in enumerate(entries[:half]))
-    high = sum(int(x) << (bits * k) for k, x in enumerate(entries[half:]))
-    return low, high
-
-
-_OWNER_LOW, _OWNER_HIGH = _pack(_EDGES["edge_owner"], 3) if _EDGES else (0, 0)
-_UPPER_LOW, _UPPER_HIGH = _pack(_EDGES["edge_upper"], 3) if _EDGES else (0, 0)
-
-
-@wp.func
-def _unpack(low: int, high: int, bits: int, half: int, k: int):
-    """Entry ``k`` of a table packed by ``_pack`` (``half`` entries in ``low``)."""
-    if k < half:
-        return (low >> (bits * k)) & ((1 << bits) - 1)
-    return (high >> (bits * (k - half))) & ((1 << bits) - 1)
-
-
-@wp.func
-def _edge_ends(e: int):
-    """Lower and upper corner of local edge ``e``."""
-    return _unpack(_OWNER_LOW, _OWNER_HIGH, 3, 6, e), _unpack(_UPPER_LOW, _UPPER_HIGH, 3, 6, e)
-
-
-def _quad_tables() -> tuple[list, list, list]:
-    """Where each crossed edge's quad comes from.
-
-    A crossed edge along axis a is shared by the four cubes whose minimum corners are its lower end minus
-    s_b e_b + s_c e_c (b, c the other axes, s in {0, 1}), numbered counter-clockwise about the axis: (0, 0), (1, 0),
-    (1, 1), (0, 1). Its quad is written by the cube at (1, 1), whose corners are the others' minimum corners.
-
-    Returns:
-        Per axis and place (12): the writing cube's corner that is that cube's minimum corner, and the edge's index
-        in that cube; per axis (6): the writing cube's corners at the edge's two ends.
-    """
-    owner, axis = _EDGES["edge_owner"], _EDGES["edge_axis"]
-    places = ((0, 0), (1, 0), (1, 1), (0, 1))
-
-    def corner_at(off):
-        return int(np.flatnonzero((CORNER_OFFSETS == np.asarray(off)).all(1))[0])
-
-    def edge_at(axis_, off):
-        return int(next(e for e in range(12) if axis[e] == axis_ and corner_at(off) == owner[e]))
-
-    quad_corner, quad_edge, quad_ends = [], [], []
-    for ax in range(3):
-        b_, c_ = (ax + 1) % 3, (ax + 2) % 3
-        for sb, sc in places:
-            off = np.zeros(3, dtype=np.int64)
-            off[b_], off[c_] = 1 - sb, 1 - sc
-            quad_corner.append(corner_at(off))
-            local = np.zeros(3, dtype=np.int64)
-            local[b_], local[c_] = sb, sc
-            quad_edge.append(edge_at(ax, local))
-        end = np.zeros(3, dtype=np.int64)
-        end[b_], end[c_] = 1, 1
-        quad_ends.append(corner_at(end))
-        end[ax] = 1
-        quad_ends.append(corner_at(end))
-    return quad_corner, quad_edge, quad_ends
-
-
-_QUADS = _quad_tables() if _EDGES else ([0] * 12, [0] * 12, [0] * 6)
-_QCORNER_LOW, _QCORNER_HIGH = _pack(_QUADS[0], 3)
-_QEDGE_LOW, _QEDGE_HIGH = _pack(_QUADS[1], 4)
-_QENDS_LOW, _QENDS_HIGH = _pack(_QUADS[2], 3)
-
-
-@wp.func
-def _quadcube_corner(k: int):
-    return _unpack(_QCORNER_LOW, _QCORNER_HIGH, 3, 6, k)
-
-
-@wp.func
-def _quad_edge(k: int):
-    return _unpack(_QEDGE_LOW, _QEDGE_HIGH, 4, 6, k)
-
-
-@wp.func
-def _quad_ends(a: int):
-    """The two corners (lower, upper) of the edge along axis ``a`` whose quad a cube writes."""
-    return _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a), _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a + 1)
 
 
 @wp.kernel(enable_backward=False)
@@ -304,7 +223,7 @@ def _place_vertices_kernel(
         ends = end_mask[case * 4 + p]
         for e in range(12):
             if (edges >> e) & 1 == 1:
-                ca, cb = _edge_ends(e)
+                ca, cb = edge_ends(e)
                 t = vals[ca] / (vals[ca] - vals[cb])
                 mass += cube_corner(ca) + t * (cube_corner(cb) - cube_corner(ca))
                 crossings += 1.0
@@ -412,7 +331,7 @@ def _quads_kernel(
         out = quad_scan[cube - 1]
     count = int(0)
     for a in range(3):
-        ea, eb = _quad_ends(a)
+        ea, eb = quad_ends(a)
         v0 = values[cube_corners[cube, ea]]
         v1 = values[cube_corners[cube, eb]]
         if (v0 < 0.0) == (v1 < 0.0):
@@ -420,11 +339,11 @@ def _quads_kernel(
         q = wp.vector(-1, -1, -1, -1, length=4, dtype=int)
         complete = int(1)
         for k in range(4):
-            other = cube_of_node[cube_corners[cube, _quadcube_corner(4 * a + k)]]
+            other = cube_of_node[cube_corners[cube, quad_corner(4 * a + k)]]
             if other < 0:
                 complete = 0
             else:
-                q[k] = edge_vertex[other * 12 + _quad_edge(4 * a + k)]
+                q[k] = edge_vertex[other * 12 + quad_edge(4 * a + k)]
         row = 2 * (out + count)
         count += 1
         if complete == 0:

@@ -309,13 +309,14 @@ def case_tables() -> dict:
     """Warp's marching-cubes tables as numpy int32 arrays: ``case_to_tri_range`` (257,), ``tri_local_inds`` (local
     edges of each case's triangles, 3 per triangle), and per local edge ``edge_owner`` / ``edge_upper`` (its lower
     and upper corner) and ``edge_axis`` (12,). Needs Warp's marching-cubes core (``HAS_SHARED_CORNER_CORE``)."""
-    device = "cpu"
+    from warp._src.geometry import marching_cubes as mc_tables  # the tables the core's device arrays hold
+
     return {
-        "case_to_tri_range": _warp_mc._get_mc_case_to_tri_range_table(device).numpy(),
-        "tri_local_inds": _warp_mc._get_mc_tri_local_inds_table(device).numpy(),
-        "edge_owner": _warp_mc._get_edge_owner_table(device).numpy(),
-        "edge_upper": _warp_mc._get_edge_upper_table(device).numpy(),
-        "edge_axis": _warp_mc._get_edge_axis_table(device).numpy(),
+        "case_to_tri_range": np.asarray(mc_tables.MC_CASE_TO_TRI_RANGE, dtype=np.int32),
+        "tri_local_inds": np.asarray(mc_tables.MC_TRI_LOCAL_INDICES, dtype=np.int32),
+        "edge_owner": np.asarray(_warp_mc._MC_EDGE_OWNER, dtype=np.int32),
+        "edge_upper": np.asarray(_warp_mc._MC_EDGE_UPPER, dtype=np.int32),
+        "edge_axis": np.asarray(_warp_mc._MC_EDGE_AXIS, dtype=np.int32),
     }
 
 
@@ -341,3 +342,95 @@ def patch_tables() -> tuple[np.ndarray, np.ndarray]:
         patch[case, used] = np.searchsorted(roots, label[used])
         count[case] = len(roots)
     return patch, count
+
+
+# ---- packed tables for the dual contouring kernels (integer constants: no table reads in inner loops) ----
+
+
+_EDGES = case_tables() if HAS_SHARED_CORNER_CORE else None
+
+
+def _pack(entries, bits: int) -> tuple[int, int]:
+    """Small non-negative integers packed ``bits`` apiece into two int32 constants (first half, second half)."""
+    half = (len(entries) + 1) // 2
+    low = sum(int(x) << (bits * k) for k, x in enumerate(entries[:half]))
+    high = sum(int(x) << (bits * k) for k, x in enumerate(entries[half:]))
+    return low, high
+
+
+_OWNER_LOW, _OWNER_HIGH = _pack(_EDGES["edge_owner"], 3) if _EDGES else (0, 0)
+_UPPER_LOW, _UPPER_HIGH = _pack(_EDGES["edge_upper"], 3) if _EDGES else (0, 0)
+
+
+@wp.func
+def _unpack(low: int, high: int, bits: int, half: int, k: int):
+    """Entry ``k`` of a table packed by ``_pack`` (``half`` entries in ``low``)."""
+    if k < half:
+        return (low >> (bits * k)) & ((1 << bits) - 1)
+    return (high >> (bits * (k - half))) & ((1 << bits) - 1)
+
+
+@wp.func
+def edge_ends(e: int):
+    """Lower and upper corner of local edge ``e``."""
+    return _unpack(_OWNER_LOW, _OWNER_HIGH, 3, 6, e), _unpack(_UPPER_LOW, _UPPER_HIGH, 3, 6, e)
+
+
+def _quad_tables() -> tuple[list, list, list]:
+    """Where each crossed edge's quad comes from.
+
+    A crossed edge along axis a is shared by the four cubes whose minimum corners are its lower end minus
+    s_b e_b + s_c e_c (b, c the other axes, s in {0, 1}), numbered counter-clockwise about the axis: (0, 0), (1, 0),
+    (1, 1), (0, 1). Its quad is written by the cube at (1, 1), whose corners are the others' minimum corners.
+
+    Returns:
+        Per axis and place (12): the writing cube's corner that is that cube's minimum corner, and the edge's index
+        in that cube; per axis (6): the writing cube's corners at the edge's two ends.
+    """
+    owner, axis = _EDGES["edge_owner"], _EDGES["edge_axis"]
+    places = ((0, 0), (1, 0), (1, 1), (0, 1))
+
+    def corner_at(off):
+        return int(np.flatnonzero((CORNER_OFFSETS == np.asarray(off)).all(1))[0])
+
+    def edge_at(axis_, off):
+        return int(next(e for e in range(12) if axis[e] == axis_ and corner_at(off) == owner[e]))
+
+    quad_corner, quad_edge, quad_ends = [], [], []
+    for ax in range(3):
+        b_, c_ = (ax + 1) % 3, (ax + 2) % 3
+        for sb, sc in places:
+            off = np.zeros(3, dtype=np.int64)
+            off[b_], off[c_] = 1 - sb, 1 - sc
+            quad_corner.append(corner_at(off))
+            local = np.zeros(3, dtype=np.int64)
+            local[b_], local[c_] = sb, sc
+            quad_edge.append(edge_at(ax, local))
+        end = np.zeros(3, dtype=np.int64)
+        end[b_], end[c_] = 1, 1
+        quad_ends.append(corner_at(end))
+        end[ax] = 1
+        quad_ends.append(corner_at(end))
+    return quad_corner, quad_edge, quad_ends
+
+
+_QUADS = _quad_tables() if _EDGES else ([0] * 12, [0] * 12, [0] * 6)
+_QCORNER_LOW, _QCORNER_HIGH = _pack(_QUADS[0], 3)
+_QEDGE_LOW, _QEDGE_HIGH = _pack(_QUADS[1], 4)
+_QENDS_LOW, _QENDS_HIGH = _pack(_QUADS[2], 3)
+
+
+@wp.func
+def quad_corner(k: int):
+    return _unpack(_QCORNER_LOW, _QCORNER_HIGH, 3, 6, k)
+
+
+@wp.func
+def quad_edge(k: int):
+    return _unpack(_QEDGE_LOW, _QEDGE_HIGH, 4, 6, k)
+
+
+@wp.func
+def quad_ends(a: int):
+    """The two corners (lower, upper) of the edge along axis ``a`` whose quad a cube writes."""
+    return _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a), _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a + 1)
