@@ -38,6 +38,7 @@ from .marching import (
     quad_corner,
     quad_edge,
     quad_ends,
+    tunnel_tables,
 )
 from .parallel import launch_split
 from .quadric import clamp_box, crease_edges, cube_corner, quadric_at, solve_in_cube, solve_smooth, trilinear, vec8
@@ -87,6 +88,7 @@ def _tables(device) -> dict:
     if key not in _TABLE_CACHE:
         tables = case_tables()
         patch, count = patch_tables()
+        spans, second = tunnel_tables()
         owner, upper = tables["edge_owner"], tables["edge_upper"]
         # per case and patch (4 at most): the bit mask of its local edges and of the corners at their ends
         edge_mask = np.zeros((256, 4), dtype=np.int32)
@@ -99,6 +101,8 @@ def _tables(device) -> dict:
             "edge_mask": wp.array(edge_mask.ravel(), dtype=wp.int32, device=device),
             "end_mask": wp.array(end_mask.ravel(), dtype=wp.int32, device=device),
             "count": wp.array(count, dtype=wp.int32, device=device),
+            "spans": wp.array(spans, dtype=wp.int32, device=device),
+            "second": wp.array(second.ravel(), dtype=wp.int32, device=device),
         }
     return _TABLE_CACHE[key]
 
@@ -125,11 +129,14 @@ def _count_patches_kernel(
     counts: wp.array[wp.int32],
     quad_counts: wp.array[wp.int32],
     cube_of_node: wp.array[wp.int32],
+    cube_case: wp.array[wp.int32],
 ):
     """Patches of cube ``first + tid``, and the crossed edges whose quads it writes (see ``_quads_kernel``); the
-    cube's index at its minimum corner's node."""
+    cube's index at its minimum corner's node, and its case."""
     cube = first + wp.tid()
-    counts[cube] = patch_count[_case(cube_corners, values, cube)]
+    case = _case(cube_corners, values, cube)
+    cube_case[cube] = case
+    counts[cube] = patch_count[case]
     cube_of_node[cube_corners[cube, 0]] = cube
     quads = int(0)
     for a in range(3):
@@ -320,11 +327,22 @@ def _quads_kernel(
     linear: wp.array[wp.vec4],
     inv: float,
     min_area: float,
+    cube_case: wp.array[wp.int32],
+    spans: wp.array[wp.int32],
+    second: wp.array[wp.int32],
+    coords: wp.array[wp.vec3i],
+    origin: wp.vec3,
     tris: wp.array2d[wp.int32],
+    tunnel: wp.array[wp.int32],
+    tunnel_point: wp.array[wp.vec3],
 ):
     """The quads of the crossed edges whose four cubes cube ``first + tid`` completes as the one below both other
     axes (each crossed edge has exactly one such cube), as two triangles, outward, split along the diagonal whose
-    midpoint its two vertices' planes fit best; -1 rows where one of the four cubes is missing (the band's edge)."""
+    midpoint its two vertices' planes fit best; -1 rows where one of the four cubes is missing (the band's edge).
+    Where two of its cubes meet across a face that each crosses with one patch in two segments and its edge lies in
+    the second segment (``tunnel_tables``), the quad's ``tunnel`` entry has that side's bit (its sides numbered from
+    its first vertex as written) and its edge's crossing point goes to ``tunnel_point``: such sides get a vertex of
+    their own (see ``_open_tunnels``)."""
     cube = first + wp.tid()
     out = int(0)
     if cube > 0:
@@ -337,20 +355,33 @@ def _quads_kernel(
         if (v0 < 0.0) == (v1 < 0.0):
             continue
         q = wp.vector(-1, -1, -1, -1, length=4, dtype=int)
+        owners = wp.vector(-1, -1, -1, -1, length=4, dtype=int)
         complete = int(1)
         for k in range(4):
             other = cube_of_node[cube_corners[cube, quad_corner(4 * a + k)]]
+            owners[k] = other
             if other < 0:
                 complete = 0
             else:
                 q[k] = edge_vertex[other * 12 + quad_edge(4 * a + k)]
-        row = 2 * (out + count)
+        quad = out + count
+        row = 2 * quad
         count += 1
+        tunnel[quad] = 0
         if complete == 0:
             for k in range(3):
                 tris[row, k] = -1
                 tris[row + 1, k] = -1
             continue
+        # sides across a face both their cubes cross with one patch in two segments, this edge in the second
+        sides = int(0)
+        for k in range(4):
+            face = 2 * ((a + 1 + k % 2) % 3) + wp.where(k < 2, 0, 1)
+            mate = face + 1 - 2 * (face % 2)  # the same face seen from the next cube
+            here = cube_case[owners[k]]
+            if (spans[here] >> face) & 1 == 1 and (spans[cube_case[owners[(k + 1) % 4]]] >> mate) & 1 == 1:
+                if second[(here * 12 + quad_edge(4 * a + k)) * 6 + face] == 1:
+                    sides = sides | (1 << k)
         q0 = q[0]
         q1 = q[1]
         q2 = q[2]
@@ -358,6 +389,23 @@ def _quads_kernel(
         if v0 >= 0.0:  # inside above: the outward normal is -axis, so turn the other way round
             q1 = q[3]
             q3 = q[1]
+            # side k (q[k], q[k + 1]) is now side (3 - k) % 4
+            sides = ((sides & 1) << 3) | ((sides & 2) << 1) | ((sides & 4) >> 1) | ((sides & 8) >> 3)
+        if sides != 0:
+            # written in order and split along q0-q2, for _open_tunnels to rebuild around the sides' new vertices
+            n_a = coords[cube_corners[cube, ea]]
+            x_a = origin + (wp.vec3(float(n_a[0]), float(n_a[1]), float(n_a[2])) + wp.vec3(0.5)) / inv
+            x_b = x_a
+            x_b[a] = x_b[a] + 1.0 / inv
+            tunnel[quad] = sides
+            tunnel_point[quad] = x_a + (v0 / (v0 - v1)) * (x_b - x_a)
+            tris[row, 0] = q0
+            tris[row, 1] = q1
+            tris[row, 2] = q2
+            tris[row + 1, 0] = q0
+            tris[row + 1, 1] = q2
+            tris[row + 1, 2] = q3
+            continue
         p0 = verts[q0]
         p1 = verts[q1]
         p2 = verts[q2]
@@ -409,7 +457,8 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
     Returns:
         dict: ``verts`` (V, 3) float32, ``tris`` (T, 3) int32 (outward, counter-clockwise), ``ranks`` (V,) int32
         (significant eigenvalues of each vertex's quadric: 1 smooth, 2 crease, 3 corner; 0 without planes) and
-        ``cells`` (V,) int32 (the active cube each vertex belongs to, a row of ``cube_corners``).
+        ``cells`` (V,) int32 (the active cube each vertex belongs to, a row of ``cube_corners``), ``tunnels``: how
+        many of the vertices were added between two cubes meeting along two dual edges (``_open_tunnels``).
     """
     device = cube_corners.device
     tables = _tables(device)
@@ -417,10 +466,11 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
     counts = wp.empty(m, dtype=wp.int32, device=device)
     quad_counts = wp.empty(m, dtype=wp.int32, device=device)
     cube_of_node = wp.full(n, -1, dtype=wp.int32, device=device)
+    cube_case = wp.empty(m, dtype=wp.int32, device=device)
     launch_split(
         _count_patches_kernel,
         m,
-        lambda s, c: [s, cube_corners, values, tables["count"], counts, quad_counts, cube_of_node],
+        lambda s, c: [s, cube_corners, values, tables["count"], counts, quad_counts, cube_of_node, cube_case],
         device,
     )
     neighbours = wp.zeros(6 * m, dtype=wp.int32, device=device)
@@ -470,6 +520,8 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
         device,
     )
     tris = wp.empty((2 * n_quads, 3), dtype=wp.int32, device=device)
+    tunnel = wp.empty(n_quads, dtype=wp.int32, device=device)
+    tunnel_point = wp.empty(n_quads, dtype=wp.vec3, device=device)
     launch_split(
         _quads_kernel,
         m,
@@ -485,19 +537,77 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             linear,
             1.0 / float(spacing),
             MIN_SPLIT_AREA,
+            cube_case,
+            tables["spans"],
+            tables["second"],
+            coords,
+            origin_wp,
             tris,
+            tunnel,
+            tunnel_point,
         ],
         device,
     )
-    tris_np = tris.numpy()
-    if n_quads and tris_np[:, 0].min() < 0:  # quads at the band's edge, where a cube is missing (open surface)
-        tris_np = tris_np[tris_np[:, 0] >= 0]
-    return {
+    surface = {
         "verts": verts.numpy().reshape(-1, 3),
-        "tris": tris_np,
+        "tris": tris.numpy(),
         "ranks": ranks.numpy(),
         "cells": cells.numpy(),
+        "tunnels": 0,
     }
+    tunnel_np = tunnel.numpy()
+    if tunnel_np.any():
+        flagged = np.flatnonzero(tunnel_np)
+        _open_tunnels(surface, flagged, tunnel_np[flagged], tunnel_point.numpy()[flagged])
+    tris_np = surface["tris"]
+    if len(tris_np) and tris_np[:, 0].min() < 0:  # quads at the band's edge, where a cube is missing (open surface)
+        surface["tris"] = tris_np[tris_np[:, 0] >= 0]
+    return surface
+
+
+def _open_tunnels(surface: dict, quads: np.ndarray, sides: np.ndarray, points: np.ndarray) -> None:
+    """Give the flagged sides of the flagged quads a vertex of their own (in place).
+
+    Two cubes that each cross their shared face with one patch in two segments make the marching cubes surface a
+    tunnel through that face, and their two dual vertices meet along two dual edges at once: one per segment. As an
+    indexed mesh that would be one edge of four triangles. The sides of the second segment's quads (flagged by
+    ``_quads_kernel``) get a vertex between the two cubes' vertices, at the middle of those quads' edge crossings,
+    and each such quad becomes a fan around its first new vertex: the edge of the first segment stays, the second
+    becomes a path through the new vertex.
+
+    Args:
+        surface: ``verts``, ``tris``, ``ranks``, ``cells`` of :func:`contour_dual`, quad q as rows 2q and 2q + 1
+            (q0, q1, q2), (q0, q2, q3) where flagged.
+        quads: (Q,) flagged quad indices; sides: (Q,) their bit masks (bit k: side q_k, q_k+1); points: (Q, 3) their
+            edges' crossing points.
+    """
+    verts, tris = surface["verts"], surface["tris"]
+    corners = np.concatenate([tris[2 * quads], tris[2 * quads + 1][:, 2:]], axis=1).astype(np.int64)  # (Q, 4)
+    bit = (sides[:, None] >> np.arange(4)) & 1 == 1  # (Q, 4)
+    row, k = np.nonzero(bit)
+    ends = np.stack([corners[row, k], corners[row, (k + 1) % 4]], axis=1)
+    keys, group = np.unique(ends.min(1) * len(verts) + ends.max(1), return_inverse=True)
+    new_points = np.zeros((len(keys), 3), dtype=np.float64)
+    np.add.at(new_points, group, points[row])
+    new_points /= np.bincount(group, minlength=len(keys))[:, None]
+    # each quad as a polygon of up to 8 slots (q0, m0, q1, m1, ...), started at its first new vertex
+    slots = np.full((len(quads), 8), -1, dtype=np.int64)
+    slots[:, 0::2] = corners
+    slots[row, 2 * k + 1] = len(verts) + group
+    start = 2 * np.argmax(bit, axis=1) + 1
+    slots = np.take_along_axis(slots, (start[:, None] + np.arange(8)) % 8, axis=1)
+    slots = np.take_along_axis(slots, np.argsort(slots < 0, axis=1, kind="stable"), axis=1)  # used slots first
+    size = (slots >= 0).sum(axis=1)
+    fan = np.stack([np.repeat(slots[:, :1], 6, axis=1), slots[:, 1:7], slots[:, 2:8]], axis=-1)  # (Q, 6, 3)
+    fans = fan[np.arange(6)[None, :] < (size - 2)[:, None]]
+    keep = np.ones(len(tris), dtype=bool)
+    keep[2 * quads] = keep[2 * quads + 1] = False
+    surface["tris"] = np.concatenate([tris[keep], fans.astype(np.int32)])
+    surface["verts"] = np.concatenate([verts, new_points.astype(np.float32)])
+    surface["ranks"] = np.concatenate([surface["ranks"], np.ones(len(keys), dtype=np.int32)])
+    first = np.unique(group, return_index=True)[1]
+    surface["cells"] = np.concatenate([surface["cells"], surface["cells"][ends[first, 0]]])
+    surface["tunnels"] = len(keys)
 
 
 # ---- creases and the entry point ----

@@ -344,6 +344,51 @@ def patch_tables() -> tuple[np.ndarray, np.ndarray]:
     return patch, count
 
 
+def tunnel_tables() -> tuple[np.ndarray, np.ndarray]:
+    """Where the dual of the marching cubes needs a vertex more: faces with four crossed edges (two segments) whose
+    cube has one patch through both, so that two cubes doing so across a face meet along two dual edges at once.
+
+    Returns:
+        ``spans`` (256,) int32: per case, bit ``2 * axis + side`` set for each face (side 0: the minimum along that
+        axis) crossed by one patch in two segments; ``second`` (256, 12, 6) int32: 1 where the local edge lies on that
+        face in the segment that does not hold the face's first edge (the one along the face's lower in-plane axis,
+        at the minimum of the other).
+    """
+    tables = case_tables()
+    ranges, local, owner, upper, axis = (
+        tables[k] for k in ("case_to_tri_range", "tri_local_inds", "edge_owner", "edge_upper", "edge_axis")
+    )
+    patch, _ = patch_tables()
+    off = CORNER_OFFSETS
+
+    def on_face(e, f):
+        a, side = divmod(f, 2)
+        return axis[e] != a and off[owner[e]][a] == side and off[upper[e]][a] == side
+
+    spans = np.zeros(256, dtype=np.int32)
+    second = np.zeros((256, 12, 6), dtype=np.int32)
+    for case in range(256):  # a one-off walk over the 256 table entries
+        tris = local[ranges[case] : ranges[case + 1]].reshape(-1, 3)
+        sides = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+        pairs, uses = np.unique(sides, axis=0, return_counts=True)
+        segments = pairs[uses == 1]  # polygon sides (fan diagonals are used twice): the face segments
+        for f in range(6):
+            edges = [e for e in range(12) if on_face(e, f) and patch[case, e] >= 0]
+            if len(edges) != 4:
+                continue
+            if len(set(patch[case, edges])) == 1:
+                spans[case] |= 1 << f
+            u = min(a for a in range(3) if a != f // 2)
+            v = 3 - f // 2 - u
+            first = next(e for e in edges if axis[e] == u and off[owner[e]][v] == 0)
+            mate = next(
+                int(b if a == first else a) for a, b in segments if first in (a, b) and on_face(a, f) and on_face(b, f)
+            )
+            for e in edges:
+                second[case, e, f] = int(e not in (first, mate))
+    return spans, second
+
+
 # ---- packed tables for the dual contouring kernels (integer constants: no table reads in inner loops) ----
 
 

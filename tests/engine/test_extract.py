@@ -415,9 +415,9 @@ def test_invalid_arguments_raise(coords, values, kwargs, error, match):
 
 @pytest.mark.parametrize(("iso_voxels", "levels"), [(0.0, 4), (1.5, 4), (-0.7, 4), (0.0, 3), (0.0, 2), (0.0, 1)])
 def test_octree_level_extraction_matches_the_generic_one(iso_voxels, levels):
-    # to_mesh(sharp=False) takes each cube's corners from its octet's +x/+y/+z neighbours, found through the child links from the
-    # dense top level (itself the octets' level with 2 levels, the finest with 1), without sorting: the mesh must be
-    # the one extract_surface finds from the same samples.
+    # to_mesh(sharp=False) takes each cube's corners from its octet's +x/+y/+z neighbours, found through the child
+    # links from the dense top level (itself the octets' level with 2 levels, the finest with 1), without sorting: the
+    # mesh must be the one extract_surface finds from the same samples.
     import engine
     from tests.support import uv_sphere
 
