@@ -61,6 +61,11 @@ SMOOTH_COS = 0.99
 HERMITE_TOLERANCE = 0.02
 
 
+# A node's plane weighs (distance to its closest point / this)^2 below this distance (voxels), where the direction
+# to that point turns to noise.
+HERMITE_NEAR = 0.12
+
+
 # A crease or corner vertex whose planes meet outside its cube may go this many voxels past a face whose neighbouring
 # cube the surface does not cross (the tip of a wedge more acute than the lattice resolves lies there).
 EMPTY_REACH = 1.0
@@ -186,6 +191,7 @@ def _place_vertices_kernel(
     cutoff: float,
     smooth_cos: float,
     tolerance: float,
+    near: float,
     margin: float,
     verts: wp.array[wp.vec3],
     ranks: wp.array[wp.int32],
@@ -244,6 +250,8 @@ def _place_vertices_kernel(
         first_normal = wp.vec3(0.0)
         min_cos = float(1.0)
         fallback = float(0.0)
+        skipped = float(0.0)
+        weighty = int(0)
         for c in range(8):
             if (ends >> c) & 1 == 0:
                 continue
@@ -253,23 +261,34 @@ def _place_vertices_kernel(
             dl = wp.length(d)
             r = raw[node]
             use = int(0)
-            if dl > 1.0e-3 and wp.abs(dl - wp.abs(r) * inv) <= tolerance:
+            if dl <= 1.0e-4:
+                use = -1  # on the surface: no direction at all
+            elif wp.abs(dl - wp.abs(r) * inv) <= tolerance:
                 n = d / dl
                 if r < 0.0:
                     n = -n
                 if wp.dot(n, g_mass) > 0.0:  # not the far side of a plate thinner than a cell
+                    # the direction to a closest point is noise close to the surface (closest points on long thin
+                    # triangles are exact to about 1e-2 voxel): such planes weigh less
+                    w = wp.min(1.0, (dl / near) * (dl / near))
                     b = wp.dot(n, q) + iso * inv
-                    ata += wp.outer(n, n)
-                    atb += n * b
-                    btb += b * b
-                    planes += 1.0
-                    normal_sum += n
-                    if planes == 1.0:
-                        first_normal = n
-                    min_cos = wp.min(min_cos, wp.dot(n, first_normal))
+                    ata += w * wp.outer(n, n)
+                    atb += w * n * b
+                    btb += w * b * b
+                    planes += w
+                    normal_sum += w * n
+                    if w >= 0.5:
+                        if weighty == 0:
+                            first_normal = n
+                            weighty = 1
+                        min_cos = wp.min(min_cos, wp.dot(n, first_normal))
                     use = 1
             if use == 0:
                 fallback += 1.0
+            elif use == -1:
+                skipped += 1.0
+        if planes == 0.0:
+            fallback += skipped
         gl = wp.length(g_mass)
         if fallback > 0.0 and gl > 0.0:
             # corners whose Hermite data does not hold: the interpolant's tangent plane at the mass point moved onto
@@ -281,7 +300,7 @@ def _place_vertices_kernel(
             btb += fallback * b * b
             planes += fallback
             normal_sum += fallback * n
-            if planes == fallback:
+            if weighty == 0:
                 first_normal = n
             min_cos = wp.min(min_cos, wp.dot(n, first_normal))
         vid = base_vertex + p
@@ -509,6 +528,7 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             EIGEN_CUTOFF,
             SMOOTH_COS,
             HERMITE_TOLERANCE,
+            HERMITE_NEAR,
             CELL_MARGIN,
             verts,
             ranks,
