@@ -116,7 +116,7 @@ def edge_use_counts(tris) -> np.ndarray:
     """How many triangles use each undirected edge (a watertight 2-manifold gives 2 everywhere)."""
     t = np.asarray(tris, dtype=np.int64)
     e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
-    _, counts = np.unique(e, axis=0, return_counts=True)
+    _, counts = np.unique(e[:, 0] * (int(t.max(initial=0)) + 1) + e[:, 1], return_counts=True)
     return counts
 
 
@@ -126,7 +126,8 @@ def is_watertight(tris) -> bool:
     if len(t) == 0:
         return False
     directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    if len(np.unique(directed, axis=0)) != len(directed):
+    codes = directed[:, 0] * (int(t.max()) + 1) + directed[:, 1]
+    if len(np.unique(codes)) != len(codes):
         return False
     return bool(np.all(edge_use_counts(t) == 2))
 
