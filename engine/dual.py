@@ -538,6 +538,7 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             edge_vertex,
         ],
         device,
+        balance=True,
     )
     tris = wp.empty((2 * n_quads, 3), dtype=wp.int32, device=device)
     tunnel = wp.empty(n_quads, dtype=wp.int32, device=device)

@@ -31,19 +31,31 @@ def cube_corner(c: int):
     return wp.vec3(float((_BITS_X >> c) & 1), float((_BITS_Y >> c) & 1), float((_BITS_Z >> c) & 1))
 
 
+# trilinear spells the corners out in this order (Warp's marching cubes order)
+_TRILINEAR_ORDER = ((0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1))
+if tuple(tuple(int(x) for x in row) for row in CORNER_OFFSETS) != _TRILINEAR_ORDER:
+    raise ImportError("engine.quadric expects Warp's marching-cubes corner order")
+
+
 @wp.func
 def trilinear(v: vec8, p: wp.vec3):
     """Value and gradient of the trilinear interpolant of a cube's corner values ``v`` at local point ``p``."""
-    g = wp.vec3(0.0)
-    f = float(0.0)
-    for c in range(8):
-        o = cube_corner(c)
-        wx = wp.where(o[0] > 0.5, p[0], 1.0 - p[0])
-        wy = wp.where(o[1] > 0.5, p[1], 1.0 - p[1])
-        wz = wp.where(o[2] > 0.5, p[2], 1.0 - p[2])
-        f += v[c] * wx * wy * wz
-        g += v[c] * wp.vec3((2.0 * o[0] - 1.0) * wy * wz, (2.0 * o[1] - 1.0) * wx * wz, (2.0 * o[2] - 1.0) * wx * wy)
-    return f, g
+    x = p[0]
+    y = p[1]
+    z = p[2]
+    d00 = v[1] - v[0]  # along x at (y, z) = (0, 0), (1, 0), (0, 1), (1, 1)
+    d10 = v[2] - v[3]
+    d01 = v[5] - v[4]
+    d11 = v[6] - v[7]
+    a00 = v[0] + x * d00
+    a10 = v[3] + x * d10
+    a01 = v[4] + x * d01
+    a11 = v[7] + x * d11
+    b0 = a00 + y * (a10 - a00)
+    b1 = a01 + y * (a11 - a01)
+    gx = (1.0 - z) * (d00 + y * (d10 - d00)) + z * (d01 + y * (d11 - d01))
+    gy = (1.0 - z) * (a10 - a00) + z * (a11 - a01)
+    return b0 + z * (b1 - b0), wp.vec3(gx, gy, b1 - b0)
 
 
 @wp.func
