@@ -294,6 +294,30 @@ def hausdorff(verts_a, tris_a, verts_b, tris_b, n: int = 200_000, seed: int = 0,
     return result
 
 
+# ---- creases (numpy) ----
+
+
+def crease_points(verts, tris, angle: float = 30.0, step: float = 1e-3) -> np.ndarray:
+    """Points every ``step`` (world units) along the edges of a closed mesh whose two triangles' normals differ by more
+    than ``angle`` degrees: its creases, as an (N, 3) float64 point set (empty when it has none)."""
+    v = verts.astype(np.float64)
+    t = tris.astype(np.int64)
+    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    sides = np.sort(np.stack([t, np.roll(t, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
+    face = np.repeat(np.arange(len(t)), 3)
+    order = np.lexsort((sides[:, 1], sides[:, 0]))
+    sides, face = sides[order], face[order]
+    same = np.all(sides[1:] == sides[:-1], axis=1)
+    pair = np.flatnonzero(same)
+    fold = np.einsum("ij,ij->i", n[face[pair]], n[face[pair + 1]]) < np.cos(np.radians(angle))
+    a, b = v[sides[pair[fold], 0]], v[sides[pair[fold], 1]]
+    count = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(int), 1)
+    edge = np.repeat(np.arange(len(a)), count + 1)
+    s = (np.arange(len(edge)) - np.repeat(np.cumsum(count + 1) - (count + 1), count + 1)) / count[edge]
+    return a[edge] + s[:, None] * (b - a)[edge]
+
+
 # ---- self-intersections (warp) ----
 
 

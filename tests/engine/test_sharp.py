@@ -12,6 +12,7 @@ from scipy.spatial import cKDTree
 import engine
 from engine import dual, extract
 from tests.metrics import (
+    crease_points,
     exact_boolean,
     exact_sdf,
     hausdorff,
@@ -106,26 +107,6 @@ def test_sharp_surface_does_not_cross_itself_at_creases(cad):
     assert self_intersections(*cad["sharp"]) == 0
 
 
-def _exact_creases(verts, tris, angle=30.0, step=0.1 * H):
-    """Points every ``step`` along the edges of a mesh whose two triangles' normals differ by more than ``angle``."""
-    v = verts.astype(np.float64)
-    t = tris.astype(np.int64)
-    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    sides = np.sort(np.stack([t, np.roll(t, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
-    face = np.repeat(np.arange(len(t)), 3)
-    order = np.lexsort((sides[:, 1], sides[:, 0]))
-    sides, face = sides[order], face[order]
-    same = np.all(sides[1:] == sides[:-1], axis=1)
-    pair = np.flatnonzero(same)
-    fold = np.einsum("ij,ij->i", n[face[pair]], n[face[pair + 1]]) < np.cos(np.radians(angle))
-    a, b = v[sides[pair[fold], 0]], v[sides[pair[fold], 1]]
-    count = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(int), 1)
-    edge = np.repeat(np.arange(len(a)), count + 1)
-    s = (np.arange(len(edge)) - np.repeat(np.cumsum(count + 1) - (count + 1), count + 1)) / count[edge]
-    return a[edge] + s[:, None] * (b - a)[edge]
-
-
 def test_crease_edges_lie_on_the_exact_creases(cad):
     verts, tris = cad["sharp"]
     creases = cad["creases"]
@@ -139,11 +120,11 @@ def test_crease_edges_lie_on_the_exact_creases(cad):
     # crease edge midpoints lie on the exact creases (edges folding by more than 20 degrees; the rocker-arm's own
     # facets fold by 10-30): measured p90 0.04-0.36 voxel
     mid = verts[creases].astype(np.float64).mean(axis=1)
-    d = cKDTree(_exact_creases(*cad["exact"], angle=20.0)).query(mid)[0] / H
+    d = cKDTree(crease_points(*cad["exact"], angle=20.0, step=0.1 * H)).query(mid)[0] / H
     assert np.percentile(d, 90) < 1.0, (cad["name"], np.percentile(d, 90))
     # and they cover the exact creases folding by more than 30 degrees: measured 0.76 (rocker-arm) to 0.97 of their
     # points within a voxel of a crease edge's midpoint
-    covered = cKDTree(mid).query(_exact_creases(*cad["exact"], angle=30.0))[0] < H
+    covered = cKDTree(mid).query(crease_points(*cad["exact"], angle=30.0, step=0.1 * H))[0] < H
     assert covered.mean() > 0.6, (cad["name"], covered.mean())
 
 
