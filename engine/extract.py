@@ -319,19 +319,18 @@ def _used_node_points_kernel(
     point_values[out] = values[i]
 
 
-def extract_octree_level(coords, values, tree, *, origin, spacing, iso=0.0):
-    """:func:`extract_surface` for an octree's finest level as it is stored: Warp arrays of lattice coordinates and
-    values (signed distances, finite; Morton order, in complete octets of 8 consecutive nodes), all on one device, and
-    ``tree`` = (child links of every node, index of the dense top level's first node, its dims, number of levels >= 2)
-    to find neighbour octets by. Same mesh as ``extract_surface(coords, values, ...)``, found without leaving the
-    device: each cube's corners come from its octet's neighbours (``_octet_cube_corners_kernel``), so nothing is
-    sorted.
+def octree_level_cubes(coords, values, tree, *, origin, spacing, iso=0.0):
+    """The active cubes of an octree's finest level as it is stored (see :func:`extract_octree_level`): each cube's
+    corners come from its octet's neighbours (``_octet_cube_corners_kernel``), so nothing is sorted.
 
-    Returns and raises as :func:`extract_surface` (no ValueError: the level is valid by construction).
+    Returns:
+        ``None`` when no complete cube changes sign, else a dict: ``cube_corners`` (M, 8) int32 Warp array of node
+        indices (``CORNER_OFFSETS`` order), ``shifted`` (N,) float32 Warp array of the values minus ``iso`` with
+        entries within the nudge of 0 pushed off it, ``lo`` (3,) int64 lattice minimum of the level.
     """
     n = coords.shape[0]
     if n == 0:
-        return empty_mesh()
+        return None
     device = coords.device
     child, top_offset, top_dims, levels = tree
     tree_args = [child, int(top_offset), wp.vec3i(*(int(d) for d in top_dims)), int(levels)]
@@ -361,7 +360,7 @@ def extract_octree_level(coords, values, tree, *, origin, spacing, iso=0.0):
     wp.utils.array_scan(active, active_scan, inclusive=True)
     n_cubes = int(active_scan[-1:].numpy()[0])
     if n_cubes == 0:
-        return empty_mesh()
+        return None
     cube_corners = wp.empty((n_cubes, 8), dtype=wp.int32, device=device)
     launch_split(
         _octet_cube_corners_kernel,
@@ -369,11 +368,34 @@ def extract_octree_level(coords, values, tree, *, origin, spacing, iso=0.0):
         lambda s, c: [s, coords, *tree_args, shifted, 1, neighbours, active_scan, active, cube_corners],
         device,
     )
-    active = active_scan = neighbours = None
+    return {"cube_corners": cube_corners, "shifted": shifted, "lo": lo, "coords_np": coords_np}
+
+
+def extract_octree_level(coords, values, tree, *, origin, spacing, iso=0.0):
+    """:func:`extract_surface` for an octree's finest level as it is stored: Warp arrays of lattice coordinates and
+    values (signed distances, finite; Morton order, in complete octets of 8 consecutive nodes), all on one device, and
+    ``tree`` = (child links of every node, index of the dense top level's first node, its dims, number of levels >= 2)
+    to find neighbour octets by. Same mesh as ``extract_surface(coords, values, ...)``, found without leaving the
+    device: each cube's corners come from its octet's neighbours (``_octet_cube_corners_kernel``), so nothing is
+    sorted.
+
+    Returns and raises as :func:`extract_surface` (no ValueError: the level is valid by construction).
+    """
+    cubes = octree_level_cubes(coords, values, tree, origin=origin, spacing=spacing, iso=iso)
+    if cubes is None:
+        return empty_mesh()
+    device = coords.device
+    origin = np.asarray(origin, dtype=np.float64)
+    spacing = float(spacing)
+    n, lo, shifted = coords.shape[0], cubes["lo"], cubes["shifted"]
     if not HAS_SHARED_CORNER_CORE:  # another Warp version: through the generic path
-        return extract_surface(coords_np, shifted.numpy(), origin=origin, spacing=spacing, iso=0.0, device=device)
+        return extract_surface(
+            cubes["coords_np"], shifted.numpy(), origin=origin, spacing=spacing, iso=0.0, device=device
+        )
     point_inputs = [coords, wp.vec3i(*(int(x) for x in lo)), shifted]
-    verts_wp, indices_wp = polygonise(cube_corners, n, _used_node_points_kernel, point_inputs, lo, origin, spacing)
+    verts_wp, indices_wp = polygonise(
+        cubes["cube_corners"], n, _used_node_points_kernel, point_inputs, lo, origin, spacing
+    )
     if indices_wp.shape[0] == 0:
         return empty_mesh()
     verts = verts_wp.numpy().astype(np.float32, copy=False).reshape(-1, 3)
@@ -462,6 +484,79 @@ def _nudge_values(values: np.ndarray, iso: float, nudge: float) -> np.ndarray:
     return shifted.astype(np.float32)
 
 
+def lattice_cubes(coords, values, *, origin, spacing, iso, device=None):
+    """The active cubes of a sparse set of lattice samples (validated as by :func:`extract_surface`): samples packed
+    into sorted 64-bit keys, each cube's other corners found by galloping search.
+
+    Returns:
+        ``None`` when no complete cube changes sign, else a dict: ``keys`` (N,) int64 and ``shifted`` (N,) float32
+        (values minus ``iso``, nudged off 0) Warp arrays in key order, ``order`` (N,) int64 sample index of each key
+        (``None`` when the samples came in key order), ``cube_corners`` (M, 8) int32 Warp array of key indices,
+        ``lo`` (3,) int64 lattice minimum, ``strides`` (key step in i, in j).
+    """
+    if len(coords) == 0:
+        return None
+    device = wp.get_device(device)
+
+    # Pack (i, j, k) into int64 keys and sort; a field that emits its samples in key order skips the sort.
+    lo = np.array([coords[:, axis].min() for axis in range(3)], dtype=np.int64)
+    hi = np.array([coords[:, axis].max() for axis in range(3)], dtype=np.int64)
+    if int((hi - lo).max()) >= _MAX_SPAN:
+        raise ValueError(
+            f"Expected 'coords' spanning fewer than 2**20 lattice points per axis, but got {(hi - lo + 1).tolist()}."
+        )
+    span = hi - lo + 2  # one spare slot per axis: a search for c + 1 past the maximum can never alias
+    stride_y = int(span[2])
+    stride_x = int(span[1]) * stride_y
+    keys = (coords[:, 0] - lo[0]).astype(np.int64) * stride_x
+    keys += (coords[:, 1] - lo[1]).astype(np.int64) * stride_y
+    keys += coords[:, 2] - lo[2]
+    order = None
+    if not np.all(keys[1:] > keys[:-1]):
+        order = np.argsort(keys)
+        keys, values = keys[order], values[order]
+        duplicates = np.count_nonzero(keys[1:] == keys[:-1])
+        if duplicates:
+            raise ValueError(f"Expected unique 'coords', but got {duplicates} repeated samples.")
+
+    nudge = iso_nudge(origin, lo, hi, spacing)
+    shifted = _nudge_values(values, iso, nudge)
+
+    # Find the complete cubes whose corners change sign and gather their corner values.
+    n = len(keys)
+    keys_wp = wp.array(keys, dtype=wp.int64, device=device)
+    values_wp = wp.array(shifted, dtype=wp.float32, device=device)
+    active = wp.empty(n, dtype=wp.int32, device=device)
+    active_scan = wp.empty(n, dtype=wp.int32, device=device)
+    strides = (wp.int64(stride_x), wp.int64(stride_y))
+    no_corners = wp.empty((0, 8), dtype=wp.int32, device=device)
+    launch_split(
+        _find_cube_corners_kernel,
+        n,
+        lambda start, _count: [start, keys_wp, values_wp, *strides, 0, active_scan, active, no_corners],
+        device,
+    )
+    wp.utils.array_scan(active, active_scan, inclusive=True)
+    n_cubes = int(active_scan[-1:].numpy()[0])
+    if n_cubes == 0:
+        return None
+    cube_corners = wp.empty((n_cubes, 8), dtype=wp.int32, device=device)
+    launch_split(
+        _find_cube_corners_kernel,
+        n,
+        lambda start, _count: [start, keys_wp, values_wp, *strides, 1, active_scan, active, cube_corners],
+        device,
+    )
+    return {
+        "keys": keys_wp,
+        "shifted": values_wp,
+        "order": order,
+        "cube_corners": cube_corners,
+        "lo": lo,
+        "strides": (stride_x, stride_y),
+    }
+
+
 def extract_surface(coords, values, *, origin, spacing, iso=0.0, device=None) -> tuple[np.ndarray, np.ndarray]:
     """Marching cubes over a sparse set of samples on a regular lattice.
 
@@ -494,59 +589,11 @@ def extract_surface(coords, values, *, origin, spacing, iso=0.0, device=None) ->
             ``spacing`` there.
     """
     coords, values, origin, spacing, iso = _validate(coords, values, origin, spacing, iso)
-    if len(coords) == 0:
+    cubes = lattice_cubes(coords, values, origin=origin, spacing=spacing, iso=iso, device=device)
+    if cubes is None:
         return empty_mesh()
-    device = wp.get_device(device)
-
-    # Pack (i, j, k) into int64 keys and sort; a field that emits its samples in key order skips the sort.
-    lo = np.array([coords[:, axis].min() for axis in range(3)], dtype=np.int64)
-    hi = np.array([coords[:, axis].max() for axis in range(3)], dtype=np.int64)
-    if int((hi - lo).max()) >= _MAX_SPAN:
-        raise ValueError(
-            f"Expected 'coords' spanning fewer than 2**20 lattice points per axis, but got {(hi - lo + 1).tolist()}."
-        )
-    span = hi - lo + 2  # one spare slot per axis: a search for c + 1 past the maximum can never alias
-    stride_y = int(span[2])
-    stride_x = int(span[1]) * stride_y
-    keys = (coords[:, 0] - lo[0]).astype(np.int64) * stride_x
-    keys += (coords[:, 1] - lo[1]).astype(np.int64) * stride_y
-    keys += coords[:, 2] - lo[2]
-    if not np.all(keys[1:] > keys[:-1]):
-        order = np.argsort(keys)
-        keys, values = keys[order], values[order]
-        duplicates = np.count_nonzero(keys[1:] == keys[:-1])
-        if duplicates:
-            raise ValueError(f"Expected unique 'coords', but got {duplicates} repeated samples.")
-
-    nudge = iso_nudge(origin, lo, hi, spacing)
-    shifted = _nudge_values(values, iso, nudge)
-
-    # Find the complete cubes whose corners change sign and gather their corner values.
-    n = len(keys)
-    keys_wp = wp.array(keys, dtype=wp.int64, device=device)
-    values_wp = wp.array(shifted, dtype=wp.float32, device=device)
-    active = wp.empty(n, dtype=wp.int32, device=device)
-    active_scan = wp.empty(n, dtype=wp.int32, device=device)
-    strides = (wp.int64(stride_x), wp.int64(stride_y))
-    no_corners = wp.empty((0, 8), dtype=wp.int32, device=device)
-    launch_split(
-        _find_cube_corners_kernel,
-        n,
-        lambda start, _count: [start, keys_wp, values_wp, *strides, 0, active_scan, active, no_corners],
-        device,
-    )
-    wp.utils.array_scan(active, active_scan, inclusive=True)
-    n_cubes = int(active_scan[-1:].numpy()[0])
-    if n_cubes == 0:
-        return empty_mesh()
-    cube_corners = wp.empty((n_cubes, 8), dtype=wp.int32, device=device)
-    launch_split(
-        _find_cube_corners_kernel,
-        n,
-        lambda start, _count: [start, keys_wp, values_wp, *strides, 1, active_scan, active, cube_corners],
-        device,
-    )
-    active = active_scan = keys = values = shifted = coords = None  # freed before the marching cubes
+    keys_wp, values_wp, cube_corners, lo = cubes["keys"], cubes["shifted"], cubes["cube_corners"], cubes["lo"]
+    stride_x, stride_y = cubes["strides"]
     surface = _sorted_corner_surface if not HAS_SHARED_CORNER_CORE else _shared_corner_surface
     verts_wp, indices_wp = surface(keys_wp, values_wp, cube_corners, lo, origin, spacing, (stride_x, stride_y))
     if indices_wp.shape[0] == 0:

@@ -15,6 +15,7 @@ import numpy as np
 import warp as wp
 
 from . import boolean, parallel, sources
+from .dual import extract_sharp
 from .errors import AasdfError
 from .extract import extract_octree_level, extract_surface
 from .placement import Placement
@@ -431,14 +432,43 @@ class AdaptiveField:
         values = self.sample(grid).reshape(tuple(shape))
         return {"values": values, "origin": lo + 0.5 * spacing, "spacing": spacing}
 
-    def to_mesh(self, iso: float = 0.0):
-        """Marching cubes over the finest level's narrow band: (V,3) float32 vertices, (F,3) int32 triangles."""
-        if self.placement is not None:
-            return self._placed_mesh(self.in_frame().to_mesh(float(iso) / self.placement.scale))
+    def to_mesh(self, iso: float = 0.0, *, sharp: bool = True, return_creases: bool = False):
+        """The ``iso`` surface of the finest level's narrow band.
+
+        Args:
+            iso: Level to extract (world units; 0 is the surface, positive values offset it outwards).
+            sharp: Keep creases and corners (dual marching cubes placing each vertex at the minimiser of the exact
+                tangent planes of its cube, :mod:`.dual`); ``False`` gives marching cubes, vertices on the lattice
+                edges.
+            return_creases: Also return the crease edges the sharp extraction reconstructed.
+        Returns:
+            ``verts`` (V, 3) float32 and ``tris`` (T, 3) int32, counter-clockwise seen from outside; with
+            ``return_creases`` also ``creases`` (E, 2) int32 vertex index pairs, each edge of ``tris`` along which
+            the surface folds at a crease (empty when ``sharp`` is ``False``).
+        Raises:
+            ValueError: If ``iso`` is not finite.
+        """
+        iso = float(iso)
+        if not np.isfinite(iso):
+            raise ValueError(f"Expected a finite 'iso', but got {iso}.")
+        if self.placement is not None:  # extracted in its own frame, then placed
+            frame = self.in_frame()
+            mesh = frame.to_mesh(iso / self.placement.scale, sharp=sharp, return_creases=return_creases)
+            return self._placed_mesh(mesh)
+        if sharp:
+            verts, tris, creases = extract_sharp(self, iso, creases=return_creases)
+        else:
+            verts, tris = self._marching_cubes(iso)
+            creases = np.zeros((0, 2), dtype=np.int32)
+        if return_creases:
+            return verts, tris, creases
+        return verts, tris
+
+    def _marching_cubes(self, iso: float):
         n0 = self.level_counts[0]
         if self.levels == 1:  # the dense top level is the finest: no octets to walk
             return extract_surface(
-                self.coords.numpy(), self.values.numpy(), origin=self.origin, spacing=self.voxel_size, iso=float(iso)
+                self.coords.numpy(), self.values.numpy(), origin=self.origin, spacing=self.voxel_size, iso=iso
             )
         return extract_octree_level(
             self.coords[:n0],
@@ -446,7 +476,7 @@ class AdaptiveField:
             (self.child, self.level_offsets[self.levels - 1], self.top_dims, self.levels),
             origin=self.origin,
             spacing=self.voxel_size,
-            iso=float(iso),
+            iso=iso,
         )
 
     def in_frame(self) -> AdaptiveField:

@@ -31,6 +31,7 @@ ENGINE_MODULES = (
     "marching",
     "extract",
     "sources",
+    "dual",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.

@@ -303,3 +303,179 @@ def iso_nudge(origin: np.ndarray, lo: np.ndarray, hi: np.ndarray, spacing: float
             "Move the objects closer to the origin or use a coarser resolution."
         )
     return max(_ISO_NUDGE * spacing, _ISO_NUDGE_ULPS * ulp)
+
+
+def case_tables() -> dict:
+    """Warp's marching-cubes tables as numpy int32 arrays: ``case_to_tri_range`` (257,), ``tri_local_inds`` (local
+    edges of each case's triangles, 3 per triangle), and per local edge ``edge_owner`` / ``edge_upper`` (its lower
+    and upper corner) and ``edge_axis`` (12,). Needs Warp's marching-cubes core (``HAS_SHARED_CORNER_CORE``)."""
+    from warp._src.geometry import marching_cubes as mc_tables  # the tables the core's device arrays hold
+
+    return {
+        "case_to_tri_range": np.asarray(mc_tables.MC_CASE_TO_TRI_RANGE, dtype=np.int32),
+        "tri_local_inds": np.asarray(mc_tables.MC_TRI_LOCAL_INDICES, dtype=np.int32),
+        "edge_owner": np.asarray(_warp_mc._MC_EDGE_OWNER, dtype=np.int32),
+        "edge_upper": np.asarray(_warp_mc._MC_EDGE_UPPER, dtype=np.int32),
+        "edge_axis": np.asarray(_warp_mc._MC_EDGE_AXIS, dtype=np.int32),
+    }
+
+
+def patch_tables() -> tuple[np.ndarray, np.ndarray]:
+    """Per marching-cubes case: the patch (connected set of triangles sharing local edges) each crossed local edge
+    belongs to, (256, 12) int32 with -1 for edges the case does not cross, and the number of patches (256,) int32."""
+    tables = case_tables()
+    ranges, local = tables["case_to_tri_range"], tables["tri_local_inds"]
+    patch = np.full((256, 12), -1, dtype=np.int32)
+    count = np.zeros(256, dtype=np.int32)
+    for case in range(256):  # a one-off walk over the 256 table entries
+        tris = local[ranges[case] : ranges[case + 1]].reshape(-1, 3)
+        label = np.arange(12)
+        for _ in range(12):  # propagate the smallest label along each triangle until nothing changes
+            low = label[tris].min(axis=1)
+            new = label.copy()
+            np.minimum.at(new, tris.ravel(), np.repeat(low, 3))
+            if np.array_equal(new, label):
+                break
+            label = new
+        used = np.unique(tris)
+        roots = np.unique(label[used])
+        patch[case, used] = np.searchsorted(roots, label[used])
+        count[case] = len(roots)
+    return patch, count
+
+
+def tunnel_tables() -> tuple[np.ndarray, np.ndarray]:
+    """Where the dual of the marching cubes needs a vertex more: faces with four crossed edges (two segments) whose
+    cube has one patch through both, so that two cubes doing so across a face meet along two dual edges at once.
+
+    Returns:
+        ``spans`` (256,) int32: per case, bit ``2 * axis + side`` set for each face (side 0: the minimum along that
+        axis) crossed by one patch in two segments; ``second`` (256, 12, 6) int32: 1 where the local edge lies on that
+        face in the segment that does not hold the face's first edge (the one along the face's lower in-plane axis,
+        at the minimum of the other).
+    """
+    tables = case_tables()
+    ranges, local, owner, upper, axis = (
+        tables[k] for k in ("case_to_tri_range", "tri_local_inds", "edge_owner", "edge_upper", "edge_axis")
+    )
+    patch, _ = patch_tables()
+    off = CORNER_OFFSETS
+
+    def on_face(e, f):
+        a, side = divmod(f, 2)
+        return axis[e] != a and off[owner[e]][a] == side and off[upper[e]][a] == side
+
+    spans = np.zeros(256, dtype=np.int32)
+    second = np.zeros((256, 12, 6), dtype=np.int32)
+    for case in range(256):  # a one-off walk over the 256 table entries
+        tris = local[ranges[case] : ranges[case + 1]].reshape(-1, 3)
+        sides = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+        pairs, uses = np.unique(sides, axis=0, return_counts=True)
+        segments = pairs[uses == 1]  # polygon sides (fan diagonals are used twice): the face segments
+        for f in range(6):
+            edges = [e for e in range(12) if on_face(e, f) and patch[case, e] >= 0]
+            if len(edges) != 4:
+                continue
+            if len(set(patch[case, edges])) == 1:
+                spans[case] |= 1 << f
+            u = min(a for a in range(3) if a != f // 2)
+            v = 3 - f // 2 - u
+            first = next(e for e in edges if axis[e] == u and off[owner[e]][v] == 0)
+            mate = next(
+                int(b if a == first else a) for a, b in segments if first in (a, b) and on_face(a, f) and on_face(b, f)
+            )
+            for e in edges:
+                second[case, e, f] = int(e not in (first, mate))
+    return spans, second
+
+
+# ---- packed tables for the dual contouring kernels (integer constants: no table reads in inner loops) ----
+
+
+_EDGES = case_tables() if HAS_SHARED_CORNER_CORE else None
+
+
+def _pack(entries, bits: int) -> tuple[int, int]:
+    """Small non-negative integers packed ``bits`` apiece into two int32 constants (first half, second half)."""
+    half = (len(entries) + 1) // 2
+    low = sum(int(x) << (bits * k) for k, x in enumerate(entries[:half]))
+    high = sum(int(x) << (bits * k) for k, x in enumerate(entries[half:]))
+    return low, high
+
+
+_OWNER_LOW, _OWNER_HIGH = _pack(_EDGES["edge_owner"], 3) if _EDGES else (0, 0)
+_UPPER_LOW, _UPPER_HIGH = _pack(_EDGES["edge_upper"], 3) if _EDGES else (0, 0)
+
+
+@wp.func
+def _unpack(low: int, high: int, bits: int, half: int, k: int):
+    """Entry ``k`` of a table packed by ``_pack`` (``half`` entries in ``low``)."""
+    if k < half:
+        return (low >> (bits * k)) & ((1 << bits) - 1)
+    return (high >> (bits * (k - half))) & ((1 << bits) - 1)
+
+
+@wp.func
+def edge_ends(e: int):
+    """Lower and upper corner of local edge ``e``."""
+    return _unpack(_OWNER_LOW, _OWNER_HIGH, 3, 6, e), _unpack(_UPPER_LOW, _UPPER_HIGH, 3, 6, e)
+
+
+def _quad_tables() -> tuple[list, list, list]:
+    """Where each crossed edge's quad comes from.
+
+    A crossed edge along axis a is shared by the four cubes whose minimum corners are its lower end minus
+    s_b e_b + s_c e_c (b, c the other axes, s in {0, 1}), numbered counter-clockwise about the axis: (0, 0), (1, 0),
+    (1, 1), (0, 1). Its quad is written by the cube at (1, 1), whose corners are the others' minimum corners.
+
+    Returns:
+        Per axis and place (12): the writing cube's corner that is that cube's minimum corner, and the edge's index
+        in that cube; per axis (6): the writing cube's corners at the edge's two ends.
+    """
+    owner, axis = _EDGES["edge_owner"], _EDGES["edge_axis"]
+    places = ((0, 0), (1, 0), (1, 1), (0, 1))
+
+    def corner_at(off):
+        return int(np.flatnonzero((CORNER_OFFSETS == np.asarray(off)).all(1))[0])
+
+    def edge_at(axis_, off):
+        return int(next(e for e in range(12) if axis[e] == axis_ and corner_at(off) == owner[e]))
+
+    quad_corner, quad_edge, quad_ends = [], [], []
+    for ax in range(3):
+        b_, c_ = (ax + 1) % 3, (ax + 2) % 3
+        for sb, sc in places:
+            off = np.zeros(3, dtype=np.int64)
+            off[b_], off[c_] = 1 - sb, 1 - sc
+            quad_corner.append(corner_at(off))
+            local = np.zeros(3, dtype=np.int64)
+            local[b_], local[c_] = sb, sc
+            quad_edge.append(edge_at(ax, local))
+        end = np.zeros(3, dtype=np.int64)
+        end[b_], end[c_] = 1, 1
+        quad_ends.append(corner_at(end))
+        end[ax] = 1
+        quad_ends.append(corner_at(end))
+    return quad_corner, quad_edge, quad_ends
+
+
+_QUADS = _quad_tables() if _EDGES else ([0] * 12, [0] * 12, [0] * 6)
+_QCORNER_LOW, _QCORNER_HIGH = _pack(_QUADS[0], 3)
+_QEDGE_LOW, _QEDGE_HIGH = _pack(_QUADS[1], 4)
+_QENDS_LOW, _QENDS_HIGH = _pack(_QUADS[2], 3)
+
+
+@wp.func
+def quad_corner(k: int):
+    return _unpack(_QCORNER_LOW, _QCORNER_HIGH, 3, 6, k)
+
+
+@wp.func
+def quad_edge(k: int):
+    return _unpack(_QEDGE_LOW, _QEDGE_HIGH, 4, 6, k)
+
+
+@wp.func
+def quad_ends(a: int):
+    """The two corners (lower, upper) of the edge along axis ``a`` whose quad a cube writes."""
+    return _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a), _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a + 1)

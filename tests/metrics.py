@@ -331,3 +331,123 @@ def closest_triangles(verts, tris, points, *, device=None) -> tuple[np.ndarray, 
             outputs=[faces, bary],
         )
     return faces.numpy(), bary.numpy()
+
+
+# ---- creases (numpy) ----
+
+
+def crease_points(verts, tris, angle: float = 30.0, step: float = 1e-3) -> np.ndarray:
+    """Points every ``step`` (world units) along the edges of a closed mesh whose two triangles' normals differ by more
+    than ``angle`` degrees: its creases, as an (N, 3) float64 point set (empty when it has none)."""
+    v = verts.astype(np.float64)
+    t = tris.astype(np.int64)
+    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    sides = np.sort(np.stack([t, np.roll(t, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
+    face = np.repeat(np.arange(len(t)), 3)
+    order = np.lexsort((sides[:, 1], sides[:, 0]))
+    sides, face = sides[order], face[order]
+    same = np.all(sides[1:] == sides[:-1], axis=1)
+    pair = np.flatnonzero(same)
+    fold = np.einsum("ij,ij->i", n[face[pair]], n[face[pair + 1]]) < np.cos(np.radians(angle))
+    a, b = v[sides[pair[fold], 0]], v[sides[pair[fold], 1]]
+    count = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(int), 1)
+    edge = np.repeat(np.arange(len(a)), count + 1)
+    s = (np.arange(len(edge)) - np.repeat(np.cumsum(count + 1) - (count + 1), count + 1)) / count[edge]
+    return a[edge] + s[:, None] * (b - a)[edge]
+
+
+# ---- self-intersections (warp) ----
+
+
+@wp.func
+def _orient(a: wp.vec3d, b: wp.vec3d, c: wp.vec3d, d: wp.vec3d) -> float:
+    """Sign of the volume of tetrahedron (a, b, c, d), in float64 (-1, 0 or 1)."""
+    v = wp.dot(wp.cross(b - a, c - a), d - a)
+    return wp.where(v > 0.0, 1.0, wp.where(v < 0.0, -1.0, 0.0))
+
+
+@wp.func
+def _segment_crosses(p: wp.vec3d, q: wp.vec3d, a: wp.vec3d, b: wp.vec3d, c: wp.vec3d) -> int:
+    """Whether the open segment p-q passes through the interior of triangle a, b, c (touching does not count)."""
+    sp = _orient(a, b, c, p)
+    sq = _orient(a, b, c, q)
+    if sp * sq >= 0.0:
+        return 0
+    s1 = _orient(p, q, a, b)
+    s2 = _orient(p, q, b, c)
+    s3 = _orient(p, q, c, a)
+    if (s1 > 0.0 and s2 > 0.0 and s3 > 0.0) or (s1 < 0.0 and s2 < 0.0 and s3 < 0.0):
+        return 1
+    return 0
+
+
+@wp.func
+def _vertex(points: wp.array(dtype=wp.vec3), i: int) -> wp.vec3d:
+    p = points[i]
+    return wp.vec3d(wp.float64(p[0]), wp.float64(p[1]), wp.float64(p[2]))
+
+
+@wp.kernel(enable_backward=False)
+def _self_intersections_kernel(
+    mesh_id: wp.uint64,
+    points: wp.array(dtype=wp.vec3),
+    tris: wp.array2d(dtype=wp.int32),
+    hits: wp.array(dtype=wp.int32),
+):
+    """Count the triangles that share no vertex with triangle ``tid`` and cross it (an edge of one through the
+    other's interior, decided by float64 orientation signs)."""
+    t = wp.tid()
+    a = tris[t, 0]
+    b = tris[t, 1]
+    c = tris[t, 2]
+    pa = _vertex(points, a)
+    pb = _vertex(points, b)
+    pc = _vertex(points, c)
+    p0 = points[a]
+    p1 = points[b]
+    p2 = points[c]
+    query = wp.mesh_query_aabb(mesh_id, wp.min(wp.min(p0, p1), p2), wp.max(wp.max(p0, p1), p2))
+    other = int(0)  # noqa: UP018 (a dynamic Warp variable)
+    count = int(0)  # noqa: UP018
+    while wp.mesh_query_aabb_next(query, other):
+        if other <= t:
+            continue
+        u = tris[other, 0]
+        v = tris[other, 1]
+        w = tris[other, 2]
+        if u == a or u == b or u == c or v == a or v == b or v == c or w == a or w == b or w == c:
+            continue
+        qu = _vertex(points, u)
+        qv = _vertex(points, v)
+        qw = _vertex(points, w)
+        crossed = _segment_crosses(pa, pb, qu, qv, qw) + _segment_crosses(pb, pc, qu, qv, qw)
+        crossed += _segment_crosses(pc, pa, qu, qv, qw) + _segment_crosses(qu, qv, pa, pb, pc)
+        crossed += _segment_crosses(qv, qw, pa, pb, pc) + _segment_crosses(qw, qu, pa, pb, pc)
+        if crossed > 0:
+            count += 1
+    hits[t] = count
+
+
+def self_intersections(verts, tris, *, device=None) -> int:
+    """How many pairs of triangles that share no vertex cross each other (0 for a surface that does not pass
+    through itself).
+
+    Args:
+        verts, tris: (V, 3) float and (T, 3) int arrays of a triangle mesh.
+    Returns:
+        The number of crossing pairs: an edge of one triangle through the interior of the other, for every pair whose
+        bounding boxes overlap (float64 orientation tests on the float32 vertices; touching does not count).
+    """
+    mesh = _wp_mesh(verts, tris, winding=False, device=device)
+    device = mesh.device
+    tris_wp = wp.array(np.asarray(tris, dtype=np.int32), dtype=wp.int32, device=device)
+    hits = wp.zeros(len(tris), dtype=wp.int32, device=device)
+    wp.launch(
+        _self_intersections_kernel,
+        dim=len(tris),
+        inputs=[mesh.id, mesh.points, tris_wp],
+        outputs=[hits],
+        device=device,
+    )
+    return int(hits.numpy().sum())

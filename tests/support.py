@@ -116,7 +116,7 @@ def edge_use_counts(tris) -> np.ndarray:
     """How many triangles use each undirected edge (a watertight 2-manifold gives 2 everywhere)."""
     t = np.asarray(tris, dtype=np.int64)
     e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
-    _, counts = np.unique(e, axis=0, return_counts=True)
+    _, counts = np.unique(e[:, 0] * (int(t.max(initial=0)) + 1) + e[:, 1], return_counts=True)
     return counts
 
 
@@ -126,6 +126,77 @@ def is_watertight(tris) -> bool:
     if len(t) == 0:
         return False
     directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    if len(np.unique(directed, axis=0)) != len(directed):
+    codes = directed[:, 0] * (int(t.max()) + 1) + directed[:, 1]
+    if len(np.unique(codes)) != len(codes):
         return False
     return bool(np.all(edge_use_counts(t) == 2))
+
+
+def cylinder_mesh(radius: float = 1.0, height: float = 2.0, segments: int = 96, center=(0.0, 0.0, 0.0)):
+    """A closed, outward-oriented cylinder along z: (V,3) float32, (T,3) int32."""
+    ang = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    ring = np.stack([radius * np.cos(ang), radius * np.sin(ang)], axis=1)
+    bottom = np.c_[ring, np.full(segments, -height / 2)]
+    top = np.c_[ring, np.full(segments, height / 2)]
+    verts = np.vstack([bottom, top, [[0, 0, -height / 2], [0, 0, height / 2]]]) + np.asarray(center)
+    i = np.arange(segments)
+    j = (i + 1) % segments
+    cb, ct = 2 * segments, 2 * segments + 1
+    sides = np.r_[np.c_[i, j, segments + j], np.c_[i, segments + j, segments + i]]
+    caps = np.r_[np.c_[np.full(segments, cb), j, i], np.c_[np.full(segments, ct), segments + i, segments + j]]
+    return verts.astype(np.float32), np.r_[sides, caps].astype(np.int32)
+
+
+def hex_prism_mesh(circumradius: float = 1.0, height: float = 2.0):
+    """A closed, outward-oriented hexagonal prism along z, centred at the origin (a cylinder of 6 segments)."""
+    return cylinder_mesh(circumradius, height, segments=6)
+
+
+def rotation(axis: int, degrees: float) -> np.ndarray:
+    """(3, 3) float64 rotation by ``degrees`` about coordinate axis ``axis`` (0 = x, 1 = y, 2 = z)."""
+    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
+    a, b = [k for k in range(3) if k != axis]
+    m = np.eye(3)
+    m[a, a], m[a, b], m[b, a], m[b, b] = c, -s, s, c
+    return m
+
+
+def normalised(mesh, center=(0.0, 0.0, 0.0), diagonal: float = 1.0, matrix=None):
+    """``mesh`` (verts, tris) moved so its bounding box is centred at ``center`` with diagonal ``diagonal``, after
+    the (3, 3) ``matrix`` (applied about the box centre) when given."""
+    verts, tris = mesh
+    v = np.asarray(verts, dtype=np.float64)
+    v = (v - 0.5 * (v.min(0) + v.max(0))) * (diagonal / np.linalg.norm(v.max(0) - v.min(0)))
+    if matrix is not None:
+        v = v @ np.asarray(matrix, dtype=np.float64).T
+    return (v + np.asarray(center, dtype=np.float64)).astype(np.float32), np.asarray(tris, dtype=np.int32)
+
+
+def cad_pairs() -> dict:
+    """The CAD-like boolean cases of the sharp-edge extraction, each operand normalised to bounding-box diagonal 1
+    (creases at angles the lattice resolves: no wedge sharper than about 45 degrees): name -> (operation, operand a,
+    operand b), ``DIFFERENCE`` meaning a minus b."""
+    cube = box_mesh()
+    tilt = rotation(0, 30.0) @ rotation(1, 30.0)
+    r = 0.12  # a cylinder of radius r and diagonal 1 along z
+    bore = normalised(cylinder_mesh(r, np.sqrt(1.0 - 8.0 * r * r), segments=128))
+    turn = rotation(2, 20.0) @ rotation(0, 10.0)
+    return {
+        "fandisk - cylinder": (
+            "DIFFERENCE",
+            normalised(load_mesh("fandisk.obj")),
+            normalised(bore, center=(0.0, 0.05, -0.05), matrix=rotation(1, 90.0)),
+        ),
+        "rocker-arm - cube": (
+            "DIFFERENCE",
+            normalised(load_mesh("rocker-arm.obj")),
+            normalised(cube, center=(0.0, -0.25, -0.3), diagonal=0.6, matrix=rotation(2, 10.0) @ rotation(0, 15.0)),
+        ),
+        "cube | tilted cube": ("UNION", normalised(cube), normalised(cube, matrix=tilt)),
+        "cube - bore": ("DIFFERENCE", normalised(cube, matrix=turn), normalised(bore, matrix=turn)),
+        "hex prism & sphere": (
+            "INTERSECT",
+            normalised(hex_prism_mesh(1.0, 4.0), matrix=rotation(0, 25.0) @ rotation(2, 10.0)),
+            normalised(uv_sphere(1.0, rings=96, segments=192)),
+        ),
+    }

@@ -415,9 +415,9 @@ def test_invalid_arguments_raise(coords, values, kwargs, error, match):
 
 @pytest.mark.parametrize(("iso_voxels", "levels"), [(0.0, 4), (1.5, 4), (-0.7, 4), (0.0, 3), (0.0, 2), (0.0, 1)])
 def test_octree_level_extraction_matches_the_generic_one(iso_voxels, levels):
-    # to_mesh takes each cube's corners from its octet's +x/+y/+z neighbours, found through the child links from the
-    # dense top level (itself the octets' level with 2 levels, the finest with 1), without sorting: the mesh must be
-    # the one extract_surface finds from the same samples.
+    # to_mesh(sharp=False) takes each cube's corners from its octet's +x/+y/+z neighbours, found through the child
+    # links from the dense top level (itself the octets' level with 2 levels, the finest with 1), without sorting: the
+    # mesh must be the one extract_surface finds from the same samples.
     import engine
     from tests.support import uv_sphere
 
@@ -427,7 +427,7 @@ def test_octree_level_extraction_matches_the_generic_one(iso_voxels, levels):
     field = engine.union(*(engine.build_field(*m, voxel_size=h, levels=levels) for m in (a, b)))
     n0 = field.level_counts[0]
     iso = iso_voxels * h
-    verts, tris = field.to_mesh(iso=iso)
+    verts, tris = field.to_mesh(iso=iso, sharp=False)
     generic_verts, generic_tris = extract_surface(
         field.coords.numpy()[:n0], field.values.numpy()[:n0], origin=field.origin, spacing=h, iso=iso
     )

@@ -32,12 +32,20 @@ def _digest(*arrays) -> str:
     return digest.hexdigest()
 
 
-def field_fingerprint(field) -> dict:
-    """Per level, a hash of its nodes' Morton codes and values; and one of the extracted surface."""
+# Cases whose sharp surface (dual contouring with creases) is fingerprinted too.
+SHARP_CASES = ("spot - bunny",)
+
+
+def field_fingerprint(field, sharp: bool = False) -> dict:
+    """Per level, a hash of its nodes' Morton codes and values; one of the marching-cubes surface; with ``sharp``
+    one of the sharp surface and its crease edges."""
     codes, values = field.codes.numpy(), field.values.numpy()
     levels = [_digest(codes[field.level_slice(k)], values[field.level_slice(k)]) for k in range(field.levels)]
-    verts, tris = field.to_mesh()
-    return {"levels": levels, "counts": list(field.level_counts), "surface": _digest(verts, tris)}
+    verts, tris = field.to_mesh(sharp=False)
+    fingerprint = {"levels": levels, "counts": list(field.level_counts), "surface": _digest(verts, tris)}
+    if sharp:
+        fingerprint["sharp"] = _digest(*field.to_mesh(sharp=True, return_creases=True))
+    return fingerprint
 
 
 def _voxel(*meshes) -> float:
@@ -62,14 +70,14 @@ def _cases():
 
 
 def fingerprints() -> dict:
-    return {name: field_fingerprint(make()) for name, make in _cases()}
+    return {name: field_fingerprint(make(), name in SHARP_CASES) for name, make in _cases()}
 
 
 @pytest.mark.parametrize("name", [name for name, _ in _cases()])
 def test_fields_and_surfaces_match_their_golden_fingerprints(name):
     expected = json.loads(GOLDEN.read_text())[name]
     make = dict(_cases())[name]
-    assert field_fingerprint(make()) == expected
+    assert field_fingerprint(make(), name in SHARP_CASES) == expected
 
 
 if __name__ == "__main__":

@@ -1,0 +1,684 @@
+"""Feature-preserving surface extraction: dual marching cubes whose vertices minimise a quadric of exact tangent planes.
+
+Marching cubes puts its vertices on the lattice edges and so cuts every crease and corner of the surface. This module
+contours the same active cubes dually (Nielson's dual marching cubes, the uniform-grid case of Schaefer et al.'s
+manifold dual contouring): one vertex per marching-cubes patch of a cube (a cube's triangles that share edges), one
+quad per crossed lattice edge joining the patches of the four cubes around it. The mesh is the dual of the marching
+cubes mesh, so it is closed and oriented where that one is, with as many quads as marching cubes has vertices.
+
+Each vertex is placed as in dual contouring (Ju et al. 2002): the minimiser of the squared distances to tangent planes
+(a quadric error function), taken relative to the mass point of the patch's edge crossings, with small eigenvalues
+truncated. The tangent planes are Hermite data the field already holds: every finest node stores the exact closest
+point ``proj`` of its source surface (for a boolean, of the operand that decides there), so the plane through
+``proj`` with normal ``(x - proj) / |x - proj|`` times the sign of the value is exact, and at a node whose closest
+point lies on a crease it contains the crease line. Where a node's value is not its distance to ``proj`` (blended
+booleans, where the value is a smooth minimum) the plane is taken at the edge crossing with the gradient of the cube's
+trilinear interpolant instead, so smooth blends get no crease. Vertices stay in their cube: a crease line found
+outside it is clipped to the cube, a corner outside it gives way to the crease through the cube, and anything left
+outside is clamped.
+
+Each quad is split along the diagonal whose midpoint fits its two vertices' planes best, which keeps crease lines
+(both ends on the crease) as mesh edges. Vertices whose quadric has two or more significant eigenvalues lie on a
+crease or corner; :func:`crease_edges` returns the mesh edges between two of them where the surface folds.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import warp as wp
+
+from .extract import lattice_cubes, octree_level_cubes
+from .marching import (
+    case_tables,
+    edge_ends,
+    empty_mesh,
+    patch_tables,
+    quad_corner,
+    quad_edge,
+    quad_ends,
+    tunnel_tables,
+)
+from .parallel import launch_split
+from .quadric import clamp_box, crease_edges, cube_corner, quadric_at, solve_in_cube, solve_smooth, trilinear, vec8
+
+if TYPE_CHECKING:  # the field type imports this module for its surface
+    from .field import AdaptiveField
+
+# Eigenvalues of a patch's plane quadric below this fraction of the largest are dropped (Ju et al. truncate singular
+# values below 0.1; the eigenvalues of A^T A are their squares): normals less than about 16 degrees apart make no
+# crease.
+EIGEN_CUTOFF = 0.02
+
+
+# A patch whose normals all lie within this cosine of its first one is smooth: solved along their mean normal
+# without an eigen decomposition (8 degrees, well inside EIGEN_CUTOFF's).
+SMOOTH_COS = 0.99
+
+
+# A node's plane is used when its value is its distance to its closest point within this fraction of a voxel.
+HERMITE_TOLERANCE = 0.02
+
+
+# A node's plane weighs (distance to its closest point / this)^2 below this distance (voxels), where the direction
+# to that point turns to noise.
+HERMITE_NEAR = 0.12
+
+
+# A crease or corner vertex whose planes meet outside its cube may go this many voxels past a face whose neighbouring
+# cube the surface does not cross (the tip of a wedge more acute than the lattice resolves lies there).
+EMPTY_REACH = 1.0
+
+
+# A quad is split along the diagonal its vertices' planes fit best unless that gives a triangle of less than this
+# twice-area (voxels^2) seen along the quad's edge and the other diagonal does better: so no triangle folds back or
+# lies along a crease line through three of its vertices.
+MIN_SPLIT_AREA = 0.1
+
+
+# Vertices keep this fraction of a voxel from their cube's faces, so vertices of neighbouring cubes never coincide.
+CELL_MARGIN = 1.0e-3
+
+
+# ---- tables ----
+
+
+_TABLE_CACHE: dict = {}
+
+
+def _tables(device) -> dict:
+    """Warp arrays of the dual tables on ``device`` (built once per device)."""
+    key = str(device)
+    if key not in _TABLE_CACHE:
+        tables = case_tables()
+        patch, count = patch_tables()
+        spans, second = tunnel_tables()
+        owner, upper = tables["edge_owner"], tables["edge_upper"]
+        # per case and patch (4 at most): the bit mask of its local edges and of the corners at their ends
+        edge_mask = np.zeros((256, 4), dtype=np.int32)
+        end_mask = np.zeros((256, 4), dtype=np.int32)
+        for e in range(12):
+            rows = np.flatnonzero(patch[:, e] >= 0)
+            np.bitwise_or.at(edge_mask, (rows, patch[rows, e]), 1 << e)
+            np.bitwise_or.at(end_mask, (rows, patch[rows, e]), (1 << int(owner[e])) | (1 << int(upper[e])))
+        _TABLE_CACHE[key] = {
+            "edge_mask": wp.array(edge_mask.ravel(), dtype=wp.int32, device=device),
+            "end_mask": wp.array(end_mask.ravel(), dtype=wp.int32, device=device),
+            "count": wp.array(count, dtype=wp.int32, device=device),
+            "spans": wp.array(spans, dtype=wp.int32, device=device),
+            "second": wp.array(second.ravel(), dtype=wp.int32, device=device),
+        }
+    return _TABLE_CACHE[key]
+
+
+# ---- patches and their vertices ----
+
+
+@wp.func
+def _case(cube_corners: wp.array2d[wp.int32], values: wp.array[wp.float32], cube: int):
+    """Marching-cubes case of a cube: bit c set when corner c is at or above the level (as ``marching``)."""
+    case = int(0)
+    for c in range(8):
+        if values[cube_corners[cube, c]] >= 0.0:
+            case = case | (1 << c)
+    return case
+
+
+@wp.kernel(enable_backward=False)
+def _count_patches_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    values: wp.array[wp.float32],
+    patch_count: wp.array[wp.int32],
+    counts: wp.array[wp.int32],
+    quad_counts: wp.array[wp.int32],
+    cube_of_node: wp.array[wp.int32],
+    cube_case: wp.array[wp.int32],
+):
+    """Patches of cube ``first + tid``, and the crossed edges whose quads it writes (see ``_quads_kernel``); the
+    cube's index at its minimum corner's node, and its case."""
+    cube = first + wp.tid()
+    case = _case(cube_corners, values, cube)
+    cube_case[cube] = case
+    counts[cube] = patch_count[case]
+    cube_of_node[cube_corners[cube, 0]] = cube
+    quads = int(0)
+    for a in range(3):
+        ea, eb = quad_ends(a)
+        v0 = values[cube_corners[cube, ea]]
+        v1 = values[cube_corners[cube, eb]]
+        if (v0 < 0.0) != (v1 < 0.0):
+            quads += 1
+    quad_counts[cube] = quads
+
+
+@wp.kernel(enable_backward=False)
+def _face_neighbours_kernel(
+    first: int, cube_corners: wp.array2d[wp.int32], cube_of_node: wp.array[wp.int32], neighbours: wp.array[wp.int32]
+):
+    """Flag, for cube ``first + tid`` and each axis, whether its + neighbour is active, and in that neighbour that its
+    - neighbour is (``neighbours`` (M, 6) flat, zeroed: -x, +x, -y, +y, -z, +z; each entry has one writer)."""
+    cube = first + wp.tid()
+    for a in range(3):
+        c = int(1)
+        if a == 1:
+            c = 3
+        elif a == 2:
+            c = 4
+        other = cube_of_node[cube_corners[cube, c]]
+        if other >= 0:
+            neighbours[cube * 6 + 2 * a + 1] = 1
+            neighbours[other * 6 + 2 * a] = 1
+
+
+@wp.kernel(enable_backward=False)
+def _place_vertices_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    values: wp.array[wp.float32],
+    raw: wp.array[wp.float32],
+    coords: wp.array[wp.vec3i],
+    proj: wp.array[wp.vec3],
+    origin: wp.vec3,
+    spacing: float,
+    iso: float,
+    edge_mask: wp.array[wp.int32],
+    end_mask: wp.array[wp.int32],
+    vertex_start: wp.array[wp.int32],
+    neighbours: wp.array[wp.int32],
+    reach: float,
+    cutoff: float,
+    smooth_cos: float,
+    tolerance: float,
+    near: float,
+    margin: float,
+    verts: wp.array[wp.vec3],
+    ranks: wp.array[wp.int32],
+    cells: wp.array[wp.int32],
+    quadrics: wp.array[wp.mat33],
+    linear: wp.array[wp.vec4],
+    edge_vertex: wp.array[wp.int32],
+):
+    """One vertex per patch of cube ``first + tid``: its plane quadric (node planes, or crossing planes where a
+    node's Hermite data does not hold), solved in the cube; its id written into the slots of the patch's edges."""
+    cube = first + wp.tid()
+    base_vertex = int(0)
+    if cube > 0:
+        base_vertex = vertex_start[cube - 1]
+    n_patches = vertex_start[cube] - base_vertex
+    ids = wp.vector(0, 0, 0, 0, 0, 0, 0, 0, length=8, dtype=int)
+    vals = vec8()
+    case = int(0)
+    for c in range(8):
+        ids[c] = cube_corners[cube, c]
+        vals[c] = values[ids[c]]
+        if vals[c] >= 0.0:
+            case = case | (1 << c)
+    c0 = coords[ids[0]]
+    corner = origin + spacing * wp.vec3(float(c0[0]) + 0.5, float(c0[1]) + 0.5, float(c0[2]) + 0.5)
+    inv = 1.0 / spacing
+    lo = margin
+    hi = 1.0 - margin
+    # crease and corner vertices may reach this far into a face neighbour the surface does not cross
+    wide_lo = wp.vec3(lo)
+    wide_hi = wp.vec3(hi)
+    for a in range(3):
+        if neighbours[cube * 6 + 2 * a] == 0:
+            wide_lo[a] = lo - reach
+        if neighbours[cube * 6 + 2 * a + 1] == 0:
+            wide_hi[a] = hi + reach
+    for p in range(n_patches):
+        # the mass point of the patch's edge crossings, the corners at their ends, and the interpolant's gradient
+        mass = wp.vec3(0.0)
+        crossings = float(0.0)
+        edges = edge_mask[case * 4 + p]
+        ends = end_mask[case * 4 + p]
+        for e in range(12):
+            if (edges >> e) & 1 == 1:
+                ca, cb = edge_ends(e)
+                t = vals[ca] / (vals[ca] - vals[cb])
+                mass += cube_corner(ca) + t * (cube_corner(cb) - cube_corner(ca))
+                crossings += 1.0
+        mass = mass / crossings
+        f_mass, g_mass = trilinear(vals, mass)
+        ata = wp.mat33(0.0)
+        atb = wp.vec3(0.0)
+        btb = float(0.0)
+        planes = float(0.0)
+        normal_sum = wp.vec3(0.0)
+        first_normal = wp.vec3(0.0)
+        min_cos = float(1.0)
+        fallback = float(0.0)
+        skipped = float(0.0)
+        weighty = int(0)
+        for c in range(8):
+            if (ends >> c) & 1 == 0:
+                continue
+            node = ids[c]
+            q = (proj[node] - corner) * inv
+            d = cube_corner(c) - q
+            dl = wp.length(d)
+            r = raw[node]
+            use = int(0)
+            if dl <= 1.0e-4:
+                use = -1  # on the surface: no direction at all
+            elif wp.abs(dl - wp.abs(r) * inv) <= tolerance:
+                n = d / dl
+                if r < 0.0:
+                    n = -n
+                if wp.dot(n, g_mass) > 0.0:  # not the far side of a plate thinner than a cell
+                    # the direction to a closest point is noise close to the surface (closest points on long thin
+                    # triangles are exact to about 1e-2 voxel): such planes weigh less
+                    w = wp.min(1.0, (dl / near) * (dl / near))
+                    b = wp.dot(n, q) + iso * inv
+                    ata += w * wp.outer(n, n)
+                    atb += w * n * b
+                    btb += w * b * b
+                    planes += w
+                    normal_sum += w * n
+                    if w >= 0.5:
+                        if weighty == 0:
+                            first_normal = n
+                            weighty = 1
+                        min_cos = wp.min(min_cos, wp.dot(n, first_normal))
+                    use = 1
+            if use == 0:
+                fallback += 1.0
+            elif use == -1:
+                skipped += 1.0
+        if planes == 0.0:
+            fallback += skipped
+        gl = wp.length(g_mass)
+        if fallback > 0.0 and gl > 0.0:
+            # corners whose Hermite data does not hold: the interpolant's tangent plane at the mass point moved onto
+            # its zero set (one Newton step; values are in world units, positions in voxels)
+            n = g_mass / gl
+            b = wp.dot(n, mass) - f_mass / gl
+            ata += fallback * wp.outer(n, n)
+            atb += fallback * n * b
+            btb += fallback * b * b
+            planes += fallback
+            normal_sum += fallback * n
+            if weighty == 0:
+                first_normal = n
+            min_cos = wp.min(min_cos, wp.dot(n, first_normal))
+        vid = base_vertex + p
+        x = mass
+        rank = int(0)
+        if planes > 0.0:
+            if min_cos >= smooth_cos:
+                x = solve_smooth(ata, atb - ata * mass, mass, normal_sum)
+                rank = 1
+                x = clamp_box(x, lo, hi)
+            else:
+                x, rank = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
+            # the quadric about the vertex, per plane: E(x + d) = d^T A d + 2 d . r + E(x)
+            w = 1.0 / planes
+            grad = ata * x - atb
+            ex = wp.dot(x, ata * x) - 2.0 * wp.dot(x, atb) + btb
+            quadrics[vid] = ata * w
+            linear[vid] = wp.vec4(grad[0] * w, grad[1] * w, grad[2] * w, wp.max(ex * w, 0.0))
+        else:
+            quadrics[vid] = wp.mat33(0.0)
+            linear[vid] = wp.vec4(0.0)
+        verts[vid] = corner + spacing * x
+        ranks[vid] = rank
+        cells[vid] = cube
+        for e in range(12):
+            if (edges >> e) & 1 == 1:
+                edge_vertex[cube * 12 + e] = vid
+
+
+# ---- quads ----
+
+
+@wp.kernel(enable_backward=False)
+def _quads_kernel(
+    first: int,
+    cube_corners: wp.array2d[wp.int32],
+    values: wp.array[wp.float32],
+    cube_of_node: wp.array[wp.int32],
+    edge_vertex: wp.array[wp.int32],
+    quad_scan: wp.array[wp.int32],
+    verts: wp.array[wp.vec3],
+    quadrics: wp.array[wp.mat33],
+    linear: wp.array[wp.vec4],
+    inv: float,
+    min_area: float,
+    cube_case: wp.array[wp.int32],
+    spans: wp.array[wp.int32],
+    second: wp.array[wp.int32],
+    coords: wp.array[wp.vec3i],
+    origin: wp.vec3,
+    tris: wp.array2d[wp.int32],
+    tunnel: wp.array[wp.int32],
+    tunnel_point: wp.array[wp.vec3],
+):
+    """The quads of the crossed edges whose four cubes cube ``first + tid`` completes as the one below both other
+    axes (each crossed edge has exactly one such cube), as two triangles, outward, split along the diagonal whose
+    midpoint its two vertices' planes fit best; -1 rows where one of the four cubes is missing (the band's edge).
+    Where two of its cubes meet across a face that each crosses with one patch in two segments and its edge lies in
+    the second segment (``tunnel_tables``), the quad's ``tunnel`` entry has that side's bit (its sides numbered from
+    its first vertex as written) and its edge's crossing point goes to ``tunnel_point``: such sides get a vertex of
+    their own (see ``_open_tunnels``)."""
+    cube = first + wp.tid()
+    out = int(0)
+    if cube > 0:
+        out = quad_scan[cube - 1]
+    count = int(0)
+    for a in range(3):
+        ea, eb = quad_ends(a)
+        v0 = values[cube_corners[cube, ea]]
+        v1 = values[cube_corners[cube, eb]]
+        if (v0 < 0.0) == (v1 < 0.0):
+            continue
+        q = wp.vector(-1, -1, -1, -1, length=4, dtype=int)
+        owners = wp.vector(-1, -1, -1, -1, length=4, dtype=int)
+        complete = int(1)
+        for k in range(4):
+            other = cube_of_node[cube_corners[cube, quad_corner(4 * a + k)]]
+            owners[k] = other
+            if other < 0:
+                complete = 0
+            else:
+                q[k] = edge_vertex[other * 12 + quad_edge(4 * a + k)]
+        quad = out + count
+        row = 2 * quad
+        count += 1
+        tunnel[quad] = 0
+        if complete == 0:
+            for k in range(3):
+                tris[row, k] = -1
+                tris[row + 1, k] = -1
+            continue
+        # sides across a face both their cubes cross with one patch in two segments, this edge in the second
+        sides = int(0)
+        for k in range(4):
+            face = 2 * ((a + 1 + k % 2) % 3) + wp.where(k < 2, 0, 1)
+            mate = face + 1 - 2 * (face % 2)  # the same face seen from the next cube
+            here = cube_case[owners[k]]
+            if (spans[here] >> face) & 1 == 1 and (spans[cube_case[owners[(k + 1) % 4]]] >> mate) & 1 == 1:
+                if second[(here * 12 + quad_edge(4 * a + k)) * 6 + face] == 1:
+                    sides = sides | (1 << k)
+        q0 = q[0]
+        q1 = q[1]
+        q2 = q[2]
+        q3 = q[3]
+        if v0 >= 0.0:  # inside above: the outward normal is -axis, so turn the other way round
+            q1 = q[3]
+            q3 = q[1]
+            # side k (q[k], q[k + 1]) is now side (3 - k) % 4
+            sides = ((sides & 1) << 3) | ((sides & 2) << 1) | ((sides & 4) >> 1) | ((sides & 8) >> 3)
+        if sides != 0:
+            # written in order and split along q0-q2, for _open_tunnels to rebuild around the sides' new vertices
+            n_a = coords[cube_corners[cube, ea]]
+            x_a = origin + (wp.vec3(float(n_a[0]), float(n_a[1]), float(n_a[2])) + wp.vec3(0.5)) / inv
+            x_b = x_a
+            x_b[a] = x_b[a] + 1.0 / inv
+            tunnel[quad] = sides
+            tunnel_point[quad] = x_a + (v0 / (v0 - v1)) * (x_b - x_a)
+            tris[row, 0] = q0
+            tris[row, 1] = q1
+            tris[row, 2] = q2
+            tris[row + 1, 0] = q0
+            tris[row + 1, 1] = q2
+            tris[row + 1, 2] = q3
+            continue
+        p0 = verts[q0]
+        p1 = verts[q1]
+        p2 = verts[q2]
+        p3 = verts[q3]
+        # each split's smaller triangle area seen along the edge (outward), in voxels^2 (twice the area)
+        axis = wp.vec3(0.0)
+        axis[a] = wp.where(v0 < 0.0, inv * inv, -inv * inv)
+        area02 = wp.min(wp.dot(wp.cross(p1 - p0, p2 - p0), axis), wp.dot(wp.cross(p2 - p0, p3 - p0), axis))
+        area13 = wp.min(wp.dot(wp.cross(p1 - p0, p3 - p0), axis), wp.dot(wp.cross(p2 - p1, p3 - p1), axis))
+        # the diagonal whose midpoint its two vertices' planes fit best, unless that folds a triangle the other does not
+        m02 = 0.5 * (p0 + p2)
+        m13 = 0.5 * (p1 + p3)
+        e02 = quadric_at(quadrics, linear, verts, q0, m02, inv) + quadric_at(quadrics, linear, verts, q2, m02, inv)
+        e13 = quadric_at(quadrics, linear, verts, q1, m13, inv) + quadric_at(quadrics, linear, verts, q3, m13, inv)
+        split02 = e02 <= e13
+        if split02 and area02 < min_area and area13 > area02:
+            split02 = False
+        elif not split02 and area13 < min_area and area02 > area13:
+            split02 = True
+        if split02:
+            tris[row, 0] = q0
+            tris[row, 1] = q1
+            tris[row, 2] = q2
+            tris[row + 1, 0] = q0
+            tris[row + 1, 1] = q2
+            tris[row + 1, 2] = q3
+        else:
+            tris[row, 0] = q0
+            tris[row, 1] = q1
+            tris[row, 2] = q3
+            tris[row + 1, 0] = q1
+            tris[row + 1, 1] = q2
+            tris[row + 1, 2] = q3
+
+
+def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, iso=0.0):
+    """Dual marching cubes over active cubes, each vertex at its patch's plane-quadric minimiser within its cube.
+
+    Args:
+        cube_corners: (M, 8) int32 Warp array: node indices of each active cube's corners (``CORNER_OFFSETS`` order).
+        values: (N,) float32 Warp array of node values minus ``iso``, none exactly 0 (the nudged values marching
+            cubes uses, so both agree on every cube's case).
+        raw: (N,) float32 Warp array of the nodes' signed distances (before ``iso``).
+        coords: (N,) vec3i Warp array of the nodes' lattice coordinates (node at ``origin + (c + 0.5) * spacing``).
+        proj: (N,) vec3 Warp array of each node's closest point on the surface its value came from.
+        origin: (3,) world position of lattice point (0, 0, 0)'s cell minimum.
+        spacing: Lattice spacing.
+        iso: Level extracted (planes are moved by it along their normals).
+    Returns:
+        dict: ``verts`` (V, 3) float32, ``tris`` (T, 3) int32 (outward, counter-clockwise), ``ranks`` (V,) int32
+        (significant eigenvalues of each vertex's quadric: 1 smooth, 2 crease, 3 corner; 0 without planes) and
+        ``cells`` (V,) int32 (the active cube each vertex belongs to, a row of ``cube_corners``), ``tunnels``: how
+        many of the vertices were added between two cubes meeting along two dual edges (``_open_tunnels``).
+    """
+    device = cube_corners.device
+    tables = _tables(device)
+    m, n = cube_corners.shape[0], values.shape[0]
+    counts = wp.empty(m, dtype=wp.int32, device=device)
+    quad_counts = wp.empty(m, dtype=wp.int32, device=device)
+    cube_of_node = wp.full(n, -1, dtype=wp.int32, device=device)
+    cube_case = wp.empty(m, dtype=wp.int32, device=device)
+    launch_split(
+        _count_patches_kernel,
+        m,
+        lambda s, c: [s, cube_corners, values, tables["count"], counts, quad_counts, cube_of_node, cube_case],
+        device,
+    )
+    neighbours = wp.zeros(6 * m, dtype=wp.int32, device=device)
+    launch_split(_face_neighbours_kernel, m, lambda s, c: [s, cube_corners, cube_of_node, neighbours], device)
+    vertex_start = wp.empty(m, dtype=wp.int32, device=device)
+    wp.utils.array_scan(counts, vertex_start, inclusive=True)
+    quad_scan = counts  # reused
+    wp.utils.array_scan(quad_counts, quad_scan, inclusive=True)
+    n_verts = int(vertex_start[-1:].numpy()[0])
+    n_quads = int(quad_scan[-1:].numpy()[0])
+    verts = wp.empty(n_verts, dtype=wp.vec3, device=device)
+    ranks = wp.empty(n_verts, dtype=wp.int32, device=device)
+    cells = wp.empty(n_verts, dtype=wp.int32, device=device)
+    quadrics = wp.empty(n_verts, dtype=wp.mat33, device=device)
+    linear = wp.empty(n_verts, dtype=wp.vec4, device=device)
+    edge_vertex = wp.empty(12 * m, dtype=wp.int32, device=device)
+    origin_wp = wp.vec3(*(float(x) for x in origin))
+    launch_split(
+        _place_vertices_kernel,
+        m,
+        lambda s, c: [
+            s,
+            cube_corners,
+            values,
+            raw,
+            coords,
+            proj,
+            origin_wp,
+            float(spacing),
+            float(iso),
+            tables["edge_mask"],
+            tables["end_mask"],
+            vertex_start,
+            neighbours,
+            EMPTY_REACH,
+            EIGEN_CUTOFF,
+            SMOOTH_COS,
+            HERMITE_TOLERANCE,
+            HERMITE_NEAR,
+            CELL_MARGIN,
+            verts,
+            ranks,
+            cells,
+            quadrics,
+            linear,
+            edge_vertex,
+        ],
+        device,
+        balance=True,
+    )
+    tris = wp.empty((2 * n_quads, 3), dtype=wp.int32, device=device)
+    tunnel = wp.empty(n_quads, dtype=wp.int32, device=device)
+    tunnel_point = wp.empty(n_quads, dtype=wp.vec3, device=device)
+    launch_split(
+        _quads_kernel,
+        m,
+        lambda s, c: [
+            s,
+            cube_corners,
+            values,
+            cube_of_node,
+            edge_vertex,
+            quad_scan,
+            verts,
+            quadrics,
+            linear,
+            1.0 / float(spacing),
+            MIN_SPLIT_AREA,
+            cube_case,
+            tables["spans"],
+            tables["second"],
+            coords,
+            origin_wp,
+            tris,
+            tunnel,
+            tunnel_point,
+        ],
+        device,
+    )
+    surface = {
+        "verts": verts.numpy().reshape(-1, 3),
+        "tris": tris.numpy(),
+        "ranks": ranks.numpy(),
+        "cells": cells.numpy(),
+        "tunnels": 0,
+    }
+    tunnel_np = tunnel.numpy()
+    if tunnel_np.any():
+        flagged = np.flatnonzero(tunnel_np)
+        _open_tunnels(surface, flagged, tunnel_np[flagged], tunnel_point.numpy()[flagged])
+    tris_np = surface["tris"]
+    if len(tris_np) and tris_np[:, 0].min() < 0:  # quads at the band's edge, where a cube is missing (open surface)
+        surface["tris"] = tris_np[tris_np[:, 0] >= 0]
+    return surface
+
+
+def _open_tunnels(surface: dict, quads: np.ndarray, sides: np.ndarray, points: np.ndarray) -> None:
+    """Give the flagged sides of the flagged quads a vertex of their own (in place).
+
+    Two cubes that each cross their shared face with one patch in two segments make the marching cubes surface a
+    tunnel through that face, and their two dual vertices meet along two dual edges at once: one per segment. As an
+    indexed mesh that would be one edge of four triangles. The sides of the second segment's quads (flagged by
+    ``_quads_kernel``) get a vertex between the two cubes' vertices, at the middle of those quads' edge crossings,
+    and each such quad becomes a fan around its first new vertex: the edge of the first segment stays, the second
+    becomes a path through the new vertex.
+
+    Args:
+        surface: ``verts``, ``tris``, ``ranks``, ``cells`` of :func:`contour_dual`, quad q as rows 2q and 2q + 1
+            (q0, q1, q2), (q0, q2, q3) where flagged.
+        quads: (Q,) flagged quad indices; sides: (Q,) their bit masks (bit k: side q_k, q_k+1); points: (Q, 3) their
+            edges' crossing points.
+    """
+    verts, tris = surface["verts"], surface["tris"]
+    corners = np.concatenate([tris[2 * quads], tris[2 * quads + 1][:, 2:]], axis=1).astype(np.int64)  # (Q, 4)
+    bit = (sides[:, None] >> np.arange(4)) & 1 == 1  # (Q, 4)
+    row, k = np.nonzero(bit)
+    ends = np.stack([corners[row, k], corners[row, (k + 1) % 4]], axis=1)
+    keys, group = np.unique(ends.min(1) * len(verts) + ends.max(1), return_inverse=True)
+    new_points = np.zeros((len(keys), 3), dtype=np.float64)
+    np.add.at(new_points, group, points[row])
+    new_points /= np.bincount(group, minlength=len(keys))[:, None]
+    # each quad as a polygon of up to 8 slots (q0, m0, q1, m1, ...), started at its first new vertex
+    slots = np.full((len(quads), 8), -1, dtype=np.int64)
+    slots[:, 0::2] = corners
+    slots[row, 2 * k + 1] = len(verts) + group
+    start = 2 * np.argmax(bit, axis=1) + 1
+    slots = np.take_along_axis(slots, (start[:, None] + np.arange(8)) % 8, axis=1)
+    slots = np.take_along_axis(slots, np.argsort(slots < 0, axis=1, kind="stable"), axis=1)  # used slots first
+    size = (slots >= 0).sum(axis=1)
+    fan = np.stack([np.repeat(slots[:, :1], 6, axis=1), slots[:, 1:7], slots[:, 2:8]], axis=-1)  # (Q, 6, 3)
+    fans = fan[np.arange(6)[None, :] < (size - 2)[:, None]]
+    keep = np.ones(len(tris), dtype=bool)
+    keep[2 * quads] = keep[2 * quads + 1] = False
+    surface["tris"] = np.concatenate([tris[keep], fans.astype(np.int32)])
+    surface["verts"] = np.concatenate([verts, new_points.astype(np.float32)])
+    surface["ranks"] = np.concatenate([surface["ranks"], np.ones(len(keys), dtype=np.int32)])
+    first = np.unique(group, return_index=True)[1]
+    surface["cells"] = np.concatenate([surface["cells"], surface["cells"][ends[first, 0]]])
+    surface["tunnels"] = len(keys)
+
+
+# ---- creases and the entry point ----
+
+
+def extract_sharp(field: AdaptiveField, iso: float = 0.0, *, creases: bool = True):
+    """Feature-preserving surface of a field's finest level (see the module docstring).
+
+    Args:
+        field: An AdaptiveField.
+        iso: Level to extract (world units).
+        creases: Find the crease edges (else ``creases`` is empty).
+    Returns:
+        ``verts`` (V, 3) float32, ``tris`` (T, 3) int32 (outward, counter-clockwise) and ``creases`` (E, 2) int32
+        vertex index pairs of the crease edges (:func:`crease_edges`).
+    """
+    n0 = field.level_counts[0]
+    coords, values, proj = field.coords[:n0], field.values[:n0], field.proj[:n0]
+    if field.levels == 1:
+        coords_np = field.coords.numpy()
+        cubes = lattice_cubes(
+            coords_np,
+            field.values.numpy().astype(np.float64),
+            origin=field.origin,
+            spacing=field.voxel_size,
+            iso=iso,
+            device=field.device,
+        )
+        if cubes is not None and cubes["order"] is not None:
+            order = cubes["order"]
+            coords = wp.array(coords_np[order], dtype=wp.vec3i, device=field.device)
+            values = wp.array(field.values.numpy()[order], dtype=wp.float32, device=field.device)
+            proj = wp.array(field.proj.numpy()[order], dtype=wp.vec3, device=field.device)
+    else:
+        tree = (field.child, field.level_offsets[field.levels - 1], field.top_dims, field.levels)
+        cubes = octree_level_cubes(coords, values, tree, origin=field.origin, spacing=field.voxel_size, iso=iso)
+    if cubes is None:
+        verts, tris = empty_mesh()
+        return verts, tris, np.zeros((0, 2), dtype=np.int32)
+    surface = contour_dual(
+        cubes["cube_corners"],
+        cubes["shifted"],
+        values,
+        coords,
+        proj,
+        origin=field.origin,
+        spacing=field.voxel_size,
+        iso=iso,
+    )
+    verts, tris = surface["verts"], surface["tris"]
+    if not creases:
+        return verts, tris, np.zeros((0, 2), dtype=np.int32)
+    return verts, tris, crease_edges(verts, tris, surface["ranks"])
