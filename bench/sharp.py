@@ -126,7 +126,8 @@ def run(names, repeat, samples, with_gn):
         for method, result, mesh_s, pipe_s in rows:
             d = deviation((result["verts"], result["tris"]), exact, creases, h, samples)
             quality = f"{d['max']:.2f} | {d['p95']:.3f} | {d['crease_max']:.2f} | {d['crease_p95']:.3f}"
-            print(f"| {name} | {method} | {quality} | {len(result['tris']):,} | {mesh_s} | {pipe_s} |")
+            label = name.replace("|", "\\|")  # a markdown table cell
+            print(f"| {label} | {method} | {quality} | {len(result['tris']):,} | {mesh_s} | {pipe_s} |")
             sys.stdout.flush()
 
 

@@ -19,32 +19,27 @@ outside is clamped.
 
 Each quad is split along the diagonal whose midpoint fits its two vertices' planes best, which keeps crease lines
 (both ends on the crease) as mesh edges. Vertices whose quadric has two or more significant eigenvalues lie on a
-crease or corner; :func:`crease_edges` returns the mesh edges between two of them where the surface folds.
+crease or corner; :func:`.quadric.crease_edges` returns the mesh edges between two of them where the surface
+folds. ``AdaptiveField.to_mesh(sharp=True)`` runs it on the field's active cubes.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import warp as wp
 
-from .extract import lattice_cubes, octree_level_cubes
 from .marching import (
     case_tables,
     edge_ends,
-    empty_mesh,
     patch_tables,
     quad_corner,
     quad_edge,
     quad_ends,
     tunnel_tables,
 )
+from .meshcheck import open_tunnels
 from .parallel import launch_split
-from .quadric import clamp_box, crease_edges, cube_corner, quadric_at, solve_in_cube, solve_smooth, trilinear, vec8
-
-if TYPE_CHECKING:  # the field type imports this module for its surface
-    from .field import AdaptiveField
+from .quadric import clamp_box, cube_corner, quadric_at, solve_in_cube, solve_smooth, trilinear, vec8
 
 # Eigenvalues of a patch's plane quadric below this fraction of the largest are dropped (Ju et al. truncate singular
 # values below 0.1; the eigenvalues of A^T A are their squares): normals less than about 16 degrees apart make no
@@ -361,7 +356,7 @@ def _quads_kernel(
     Where two of its cubes meet across a face that each crosses with one patch in two segments and its edge lies in
     the second segment (``tunnel_tables``), the quad's ``tunnel`` entry has that side's bit (its sides numbered from
     its first vertex as written) and its edge's crossing point goes to ``tunnel_point``: such sides get a vertex of
-    their own (see ``_open_tunnels``)."""
+    their own (see :func:`.meshcheck.open_tunnels`)."""
     cube = first + wp.tid()
     out = int(0)
     if cube > 0:
@@ -477,7 +472,7 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
         dict: ``verts`` (V, 3) float32, ``tris`` (T, 3) int32 (outward, counter-clockwise), ``ranks`` (V,) int32
         (significant eigenvalues of each vertex's quadric: 1 smooth, 2 crease, 3 corner; 0 without planes) and
         ``cells`` (V,) int32 (the active cube each vertex belongs to, a row of ``cube_corners``), ``tunnels``: how
-        many of the vertices were added between two cubes meeting along two dual edges (``_open_tunnels``).
+        many of the vertices were added between two cubes meeting along two dual edges (``meshcheck.open_tunnels``).
     """
     device = cube_corners.device
     tables = _tables(device)
@@ -579,106 +574,8 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
     tunnel_np = tunnel.numpy()
     if tunnel_np.any():
         flagged = np.flatnonzero(tunnel_np)
-        _open_tunnels(surface, flagged, tunnel_np[flagged], tunnel_point.numpy()[flagged])
+        open_tunnels(surface, flagged, tunnel_np[flagged], tunnel_point.numpy()[flagged])
     tris_np = surface["tris"]
     if len(tris_np) and tris_np[:, 0].min() < 0:  # quads at the band's edge, where a cube is missing (open surface)
         surface["tris"] = tris_np[tris_np[:, 0] >= 0]
     return surface
-
-
-def _open_tunnels(surface: dict, quads: np.ndarray, sides: np.ndarray, points: np.ndarray) -> None:
-    """Give the flagged sides of the flagged quads a vertex of their own (in place).
-
-    Two cubes that each cross their shared face with one patch in two segments make the marching cubes surface a
-    tunnel through that face, and their two dual vertices meet along two dual edges at once: one per segment. As an
-    indexed mesh that would be one edge of four triangles. The sides of the second segment's quads (flagged by
-    ``_quads_kernel``) get a vertex between the two cubes' vertices, at the middle of those quads' edge crossings,
-    and each such quad becomes a fan around its first new vertex: the edge of the first segment stays, the second
-    becomes a path through the new vertex.
-
-    Args:
-        surface: ``verts``, ``tris``, ``ranks``, ``cells`` of :func:`contour_dual`, quad q as rows 2q and 2q + 1
-            (q0, q1, q2), (q0, q2, q3) where flagged.
-        quads: (Q,) flagged quad indices; sides: (Q,) their bit masks (bit k: side q_k, q_k+1); points: (Q, 3) their
-            edges' crossing points.
-    """
-    verts, tris = surface["verts"], surface["tris"]
-    corners = np.concatenate([tris[2 * quads], tris[2 * quads + 1][:, 2:]], axis=1).astype(np.int64)  # (Q, 4)
-    bit = (sides[:, None] >> np.arange(4)) & 1 == 1  # (Q, 4)
-    row, k = np.nonzero(bit)
-    ends = np.stack([corners[row, k], corners[row, (k + 1) % 4]], axis=1)
-    keys, group = np.unique(ends.min(1) * len(verts) + ends.max(1), return_inverse=True)
-    new_points = np.zeros((len(keys), 3), dtype=np.float64)
-    np.add.at(new_points, group, points[row])
-    new_points /= np.bincount(group, minlength=len(keys))[:, None]
-    # each quad as a polygon of up to 8 slots (q0, m0, q1, m1, ...), started at its first new vertex
-    slots = np.full((len(quads), 8), -1, dtype=np.int64)
-    slots[:, 0::2] = corners
-    slots[row, 2 * k + 1] = len(verts) + group
-    start = 2 * np.argmax(bit, axis=1) + 1
-    slots = np.take_along_axis(slots, (start[:, None] + np.arange(8)) % 8, axis=1)
-    slots = np.take_along_axis(slots, np.argsort(slots < 0, axis=1, kind="stable"), axis=1)  # used slots first
-    size = (slots >= 0).sum(axis=1)
-    fan = np.stack([np.repeat(slots[:, :1], 6, axis=1), slots[:, 1:7], slots[:, 2:8]], axis=-1)  # (Q, 6, 3)
-    fans = fan[np.arange(6)[None, :] < (size - 2)[:, None]]
-    keep = np.ones(len(tris), dtype=bool)
-    keep[2 * quads] = keep[2 * quads + 1] = False
-    surface["tris"] = np.concatenate([tris[keep], fans.astype(np.int32)])
-    surface["verts"] = np.concatenate([verts, new_points.astype(np.float32)])
-    surface["ranks"] = np.concatenate([surface["ranks"], np.ones(len(keys), dtype=np.int32)])
-    first = np.unique(group, return_index=True)[1]
-    surface["cells"] = np.concatenate([surface["cells"], surface["cells"][ends[first, 0]]])
-    surface["tunnels"] = len(keys)
-
-
-# ---- creases and the entry point ----
-
-
-def extract_sharp(field: AdaptiveField, iso: float = 0.0, *, creases: bool = True):
-    """Feature-preserving surface of a field's finest level (see the module docstring).
-
-    Args:
-        field: An AdaptiveField.
-        iso: Level to extract (world units).
-        creases: Find the crease edges (else ``creases`` is empty).
-    Returns:
-        ``verts`` (V, 3) float32, ``tris`` (T, 3) int32 (outward, counter-clockwise) and ``creases`` (E, 2) int32
-        vertex index pairs of the crease edges (:func:`crease_edges`).
-    """
-    n0 = field.level_counts[0]
-    coords, values, proj = field.coords[:n0], field.values[:n0], field.proj[:n0]
-    if field.levels == 1:
-        coords_np = field.coords.numpy()
-        cubes = lattice_cubes(
-            coords_np,
-            field.values.numpy().astype(np.float64),
-            origin=field.origin,
-            spacing=field.voxel_size,
-            iso=iso,
-            device=field.device,
-        )
-        if cubes is not None and cubes["order"] is not None:
-            order = cubes["order"]
-            coords = wp.array(coords_np[order], dtype=wp.vec3i, device=field.device)
-            values = wp.array(field.values.numpy()[order], dtype=wp.float32, device=field.device)
-            proj = wp.array(field.proj.numpy()[order], dtype=wp.vec3, device=field.device)
-    else:
-        tree = (field.child, field.level_offsets[field.levels - 1], field.top_dims, field.levels)
-        cubes = octree_level_cubes(coords, values, tree, origin=field.origin, spacing=field.voxel_size, iso=iso)
-    if cubes is None:
-        verts, tris = empty_mesh()
-        return verts, tris, np.zeros((0, 2), dtype=np.int32)
-    surface = contour_dual(
-        cubes["cube_corners"],
-        cubes["shifted"],
-        values,
-        coords,
-        proj,
-        origin=field.origin,
-        spacing=field.voxel_size,
-        iso=iso,
-    )
-    verts, tris = surface["verts"], surface["tris"]
-    if not creases:
-        return verts, tris, np.zeros((0, 2), dtype=np.int32)
-    return verts, tris, crease_edges(verts, tris, surface["ranks"])

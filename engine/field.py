@@ -15,11 +15,13 @@ import numpy as np
 import warp as wp
 
 from . import boolean, parallel, sources
-from .dual import extract_sharp
+from .dual import contour_dual
 from .errors import AasdfError
-from .extract import extract_octree_level, extract_surface
+from .extract import extract_octree_level, extract_surface, lattice_cubes, octree_level_cubes
+from .marching import empty_mesh
 from .placement import Placement
 from .plan import available_memory
+from .quadric import crease_edges
 from .sampling import FieldArg, face_nodes_kernel, sample_field_kernel, source_ids_kernel
 
 
@@ -456,13 +458,54 @@ class AdaptiveField:
             mesh = frame.to_mesh(iso / self.placement.scale, sharp=sharp, return_creases=return_creases)
             return self._placed_mesh(mesh)
         if sharp:
-            verts, tris, creases = extract_sharp(self, iso, creases=return_creases)
+            verts, tris, creases = self._sharp_surface(iso, return_creases)
         else:
             verts, tris = self._marching_cubes(iso)
             creases = np.zeros((0, 2), dtype=np.int32)
         if return_creases:
             return verts, tris, creases
         return verts, tris
+
+    def _sharp_surface(self, iso: float, creases: bool):
+        """The dual contouring of the finest level's active cubes (:func:`.dual.contour_dual`): ``verts``, ``tris``
+        and, with ``creases``, the crease edges (:func:`.quadric.crease_edges`)."""
+        n0 = self.level_counts[0]
+        coords, values, proj = self.coords[:n0], self.values[:n0], self.proj[:n0]
+        if self.levels == 1:
+            coords_np = self.coords.numpy()
+            cubes = lattice_cubes(
+                coords_np,
+                self.values.numpy().astype(np.float64),
+                origin=self.origin,
+                spacing=self.voxel_size,
+                iso=iso,
+                device=self.device,
+            )
+            if cubes is not None and cubes["order"] is not None:
+                order = cubes["order"]
+                coords = wp.array(coords_np[order], dtype=wp.vec3i, device=self.device)
+                values = wp.array(self.values.numpy()[order], dtype=wp.float32, device=self.device)
+                proj = wp.array(self.proj.numpy()[order], dtype=wp.vec3, device=self.device)
+        else:
+            tree = (self.child, self.level_offsets[self.levels - 1], self.top_dims, self.levels)
+            cubes = octree_level_cubes(coords, values, tree, origin=self.origin, spacing=self.voxel_size, iso=iso)
+        if cubes is None:
+            verts, tris = empty_mesh()
+            return verts, tris, np.zeros((0, 2), dtype=np.int32)
+        surface = contour_dual(
+            cubes["cube_corners"],
+            cubes["shifted"],
+            values,
+            coords,
+            proj,
+            origin=self.origin,
+            spacing=self.voxel_size,
+            iso=iso,
+        )
+        verts, tris = surface["verts"], surface["tris"]
+        if not creases:
+            return verts, tris, np.zeros((0, 2), dtype=np.int32)
+        return verts, tris, crease_edges(verts, tris, surface["ranks"])
 
     def _marching_cubes(self, iso: float):
         n0 = self.level_counts[0]

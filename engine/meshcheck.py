@@ -4,7 +4,8 @@ holes.
 :func:`checked_mesh` refuses what no build can use (empty, non-finite, out-of-range or fully degenerate input) and
 drops zero-area triangles. :func:`edge_table` and :func:`problem_faces` find open, non-manifold and inconsistently
 oriented edges, judged on the mesh with repeated positions welded (:func:`weld_positions`), and :func:`hole_caps`
-bounds how far the winding number of an open mesh may be from an integer (see there).
+bounds how far the winding number of an open mesh may be from an integer (see there). :func:`open_tunnels` gives the
+dual contouring's doubled edges a vertex of their own.
 """
 
 from __future__ import annotations
@@ -163,3 +164,48 @@ def hole_caps(vertices: np.ndarray, triangles: np.ndarray, edges: dict | None = 
     tri_area = 0.5 * np.linalg.norm(np.cross(a - apex, b - apex), axis=1) * np.abs(net[open_edges])
     area = np.bincount(piece, weights=tri_area, minlength=k)
     return lo, hi, np.sqrt(area / math.pi)
+
+
+def open_tunnels(surface: dict, quads: np.ndarray, sides: np.ndarray, points: np.ndarray) -> None:
+    """Give the flagged sides of the flagged quads a vertex of their own (in place).
+
+    Two cubes that each cross their shared face with one patch in two segments make the marching cubes surface a
+    tunnel through that face, and their two dual vertices meet along two dual edges at once: one per segment. As an
+    indexed mesh that would be one edge of four triangles. The sides of the second segment's quads (flagged by
+    ``dual._quads_kernel``) get a vertex between the two cubes' vertices, at the middle of those quads' edge crossings,
+    and each such quad becomes a fan around its first new vertex: the edge of the first segment stays, the second
+    becomes a path through the new vertex.
+
+    Args:
+        surface: ``verts``, ``tris``, ``ranks``, ``cells`` of :func:`.dual.contour_dual`, quad q as rows 2q and 2q + 1
+            (q0, q1, q2), (q0, q2, q3) where flagged.
+        quads: (Q,) flagged quad indices; sides: (Q,) their bit masks (bit k: side q_k, q_k+1); points: (Q, 3) their
+            edges' crossing points.
+    """
+    verts, tris = surface["verts"], surface["tris"]
+    corners = np.concatenate([tris[2 * quads], tris[2 * quads + 1][:, 2:]], axis=1).astype(np.int64)  # (Q, 4)
+    bit = (sides[:, None] >> np.arange(4)) & 1 == 1  # (Q, 4)
+    row, k = np.nonzero(bit)
+    ends = np.stack([corners[row, k], corners[row, (k + 1) % 4]], axis=1)
+    keys, group = np.unique(ends.min(1) * len(verts) + ends.max(1), return_inverse=True)
+    new_points = np.zeros((len(keys), 3), dtype=np.float64)
+    np.add.at(new_points, group, points[row])
+    new_points /= np.bincount(group, minlength=len(keys))[:, None]
+    # each quad as a polygon of up to 8 slots (q0, m0, q1, m1, ...), started at its first new vertex
+    slots = np.full((len(quads), 8), -1, dtype=np.int64)
+    slots[:, 0::2] = corners
+    slots[row, 2 * k + 1] = len(verts) + group
+    start = 2 * np.argmax(bit, axis=1) + 1
+    slots = np.take_along_axis(slots, (start[:, None] + np.arange(8)) % 8, axis=1)
+    slots = np.take_along_axis(slots, np.argsort(slots < 0, axis=1, kind="stable"), axis=1)  # used slots first
+    size = (slots >= 0).sum(axis=1)
+    fan = np.stack([np.repeat(slots[:, :1], 6, axis=1), slots[:, 1:7], slots[:, 2:8]], axis=-1)  # (Q, 6, 3)
+    fans = fan[np.arange(6)[None, :] < (size - 2)[:, None]]
+    keep = np.ones(len(tris), dtype=bool)
+    keep[2 * quads] = keep[2 * quads + 1] = False
+    surface["tris"] = np.concatenate([tris[keep], fans.astype(np.int32)])
+    surface["verts"] = np.concatenate([verts, new_points.astype(np.float32)])
+    surface["ranks"] = np.concatenate([surface["ranks"], np.ones(len(keys), dtype=np.int32)])
+    first = np.unique(group, return_index=True)[1]
+    surface["cells"] = np.concatenate([surface["cells"], surface["cells"][ends[first, 0]]])
+    surface["tunnels"] = len(keys)

@@ -67,7 +67,7 @@ def cad(request):
 
 
 # Hausdorff max bound (voxels): the target, 0.5, except at cube - bore, whose cube's corners come out 0.58 voxel short
-# (the cubes around a corner see its third face only through nodes within 0.1 voxel of it, whose planes are damped:
+# (the cubes around a corner see its third face only through nodes within 0.12 voxel of it, whose planes are damped:
 # their closest points on the bore's long thin triangles are off by ~1e-2 voxel, see dual.HERMITE_NEAR)
 MAX_BOUND = {"cube - bore": 0.65}
 
