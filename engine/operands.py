@@ -168,7 +168,12 @@ def bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3
     found, phi, g, j = lookup(f, aligned, offset, c, x)
     if found == 1:
         return phi, 0.0
-    phi, radius, _leaf = estimate(f, x)
+    phi, radius, leaf = estimate(f, x)
+    if radius < 0.0:  # in the finest band: the finest node whose cell holds x (the field is 1-Lipschitz there too)
+        xc = clamp_to_domain(f, to_frame(f, x))
+        centre = node_center(f.origin, f.voxel_size, f.coords[leaf[0]])
+        v = f.values[leaf[0]]
+        return v * f.scale, (wp.length(xc - centre) + LEAF_SLACK * wp.abs(v)) * f.scale
     return phi, radius
 
 
