@@ -25,10 +25,10 @@ from .operands import (
     coarse_sample,
     estimate,
     extrapolate,
+    finest_sample,
     lookup_node,
     node_bracket,
     octet_source,
-    sample_operand,
 )
 from .plan import byte_grid_fits, check_budget, plan_domain
 from .sampling import FieldArg, clamp_to_domain, locate_leaf, to_frame, vec27i
@@ -141,12 +141,12 @@ def _combine_nodes_kernel(
             if fb == 0:
                 vb, rad_b, leaf_b = estimate(b, x)
             if rad_a < 0.0:
-                r = sample_operand(a, x)
+                r = finest_sample(a, x)
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
                 rad_a = 0.0
             if rad_b < 0.0:
-                r = sample_operand(b, x)
+                r = finest_sample(b, x)
                 vb = r[0]
                 gb = wp.vec3(r[1], r[2], r[3])
                 rad_b = 0.0
