@@ -25,6 +25,7 @@ ENGINE_MODULES = (
     "signs",
     "holes",
     "build",
+    "field",
     "sampling",
     "boolean",
     "marching",

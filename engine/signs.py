@@ -253,6 +253,7 @@ def _inherit_sign_kernel(
     cap_hi: wp.array[wp.vec3],
     cap_radius: wp.array[wp.float32],
     expansions: ExpansionArg,
+    coarse_children: int,
 ):
     """A node takes its parent's sign when the two empty balls around them cover the segment between them (no
     surface can cross it); otherwise its sign stays 0 (undecided) for the caller's oracle. Near an open mesh's holes
@@ -269,7 +270,7 @@ def _inherit_sign_kernel(
     s = wp.length(xi - xp)
     if exact == 1:
         if near_cap(xi, cap_lo, cap_hi, cap_radius, s) or expansions.cert[p - expansions.first] != wp.uint8(0):
-            sign[i] = sign_from_parent(winding, i, p, xi, s, dist, sign, safety, expansions)
+            sign[i] = sign_from_parent(winding, i, p, xi, s, dist, sign, safety, expansions, coarse_children)
             return
     if (dist[i] + dist[p]) * safety > s:
         sign[i] = sign[p]
@@ -473,6 +474,7 @@ def sign_levels(
                 int(exact),
                 *cap_args,
                 expansions,
+                int(k >= 2),
             ],
             device,
         )

@@ -73,18 +73,28 @@ _FOUR_PI = 12.566370614359172
 NO_BOUND = 1.0e30
 
 
+# A coarse node its anchor decides is expanded all the same when the anchor's expansion would leave this many of its
+# children undecided (finest children: each pays a winding number; coarse ones: an expansion, about twice that): its
+# own expansion, nearer, decides most of them (Taylor's remainder grows with the cube of the distance).
+EXPAND_FOR_FINEST = 3
+
+
+EXPAND_FOR_COARSE = 2
+
+
 @wp.struct
 class WindingArg:
     """What a kernel needs to decide inside or outside of a mesh: its BVH (with winding number support), how its
-    winding number is known (``mode``) and, for an open mesh, its boundary edges (start, end, length) in cycles, their
-    cones' apexes and how each edge links to the one before it (:func:`.meshcheck.hole_boundary`; empty arrays for a
-    closed mesh)."""
+    winding number is known (``mode``) and, for an open mesh, its boundary edges (start, end, length, 1 / length^2)
+    in cycles, their cones' apexes and how each edge links to the one before it (:func:`.meshcheck.hole_boundary`;
+    empty arrays for a closed mesh)."""
 
     mesh: wp.uint64
     mode: int
     start: wp.array[wp.vec3]
     end: wp.array[wp.vec3]
     length: wp.array[wp.float32]
+    inv_length2: wp.array[wp.float32]
     apex: wp.array[wp.vec3]
     links: wp.array[wp.uint8]
 
@@ -127,7 +137,10 @@ def winding_arg(mesh: wp.Mesh, boundary, device, *, encloses: bool = True) -> Wi
             start, end, apex, links = boundary["start"], boundary["end"], boundary["apex"], boundary["links"]
     arg.start = wp.array(start, dtype=wp.vec3, device=device)
     arg.end = wp.array(end, dtype=wp.vec3, device=device)
-    arg.length = wp.array(np.linalg.norm(end - start, axis=1).astype(np.float32), dtype=wp.float32, device=device)
+    length = np.linalg.norm(np.asarray(end, np.float64) - start, axis=1)
+    arg.length = wp.array(length.astype(np.float32), dtype=wp.float32, device=device)
+    inv_length2 = 1.0 / np.maximum(length * length, 1e-30)
+    arg.inv_length2 = wp.array(inv_length2.astype(np.float32), dtype=wp.float32, device=device)
     arg.apex = wp.array(apex, dtype=wp.vec3, device=device)
     arg.links = wp.array(links, dtype=wp.uint8, device=device)
     return arg
@@ -252,16 +265,20 @@ def _d3_term(length: float, d: float) -> float:
 def winding_expansion(f: WindingArg, x: wp.vec3, near: float, far: float):
     """(w, grad w, Hessian of w, bound of |D^3 w| within ``near`` of ``x``, the same within ``far``) of an open mesh
     in mode WINDING_EXACT at ``x`` off its triangles: one pass over the boundary edges gives the cones' winding number,
-    the Biot-Savart field f (r1 x r2) of each edge (r1, r2 from ``x`` to its ends, f = (l1 + l2) / (l1 l2 (l1 l2 +
-    r1 . r2))), its derivative f ([E]x + (r1 x r2) (grad ln f)^T) (E = r2 - r1) and the edges' distances."""
+    the Biot-Savart field f (r1 x r2) of each edge (r1, r2 from ``x`` to its ends, f = (l1 + l2) / (l1 l2 P), P = l1 l2
+    + r1 . r2), its derivative f [E]x + (f r1 x r2) (grad ln f)^T (E = r2 - r1, [E]x its cross-product matrix; grad ln
+    f = u1 (1/l1 - 1/(l1 + l2) + l2/P) + u2 (1/l2 - 1/(l1 + l2) + l1/P) + (r1 + r2)/P, u = r/l) and the edges'
+    distances."""
     re = float(1.0)
     im = float(0.0)
     grad = wp.vec3(0.0)
+    spin = wp.vec3(0.0)  # sum of f E: the cross-product matrices' share of the Hessian
     hess = wp.mat33(0.0)
     d3_near = float(0.0)
     d3_far = float(0.0)
     r1 = wp.vec3(0.0)
     l1 = float(0.0)
+    il1 = float(0.0)
     ra = wp.vec3(0.0)
     la = float(0.0)
     for e in range(f.links.shape[0]):
@@ -269,11 +286,13 @@ def winding_expansion(f: WindingArg, x: wp.vec3, near: float, far: float):
         if (link & 1) == 0:
             r1 = f.start[e] - x
             l1 = wp.length(r1)
+            il1 = 1.0 / wp.max(l1, 1.0e-30)
         if (link & 2) == 0:
             ra = f.apex[e] - x
             la = wp.length(ra)
         r2 = f.end[e] - x
         l2 = wp.length(r2)
+        il2 = 1.0 / wp.max(l2, 1.0e-30)
         cr = wp.cross(r1, r2)
         d12 = wp.dot(r1, r2)
         det = -wp.dot(ra, cr)
@@ -281,22 +300,24 @@ def winding_expansion(f: WindingArg, x: wp.vec3, near: float, far: float):
         re, im = _turn(re, im, det, den)
         edge = r2 - r1
         pair = l1 * l2 + d12
-        if l1 > 0.0 and l2 > 0.0 and pair > 0.0:
-            fac = (l1 + l2) / (l1 * l2 * pair)
-            grad += fac * cr
-            u1 = r1 / l1
-            u2 = r2 / l2
-            # grad of ln f: d l1 = -u1, d l2 = -u2, d (l1 l2 + r1 . r2) = -(l2 u1 + l1 u2 + r1 + r2)
-            g = -(u1 + u2) / (l1 + l2) + u1 / l1 + u2 / l2 + (l2 * u1 + l1 * u2 + r1 + r2) / pair
-            skew = wp.mat33(0.0, -edge[2], edge[1], edge[2], 0.0, -edge[0], -edge[1], edge[0], 0.0)
-            hess += fac * (skew + wp.outer(cr, g))
+        if pair > 0.0:
+            ipair = 1.0 / pair
+            isum = 1.0 / (l1 + l2)
+            fac = (l1 + l2) * il1 * il2 * ipair
+            field = fac * cr
+            grad += field
+            spin += fac * edge
+            g = (r1 * il1) * (il1 - isum + l2 * ipair) + (r2 * il2) * (il2 - isum + l1 * ipair) + (r1 + r2) * ipair
+            hess += wp.outer(field, g)
         length = f.length[e]
-        along = wp.clamp(-wp.dot(r1, edge) / wp.max(length * length, 1.0e-30), 0.0, 1.0)
+        along = wp.clamp(-wp.dot(r1, edge) * f.inv_length2[e], 0.0, 1.0)
         d = wp.length(r1 + along * edge)
         d3_near += _d3_term(length, d - near)
         d3_far += _d3_term(length, d - far)
         r1 = r2
         l1 = l2
+        il1 = il2
+    hess += wp.mat33(0.0, -spin[2], spin[1], spin[2], 0.0, -spin[0], -spin[1], spin[0], 0.0)
     cones = wp.atan2(im, re) / (2.0 * wp.pi)
     fast = winding_number(f.mesh, x, WINDING_ACCURACY)
     w = _nearest_integer(f, x, fast, cones) - cones
@@ -408,10 +429,13 @@ def sign_from_parent(
     sign: wp.array[wp.float32],
     safety: float,
     e: ExpansionArg,
+    coarse_children: int,
 ) -> float:
     """The sign node ``i`` (centre ``xi``, cell radius ``radius``) of an open mesh takes from its parent ``p``, or 0
-    when that cannot be proven: the parent's whole cell is certified, or Taylor's theorem on the expansion that
-    decided the parent (its anchor's, see :class:`ExpansionArg`) keeps w on one side of +-1/2 at ``xi``. Its smooth
+    when that cannot be proven (or when a coarse node's own expansion would pay, see ``EXPAND_FOR_FINEST``; its
+    children are coarse when ``coarse_children`` is 1): the parent's whole cell is certified, or Taylor's theorem on
+    the expansion that decided the parent (its anchor's, see :class:`ExpansionArg`) keeps w on one side of +-1/2 at
+    ``xi``. Its smooth
     part, that is: w jumps by 1 through each triangle, so the triangles the segment from the anchor passes through
     are counted (``segment_crossings``) unless the anchor's or the two nodes' empty balls cover it. A coarse node takes
     the same anchor, and is certified when the expansion keeps w on one side over its whole cell (within the
@@ -440,8 +464,26 @@ def sign_from_parent(
         return 0.0
     if coarse:
         j = i - e.first
-        e.anchor[j] = a
         # every point of the cell is within s + radius <= the anchor's reach of the anchor
         if empty and inside_margin(w) > WINDING_ROUNDING + _spread_bound(e, ja, radius, s + radius):
             e.cert[j] = wp.uint8(1)
+        elif _children_left(e, ja, delta, radius) >= wp.where(
+            coarse_children == 1, EXPAND_FOR_COARSE, EXPAND_FOR_FINEST
+        ):
+            return 0.0
+        e.anchor[j] = a
     return side_of(w)
+
+
+@wp.func
+def _children_left(e: ExpansionArg, ja: int, delta: wp.vec3, radius: float) -> int:
+    """How many children of a node at ``delta`` from the centre of row ``ja``'s expansion (cell radius ``radius``)
+    that expansion would leave undecided (their crossings aside)."""
+    left = int(0)
+    step = 0.28867513 * radius  # a child's centre is a quarter cell (radius / (4 * 0.866)) away along each axis
+    for k in range(8):
+        d = delta + step * wp.vec3(float(2 * (k & 1) - 1), float((k & 2) - 1), float(((k >> 1) & 2) - 1))
+        s = wp.length(d)
+        if inside_margin(_taylor(e, ja, d)) <= WINDING_ROUNDING + e.d3_cell[ja] * s * s * s / 6.0:
+            left += 1
+    return left
