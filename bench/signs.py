@@ -36,7 +36,7 @@ import warp as wp  # noqa: E402
 import engine  # noqa: E402
 from bench.paired import paired  # noqa: E402
 from tests.metrics import unsigned_distance, winding_numbers  # noqa: E402
-from tests.support import SHARED_MESHES, load_mesh  # noqa: E402
+from tests.support import SHARED_MESHES, load_mesh, sample_points  # noqa: E402
 
 MAX_POINTS = 20_000
 
@@ -51,20 +51,6 @@ def load_engine(root: Path, name: str = "engine_before"):
     sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
-
-
-def sample_points(verts, tris, h: float, n: int, seed: int = 0) -> np.ndarray:
-    """(n, 3) float32: half uniform in the grown bounding box, half near the surface (noise of h and 4 h)."""
-    rng = np.random.default_rng(seed)
-    lo, hi = verts.min(axis=0).astype(np.float64), verts.max(axis=0).astype(np.float64)
-    pad = 0.05 * float(np.linalg.norm(hi - lo))
-    uniform = rng.uniform(lo - pad, hi + pad, size=(n // 2, 3))
-    m = n - n // 2
-    face = rng.integers(0, len(tris), m)
-    bary = rng.dirichlet([1.0, 1.0, 1.0], m)
-    base = (verts[tris[face]].astype(np.float64) * bary[:, :, None]).sum(axis=1)
-    noise = rng.normal(0.0, 1.0, (m, 3)) * np.where(np.arange(m) % 2 == 0, h, 4.0 * h)[:, None]
-    return np.concatenate([uniform, base + noise]).astype(np.float32)
 
 
 def accuracy(field, points, dist, inside) -> dict:
