@@ -22,6 +22,7 @@ from .geometry import near_cap, segment_clear
 from .octree import node_center
 from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
 from .winding import (
+    SEED_REACH,
     WINDING_EXACT,
     WINDING_NONE,
     ExpansionArg,
@@ -30,6 +31,7 @@ from .winding import (
     expansion_arg,
     mesh_sign_kernel,
     sign_from_parent,
+    sign_from_seed_kernel,
     take_known_expansion_kernel,
 )
 
@@ -270,7 +272,7 @@ def _inherit_sign_kernel(
     s = wp.length(xi - xp)
     if exact == 1:
         if near_cap(xi, cap_lo, cap_hi, cap_radius, s) or expansions.cert[p - expansions.first] != wp.uint8(0):
-            sign[i] = sign_from_parent(winding, i, p, xi, s, dist, sign, safety, expansions, coarse_children)
+            sign[i] = sign_from_parent(winding, i, p, xi, xp, s, dist, sign, safety, expansions, coarse_children)
             return
     if (dist[i] + dist[p]) * safety > s:
         sign[i] = sign[p]
@@ -279,10 +281,13 @@ def _inherit_sign_kernel(
 # ---- host side: the top-down pass ----
 
 
-def _winding_signs(winding: WindingArg, layout: dict, nodes_np: np.ndarray, k: int, lattice, sign, expand) -> None:
+def _winding_signs(
+    winding: WindingArg, layout: dict, nodes_np: np.ndarray, k: int, lattice, sign, expand, reach: float = 0.8661
+) -> None:
     """The oracle: the sign of each of ``nodes_np`` (indices of level ``k``'s nodes) from the winding number, with
-    the coarse nodes' expansions when ``expand`` is (dist, ExpansionArg), see :func:`.winding.expand_winding_kernel`.
-    ``lattice``: (origin vec3, finest voxel size)."""
+    the coarse nodes' expansions when ``expand`` is (dist, ExpansionArg), see :func:`.winding.expand_winding_kernel`
+    (valid within ``reach`` cells: their own cell's radius and a little). ``lattice``: (origin vec3, finest voxel
+    size)."""
     if len(nodes_np) == 0:
         return
     coords = layout["coords"]
@@ -294,7 +299,18 @@ def _winding_signs(winding: WindingArg, layout: dict, nodes_np: np.ndarray, k: i
     def args(lo, n):
         if expand is None:
             return [winding, coords, nodes[lo : lo + n], lattice[0], spacing, sign]
-        return [winding, coords, nodes[lo : lo + n], lattice[0], spacing, expand[0], SIGN_SAFETY, sign, expand[1]]
+        return [
+            winding,
+            coords,
+            nodes[lo : lo + n],
+            lattice[0],
+            spacing,
+            reach * spacing,
+            expand[0],
+            SIGN_SAFETY,
+            sign,
+            expand[1],
+        ]
 
     launch_split(
         kernel,
@@ -373,9 +389,9 @@ def sign_levels(
             take_known_expansion_kernel, n - n0, lambda s, _n: [s, prev_index, renumber_wp, known, expansions], device
         )
 
-    def oracle(nodes_np, k):
+    def oracle(nodes_np, k, reach=0.8661):
         expand = (dist, expansions) if exact and k > 0 else None
-        _winding_signs(winding, layout, nodes_np, k, (origin_v, voxel_size), sign, expand)
+        _winding_signs(winding, layout, nodes_np, k, (origin_v, voxel_size), sign, expand, reach)
 
     def spread(k, lo, hi):
         changed = wp.zeros(1, dtype=wp.int32, device=device)
@@ -449,10 +465,35 @@ def sign_levels(
         # Across a hole of an open mesh the sign changes where no triangle is near, so empty balls prove nothing
         # near it: signs spread only away from the holes' caps (``hole_caps``), the oracle decides the rest.
         nx, ny, nz = (int(d) for d in top_dims)
-        ix, iy, iz = (np.arange(min(TOP_SEED_STRIDE // 2, m - 1), m, TOP_SEED_STRIDE) for m in (nx, ny, nz))
+        if exact:
+            # near the holes nothing spreads: a lattice of seeds every other node expands far enough to decide its
+            # neighbours by Taylor's theorem
+            ix, iy, iz = (np.arange(0, m, 2) for m in (nx, ny, nz))
+        else:
+            ix, iy, iz = (np.arange(min(TOP_SEED_STRIDE // 2, m - 1), m, TOP_SEED_STRIDE) for m in (nx, ny, nz))
         seeds = top_lo + (ix[None, None, :] + nx * (iy[None, :, None] + ny * iz[:, None, None])).ravel()
         seeds = seeds[sign.numpy()[seeds] == 0.0]
-        oracle(seeds, levels - 1)
+        oracle(seeds, levels - 1, SEED_REACH)
+        if exact:
+            launch_split(
+                sign_from_seed_kernel,
+                top_hi - top_lo,
+                lambda start, _n: [
+                    winding,
+                    coords,
+                    top_lo,
+                    start,
+                    wp.vec3i(nx, ny, nz),
+                    origin_v,
+                    float(voxel_size * 2 ** (levels - 1)),
+                    dist,
+                    SIGN_SAFETY,
+                    sign,
+                    expansions,
+                    int(levels > 2),
+                ],
+                device,
+            )
         rest = spread(levels - 1, top_lo, top_hi)
         oracle(rest, levels - 1)
         oracle_counts[levels - 1] = len(seeds) + len(rest)

@@ -82,6 +82,11 @@ EXPAND_FOR_FINEST = 3
 EXPAND_FOR_COARSE = 2
 
 
+# The top level expands a lattice of seeds (every other node along each axis) whose expansions reach this many cells:
+# a node's seed is at most a diagonal (1.73 cells) away, and its cell half a diagonal further.
+SEED_REACH = 2.6
+
+
 @wp.struct
 class WindingArg:
     """What a kernel needs to decide inside or outside of a mesh: its BVH (with winding number support), how its
@@ -102,14 +107,17 @@ class WindingArg:
 @wp.struct
 class ExpansionArg:
     """Per coarse node (node ``first + j`` in row ``j``): ``cert`` 1 when w keeps one side of +-1/2 over its whole
-    cell (its descendants take its sign), and ``anchor``, the node whose expansion decided it (itself when expanded,
-    -1: none). An expanded node keeps its centre ``at``, its cell's radius ``reach``, ``w``, ``grad``, ``hess`` and
-    bounds of |D^3 w| within a child's distance (``d3_child``) and within ``reach`` (``d3_cell``)."""
+    cell (its descendants take its sign), ``anchor``, the node whose expansion decided it (itself when expanded, -1:
+    none), and ``jumps``, what w gains through triangles from the anchor to it. An expanded node keeps its centre
+    ``at``, ``w``, ``grad``, ``hess`` and bounds of |D^3 w| within ``inner`` of it (its children's distance,
+    ``d3_child``) and within ``reach`` (at least its cell's radius, ``d3_cell``)."""
 
     first: int
     cert: wp.array[wp.uint8]
     anchor: wp.array[wp.int32]
+    jumps: wp.array[wp.int32]
     at: wp.array[wp.vec3]
+    inner: wp.array[wp.float32]
     reach: wp.array[wp.float32]
     w: wp.array[wp.float32]
     grad: wp.array[wp.vec3]
@@ -152,7 +160,8 @@ def expansion_arg(first: int, count: int, device) -> ExpansionArg:
     arg.first = int(first)
     arg.cert = wp.zeros(count, dtype=wp.uint8, device=device)
     arg.anchor = wp.full(count, -1, dtype=wp.int32, device=device)
-    for name in ("reach", "w", "d3_child", "d3_cell"):
+    arg.jumps = wp.zeros(count, dtype=wp.int32, device=device)
+    for name in ("inner", "reach", "w", "d3_child", "d3_cell"):
         setattr(arg, name, wp.zeros(count, dtype=wp.float32, device=device))
     arg.at = wp.zeros(count, dtype=wp.vec3, device=device)
     arg.grad = wp.zeros(count, dtype=wp.vec3, device=device)
@@ -367,31 +376,35 @@ def expand_winding_kernel(
     nodes: wp.array[wp.int32],
     origin: wp.vec3,
     spacing: float,
+    reach: float,
     dist: wp.array[wp.float32],
     safety: float,
     sign: wp.array[wp.float32],
     e: ExpansionArg,
 ):
     """Sign and expansion of coarse nodes ``nodes[tid]`` of an open mesh (mode WINDING_EXACT), with |D^3 w| bounded
-    over the ball of its children's centres (``d3_child``) and its cell's (``d3_cell``); a node whose empty ball
-    (``dist`` times ``safety``) holds its cell and whose w keeps one side of +-1/2 over it is certified."""
+    over the ball of its children's centres (``d3_child``) and over ``reach`` (at least its cell's radius; more for
+    the top level's seeds, whose expansions decide their neighbours: ``d3_cell``); a node whose empty ball (``dist``
+    times ``safety``) holds its cell and whose w keeps one side of +-1/2 over it is certified."""
     i = nodes[wp.tid()]
     x = node_center(origin, spacing, coords[i])
     cell = 0.8660254 * spacing
-    w, g, h, d3_child, d3_cell = winding_expansion(f, x, 0.5 * cell, cell)
+    inner = 0.4331 * spacing  # a child's centre is 0.4330 cells away
+    w, g, h, d3_child, d3_cell = winding_expansion(f, x, inner, reach)
     sign[i] = side_of(w)
     j = i - e.first
     e.anchor[j] = i
+    e.jumps[j] = 0
     e.at[j] = x
-    e.reach[j] = cell
+    e.inner[j] = inner
+    e.reach[j] = reach
     e.w[j] = w
     e.grad[j] = g
     e.hess[j] = h
     e.d3_child[j] = d3_child
     e.d3_cell[j] = d3_cell
-    if dist[i] * safety > cell:
-        if inside_margin(w) > WINDING_ROUNDING + _spread_bound(e, j, cell, cell):
-            e.cert[j] = wp.uint8(1)
+    if dist[i] * safety > cell and inside_margin(w) > WINDING_ROUNDING + _spread_bound(e, j, cell, cell):
+        e.cert[j] = wp.uint8(1)
 
 
 @wp.kernel(enable_backward=False)
@@ -409,7 +422,9 @@ def take_known_expansion_kernel(
     if a >= 0:
         a = renumber[a]
     now.anchor[j] = a
+    now.jumps[j] = before.jumps[k]
     now.at[j] = before.at[k]
+    now.inner[j] = before.inner[k]
     now.reach[j] = before.reach[k]
     now.w[j] = before.w[k]
     now.grad[j] = before.grad[k]
@@ -419,52 +434,28 @@ def take_known_expansion_kernel(
 
 
 @wp.func
-def sign_from_parent(
-    f: WindingArg,
-    i: int,
-    p: int,
-    xi: wp.vec3,
-    radius: float,
-    dist: wp.array[wp.float32],
-    sign: wp.array[wp.float32],
-    safety: float,
-    e: ExpansionArg,
-    coarse_children: int,
+def _sign_from_anchor(
+    i: int, a: int, jumps: int, xi: wp.vec3, radius: float, empty: bool, e: ExpansionArg, coarse_children: int
 ) -> float:
-    """The sign node ``i`` (centre ``xi``, cell radius ``radius``) of an open mesh takes from its parent ``p``, or 0
-    when that cannot be proven (or when a coarse node's own expansion would pay, see ``EXPAND_FOR_FINEST``; its
-    children are coarse when ``coarse_children`` is 1): the parent's whole cell is certified, or Taylor's theorem on
-    the expansion that decided the parent (its anchor's, see :class:`ExpansionArg`) keeps w on one side of +-1/2 at
-    ``xi``. Its smooth
-    part, that is: w jumps by 1 through each triangle, so the triangles the segment from the anchor passes through
-    are counted (``segment_crossings``) unless the anchor's or the two nodes' empty balls cover it. A coarse node takes
-    the same anchor, and is certified when the expansion keeps w on one side over its whole cell (within the
-    anchor's, which then holds no triangle)."""
-    jp = p - e.first
-    coarse = i >= e.first
-    if e.cert[jp] == wp.uint8(1):
-        if coarse:
-            e.cert[i - e.first] = wp.uint8(1)
-        return sign[p]
-    a = e.anchor[jp]
-    if a < 0:
-        return 0.0
+    """The sign node ``i`` (centre ``xi``, cell radius ``radius``) takes from the expansion of node ``a`` (what w
+    gains through triangles on the way: ``jumps``), or 0: Taylor's theorem holds for w's smooth part, as no boundary
+    edge reaches the expansion's ball. A coarse node takes ``a`` for its anchor, and is certified when the expansion
+    keeps w on one side of +-1/2 over its whole cell (within ``reach`` of ``a``, whose ball holds no triangle when
+    ``empty``), or left to its own expansion when that would decide more of its children (see
+    ``EXPAND_FOR_FINEST``; they are coarse when ``coarse_children`` is 1)."""
     ja = a - e.first
     delta = xi - e.at[ja]
     s = wp.length(delta)
-    empty = dist[a] * safety > e.reach[ja]
-    jumps = int(0)
-    if not empty and (dist[i] + dist[a]) * safety <= s:
-        jumps = segment_crossings(f.mesh, e.at[ja], xi)
-        if jumps == CROSSINGS_UNKNOWN:
-            return 0.0
-    d3 = wp.where(a == p, e.d3_child[ja], e.d3_cell[ja])
+    coarse = i >= e.first
+    # the bounds hold within reach: of the node, or for a coarse node (an anchor for its descendants) of its cell
+    if s + wp.where(coarse, radius, 0.0) > e.reach[ja]:
+        return 0.0
+    d3 = wp.where(s <= e.inner[ja], e.d3_child[ja], e.d3_cell[ja])
     w = _taylor(e, ja, delta) + float(jumps)
     if inside_margin(w) <= WINDING_ROUNDING + d3 * s * s * s / 6.0:
         return 0.0
     if coarse:
         j = i - e.first
-        # every point of the cell is within s + radius <= the anchor's reach of the anchor
         if empty and inside_margin(w) > WINDING_ROUNDING + _spread_bound(e, ja, radius, s + radius):
             e.cert[j] = wp.uint8(1)
         elif _children_left(e, ja, delta, radius) >= wp.where(
@@ -472,7 +463,85 @@ def sign_from_parent(
         ):
             return 0.0
         e.anchor[j] = a
+        e.jumps[j] = jumps
     return side_of(w)
+
+
+@wp.func
+def sign_from_parent(
+    f: WindingArg,
+    i: int,
+    p: int,
+    xi: wp.vec3,
+    xp: wp.vec3,
+    radius: float,
+    dist: wp.array[wp.float32],
+    sign: wp.array[wp.float32],
+    safety: float,
+    e: ExpansionArg,
+    coarse_children: int,
+) -> float:
+    """The sign node ``i`` (centre ``xi``, cell radius ``radius``) of an open mesh takes from its parent ``p`` (centre
+    ``xp``), or 0 when that cannot be proven: the parent's whole cell is certified, or Taylor's theorem on the
+    expansion that decided the parent (its anchor's, see :class:`ExpansionArg`) keeps w on one side of +-1/2 at
+    ``xi`` (:func:`_sign_from_anchor`). w jumps by 1 through each triangle: the jumps are counted along the path
+    anchor - parent - node (the parent's ``jumps``, then ``segment_crossings`` on the last leg unless the two nodes'
+    empty balls cover it; none when the anchor's empty ball holds its whole reach)."""
+    jp = p - e.first
+    if e.cert[jp] == wp.uint8(1):
+        if i >= e.first:
+            e.cert[i - e.first] = wp.uint8(1)
+        return sign[p]
+    a = e.anchor[jp]
+    if a < 0:
+        return 0.0
+    empty = dist[a] * safety > e.reach[a - e.first]
+    jumps = int(0)
+    if not empty:
+        jumps = e.jumps[jp]
+        if (dist[i] + dist[p]) * safety <= radius:  # the leg from the parent: a quarter of its diagonal
+            leg = segment_crossings(f.mesh, xp, xi)
+            if leg == CROSSINGS_UNKNOWN:
+                return 0.0
+            jumps += leg
+    return _sign_from_anchor(i, a, jumps, xi, radius, empty, e, coarse_children)
+
+
+@wp.kernel(enable_backward=False)
+def sign_from_seed_kernel(
+    f: WindingArg,
+    coords: wp.array[wp.vec3i],
+    top_lo: int,
+    start: int,
+    top_dims: wp.vec3i,
+    origin: wp.vec3,
+    spacing: float,
+    dist: wp.array[wp.float32],
+    safety: float,
+    sign: wp.array[wp.float32],
+    e: ExpansionArg,
+    coarse_children: int,
+):
+    """Top-level node ``top_lo + start + tid`` takes its sign from the expansion of the seed at its coordinates
+    rounded down to even ones (at most a diagonal away; seeds reach ``SEED_REACH`` cells), along a segment whose
+    triangle crossings are counted unless the two empty balls cover it (:func:`_sign_from_anchor`)."""
+    i = top_lo + start + wp.tid()
+    if sign[i] != 0.0:
+        return
+    c = coords[i]
+    cs = wp.vec3i(c[0] - c[0] % 2, c[1] - c[1] % 2, c[2] - c[2] % 2)
+    a = top_lo + cs[0] + top_dims[0] * (cs[1] + top_dims[1] * cs[2])
+    ja = a - e.first
+    if a == i or e.anchor[ja] != a:
+        return
+    xi = node_center(origin, spacing, c)
+    empty = dist[a] * safety > e.reach[ja]
+    jumps = int(0)
+    if not empty and (dist[i] + dist[a]) * safety <= wp.length(xi - e.at[ja]):
+        jumps = segment_crossings(f.mesh, e.at[ja], xi)
+        if jumps == CROSSINGS_UNKNOWN:
+            return
+    sign[i] = _sign_from_anchor(i, a, jumps, xi, 0.8660254 * spacing, empty, e, coarse_children)
 
 
 @wp.func

@@ -232,3 +232,21 @@ def test_boolean_results_say_whether_they_enclose_a_volume():
     assert not apart.encloses_volume
     verts, tris = apart.to_mesh()
     assert len(verts) == 0 and len(tris) == 0
+
+
+def test_a_boundary_too_long_to_sum_leaves_the_signs_to_the_accurate_fast_winding_number(monkeypatch):
+    # beyond MAX_BOUNDARY_EDGES the cones are not summed: the accurate fast winding number decides (measured: the
+    # surface's volume 0.01 % from the exact build's, every sign of 848 points beyond 2 voxels right)
+    verts, tris = load_mesh("stanford-bunny.obj")
+    h = _voxel(verts, 128)
+    exact = engine.build_field(verts, tris, voxel_size=h)
+    monkeypatch.setattr(engine.winding, "MAX_BOUNDARY_EDGES", 100)  # the bunny has 223
+    approximate = engine.build_field(verts, tris, voxel_size=h)
+    assert approximate.encloses_volume
+    volume, reference = mesh_volume(*approximate.to_mesh()), mesh_volume(*exact.to_mesh())
+    assert volume == pytest.approx(reference, rel=3e-4)
+    rng = np.random.default_rng(3)
+    points = rng.uniform(verts.min(axis=0), verts.max(axis=0), (1000, 3)).astype(np.float32)
+    far = unsigned_distance(verts, tris, points) > 2.0 * h
+    inside = np.abs(winding_numbers(verts, tris, points[far])) >= 0.5
+    assert np.mean((approximate.sample(points[far]) < 0.0) == inside) >= 0.995
