@@ -2,7 +2,8 @@
 
 The orientation of the faces does not matter: an inside-out closed mesh (w = -1 inside) is the same solid as the
 outward one, a shell facing inward inside another leaves a cavity (w = 1 - 1 = 0), shells that overlap stay solid
-(w = 2), and a flat or single-sided surface encloses nothing (|w| < 1/2 off it).
+(w = 2), and a flat sheet covered once encloses nothing (|w| < 1/2 off it; a curved open sheet does enclose a thin
+sliver on its hollow side, where |w| passes 1/2 next to it).
 
 Warp's fast winding number (Barill et al., accuracy ``WINDING_ACCURACY``) is off by up to ``FAST_WINDING_ERROR``
 (measured): a point whose fast value is farther than that from +-1/2 is decided by it. The others are decided
@@ -127,9 +128,17 @@ class ExpansionArg:
 
 
 def winding_arg(mesh: wp.Mesh, boundary, device, *, encloses: bool = True) -> WindingArg:
-    """The :class:`WindingArg` of a mesh (built with winding number support) and its boundary
-    (:func:`.meshcheck.hole_boundary`: None for a closed mesh); ``encloses`` False: the mesh encloses nothing
-    (:func:`.meshcheck.encloses_nothing`)."""
+    """What the sign kernels need of a mesh.
+
+    Args:
+        mesh: ``wp.Mesh`` of the mesh, built with ``support_winding_number=True``.
+        boundary: Its :func:`.meshcheck.hole_boundary` (None for a closed mesh).
+        device: Warp device of the mesh.
+        encloses: False when the mesh surely encloses nothing (:func:`.meshcheck.encloses_nothing`).
+    Returns:
+        :class:`WindingArg`, in mode WINDING_CLOSED, WINDING_EXACT, WINDING_APPROXIMATE (more boundary edges than
+        ``MAX_BOUNDARY_EDGES``) or WINDING_NONE.
+    """
     arg = WindingArg()
     arg.mesh = mesh.id
     arg.mode = WINDING_CLOSED
@@ -155,7 +164,15 @@ def winding_arg(mesh: wp.Mesh, boundary, device, *, encloses: bool = True) -> Wi
 
 
 def expansion_arg(first: int, count: int, device) -> ExpansionArg:
-    """An :class:`ExpansionArg` for ``count`` coarse nodes from node ``first`` on: none certified, none expanded."""
+    """Room for the expansions of a field's coarse nodes.
+
+    Args:
+        first: Index of the first coarse node (the finest level's node count).
+        count: How many coarse nodes (0 when no expansion is needed: a closed mesh).
+        device: Warp device.
+    Returns:
+        :class:`ExpansionArg` with ``count`` rows, none certified, none expanded (anchor -1).
+    """
     arg = ExpansionArg()
     arg.first = int(first)
     arg.cert = wp.zeros(count, dtype=wp.uint8, device=device)
