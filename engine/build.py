@@ -161,9 +161,9 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         vertices: (V, 3) world-space vertex positions.
         triangles: (T, 3) integer vertex indices. Open, multi-shell, flipped or duplicated faces are handled:
             inside means |w| >= 1/2, w the generalised winding number, whatever the orientation (an inside-out
-            closed mesh is the same solid; a shell facing inward inside another is a cavity). A surface that
-            encloses nothing (a plane, a single triangle, an open sheet) gives a field with no inside
-            (``encloses_volume`` False, ``to_mesh()`` empty).
+            closed mesh is the same solid; a shell facing inward inside another is a cavity). A flat surface
+            that encloses nothing (a plane, a single triangle, a flat sheet) gives a field with no inside
+            (``encloses_volume`` False, ``to_mesh()`` empty) and ``stats["flat"]`` True.
         voxel_size: Edge length of the finest cells.
         levels: Number of levels, finest to dense top (>= 1).
         padding: Finest cells kept around each triangle (>= 0; 1 or more gives watertight surfaces).
