@@ -154,8 +154,8 @@ def test_taylor_bounds_of_the_expansion_hold_against_the_exact_winding_number():
     remainder = np.abs(exact - taylor[clear])
     bound = d3[clear] * np.linalg.norm(offsets[clear], axis=1) ** 3 / 6.0 + 1e-4
     assert np.all(remainder <= bound), (remainder / bound).max()
-    # the bound is not vacuous: measured 1.6 % of it used at the median
-    assert np.median(remainder / bound) < 0.5
+    # the bound is not vacuous: measured 1.2 % of it used at the median, 11 % at most
+    assert np.median(remainder / bound) < 0.04
 
 
 # ---- holes close, flat surfaces enclose nothing ----
@@ -168,10 +168,11 @@ def test_a_cube_with_one_face_missing_still_closes_across_the_hole(flip):
     assert field.encloses_volume
     out_verts, out_tris = field.to_mesh()
     assert is_watertight(out_tris)
-    # the opening is closed where the box's top was: volume 8 (measured 0.1 % off), the top at z = 1
-    assert abs(mesh_volume(out_verts, out_tris)) == pytest.approx(8.0, rel=0.01)
+    # the opening is closed where the box's top was: volume 8 (measured 0.16 % below), the top at z = 1 (measured
+    # 2.4e-6 below: the values on either side of it are equal and opposite)
+    assert abs(mesh_volume(out_verts, out_tris)) == pytest.approx(8.0, rel=0.005)
     top = out_verts[np.abs(out_verts[:, 0]) < 0.5]
-    assert top[:, 2].max() == pytest.approx(1.0, abs=0.04)
+    assert top[:, 2].max() == pytest.approx(1.0, abs=1e-5)
 
 
 PLANE = (np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32), np.array([[0, 1, 2], [0, 2, 3]]))
