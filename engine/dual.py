@@ -56,6 +56,12 @@ SMOOTH_COS = 0.99
 HERMITE_TOLERANCE = 0.02
 
 
+# A crossed edge whose values differ by more than this many edge lengths is a sign jump, not a surface (a distance
+# field changes by at most its edge length): the patch takes no node planes (their closest points lie on a hole's
+# rim), only the interpolant's.
+JUMP_RATIO = 1.5
+
+
 # A node's plane weighs (distance to its closest point / this)^2 below this distance (voxels), where the direction
 # to that point turns to noise.
 HERMITE_NEAR = 0.12
@@ -229,12 +235,15 @@ def _place_vertices_kernel(
         crossings = float(0.0)
         edges = edge_mask[case * 4 + p]
         ends = end_mask[case * 4 + p]
+        jump = int(0)  # values across a crossed edge further apart than its length: a sign jump (a hole's span)
         for e in range(12):
             if (edges >> e) & 1 == 1:
                 ca, cb = edge_ends(e)
                 t = vals[ca] / (vals[ca] - vals[cb])
                 mass += cube_corner(ca) + t * (cube_corner(cb) - cube_corner(ca))
                 crossings += 1.0
+                if vals[ca] - vals[cb] > JUMP_RATIO * spacing or vals[cb] - vals[ca] > JUMP_RATIO * spacing:
+                    jump = 1
         mass = mass / crossings
         f_mass, g_mass = trilinear(vals, mass)
         ata = wp.mat33(0.0)
@@ -256,7 +265,9 @@ def _place_vertices_kernel(
             dl = wp.length(d)
             r = raw[node]
             use = int(0)
-            if dl <= 1.0e-4:
+            if jump == 1:
+                use = 0  # the closest points lie on the hole's rim, not on the surface crossing here
+            elif dl <= 1.0e-4:
                 use = -1  # on the surface: no direction at all
             elif wp.abs(dl - wp.abs(r) * inv) <= tolerance:
                 n = d / dl

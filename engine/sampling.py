@@ -23,6 +23,11 @@ vec27i = wp.types.vector(length=27, dtype=wp.int32)
 LEAF_TOLERANCE = 0.05
 
 
+# Values of opposite signs at two nodes are distances to a surface between them only when they add up to no more than
+# the nodes' distance (1-Lipschitz); the slack allows for rounding and smooth blends.
+JUMP_SLACK = 1.5
+
+
 @wp.struct
 class FieldArg:
     """What a kernel needs to query a field."""
@@ -218,29 +223,37 @@ def sample_mls(f: FieldArg, x: wp.vec3) -> wp.vec4:
     """(phi, dphi/dx, dphi/dy, dphi/dz) at ``x`` inside the domain by moving least squares.
 
     In a finest leaf (the narrow band around the surface) this is the paper's linear MLS fit of the neighbours'
-    values (Eq. 9-10); in a coarser leaf :func:`coarse_mls`.
+    values (Eq. 9-10); in a coarser leaf :func:`coarse_mls`. A neighbour of the other sign than the leaf whose value
+    and the leaf's cannot both be distances to a surface between them (their sum beyond ``JUMP_SLACK`` times the
+    distance between the nodes: where an open mesh's inside ends across a hole, away from every triangle, the values
+    jump) is left out: the fit keeps the leaf's side instead of smearing the jump over two cells.
     """
     leaf = locate_leaf(f, x)
     s = level_spacing(f, leaf[1])
     count, ids, levels = leaf_neighbours(f, leaf[0], leaf[1])
+    leaf_value = f.values[leaf[0]]
     if leaf[1] > 0:
-        return coarse_mls(f, count, ids, levels, x, s, f.values[leaf[0]])
+        return coarse_mls(f, count, ids, levels, x, s, leaf_value)
+    x_leaf = node_center(f.origin, s, f.coords[leaf[0]])
     ata = wp.mat44(0.0)
     atb = wp.vec4(0.0)
     wsum = float(0.0)
     vsum = float(0.0)
     for t in range(count):
         xn, w = _neighbour_weight(f, ids[t], levels[t], x, s)
+        phi = f.values[ids[t]]
+        if (phi < 0.0) != (leaf_value < 0.0):
+            if wp.abs(phi) + wp.abs(leaf_value) > JUMP_SLACK * wp.length(xn - x_leaf):
+                w = 0.0
         if w > 0.0:
             d = (xn - x) / s
             b = wp.vec4(1.0, d[0], d[1], d[2])
             ata += w * wp.outer(b, b)
-            phi = f.values[ids[t]]
             atb += (w * phi) * b
             vsum += w * phi
             wsum += w
     if wsum <= 0.0:
-        return wp.vec4(f.values[leaf[0]], 0.0, 0.0, 0.0)
+        return wp.vec4(leaf_value, 0.0, 0.0, 0.0)
     # A small ridge on the gradient keeps one-sided neighbourhoods well posed.
     ridge = 1.0e-4 * wsum
     ata[1, 1] += ridge
@@ -279,13 +292,23 @@ def sample_field_kernel(
     f: FieldArg, points: wp.array[wp.vec3], method: int, values: wp.array[wp.float32], grads: wp.array[wp.vec3]
 ):
     """Signed distance (negative inside) and gradient at each point; outside the domain the value grows with the
-    distance to the domain box and is never below it."""
+    distance to the domain box and is never below it. ``method`` 0: MLS, 1: linear, 2: the unsigned distance of a
+    field with no inside (the nearest of the neighbours' closest points, as in a coarse leaf: no fit smooths the kink
+    of the distance on the surface)."""
     i = wp.tid()
     x = points[i]
     xc = clamp_to_domain(f, x)
     out = wp.length(x - xc)
     if method == 0:
         r = sample_mls(f, xc)
+        phi = r[0]
+        g = wp.vec3(r[1], r[2], r[3])
+    elif method == 2:
+        # a finest leaf's nodes lie half a cell from the surface: their feet on it are a cell apart, and the tangent
+        # plane through the nearest is followed a cell along (as a coarse leaf of twice the size would)
+        leaf = locate_leaf(f, xc)
+        count, ids, levels = leaf_neighbours(f, leaf[0], leaf[1])
+        r = coarse_mls(f, count, ids, levels, xc, level_spacing(f, wp.max(leaf[1], 1)), f.values[leaf[0]])
         phi = r[0]
         g = wp.vec3(r[1], r[2], r[3])
     else:
