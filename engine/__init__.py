@@ -9,7 +9,9 @@ from .boolean import difference, intersection, union
 from .build import build_field, build_fields
 from .errors import AasdfError
 from .field import AdaptiveField
+from .fieldops import offset, shell
 from .plan import check_meshes, plan_field
+from .sweeping import redistance
 
 kernels.configure_modules(__name__)
 
@@ -21,6 +23,9 @@ __all__ = [
     "check_meshes",
     "difference",
     "intersection",
+    "offset",
     "plan_field",
+    "redistance",
+    "shell",
     "union",
 ]

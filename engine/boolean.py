@@ -5,8 +5,9 @@ corner of both domains, Eq. 11, snapped to the shared world origin). An operand 
 node-aligned and contributes its exact node values; an operand with another spacing has its finest level rebuilt
 at the result's spacing from its own cells (the paper's "cells as primitives"), its values sampled by MLS. Each finest
 node then takes ``op(phi_a, phi_b)`` (Eq. 8 with negative inside: union = min, intersection = max, difference =
-max(a, -b)), or the polynomial smooth version when ``blend > 0``. The intermediate and top levels are rebuilt bottom-up
-with the construction's own structure code (parents + siblings, dense top), their values sampled from the operands.
+max(a, -b)), or a round or chamfer blend of it when ``blend > 0`` (:mod:`.blends`). The intermediate and top levels are
+rebuilt bottom-up with the construction's own structure code (parents + siblings, dense top), their values sampled from
+the operands.
 """
 
 from __future__ import annotations
@@ -20,9 +21,10 @@ import warp as wp
 import warp.geometry
 
 from . import octree, parallel
+from .blends import BLEND_MODES, chamfer_bracket, chamfer_needs, sdf_combine
 from .octree import code_bits, level_layout, morton_encode, node_center
 from .operands import (
-    coarse_sample,
+    blend_sample,
     estimate,
     extrapolate,
     lookup_node,
@@ -47,25 +49,6 @@ COMBINE_GROUP = 8
 KEEP_BAND = 2.5
 
 
-@wp.func
-def sdf_smooth_min(a: float, b: float, k: float) -> float:
-    """Polynomial smooth minimum of radius ``k`` (``k = 0``: min)."""
-    if k <= 0.0:
-        return wp.min(a, b)
-    h = wp.clamp(0.5 + 0.5 * (b - a) / k, 0.0, 1.0)
-    return b + (a - b) * h - k * h * (1.0 - h)
-
-
-@wp.func
-def sdf_combine(op: int, a: float, b: float, k: float) -> float:
-    """union = min, intersection = max, difference (a minus b) = max(a, -b); smooth when ``k > 0``."""
-    if op == 0:
-        return sdf_smooth_min(a, b, k)
-    if op == 1:
-        return -sdf_smooth_min(-a, -b, k)
-    return -sdf_smooth_min(-a, b, k)
-
-
 @wp.kernel(enable_backward=False)
 def _combine_nodes_kernel(
     a: FieldArg,
@@ -82,6 +65,8 @@ def _combine_nodes_kernel(
     spacing: float,
     op: int,
     blend: float,
+    mode: int,
+    walk: wp.vec2i,
     precise: int,
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
@@ -155,7 +140,11 @@ def _combine_nodes_kernel(
                 tb = -vb
             need_a = int(1)
             need_b = int(1)
-            if op == 0:
+            if mode == 1:
+                needs = chamfer_needs(op, va, rad_a, tb, rad_b, blend)
+                need_a = needs[0]
+                need_b = needs[1]
+            elif op == 0:
                 if tb - rad_b >= va + rad_a + blend:
                     need_b = 0
                 elif va - rad_a >= tb + rad_b + blend:
@@ -166,16 +155,20 @@ def _combine_nodes_kernel(
                 elif va + rad_a <= tb - rad_b - blend:
                     need_a = 0
             if need_a == 1 and rad_a > 0.0:
-                r, cached_a, count_a, ids_a, levels_a = coarse_sample(a, x, leaf_a, cached_a, count_a, ids_a, levels_a)
+                r, cached_a, count_a, ids_a, levels_a = blend_sample(
+                    a, walk[0], x, leaf_a, cached_a, count_a, ids_a, levels_a
+                )
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
             if need_b == 1 and rad_b > 0.0:
-                r, cached_b, count_b, ids_b, levels_b = coarse_sample(b, x, leaf_b, cached_b, count_b, ids_b, levels_b)
+                r, cached_b, count_b, ids_b, levels_b = blend_sample(
+                    b, walk[1], x, leaf_b, cached_b, count_b, ids_b, levels_b
+                )
                 vb = r[0]
                 gb = wp.vec3(r[1], r[2], r[3])
         ra = wp.vec4(va, ga[0], ga[1], ga[2])
         rb = wp.vec4(vb, gb[0], gb[1], gb[2])
-        phi = sdf_combine(op, ra[0], rb[0], blend)
+        phi = sdf_combine(op, ra[0], rb[0], blend, mode)
         b_term = rb[0]
         if op == 2:
             b_term = -rb[0]
@@ -217,6 +210,7 @@ def _octet_bracket_kernel(
     spacing: float,
     op: int,
     blend: float,
+    mode: int,
     band: float,
     near: wp.array[wp.int32],
     has_neg: wp.array[wp.int32],
@@ -252,6 +246,10 @@ def _octet_bracket_kernel(
             if op != 0:
                 lo = wp.max(va - ra, tb - rb)
                 hi = wp.max(va + ra, tb + rb) + 0.25 * blend
+            if mode == 1:
+                bounds = chamfer_bracket(op, va, ra, tb, rb, blend)
+                lo = bounds[0]
+                hi = bounds[1]
             if lo <= band and hi >= -band:
                 n_near = 1
             # a node whose bracket contains zero may have either sign
@@ -401,13 +399,17 @@ def _octets_of(f: AdaptiveField, origin, spacing, oct_dims, aligned, device) -> 
     )
 
 
-def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, spacing: str = "finer"):
+def combine(
+    a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, spacing: str = "finer", blend_mode="round"
+):
     """Boolean of two fields; ``op`` is OP_UNION, OP_INTERSECTION or OP_DIFFERENCE (a minus b).
 
     Args:
         a, b: Operands (any built field or boolean result).
         op: Which operation.
-        blend: Smoothing radius (world units) of a polynomial smooth union / intersection / difference; 0 = hard.
+        blend: Size of the blend along the seam (world units); 0 = hard.
+        blend_mode: ``"round"`` (a polynomial smooth minimum / maximum of radius ``blend``) or ``"chamfer"`` (a flat
+            bevel meeting each face ``blend`` from the seam where the faces meet at a right angle).
         spacing: ``"finer"`` (default), ``"coarser"``, ``"a"`` or ``"b"``: whose finest spacing the result takes.
     Returns:
         A new AdaptiveField whose node sources carry the operands' field ids.
@@ -416,6 +418,11 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         AasdfError: If the combined domain would not fit in memory.
     """
     blend = _check_operands(a, b, blend)
+    if blend_mode not in BLEND_MODES:
+        raise ValueError(f"Expected 'blend_mode' to be one of {sorted(BLEND_MODES)}, but got {blend_mode!r}.")
+    mode = BLEND_MODES[blend_mode] if blend > 0.0 else 0  # no blend: the hard min / max either way
+    # a chamfer reads an operand with closest points on its surface by them where they beat its coarse leaves' MLS
+    walk = wp.vec2i(*(int(mode == 1 and f.stats.get("exact_distance", False)) for f in (a, b)))
     choices = {
         "finer": min(a.voxel_size, b.voxel_size),
         "coarser": max(a.voxel_size, b.voxel_size),
@@ -446,7 +453,9 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     wp.copy(all_codes, parts[0], count=parts[0].shape[0])
     wp.copy(all_codes, parts[1], dest_offset=parts[0].shape[0], count=parts[1].shape[0])
     octets = octree.sort_unique(all_codes, end_bit=3 * code_bits(oct_dims))
-    radius = int(math.ceil(0.25 * blend / (2.0 * h))) if blend > 0.0 else 0
+    # a round blend moves the surface up to blend / 4 from both operands' surfaces, a chamfer up to blend / 2
+    reach = (0.5 if mode == 1 else 0.25) * blend
+    radius = int(math.ceil(reach / (2.0 * h))) if blend > 0.0 else 0
     for _ in range(radius):  # grow one octet at a time: 27x the set, then de-duplicate
         check_budget(fine_dims, 0, 8 * 27 * octets.shape[0])
         octets = octree.dilate_octets(octets, oct_dims, end_bit=3 * code_bits(oct_dims))
@@ -488,6 +497,7 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
             float(h),
             int(op),
             blend,
+            mode,
             KEEP_BAND * h,
             near,
             has_neg,
@@ -550,6 +560,8 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
                 float(spacing_),
                 int(op),
                 blend,
+                mode,
+                walk,
                 int(finest),
                 proj,
                 source,
@@ -586,16 +598,22 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     )
 
 
-def union(a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer") -> AdaptiveField:
-    """``a`` or ``b`` (min); smooth when ``blend > 0``. See :func:`combine`."""
-    return combine(a, b, OP_UNION, blend=blend, spacing=spacing)
+def union(
+    a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer", blend_mode: str = "round"
+) -> AdaptiveField:
+    """``a`` or ``b`` (min); blended when ``blend > 0`` (round or chamfer). See :func:`combine`."""
+    return combine(a, b, OP_UNION, blend=blend, spacing=spacing, blend_mode=blend_mode)
 
 
-def intersection(a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer") -> AdaptiveField:
-    """``a`` and ``b`` (max); smooth when ``blend > 0``. See :func:`combine`."""
-    return combine(a, b, OP_INTERSECTION, blend=blend, spacing=spacing)
+def intersection(
+    a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer", blend_mode: str = "round"
+) -> AdaptiveField:
+    """``a`` and ``b`` (max); blended when ``blend > 0`` (round or chamfer). See :func:`combine`."""
+    return combine(a, b, OP_INTERSECTION, blend=blend, spacing=spacing, blend_mode=blend_mode)
 
 
-def difference(a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer") -> AdaptiveField:
-    """``a`` minus ``b`` (max(a, -b)); smooth when ``blend > 0``. See :func:`combine`."""
-    return combine(a, b, OP_DIFFERENCE, blend=blend, spacing=spacing)
+def difference(
+    a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer", blend_mode: str = "round"
+) -> AdaptiveField:
+    """``a`` minus ``b`` (max(a, -b)); blended when ``blend > 0`` (round or chamfer). See :func:`combine`."""
+    return combine(a, b, OP_DIFFERENCE, blend=blend, spacing=spacing, blend_mode=blend_mode)

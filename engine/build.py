@@ -23,7 +23,7 @@ import time
 import numpy as np
 import warp as wp
 
-from . import distance, fim, holes, octree, parallel, signs
+from . import distance, fieldops, fim, holes, octree, parallel, signs, sweeping
 from .errors import AasdfError
 from .field import AdaptiveField
 from .geometry import tri_box_overlap
@@ -102,7 +102,37 @@ def _device(device):
     return wp.get_device(device)
 
 
-def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_ids=None) -> list[AdaptiveField]:
+def _thicknesses(thickness, count: int, voxel_size) -> list:
+    """One thickness (or None) per mesh from ``thickness``: None, a number for every mesh, or one per mesh."""
+    if thickness is None or np.ndim(thickness) == 0:
+        thickness = [thickness] * count
+    thickness = list(thickness)
+    if len(thickness) != count:
+        raise ValueError(f"Expected one thickness per mesh ({count}), but got {len(thickness)}.")
+    return [None if t is None else fieldops.checked_wall("thickness", t, float(voxel_size)) for t in thickness]
+
+
+def _plan_thickness(plan: dict, thickness) -> dict:
+    """``plan`` for a shell of ``thickness`` around its surface: the domain grown by half the thickness, refused
+    (AasdfError) when the octree cannot address it or it would not fit in memory."""
+    if thickness is None:
+        return plan
+    verts = plan["vertices"]
+    origin, top_dims, levels = fieldops.plan_grown(
+        verts.min(axis=0),
+        verts.max(axis=0),
+        0.5 * thickness,
+        voxel_size=plan["voxel_size"],
+        levels=plan["levels"],
+        nodes=2.0 * plan["fine_nodes"],  # the band runs along both sides of the surface
+        what=f"A thickness of {thickness:g}",
+    )
+    return {**plan, "thickness": thickness, "origin": origin, "top_dims": top_dims, "levels": levels}
+
+
+def build_fields(
+    meshes, *, voxel_size, levels=4, padding=1, device=None, field_ids=None, thickness=None
+) -> list[AdaptiveField]:
     """Build the fields of several meshes at one voxel size, checked together first (:func:`check_meshes`), so an
     impossible request builds none.
 
@@ -114,6 +144,7 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
         meshes: Sequence of (vertices, triangles) pairs, as for :func:`build_field`.
         voxel_size, levels, padding, device: As for :func:`build_field`.
         field_ids: One id per mesh (default 0, 1, 2, ...).
+        thickness: As for :func:`build_field`: one value for every mesh, or one per mesh (None: none).
     Returns:
         One AdaptiveField per mesh, in order.
     Raises:
@@ -124,7 +155,13 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
     field_ids = list(range(len(meshes))) if field_ids is None else [int(k) for k in field_ids]
     if len(field_ids) != len(meshes):
         raise ValueError(f"build_fields got {len(field_ids)} field ids for {len(meshes)} meshes")
+    walls = _thicknesses(thickness, len(meshes), voxel_size)
     plans = checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding)
+    try:
+        plans = [_plan_thickness(plan, t) for plan, t in zip(plans, walls, strict=True)]
+    except AasdfError as err:
+        k = next(k for k, (plan, t) in enumerate(zip(plans, walls, strict=True)) if "thickness" not in plan)
+        raise AasdfError(f"Mesh {k}: {err}") from err
     device = _device(device)
     fields: list = [None] * len(meshes)
     errors: dict = {}
@@ -144,7 +181,16 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
             if k in errors:
                 raise errors[k]
         return fields
-    for module in (octree, distance, fim, signs, holes, sys.modules[__name__]):  # the modules a build launches
+    for module in (
+        octree,
+        distance,
+        fim,
+        signs,
+        holes,
+        fieldops,
+        sweeping,
+        sys.modules[__name__],
+    ):  # what builds launch
         wp.load_module(module, device=device)  # compiled or loaded once, before the threads
     workers = min(len(meshes), os.cpu_count() or 1)
     # worker w builds meshes w, w + workers, ...
@@ -154,7 +200,9 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
     return fields
 
 
-def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=None, field_id=0) -> AdaptiveField:
+def build_field(
+    vertices, triangles, *, voxel_size, levels=4, padding=1, device=None, field_id=0, thickness=None
+) -> AdaptiveField:
     """Build the adaptive signed distance field of a triangle mesh.
 
     Args:
@@ -166,20 +214,54 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         padding: Finest cells kept around each triangle (>= 0; 1 or more gives watertight surfaces).
         device: Warp device (``None``: Warp's default).
         field_id: Integer id carried per node through booleans (see ``source_ids``).
+        thickness: Give the surface this thickness (world units, at least two voxels): the field is the solid
+            shell of half-width ``thickness / 2`` around the triangles (their unsigned distance minus half the
+            thickness), so surfaces that enclose nothing (planes, cloth, single-sided scans) become solids; a closed
+            mesh becomes a hollow shell centred on its surface. None: the mesh's own inside.
     Returns:
         AdaptiveField, negative inside.
     Raises:
         ValueError: On wrongly shaped or typed arguments.
         AasdfError: On empty, non-finite or fully degenerate meshes, out-of-range indices, non-positive voxel
-            size, ``levels < 1``, ``padding < 0``, or a resolution that would not fit in memory.
+            size, ``levels < 1``, ``padding < 0``, a resolution that would not fit in memory, or a thickness under
+            two voxels.
     """
+    wall = _thicknesses(thickness, 1, voxel_size)[0]
     plan = plan_field(vertices, triangles, voxel_size=voxel_size, levels=levels, padding=padding)
     check_budget(plan["fine_dims"], plan["top_count"], plan["fine_nodes"])
-    return _build_planned(plan, device=device, field_id=field_id)
+    return _build_planned(_plan_thickness(plan, wall), device=device, field_id=field_id)
+
+
+def _build_thick(plan: dict, *, device, field_id: int) -> AdaptiveField:
+    """The shell of ``plan["thickness"]`` around a mesh's triangles (:func:`.fieldops.levelset_field` of their
+    unsigned distance)."""
+    t0 = time.perf_counter()
+    mesh = wp.Mesh(
+        points=wp.array(plan["vertices"], dtype=wp.vec3, device=device),
+        indices=wp.array(plan["triangles"].reshape(-1), dtype=wp.int32, device=device),
+    )
+    seconds = time.perf_counter() - t0
+    field = fieldops.levelset_field(
+        mesh.id,
+        None,
+        fieldops.KIND_CENTER,
+        plan["thickness"],
+        voxel_size=plan["voxel_size"],
+        levels=plan["levels"],
+        origin=plan["origin"],
+        top_dims=plan["top_dims"],
+        field_ids=(field_id,),
+        device=device,
+    )
+    field.timings["mesh_bvh"] = seconds
+    field.stats["thickness"] = plan["thickness"]
+    return field
 
 
 def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     """:func:`build_field` of a checked :func:`plan_field`."""
+    if plan.get("thickness") is not None:
+        return _build_thick(plan, device=_device(device), field_id=field_id)
     verts, tris, origin, top_dims = plan["vertices"], plan["triangles"], plan["origin"], plan["top_dims"]
     fine_dims, top_count = plan["fine_dims"], plan["top_count"]
     voxel_size, levels, padding = plan["voxel_size"], plan["levels"], plan["padding"]
@@ -365,5 +447,8 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     field.stats["sign_refinements"] = rounds
     field.timings["sign_check"] = refine_seconds
     field.stats["clean_mesh"] = clean
+    # a closed mesh's field is its surface's distance, with its closest points on it (an open mesh's surface runs
+    # across its holes too, away from any closest point)
+    field.stats["exact_distance"] = clean
     field.stats["problem_faces"] = int(problem.sum())
     return field

@@ -132,6 +132,12 @@ class AdaptiveField:
         return [int(n) for n in np.diff(self.level_offsets)]
 
     @property
+    def is_empty(self) -> bool:
+        """Whether the field encloses nothing: no node inside (an offset that shrank a shape away; ``to_mesh`` then
+        has no triangles)."""
+        return not bool((self.values.numpy() < 0.0).any())
+
+    @property
     def field_id(self) -> int:
         return self.field_ids[0]
 

@@ -17,7 +17,20 @@ import shutil
 from pathlib import Path
 
 # The engine's Warp modules, relative to the engine package, and Warp's own modules the engine launches.
-ENGINE_MODULES = ("octree", "distance", "fim", "signs", "holes", "build", "sampling", "boolean", "marching", "extract")
+ENGINE_MODULES = (
+    "octree",
+    "distance",
+    "fim",
+    "signs",
+    "holes",
+    "build",
+    "sampling",
+    "boolean",
+    "marching",
+    "extract",
+    "sweeping",
+    "fieldops",
+)
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.
 GENERIC_PACKAGE = "engine"

@@ -251,6 +251,88 @@ def sample_linear(f: FieldArg, x: wp.vec3) -> float:
     return acc
 
 
+# ---- the nearest stored closest point ----
+
+# Steps of the walk to a point's nearest stored closest point (each moves to the nodes around a nearer one).
+MAX_WALK_STEPS = 16
+
+
+@wp.func
+def _nearer(f: FieldArg, x: wp.vec3, q: wp.vec3, level: int, best: float, best_p: wp.vec3, best_n: wp.vec3):
+    """The nearest to ``x`` of (``best``, ``best_p``) and the closest point of the node holding ``q`` on ``level`` (or
+    the coarser leaf holding it), with that node's surface normal line (``best_n``, from its closest point to it)."""
+    if inside_domain(f, q):
+        node = locate_node(f, q, level)
+        p = f.proj[node[0]]
+        d = wp.length(x - p)
+        if d < best:
+            best = d
+            best_p = p
+            best_n = node_center(f.origin, level_spacing(f, node[1]), f.coords[node[0]]) - p
+    return best, best_p, best_n
+
+
+@wp.func
+def closest_stored_point(f: FieldArg, x: wp.vec3):
+    """(distance, point) of the nearest of the field's stored closest points to ``x``, by a walk: the nodes of the
+    27 cells around the leaf holding ``x`` (clamped into the domain) pick a start; then, while a nearer one turns up,
+    the 8 finest nodes around ``x``'s foot on the tangent plane at the nearest point so far (a flat surface's exact
+    foot: one step), or else the 27 around that point. The finest band's closest points sample the surface a voxel
+    apart: for a field whose closest points lie on its surface, the distance is exact but for that sampling (an upper
+    bound within about h^2 / 4 S)."""
+    xc = clamp_to_domain(f, x)
+    leaf = locate_leaf(f, xc)
+    s = level_spacing(f, leaf[1])
+    c = node_center(f.origin, s, f.coords[leaf[0]])
+    best = float(1.0e30)
+    best_p = x
+    best_n = wp.vec3(0.0)
+    # loop bounds held in variables keep Warp from unrolling the searches (compile time)
+    block = int(27)
+    octet = int(8)
+    steps = int(MAX_WALK_STEPS)
+    for o in range(block):
+        q = c + s * wp.vec3(float(o % 3 - 1), float((o // 3) % 3 - 1), float(o // 9 - 1))
+        best, best_p, best_n = _nearer(f, x, q, leaf[1], best, best_p, best_n)
+    h = f.voxel_size
+    for _step in range(steps):
+        before = best
+        ln = wp.length(best_n)
+        if ln > 0.0:
+            # the 8 finest nodes around x's foot on the tangent plane at the nearest point so far
+            nrm = best_n / ln
+            rel = (x - nrm * wp.dot(x - best_p, nrm) - f.origin) / h - wp.vec3(0.5)
+            base = wp.vec3(wp.floor(rel[0]), wp.floor(rel[1]), wp.floor(rel[2]))
+            for o in range(octet):
+                q = wp.vec3(float(o & 1) + 0.5, float((o >> 1) & 1) + 0.5, float(o >> 2) + 0.5)
+                best, best_p, best_n = _nearer(f, x, f.origin + h * (base + q), 0, best, best_p, best_n)
+        if best >= before:
+            # no nearer point there (an edge, a curved patch): the 27 finest nodes around the nearest point
+            rel = (best_p - f.origin) / h
+            base = wp.vec3(wp.floor(rel[0]), wp.floor(rel[1]), wp.floor(rel[2]))
+            for o in range(block):
+                q = wp.vec3(float(o % 3 - 1) + 0.5, float((o // 3) % 3 - 1) + 0.5, float(o // 9 - 1) + 0.5)
+                best, best_p, best_n = _nearer(f, x, f.origin + h * (base + q), 0, best, best_p, best_n)
+            if best >= before:
+                break
+    return best, best_p
+
+
+@wp.func
+def closest_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i) -> wp.vec4:
+    """(phi, grad) at ``x`` in coarse leaf ``leaf`` (or outside the domain) of a field whose closest points lie on its
+    surface: the distance to the nearest of them (:func:`closest_stored_point`), with the leaf's sign (a coarse leaf
+    holds no surface; outside the domain is outside)."""
+    d, p = closest_stored_point(f, x)
+    sign = wp.where(f.values[leaf[0]] < 0.0, -1.0, 1.0)
+    if not inside_domain(f, x):
+        sign = 1.0
+    g = wp.vec3(0.0)
+    if d > 0.0:
+        g = (sign / d) * (x - p)
+    return wp.vec4(sign * d, g[0], g[1], g[2])
+
+
 @wp.kernel(enable_backward=False)
 def sample_field_kernel(
     f: FieldArg, points: wp.array[wp.vec3], method: int, values: wp.array[wp.float32], grads: wp.array[wp.vec3]
