@@ -11,7 +11,7 @@ from .errors import AasdfError
 from .field import AdaptiveField
 from .fieldops import offset, shell
 from .plan import check_meshes, plan_field
-from .sweeping import redistance
+from .redistancing import redistance
 
 kernels.configure_modules(__name__)
 

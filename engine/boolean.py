@@ -422,7 +422,7 @@ def combine(
         raise ValueError(f"Expected 'blend_mode' to be one of {sorted(BLEND_MODES)}, but got {blend_mode!r}.")
     mode = BLEND_MODES[blend_mode] if blend > 0.0 else 0  # no blend: the hard min / max either way
     # a chamfer reads an operand with closest points on its surface by them where they beat its coarse leaves' MLS
-    walk = wp.vec2i(*(int(mode == 1 and f.stats.get("exact_distance", False)) for f in (a, b)))
+    walk = wp.vec2i(*(int(mode == 1 and f.stats.get("surface_points", False)) for f in (a, b)))
     choices = {
         "finer": min(a.voxel_size, b.voxel_size),
         "coarser": max(a.voxel_size, b.voxel_size),

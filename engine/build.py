@@ -23,7 +23,7 @@ import time
 import numpy as np
 import warp as wp
 
-from . import distance, fieldops, fim, holes, octree, parallel, signs, sweeping
+from . import distance, fieldops, fim, holes, octree, parallel, redistancing, signs, sweeping
 from .errors import AasdfError
 from .field import AdaptiveField
 from .geometry import tri_box_overlap
@@ -181,17 +181,10 @@ def build_fields(
             if k in errors:
                 raise errors[k]
         return fields
-    for module in (
-        octree,
-        distance,
-        fim,
-        signs,
-        holes,
-        fieldops,
-        sweeping,
-        sys.modules[__name__],
-    ):  # what builds launch
-        wp.load_module(module, device=device)  # compiled or loaded once, before the threads
+    # the modules a build launches (a thick one: those of the field operations too), compiled or loaded once,
+    # before the threads
+    for module in (octree, distance, fim, signs, holes, fieldops, sweeping, redistancing, sys.modules[__name__]):
+        wp.load_module(module, device=device)
     workers = min(len(meshes), os.cpu_count() or 1)
     # worker w builds meshes w, w + workers, ...
     parallel.run_tasks([lambda w=w: [build(k) for k in range(w, len(meshes), workers)] for w in range(workers)], device)
@@ -447,8 +440,8 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     field.stats["sign_refinements"] = rounds
     field.timings["sign_check"] = refine_seconds
     field.stats["clean_mesh"] = clean
-    # a closed mesh's field is its surface's distance, with its closest points on it (an open mesh's surface runs
-    # across its holes too, away from any closest point)
-    field.stats["exact_distance"] = clean
+    # a closed mesh's closest points lie on the field's surface (an open mesh's surface runs across its holes too,
+    # away from any closest point)
+    field.stats["surface_points"] = clean
     field.stats["problem_faces"] = int(problem.sum())
     return field

@@ -157,6 +157,7 @@ class AdaptiveField:
         f.coords, f.child, f.values, f.source, f.proj = self.coords, self.child, self.values, self.source, self.proj
         f.codes = self.codes
         f.fine_count = int(self.level_offsets[1])
+        f.exact = int(bool(self.stats.get("exact_distance", False)))
         return f
 
     def __repr__(self) -> str:

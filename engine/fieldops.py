@@ -7,7 +7,7 @@ exact from a BVH over the surface's triangles (a field's ``to_mesh``, or a mesh)
 came from (:func:`side_of`), so the new surface can lie anywhere in the domain, not only within a band. The new
 finest band is found top-down (:func:`band_octets`): a cell whose centre has ``|g|`` beyond its half diagonal and the
 band holds none of the new surface (``g`` is 1-Lipschitz), so only cells near it are split, down to the finest
-octets. Every node then takes ``g``, and :func:`.sweeping.redistance` makes the result a signed distance everywhere
+octets. Every node then takes ``g``, and :func:`.redistancing.redistance` makes the result a signed distance everywhere
 (where ``g`` is only a bound: a grown shape's filled creases, a shrunk one's far side).
 """
 
@@ -25,8 +25,8 @@ from .geometry import mesh_closest_point
 from .octree import MAX_CELLS_PER_AXIS, dense_level, level_layout, morton_decode, node_center, sort_unique
 from .parallel import launch_split
 from .plan import check_budget, plan_domain
+from .redistancing import KEEP_BAND, redistance
 from .sampling import FieldArg, closest_stored_point, inside_domain, locate_leaf, sample_mls
-from .sweeping import KEEP_BAND, redistance
 
 KIND_OFFSET, KIND_INSIDE, KIND_OUTSIDE, KIND_CENTER = 0, 1, 2, 3
 SIDES = {"inside": KIND_INSIDE, "outside": KIND_OUTSIDE, "center": KIND_CENTER}
@@ -304,6 +304,7 @@ def _empty_field_arg(device) -> FieldArg:
     f.proj = wp.empty(0, dtype=wp.vec3, device=device)
     f.source = wp.empty(0, dtype=wp.int32, device=device)
     f.codes = wp.empty(0, dtype=wp.int64, device=device)
+    f.exact = 0
     return f
 
 
@@ -372,7 +373,7 @@ def _operate(field, kind: int, a: float, grow: float, what: str):
     lo, hi = field.bounds
     # refused before any work: the field's domain holds its surface
     plan_grown(lo, hi, grow, voxel_size=h, levels=field.levels, nodes=_grown_nodes(field, grow), what=what)
-    if not field.stats.get("exact_distance", False):
+    if not field.stats.get("surface_points", False):
         field = redistance(field)  # closest points on its own surface
     if field.is_empty:  # nothing to offset or hollow: nothing comes out
         return field

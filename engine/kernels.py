@@ -29,6 +29,7 @@ ENGINE_MODULES = (
     "marching",
     "extract",
     "sweeping",
+    "redistancing",
     "fieldops",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)

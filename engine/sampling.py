@@ -41,6 +41,7 @@ class FieldArg:
     source: wp.array[wp.int32]
     codes: wp.array[wp.int64]
     fine_count: int
+    exact: int  # 1: a re-distanced field (``stats["exact_distance"]``): every closest point on its surface
 
 
 @wp.func
@@ -338,12 +339,21 @@ def sample_field_kernel(
     f: FieldArg, points: wp.array[wp.vec3], method: int, values: wp.array[wp.float32], grads: wp.array[wp.vec3]
 ):
     """Signed distance (negative inside) and gradient at each point; outside the domain the value grows with the
-    distance to the domain box and is never below it."""
+    distance to the domain box and is never below it. In a coarse leaf of a re-distanced field (``f.exact``), the
+    distance to the nearest of its closest points (:func:`closest_sample`): within about h^2 / 4S where the MLS
+    estimate of a coarse leaf reads up to a tenth too far."""
     i = wp.tid()
     x = points[i]
     xc = clamp_to_domain(f, x)
     out = wp.length(x - xc)
     if method == 0:
+        leaf = locate_leaf(f, xc)
+        if f.exact == 1 and leaf[1] > 0:
+            # a coarse leaf of a field whose closest points lie on its surface: the nearest of them
+            r = closest_sample(f, x, leaf)
+            values[i] = r[0]
+            grads[i] = wp.vec3(r[1], r[2], r[3])
+            return
         r = sample_mls(f, xc)
         phi = r[0]
         g = wp.vec3(r[1], r[2], r[3])
