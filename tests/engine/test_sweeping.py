@@ -73,9 +73,9 @@ def test_a_smooth_union_becomes_the_distance_to_its_surface(blended_spheres):
     old, new = _distance_errors(before), _distance_errors(after)
     # before: the blend's values are far from distances (measured far p95 58 %, grad p95 8.8 %)
     assert old["far_p95"] > 0.2 and old["grad_p95"] > 0.05, old
-    assert new["band_p99"] <= 0.11, new  # measured 0.038 voxel (issue: 0.5)
-    assert new["far_p95"] <= 0.0025, new  # measured 0.08 % (issue: 2 %)
-    assert new["grad_p95"] <= 0.022, new  # measured 0.72 % (issue: 5 %)
+    assert new["band_p99"] <= 0.11, new  # measured 0.036 voxel (issue: 0.5)
+    assert new["far_p95"] <= 0.0024, new  # measured 0.079 % (issue: 2 %)
+    assert new["grad_p95"] <= 0.022, new  # measured 0.73 % (issue: 5 %)
     assert after.stats["exact_distance"] and after.stats["surface_points"]
     _check_structure(after)
 
@@ -87,7 +87,7 @@ def test_mesh_booleans_become_the_distance_to_their_surface(mesh_boolean):
     # near the surface the error is the linear MLS fit across the result's sharp creases (a build of fandisk alone
     # measures 0.25 voxel)
     assert new["band_p99"] <= 0.5, new  # measured 0.26 voxel (issue: 0.5)
-    assert new["far_p95"] <= 0.003, new  # measured 0.094 % (issue: 2 %)
+    assert new["far_p95"] <= 0.0037, new  # measured 0.12 % (issue: 2 %)
     assert new["grad_p95"] <= 0.021, new  # measured 0.69 % (issue: 5 %)
 
 
@@ -105,8 +105,8 @@ def test_a_second_redistance_changes_nothing_that_matters(blended_spheres):
     _, once = blended_spheres
     twice = engine.redistance(once)
     pts = np.random.default_rng(3).uniform(*once.bounds, (5000, 3)).astype(np.float32)
-    # measured 1.0e-4 voxel: the first one's surface and distances come back
-    np.testing.assert_allclose(twice.sample(pts), once.sample(pts), rtol=0, atol=3e-4 * once.voxel_size)
+    # measured 0.0032 voxel (the top level's closest points within 5 % may differ): the same surface and distances
+    np.testing.assert_allclose(twice.sample(pts), once.sample(pts), rtol=0, atol=0.01 * once.voxel_size)
     assert twice.stats["interface_scale"] == pytest.approx(1.0, abs=1e-5)
 
 
@@ -120,11 +120,15 @@ def test_redistancing_keeps_source_ids_and_prunes_the_blend_band(blended_spheres
 
 
 def test_sweeping_and_the_fast_iterative_method_give_the_same_field(mesh_boolean):
-    before, swept = mesh_boolean
-    iterated = engine.redistance(before, method="fim")
-    # both estimates only bound the BVH query that makes each coarse leaf exact
+    before, default = mesh_boolean
+    # both estimates only bound the BVH query that makes each coarse leaf exact (on the top level, with its 5 %
+    # tolerance, a point within 5 % of the closest, which may depend on the bound: compare exact top levels)
+    swept = engine.redistance(before, top_tolerance=0.0)
+    iterated = engine.redistance(before, method="fim", top_tolerance=0.0)
     np.testing.assert_array_equal(iterated.codes.numpy(), swept.codes.numpy())
-    np.testing.assert_allclose(iterated.values.numpy(), swept.values.numpy(), rtol=0, atol=1e-6 * swept.voxel_size)
+    np.testing.assert_allclose(iterated.values.numpy(), swept.values.numpy(), rtol=1e-6, atol=1e-6 * swept.voxel_size)
+    top = default.level_slice(default.levels - 1)
+    assert np.all(np.abs(default.values.numpy()[top]) <= 1.05 * np.abs(swept.values.numpy()[top]) + 1e-6)
 
 
 def _level_solve(field, **solver_options):
