@@ -1,4 +1,5 @@
-"""AASDF engine: algebraic adaptive signed distance fields of triangle meshes, their booleans and surfaces.
+"""AASDF engine: algebraic adaptive signed distance fields of triangle meshes, their booleans, field operations
+(re-distancing, offset, shell, thickness) and surfaces.
 
 Pure numpy + NVIDIA Warp (never Blender): arrays in, arrays out. Kernels run on Warp's default device, or the one
 passed as ``device`` (CPU here, CUDA wherever an NVIDIA GPU is present). Negative inside, positive outside.

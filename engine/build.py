@@ -30,7 +30,7 @@ from .geometry import tri_box_overlap
 from .holes import cap_lattices, cap_sign_presets, changed_top_cells, sign_change_octets
 from .meshcheck import edge_table, hole_caps, problem_faces, weld_positions
 from .octree import add_octets, code_bits, in_sorted, level_layout, match_levels, morton_encode
-from .plan import byte_grid_fits, check_budget, checked_plans, plan_field
+from .plan import byte_grid_fits, check_budget, checked_plans, plan_field, thick_plan, thicknesses
 from .sampling import LEAF_TOLERANCE
 from .signs import (
     NO_BOXES,
@@ -102,34 +102,6 @@ def _device(device):
     return wp.get_device(device)
 
 
-def _thicknesses(thickness, count: int, voxel_size) -> list:
-    """One thickness (or None) per mesh from ``thickness``: None, a number for every mesh, or one per mesh."""
-    if thickness is None or np.ndim(thickness) == 0:
-        thickness = [thickness] * count
-    thickness = list(thickness)
-    if len(thickness) != count:
-        raise ValueError(f"Expected one thickness per mesh ({count}), but got {len(thickness)}.")
-    return [None if t is None else fieldops.checked_wall("thickness", t, float(voxel_size)) for t in thickness]
-
-
-def _plan_thickness(plan: dict, thickness) -> dict:
-    """``plan`` for a shell of ``thickness`` around its surface: the domain grown by half the thickness, refused
-    (AasdfError) when the octree cannot address it or it would not fit in memory."""
-    if thickness is None:
-        return plan
-    verts = plan["vertices"]
-    origin, top_dims, levels = fieldops.plan_grown(
-        verts.min(axis=0),
-        verts.max(axis=0),
-        0.5 * thickness,
-        voxel_size=plan["voxel_size"],
-        levels=plan["levels"],
-        nodes=2.0 * plan["fine_nodes"],  # the band runs along both sides of the surface
-        what=f"A thickness of {thickness:g}",
-    )
-    return {**plan, "thickness": thickness, "origin": origin, "top_dims": top_dims, "levels": levels}
-
-
 def build_fields(
     meshes, *, voxel_size, levels=4, padding=1, device=None, field_ids=None, thickness=None
 ) -> list[AdaptiveField]:
@@ -155,13 +127,7 @@ def build_fields(
     field_ids = list(range(len(meshes))) if field_ids is None else [int(k) for k in field_ids]
     if len(field_ids) != len(meshes):
         raise ValueError(f"build_fields got {len(field_ids)} field ids for {len(meshes)} meshes")
-    walls = _thicknesses(thickness, len(meshes), voxel_size)
-    plans = checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding)
-    try:
-        plans = [_plan_thickness(plan, t) for plan, t in zip(plans, walls, strict=True)]
-    except AasdfError as err:
-        k = next(k for k, (plan, t) in enumerate(zip(plans, walls, strict=True)) if "thickness" not in plan)
-        raise AasdfError(f"Mesh {k}: {err}") from err
+    plans = checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding, thickness=thickness)
     device = _device(device)
     fields: list = [None] * len(meshes)
     errors: dict = {}
@@ -219,10 +185,10 @@ def build_field(
             size, ``levels < 1``, ``padding < 0``, a resolution that would not fit in memory, or a thickness under
             two voxels.
     """
-    wall = _thicknesses(thickness, 1, voxel_size)[0]
+    wall = thicknesses(thickness, 1, voxel_size)[0]
     plan = plan_field(vertices, triangles, voxel_size=voxel_size, levels=levels, padding=padding)
     check_budget(plan["fine_dims"], plan["top_count"], plan["fine_nodes"])
-    return _build_planned(_plan_thickness(plan, wall), device=device, field_id=field_id)
+    return _build_planned(thick_plan(plan, wall), device=device, field_id=field_id)
 
 
 def _build_thick(plan: dict, *, device, field_id: int) -> AdaptiveField:

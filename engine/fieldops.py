@@ -19,23 +19,24 @@ import time
 import numpy as np
 import warp as wp
 
-from .errors import AasdfError
 from .field import AdaptiveField
 from .geometry import mesh_closest_point
-from .octree import MAX_CELLS_PER_AXIS, dense_level, level_layout, morton_decode, node_center, sort_unique
+from .octree import code_bits, dense_level, level_layout, morton_decode, node_center, sort_unique
 from .parallel import launch_split
-from .plan import check_budget, plan_domain
+from .plan import check_budget, checked_wall, finite_number, plan_grown
 from .redistancing import KEEP_BAND, redistance
-from .sampling import FieldArg, closest_stored_point, inside_domain, locate_leaf, sample_mls
+from .sampling import (
+    FieldArg,
+    closest_stored_point,
+    inside_domain,
+    level_spacing,
+    locate_leaf,
+    locate_node,
+    sample_mls,
+)
 
 KIND_OFFSET, KIND_INSIDE, KIND_OUTSIDE, KIND_CENTER = 0, 1, 2, 3
 SIDES = {"inside": KIND_INSIDE, "outside": KIND_OUTSIDE, "center": KIND_CENTER}
-
-# Finest cells kept around the domain's content, as a build keeps them (padding 1 + 2).
-MARGIN_CELLS = 3
-
-# The thinnest wall (shell, thickness) in voxels: thinner ones leave holes where the surface's two sides share a cell.
-MIN_WALL_VOXELS = 2.0
 
 
 @wp.func
@@ -79,11 +80,18 @@ def side_of(f: FieldArg, x: wp.vec3) -> float:
 
 
 @wp.func
-def surface_distance(mesh: wp.uint64, f: FieldArg, signs: int, x: wp.vec3, reach: float):
+def surface_distance(mesh: wp.uint64, f: FieldArg, signs: int, x: wp.vec3, reach: float, level: int):
     """(S, closest point, found): with ``signs`` 1 the distance from ``x`` to the field ``f``'s surface through its
     closest points (:func:`.sampling.closest_stored_point`), signed by :func:`side_of`; else the unsigned distance
     to the mesh's triangles within ``reach`` (``reach`` and ``x`` itself when none is nearer)."""
     if signs == 1:
+        # a node of the field's own at x, below its top level (whose closest points may be 5 % off): its closest point
+        node = locate_node(f, x, level)
+        if node[1] == level and level < f.levels - 1 and inside_domain(f, x):
+            s = level_spacing(f, level)
+            if wp.length(node_center(f.origin, s, f.coords[node[0]]) - x) < 0.25 * s:
+                p = f.proj[node[0]]
+                return wp.length(x - p) * side_of(f, x), p, True
         d, p = closest_stored_point(f, x)
         return d * side_of(f, x), p, True
     found, p = mesh_closest_point(mesh, x, reach)
@@ -104,6 +112,7 @@ def _band_cells_kernel(
     codes: wp.array[wp.int64],
     origin: wp.vec3,
     spacing: float,
+    level: int,
     radius: float,
     reach: float,
     keep: wp.array[wp.int32],
@@ -112,7 +121,7 @@ def _band_cells_kernel(
     band of the new surface: ``|g|`` at its centre within ``radius``."""
     t = first + wp.tid()
     x = node_center(origin, spacing, morton_decode(codes[t]))
-    s, p, found = surface_distance(mesh, f, signs, x, reach)
+    s, p, found = surface_distance(mesh, f, signs, x, reach, level)
     keep[t] = wp.where(wp.abs(level_value(kind, s, a)) <= radius, 1, 0)
 
 
@@ -127,6 +136,7 @@ def _level_values_kernel(
     coords: wp.array[wp.vec3i],
     origin: wp.vec3,
     spacing: float,
+    level: int,
     reach: float,
     source_id: int,
     values: wp.array[wp.float32],
@@ -137,7 +147,7 @@ def _level_values_kernel(
     node, along the old closest point's normal) and the source id of the old surface there."""
     i = first + wp.tid()
     x = node_center(origin, spacing, coords[i])
-    s, p, found = surface_distance(mesh, f, signs, x, reach)
+    s, p, found = surface_distance(mesh, f, signs, x, reach, level)
     values[i] = level_value(kind, s, a)
     n = x - p
     ln = wp.length(n)
@@ -157,14 +167,13 @@ def level_reach(kind: int, a: float) -> float:
 
 
 def band_octets(mesh_id, f_arg, signs, kind, a, *, origin, top_dims, levels, voxel_size, device) -> wp.array:
-    """Sorted codes of the finest octets with a node within ``KEEP_BAND`` voxels of the new surface, found
+    """Codes (unsorted) of the finest octets with a node within ``KEEP_BAND`` voxels of the new surface, found
     top-down: every top cell, then the children of the cells kept on each level (a level-``k`` cell is kept when
-    ``|g|`` at its centre is within the band plus the reach of its octets)."""
+    ``|g|`` at its centre is within the band plus the reach of its octets: ``g`` is 1-Lipschitz)."""
     h = float(voxel_size)
     top_n = int(np.prod(top_dims))
     codes = wp.empty(top_n, dtype=wp.int64, device=device)
     dense_level(top_dims, codes, wp.empty(top_n, dtype=wp.vec3i, device=device))
-    sorted_top = True
     reach0 = level_reach(kind, a)
     origin_v = wp.vec3(*origin)
     for k in range(levels - 1, 0, -1):
@@ -178,7 +187,7 @@ def band_octets(mesh_id, f_arg, signs, kind, a, *, origin, top_dims, levels, vox
         launch_split(
             _band_cells_kernel,
             n,
-            lambda s, _n, spacing=spacing, radius=radius, codes=codes, keep=keep: [
+            lambda s, _n, k=k, spacing=spacing, radius=radius, codes=codes, keep=keep: [
                 s,
                 wp.uint64(mesh_id),
                 f_arg,
@@ -188,6 +197,7 @@ def band_octets(mesh_id, f_arg, signs, kind, a, *, origin, top_dims, levels, vox
                 codes,
                 origin_v,
                 float(spacing),
+                k,
                 float(radius),
                 float(reach0 + radius + spacing),
                 keep,
@@ -196,9 +206,6 @@ def band_octets(mesh_id, f_arg, signs, kind, a, *, origin, top_dims, levels, vox
             balance=True,
         )
         kept = codes.numpy()[keep.numpy().astype(bool)]
-        if not sorted_top:
-            kept = np.sort(kept)
-        sorted_top = True
         if k == 1:
             return wp.array(kept, dtype=wp.int64, device=device)
         check_budget(np.asarray(top_dims) * 2 ** (levels - 1), top_n, 8 * 8 * len(kept))
@@ -218,10 +225,20 @@ def levelset_field(
     top_dims,
     field_ids,
     device,
-    exact: bool = True,
 ):
-    """The field of ``g(S)`` (``kind``, ``a``: see :func:`level_value`) for the surface ``mesh_id`` signed by the field
-    ``base`` (None: unsigned), on the domain ``origin``/``top_dims``; re-distanced when ``exact``."""
+    """The field of ``g(S)``, re-distanced: the new surface's band found top-down (:func:`band_octets`), every node
+    given ``g`` (a point of the new surface as its closest point), then :func:`.redistancing.redistance`.
+
+    Args:
+        mesh_id: ``wp.Mesh.id`` of the surface's triangles when ``base`` is None (``S`` their unsigned distance).
+        base: The field whose surface is offset or hollowed (``S`` through its closest points, signed by its values).
+        kind, a: Which ``g`` (KIND_OFFSET, KIND_INSIDE, KIND_OUTSIDE, KIND_CENTER) and its distance or thickness.
+        voxel_size, levels, origin, top_dims: The new field's lattice and domain (see :func:`plan_grown`).
+        field_ids: Ids of the new field (its nodes' sources come from ``base`` where it has them, else the first).
+        device: Warp device.
+    Returns:
+        AdaptiveField, ``stats["exact_distance"]`` True.
+    """
     timings = {}
     t0 = time.perf_counter()
     signs = base is not None
@@ -240,7 +257,7 @@ def levelset_field(
             voxel_size=voxel_size,
             device=device,
         )
-        octets = sort_unique(octets, end_bit=63)
+        octets = sort_unique(octets, end_bit=3 * code_bits(np.asarray(top_dims) * 2 ** (levels - 2)))
     timings["band"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     layout = level_layout(octets, top_dims, levels, device, timings)
@@ -259,7 +276,7 @@ def levelset_field(
         launch_split(
             _level_values_kernel,
             hi - lo,
-            lambda s, _n, lo=lo, spacing=spacing, reach=reach: [
+            lambda s, _n, lo=lo, k=k, spacing=spacing, reach=reach: [
                 lo + s,
                 wp.uint64(mesh_id),
                 f_arg,
@@ -269,6 +286,7 @@ def levelset_field(
                 layout["coords"],
                 origin_v,
                 float(spacing),
+                k,
                 float(reach),
                 int(field_ids[0]),
                 values,
@@ -289,8 +307,6 @@ def levelset_field(
         field_ids=field_ids,
         timings=timings,
     )
-    if not exact:
-        return field
     result = redistance(field)
     result.timings = {**timings, **{f"redistance_{k}": v for k, v in result.timings.items()}}
     return result
@@ -314,50 +330,6 @@ def _empty_field_arg(device) -> FieldArg:
 def _check_field(field):
     if not callable(getattr(field, "arg", None)) or not hasattr(field, "level_offsets"):
         raise TypeError(f"Expected 'field' to be an AdaptiveField, but got {type(field).__name__}.")
-
-
-def finite_number(name: str, value) -> float:
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"Expected a number for '{name}', but got {type(value).__name__}.") from None
-    if not math.isfinite(value):
-        raise ValueError(f"Expected a finite '{name}', but got {value}.")
-    return value
-
-
-def checked_wall(name: str, value, voxel_size: float) -> float:
-    """A thickness: positive and finite (ValueError), at least ``MIN_WALL_VOXELS`` voxels (AasdfError)."""
-    value = finite_number(name, value)
-    if value <= 0.0:
-        raise ValueError(f"Expected a positive '{name}', but got {value}.")
-    if value < MIN_WALL_VOXELS * voxel_size:
-        raise AasdfError(
-            f"A {name} of {value:g} is thinner than two voxels ({MIN_WALL_VOXELS * voxel_size:g}) and would leave "
-            f"holes; use a {name} of at least {MIN_WALL_VOXELS * voxel_size:g}, or a smaller voxel size."
-        )
-    return value
-
-
-def plan_grown(lo, hi, grow: float, *, voxel_size: float, levels: int, nodes: float, what: str):
-    """(origin, top_dims, levels) of a domain around the box ``lo``-``hi`` grown by ``grow`` on every side, refused
-    (AasdfError) when the octree cannot address it or its ``nodes`` finest nodes would not fit in memory. More levels
-    keep the dense top level about as large as the box's when the domain grows much."""
-    lo = np.asarray(lo, np.float64) - grow
-    hi = np.asarray(hi, np.float64) + grow
-    span = float(np.max(hi - lo)) / voxel_size + 2 * MARGIN_CELLS
-    if not span < MAX_CELLS_PER_AXIS - 1:
-        raise AasdfError(
-            f"{what} needs a domain of {span:.0f} finest cells along an axis, more than the {MAX_CELLS_PER_AXIS - 1} "
-            "the octree can address; use a smaller distance or a larger voxel size."
-        )
-    base = float(np.max(hi - lo - 2.0 * grow)) / voxel_size + 2 * MARGIN_CELLS
-    levels = int(levels) + max(0, int(math.floor(math.log2(max(span / max(base, 1.0), 1.0)))))
-    while levels > 1 and 2 ** (levels - 1) > span:  # a top cell no larger than the domain
-        levels -= 1
-    origin, top_dims = plan_domain(lo, hi, voxel_size, levels, MARGIN_CELLS)
-    check_budget(top_dims * 2 ** (levels - 1), int(np.prod(top_dims)), nodes)
-    return origin, top_dims, levels
 
 
 def _grown_nodes(field, grow: float) -> float:

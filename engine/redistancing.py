@@ -174,8 +174,8 @@ def redistance(field, *, method: str = "sweep", top_tolerance: float = LEAF_TOLE
     Args:
         field: AdaptiveField, e.g. a boolean or blend result whose values are bounds rather than distances.
         method: How each coarser level's leaves get their first estimate before a bounded BVH query makes them
-            exact: ``"sweep"`` (sparse fast sweeping, :func:`solve_level`) or ``"fim"`` (the build's fast iterative
-            method). The same result; see :func:`solve_level` for which is faster where.
+            exact: ``"sweep"`` (sparse fast sweeping, :func:`.sweeping.solve_level`) or ``"fim"`` (the build's fast
+            iterative method). The same result; :mod:`.sweeping` says which is faster where.
         top_tolerance: Relative error allowed to the closest points of the dense top level's leaves, as the build
             allows (0: exact; a large top level's exact queries cost 4x: (spot | fandisk) - sphere with 3 levels at
             /256, 0.17 -> 0.75 s, for a far p95 error of 0.04 % instead of 0.10 %).

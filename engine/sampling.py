@@ -278,9 +278,10 @@ def closest_stored_point(f: FieldArg, x: wp.vec3):
     """(distance, point) of the nearest of the field's stored closest points to ``x``, by a walk: the nodes of the
     27 cells around the leaf holding ``x`` (clamped into the domain) pick a start; then, while a nearer one turns up,
     the 8 finest nodes around ``x``'s foot on the tangent plane at the nearest point so far (a flat surface's exact
-    foot: one step), or else the 27 around that point. The finest band's closest points sample the surface a voxel
-    apart: for a field whose closest points lie on its surface, the distance is exact but for that sampling (an upper
-    bound within about h^2 / 4 S)."""
+    foot: one step), or else the 27 around that point (an edge, where the tangent plane misleads; these confirm the
+    end: a foot a voxel from a face's nearest point may lie past its edge). The finest band's closest points sample
+    the surface a voxel apart: for a field whose closest points lie on its surface, the distance is exact but for that
+    sampling (an upper bound within about h^2 / 4 S)."""
     xc = clamp_to_domain(f, x)
     leaf = locate_leaf(f, xc)
     s = level_spacing(f, leaf[1])

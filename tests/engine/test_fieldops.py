@@ -220,6 +220,15 @@ def test_build_fields_takes_a_thickness_per_mesh(thick_sheet):
         engine.build_fields([box, _sheet()], voxel_size=H, thickness=[0.2, 0.2, 0.2])
 
 
+def test_check_meshes_plans_the_thickness():
+    plain = engine.check_meshes([_sheet()], voxel_size=H)
+    assert engine.check_meshes([_sheet()], voxel_size=H, thickness=0.2) > plain  # both sides of the sheet
+    with pytest.raises(engine.AasdfError, match="A thickness of 0.05 is thinner than two voxels"):
+        engine.check_meshes([_sheet()], voxel_size=H, thickness=0.05)
+    with pytest.raises(engine.AasdfError, match="Mesh 0: A thickness of 1e.07 needs a domain of .* octree can"):
+        engine.check_meshes([_sheet()], voxel_size=H, thickness=1.0e7)
+
+
 @pytest.mark.parametrize(("thickness", "error", "match"), [
     (float("inf"), ValueError, "Expected a finite 'thickness', but got inf"),
     (0.0, ValueError, "Expected a positive 'thickness'"),
