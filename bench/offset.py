@@ -7,11 +7,12 @@ alternating rounds after a warm-up (``bench/paired.py``); a geometry-nodes run s
 once, its time beside AASDF's median. Accuracy: every vertex of each result against the exact offset surface
 (|exact signed distance to the mesh - distance|, in voxels: p95 and max), and the volume.
 
-Part ``sweep``: ``engine.redistance`` with ``method="sweep"`` (sparse fast sweeping) and ``method="fim"`` (the build's
-fast iterative method) on a smooth union of two spheres (blend 0.1 of the diagonal) and on (spot | fandisk) - sphere
-at diagonal / 256, the second also with 3 and 2 levels (a larger dense top level), in alternating rounds: seconds of
-the whole re-distancing and of its coarse levels, sweeps on the top level, and the accuracy against the exact distance
-to the field's own surface (the same for both: a bounded BVH query makes every leaf exact after either).
+Part ``sweep``: ``engine.redistance`` with each ``method`` (``"sweep"``: fast sweeping on the dense top level, the FIM
+on the sparse ones; ``"diagonal"``: Museth's sort-key sweeps on every level; ``"fim"``: the build's fast iterative
+method) on a smooth union of two spheres (blend 0.1 of the diagonal) and on (spot | fandisk) - sphere at diagonal /
+256, the second also with 3 and 2 levels (a larger dense top level), in rotating order: seconds of the whole
+re-distancing and of its coarse levels, sweeps on the top level, and the accuracy against the exact distance to the
+field's own surface (the same for all: a bounded BVH query makes every leaf exact after any).
 
     .venv/bin/python bench/offset.py [--parts offset sweep] [--resolution 256] [--repeat 3] [--slow 60]
 """
@@ -168,40 +169,49 @@ def _levels_seconds(field) -> float:
     return sum(v for k, v in field.timings.items() if k.startswith(("level_", "top_level")))
 
 
+METHODS = ("sweep", "diagonal", "fim")
+
+
 def sweep_part(resolution: int, repeat: int) -> None:
-    print(f"\n### Re-distancing: sparse fast sweeping against the FIM, diagonal / {resolution}; {repeat} rounds")
-    print("| case | nodes per level | sweep s (coarse levels) | FIM s (coarse levels) | sweep / FIM | top-level "
-          "sweeps (sweep / FIM) | before: band p99, far p95, grad p95 | after |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|")
+    print(f"\n### Re-distancing: the coarse levels' solvers, diagonal / {resolution}; {repeat} rounds, order rotating")
+    print(
+        "sweep: the dense top level by fast sweeping (8 diagonal orderings), the sparse levels by the FIM (the "
+        "default); diagonal: Museth's sort-key sweeps on every level; fim: the build's FIM. Seconds: medians "
+        "(coarse levels: propagation + the BVH queries that make them exact); ratios: medians of per-round ratios "
+        "to fim.\n"
+    )
+    print(
+        "| case | nodes per level | sweep s (coarse) | diagonal s (coarse) | fim s (coarse) | sweep / fim (coarse) "
+        "| diagonal / fim (coarse) | top-level sweeps s / d / f | before: band p99, far p95, grad p95 | after |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name, make in sweep_cases(resolution).items():
         field = make()
-        runs = {"sweep": [], "fim": []}
+        runs = {m: [] for m in METHODS}
+        for rnd in range(repeat + 1):  # the first round warms up
+            order = METHODS[rnd % 3 :] + METHODS[: rnd % 3]
+            for method in order:
+                wp.synchronize()
+                t0 = time.perf_counter()
+                result = engine.redistance(field, method=method)
+                wp.synchronize()
+                if rnd:
+                    runs[method].append((time.perf_counter() - t0, _levels_seconds(result), result))
+        med = {m: (statistics.median(r[0] for r in runs[m]), statistics.median(r[1] for r in runs[m])) for m in METHODS}
 
-        def run(method, field=field, runs=runs):
-            wp.synchronize()
-            t0 = time.perf_counter()
-            result = engine.redistance(field, method=method)
-            wp.synchronize()
-            runs[method].append(result)
-            return {"seconds": time.perf_counter() - t0, "result": result}
+        def ratio(m, k, runs=runs):
+            value, low, high = round_ratios([r[k] for r in runs[m]], [r[k] for r in runs["fim"]])
+            return f"{value:.2f} ({low:.2f}-{high:.2f})"
 
-        result = paired(lambda: run("sweep"), lambda: run("fim"), repeat)
-        sweep, fim = result["ours"]["result"], result["theirs"]["result"]
-        levels_sweep = statistics.median(_levels_seconds(r) for r in runs["sweep"][1:])
-        levels_fim = statistics.median(_levels_seconds(r) for r in runs["fim"][1:])
-        coarse_ratio = round_ratios(
-            [_levels_seconds(r) for r in runs["sweep"][1:]], [_levels_seconds(r) for r in runs["fim"][1:]]
-        )[0]
+        last = {m: runs[m][-1][2] for m in METHODS}
         top = field.levels - 1
-        before, after = _accuracy(field), _accuracy(sweep)
-        same = np.allclose(sweep.values.numpy(), fim.values.numpy(), rtol=1e-6, atol=1e-6 * field.voxel_size)
+        sweeps = " / ".join(str(last[m].stats["sweeps"].get(top, 0)) for m in METHODS)
+        before, after = _accuracy(field), _accuracy(last["sweep"])
         fmt = lambda e: f"{e['band_p99']:.3f} vox, {100 * e['far_p95']:.2f} %, {100 * e['grad_p95']:.2f} %"  # noqa: E731
+        cells = " | ".join(f"{med[m][0]:.3f} ({med[m][1]:.3f})" for m in METHODS)
         print(
-            f"| {name} | {sweep.level_counts} | {result['ours']['seconds']:.3f} ({levels_sweep:.3f}) | "
-            f"{result['theirs']['seconds']:.3f} ({levels_fim:.3f}) | {result['ratio']:.3f} "
-            f"({result['low']:.3f}-{result['high']:.3f}); coarse levels {coarse_ratio:.3f} | "
-            f"{sweep.stats['sweeps'].get(top, 0)} / {fim.stats['sweeps'].get(top, 0)} | {fmt(before)} | "
-            f"{fmt(after)}{'' if same else ' (FIM differs!)'} |",
+            f"| {name} | {last['sweep'].level_counts} | {cells} | {ratio('sweep', 0)} ({ratio('sweep', 1)}) | "
+            f"{ratio('diagonal', 0)} ({ratio('diagonal', 1)}) | {sweeps} | {fmt(before)} | {fmt(after)} |",
             flush=True,
         )
 

@@ -124,9 +124,10 @@ def test_sweeping_and_the_fast_iterative_method_give_the_same_field(mesh_boolean
     # both estimates only bound the BVH query that makes each coarse leaf exact (on the top level, with its 5 %
     # tolerance, a point within 5 % of the closest, which may depend on the bound: compare exact top levels)
     swept = engine.redistance(before, top_tolerance=0.0)
-    iterated = engine.redistance(before, method="fim", top_tolerance=0.0)
-    np.testing.assert_array_equal(iterated.codes.numpy(), swept.codes.numpy())
-    np.testing.assert_allclose(iterated.values.numpy(), swept.values.numpy(), rtol=1e-6, atol=1e-6 * swept.voxel_size)
+    for method in ("fim", "diagonal"):
+        other = engine.redistance(before, method=method, top_tolerance=0.0)
+        np.testing.assert_array_equal(other.codes.numpy(), swept.codes.numpy())
+        np.testing.assert_allclose(other.values.numpy(), swept.values.numpy(), rtol=1e-6, atol=1e-6 * swept.voxel_size)
     top = default.level_slice(default.levels - 1)
     assert np.all(np.abs(default.values.numpy()[top]) <= 1.05 * np.abs(swept.values.numpy()[top]) + 1e-6)
 
@@ -157,9 +158,9 @@ def _level_solve(field, **solver_options):
 def test_plane_parallel_sweeps_equal_ordered_sweeps(monkeypatch):
     # nodes of one diagonal plane are never face neighbours: a launch per plane gives the ordered sweep's result
     field = engine.build_field(*uv_sphere(1.0, rings=24, segments=48), voxel_size=0.05, levels=3)
-    ordered = _level_solve(field, plane_parallel=False)
+    ordered = _level_solve(field, plane_parallel=False, sparse="diagonal")
     monkeypatch.setattr(sweeping, "PLANE_LAUNCH_MIN", 1)
-    parallel = _level_solve(field, plane_parallel=True)
+    parallel = _level_solve(field, plane_parallel=True, sparse="diagonal")
     np.testing.assert_array_equal(parallel[0], ordered[0])
     np.testing.assert_array_equal(parallel[1], ordered[1])
     # the propagation alone reaches every leaf, with an upper bound of its distance
@@ -204,7 +205,7 @@ def test_redistance_validates_its_arguments(blended_spheres):
     field = blended_spheres[1]
     with pytest.raises(TypeError, match="Expected 'field' to be an AdaptiveField"):
         engine.redistance(np.zeros(3))
-    with pytest.raises(ValueError, match="Expected 'method' to be 'sweep' or 'fim'"):
+    with pytest.raises(ValueError, match="Expected 'method' to be 'sweep', 'diagonal' or 'fim'"):
         engine.redistance(field, method="fmm")
     with pytest.raises(ValueError, match="Expected 'top_tolerance' in"):
         engine.redistance(field, top_tolerance=0.5)
