@@ -72,7 +72,7 @@ def aasdf_offset(mesh, voxel: float, distance: float) -> dict:
     }
 
 
-def offset_part(resolution: int, repeat: int, slow: float) -> None:
+def offset_part(resolution: int, repeat: int, slow: float, offsets=OFFSETS) -> None:
     import bpy
 
     from bench import baselines  # needs bpy
@@ -84,7 +84,7 @@ def offset_part(resolution: int, repeat: int, slow: float) -> None:
     print("| offset (voxels) | AASDF s (build + offset + mesh) | GN s (band) | AASDF / GN | AASDF err p95 / max "
           "(voxels) | GN err p95 / max | AASDF volume | GN volume |")  # fmt: skip
     print("|---|---|---|---|---|---|---|---|")
-    for k in OFFSETS:
+    for k in offsets:
         d = k * voxel
         ours = lambda d=d: aasdf_offset(spot, voxel, d)  # noqa: E731
         theirs = lambda d=d: baselines.gn_sdf_offset(spot, voxel, d)  # noqa: E731
@@ -222,6 +222,7 @@ def main(argv=None) -> None:
     parser.add_argument("--resolution", type=int, default=256)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--slow", type=float, default=60.0, help="run a slower geometry-nodes offset once")
+    parser.add_argument("--offsets", nargs="+", type=int, default=list(OFFSETS), help="offsets in voxels")
     args = parser.parse_args(argv)
     wp.config.quiet = True
     wp.init()
@@ -229,7 +230,7 @@ def main(argv=None) -> None:
     if "sweep" in args.parts:
         sweep_part(args.resolution, args.repeat)
     if "offset" in args.parts:
-        offset_part(args.resolution, args.repeat, args.slow)
+        offset_part(args.resolution, args.repeat, args.slow, args.offsets)
 
 
 if __name__ == "__main__":

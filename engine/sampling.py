@@ -274,34 +274,20 @@ def _nearer(f: FieldArg, x: wp.vec3, q: wp.vec3, level: int, best: float, best_p
 
 
 @wp.func
-def closest_stored_point(f: FieldArg, x: wp.vec3):
-    """(distance, point) of the nearest of the field's stored closest points to ``x``, by a walk: the nodes of the
-    27 cells around the leaf holding ``x`` (clamped into the domain) pick a start; then, while a nearer one turns up,
-    the 8 finest nodes around ``x``'s foot on the tangent plane at the nearest point so far (a flat surface's exact
-    foot: one step), or else the 27 around that point (an edge, where the tangent plane misleads; these confirm the
-    end: a foot a voxel from a face's nearest point may lie past its edge). The finest band's closest points sample
-    the surface a voxel apart: for a field whose closest points lie on its surface, the distance is exact but for that
-    sampling (an upper bound within about h^2 / 4 S)."""
-    xc = clamp_to_domain(f, x)
-    leaf = locate_leaf(f, xc)
-    s = level_spacing(f, leaf[1])
-    c = node_center(f.origin, s, f.coords[leaf[0]])
-    best = float(1.0e30)
-    best_p = x
-    best_n = wp.vec3(0.0)
+def _walk(f: FieldArg, x: wp.vec3, best: float, best_p: wp.vec3, best_n: wp.vec3):
+    """From (``best``, ``best_p``, ``best_n``) on through the finest band: while a nearer closest point turns up, the 8
+    finest nodes around ``x``'s foot on the tangent plane at the nearest point so far (a flat surface's exact foot:
+    one step), or else the 27 around that point (an edge, where the tangent plane misleads; these confirm the end: a
+    foot a voxel from a face's nearest point may lie past its edge)."""
+    h = f.voxel_size
     # loop bounds held in variables keep Warp from unrolling the searches (compile time)
     block = int(27)
     octet = int(8)
     steps = int(MAX_WALK_STEPS)
-    for o in range(block):
-        q = c + s * wp.vec3(float(o % 3 - 1), float((o // 3) % 3 - 1), float(o // 9 - 1))
-        best, best_p, best_n = _nearer(f, x, q, leaf[1], best, best_p, best_n)
-    h = f.voxel_size
     for _step in range(steps):
         before = best
         ln = wp.length(best_n)
         if ln > 0.0:
-            # the 8 finest nodes around x's foot on the tangent plane at the nearest point so far
             nrm = best_n / ln
             rel = (x - nrm * wp.dot(x - best_p, nrm) - f.origin) / h - wp.vec3(0.5)
             base = wp.vec3(wp.floor(rel[0]), wp.floor(rel[1]), wp.floor(rel[2]))
@@ -309,7 +295,6 @@ def closest_stored_point(f: FieldArg, x: wp.vec3):
                 q = wp.vec3(float(o & 1) + 0.5, float((o >> 1) & 1) + 0.5, float(o >> 2) + 0.5)
                 best, best_p, best_n = _nearer(f, x, f.origin + h * (base + q), 0, best, best_p, best_n)
         if best >= before:
-            # no nearer point there (an edge, a curved patch): the 27 finest nodes around the nearest point
             rel = (best_p - f.origin) / h
             base = wp.vec3(wp.floor(rel[0]), wp.floor(rel[1]), wp.floor(rel[2]))
             for o in range(block):
@@ -317,6 +302,50 @@ def closest_stored_point(f: FieldArg, x: wp.vec3):
                 best, best_p, best_n = _nearer(f, x, f.origin + h * (base + q), 0, best, best_p, best_n)
             if best >= before:
                 break
+    return best, best_p
+
+
+@wp.func
+def closest_stored_point(f: FieldArg, x: wp.vec3):
+    """(distance, point) of the nearest of the field's stored closest points to ``x``: the nodes of the 27 cells
+    around the leaf holding ``x`` (clamped into the domain) give a start, from which a walk (:func:`_walk`) goes on
+    through the finest band. Those nodes' closest points overestimate ``x``'s distance by up to about s^2 / 2S (s
+    their spacing), so near a medial axis the nearest of them may lie in the wrong basin: the nearest one more than two
+    cells from it starts a second walk when it is within two cells of the first walk's end, and the nearer end wins.
+    The finest band's closest points sample the surface a voxel apart: for a field whose closest points lie on its
+    surface, the distance is exact but for that sampling (an upper bound within about h^2 / 4S)."""
+    xc = clamp_to_domain(f, x)
+    leaf = locate_leaf(f, xc)
+    s = level_spacing(f, leaf[1])
+    c = node_center(f.origin, s, f.coords[leaf[0]])
+    best = float(1.0e30)
+    best_p = x
+    best_n = wp.vec3(0.0)
+    other = float(1.0e30)  # the nearest candidate more than two cells from the nearest one
+    other_p = x
+    other_n = wp.vec3(0.0)
+    block = int(27)
+    for o in range(block):
+        q = c + s * wp.vec3(float(o % 3 - 1), float((o // 3) % 3 - 1), float(o // 9 - 1))
+        d, p, n = _nearer(f, x, q, leaf[1], float(1.0e30), x, wp.vec3(0.0))
+        if d < best:
+            if wp.length(p - best_p) > 2.0 * s and best < other:
+                other = best
+                other_p = best_p
+                other_n = best_n
+            best = d
+            best_p = p
+            best_n = n
+        elif d < other and wp.length(p - best_p) > 2.0 * s:
+            other = d
+            other_p = p
+            other_n = n
+    best, best_p = _walk(f, x, best, best_p, best_n)
+    if other < best + 2.0 * s:
+        d2, p2 = _walk(f, x, other, other_p, other_n)
+        if d2 < best:
+            best = d2
+            best_p = p2
     return best, best_p
 
 
