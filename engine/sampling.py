@@ -305,47 +305,68 @@ def _walk(f: FieldArg, x: wp.vec3, best: float, best_p: wp.vec3, best_n: wp.vec3
     return best, best_p
 
 
+mat43 = wp.types.matrix(shape=(4, 3), dtype=wp.float32)
+
+
 @wp.func
 def closest_stored_point(f: FieldArg, x: wp.vec3):
     """(distance, point) of the nearest of the field's stored closest points to ``x``: the nodes of the 27 cells
-    around the leaf holding ``x`` (clamped into the domain) give a start, from which a walk (:func:`_walk`) goes on
+    around the leaf holding ``x`` (clamped into the domain) give starts, from which walks (:func:`_walk`) go on
     through the finest band. Those nodes' closest points overestimate ``x``'s distance by up to about s^2 / 2S (s
-    their spacing), so near a medial axis the nearest of them may lie in the wrong basin: the nearest one more than two
-    cells from it starts a second walk when it is within two cells of the first walk's end, and the nearer end wins.
-    The finest band's closest points sample the surface a voxel apart: for a field whose closest points lie on its
-    surface, the distance is exact but for that sampling (an upper bound within about h^2 / 4S)."""
+    their spacing; on a build's top level they are within 5 % of the closest), so near a medial axis the nearest of
+    them may lie in the wrong basin: the nearest start in each of up to 4 basins (starts more than two cells apart)
+    walks when it is within two cells of the nearest end so far, and the nearest end wins. The finest band's closest
+    points sample the surface a voxel apart: for a field whose closest points lie on its surface, the distance is
+    exact but for that sampling (an upper bound within about h^2 / 4S)."""
     xc = clamp_to_domain(f, x)
     leaf = locate_leaf(f, xc)
     s = level_spacing(f, leaf[1])
     c = node_center(f.origin, s, f.coords[leaf[0]])
+    # the nearest start of each basin found: distances, points, normal lines (slots past ``count`` unused)
+    dists = wp.vec4(1.0e30)
+    points = mat43()
+    normals = mat43()
+    count = int(0)
+    # outside the domain x's foot may lie as far aside as x lies out: the block of cells around the clamped point
+    # widens with that distance (2 cells either side at most)
+    r = wp.min(2, 1 + int(wp.ceil(wp.length(x - xc) / s)))
+    w = 2 * r + 1
+    for o in range(w * w * w):
+        q = c + s * wp.vec3(float(o % w - r), float((o // w) % w - r), float(o // (w * w) - r))
+        d, p, n = _nearer(f, x, q, leaf[1], float(1.0e30), x, wp.vec3(0.0))
+        if d < 1.0e30:
+            slot = int(-1)
+            for b in range(count):
+                if wp.length(p - points[b]) <= 2.0 * s:
+                    slot = b
+            if slot < 0:
+                if count < 4:
+                    slot = count
+                    count += 1
+                else:  # a fifth basin: it replaces the farthest one if nearer
+                    far = int(0)
+                    for b in range(4):
+                        if dists[b] > dists[far]:
+                            far = b
+                    slot = far
+            if d < dists[slot]:
+                dists[slot] = d
+                points[slot] = p
+                normals[slot] = n
     best = float(1.0e30)
     best_p = x
-    best_n = wp.vec3(0.0)
-    other = float(1.0e30)  # the nearest candidate more than two cells from the nearest one
-    other_p = x
-    other_n = wp.vec3(0.0)
-    block = int(27)
-    for o in range(block):
-        q = c + s * wp.vec3(float(o % 3 - 1), float((o // 3) % 3 - 1), float(o // 9 - 1))
-        d, p, n = _nearer(f, x, q, leaf[1], float(1.0e30), x, wp.vec3(0.0))
-        if d < best:
-            if wp.length(p - best_p) > 2.0 * s and best < other:
-                other = best
-                other_p = best_p
-                other_n = best_n
-            best = d
-            best_p = p
-            best_n = n
-        elif d < other and wp.length(p - best_p) > 2.0 * s:
-            other = d
-            other_p = p
-            other_n = n
-    best, best_p = _walk(f, x, best, best_p, best_n)
-    if other < best + 2.0 * s:
-        d2, p2 = _walk(f, x, other, other_p, other_n)
-        if d2 < best:
-            best = d2
-            best_p = p2
+    # nearest start first, then the others that may end nearer
+    order = int(0)
+    for b in range(count):
+        if dists[b] < dists[order]:
+            order = b
+    best, best_p = _walk(f, x, dists[order], points[order], normals[order])
+    for b in range(count):
+        if b != order and dists[b] < best + 2.0 * s:
+            d2, p2 = _walk(f, x, dists[b], points[b], normals[b])
+            if d2 < best:
+                best = d2
+                best_p = p2
     return best, best_p
 
 

@@ -105,6 +105,21 @@ def test_a_boolean_is_redistanced_before_its_offset():
     assert err.max() <= 0.75 * H  # measured 0.47 voxel
 
 
+def test_a_far_offset_of_a_concave_shape_outside_its_domain_is_exact():
+    # 93 % of the new surface lies outside the union's domain, where the nearest of the union's closest points is
+    # looked for from the domain's border: its foot may lie as far aside as the point lies out
+    h = 0.1
+    a = engine.build_field(*uv_sphere(1.0, rings=32, segments=64), voxel_size=h)
+    b = engine.build_field(*uv_sphere(0.8, center=(1.4, 0.3, 0.0), rings=32, segments=64), voxel_size=h)
+    verts, _ = engine.offset(engine.union(a, b), 2.0).to_mesh()
+    both = np.minimum(
+        np.linalg.norm(verts, axis=1) - 1.0, np.linalg.norm(verts - np.float32([1.4, 0.3, 0]), axis=1) - 0.8
+    )
+    err = np.abs(both - 2.0)
+    assert np.percentile(err, 99) <= 0.15 * h  # measured 0.052 voxel
+    assert err.max() <= 0.45 * h  # measured 0.16 voxel (3.5 voxels on spot before the border's wider search)
+
+
 def test_shrinking_a_thin_shape_away_leaves_an_empty_field():
     thin = engine.build_field(*box_mesh(half=(0.5, 0.5, 0.1)), voxel_size=H)
     gone = engine.offset(thin, -0.15)
