@@ -24,14 +24,14 @@ import time
 import numpy as np
 import warp as wp
 
-from . import distance, fim, holes, octree, parallel, signs, winding
+from . import distance, fieldops, fim, holes, octree, parallel, redistancing, signs, sweeping, winding
 from .errors import AasdfError
 from .field import AdaptiveField
 from .geometry import tri_box_overlap
 from .holes import cap_lattices, changed_top_cells, sign_change_octets
 from .meshcheck import edge_table, encloses_nothing, hole_boundary, problem_faces, weld_positions
 from .octree import add_octets, code_bits, in_sorted, level_layout, match_levels, morton_encode
-from .plan import byte_grid_fits, check_budget, checked_plans, plan_field
+from .plan import byte_grid_fits, check_budget, checked_plans, plan_field, thick_plan, thicknesses
 from .sampling import LEAF_TOLERANCE
 from .signs import NO_BOXES
 from .sources import SourceMesh
@@ -103,7 +103,9 @@ def _device(device):
     return wp.get_device(device)
 
 
-def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_ids=None) -> list[AdaptiveField]:
+def build_fields(
+    meshes, *, voxel_size, levels=4, padding=1, device=None, field_ids=None, thickness=None
+) -> list[AdaptiveField]:
     """Build the fields of several meshes at one voxel size, checked together first (:func:`check_meshes`), so an
     impossible request builds none.
 
@@ -115,6 +117,7 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
         meshes: Sequence of (vertices, triangles) pairs, as for :func:`build_field`.
         voxel_size, levels, padding, device: As for :func:`build_field`.
         field_ids: One id per mesh (default 0, 1, 2, ...).
+        thickness: As for :func:`build_field`: one value for every mesh, or one per mesh (None: none).
     Returns:
         One AdaptiveField per mesh, in order.
     Raises:
@@ -125,7 +128,7 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
     field_ids = list(range(len(meshes))) if field_ids is None else [int(k) for k in field_ids]
     if len(field_ids) != len(meshes):
         raise ValueError(f"build_fields got {len(field_ids)} field ids for {len(meshes)} meshes")
-    plans = checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding)
+    plans = checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding, thickness=thickness)
     device = _device(device)
     fields: list = [None] * len(meshes)
     errors: dict = {}
@@ -145,8 +148,11 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
             if k in errors:
                 raise errors[k]
         return fields
-    for module in (octree, distance, fim, winding, signs, holes, sys.modules[__name__]):  # the modules a build launches
-        wp.load_module(module, device=device)  # compiled or loaded once, before the threads
+    # the modules a build launches (a thick one: those of the field operations too), compiled or loaded once,
+    # before the threads
+    launched = (octree, distance, fim, winding, signs, holes, fieldops, sweeping, redistancing, sys.modules[__name__])
+    for module in launched:
+        wp.load_module(module, device=device)
     workers = min(len(meshes), os.cpu_count() or 1)
     # worker w builds meshes w, w + workers, ...
     parallel.run_tasks([lambda w=w: [build(k) for k in range(w, len(meshes), workers)] for w in range(workers)], device)
@@ -155,7 +161,9 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
     return fields
 
 
-def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=None, field_id=0) -> AdaptiveField:
+def build_field(
+    vertices, triangles, *, voxel_size, levels=4, padding=1, device=None, field_id=0, thickness=None
+) -> AdaptiveField:
     """Build the adaptive signed distance field of a triangle mesh.
 
     Args:
@@ -170,20 +178,54 @@ def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=
         padding: Finest cells kept around each triangle (>= 0; 1 or more gives watertight surfaces).
         device: Warp device (``None``: Warp's default).
         field_id: Integer id carried per node through booleans (see ``source_ids``).
+        thickness: Give the surface this thickness (world units, at least two voxels): the field is the solid
+            shell of half-width ``thickness / 2`` around the triangles (their unsigned distance minus half the
+            thickness), so surfaces that enclose nothing (planes, cloth, single-sided scans) become solids; a closed
+            mesh becomes a hollow shell centred on its surface. None: the mesh's own inside.
     Returns:
         AdaptiveField, negative inside.
     Raises:
         ValueError: On wrongly shaped or typed arguments.
         AasdfError: On empty, non-finite or fully degenerate meshes, out-of-range indices, non-positive voxel
-            size, ``levels < 1``, ``padding < 0``, or a resolution that would not fit in memory.
+            size, ``levels < 1``, ``padding < 0``, a resolution that would not fit in memory, or a thickness under
+            two voxels.
     """
+    wall = thicknesses(thickness, 1, voxel_size)[0]
     plan = plan_field(vertices, triangles, voxel_size=voxel_size, levels=levels, padding=padding)
     check_budget(plan["fine_dims"], plan["top_count"], plan["fine_nodes"])
-    return _build_planned(plan, device=device, field_id=field_id)
+    return _build_planned(thick_plan(plan, wall), device=device, field_id=field_id)
+
+
+def _build_thick(plan: dict, *, device, field_id: int) -> AdaptiveField:
+    """The shell of ``plan["thickness"]`` around a mesh's triangles (:func:`.fieldops.levelset_field` of their
+    unsigned distance)."""
+    t0 = time.perf_counter()
+    mesh = wp.Mesh(
+        points=wp.array(plan["vertices"], dtype=wp.vec3, device=device),
+        indices=wp.array(plan["triangles"].reshape(-1), dtype=wp.int32, device=device),
+    )
+    seconds = time.perf_counter() - t0
+    field = fieldops.levelset_field(
+        mesh.id,
+        None,
+        fieldops.KIND_CENTER,
+        plan["thickness"],
+        voxel_size=plan["voxel_size"],
+        levels=plan["levels"],
+        origin=plan["origin"],
+        top_dims=plan["top_dims"],
+        field_ids=(field_id,),
+        device=device,
+    )
+    field.timings["mesh_bvh"] = seconds
+    field.stats["thickness"] = plan["thickness"]
+    return field
 
 
 def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     """:func:`build_field` of a checked :func:`plan_field`."""
+    if plan.get("thickness") is not None:
+        return _build_thick(plan, device=_device(device), field_id=field_id)
     verts, tris, origin, top_dims = plan["vertices"], plan["triangles"], plan["origin"], plan["top_dims"]
     fine_dims, top_count = plan["fine_dims"], plan["top_count"]
     voxel_size, levels, padding = plan["voxel_size"], plan["levels"], plan["padding"]
@@ -378,6 +420,9 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     field.timings["sign_check"] = refine_seconds
     field.stats["clean_mesh"] = clean
     field.stats["flat"] = not encloses
+    # a closed mesh's closest points lie on the field's surface (an open mesh's surface runs across its holes too,
+    # away from any closest point)
+    field.stats["surface_points"] = clean
     field.stats["problem_faces"] = int(problem.sum())
     field.sources = {field_id: SourceMesh(verts, tris, plan["triangle_ids"])}
     return field

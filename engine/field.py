@@ -228,6 +228,12 @@ class AdaptiveField:
         return [int(n) for n in np.diff(self.level_offsets)]
 
     @property
+    def is_empty(self) -> bool:
+        """Whether the field encloses nothing: no node inside (an offset that shrank a shape away; ``to_mesh`` then
+        has no triangles)."""
+        return not bool((self.values.numpy() < 0.0).any())
+
+    @property
     def field_id(self) -> int:
         return self.field_ids[0]
 
@@ -253,6 +259,7 @@ class AdaptiveField:
         f.codes = self.codes
         f.fine_count = int(self.level_offsets[1])
         f.tri = self.tri if self.tri is not None else wp.empty(0, dtype=wp.int32, device=self.device)
+        f.exact = int(bool(self.stats.get("exact_distance", False)))
         return f
 
     def __repr__(self) -> str:
@@ -461,14 +468,15 @@ class AdaptiveField:
         values = self.sample(grid).reshape(tuple(shape))
         return {"values": values, "origin": lo + 0.5 * spacing, "spacing": spacing}
 
-    def to_mesh(self, iso: float = 0.0, *, sharp: bool = True, return_creases: bool = False):
+    def to_mesh(self, iso: float = 0.0, *, sharp: bool | None = None, return_creases: bool = False):
         """The ``iso`` surface of the finest level's narrow band.
 
         Args:
             iso: Level to extract (world units; 0 is the surface, positive values offset it outwards).
             sharp: Keep creases and corners (dual marching cubes placing each vertex at the minimiser of the exact
                 tangent planes of its cube, :mod:`.dual`); ``False`` gives marching cubes, vertices on the lattice
-                edges.
+                edges. Default: sharp, except for a re-distanced field (``stats["exact_distance"]``: offsets and
+                shells), whose closest points lie on a marching-cubes surface, so there is no crease to recover.
             return_creases: Also return the crease edges the sharp extraction reconstructed.
         Returns:
             ``verts`` (V, 3) float32 and ``tris`` (T, 3) int32, counter-clockwise seen from outside; with
@@ -480,6 +488,8 @@ class AdaptiveField:
         iso = float(iso)
         if not np.isfinite(iso):
             raise ValueError(f"Expected a finite 'iso', but got {iso}.")
+        if sharp is None:
+            sharp = not self.stats.get("exact_distance", False)
         if self.placement is not None:  # extracted in its own frame, then placed
             frame = self.in_frame()
             mesh = frame.to_mesh(iso / self.placement.scale, sharp=sharp, return_creases=return_creases)

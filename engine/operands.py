@@ -21,6 +21,7 @@ from .sampling import (
     LEAF_TOLERANCE,
     FieldArg,
     clamp_to_domain,
+    closest_sample,
     coarse_mls,
     inside_domain,
     leaf_neighbours,
@@ -160,6 +161,19 @@ def coarse_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, cached: int, count: i
     xc = clamp_to_domain(f, xf)
     r = coarse_mls(f, count, ids, levels, xc, level_spacing(f, leaf[1]), f.values[leaf[0]])
     return to_world_sample(f, _beyond_domain(r, xf, xc)), leaf[0], count, ids, levels
+
+
+@wp.func
+def blend_sample(
+    f: FieldArg, walk: int, x: wp.vec3, leaf: wp.vec2i, cached: int, count: int, ids: vec27i, levels: vec27i
+):
+    """:func:`coarse_sample`, or with ``walk`` the distance to the operand's nearest stored closest point
+    (:func:`.sampling.closest_sample`): exact where the MLS estimate of a coarse leaf is not (a few voxels off a flat
+    face it reads up to a tenth too far), for blends that reach that far and operands whose closest points lie on
+    their surface."""
+    if walk == 1:
+        return closest_sample(f, x, leaf), cached, count, ids, levels
+    return coarse_sample(f, x, leaf, cached, count, ids, levels)
 
 
 @wp.func
