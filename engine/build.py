@@ -150,7 +150,9 @@ def build_fields(
         return fields
     # the modules a build launches (a thick one: those of the field operations too), compiled or loaded once,
     # before the threads
-    launched = (octree, distance, fim, winding, signs, holes, fieldops, sweeping, redistancing, sys.modules[__name__])
+    launched = (octree, distance, fim, winding, signs, holes, sys.modules[__name__])
+    if any(plan.get("thickness") is not None for plan in plans):  # loading hashes a module's kernels: only if needed
+        launched += (fieldops, sweeping, redistancing)
     for module in launched:
         wp.load_module(module, device=device)
     workers = min(len(meshes), os.cpu_count() or 1)
