@@ -137,9 +137,7 @@ def test_vertices_stay_in_their_cubes():
     coords, values, proj = field.coords[:n0], field.values[:n0], field.proj[:n0]
     tree = (field.child, field.level_offsets[field.levels - 1], field.top_dims, field.levels)
     cubes = extract.octree_level_cubes(coords, values, tree, origin=field.origin, spacing=H)
-    surface = dual.contour_dual(
-        cubes["cube_corners"], cubes["shifted"], values, coords, proj, origin=field.origin, spacing=H
-    )
+    surface = dual.contour_dual(cubes["cube_corners"], cubes["shifted"], coords, proj, origin=field.origin, spacing=H)
     lattice = coords.numpy()[cubes["cube_corners"].numpy()[:, 0]]
     local = (surface["verts"].astype(np.float64) - field.origin) / H - 0.5 - lattice[surface["cells"]]
     inside = np.all((local >= 0.0) & (local <= 1.0), axis=1)
@@ -263,7 +261,6 @@ def test_random_fields_give_closed_2_manifolds(seed):
     surface = dual.contour_dual(
         cubes["cube_corners"],
         cubes["shifted"],
-        wp.array(values[order], dtype=wp.float32),
         wp.array(coords[order], dtype=wp.vec3i),
         wp.array((coords[order] + 0.5).astype(np.float32), dtype=wp.vec3),  # no Hermite data: interpolant planes
         origin=np.zeros(3),
