@@ -42,11 +42,14 @@ from .parallel import launch_split
 from .quadric import (
     clamp_box,
     cube_corner,
+    is_smooth,
     pack_quadric,
+    plane_terms,
     quadric_at,
     solve_in_cube,
     solve_smooth,
     trilinear,
+    unpack_terms,
     vec8,
     vec10,
 )
@@ -66,8 +69,8 @@ SMOOTH_COS = 0.99
 HERMITE_TOLERANCE = 0.02
 
 
-# A node's plane weighs (distance to its closest point / this)^2 below this distance (voxels), where the direction
-# to that point turns to noise.
+# Below this distance (voxels) from its closest point a node's plane is damped, to (distance / this)^2 of its weight,
+# where the direction to that point turns to noise: only in a patch whose crease or corner misses its cube otherwise.
 HERMITE_NEAR = 0.12
 
 
@@ -247,22 +250,21 @@ def _place_vertices_kernel(
             crossings += 1.0
         mass = mass / crossings
         f_mass, g_mass = trilinear(vals, mass)
-        # the quadric's upper triangle, linear part and constant, summed over the planes of the patch's corners
-        a00 = float(0.0)
-        a01 = float(0.0)
-        a02 = float(0.0)
-        a11 = float(0.0)
-        a12 = float(0.0)
-        a22 = float(0.0)
-        atb = wp.vec3(0.0)
-        btb = float(0.0)
+        # the planes of the patch's corners, summed (plane_terms), and the part of that which planes of nodes near
+        # the surface lose when damped (see HERMITE_NEAR)
+        sums = vec10()
         planes = float(0.0)
         normal_sum = wp.vec3(0.0)
+        near_sums = vec10()
+        near_planes = float(0.0)
+        near_normals = wp.vec3(0.0)
         first_normal = wp.vec3(0.0)
-        min_cos = float(1.0)
+        first_heavy = wp.vec3(0.0)
+        min_cos = float(1.0)  # of all planes
+        min_cos_heavy = float(1.0)  # of the planes that keep at least half their weight when damped
         fallback = float(0.0)
         skipped = float(0.0)
-        weighty = int(0)
+        heavy = int(0)
         bits = ends
         while bits != 0:
             low = bits & (-bits)
@@ -278,25 +280,23 @@ def _place_vertices_kernel(
             if wp.dot(n, g_mass) <= 0.0:  # the far side of a plate thinner than a cell
                 fallback += 1.0
                 continue
-            w = weights[c]
-            b = offsets[c]
-            wn = w * n
-            a00 += wn[0] * n[0]
-            a01 += wn[0] * n[1]
-            a02 += wn[0] * n[2]
-            a11 += wn[1] * n[1]
-            a12 += wn[1] * n[2]
-            a22 += wn[2] * n[2]
-            atb += wn * b
-            btb += w * b * b
-            planes += w
-            normal_sum += wn
-            if w >= 0.5:
-                if weighty == 0:
-                    first_normal = n
-                    weighty = 1
-                min_cos = wp.min(min_cos, wp.dot(n, first_normal))
-        ata = wp.mat33(a00, a01, a02, a01, a11, a12, a02, a12, a22)
+            terms = plane_terms(n, offsets[c])
+            sums += terms
+            if planes == 0.0:
+                first_normal = n
+            planes += 1.0
+            normal_sum += n
+            min_cos = wp.min(min_cos, wp.dot(n, first_normal))
+            lost = 1.0 - weights[c]
+            if lost > 0.0:
+                near_sums += lost * terms
+                near_planes += lost
+                near_normals += lost * n
+            if lost <= 0.5:
+                if heavy == 0:
+                    first_heavy = n
+                    heavy = 1
+                min_cos_heavy = wp.min(min_cos_heavy, wp.dot(n, first_heavy))
         if planes == 0.0:
             fallback += skipped
         gl = wp.length(g_mass)
@@ -304,28 +304,23 @@ def _place_vertices_kernel(
             # corners whose Hermite data does not hold: the interpolant's tangent plane at the mass point moved onto
             # its zero set (one Newton step; values are in world units, positions in voxels)
             n = g_mass / gl
-            b = wp.dot(n, mass) - f_mass / gl
-            ata += fallback * wp.outer(n, n)
-            atb += fallback * n * b
-            btb += fallback * b * b
+            sums += fallback * plane_terms(n, wp.dot(n, mass) - f_mass / gl)
+            if planes == 0.0:
+                first_normal = n
+            if heavy == 0:
+                first_heavy = n
             planes += fallback
             normal_sum += fallback * n
-            if weighty == 0:
-                first_normal = n
             min_cos = wp.min(min_cos, wp.dot(n, first_normal))
+            min_cos_heavy = wp.min(min_cos_heavy, wp.dot(n, first_heavy))
+        ata, atb, btb = unpack_terms(sums)
         vid = base_vertex + p
         x = mass
         rank = int(0)
         if planes > 0.0:
-            # rank 1 for sure when the planes' spread about their mean normal is small: the mean normal's Rayleigh
-            # quotient bounds the largest eigenvalue from below, the trace less it the other two from above
-            mean = wp.normalize(normal_sum)
-            lam = wp.dot(mean, ata * mean)
-            spread = ata[0, 0] + ata[1, 1] + ata[2, 2] - lam
-            if min_cos >= smooth_cos or spread <= cutoff * lam:
-                x = solve_smooth(ata, atb - ata * mass, mass, normal_sum)
+            if is_smooth(ata, normal_sum, min_cos, smooth_cos, cutoff):
+                x = clamp_box(solve_smooth(ata, atb - ata * mass, mass, normal_sum), lo, hi)
                 rank = 1
-                x = clamp_box(x, lo, hi)
             else:
                 # crease and corner vertices may reach this far into a face neighbour the surface does not cross
                 wide_lo = wp.vec3(lo)
@@ -335,7 +330,19 @@ def _place_vertices_kernel(
                         wide_lo[a] = lo - reach
                     if cube_of_node[ids[wp.where(a == 0, 1, wp.where(a == 1, 3, 4))]] < 0:
                         wide_hi[a] = hi + reach
-                x, rank = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
+                x, rank, own = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
+                if own == 0 and near_planes > 0.0 and planes - near_planes > 0.0:
+                    # the crease or corner that planes of nodes near the surface make misses the cube (a crease just
+                    # past it, seen from a node within a fraction of a voxel of its other face): solved with those
+                    # planes damped
+                    ata, atb, btb = unpack_terms(sums - near_sums)
+                    planes = planes - near_planes
+                    normal_sum = normal_sum - near_normals
+                    if is_smooth(ata, normal_sum, min_cos_heavy, smooth_cos, cutoff):
+                        x = clamp_box(solve_smooth(ata, atb - ata * mass, mass, normal_sum), lo, hi)
+                        rank = 1
+                    else:
+                        x, rank, own = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
             quadrics[vid] = pack_quadric(ata, atb, btb, x, 1.0 / planes)
         else:
             quadrics[vid] = vec10()

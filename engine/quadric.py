@@ -19,6 +19,35 @@ CREASE_ANGLE = 25.0
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
 
+# A quadric in 10 floats: the upper triangle of A (a00, a01, a02, a11, a12, a22), then a vector and a constant. A sum
+# of planes' terms (plane_terms) holds A^T A, A^T b and b.b; a vertex's quadric about itself (pack_quadric) holds A,
+# the linear part r and the constant of E(x + d) = d^T A d + 2 d . r + E(x), per plane.
+vec10 = wp.types.vector(length=10, dtype=wp.float32)
+
+
+@wp.func
+def plane_terms(n: wp.vec3, b: float):
+    """What plane n.x = b adds to a sum of squared distances, as :data:`vec10`: n n^T (upper triangle), n b, b b."""
+    return vec10(
+        n[0] * n[0],
+        n[0] * n[1],
+        n[0] * n[2],
+        n[1] * n[1],
+        n[1] * n[2],
+        n[2] * n[2],
+        n[0] * b,
+        n[1] * b,
+        n[2] * b,
+        b * b,
+    )
+
+
+@wp.func
+def unpack_terms(s: vec10):
+    """(A^T A, A^T b, b.b) of a sum of :func:`plane_terms`."""
+    return wp.mat33(s[0], s[1], s[2], s[1], s[3], s[4], s[2], s[4], s[5]), wp.vec3(s[6], s[7], s[8]), s[9]
+
+
 # Bit c of these is corner c's offset along x, y, z (CORNER_OFFSETS as integer constants, no table reads).
 _BITS_X = int(sum(int(CORNER_OFFSETS[c][0]) << c for c in range(8)))
 _BITS_Y = int(sum(int(CORNER_OFFSETS[c][1]) << c for c in range(8)))
@@ -228,12 +257,13 @@ def solve_in_cube(
 ):
     """Minimiser of |A x - b|^2 near the mass point (``rhs = A^T b - A^T A mass``): the truncated pseudo-inverse
     solution if it lies in the box [wide_lo, wide_hi]; else the solution line of the two largest eigenvalues clipped
-    to that box; else the point of rank 1 clamped to the cube [lo, hi]^3. Returns (x, rank used)."""
+    to that box; else the point of rank 1 clamped to the cube [lo, hi]^3. Returns (x, rank used, 0 where that is
+    the last because the crease missed the box, else 1)."""
     d, e0, e1, e2 = eigen_sym3(ata)
     top = d[0]
     x = mass
     if top <= 0.0:
-        return clamp_box(x, lo, hi), 0
+        return clamp_box(x, lo, hi), 0, 1
     rank = int(1)
     if d[1] > cutoff * top:
         rank = 2
@@ -247,7 +277,7 @@ def solve_in_cube(
     if rank == 3:
         x3 = x2 + e2 * (wp.dot(e2, rhs) / d[2])
         if inside_box(x3, wp.vec3(lo), wp.vec3(hi)):
-            return x3, 3
+            return x3, 3, 1
     if rank >= 2:
         # the crease line through the cube, else through the box that reaches into the empty neighbours: the point
         # nearest the mass point within the middle half of the part inside, so that the crease vertices of
@@ -258,11 +288,20 @@ def solve_in_cube(
         if s[0] <= s[1]:
             quarter = 0.25 * (s[1] - s[0])
             t = wp.clamp(0.0, s[0] + quarter, s[1] - quarter)
-            return x2 + t * e2, 2
-    x = x1
-    if rank >= 2:
-        rank = 1
-    return clamp_box(x, lo, hi), rank
+            return x2 + t * e2, 2, 1
+    return clamp_box(x1, lo, hi), 1, wp.where(rank == 1, 1, 0)
+
+
+@wp.func
+def is_smooth(ata: wp.mat33, normal_sum: wp.vec3, min_cos: float, smooth_cos: float, cutoff: float):
+    """Whether a quadric is of rank 1: all its (heavy) normals within ``smooth_cos`` of the first, or, for sure, the
+    planes' spread about their mean normal small (the mean normal's Rayleigh quotient bounds the largest eigenvalue
+    from below, the trace less it the other two from above)."""
+    if min_cos >= smooth_cos:
+        return True
+    mean = wp.normalize(normal_sum)
+    lam = wp.dot(mean, ata * mean)
+    return ata[0, 0] + ata[1, 1] + ata[2, 2] - lam <= cutoff * lam
 
 
 @wp.func
@@ -273,11 +312,6 @@ def solve_smooth(ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, normal_sum: wp.vec3
     if lam <= 0.0:
         return mass
     return mass + e0 * (wp.dot(e0, rhs) / lam)
-
-
-# A vertex's quadric about itself (voxels): the upper triangle of A (a00, a01, a02, a11, a12, a22), the linear part
-# r and the constant, E(x + d) = d^T A d + 2 d . r + E(x), per plane.
-vec10 = wp.types.vector(length=10, dtype=wp.float32)
 
 
 @wp.func
