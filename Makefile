@@ -15,13 +15,15 @@ $(STAMP): requirements-dev.txt
 	$(PY) -m pip install -r requirements-dev.txt
 	touch $@
 
-# The whole suite: engine, Blender and packaging tests, including the slow install test.
+# The whole suite: engine, Blender and packaging tests, including the slow install test; one worker per core, each
+# taking whole test files (kernels are compiled once first: tests/warm_kernels.py).
+PARALLEL := -n auto --dist loadfile
 test: venv
-	$(PY) -m pytest $(PYTEST_ARGS)
+	$(PY) -m pytest $(PARALLEL) $(PYTEST_ARGS)
 
 # Everything but the slow tests (the install test builds a 150 MB zip and installs it in a bare bpy).
 test-fast: venv
-	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)
+	$(PY) -m pytest $(PARALLEL) -m "not slow" $(PYTEST_ARGS)
 
 lint: venv
 	$(PY) -m ruff check .

@@ -8,15 +8,18 @@ Run it with Blender or with the ``bpy`` module::
 
 Operands are the imported files (``.obj``, ``.ply``, ``.stl``; a file holding several meshes becomes one operand),
 then the named objects, in the order given: the first is the active object, so DIFFERENCE is the first operand
-minus all the others. The output is ``.ply``, ``.obj``, ``.stl`` or ``.blend``. The boolean runs through
-``bpy.ops.aasdf.boolean``; when AASDF is not already enabled, the repository this script sits in is registered as
-the package ``aasdf``. Prints each step as it goes (``--quiet``: only the summary; ``--verbose``: Warp's own start-up
-and kernel-loading lines too) and a one-line summary; exits with 2 on bad arguments or input and with 1 when the
-boolean fails or is empty, with the reason on stderr.
+minus all the others. ``--offset`` grows (or shrinks) the result and ``--shell`` hollows it (with one operand, that
+operand alone); ``--thickness`` gives surfaces that enclose nothing a wall; ``--blend-mode``, ``--no-sharp-edges``
+as the add-on's settings. The output is ``.ply``, ``.obj``, ``.stl`` or ``.blend``. Everything runs through the
+add-on's pipeline, as ``bpy.ops.aasdf.boolean`` does; when AASDF is not already enabled, the repository this script
+sits in is registered as the package ``aasdf``. Prints each step as it goes (``--quiet``: only the summary;
+``--verbose``: Warp's own start-up and kernel-loading lines too) and a one-line summary; exits with 2 on bad arguments
+or input and with 1 when the boolean fails or is empty, with the reason on stderr.
 """
 
 import argparse
 import importlib.util
+import math
 import os
 import shutil
 import sys
@@ -42,7 +45,7 @@ def script_args(argv):
 
 def parse_args(args):
     parser = argparse.ArgumentParser(prog="aasdf_batch.py", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--operation", required=True, type=str.lower, choices=sorted(OPERATIONS))
+    parser.add_argument("--operation", type=str.lower, choices=sorted(OPERATIONS), help="the boolean of the operands")
     parser.add_argument("--inputs", nargs="+", default=[], metavar="FILE", help="mesh files: .obj, .ply, .stl")
     parser.add_argument("--objects", nargs="+", default=[], metavar="NAME", help="mesh objects of the open .blend")
     parser.add_argument("--output", required=True, metavar="FILE", help=".ply, .obj, .stl or .blend")
@@ -51,6 +54,19 @@ def parse_args(args):
     parser.add_argument("--levels", type=int, default=4)
     parser.add_argument("--padding", type=int, default=1)
     parser.add_argument("--blend-radius", type=float, default=0.0, help="smooth blend radius (0: sharp)")
+    parser.add_argument("--blend-mode", type=str.upper, choices=["ROUND", "CHAMFER"], default="ROUND")
+    parser.add_argument(
+        "--thickness", type=float, default=0.0, help="a wall this thick for surfaces that enclose nothing (0: none)"
+    )
+    parser.add_argument("--offset", type=float, metavar="DISTANCE", help="then grow (> 0) or shrink (< 0) the result")
+    parser.add_argument("--shell", type=float, metavar="WALL", help="then hollow the result, walls this thick")
+    parser.add_argument("--shell-side", type=str.upper, choices=["INSIDE", "OUTSIDE", "CENTER"], default="INSIDE")
+    parser.add_argument(
+        "--sharp-edges",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="keep creases sharp (default) or round them (--no-sharp-edges: marching cubes)",
+    )
     parser.add_argument("--debug-volume", metavar="FILE", help="also write the result's field as a .vdb")
     parser.add_argument("--blend", metavar="FILE", help="open this .blend first (with the bpy module)")
     parser.add_argument("--verbose", action="store_true", help="also print Warp's start-up and kernel-loading lines")
@@ -72,14 +88,25 @@ def check_args(args):
         raise BatchError(f"cannot write {args.output}: use one of {', '.join([*EXPORTERS, '.blend'])}")
     if args.debug_volume is not None and Path(args.debug_volume).suffix.lower() != ".vdb":
         raise BatchError(f"the debug volume must be a .vdb file, not {args.debug_volume}")
-    if len(args.inputs) + len(args.objects) < 2:
-        raise BatchError("give at least two operands (--inputs and --objects together)")
+    count = len(args.inputs) + len(args.objects)
+    if args.offset is None and args.shell is None and count < 2:
+        raise BatchError("give at least two operands (--inputs and --objects together), or --offset or --shell")
+    if count == 0:
+        raise BatchError("give an operand (--inputs or --objects)")
+    if count > 1 and args.operation is None:
+        raise BatchError("give --operation to combine several operands")
+    for name in ("voxel_size", "blend_radius", "thickness", "offset", "shell"):
+        value = getattr(args, name)
+        if value is not None and not math.isfinite(value):
+            raise BatchError(f"--{name.replace('_', '-')} must be a finite number, not {value}")
+    if args.thickness < 0.0 or (args.shell is not None and args.shell <= 0.0):
+        raise BatchError("--thickness must not be negative and --shell must be positive")
     if args.resolution < 8 or args.voxel_size < 0.0:
         raise BatchError("--resolution must be at least 8 and --voxel-size not negative")
 
 
 def ensure_addon():
-    """The module of ``AASDF_OT_boolean``: the enabled add-on's, else the repository registered as ``aasdf``."""
+    """The add-on's package: the enabled add-on's, else the repository registered as ``aasdf``."""
     import bpy
 
     if not hasattr(bpy.types, "AASDF_OT_boolean"):
@@ -94,7 +121,7 @@ def ensure_addon():
         if PACKAGE not in bpy.context.preferences.addons:  # as enabling the add-on does: preferences exist
             bpy.context.preferences.addons.new().module = PACKAGE
         package.register()
-    return sys.modules[bpy.types.AASDF_OT_boolean.__module__]
+    return sys.modules[sys.modules[bpy.types.AASDF_OT_boolean.__module__].__name__.rpartition(".operators")[0]]
 
 
 def import_operand(path):
@@ -182,6 +209,19 @@ def progress_printer(start: float):
     return show
 
 
+def plan_of(args, count: int) -> tuple:
+    """What the run computes: the boolean of the operands (or the one operand), then the offset, then the shell."""
+    steps = ("field", 0)
+    if count > 1:
+        leaves = [("field", k) for k in range(count)]
+        steps = ("boolean", OPERATIONS[args.operation], args.blend_radius, args.blend_mode, leaves)
+    if args.offset is not None:
+        steps = ("offset", args.offset, steps)
+    if args.shell is not None:
+        steps = ("shell", args.shell, args.shell_side, steps)
+    return steps
+
+
 def run(args) -> int:
     check_args(args)
     if args.verbose:
@@ -190,47 +230,51 @@ def run(args) -> int:
 
     if args.blend is not None:
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
-    operator_module = ensure_addon()
+    package = ensure_addon()
+    pipeline, plan = package.aasdf_addon.pipeline, package.aasdf_addon.plan
+    engine = package.aasdf_addon.runtime.engine()
     if bpy.context.mode != "OBJECT":
         bpy.ops.object.mode_set(mode="OBJECT")
     # Names first: an unknown object fails before anything is imported.
     named = [scene_operand(name) for name in args.objects]
     operands = [import_operand(path) for path in args.inputs] + named
-    if len({obj.name for obj in operands}) < 2:
+    if len(operands) > 1 and len({obj.name for obj in operands}) < 2:
         raise BatchError("give at least two different operands")
-
     for obj in bpy.context.view_layer.objects:
-        obj.select_set(False)
-    for obj in operands:
-        obj.hide_set(False)
-        obj.select_set(True)
+        obj.select_set(obj in operands)
     bpy.context.view_layer.objects.active = operands[0]
     start = time.perf_counter()
-    pipeline = sys.modules[operator_module.__name__.rpartition(".operators")[0] + ".aasdf_addon.pipeline"]
     listener = progress_printer(start)
     if not args.quiet:
         pipeline.progress_listeners.append(listener)
+    settings = pipeline.FieldSettings(args.voxel_size, args.resolution, args.levels, args.padding)
+    output = pipeline.Output(
+        f"{operands[0].name}.aasdf",
+        hide_inputs=True,
+        debug_volume=args.debug_volume is not None,
+        sharp=args.sharp_edges,
+    )
     try:
-        status = bpy.ops.aasdf.boolean(
-            operation=OPERATIONS[args.operation],
-            voxel_size=args.voxel_size,
-            resolution=args.resolution,
-            levels=args.levels,
-            padding=args.padding,
-            blend=args.blend_radius,
-            debug_volume=args.debug_volume is not None,
-            hide_inputs=True,
+        summary = pipeline.run(
+            bpy.context,
+            [plan.Input(obj, args.thickness) for obj in operands],
+            plan_of(args, len(operands)),
+            settings,
+            output,
+            source="aasdf_batch",
+            operation=args.operation or "none",
         )
-    except RuntimeError as err:  # the operator's ERROR report
+    except engine.AasdfError as err:
         print(f"aasdf_batch: the boolean failed: {err}", file=sys.stderr)
         return 1
     finally:
         if listener in pipeline.progress_listeners:
             pipeline.progress_listeners.remove(listener)
-    if status != {"FINISHED"}:
-        print("aasdf_batch: the boolean result is empty: nothing written", file=sys.stderr)
+    if summary.get("empty"):
+        print("aasdf_batch: the result is empty: nothing written", file=sys.stderr)
         return 1
-    summary = dict(operator_module.last_run)
+    for warning in summary["warnings"]:
+        print(f"aasdf_batch: warning: {warning}", file=sys.stderr)
     result = bpy.data.objects[summary["object"]]
     if args.debug_volume is not None:
         volume = bpy.data.objects[f"{result.name}.sdf"].data
@@ -240,8 +284,17 @@ def run(args) -> int:
         obj.select_set(obj == result)
     bpy.context.view_layer.objects.active = result
     path = export_result(args)
+    what = " then ".join(
+        part
+        for part in (
+            f"{args.operation} of {summary['operands']} operands" if len(operands) > 1 else None,
+            f"offset {args.offset:+g}" if args.offset is not None else None,
+            f"shell {args.shell:g}" if args.shell is not None else None,
+        )
+        if part
+    )
     print(
-        f"aasdf_batch: {args.operation} of {summary['operands']} operands -> {path}: "
+        f"aasdf_batch: {what} -> {path}: "
         f"{summary['triangles']:,} triangles, {summary['nodes']:,} field nodes, "
         f"voxel size {summary['voxel_size']:.5g}, boolean {summary['seconds']:.2f} s, "
         f"total {time.perf_counter() - start:.2f} s"

@@ -193,7 +193,8 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
         attributes: What the faces carry (``transfer.face_attributes``): ``materials`` (the slots, ``None`` an empty
             one), ``material_index`` (F,), ``smooth`` (F,) bool, ``operand`` (F,) int (written as the face attribute
             ``transfer.OPERAND_ATTRIBUTE``), ``uv_maps`` {name: (3F, 2)} and ``colors`` {name: (data type, (3F, 4))}
-            per corner; any may be missing (default: flat faces, no materials).
+            per corner, ``creases`` (E, 2) vertex pairs of edges to mark sharp (``sharp_edge``); any may be missing
+            (default: flat faces, no materials).
         edge_cache: Optional dict kept with these triangles: an empty one receives the edges Blender derives, a filled
             one gives them back, so writing the same triangles again skips deriving them.
     Returns:
@@ -217,6 +218,9 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
         _cache_edges(mesh, edge_cache)
     if not len(tris):
         return mesh
+    creases = attributes.get("creases")
+    if creases is not None and len(creases):
+        _mark_sharp_edges(mesh, creases, len(verts))
     if attributes.get("material_index") is not None:
         _new_attribute(mesh, "material_index", "INT", "FACE", "value", attributes["material_index"], np.int32)
     smooth = attributes.get("smooth")
@@ -234,6 +238,17 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
     if len(mesh.color_attributes):  # what exporters and the viewport show: the first one
         mesh.color_attributes.active_color_index = mesh.color_attributes.render_color_index = 0
     return mesh
+
+
+def _mark_sharp_edges(mesh, creases, vertex_count):
+    """Set ``sharp_edge`` on the mesh's edges between the vertex pairs ``creases`` (E, 2)."""
+    pairs = np.empty(2 * len(mesh.edges), dtype=np.int64)
+    mesh.attributes[".edge_verts"].data.foreach_get("value", pairs)
+    pairs = np.sort(pairs.reshape(-1, 2), axis=1)
+    wanted = np.sort(np.asarray(creases, dtype=np.int64).reshape(-1, 2), axis=1)
+    keys = pairs[:, 0] * vertex_count + pairs[:, 1]
+    sharp = np.isin(keys, wanted[:, 0] * vertex_count + wanted[:, 1])
+    _new_attribute(mesh, "sharp_edge", "BOOLEAN", "EDGE", "value", sharp, bool)
 
 
 def _new_attribute(mesh, name, kind, domain, prop, values, dtype):

@@ -48,7 +48,7 @@ def limit_bytes(context=None) -> int:
     return int(mb) * 2**20
 
 
-def geometry_key(verts, tris, *, voxel_size, levels, padding, device) -> str:
+def geometry_key(verts, tris, *, voxel_size, levels, padding, device, thickness=0.0) -> str:
     """Hash of a mesh in its own frame and of the field settings: equal keys give the same field, up to where it is
     placed."""
     digest = hashlib.blake2b(digest_size=20)
@@ -56,7 +56,8 @@ def geometry_key(verts, tris, *, voxel_size, levels, padding, device) -> str:
         array = np.ascontiguousarray(array)
         digest.update(str(array.shape).encode())
         digest.update(array.tobytes())
-    digest.update(repr((float(voxel_size), int(levels), int(padding), str(device))).encode())
+    settings = (float(np.float32(voxel_size)), int(levels), int(padding), str(device), float(np.float32(thickness)))
+    digest.update(repr(settings).encode())
     return digest.hexdigest()
 
 

@@ -3,8 +3,8 @@
 ``plan_tree`` checks the whole tree before any work starts: every input socket connected, each Object node on a mesh
 object, each Collection node on a collection with mesh objects, Output nodes with distinct names of objects that are
 not their own inputs. Problems are written on their nodes (``node.message``) and raised together as ``AasdfError``,
-so the previous results stay as they are. A valid output becomes a plan: nested ``("field", k)``, ``("union", [...])``
-and ``(operation, blend, [...])`` over its operands, the distinct mesh objects below it in depth-first order.
+so the previous results stay as they are. A valid output becomes a plan (``aasdf_addon.plan``) over its operands, the
+distinct (mesh object, thickness) inputs below it in depth-first order.
 
 ``evaluate_tree`` then runs each output's plan through ``pipeline.run`` (read, key, cache, build, combine, extract,
 write), writing or updating the result object in place: the path ``aasdf.boolean`` takes.
@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import bpy
 
-from . import nodes, pipeline, runtime
+from . import nodes, pipeline, plan, runtime
 
 
 @dataclass
@@ -23,7 +23,7 @@ class OutputPlan:
 
     node_name: str
     object_name: str
-    operands: list  # distinct mesh objects, field_id = index
+    operands: list  # distinct plan.Input (a mesh object and its thickness), field_id = index
     plan: tuple
     collection: object = None  # where a new result object goes
     errors: dict = field(default_factory=dict)
@@ -95,17 +95,17 @@ def plan_tree(tree) -> list[OutputPlan]:
         linked = _linked_nodes(out.inputs[0])
         if not linked:
             errors[out.name] = "Connect the 'Field' input"
-            plan = None
+            steps = None
         else:
-            plan = _plan_node(linked[0], operands, errors, exclude)
+            steps = _plan_node(linked[0], operands, errors, exclude)
         target = bpy.data.objects.get(out.object_name)
         if target is not None and target.type != "MESH":
             errors[out.name] = f"'{target.name}' exists and is not a mesh object"
-        elif target is not None and target in operands:
+        elif target is not None and target in [item.obj for item in operands]:
             errors[out.name] = f"'{target.name}' is also an input of this output"
-        first = operands[0] if operands else None
+        first = operands[0].obj if operands else None
         collection = first.users_collection[0] if first is not None and first.users_collection else None
-        plans.append(OutputPlan(out.name, out.object_name, operands, plan, collection))
+        plans.append(OutputPlan(out.name, out.object_name, operands, steps, collection))
 
     _set_messages(tree, errors)
     if errors:
@@ -114,10 +114,11 @@ def plan_tree(tree) -> list[OutputPlan]:
     return plans
 
 
-def _operand(obj, operands) -> tuple:
-    if obj not in operands:
-        operands.append(obj)
-    return ("field", operands.index(obj))
+def _operand(obj, thickness, operands) -> tuple:
+    item = plan.Input(obj, float(thickness))
+    if item not in operands:
+        operands.append(item)
+    return ("field", operands.index(item))
 
 
 def _plan_node(node, operands, errors, exclude):
@@ -131,7 +132,7 @@ def _plan_node(node, operands, errors, exclude):
         if obj.type != "MESH":
             errors[node.name] = f"'{obj.name}' is not a mesh object"
             return None
-        return _operand(obj, operands)
+        return _operand(obj, node.thickness, operands)
     if kind == nodes.COLLECTION:
         collection = node.collection
         if collection is None:
@@ -141,7 +142,7 @@ def _plan_node(node, operands, errors, exclude):
         if not meshes:
             errors[node.name] = f"Collection '{collection.name}' has no mesh objects"
             return None
-        return ("UNION", 0.0, [_operand(obj, operands) for obj in meshes])
+        return ("boolean", "UNION", 0.0, "ROUND", [_operand(obj, node.thickness, operands) for obj in meshes])
     if kind in nodes.BOOLEAN_NODES:
         children = []
         for socket in node.inputs:
@@ -151,7 +152,18 @@ def _plan_node(node, operands, errors, exclude):
             children += [_plan_node(child, operands, errors, exclude) for child in linked]
         if node.name in errors or None in children:
             return None
-        return (nodes.BOOLEAN_NODES[kind], float(node.blend), children)
+        return ("boolean", nodes.BOOLEAN_NODES[kind], float(node.blend), node.blend_mode, children)
+    if kind in (nodes.OFFSET, nodes.SHELL):
+        linked = _linked_nodes(node.inputs[0])
+        if not linked:
+            errors[node.name] = "Connect the 'Field' input"
+            return None
+        child = _plan_node(linked[0], operands, errors, exclude)
+        if child is None:
+            return None
+        if kind == nodes.OFFSET:
+            return ("offset", float(node.distance), child)
+        return ("shell", float(node.wall), node.side, child)
     errors[node.name] = f"A {node.bl_label} node cannot feed an SDF input"
     return None
 
@@ -183,18 +195,19 @@ def evaluate_tree(context, tree) -> list[dict]:
     plans = plan_tree(tree)
     settings = pipeline.FieldSettings.of(tree)
     runs = []
-    for plan in plans:
-        out = tree.nodes[plan.node_name]
+    for output_plan in plans:
+        out = tree.nodes[output_plan.node_name]
         output = pipeline.Output(
-            plan.object_name,
-            target=bpy.data.objects.get(plan.object_name),
-            collection=plan.collection,
+            output_plan.object_name,
+            target=bpy.data.objects.get(output_plan.object_name),
+            collection=output_plan.collection,
             select=False,
             hide_inputs=tree.hide_inputs,
+            sharp=tree.sharp_edges,
         )
         try:
             numbers = pipeline.run(
-                context, plan.operands, plan.plan, settings, output, source=tree.name, operation="TREE"
+                context, output_plan.operands, output_plan.plan, settings, output, source=tree.name, operation="TREE"
             )
         except engine.AasdfError as err:
             out.message = str(err)

@@ -1,8 +1,9 @@
 """The ``AASDF CSG`` node tree: procedural SDF booleans that stay live.
 
-Input nodes (Object, Collection) give fields; Union / Intersect / Difference nodes combine them (each with a blend
-radius); an Output node names the object that receives the result. Blender only stores and draws these trees: they are
-evaluated by ``aasdf_addon.csg`` (``aasdf.evaluate_tree``, or Auto Update through ``aasdf_addon.autoupdate``). Every
+Input nodes (Object, Collection) give fields (each with a thickness for surfaces that enclose nothing); Union /
+Intersect / Difference nodes combine them (each with a blend radius and mode); Offset grows or shrinks a field and Shell
+hollows it; an Output node names the object that receives the result. Blender only stores and draws these trees: they
+are evaluated by ``aasdf_addon.csg`` (``aasdf.evaluate_tree``, or Auto Update through ``aasdf_addon.autoupdate``). Every
 setting that changes a result tells ``autoupdate`` that its tree changed; a tree gets a fake user as soon as it has
 nodes, so it is saved with the .blend even when no editor shows it.
 """
@@ -13,18 +14,25 @@ from bpy.props import PointerProperty, StringProperty
 from .properties import CSG_TREE as TREE
 from .properties import (
     auto_update_property,
+    blend_mode_property,
     blend_property,
     hide_inputs_property,
     levels_property,
     message_property,
+    offset_distance_property,
     padding_property,
     resolution_property,
+    sharp_edges_property,
+    shell_side_property,
+    thickness_property,
     voxel_size_property,
+    wall_thickness_property,
 )
 
 SOCKET = "AASDF_NS_field"
 OBJECT, COLLECTION = "AASDF_N_object", "AASDF_N_collection"
 UNION, INTERSECT, DIFFERENCE = "AASDF_N_union", "AASDF_N_intersect", "AASDF_N_difference"
+OFFSET, SHELL = "AASDF_N_offset", "AASDF_N_shell"
 OUTPUT = "AASDF_N_output"
 
 # Boolean node type -> operation identifier of ``properties.OPERATIONS``.
@@ -55,6 +63,7 @@ class AASDF_NT_csg(bpy.types.NodeTree):
     resolution: resolution_property(default=128, update=_changed)
     levels: levels_property(default=5, update=_changed)
     padding: padding_property(default=2, update=_changed)
+    sharp_edges: sharp_edges_property(update=_changed)
     auto_update: auto_update_property(update=_changed)
     hide_inputs: hide_inputs_property(default=False)
     message: message_property()
@@ -115,12 +124,14 @@ class AASDF_N_object(CsgNode, bpy.types.Node):
         poll=lambda self, obj: obj.type == "MESH",
         update=_changed,
     )
+    thickness: thickness_property(update=_changed)
 
     def init(self, context):
         self.outputs.new(SOCKET, "Field")
 
     def draw_settings(self, layout):
         layout.prop(self, "object", text="")
+        layout.prop(self, "thickness")
 
 
 class AASDF_N_collection(CsgNode, bpy.types.Node):
@@ -134,19 +145,23 @@ class AASDF_N_collection(CsgNode, bpy.types.Node):
         type=bpy.types.Collection,
         update=_changed,
     )
+    thickness: thickness_property(update=_changed)
 
     def init(self, context):
         self.outputs.new(SOCKET, "Field")
 
     def draw_settings(self, layout):
         layout.prop(self, "collection", text="")
+        layout.prop(self, "thickness")
 
 
 class BooleanNode(CsgNode):
     blend: blend_property(update=_changed)
+    blend_mode: blend_mode_property(update=_changed)
 
     def draw_settings(self, layout):
         layout.prop(self, "blend")
+        layout.prop(self, "blend_mode", text="")
 
 
 class AASDF_N_union(BooleanNode, bpy.types.Node):
@@ -180,6 +195,38 @@ class AASDF_N_difference(BooleanNode, bpy.types.Node):
         self.outputs.new(SOCKET, "Field")
 
 
+class AASDF_N_offset(CsgNode, bpy.types.Node):
+    """The connected field's surface moved outwards (positive distance) or inwards (negative)"""
+
+    bl_idname, bl_label, bl_icon = OFFSET, "Offset", "MOD_SKIN"
+
+    distance: offset_distance_property(update=_changed)
+
+    def init(self, context):
+        self.inputs.new(SOCKET, "Field")
+        self.outputs.new(SOCKET, "Field")
+
+    def draw_settings(self, layout):
+        layout.prop(self, "distance")
+
+
+class AASDF_N_shell(CsgNode, bpy.types.Node):
+    """A wall of the given thickness along the connected field's surface: the solid hollowed"""
+
+    bl_idname, bl_label, bl_icon = SHELL, "Shell", "MOD_SOLIDIFY"
+
+    wall: wall_thickness_property(update=_changed)
+    side: shell_side_property(update=_changed)
+
+    def init(self, context):
+        self.inputs.new(SOCKET, "Field")
+        self.outputs.new(SOCKET, "Field")
+
+    def draw_settings(self, layout):
+        layout.prop(self, "wall")
+        layout.prop(self, "side", text="")
+
+
 class AASDF_N_output(CsgNode, bpy.types.Node):
     """Writes the connected field's surface into the named mesh object (created when missing, else updated in place)"""
 
@@ -207,5 +254,7 @@ classes = (
     AASDF_N_union,
     AASDF_N_intersect,
     AASDF_N_difference,
+    AASDF_N_offset,
+    AASDF_N_shell,
     AASDF_N_output,
 )

@@ -6,10 +6,10 @@ tree: read → key → cache → build → combine → extract → write, in tha
 3. cache: ``cache.find`` returns the fields it has;
 4. build: the missing ones are built together (``engine.build_fields``, checked together first) and ``cache.store``d;
    each field is relabelled with its operand's index (``field_id`` = position in the plan's operand list);
-5. combine: a plan (``("field", k)`` leaves, ``(operation, blend, [children])`` nodes) folded with the engine's
-   booleans as balanced binary trees; the last result is reused when nothing changed (``cache.find_result``);
-6. extract: the result's zero surface, each face carrying over its source face's material, shading, UV maps and
-   colours (``transfer``);
+5. combine: a plan (``aasdf_addon.plan``: booleans, offsets, shells over the operands' fields) evaluated; the last
+   result is reused when nothing changed (``cache.find_result``);
+6. extract: the result's zero surface (creases kept sharp unless asked otherwise), each face carrying over its source
+   face's material, shading, UV maps and colours (``transfer``);
 7. write: a new object, or new mesh data for an existing one, plus debug objects and hidden inputs when asked.
 
 ``run`` does all of it, owns the progress bar and the status text, and returns the numbers of the run, also kept in
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import bridge, cache, runtime, transfer
+from . import bridge, cache, plan, runtime, transfer
 
 # Numbers of the last successful run (``aasdf.boolean`` or a CSG tree): read by the sidebar and by scripts.
 last_run: dict = {}
@@ -32,8 +32,6 @@ STAGES = ("read", "fields", "booleans", "surface", "attributes", "write")
 
 # Callables ``listener(text)`` told each step of a run (the batch script prints them).
 progress_listeners: list = []
-
-_ENGINE_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
 
 
 @dataclass(frozen=True)
@@ -63,15 +61,7 @@ class Output:
     select: bool = True
     hide_inputs: bool = False
     debug_volume: bool = False
-
-
-def boolean_plan(operation: str, count: int, blend: float = 0.0) -> tuple:
-    """The plan of ``aasdf.boolean`` over ``count`` operands: DIFFERENCE is the first minus all the others (their
-    union is sharp; ``blend`` rounds the final cut only), UNION and INTERSECT take them all."""
-    if operation not in _ENGINE_OPS:
-        raise ValueError(f"Expected 'operation' in {tuple(_ENGINE_OPS)}, but got {operation!r}.")
-    leaves = [("field", k) for k in range(count)]
-    return (operation, float(blend), leaves)
+    sharp: bool = True  # creases kept sharp (dual contouring) or rounded (marching cubes)
 
 
 class Progress:
@@ -176,22 +166,44 @@ def _placement(matrix_now, matrix_built):
     return relative
 
 
-def operand_fields(context, operands, settings: FieldSettings, voxel_size: float, progress=None) -> list:
+def operand_fields(
+    context, operands, settings: FieldSettings, voxel_size: float, progress=None, thickness=None
+) -> list:
     """Key → cache → build for read operands (``bridge.read_operands``): one field per operand, operand ``k``'s
     with ``field_id`` k, placed where its object is. A cached field of the same geometry and settings (the object's
     own, or a duplicate's) is placed by the rigid motion and uniform scale from where it was built; what is missing
-    is checked together first and built at the same time, one field per distinct geometry.
+    is checked together first and built at the same time, one field per distinct geometry. ``thickness`` (one per
+    operand, default 0) gives an operand whose surface encloses no volume (a plane, a sheet) a wall that thick,
+    centred on it; operands that enclose a volume stay as they are.
 
     Raises:
-        AasdfError: From the engine, its message naming the object.
+        AasdfError: From the engine, its message naming the object; or naming an operand that encloses no volume.
     """
+    wanted = [0.0] * len(operands) if thickness is None else [float(t) for t in thickness]
+    placed = _placed_fields(context, operands, settings, voxel_size, progress, [0.0] * len(operands))
+    flat = [k for k, field in enumerate(placed) if not field.encloses_volume and wanted[k] > 0.0]
+    if flat:  # a second field, with the wall, for each surface that encloses nothing
+        walls = [wanted[k] for k in flat]
+        thick = _placed_fields(context, [operands[k] for k in flat], settings, voxel_size, progress, walls)
+        for k, field in zip(flat, thick, strict=True):
+            placed[k] = field
+    for k, field in enumerate(placed):
+        if not field.encloses_volume:
+            raise runtime.engine().AasdfError(
+                f"'{operands[k].name}' encloses no volume: give it a thickness or close it"
+            )
+    return [field.relabel(k) for k, field in enumerate(placed)]
+
+
+def _placed_fields(context, operands, settings: FieldSettings, voxel_size: float, progress, thickness) -> list:
+    """One field per operand, each with the wall ``thickness[k]`` (0: none), from the cache or built; placed."""
     engine = runtime.engine()
     device = runtime.device(context)
     options = {"voxel_size": voxel_size, "levels": settings.levels, "padding": settings.padding}
     placed = [None] * len(operands)
     missing = {}  # key -> the operands that need it built
     for k, operand in enumerate(operands):
-        key = cache.geometry_key(operand.verts, operand.tris, **options, device=device)
+        key = cache.geometry_key(operand.verts, operand.tris, **options, thickness=thickness[k], device=device)
         found = cache.find(key) if key not in missing else None
         relative = _placement(operand.matrix, found[1]) if found is not None else None
         if relative is None and (found is not None or key in missing):
@@ -212,7 +224,15 @@ def operand_fields(context, operands, settings: FieldSettings, voxel_size: float
         if progress is not None:
             progress.step(f"building the fields of {', '.join(operands[k].name for k in first)}")
         try:
-            built = engine.build_fields([operands[k].world() for k in first], **options, device=device)
+            built = [None] * len(first)
+            by_thickness = {}
+            for j, k in enumerate(first):
+                by_thickness.setdefault(thickness[k], []).append(j)
+            for wall, js in by_thickness.items():  # checked and built together, a group per thickness
+                meshes = [operands[first[j]].world() for j in js]
+                extra = {"thickness": wall} if wall > 0.0 else {}
+                for j, field in zip(js, engine.build_fields(meshes, **options, **extra, device=device), strict=True):
+                    built[j] = field
         except engine.AasdfError as err:
             message = str(err)
             if message.startswith("Mesh "):  # "Mesh <j>: ..." counts the meshes built: name the object instead
@@ -225,25 +245,7 @@ def operand_fields(context, operands, settings: FieldSettings, voxel_size: float
             for k in ks:
                 relative = _placement(operands[k].matrix, operands[ks[0]].matrix)
                 placed[k] = field if k == ks[0] else field.transformed(relative)
-    return [field.relabel(k) for k, field in enumerate(placed)]
-
-
-def combine(plan: tuple, fields: list, progress=None):
-    """The field of a plan: ``("field", k)`` is ``fields[k]``; ``(operation, blend, children)`` combines its
-    children as a balanced binary tree (depth ``ceil(log2 n)``), DIFFERENCE as the first child minus the union of
-    the others."""
-    if plan[0] == "field":
-        return fields[plan[1]]
-    engine = runtime.engine()
-    operation, blend, children = plan
-    items = [combine(child, fields, progress) for child in children]
-    if operation == "DIFFERENCE" and len(items) > 1:
-        cutter = _fold(engine.union, items[1:], 0.0, progress)
-        result = engine.difference(items[0], cutter, blend=blend)
-        if progress is not None:
-            progress.step("combining fields")
-        return result
-    return _fold(getattr(engine, _ENGINE_OPS[operation]), items, blend, progress)
+    return placed
 
 
 def _matrix_bytes(field) -> bytes:
@@ -251,31 +253,17 @@ def _matrix_bytes(field) -> bytes:
     return b"" if field.placement is None else field.placement.matrix.tobytes()
 
 
-def _fold(op, items, blend, progress):
-    items = list(items)
-    while len(items) > 1:
-        paired = []
-        for i in range(0, len(items) - 1, 2):
-            paired.append(op(items[i], items[i + 1], blend=blend))
-            if progress is not None:
-                progress.step("combining fields")
-        if len(items) % 2:
-            paired.append(items[-1])
-        items = paired
-    return items[0]
-
-
-def extract(field, surface: dict) -> dict:
+def extract(field, surface: dict, *, sharp: bool = True) -> dict:
     """The zero surface of ``field``, computed once per result (``surface`` is the dict the cache keeps with it).
 
     Returns:
-        ``{"verts": (V,3) float32, "tris": (F,3) int32, "edges": the surface's edge cache (see
-        ``bridge.result_mesh``)}``.
+        ``{"verts": (V,3) float32, "tris": (F,3) int32, "creases": (E,2) int32 vertex pairs of the edges
+        reconstructed as creases, "edges": the surface's edge cache (see ``bridge.result_mesh``)}``.
     """
     if "verts" not in surface:
-        surface["verts"], surface["tris"] = field.to_mesh()
+        surface["verts"], surface["tris"], surface["creases"] = field.to_mesh(sharp=sharp, return_creases=True)
     edges = surface.setdefault("edges", {})  # filled by the first write, reused by the next ones
-    return {"verts": surface["verts"], "tris": surface["tris"], "edges": edges}
+    return {"verts": surface["verts"], "tris": surface["tris"], "creases": surface["creases"], "edges": edges}
 
 
 def carry_over(field, surface: dict, operands) -> dict:
@@ -291,7 +279,7 @@ def carry_over(field, surface: dict, operands) -> dict:
 
 def write(context, result: dict, output: Output):
     """Write an ``extract`` result: into ``output.target``'s new mesh data (in place), or as a new object."""
-    arrays = (result["verts"], result["tris"], result["attributes"])
+    arrays = (result["verts"], result["tris"], {**result["attributes"], "creases": result["creases"]})
     if output.target is not None:
         if not output.target.users_collection:  # an orphan: show it again
             (output.collection or context.scene.collection).objects.link(output.target)
@@ -304,8 +292,9 @@ def write(context, result: dict, output: Output):
 # ---- a whole run ----
 
 
-def run(context, objects, plan, settings: FieldSettings, output: Output, *, source: str, operation: str) -> dict:
-    """Evaluate ``plan`` over ``objects`` (``("field", k)`` is ``objects[k]``) and write the result.
+def run(context, inputs, steps, settings: FieldSettings, output: Output, *, source: str, operation: str) -> dict:
+    """Evaluate the plan ``steps`` over ``inputs`` (``plan.Input``, or mesh objects taken as they are;
+    ``("field", k)`` is ``inputs[k]``) and write the result.
 
     Returns:
         The numbers of the run (also in ``last_run`` unless the result is empty): ``seconds``, ``stages``, ``nodes``,
@@ -316,6 +305,8 @@ def run(context, objects, plan, settings: FieldSettings, output: Output, *, sour
         AasdfError: Bad input or too fine for memory, the object named; nothing is written.
     """
     engine = runtime.engine()
+    inputs = [item if isinstance(item, plan.Input) else plan.Input(item) for item in inputs]
+    objects = [item.obj for item in inputs]
     timer = Timer()
     progress = Progress(context, len(objects) + 5)
     warnings = []
@@ -326,18 +317,21 @@ def run(context, objects, plan, settings: FieldSettings, output: Output, *, sour
             voxel_size = voxel_size_for(objects, depsgraph, settings)
             operands = bridge.read_operands(objects, depsgraph)
         with timer.stage("fields"):
-            fields = operand_fields(context, operands, settings, voxel_size, progress)
+            fields = operand_fields(
+                context, operands, settings, voxel_size, progress, thickness=[item.thickness for item in inputs]
+            )
         with timer.stage("booleans"):
-            key = (plan, tuple((id(f.codes), f.field_ids, _matrix_bytes(f)) for f in fields))
+            fingerprint = tuple((id(f.codes), f.field_ids, _matrix_bytes(f)) for f in fields)
+            key = (steps, fingerprint, output.sharp)
             found = cache.find_result(key)
             if found is None:
-                field = combine(plan, fields, progress)
+                field = plan.evaluate(steps, fields, progress)
                 surface = cache.store_result(key, fields, field)
             else:
                 field, surface = found
         with timer.stage("surface"):
             progress.step("extracting the surface")
-            result = extract(field, surface)
+            result = extract(field, surface, sharp=output.sharp)
         if len(result["tris"]) == 0:
             return {"object": output.target.name if output.target is not None else output.name, "empty": True}
         with timer.stage("attributes"):

@@ -14,6 +14,19 @@ OPERATIONS = (
 )
 
 
+# How a blend shapes a seam: rounded (polynomial smooth minimum) or a flat bevel.
+BLEND_MODES = (
+    ("ROUND", "Round", "A rounded fillet along the seams"),
+    ("CHAMFER", "Chamfer", "A flat bevel along the seams, meeting each face Blend away from the seam"),
+)
+
+# Which side of a surface a shell's wall lies on.
+SHELL_SIDES = (
+    ("INSIDE", "Inside", "The wall inside the surface: the outside stays where it is"),
+    ("OUTSIDE", "Outside", "The wall outside the surface: the inside stays where it is"),
+    ("CENTER", "Center", "The wall centred on the surface"),
+)
+
 CSG_TREE = "AASDF_NT_csg"  # bl_idname of the node tree (``aasdf_addon.nodes``)
 
 _ALLOWED = {"default", "update"}
@@ -97,6 +110,76 @@ def blend_property(**overrides):
     return _make(FloatProperty, options, overrides)
 
 
+def blend_mode_property(**overrides):
+    options = {
+        "name": "Blend Mode",
+        "description": "How Blend shapes the seams: a rounded fillet or a flat chamfer",
+        "items": BLEND_MODES,
+        "default": "ROUND",
+    }
+    return _make(EnumProperty, options, overrides)
+
+
+def thickness_property(**overrides):
+    options = {
+        "name": "Thickness",
+        "description": "Gives surfaces that enclose no volume (planes, sheets, single-sided scans) a wall this thick, "
+        "centred on the surface; 0 uses each input as it is",
+        "default": 0.0,
+        "min": 0.0,
+        "soft_max": 1.0,
+        "precision": 4,
+        "subtype": "DISTANCE",
+    }
+    return _make(FloatProperty, options, overrides)
+
+
+def offset_distance_property(**overrides):
+    options = {
+        "name": "Distance",
+        "description": "How far the surface moves: outwards (grow) when positive, inwards (shrink) when negative",
+        "default": 0.05,
+        "soft_min": -1.0,
+        "soft_max": 1.0,
+        "precision": 4,
+        "subtype": "DISTANCE",
+    }
+    return _make(FloatProperty, options, overrides)
+
+
+def wall_thickness_property(**overrides):
+    options = {
+        "name": "Wall",
+        "description": "Thickness of the shell's wall (at least two voxels)",
+        "default": 0.05,
+        "min": 0.0,
+        "soft_max": 1.0,
+        "precision": 4,
+        "subtype": "DISTANCE",
+    }
+    return _make(FloatProperty, options, overrides)
+
+
+def shell_side_property(**overrides):
+    options = {
+        "name": "Side",
+        "description": "Which side of the surface the wall lies on",
+        "items": SHELL_SIDES,
+        "default": "INSIDE",
+    }
+    return _make(EnumProperty, options, overrides)
+
+
+def sharp_edges_property(**overrides):
+    options = {
+        "name": "Sharp Edges",
+        "description": "Keep the creases of the result sharp (edges and corners reconstructed from the inputs' exact "
+        "closest points, marked Sharp); off: marching cubes, every crease rounded to about a voxel",
+        "default": True,
+    }
+    return _make(BoolProperty, options, overrides)
+
+
 def hide_inputs_property(**overrides):
     options = {
         "name": "Hide Inputs",
@@ -137,8 +220,14 @@ class AASDF_PG_scene(bpy.types.PropertyGroup):
     levels: levels_property()
     padding: padding_property()
     blend: blend_property()
+    blend_mode: blend_mode_property()
+    thickness: thickness_property()
+    sharp_edges: sharp_edges_property()
     hide_inputs: hide_inputs_property()
     debug_volume: debug_volume_property()
+    offset_distance: offset_distance_property()
+    wall: wall_thickness_property()
+    shell_side: shell_side_property()
     tree: PointerProperty(
         name="CSG Tree",
         description="The AASDF CSG node tree shown in the sidebar",

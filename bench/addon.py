@@ -4,8 +4,8 @@ For each case and finest spacing (combined bounding-box diagonal / 256 and / 512
 size so that moving an operand does not change it), in one ``bpy`` process with the add-on registered:
 
 - **cold**: field cache and boolean memo cleared, both fields built, boolean, surface, result object written;
-- **warm**: the second operand moved a little (a new position every run, so its field is rebuilt; the first operand's
-  field comes from the cache);
+- **moved**: the second operand moved a little (a new position every run: its cached field is placed there, nothing
+  is built); **turned**: the same, turned 17 degrees about two axes;
 - **re-run**: nothing changed (the redo panel, a script calling the operator again): cached fields and boolean;
 - **GN SDF**: Mesh to SDF Grid ×2 → SDF Grid Boolean → Grid to Mesh on fresh objects (geometry nodes keeps no
   per-operand grid, so moving an operand re-evaluates all of it).
@@ -15,7 +15,10 @@ within minutes); times are medians of ``--repeat`` rounds (default 5) after a wa
 call (it includes reading the evaluated meshes and writing the result object). Ratios are the median of the rounds'
 ratios to that round's GN SDF time, with the smallest and largest in brackets.
 
-    .venv/bin/python bench/addon.py [--cases bunny-spot spheres] [--resolutions 256 512] [--repeat 5]
+Then the stages of the moved case, and a drag: ``--drag-moves`` (10) successive moves of the cutter through a CSG
+tree, the tree evaluated after each, against as many geometry-nodes evaluations.
+
+    .venv/bin/python bench/addon.py [--cases bunny-spot spheres spheres-100k] [--resolutions 256 512] [--repeat 5]
 """
 
 from __future__ import annotations
@@ -108,7 +111,13 @@ def _clear_cache():
     cache.clear()  # fields and the last result
 
 
+def _turn(obj, step: int):
+    """Turn an object 17 degrees about x and y (a new small extra angle each step, so each run is a new pose)."""
+    obj.rotation_euler = (np.radians(17.0 + 0.1 * step), np.radians(17.0), 0.0)
+
+
 def measure(a, b, voxel_size, repeat):
+    """Cold, one operand moved, one operand turned, nothing changed, and the geometry-nodes pipeline, in rounds."""
     bpy.ops.wm.read_homefile(use_empty=True)
     first = baselines.mesh_object("operand_a", *a)
     second = baselines.mesh_object("operand_b", *b)
@@ -116,12 +125,14 @@ def measure(a, b, voxel_size, repeat):
     _decorate(second, "b")
     bpy.context.view_layer.update()
     diag = float(np.linalg.norm(b[0].max(0) - b[0].min(0)))
-    out = {"cold": [], "warm": [], "rerun": [], "gn": [], "attributes": []}
+    out = {"cold": [], "moved": [], "turned": [], "rerun": [], "gn": [], "attributes": []}
+    stages = []
     built = {}
     step = 0
 
     def gn_run(k):
-        moved = (b[0] + np.float32([second.location.x, 0.0, 0.0]), b[1])
+        matrix = np.array(second.matrix_world, dtype=np.float64)
+        moved = ((b[0] @ matrix[:3, :3].T + matrix[:3, 3]).astype(np.float32), b[1])
         gn = baselines.gn_sdf_boolean(a, moved, OPERATION, voxel_size)
         if k:
             out["gn"].append(gn["seconds"])
@@ -135,23 +146,85 @@ def measure(a, b, voxel_size, repeat):
         if k:
             out["cold"].append(seconds)
             out["attributes"].append(numbers["stages"]["attributes"] / seconds)
-        step += 1
-        second.location.x = 1.0e-3 * diag * step
-        bpy.context.view_layer.update()
-        seconds, numbers = _run_operator(first, second, voxel_size)
-        built["warm"] = numbers["fields_built"]
-        if k:
-            out["warm"].append(seconds)
+        for case in ("moved", "turned"):
+            step += 1
+            second.location.x = 1.0e-3 * diag * step
+            if case == "turned":
+                _turn(second, step)
+            bpy.context.view_layer.update()
+            seconds, numbers = _run_operator(first, second, voxel_size)
+            built[case] = numbers["fields_built"]
+            if k:
+                out[case].append(seconds)
+                if case == "moved":
+                    stages.append(numbers["stages"])
         seconds, numbers = _run_operator(first, second, voxel_size)
         built["rerun"] = numbers["fields_built"]
         if k:
             out["rerun"].append(seconds)
         if k % 2 == 0:
             gn_run(k)
+        second.rotation_euler = (0.0, 0.0, 0.0)
+        bpy.context.view_layer.update()
     medians = {key: statistics.median(v) for key, v in out.items()}
-    for key in ("cold", "warm", "rerun"):
+    for key in ("cold", "moved", "turned", "rerun"):
         medians[f"{key}_ratio"] = round_ratios(out[key], out["gn"])
+    medians["stages"] = {name: statistics.median(run[name] for run in stages) for name in stages[0]}
     return medians, built
+
+
+def drag(a, b, voxel_size, moves: int = 10, repeat: int = 3) -> dict:
+    """A drag through a CSG tree: ``moves`` successive moves of the cutter, the tree evaluated after each, against as
+    many geometry-nodes evaluations; ``repeat`` alternating rounds. Returns seconds per drag and the ratios."""
+    from aasdf.aasdf_addon import cache, csg, nodes
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    first = baselines.mesh_object("operand_a", *a)
+    second = baselines.mesh_object("operand_b", *b)
+    bpy.context.view_layer.update()
+    tree = bpy.data.node_groups.new("Drag", nodes.TREE)
+    tree.voxel_size = voxel_size
+    node_a, node_b = tree.nodes.new(nodes.OBJECT), tree.nodes.new(nodes.OBJECT)
+    node_a.object, node_b.object = first, second
+    difference, output = tree.nodes.new(nodes.DIFFERENCE), tree.nodes.new(nodes.OUTPUT)
+    tree.links.new(node_a.outputs[0], difference.inputs["Base"])
+    tree.links.new(node_b.outputs[0], difference.inputs["Cutters"])
+    tree.links.new(difference.outputs[0], output.inputs[0])
+    diag = float(np.linalg.norm(b[0].max(0) - b[0].min(0)))
+    ours, theirs, built = [], [], []
+
+    def our_drag():
+        t0, before = time.perf_counter(), cache.stats()["builds"]
+        for step in range(moves):
+            second.location.x = 0.01 * diag * step
+            bpy.context.view_layer.update()
+            csg.evaluate_tree(bpy.context, tree)
+        built.append(cache.stats()["builds"] - before)
+        return time.perf_counter() - t0
+
+    def their_drag():
+        t0 = time.perf_counter()
+        for step in range(moves):
+            moved = (b[0] + np.float32([0.01 * diag * step, 0.0, 0.0]), b[1])
+            baselines.gn_sdf_boolean(a, moved, OPERATION, voxel_size)
+        return time.perf_counter() - t0
+
+    _clear_cache()
+    csg.evaluate_tree(bpy.context, tree)  # the cold evaluation before the drag starts, and a warm-up
+    their_drag()
+    for k in range(repeat):
+        if k % 2:
+            theirs.append(their_drag())
+            ours.append(our_drag())
+        else:
+            ours.append(our_drag())
+            theirs.append(their_drag())
+    return {
+        "ours": statistics.median(ours),
+        "theirs": statistics.median(theirs),
+        "ratio": round_ratios(ours, theirs),
+        "built": max(built),
+    }
 
 
 def machine() -> str:
@@ -160,32 +233,52 @@ def machine() -> str:
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cases", nargs="+", default=["bunny-spot", "spheres"])
+    parser.add_argument("--cases", nargs="+", default=["bunny-spot", "spheres", "spheres-100k"])
     parser.add_argument("--resolutions", nargs="+", type=int, default=[256, 512])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--drag-moves", type=int, default=10)
     args = parser.parse_args(argv)
     register()
     all_cases = cases()
     print(f"# Add-on benchmark — {machine()}; {OPERATION.lower()}, {args.repeat} rounds after a warm-up\n")
     header = (
-        "| case | res | GN SDF s | cold s | cold / GN | warm s (one field rebuilt) | warm / GN "
-        "| re-run s | re-run / GN | fields built cold / warm / re-run | attributes (share of cold) |"
+        "| case | res | GN SDF s | cold s | cold / GN | moved s | moved / GN | turned s | turned / GN "
+        "| re-run s | re-run / GN | fields built cold / moved / turned / re-run | attributes (share of cold) |"
     )
     print(header)
     print("|" + "|".join(["---"] * (header.count("|") - 1)) + "|")
+    stage_rows = []
     for name in args.cases:
         a, b = all_cases[name]
         pts = np.vstack([a[0], b[0]])
         diag = float(np.linalg.norm(pts.max(0) - pts.min(0)))
         for res in args.resolutions:
+            if name == "spheres-100k" and res != 256:
+                continue
             m, built = measure(a, b, diag / res, args.repeat)
-            cold, warm, rerun = (m[f"{key}_ratio"] for key in ("cold", "warm", "rerun"))
+            cold, moved, turned, rerun = (m[f"{key}_ratio"] for key in ("cold", "moved", "turned", "rerun"))
             print(
-                f"| {name} | /{res} | {m['gn']:.2f} | {m['cold']:.2f} | {_ratio(cold, 2)} | {m['warm']:.2f} "
-                f"| {_ratio(warm, 2)} | {m['rerun']:.3f} | {_ratio(rerun, 3)} "
-                f"| {built['cold']} / {built['warm']} / {built['rerun']} | {100 * m['attributes']:.1f} % |",
+                f"| {name} | /{res} | {m['gn']:.2f} | {m['cold']:.2f} | {_ratio(cold, 2)} | {m['moved']:.2f} "
+                f"| {_ratio(moved, 2)} | {m['turned']:.2f} | {_ratio(turned, 2)} | {m['rerun']:.3f} "
+                f"| {_ratio(rerun, 3)} | {built['cold']} / {built['moved']} / {built['turned']} / {built['rerun']} "
+                f"| {100 * m['attributes']:.1f} % |",
                 flush=True,
             )
+            stage_rows.append((name, res, m["stages"]))
+    print("\n## One operand moved: seconds per stage (median)\n")
+    names = list(stage_rows[0][2]) if stage_rows else []
+    print("| case | res | " + " | ".join(names) + " |")
+    print("|" + "|".join(["---"] * (len(names) + 2)) + "|")
+    for name, res, stages in stage_rows:
+        print(f"| {name} | /{res} | " + " | ".join(f"{stages[n]:.3f}" for n in names) + " |")
+    a, b = all_cases["bunny-spot"]
+    pts = np.vstack([a[0], b[0]])
+    voxel = float(np.linalg.norm(pts.max(0) - pts.min(0))) / 256
+    d = drag(a, b, voxel, moves=args.drag_moves, repeat=max(1, args.repeat // 2))
+    print(f"\n## A drag through a CSG tree: {args.drag_moves} moves of the cutter, bunny - spot, /256\n")
+    print("| AASDF s | GN SDF s | AASDF / GN | fields built during the drag |")
+    print("|---|---|---|---|")
+    print(f"| {d['ours']:.2f} | {d['theirs']:.2f} | {_ratio(d['ratio'], 2)} | {d['built']} |")
 
 
 def _ratio(r, digits: int) -> str:

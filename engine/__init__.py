@@ -1,4 +1,5 @@
-"""AASDF engine: algebraic adaptive signed distance fields of triangle meshes, their booleans and surfaces.
+"""AASDF engine: algebraic adaptive signed distance fields of triangle meshes, their booleans, field operations
+(re-distancing, offset, shell, thickness) and surfaces.
 
 Pure numpy + NVIDIA Warp (never Blender): arrays in, arrays out. Kernels run on Warp's default device, or the one
 passed as ``device`` (CPU here, CUDA wherever an NVIDIA GPU is present). Negative inside, positive outside.
@@ -9,7 +10,9 @@ from .boolean import difference, intersection, union
 from .build import build_field, build_fields
 from .errors import AasdfError
 from .field import AdaptiveField
+from .fieldops import offset, shell
 from .plan import check_meshes, plan_field
+from .redistancing import redistance
 
 kernels.configure_modules(__name__)
 
@@ -21,6 +24,9 @@ __all__ = [
     "check_meshes",
     "difference",
     "intersection",
+    "offset",
     "plan_field",
+    "redistance",
+    "shell",
     "union",
 ]

@@ -5,8 +5,9 @@ corner of both domains, Eq. 11, snapped to the shared world origin). An operand 
 node-aligned and contributes its exact node values; an operand with another spacing has its finest level rebuilt
 at the result's spacing from its own cells (the paper's "cells as primitives"), its values sampled by MLS. Each finest
 node then takes ``op(phi_a, phi_b)`` (Eq. 8 with negative inside: union = min, intersection = max, difference =
-max(a, -b)), or the polynomial smooth version when ``blend > 0``. The intermediate and top levels are rebuilt bottom-up
-with the construction's own structure code (parents + siblings, dense top), their values sampled from the operands.
+max(a, -b)), or a round or chamfer blend of it when ``blend > 0`` (:mod:`.blends`). The intermediate and top levels are
+rebuilt bottom-up with the construction's own structure code (parents + siblings, dense top), their values sampled from
+the operands.
 """
 
 from __future__ import annotations
@@ -20,17 +21,17 @@ import warp as wp
 import warp.geometry
 
 from . import octree, parallel
-from .octree import code_bits, level_layout, morton_encode, node_center
+from .blends import BLEND_MODES, chamfer_needs, sdf_combine
+from .octree import code_bits, level_layout, node_center
 from .operands import (
-    coarse_sample,
+    blend_sample,
     estimate,
     extrapolate,
+    finest_sample,
     lookup_node,
-    node_bracket,
-    octet_source,
-    sample_operand,
 )
-from .plan import byte_grid_fits, check_budget, plan_domain
+from .plan import check_budget, plan_domain
+from .prune import offset_to, operand_octets, prune_octets
 from .sampling import FieldArg, clamp_to_domain, locate_leaf, to_frame, vec27i
 
 if TYPE_CHECKING:  # the field type imports this module for its operators
@@ -41,29 +42,6 @@ OP_UNION, OP_INTERSECTION, OP_DIFFERENCE = 0, 1, 2
 
 # Consecutive nodes per thread of the combination (an octet on the sparse levels).
 COMBINE_GROUP = 8
-
-
-# Finest octets are kept where some node is within this many voxels of the result's surface.
-KEEP_BAND = 2.5
-
-
-@wp.func
-def sdf_smooth_min(a: float, b: float, k: float) -> float:
-    """Polynomial smooth minimum of radius ``k`` (``k = 0``: min)."""
-    if k <= 0.0:
-        return wp.min(a, b)
-    h = wp.clamp(0.5 + 0.5 * (b - a) / k, 0.0, 1.0)
-    return b + (a - b) * h - k * h * (1.0 - h)
-
-
-@wp.func
-def sdf_combine(op: int, a: float, b: float, k: float) -> float:
-    """union = min, intersection = max, difference (a minus b) = max(a, -b); smooth when ``k > 0``."""
-    if op == 0:
-        return sdf_smooth_min(a, b, k)
-    if op == 1:
-        return -sdf_smooth_min(-a, -b, k)
-    return -sdf_smooth_min(-a, b, k)
 
 
 @wp.kernel(enable_backward=False)
@@ -82,6 +60,8 @@ def _combine_nodes_kernel(
     spacing: float,
     op: int,
     blend: float,
+    mode: int,
+    walk: wp.vec2i,
     precise: int,
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
@@ -141,12 +121,12 @@ def _combine_nodes_kernel(
             if fb == 0:
                 vb, rad_b, leaf_b = estimate(b, x)
             if rad_a < 0.0:
-                r = sample_operand(a, x)
+                r = finest_sample(a, x)
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
                 rad_a = 0.0
             if rad_b < 0.0:
-                r = sample_operand(b, x)
+                r = finest_sample(b, x)
                 vb = r[0]
                 gb = wp.vec3(r[1], r[2], r[3])
                 rad_b = 0.0
@@ -156,7 +136,11 @@ def _combine_nodes_kernel(
                 tb = -vb
             need_a = int(1)
             need_b = int(1)
-            if op == 0:
+            if mode == 1:
+                needs = chamfer_needs(op, va, rad_a, tb, rad_b, blend)
+                need_a = needs[0]
+                need_b = needs[1]
+            elif op == 0:
                 if tb - rad_b >= va + rad_a + blend:
                     need_b = 0
                 elif va - rad_a >= tb + rad_b + blend:
@@ -167,16 +151,20 @@ def _combine_nodes_kernel(
                 elif va + rad_a <= tb - rad_b - blend:
                     need_a = 0
             if need_a == 1 and rad_a > 0.0:
-                r, cached_a, count_a, ids_a, levels_a = coarse_sample(a, x, leaf_a, cached_a, count_a, ids_a, levels_a)
+                r, cached_a, count_a, ids_a, levels_a = blend_sample(
+                    a, walk[0], x, leaf_a, cached_a, count_a, ids_a, levels_a
+                )
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
             if need_b == 1 and rad_b > 0.0:
-                r, cached_b, count_b, ids_b, levels_b = coarse_sample(b, x, leaf_b, cached_b, count_b, ids_b, levels_b)
+                r, cached_b, count_b, ids_b, levels_b = blend_sample(
+                    b, walk[1], x, leaf_b, cached_b, count_b, ids_b, levels_b
+                )
                 vb = r[0]
                 gb = wp.vec3(r[1], r[2], r[3])
         ra = wp.vec4(va, ga[0], ga[1], ga[2])
         rb = wp.vec4(vb, gb[0], gb[1], gb[2])
-        phi = sdf_combine(op, ra[0], rb[0], blend)
+        phi = sdf_combine(op, ra[0], rb[0], blend, mode)
         b_term = rb[0]
         if op == 2:
             b_term = -rb[0]
@@ -206,186 +194,6 @@ def _combine_nodes_kernel(
                 tri[i] = follow.tri[node]
 
 
-@wp.kernel(enable_backward=False)
-def _octet_bracket_kernel(
-    first: int,
-    a: FieldArg,
-    b: FieldArg,
-    a_aligned: int,
-    b_aligned: int,
-    a_octets: int,
-    b_octets: int,
-    a_offset: wp.vec3i,
-    b_offset: wp.vec3i,
-    octets: wp.array[wp.int64],
-    origin: wp.vec3,
-    spacing: float,
-    op: int,
-    blend: float,
-    band: float,
-    near: wp.array[wp.int32],
-    has_neg: wp.array[wp.int32],
-    has_pos: wp.array[wp.int32],
-    a_first_out: wp.array[wp.int32],
-    b_first_out: wp.array[wp.int32],
-):
-    """Per finest octet of the result, from the operands' brackets alone (no interpolation): whether a node may lie
-    within ``band`` of the result's surface, and which signs its nodes may have."""
-    t = first + wp.tid()
-    oc = octree.morton_decode(octets[t])
-    a_first, a_leaf, a_level = octet_source(a, a_octets, a_offset, oc, origin, spacing)
-    b_first, b_leaf, b_level = octet_source(b, b_octets, b_offset, oc, origin, spacing)
-    n_near = int(0)
-    neg = int(0)
-    pos = int(0)
-    for k in range(8):
-        c = wp.vec3i(2 * oc[0] + (k & 1), 2 * oc[1] + ((k >> 1) & 1), 2 * oc[2] + ((k >> 2) & 1))
-        x = node_center(origin, spacing, c)
-        va, ra = node_bracket(a, a_first, a_leaf, a_level, k, a_aligned, a_offset, c, x)
-        vb, rb = node_bracket(b, b_first, b_leaf, b_level, k, b_aligned, b_offset, c, x)
-        if ra < 0.0 or rb < 0.0:
-            n_near = 1
-            neg = 1
-            pos = 1
-        else:
-            tb = vb
-            if op == 2:
-                tb = -vb
-            # min and max are monotone; the polynomial smooth min lies within blend / 4 below the min
-            lo = wp.min(va - ra, tb - rb) - 0.25 * blend
-            hi = wp.min(va + ra, tb + rb)
-            if op != 0:
-                lo = wp.max(va - ra, tb - rb)
-                hi = wp.max(va + ra, tb + rb) + 0.25 * blend
-            if lo <= band and hi >= -band:
-                n_near = 1
-            # a node whose bracket contains zero may have either sign
-            if hi < 0.0:
-                neg = 1
-            elif lo >= 0.0:
-                pos = 1
-            else:
-                neg = 1
-                pos = 1
-    near[t] = n_near
-    a_first_out[t] = a_first
-    b_first_out[t] = b_first
-    has_neg[t] = neg
-    has_pos[t] = pos
-
-
-@wp.kernel(enable_backward=False)
-def _keep_octets_kernel(
-    first: int,
-    octets: wp.array[wp.int64],
-    near: wp.array[wp.int32],
-    has_neg: wp.array[wp.int32],
-    has_pos: wp.array[wp.int32],
-    dims: wp.vec3i,
-    signs: wp.array[wp.uint8],
-    keep: wp.array[wp.int32],
-):
-    """Keep an octet near the surface, or with a sign change inside it or towards one of its 26 neighbours. The
-    neighbours' possible signs come from ``signs`` (the octet grid, x-fastest, see ``_octet_signs_kernel``) or, when
-    it is empty, by binary search among ``octets``."""
-    t = first + wp.tid()
-    keep[t] = 0
-    if near[t] == 1 or (has_neg[t] == 1 and has_pos[t] == 1):
-        keep[t] = 1
-        return
-    c = octree.morton_decode(octets[t])
-    n = octets.shape[0]
-    # the sign a neighbour must be able to have: bit 0 negative, bit 1 positive
-    other = wp.where(has_pos[t] == 1, 1, 0) + wp.where(has_neg[t] == 1, 2, 0)
-    for o in range(27):
-        q = c + wp.vec3i(o % 3 - 1, (o // 3) % 3 - 1, o // 9 - 1)
-        if o != 13 and q[0] >= 0 and q[1] >= 0 and q[2] >= 0 and q[0] < dims[0] and q[1] < dims[1] and q[2] < dims[2]:
-            if signs.shape[0] > 0:
-                if (int(signs[q[0] + dims[0] * (q[1] + dims[1] * q[2])]) & other) != 0:
-                    keep[t] = 1
-                    return
-            else:
-                j = octree.find_key(octets, 0, n, morton_encode(q))
-                if j >= 0:
-                    if (has_neg[j] == 1 and has_pos[t] == 1) or (has_pos[j] == 1 and has_neg[t] == 1):
-                        keep[t] = 1
-                        return
-
-
-@wp.kernel(enable_backward=False)
-def _octet_signs_kernel(
-    first: int,
-    octets: wp.array[wp.int64],
-    has_neg: wp.array[wp.int32],
-    has_pos: wp.array[wp.int32],
-    dims: wp.vec3i,
-    signs: wp.array[wp.uint8],
-):
-    """The signs octet ``first + tid`` may have (bit 0 negative, bit 1 positive) at its place in the octet grid."""
-    t = first + wp.tid()
-    c = octree.morton_decode(octets[t])
-    signs[c[0] + dims[0] * (c[1] + dims[1] * c[2])] = wp.uint8(has_neg[t] + 2 * has_pos[t])
-
-
-@wp.kernel(enable_backward=False)
-def _aligned_octets_kernel(coords: wp.array[wp.vec3i], offset: wp.vec3i, step: int, codes: wp.array[wp.int64]):
-    """Octet code, on the result lattice, of every ``step``-th finest node of an aligned operand."""
-    i = wp.tid()
-    c = coords[step * i] + offset
-    codes[i] = morton_encode(wp.vec3i(c[0] >> 1, c[1] >> 1, c[2] >> 1))
-
-
-@wp.kernel(enable_backward=False)
-def _octets_of_cells_kernel(
-    first: int,
-    f: FieldArg,
-    origin: wp.vec3,
-    octet_size: float,
-    pad: float,
-    dims: wp.vec3i,
-    per_cell: int,
-    mask: wp.array[wp.uint8],
-    offsets: wp.array[wp.int32],
-    emit: int,
-    counts: wp.array[wp.int32],
-    codes: wp.array[wp.int64],
-):
-    """Result octets within ``pad`` of each finest octet of an operand (its cells as primitives, 8 at a time, or one
-    at a time for a dense single level: ``per_cell``; those of a placed operand where it is placed, a turned box),
-    counted (``emit`` 0), written (1) or marked in ``mask`` (2, see ``octree.mark_then_compact``)."""
-    t = first + wp.tid()
-    c = node_center(f.origin, f.voxel_size, f.coords[t])
-    size = f.voxel_size  # the primitive's half width: a cell's half, or an octet's
-    if per_cell == 0:
-        c = node_center(f.origin, f.voxel_size, f.coords[8 * t]) + wp.vec3(0.5 * f.voxel_size)
-        size = 2.0 * f.voxel_size
-    half = wp.vec3(0.5 * size + pad)
-    if f.moved == 1:
-        c = f.scale * (f.rotation @ c) + f.translation
-        for k in range(3):
-            reach = wp.abs(f.rotation[k, 0]) + wp.abs(f.rotation[k, 1]) + wp.abs(f.rotation[k, 2])
-            half[k] = 0.5 * size * f.scale * reach + pad
-    i0 = wp.vec3i(0)
-    i1 = wp.vec3i(0)
-    for k in range(3):
-        i0[k] = wp.clamp(int(wp.floor((c[k] - half[k] - origin[k]) / octet_size)), 0, dims[k] - 1)
-        i1[k] = wp.clamp(int(wp.floor((c[k] + half[k] - origin[k]) / octet_size)), 0, dims[k] - 1)
-    n = int(0)
-    base = int(0)
-    if emit == 1:
-        base = offsets[t]
-    for z in range(i0[2], i1[2] + 1):
-        for y in range(i0[1], i1[1] + 1):
-            for xx in range(i0[0], i1[0] + 1):
-                if emit == 2:
-                    mask[xx + dims[0] * (y + dims[1] * z)] = wp.uint8(1)
-                elif emit == 1:
-                    codes[base + n] = morton_encode(wp.vec3i(xx, y, z))
-                n += 1
-    if emit == 0:
-        counts[t] = n
-
-
 def _check_operands(a, b, blend):
     for name, f in (("a", a), ("b", b)):
         if not callable(getattr(f, "arg", None)) or not hasattr(f, "level_offsets"):
@@ -398,52 +206,17 @@ def _check_operands(a, b, blend):
     return blend
 
 
-def _offset_to(f: AdaptiveField, origin: np.ndarray, spacing: float) -> np.ndarray:
-    return np.rint((f.origin - origin) / spacing).astype(np.int64)
-
-
-def _octets_of(f: AdaptiveField, origin, spacing, oct_dims, aligned, device) -> wp.array:
-    """Octet codes (result lattice) that cover an operand's finest level."""
-    n0 = int(f.level_offsets[1])
-    if aligned:
-        offset_np = _offset_to(f, origin, spacing)
-        # with even offsets the operand's octets are result octets: one code per octet (its first node) will do
-        step = 8 if f.levels > 1 and not (offset_np % 2).any() else 1
-        codes = wp.empty(n0 // step, dtype=wp.int64, device=device)
-        offset = wp.vec3i(*(int(v) for v in offset_np))
-        wp.launch(
-            _aligned_octets_kernel, dim=n0 // step, inputs=[f.coords, offset, step], outputs=[codes], device=device
-        )
-        return codes
-    per_cell = int(f.levels == 1)  # a dense single level is not stored in octets
-    args = [f.arg(), wp.vec3(*origin), 2.0 * spacing, 1.0 * spacing, wp.vec3i(*(int(d) for d in oct_dims)), per_cell]
-    n_octets = n0 if per_cell else n0 // 8
-    if byte_grid_fits(oct_dims):  # each result octet marked once in a byte per octet, no (cell, octet) pairs sorted
-        return octree.mark_then_compact(
-            _octets_of_cells_kernel,
-            n_octets,
-            args,
-            oct_dims,
-            device,
-            end_bit=3 * code_bits(oct_dims),
-            check=lambda total: check_budget(oct_dims * 2, 0, 8 * total),
-        )
-    return octree.count_then_emit(
-        _octets_of_cells_kernel,
-        n_octets,
-        [*args, wp.empty(0, dtype=wp.uint8, device=device)],
-        device,
-        check=lambda total: check_budget(oct_dims * 2, 0, 0, pairs=total),
-    )
-
-
-def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, spacing: str = "finer"):
+def combine(
+    a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, spacing: str = "finer", blend_mode="round"
+):
     """Boolean of two fields; ``op`` is OP_UNION, OP_INTERSECTION or OP_DIFFERENCE (a minus b).
 
     Args:
         a, b: Operands (any built field or boolean result).
         op: Which operation.
-        blend: Smoothing radius (world units) of a polynomial smooth union / intersection / difference; 0 = hard.
+        blend: Size of the blend along the seam (world units); 0 = hard.
+        blend_mode: ``"round"`` (a polynomial smooth minimum / maximum of radius ``blend``) or ``"chamfer"`` (a flat
+            bevel meeting each face ``blend`` from the seam where the faces meet at a right angle).
         spacing: ``"finer"`` (default), ``"coarser"``, ``"a"`` or ``"b"``: whose finest spacing the result takes
             (where the operands are placed: ``world_voxel_size``).
     Returns:
@@ -453,6 +226,11 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         AasdfError: If the combined domain would not fit in memory.
     """
     blend = _check_operands(a, b, blend)
+    if blend_mode not in BLEND_MODES:
+        raise ValueError(f"Expected 'blend_mode' to be one of {sorted(BLEND_MODES)}, but got {blend_mode!r}.")
+    mode = BLEND_MODES[blend_mode] if blend > 0.0 else 0  # no blend: the hard min / max either way
+    # a chamfer reads an operand with closest points on its surface by them where they beat its coarse leaves' MLS
+    walk = wp.vec2i(*(int(mode == 1 and f.stats.get("surface_points", False)) for f in (a, b)))
     choices = {
         "finer": min(a.world_voxel_size, b.world_voxel_size),
         "coarser": max(a.world_voxel_size, b.world_voxel_size),
@@ -480,12 +258,14 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
         for f in (a, b)
     ]
     oct_dims = fine_dims // 2
-    parts = [_octets_of(f, origin, h, oct_dims, al, device) for f, al in zip((a, b), aligned, strict=False)]
+    parts = [operand_octets(f, origin, h, oct_dims, al, device) for f, al in zip((a, b), aligned, strict=False)]
     all_codes = wp.empty(parts[0].shape[0] + parts[1].shape[0], dtype=wp.int64, device=device)
     wp.copy(all_codes, parts[0], count=parts[0].shape[0])
     wp.copy(all_codes, parts[1], dest_offset=parts[0].shape[0], count=parts[1].shape[0])
     octets = octree.sort_unique(all_codes, end_bit=3 * code_bits(oct_dims))
-    radius = int(math.ceil(0.25 * blend / (2.0 * h))) if blend > 0.0 else 0
+    # a round blend moves the surface up to blend / 4 from both operands' surfaces, a chamfer up to blend / 2
+    reach = (0.5 if mode == 1 else 0.25) * blend
+    radius = int(math.ceil(reach / (2.0 * h))) if blend > 0.0 else 0
     for _ in range(radius):  # grow one octet at a time: 27x the set, then de-duplicate
         check_budget(fine_dims, 0, 8 * 27 * octets.shape[0])
         octets = octree.dilate_octets(octets, oct_dims, end_bit=3 * code_bits(oct_dims))
@@ -493,69 +273,17 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
 
     a_arg, b_arg = a.arg(), b.arg()
     offs = [
-        wp.vec3i(*(int(v) for v in (-_offset_to(f, origin, h) if al else (0, 0, 0))))
+        wp.vec3i(*(int(v) for v in (-offset_to(f, origin, h) if al else (0, 0, 0))))
         for f, al in zip((a, b), aligned, strict=False)
     ]
     origin_v = wp.vec3(*origin)
 
-    # Keep the result adaptive: drop octets the result's surface is far from (an operand's band buried inside the
-    # other operand, say), deciding from the operands' brackets before any interpolation, so only kept nodes pay
-    # for MLS. A marching cube with a corner farther than its diagonal from the surface cannot contain it, so
-    # octets whose nodes are all beyond KEEP_BAND voxels change no surface — unless the field jumps there (the
-    # surface an open operand gets across a hole): octets with both signs, or next to one of the other sign, stay.
+    # Keep the result adaptive: drop the octets the result's surface is far from, before any interpolation.
     t0 = time.perf_counter()
-    n_oct = octets.shape[0]
-    near, has_neg, has_pos, keep_wp, a_first, b_first = (
-        wp.empty(n_oct, dtype=wp.int32, device=device) for _ in range(6)
+    octet_flags = [int(al and not (offset_to(f, origin, h) % 2).any()) for f, al in zip((a, b), aligned, strict=False)]
+    octets, a_first, b_first = prune_octets(
+        octets, (a_arg, b_arg), [int(al) for al in aligned], octet_flags, offs, origin, h, op, blend, mode, oct_dims
     )
-    flags = [int(aligned[0]), int(aligned[1])]
-    # octet-granular look-ups need the operand's octets to coincide with the result's (even lattice offsets)
-    octet_flags = [int(al and not (_offset_to(f, origin, h) % 2).any()) for f, al in zip((a, b), aligned, strict=False)]
-    parallel.launch_split(
-        _octet_bracket_kernel,
-        n_oct,
-        lambda start, n: [
-            start,
-            a_arg,
-            b_arg,
-            *flags,
-            *octet_flags,
-            offs[0],
-            offs[1],
-            octets,
-            origin_v,
-            float(h),
-            int(op),
-            blend,
-            KEEP_BAND * h,
-            near,
-            has_neg,
-            has_pos,
-            a_first,
-            b_first,
-        ],
-        device,
-    )
-    dims_v = wp.vec3i(*(int(d) for d in oct_dims))
-    if byte_grid_fits(oct_dims):
-        # a byte per octet of the grid: the 26 neighbours are found by index rather than by binary search
-        signs = wp.zeros(int(np.prod(oct_dims)), dtype=wp.uint8, device=device)
-        parallel.launch_split(
-            _octet_signs_kernel, n_oct, lambda start, n: [start, octets, has_neg, has_pos, dims_v, signs], device
-        )
-    else:
-        signs = wp.empty(0, dtype=wp.uint8, device=device)
-    parallel.launch_split(
-        _keep_octets_kernel,
-        n_oct,
-        lambda start, n: [start, octets, near, has_neg, has_pos, dims_v, signs, keep_wp],
-        device,
-    )
-    keep = keep_wp.numpy().astype(bool)
-    if not keep.all():
-        octets, a_first, b_first = (
-            wp.array(arr.numpy()[keep], dtype=arr.dtype, device=device) for arr in (octets, a_first, b_first)
-        )
     timings["finest_prune"] = time.perf_counter() - t0
     # every node's place first, so the finest values are computed where they are kept
     layout = level_layout(octets, top_dims, levels, device, timings)
@@ -589,6 +317,8 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
                 float(spacing_),
                 int(op),
                 blend,
+                mode,
+                walk,
                 int(finest),
                 proj,
                 source,
@@ -629,16 +359,22 @@ def combine(a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, 
     )
 
 
-def union(a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer") -> AdaptiveField:
-    """``a`` or ``b`` (min); smooth when ``blend > 0``. See :func:`combine`."""
-    return combine(a, b, OP_UNION, blend=blend, spacing=spacing)
+def union(
+    a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer", blend_mode: str = "round"
+) -> AdaptiveField:
+    """``a`` or ``b`` (min); blended when ``blend > 0`` (round or chamfer). See :func:`combine`."""
+    return combine(a, b, OP_UNION, blend=blend, spacing=spacing, blend_mode=blend_mode)
 
 
-def intersection(a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer") -> AdaptiveField:
-    """``a`` and ``b`` (max); smooth when ``blend > 0``. See :func:`combine`."""
-    return combine(a, b, OP_INTERSECTION, blend=blend, spacing=spacing)
+def intersection(
+    a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer", blend_mode: str = "round"
+) -> AdaptiveField:
+    """``a`` and ``b`` (max); blended when ``blend > 0`` (round or chamfer). See :func:`combine`."""
+    return combine(a, b, OP_INTERSECTION, blend=blend, spacing=spacing, blend_mode=blend_mode)
 
 
-def difference(a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer") -> AdaptiveField:
-    """``a`` minus ``b`` (max(a, -b)); smooth when ``blend > 0``. See :func:`combine`."""
-    return combine(a, b, OP_DIFFERENCE, blend=blend, spacing=spacing)
+def difference(
+    a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer", blend_mode: str = "round"
+) -> AdaptiveField:
+    """``a`` minus ``b`` (max(a, -b)); blended when ``blend > 0`` (round or chamfer). See :func:`combine`."""
+    return combine(a, b, OP_DIFFERENCE, blend=blend, spacing=spacing, blend_mode=blend_mode)

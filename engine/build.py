@@ -7,7 +7,8 @@ Pipeline of :func:`build_field`:
    byte per octet (or, for very large grids, all (triangle, octet) pairs radix-sorted), gathered, radix-sorted into
    Morton order, expanded to cells; exact closest points octet by octet (:mod:`.distance`);
 2. coarser levels: placed by :func:`.octree.level_layout`, their distances solved bottom-up (:mod:`.distance`);
-3. signs, top-down (:mod:`.signs`): inside means generalised winding number >= 0.5;
+3. signs, top-down (:mod:`.signs`): inside means |w| >= 1/2, w the generalised winding number, decided exactly where
+   the fast one is not sure (:mod:`.winding`);
 4. open meshes: the surface across their holes (:mod:`.holes`), before the first build and in refinement rounds.
 
 Sign convention: negative inside, positive outside (Blender/OpenVDB); the paper uses the opposite.
@@ -23,19 +24,18 @@ import time
 import numpy as np
 import warp as wp
 
-from . import distance, fim, holes, octree, parallel, signs
+from . import distance, fieldops, fim, holes, octree, parallel, redistancing, signs, sweeping, winding
 from .errors import AasdfError
 from .field import AdaptiveField
 from .geometry import tri_box_overlap
-from .holes import cap_lattices, cap_sign_presets, changed_top_cells, sign_change_octets
-from .meshcheck import edge_table, hole_caps, problem_faces, weld_positions
+from .holes import cap_lattices, changed_top_cells, sign_change_octets
+from .meshcheck import edge_table, encloses_nothing, hole_boundary, problem_faces, weld_positions
 from .octree import add_octets, code_bits, in_sorted, level_layout, match_levels, morton_encode
-from .plan import byte_grid_fits, check_budget, checked_plans, plan_field
+from .plan import byte_grid_fits, check_budget, checked_plans, plan_field, thick_plan, thicknesses
 from .sampling import LEAF_TOLERANCE
-from .signs import (
-    NO_BOXES,
-)
+from .signs import NO_BOXES
 from .sources import SourceMesh
+from .winding import winding_arg
 
 # Rounds of refining coarse leaves the zero set crosses (open meshes: the surface across a hole).
 MAX_SIGN_REFINEMENTS = 4
@@ -103,7 +103,9 @@ def _device(device):
     return wp.get_device(device)
 
 
-def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_ids=None) -> list[AdaptiveField]:
+def build_fields(
+    meshes, *, voxel_size, levels=4, padding=1, device=None, field_ids=None, thickness=None
+) -> list[AdaptiveField]:
     """Build the fields of several meshes at one voxel size, checked together first (:func:`check_meshes`), so an
     impossible request builds none.
 
@@ -115,6 +117,7 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
         meshes: Sequence of (vertices, triangles) pairs, as for :func:`build_field`.
         voxel_size, levels, padding, device: As for :func:`build_field`.
         field_ids: One id per mesh (default 0, 1, 2, ...).
+        thickness: As for :func:`build_field`: one value for every mesh, or one per mesh (None: none).
     Returns:
         One AdaptiveField per mesh, in order.
     Raises:
@@ -125,7 +128,7 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
     field_ids = list(range(len(meshes))) if field_ids is None else [int(k) for k in field_ids]
     if len(field_ids) != len(meshes):
         raise ValueError(f"build_fields got {len(field_ids)} field ids for {len(meshes)} meshes")
-    plans = checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding)
+    plans = checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding, thickness=thickness)
     device = _device(device)
     fields: list = [None] * len(meshes)
     errors: dict = {}
@@ -145,8 +148,11 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
             if k in errors:
                 raise errors[k]
         return fields
-    for module in (octree, distance, fim, signs, holes, sys.modules[__name__]):  # the modules a build launches
-        wp.load_module(module, device=device)  # compiled or loaded once, before the threads
+    # the modules a build launches (a thick one: those of the field operations too), compiled or loaded once,
+    # before the threads
+    launched = (octree, distance, fim, winding, signs, holes, fieldops, sweeping, redistancing, sys.modules[__name__])
+    for module in launched:
+        wp.load_module(module, device=device)
     workers = min(len(meshes), os.cpu_count() or 1)
     # worker w builds meshes w, w + workers, ...
     parallel.run_tasks([lambda w=w: [build(k) for k in range(w, len(meshes), workers)] for w in range(workers)], device)
@@ -155,32 +161,71 @@ def build_fields(meshes, *, voxel_size, levels=4, padding=1, device=None, field_
     return fields
 
 
-def build_field(vertices, triangles, *, voxel_size, levels=4, padding=1, device=None, field_id=0) -> AdaptiveField:
+def build_field(
+    vertices, triangles, *, voxel_size, levels=4, padding=1, device=None, field_id=0, thickness=None
+) -> AdaptiveField:
     """Build the adaptive signed distance field of a triangle mesh.
 
     Args:
         vertices: (V, 3) world-space vertex positions.
         triangles: (T, 3) integer vertex indices. Open, multi-shell, flipped or duplicated faces are handled:
-            inside means generalised winding number >= 0.5.
+            inside means |w| >= 1/2, w the generalised winding number, whatever the orientation (an inside-out
+            closed mesh is the same solid; a shell facing inward inside another is a cavity). A flat surface
+            that encloses nothing (a plane, a single triangle, a flat sheet) gives a field with no inside
+            (``encloses_volume`` False, ``to_mesh()`` empty) and ``stats["flat"]`` True.
         voxel_size: Edge length of the finest cells.
         levels: Number of levels, finest to dense top (>= 1).
         padding: Finest cells kept around each triangle (>= 0; 1 or more gives watertight surfaces).
         device: Warp device (``None``: Warp's default).
         field_id: Integer id carried per node through booleans (see ``source_ids``).
+        thickness: Give the surface this thickness (world units, at least two voxels): the field is the solid
+            shell of half-width ``thickness / 2`` around the triangles (their unsigned distance minus half the
+            thickness), so surfaces that enclose nothing (planes, cloth, single-sided scans) become solids; a closed
+            mesh becomes a hollow shell centred on its surface. None: the mesh's own inside.
     Returns:
         AdaptiveField, negative inside.
     Raises:
         ValueError: On wrongly shaped or typed arguments.
         AasdfError: On empty, non-finite or fully degenerate meshes, out-of-range indices, non-positive voxel
-            size, ``levels < 1``, ``padding < 0``, or a resolution that would not fit in memory.
+            size, ``levels < 1``, ``padding < 0``, a resolution that would not fit in memory, or a thickness under
+            two voxels.
     """
+    wall = thicknesses(thickness, 1, voxel_size)[0]
     plan = plan_field(vertices, triangles, voxel_size=voxel_size, levels=levels, padding=padding)
     check_budget(plan["fine_dims"], plan["top_count"], plan["fine_nodes"])
-    return _build_planned(plan, device=device, field_id=field_id)
+    return _build_planned(thick_plan(plan, wall), device=device, field_id=field_id)
+
+
+def _build_thick(plan: dict, *, device, field_id: int) -> AdaptiveField:
+    """The shell of ``plan["thickness"]`` around a mesh's triangles (:func:`.fieldops.levelset_field` of their
+    unsigned distance)."""
+    t0 = time.perf_counter()
+    mesh = wp.Mesh(
+        points=wp.array(plan["vertices"], dtype=wp.vec3, device=device),
+        indices=wp.array(plan["triangles"].reshape(-1), dtype=wp.int32, device=device),
+    )
+    seconds = time.perf_counter() - t0
+    field = fieldops.levelset_field(
+        mesh.id,
+        None,
+        fieldops.KIND_CENTER,
+        plan["thickness"],
+        voxel_size=plan["voxel_size"],
+        levels=plan["levels"],
+        origin=plan["origin"],
+        top_dims=plan["top_dims"],
+        field_ids=(field_id,),
+        device=device,
+    )
+    field.timings["mesh_bvh"] = seconds
+    field.stats["thickness"] = plan["thickness"]
+    return field
 
 
 def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     """:func:`build_field` of a checked :func:`plan_field`."""
+    if plan.get("thickness") is not None:
+        return _build_thick(plan, device=_device(device), field_id=field_id)
     verts, tris, origin, top_dims = plan["vertices"], plan["triangles"], plan["origin"], plan["top_dims"]
     fine_dims, top_count = plan["fine_dims"], plan["top_count"]
     voxel_size, levels, padding = plan["voxel_size"], plan["levels"], plan["padding"]
@@ -211,7 +256,8 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     edges = edge_table(tris, len(verts))
     problem = problem_faces(tris, len(verts), edges)
     clean = not bool(problem.any())
-    caps = None
+    boundary = None
+    encloses = True
     if not clean:
         # the checks are about the surface, not its indexing: seams that repeat a vertex at one position (UV or patch
         # seams) open edges only in the index, so they are judged on the mesh with those vertices merged
@@ -222,7 +268,10 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             edges = edge_table(seam_tris, len(seam_verts))
             problem = problem_faces(seam_tris, len(seam_verts), edges)
             clean = not bool(problem.any())
-        caps = None if clean else hole_caps(seam_verts, seam_tris, edges)
+        boundary = None if clean else hole_boundary(seam_verts, seam_tris, edges)
+        # a flat sheet (a plane, a triangle) encloses nothing: no winding number needed, no surface across its holes
+        encloses = not encloses_nothing(seam_verts, boundary)
+    caps = None if boundary is None or not encloses else boundary["caps"]
     diag = float(np.linalg.norm(fine_dims * voxel_size))
     # candidate triangles per octet grow as cell area / triangle area: search boxes only where that stays small
     box_search = float(plan["areas"].mean()) >= OCTET_SEARCH_MIN_AREA * voxel_size**2
@@ -265,11 +314,12 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     if "error" in made:
         raise made["error"]
     mesh = made["mesh"]
+    winding = winding_arg(mesh, boundary, device, encloses=encloses)
     lattices = None
     if caps is not None and levels > 1:
         # the surface across the holes, found before the first build instead of by a refinement round after it
         t0 = time.perf_counter()
-        lattices = cap_lattices(mesh.id, caps, origin, fine_dims // 2, octet, base_octets.shape[0], device)
+        lattices = cap_lattices(winding, caps, origin, fine_dims // 2, octet, base_octets.shape[0], device)
         if lattices is not None:
             band = base_octets.numpy()
             sheet = lattices["sheet"][~in_sorted(band, lattices["sheet"])]  # where the band does not hold it already
@@ -277,6 +327,8 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
                 check_budget(fine_dims, top_count, 8 * len(band) + 8 * 27 * len(sheet))
                 base_octets = add_octets(base_octets, sheet, fine_dims // 2, end_bit=3 * code_bits(fine_dims // 2))
         timings["cap_lattices"] = time.perf_counter() - t0
+
+    known = {}  # the signs' expansions of the latest build, which a refinement round keeps
 
     def build(octets, query_radius, previous=None):
         # every node's place first, so each level's values are computed where they are kept
@@ -311,17 +363,17 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             prev_index=prev_index,
             timings=timings,
         )
-        values, sign_stats = signs.sign_levels(
-            mesh.id,
+        values, sign_stats, known["expansions"] = signs.sign_levels(
+            winding,
             layout,
             dist,
             neighbours,
             origin=origin,
             voxel_size=voxel_size,
             hole_caps=caps,
-            presets=None if lattices is None else cap_sign_presets(lattices, layout, levels),
             previous=previous,
             prev_index=prev_index,
+            known=known.get("expansions"),
             timings=timings,
         )
         return AdaptiveField.from_layout(
@@ -347,7 +399,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     rounds = 0
     refine_seconds = 0.0
     region = None
-    while levels > 1 and not clean and rounds < MAX_SIGN_REFINEMENTS:
+    while levels > 1 and not clean and encloses and rounds < MAX_SIGN_REFINEMENTS:
         t_refine = time.perf_counter()
         # off the caps over the holes the winding number stays near an integer (see hole_caps): the zero set can
         # only leave the band near them (no caps: the edges cancel, it never does)
@@ -367,6 +419,10 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     field.stats["sign_refinements"] = rounds
     field.timings["sign_check"] = refine_seconds
     field.stats["clean_mesh"] = clean
+    field.stats["flat"] = not encloses
+    # a closed mesh's closest points lie on the field's surface (an open mesh's surface runs across its holes too,
+    # away from any closest point)
+    field.stats["surface_points"] = clean
     field.stats["problem_faces"] = int(problem.sum())
     field.sources = {field_id: SourceMesh(verts, tris, plan["triangle_ids"])}
     return field

@@ -29,9 +29,8 @@ import numpy as np
 import warp as wp
 
 from .marching import (
-    case_tables,
     edge_ends,
-    patch_tables,
+    patch_masks,
     quad_corner,
     quad_edge,
     quad_ends,
@@ -69,6 +68,12 @@ SMOOTH_COS = 0.99
 HERMITE_TOLERANCE = 0.02
 
 
+# A crossed edge whose values differ by more than this many edge lengths is a sign jump, not a surface (a distance
+# field changes by at most its edge length): the patch takes no node planes (their closest points lie on a hole's
+# rim), only the interpolant's.
+JUMP_RATIO = 1.5
+
+
 # Below this distance (voxels) from its closest point a node's plane is damped, to (distance / this)^2 of its weight,
 # where the direction to that point turns to noise: only in a patch whose crease or corner misses its cube otherwise.
 HERMITE_NEAR = 0.12
@@ -99,27 +104,9 @@ def _tables(device) -> dict:
     """Warp arrays of the dual tables on ``device`` (built once per device)."""
     key = str(device)
     if key not in _TABLE_CACHE:
-        tables = case_tables()
-        patch, count = patch_tables()
-        spans, second = tunnel_tables()
-        owner, upper = tables["edge_owner"], tables["edge_upper"]
-        # per case and patch (4 at most): the bit mask of its local edges and of the corners at their ends
-        edge_mask = np.zeros((256, 4), dtype=np.int32)
-        end_mask = np.zeros((256, 4), dtype=np.int32)
-        # per case: each crossed local edge's patch, 2 bits per edge
-        patch_of_edge = (np.maximum(patch, 0).astype(np.int64) << (2 * np.arange(12))).sum(axis=1).astype(np.int32)
-        for e in range(12):
-            rows = np.flatnonzero(patch[:, e] >= 0)
-            np.bitwise_or.at(edge_mask, (rows, patch[rows, e]), 1 << e)
-            np.bitwise_or.at(end_mask, (rows, patch[rows, e]), (1 << int(owner[e])) | (1 << int(upper[e])))
-        _TABLE_CACHE[key] = {
-            "edge_mask": wp.array(edge_mask.ravel(), dtype=wp.int32, device=device),
-            "end_mask": wp.array(end_mask.ravel(), dtype=wp.int32, device=device),
-            "count": wp.array(count, dtype=wp.int32, device=device),
-            "patch_of_edge": wp.array(patch_of_edge, dtype=wp.int32, device=device),
-            "spans": wp.array(spans, dtype=wp.int32, device=device),
-            "second": wp.array(second.ravel(), dtype=wp.int32, device=device),
-        }
+        tables = patch_masks()
+        tables["spans"], tables["second"] = tunnel_tables()
+        _TABLE_CACHE[key] = {k: wp.array(v.ravel(), dtype=wp.int32, device=device) for k, v in tables.items()}
     return _TABLE_CACHE[key]
 
 
@@ -230,7 +217,7 @@ def _place_vertices_kernel(
         n = k * d
         normals[c] = n
         offsets[c] = wp.dot(n, q) + iso * inv
-        # the direction to a closest point is noise close to the surface (see HERMITE_NEAR): such planes weigh less
+        # the direction to a closest point is noise close to the surface: such planes may be damped (HERMITE_NEAR)
         weights[c] = wp.min(1.0, (dl / near) * (dl / near))
         state[c] = wp.where(dl <= 1.0e-4, -1, wp.where(good, 1, 0))
     for p in range(n_patches):
@@ -239,6 +226,7 @@ def _place_vertices_kernel(
         crossings = float(0.0)
         edges = edge_mask[case * 4 + p]
         ends = end_mask[case * 4 + p]
+        jump = int(0)  # values across a crossed edge further apart than its length: a sign jump (a hole's span)
         bits = edges
         while bits != 0:
             low = bits & (-bits)
@@ -248,6 +236,8 @@ def _place_vertices_kernel(
             t = vals[ca] / (vals[ca] - vals[cb])
             mass += cube_corner(ca) + t * (cube_corner(cb) - cube_corner(ca))
             crossings += 1.0
+            if wp.abs(vals[ca] - vals[cb]) > JUMP_RATIO * spacing:
+                jump = 1
         mass = mass / crossings
         f_mass, g_mass = trilinear(vals, mass)
         # the planes of the patch's corners, summed (plane_terms), and the part of that which planes of nodes near
@@ -270,8 +260,8 @@ def _place_vertices_kernel(
             low = bits & (-bits)
             c = wp.bit_count(low - 1)
             bits = bits ^ low
-            if state[c] != 1:
-                if state[c] == 0:
+            if state[c] != 1 or jump == 1:  # no plane, or the closest points lie on a hole's rim (a sign jump)
+                if state[c] == 0 or jump == 1:
                     fallback += 1.0
                 else:
                     skipped += 1.0

@@ -25,11 +25,19 @@ from .quadric import crease_edges
 from .sampling import FieldArg, face_nodes_kernel, sample_field_kernel, source_ids_kernel
 
 
+@wp.kernel(enable_backward=False)
+def _find_inside_kernel(values: wp.array[wp.float32], found: wp.array[wp.int32]):
+    """``found[0]`` becomes 1 when some node is inside (every such thread writes the same 1: races are harmless)."""
+    if values[wp.tid()] < 0.0:
+        found[0] = 1
+
+
 class AdaptiveField:
     """A hierarchical sparse octree of signed distances (negative inside), closed under booleans.
 
     Levels are stored finest first and concatenated; ``level_offsets[k]:level_offsets[k+1]`` is level ``k``.
-    Intermediate levels are sorted by Morton code; the top level is dense in x-fastest order.
+    Intermediate levels are sorted by Morton code; the top level is dense in x-fastest order. ``encloses_volume``
+    says whether it has an inside at all.
     """
 
     def __init__(
@@ -72,6 +80,7 @@ class AdaptiveField:
         self.tri = triangles
         # where the field's own frame sits in the world (None: it is the world; see ``transformed``)
         self.placement = placement
+        self._encloses_volume = None
 
     @classmethod
     def from_layout(
@@ -200,8 +209,29 @@ class AdaptiveField:
         return int(self.level_offsets[-1])
 
     @property
+    def encloses_volume(self) -> bool:
+        """Whether the field has an inside: some node's value is negative.
+
+        False for a mesh that encloses nothing (a plane, a single triangle, a flat sheet: |w| < 1/2 everywhere, see
+        :func:`.build.build_field`) and for a boolean whose result is empty (e.g. the intersection of disjoint
+        solids); ``to_mesh()`` then returns empty arrays. Computed once, by one pass over the nodes.
+        """
+        if self._encloses_volume is None:
+            found = wp.zeros(1, dtype=wp.int32, device=self.device)
+            if self.node_count:
+                wp.launch(_find_inside_kernel, dim=self.node_count, inputs=[self.values, found], device=self.device)
+            self._encloses_volume = bool(found.numpy()[0])
+        return self._encloses_volume
+
+    @property
     def level_counts(self) -> list[int]:
         return [int(n) for n in np.diff(self.level_offsets)]
+
+    @property
+    def is_empty(self) -> bool:
+        """Whether the field encloses nothing: no node inside (an offset that shrank a shape away; ``to_mesh`` then
+        has no triangles)."""
+        return not bool((self.values.numpy() < 0.0).any())
 
     @property
     def field_id(self) -> int:
@@ -229,6 +259,7 @@ class AdaptiveField:
         f.codes = self.codes
         f.fine_count = int(self.level_offsets[1])
         f.tri = self.tri if self.tri is not None else wp.empty(0, dtype=wp.int32, device=self.device)
+        f.exact = int(bool(self.stats.get("exact_distance", False)))
         return f
 
     def __repr__(self) -> str:
@@ -246,7 +277,9 @@ class AdaptiveField:
             method: ``"mls"`` (moving least squares, Eq. 9-10) or ``"linear"`` (trilinear, for comparison).
             return_gradient: Also return the (N, 3) float32 MLS gradient.
         Returns:
-            (N,) float32 signed distances, negative inside; outside the domain never below the distance to it.
+            (N,) float32 signed distances, negative inside; outside the domain never below the distance to it. A field
+            that encloses no volume (``encloses_volume`` False) is an unsigned distance, kinked on its surface: "mls"
+            there takes the nearest closest point of the neighbouring nodes instead of a fit.
         Raises:
             ValueError: If ``points`` is not (N, 3) or ``method`` is unknown.
         """
@@ -257,7 +290,8 @@ class AdaptiveField:
         values = wp.empty(n, dtype=wp.float32, device=self.device)
         grads = wp.empty(n, dtype=wp.vec3, device=self.device)
         if n:
-            arg, pts_wp, mode = self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device), int(method != "mls")
+            arg, pts_wp = self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device)
+            mode = 1 if method == "linear" else (0 if self.encloses_volume else 2)
             parallel.launch_split(
                 sample_field_kernel,
                 n,
@@ -434,14 +468,15 @@ class AdaptiveField:
         values = self.sample(grid).reshape(tuple(shape))
         return {"values": values, "origin": lo + 0.5 * spacing, "spacing": spacing}
 
-    def to_mesh(self, iso: float = 0.0, *, sharp: bool = True, return_creases: bool = False):
+    def to_mesh(self, iso: float = 0.0, *, sharp: bool | None = None, return_creases: bool = False):
         """The ``iso`` surface of the finest level's narrow band.
 
         Args:
             iso: Level to extract (world units; 0 is the surface, positive values offset it outwards).
             sharp: Keep creases and corners (dual marching cubes placing each vertex at the minimiser of the exact
                 tangent planes of its cube, :mod:`.dual`); ``False`` gives marching cubes, vertices on the lattice
-                edges.
+                edges. Default: sharp, except for a re-distanced field (``stats["exact_distance"]``: offsets and
+                shells), whose closest points lie on a marching-cubes surface, so there is no crease to recover.
             return_creases: Also return the crease edges the sharp extraction reconstructed.
         Returns:
             ``verts`` (V, 3) float32 and ``tris`` (T, 3) int32, counter-clockwise seen from outside; with
@@ -453,6 +488,8 @@ class AdaptiveField:
         iso = float(iso)
         if not np.isfinite(iso):
             raise ValueError(f"Expected a finite 'iso', but got {iso}.")
+        if sharp is None:
+            sharp = not self.stats.get("exact_distance", False)
         if self.placement is not None:  # extracted in its own frame, then placed
             frame = self.in_frame()
             mesh = frame.to_mesh(iso / self.placement.scale, sharp=sharp, return_creases=return_creases)

@@ -80,7 +80,7 @@ def _init_from_children_kernel(
 
 
 @wp.func
-def _nearest_projection(
+def nearest_projection(
     x: wp.vec3,
     i: int,
     neighbours: wp.array2d[wp.int32],
@@ -109,7 +109,7 @@ def _nearest_projection(
 
 
 @wp.kernel(enable_backward=False)
-def _fim_sweep_kernel(
+def fim_sweep_kernel(
     coords: wp.array[wp.vec3i],
     neighbours: wp.array2d[wp.int32],
     row0: int,
@@ -131,7 +131,7 @@ def _fim_sweep_kernel(
     known nodes stay fixed as sources (the caller keeps them in both buffers). Node ``i`` is entry ``i - in0`` of the
     inputs, ``i - out0`` of the outputs and row ``i - row0`` of ``neighbours``."""
     i = nodes[wp.tid()]
-    best, p, s = _nearest_projection(
+    best, p, s = nearest_projection(
         node_center(origin, spacing, coords[i]), i, neighbours, row0, in0, dist_in, proj_in, src_in
     )
     if best < dist_in[i - in0]:
@@ -167,7 +167,7 @@ def _fim_ordered_sweep_kernel(
         if reverse == 1:
             i = hi - 1 - t
         if first_child[i] < 0 and known[i] == 0:
-            best, p, s = _nearest_projection(
+            best, p, s = nearest_projection(
                 node_center(origin, spacing, coords[i]), i, neighbours, row0, 0, dist, proj, source
             )
             if best < dist[i]:
@@ -178,7 +178,7 @@ def _fim_ordered_sweep_kernel(
     changed[0] = count
 
 
-def _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance=0.0):
+def refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance=0.0):
     """Closest points of a solved level's leaves (``_refine_leaves_kernel``), when there is a mesh."""
     if not mesh_id:
         return
@@ -200,6 +200,35 @@ def _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known
         device,
         min_dim=EMIT_SPLIT_MIN_DIM,  # a BVH query per leaf: worth two threads from a few thousand
         balance=True,  # far from the surface a query costs more
+    )
+
+
+def init_level(coords, first_child, lo, hi, origin, spacing, dist, proj, source, mesh_id, known, octet_points=None):
+    """Start level nodes [lo, hi) from their children (``_init_from_children_kernel``): internal nodes take the
+    nearest of their children's closest points (exact from ``mesh_id`` when given), leaves are unset, nodes flagged
+    in ``known`` keep theirs. ``octet_points``: as for :func:`solve_level`."""
+    device = coords.device
+    if octet_points is None:
+        octet_points = (wp.empty(0, dtype=wp.float32, device=device), wp.empty(0, dtype=wp.vec3, device=device))
+    origin_v = wp.vec3(*origin)
+    launch_split(
+        _init_from_children_kernel,
+        hi - lo,
+        lambda start, count: [
+            coords,
+            first_child,
+            lo + start,
+            origin_v,
+            float(spacing),
+            wp.uint64(mesh_id),
+            4.0 * float(spacing),
+            known,
+            *octet_points,
+            dist,
+            proj,
+            source,
+        ],
+        device,
     )
 
 
@@ -236,27 +265,7 @@ def solve_level(
     if known is None:
         known = wp.zeros(dist.shape[0], dtype=wp.int32, device=device)
     origin_v = wp.vec3(*origin)
-    if octet_points is None:
-        octet_points = (wp.empty(0, dtype=wp.float32, device=device), wp.empty(0, dtype=wp.vec3, device=device))
-    launch_split(
-        _init_from_children_kernel,
-        n,
-        lambda start, count: [
-            coords,
-            first_child,
-            lo + start,
-            origin_v,
-            float(spacing),
-            wp.uint64(mesh_id),
-            4.0 * float(spacing),
-            known,
-            *octet_points,
-            dist,
-            proj,
-            source,
-        ],
-        device,
-    )
+    init_level(coords, first_child, lo, hi, origin, spacing, dist, proj, source, mesh_id, known, octet_points)
     if ordered_sweeps and device.is_cpu:
         # one CPU thread, in place, alternating directions (see _fim_ordered_sweep_kernel)
         changed = wp.zeros(1, dtype=wp.int32, device=device)
@@ -272,7 +281,7 @@ def solve_level(
             sweeps += 1
             if int(changed.numpy()[0]) == 0:
                 break
-        _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance)
+        refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance)
         return sweeps
     # only the unknown leaves change: the sweeps run over them alone
     free = (first_child[lo:hi].numpy() < 0) & (known[lo:hi].numpy() == 0)
@@ -289,7 +298,7 @@ def solve_level(
         src_bufs, dst_bufs = bufs[sweeps % 2], bufs[(sweeps + 1) % 2]
         # Jacobi sweeps read one buffer and write the other: both cores may take half each
         launch_split(
-            _fim_sweep_kernel,
+            fim_sweep_kernel,
             nodes.shape[0],
             lambda start, count, src_bufs=src_bufs, dst_bufs=dst_bufs: [
                 coords,
@@ -311,7 +320,7 @@ def solve_level(
         wp.copy(dist, dist_b, dest_offset=lo, count=n)
         wp.copy(proj, proj_b, dest_offset=lo, count=n)
         wp.copy(source, src_b, dest_offset=lo, count=n)
-    _refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance)
+    refine_leaves(coords, first_child, lo, n, origin_v, spacing, mesh_id, known, dist, proj, device, tolerance)
     return sweeps
 
 
@@ -356,6 +365,7 @@ def solve_levels(
     previous=None,
     prev_index=None,
     timings: dict,
+    level_solver=None,
 ):
     """Distances and closest points of every level above the finest (:func:`solve_level`, bottom-up), in place.
 
@@ -369,6 +379,8 @@ def solve_levels(
         previous, prev_index: An earlier field of the same mesh and domain and each node's index in it: its
             coarse nodes keep their distances.
         timings: Seconds per level are added here.
+        level_solver: Solves one level (default :func:`solve_level`; the same arguments, e.g.
+            ``sweeping.solve_level``).
     Returns:
         ``(neighbours, sweeps)``: the (N - N0, 6) int32 table of every coarse node's same-level face neighbours
         (node ``i`` in row ``i - N0``, -1 where none), and the fast iterative method's sweeps per level.
@@ -406,7 +418,7 @@ def solve_levels(
         name = "top_level" if k == levels - 1 else f"level_{k}"
         level_neighbours(coords, lo, hi, fine_dims >> k, neighbours, row0=n0)
         tn = time.perf_counter()
-        sweeps[k] = solve_level(
+        sweeps[k] = (level_solver or solve_level)(
             coords,
             child,
             neighbours,

@@ -202,6 +202,55 @@ def segment_clear(mesh: wp.uint64, p: wp.vec3, q: wp.vec3) -> bool:
     return True
 
 
+# What segment_crossings returns when it cannot tell (the segment touches an edge or a vertex, or grazes a face).
+CROSSINGS_UNKNOWN = 1 << 20
+
+
+@wp.func
+def _crossing(p: wp.vec3, q: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> int:
+    """How segment pq meets triangle abc: 0 surely not at all, +1 or -1 through its interior (from the side its
+    normal (b - a) x (c - a) points to, or into it), CROSSINGS_UNKNOWN within float rounding of an edge, a vertex or
+    the plane (the margins of ``_may_cross``)."""
+    n = wp.cross(b - a, c - a)
+    d = q - p
+    reach = wp.max(wp.length(a - p), wp.max(wp.length(b - p), wp.length(c - p))) + wp.length(d)
+    tol = 1.0e-5 * wp.length(n) * reach
+    sp = wp.dot(p - a, n)
+    sq = wp.dot(q - a, n)
+    if (sp > tol and sq > tol) or (sp < -tol and sq < -tol):
+        return 0
+    tol = 1.0e-5 * reach * reach * wp.length(d)
+    v0 = wp.dot(wp.cross(a - p, b - p), d)
+    v1 = wp.dot(wp.cross(b - p, c - p), d)
+    v2 = wp.dot(wp.cross(c - p, a - p), d)
+    if (v0 > tol or v1 > tol or v2 > tol) and (v0 < -tol or v1 < -tol or v2 < -tol):
+        return 0
+    through = (v0 > tol and v1 > tol and v2 > tol) or (v0 < -tol and v1 < -tol and v2 < -tol)
+    if through and sp > tol and sq < -tol:
+        return 1
+    if through and sp < -tol and sq > tol:
+        return -1
+    return CROSSINGS_UNKNOWN
+
+
+@wp.func
+def segment_crossings(mesh: wp.uint64, p: wp.vec3, q: wp.vec3) -> int:
+    """The number of times segment pq passes through the mesh's triangles into them (against their normals) minus
+    out of them: what the winding number gains from p to q beyond its smooth part, or CROSSINGS_UNKNOWN when a
+    triangle is met at an edge, a vertex or a graze."""
+    pad = wp.vec3(1.0e-3 * wp.length(q - p))
+    candidates = wp.mesh_query_aabb(mesh, wp.min(p, q) - pad, wp.max(p, q) + pad)
+    m = wp.mesh_get(mesh)
+    f = int(0)
+    total = int(0)
+    while wp.mesh_query_aabb_next(candidates, f):
+        k = _crossing(p, q, m.points[m.indices[3 * f]], m.points[m.indices[3 * f + 1]], m.points[m.indices[3 * f + 2]])
+        if k == CROSSINGS_UNKNOWN:
+            return CROSSINGS_UNKNOWN
+        total += k
+    return total
+
+
 # Warp's BVH closest-point search (``mesh_query_point_no_sign``), returning the point itself: the same traversal
 # (nearest child first, boxes farther than the best distance so far skipped), with the closest point on each triangle
 # computed as ``closest_on_triangle`` does (Warp's routine is the Voronoi-region method, whose barycentric coordinates

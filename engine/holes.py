@@ -1,10 +1,10 @@
 """Where an open mesh's surface crosses its holes, away from every triangle.
 
 Across a hole the winding number jumps from inside to outside with no triangle near, so the finest band around the
-triangles does not hold that part of the surface. Before the first build, :func:`cap_lattices` samples winding
-numbers at the octet centres around each hole's cap and adds the octets on either side of 0.5 to the finest level;
-:func:`cap_sign_presets` gives their level-1 nodes the sampled signs. After a build, :func:`sign_change_octets` looks
-for the zero set leaving the band near the caps, and the build refines what it finds in another round.
+triangles does not hold that part of the surface. Before the first build, :func:`cap_lattices` decides inside or
+outside at the octet centres around each hole's cap and adds the octets on either side of that surface to the finest
+level. After a build, :func:`sign_change_octets` looks for the zero set leaving the band near the caps, and the build
+refines what it finds in another round.
 """
 
 from __future__ import annotations
@@ -17,9 +17,10 @@ import warp as wp
 
 from . import octree, parallel
 from .geometry import near_cap, segment_clear
-from .octree import in_sorted, morton_encode, node_center
+from .octree import morton_encode, node_center
 from .sampling import FieldArg, inside_domain, locate_leaf, top_cell
-from .signs import box_arrays, mesh_sign_kernel
+from .signs import box_arrays
+from .winding import WindingArg, mesh_sign_kernel
 
 if TYPE_CHECKING:
     from .field import AdaptiveField
@@ -250,7 +251,7 @@ def _merge_boxes(first: np.ndarray, last: np.ndarray) -> tuple[np.ndarray, np.nd
     return np.array([a for a, _ in boxes]), np.array([b for _, b in boxes])
 
 
-def _inside_at(mesh_id, cells: np.ndarray, origin, size: float, device) -> np.ndarray:
+def _inside_at(winding: WindingArg, cells: np.ndarray, origin, size: float, device) -> np.ndarray:
     """(M,) bool: whether the centres of the cells (M, 3) of edge ``size`` are inside the mesh (the sign oracle's
     kernel, on every cell)."""
     sign = wp.empty(len(cells), dtype=wp.float32, device=device)
@@ -259,20 +260,12 @@ def _inside_at(mesh_id, cells: np.ndarray, origin, size: float, device) -> np.nd
     parallel.launch_split(
         mesh_sign_kernel,
         len(cells),
-        lambda start, n: [wp.uint64(mesh_id), cells_wp, every[start : start + n], wp.vec3(*origin), float(size), sign],
+        lambda start, n: [winding, cells_wp, every[start : start + n], wp.vec3(*origin), float(size), sign],
         device,
         min_dim=parallel.EMIT_SPLIT_MIN_DIM,  # a winding number each
         balance=True,  # cells near the mesh cost more
     )
     return sign.numpy() < 0.0
-
-
-def _in_box(columns, first, last) -> np.ndarray:
-    """Whether each point (``columns``: its x, y and z arrays) lies in the integer box [first, last] (inclusive)."""
-    hit = np.ones(len(columns[0]), dtype=bool)
-    for k in range(3):
-        hit &= (columns[k] >= first[k]) & (columns[k] <= last[k])
-    return hit
 
 
 def _box_cells(first, last) -> np.ndarray:
@@ -310,14 +303,14 @@ def _clear_pairs(mesh_id, pairs: np.ndarray, origin, size: float, device) -> np.
     return pairs[clear.numpy() == 1]
 
 
-def cap_lattices(mesh_id, caps, origin, octet_dims, octet: float, band_count: int, device):
-    """Where an open mesh's surface crosses its holes, from winding numbers at the centres of octets (the level-1
-    nodes) around each hole's cap: that surface spans the hole's boundary, where the boundary's solid angle is 2 pi,
-    inside the hull of the boundary and so inside the cap's box. The box's octets and ``CAP_LATTICE_MARGIN`` more
-    around it are sampled (overlapping boxes as one), where cells twice their size, sampled first, find enough of that
-    surface (``CAP_LATTICE_MIN_SHEET``). Sampling only the octets of those cells that change sides, and the cells
-    next to them, still sampled 64-91 % of the octets on Suzanne and the bunny: the triangles in a box change sides
-    too.
+def cap_lattices(winding: WindingArg, caps, origin, octet_dims, octet: float, band_count: int, device):
+    """Where an open mesh's surface crosses its holes, from inside or outside (:class:`.winding.WindingArg`) at the
+    centres of octets (the level-1 nodes) around each hole's cap: that surface spans the hole's boundary, where the
+    boundary's solid angle is 2 pi, inside the hull of the boundary and so inside the cap's box. The box's octets and
+    ``CAP_LATTICE_MARGIN`` more around it are sampled (overlapping boxes as one), where cells twice their size,
+    sampled first, find enough of that surface (``CAP_LATTICE_MIN_SHEET``). Sampling only the octets of those cells
+    that change sides, and the cells next to them, still sampled 64-91 % of the octets on Suzanne and the bunny: the
+    triangles in a box change sides too.
 
     Returns ``{"lattices": [(first octet (3,), inside (nx, ny, nz) bool)], "sheet": sorted codes of the octets on
     either side of 0.5 from a neighbour (faces, edges or corners) with no triangle between their centres}``, or None
@@ -337,48 +330,15 @@ def cap_lattices(mesh_id, caps, origin, octet_dims, octet: float, band_count: in
         # mostly filled, its surface within the triangles' band) is left to the refinement rounds, which it would
         # rarely need
         c0, c1 = corner // 2, end // 2
-        coarse = _inside_at(mesh_id, _box_cells(c0, c1), origin, 2 * octet, device).reshape(c1 - c0 + 1)
-        found = _clear_pairs(mesh_id, _changes(coarse) + c0, origin, 2 * octet, device)
+        coarse = _inside_at(winding, _box_cells(c0, c1), origin, 2 * octet, device).reshape(c1 - c0 + 1)
+        found = _clear_pairs(winding.mesh, _changes(coarse) + c0, origin, 2 * octet, device)
         # a sheet of cells twice an octet's size is about 4 octets to each of its cells
         if 4 * len(np.unique(found.reshape(-1, 3), axis=0)) < CAP_LATTICE_MIN_SHEET * (end - corner + 1).prod():
             continue
-        grid = _inside_at(mesh_id, _box_cells(corner, end), origin, octet, device).reshape(end - corner + 1)
+        grid = _inside_at(winding, _box_cells(corner, end), origin, octet, device).reshape(end - corner + 1)
         lattices.append((corner, grid))
-        sheet.append(_clear_pairs(mesh_id, _changes(grid) + corner, origin, octet, device).reshape(-1, 3))
+        sheet.append(_clear_pairs(winding.mesh, _changes(grid) + corner, origin, octet, device).reshape(-1, 3))
     if not lattices:
         return None
     codes = octree.morton_encode_np(np.concatenate(sheet))
     return {"lattices": lattices, "sheet": np.unique(codes)}
-
-
-def cap_sign_presets(found: dict, layout: dict, levels: int):
-    """Signs set before the top-down pass around an open mesh's holes, and the nodes that must not take their
-    parent's: (sign (N,) float32, no_inherit (N,) uint8). The level-1 nodes of the lattices (:func:`cap_lattices`)
-    take the winding numbers found there. A node takes its parent's sign when their empty balls cover the segment
-    between them, which proves nothing where that segment may cross the surface across a hole: the finest nodes of
-    the sheet octets, and the coarser nodes within a cell of a lattice, are left to their neighbours and the
-    oracle."""
-    codes, coords = layout["codes"].numpy(), layout["coords"].numpy()
-    offsets = layout["offsets"]
-    n = int(offsets[-1])
-    sign = np.zeros(n, dtype=np.float32)
-    no_inherit = np.zeros(n, dtype=np.uint8)
-    lo1, hi1 = int(offsets[1]), int(offsets[2])
-    level1 = [coords[lo1:hi1, k] for k in range(3)]  # column by column: faster than reductions over (N, 3)
-    for corner, grid in found["lattices"]:
-        within = np.flatnonzero(_in_box(level1, corner, corner + np.asarray(grid.shape) - 1))
-        inside = grid[tuple(level1[k][within] - corner[k] for k in range(3))]
-        sign[lo1 + within] = np.where(inside, -1.0, 1.0)
-    # finest nodes in the sheet octets
-    n0 = int(offsets[1])
-    no_inherit[:n0] = np.repeat(in_sorted(found["sheet"], codes[:n0:8] >> 3), 8)
-    # coarser nodes within a cell of a lattice
-    for k in range(2, levels):
-        a, b = int(offsets[k]), int(offsets[k + 1])
-        level = [coords[a:b, axis] for axis in range(3)]
-        near = np.zeros(b - a, dtype=bool)
-        for corner, grid in found["lattices"]:
-            # level-k cells hold 2^(k-1) octets per axis
-            near |= _in_box(level, (corner >> (k - 1)) - 1, ((corner + np.asarray(grid.shape) - 1) >> (k - 1)) + 1)
-        no_inherit[a:b] = near
-    return sign, no_inherit

@@ -23,15 +23,21 @@ ENGINE_MODULES = (
     "octree",
     "distance",
     "fim",
+    "winding",
     "signs",
     "holes",
     "build",
+    "field",
     "sampling",
+    "prune",
     "boolean",
     "marching",
     "extract",
     "sources",
     "dual",
+    "sweeping",
+    "redistancing",
+    "fieldops",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.
@@ -60,14 +66,18 @@ def configure_modules(engine_package: str) -> None:
         wp.set_module_options({"cpu_compiler_flags": PORTABLE_CPU_FLAGS}, module)
 
 
-def compile_prebuilt(out_dir, *, cuda: bool = True, modules=None) -> list[Path]:
+def compile_prebuilt(out_dir, *, cuda: bool = True, modules=None, archs=CUDA_ARCHS, reuse=None) -> list[Path]:
     """Compile the engine's modules (imported as the top-level package ``engine``) into ``out_dir``.
 
     Args:
         out_dir: Folder for the compiled files (created).
-        cuda: Also emit PTX for ``CUDA_ARCHS`` (works without a GPU, through NVRTC).
+        cuda: Also emit PTX for ``archs`` (works without a GPU, through NVRTC).
         modules: Names among ``ENGINE_MODULES`` to compile (default: all), so that several processes can share the
             work.
+        archs: CUDA architectures to emit PTX for (default: ``CUDA_ARCHS``).
+        reuse: A Warp kernel cache folder (versioned, as ``warp.config.kernel_cache_dir``) whose CPU objects of the
+            same modules, with the same hash, are copied instead of compiled (a module's hash covers its source and
+            options, so the copy is the object the compiler would write).
     Returns:
         The files written.
     """
@@ -80,11 +90,26 @@ def compile_prebuilt(out_dir, *, cuda: bool = True, modules=None) -> list[Path]:
     written = []
     for module in modules:
         wp.set_module_options({"block_dim": 1}, module)
-        written += wp.compile_aot_module(module, device="cpu", module_dir=out)
-        if cuda:
+        cached = _cached_cpu_files(wp.get_module(module.__name__), reuse)
+        if cached:
+            for path in cached:
+                shutil.copy2(path, out / path.name)
+            written += [out / path.name for path in cached]
+        else:
+            written += wp.compile_aot_module(module, device="cpu", module_dir=out)
+        if cuda and archs:
             wp.set_module_options({"block_dim": 256}, module)
-            written += wp.compile_aot_module(module, arch=list(CUDA_ARCHS), module_dir=out, use_ptx=True)
+            written += wp.compile_aot_module(module, arch=list(archs), module_dir=out, use_ptx=True)
     return [Path(p) for p in written]
+
+
+def _cached_cpu_files(module, cache) -> list[Path]:
+    """A module's CPU object and metadata in a kernel cache (empty when either is missing)."""
+    if cache is None:
+        return []
+    folder = Path(cache) / module.get_module_identifier(block_dim=1)
+    objects, metas = sorted(folder.glob("*.o")), sorted(folder.glob("*.meta"))
+    return objects + metas if len(objects) == 1 and len(metas) == 1 else []
 
 
 def install_prebuilt(source_dir, cache_dir, engine_package: str) -> int:

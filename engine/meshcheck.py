@@ -128,6 +128,92 @@ def _boundary_pieces(pairs: np.ndarray) -> np.ndarray:
     return np.unique(label, return_inverse=True)[1].reshape(-1)[local[:, 0]]
 
 
+def _cycle_order(tails: np.ndarray, heads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An order of directed edges (tails -> heads, vertex ids) of a balanced graph (as many edges into each vertex as
+    out of it) in which they form cycles, each edge followed by one leaving its head: (order (E,), first (E,) bool,
+    whether each edge of the order starts a cycle). Each vertex's incoming edges are paired with its outgoing ones;
+    the cycles of that pairing are listed by pointer jumping (list ranking), without a loop over the edges."""
+    n = len(tails)
+    succ = np.empty(n, dtype=np.int64)
+    succ[np.argsort(heads, kind="stable")] = np.argsort(tails, kind="stable")
+    pred = np.empty(n, dtype=np.int64)
+    pred[succ] = np.arange(n)
+    label, jump = np.arange(n), succ.copy()
+    while True:  # each edge's cycle: its smallest edge
+        low = np.minimum(label, label[jump])
+        jump = jump[jump]
+        if np.array_equal(low, label):
+            break
+        label = low
+    ptr = np.where(label == np.arange(n), -1, pred)  # cut each cycle before its smallest edge
+    rank = (ptr >= 0).astype(np.int64)
+    while (ptr >= 0).any():
+        valid = ptr >= 0
+        safe = np.where(valid, ptr, 0)
+        rank = rank + np.where(valid, rank[safe], 0)
+        ptr = np.where(valid, ptr[safe], -1)
+    order = np.lexsort((rank, label))
+    return order, rank[order] == 0
+
+
+def hole_boundary(vertices: np.ndarray, triangles: np.ndarray, edges: dict | None = None):
+    """An open mesh's boundary as directed edges with their cones, and the caps bounding how far its winding number
+    may be from an integer (see :func:`hole_caps`); None when every edge cancels.
+
+    The boundary G is the mesh's edges whose two orientations do not cancel (open, or inconsistently oriented), each
+    directed the way the triangles list it more often, as many times as more often. Its connected pieces G_c are
+    closed: the cone over G_c from the centre of G_c's bounding box is one triangle (apex, end, start) per edge, and
+    the mesh and all cones form a closed surface, whose winding number is an integer. The edges come piece by piece,
+    in cycles (each edge starting where the one before it ends, but at the start of a cycle), so sums over them share
+    the vertices' and the apexes' terms.
+
+    Args:
+        vertices: (V, 3) float positions (welded, see :func:`weld_positions`, so seams are not boundary).
+        triangles: (T, 3) int indices.
+        edges: ``edge_table(triangles, len(vertices))`` when already at hand.
+    Returns:
+        None, or ``{"start": (E, 3) float32, "end": (E, 3) float32, "apex": (E, 3) float32 the cone apex of each
+        edge, "links": (E,) uint8, bit 0 set where an edge starts at the previous one's end and bit 1 where it has
+        the previous one's apex, "caps": (box lo (K, 3), box hi (K, 3), radius (K,))}``.
+    """
+    edges = edge_table(triangles, len(vertices)) if edges is None else edges
+    net = 2 * edges["forward"] - edges["faces"]  # low -> high minus high -> low
+    open_edges = net != 0
+    if not open_edges.any():
+        return None
+    pairs = edges["pairs"][open_edges]
+    net = net[open_edges]
+    piece = _boundary_pieces(pairs)
+    if piece.max() + 1 > MAX_HOLE_CAPS:
+        piece = np.zeros_like(piece)
+    k = int(piece.max()) + 1
+    verts = np.asarray(vertices, dtype=np.float64)
+    a, b = (verts[pairs[:, c]] for c in (0, 1))
+    lo = np.full((k, 3), np.inf)
+    hi = np.full((k, 3), -np.inf)
+    np.minimum.at(lo, piece, np.minimum(a, b))
+    np.maximum.at(hi, piece, np.maximum(a, b))
+    centre = 0.5 * (lo + hi)
+    tri_area = 0.5 * np.linalg.norm(np.cross(a - centre[piece], b - centre[piece]), axis=1) * np.abs(net)
+    area = np.bincount(piece, weights=tri_area, minlength=k)
+    # one directed edge per unit of multiplicity, then cycles within each piece
+    copies = np.repeat(np.arange(len(net)), np.abs(net))
+    tails = np.where(net > 0, pairs[:, 0], pairs[:, 1])[copies]
+    heads = np.where(net > 0, pairs[:, 1], pairs[:, 0])[copies]
+    order, first = _cycle_order(tails, heads)
+    order_piece = piece[copies][order]
+    by_piece = np.argsort(order_piece, kind="stable")  # cycles stay whole: each lies in one piece
+    order, first, order_piece = order[by_piece], first[by_piece], order_piece[by_piece]
+    same_apex = np.r_[False, order_piece[1:] == order_piece[:-1]]
+    return {
+        "start": verts[tails[order]].astype(np.float32),
+        "end": verts[heads[order]].astype(np.float32),
+        "apex": centre[order_piece].astype(np.float32),
+        "links": ((~first).astype(np.uint8) | (same_apex.astype(np.uint8) << 1)).astype(np.uint8),
+        "caps": (lo, hi, np.sqrt(area / math.pi)),
+    }
+
+
 def hole_caps(vertices: np.ndarray, triangles: np.ndarray, edges: dict | None = None):
     """Where an open mesh's winding number may be far from an integer: (box lo (K, 3), box hi (K, 3), radius (K,)),
     or None.
@@ -138,32 +224,114 @@ def hole_caps(vertices: np.ndarray, triangles: np.ndarray, edges: dict | None = 
     integer that changes only across the mesh or a cone, and the mesh's winding number differs from it by the cones',
     each at most area(C_c) / (4 pi d_c^2) at distance d_c from C_c. With ``radius_c = sqrt(area(C_c) / pi)``, where
     the sum over c of (radius_c / d_c)^2 stays below 1, d_c now the distance to the box c (which holds C_c), their
-    sum is below 1/4: there the winding number stays within 1/4 of an integer, so two points joined by a segment that
-    crosses no triangle are on the same side of 0.5, and signs may spread between nodes as on a closed mesh (the
-    kernels' ``near_cap`` test). One cone per piece keeps the caps of holes far apart small; beyond
-    ``MAX_HOLE_CAPS`` pieces a single cone over the whole boundary is used. Returns None when every edge cancels
-    (closed, consistently oriented, possibly non-manifold). ``edges``: ``edge_table(triangles, len(vertices))`` when
-    already at hand.
+    sum is below 1/4: there the winding number w stays within 1/4 of an integer k, so |w| >= 1/2 (inside) exactly when
+    k != 0, and two points joined by a segment that crosses no triangle (nor, being off the boxes, a cone) are on the
+    same side, and signs may spread between nodes as on a closed mesh (the kernels' ``near_cap`` test). One cone per
+    piece keeps the caps of holes far apart small; beyond ``MAX_HOLE_CAPS`` pieces a single cone over the whole
+    boundary is used. Returns None when every edge cancels (closed, consistently oriented, possibly non-manifold).
+    ``edges``: ``edge_table(triangles, len(vertices))`` when already at hand.
     """
-    edges = edge_table(triangles, len(vertices)) if edges is None else edges
-    net = 2 * edges["forward"] - edges["faces"]  # low -> high minus high -> low
-    open_edges = net != 0
-    if not open_edges.any():
-        return None
-    pairs = edges["pairs"][open_edges]
-    piece = _boundary_pieces(pairs)
-    if piece.max() + 1 > MAX_HOLE_CAPS:
-        piece = np.zeros_like(piece)
-    k = int(piece.max()) + 1
-    a, b = (np.asarray(vertices, dtype=np.float64)[pairs[:, c]] for c in (0, 1))
-    lo = np.full((k, 3), np.inf)
-    hi = np.full((k, 3), -np.inf)
-    np.minimum.at(lo, piece, np.minimum(a, b))
-    np.maximum.at(hi, piece, np.maximum(a, b))
-    apex = 0.5 * (lo + hi)[piece]
-    tri_area = 0.5 * np.linalg.norm(np.cross(a - apex, b - apex), axis=1) * np.abs(net[open_edges])
-    area = np.bincount(piece, weights=tri_area, minlength=k)
-    return lo, hi, np.sqrt(area / math.pi)
+    boundary = hole_boundary(vertices, triangles, edges)
+    return None if boundary is None else boundary["caps"]
+
+
+# The most boundary edges for which a flat mesh is checked to enclose nothing (the check compares every pair).
+MAX_FLAT_BOUNDARY = 2048
+
+
+# Vertices within this share of the mesh's extent of one plane make a flat mesh (float32 rounding: 6e-8).
+FLAT_TOLERANCE = 1.0e-6
+
+
+def encloses_nothing(vertices: np.ndarray, boundary) -> bool:
+    """Whether a mesh surely encloses no volume because it is flat: its vertices on one plane (within
+    ``FLAT_TOLERANCE``), and its boundary (:func:`hole_boundary`) winding at most once around any point of that plane.
+
+    Off the plane, w(x) = +-1/4pi times the integral over the plane of c dOmega_x, c the number of times the triangles
+    cover a point (with their orientations): the winding number of the boundary around it. The plane subtends 2 pi, so
+    |w| < max |c| / 2 <= 1/2 everywhere off it. When no two boundary edges meet (but consecutive ones at their common
+    end), the boundary's cycles are simple closed curves, every face of their arrangement borders a cycle, and c is
+    checked on both sides of one edge of each cycle. False (not proven) for a mesh that is not flat, whose boundary
+    meets itself, or has more than ``MAX_FLAT_BOUNDARY`` edges.
+
+    Args:
+        vertices: (V, 3) float positions.
+        boundary: :func:`hole_boundary` of the mesh (None: closed).
+    Returns:
+        bool.
+    """
+    verts = np.asarray(vertices, dtype=np.float64)
+    centre = verts.mean(axis=0)
+    offsets = verts - centre
+    extent = float(np.abs(offsets).max())
+    if boundary is None or extent == 0.0 or len(boundary["start"]) > MAX_FLAT_BOUNDARY:
+        return False
+    axes = np.linalg.eigh(offsets.T @ offsets)[1]  # ascending: the last two span the plane, the first is its normal
+    if np.abs(offsets @ axes[:, 0]).max() > FLAT_TOLERANCE * extent:
+        return False
+    a = (np.asarray(boundary["start"], np.float64) - centre) @ axes[:, 1:]
+    b = (np.asarray(boundary["end"], np.float64) - centre) @ axes[:, 1:]
+    if _edges_meet(a, b):
+        return False
+    first = np.flatnonzero((np.asarray(boundary["links"]) & 1) == 0)  # an edge of each cycle
+    along = b[first] - a[first]
+    side = np.stack([-along[:, 1], along[:, 0]], axis=1) * 1.0e-4
+    mid = 0.5 * (a[first] + b[first])
+    return bool(np.abs(_winding_2d(np.concatenate([mid + side, mid - side]), a, b)).max() <= 1.5)
+
+
+def _point_segment_distance(px, py, ax, ay, dx, dy):
+    """Distance from points (px, py) to segments from (ax, ay) along (dx, dy), all broadcast together."""
+    t = np.clip(((px - ax) * dx + (py - ay) * dy) / np.maximum(dx * dx + dy * dy, 1e-300), 0.0, 1.0)
+    return np.hypot(px - ax - t * dx, py - ay - t * dy)
+
+
+def _edges_meet(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two of the 2D segments a[i] b[i] that share no end come within 1e-3 of the longest one's length of
+    each other (crossing, touching, or so near that the side test of :func:`encloses_nothing` could land beside the
+    wrong face). Pairs are found by a sweep along x (sorted starts, ranges by binary search), then tested."""
+    n = len(a)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    margin = 1.0e-3 * float(np.linalg.norm(b - a, axis=1).max())
+    order = np.argsort(lo[:, 0], kind="stable")
+    starts = lo[order, 0]
+    ends = np.searchsorted(starts, hi[order, 0] + margin, side="right")
+    counts = np.maximum(ends - np.arange(n) - 1, 0)
+    i = np.repeat(np.arange(n), counts)
+    j = i + 1 + np.arange(len(i)) - np.repeat(np.cumsum(counts) - counts, counts)
+    i, j = order[i], order[j]
+    keep = (lo[i, 1] <= hi[j, 1] + margin) & (lo[j, 1] <= hi[i, 1] + margin)
+    i, j = i[keep], j[keep]
+    _, ids = np.unique(np.concatenate([a, b]), axis=0, return_inverse=True)
+    ids = ids.reshape(2, -1)
+    shared = (ids[0][i] == ids[0][j]) | (ids[0][i] == ids[1][j]) | (ids[1][i] == ids[0][j]) | (ids[1][i] == ids[1][j])
+    i, j = i[~shared], j[~shared]
+    d = b - a
+    seg_i = (a[i, 0], a[i, 1], d[i, 0], d[i, 1])
+    seg_j = (a[j, 0], a[j, 1], d[j, 0], d[j, 1])
+    gap = np.minimum(
+        np.minimum(
+            _point_segment_distance(a[i, 0], a[i, 1], *seg_j), _point_segment_distance(b[i, 0], b[i, 1], *seg_j)
+        ),
+        np.minimum(
+            _point_segment_distance(a[j, 0], a[j, 1], *seg_i), _point_segment_distance(b[j, 0], b[j, 1], *seg_i)
+        ),
+    )
+    # proper crossings: each segment's ends on strictly opposite sides of the other's line
+    side = lambda s, p: s[2] * (p[1] - s[1]) - s[3] * (p[0] - s[0])  # noqa: E731
+    crossing = (side(seg_i, a[j].T) * side(seg_i, b[j].T) < 0) & (side(seg_j, a[i].T) * side(seg_j, b[i].T) < 0)
+    return bool(np.any((gap < margin) | crossing))
+
+
+def _winding_2d(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(P,) winding numbers of the closed 2D edge cycles a -> b around each point: the sum of the angles the edges
+    subtend, over 2 pi."""
+    total = np.zeros(len(points))
+    for lo in range(0, len(points), 512):
+        ux, uy = a[None, :, 0] - points[lo : lo + 512, 0, None], a[None, :, 1] - points[lo : lo + 512, 1, None]
+        vx, vy = b[None, :, 0] - points[lo : lo + 512, 0, None], b[None, :, 1] - points[lo : lo + 512, 1, None]
+        total[lo : lo + 512] = np.arctan2(ux * vy - uy * vx, ux * vx + uy * vy).sum(axis=1)
+    return total / (2.0 * np.pi)
 
 
 def open_tunnels(surface: dict, quads: np.ndarray, sides: np.ndarray, points: np.ndarray) -> None:

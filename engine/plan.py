@@ -3,11 +3,13 @@
 Every field's domain is snapped to multiples of its top-level spacing measured from one world origin (Ren et al.,
 Eq. 3), so fields of the same finest spacing are node-aligned. :func:`plan_field` validates a mesh
 (:mod:`.meshcheck`), lays out its domain and bounds the finest nodes from above; :func:`check_meshes` refuses a set of
-builds that would not fit in memory together, before any of them starts.
+builds that would not fit in memory together, before any of them starts. :func:`plan_grown` lays out the domain of a
+surface grown by an offset or a thickness, and refuses one the octree cannot address.
 """
 
 from __future__ import annotations
 
+import math
 import os
 
 import numpy as np
@@ -19,6 +21,14 @@ from .octree import MAX_CELLS_PER_AXIS
 
 # Bytes a finest node costs while building (codes, coords, distances, projections, links, sort buffers).
 BUILD_BYTES_PER_NODE = 160
+
+
+# Finest cells kept around the domain's content, as a build keeps them (padding 1 + 2).
+MARGIN_CELLS = 3
+
+
+# The thinnest wall (shell, thickness) in voxels: thinner ones leave holes where the surface's two sides share a cell.
+MIN_WALL_VOXELS = 2.0
 
 
 def available_memory() -> int:
@@ -125,27 +135,118 @@ def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
     }
 
 
-def check_meshes(meshes, *, voxel_size, levels=4, padding=1) -> int:
+def finite_number(name: str, value) -> float:
+    """``value`` as a float: a number (TypeError) and finite (ValueError)."""
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"Expected a number for '{name}', but got {type(value).__name__}.") from None
+    if not math.isfinite(value):
+        raise ValueError(f"Expected a finite '{name}', but got {value}.")
+    return value
+
+
+def checked_wall(name: str, value, voxel_size: float) -> float:
+    """A thickness: positive and finite (ValueError), at least ``MIN_WALL_VOXELS`` voxels (AasdfError)."""
+    value = finite_number(name, value)
+    if value <= 0.0:
+        raise ValueError(f"Expected a positive '{name}', but got {value}.")
+    if value < MIN_WALL_VOXELS * voxel_size:
+        raise AasdfError(
+            f"A {name} of {value:g} is thinner than two voxels ({MIN_WALL_VOXELS * voxel_size:g}) and would leave "
+            f"holes; use a {name} of at least {MIN_WALL_VOXELS * voxel_size:g}, or a smaller voxel size."
+        )
+    return value
+
+
+def plan_grown(lo, hi, grow: float, *, voxel_size: float, levels: int, nodes: float, what: str):
+    """(origin, top_dims, levels) of a domain around the box ``lo``-``hi`` grown by ``grow`` on every side, refused
+    (AasdfError) when the octree cannot address it or its ``nodes`` finest nodes would not fit in memory. More levels
+    keep the dense top level about as large as the box's when the domain grows much."""
+    lo = np.asarray(lo, np.float64) - grow
+    hi = np.asarray(hi, np.float64) + grow
+    span = float(np.max(hi - lo)) / voxel_size + 2 * MARGIN_CELLS
+    if not span < MAX_CELLS_PER_AXIS - 1:
+        raise AasdfError(
+            f"{what} needs a domain of {span:.0f} finest cells along an axis, more than the {MAX_CELLS_PER_AXIS - 1} "
+            "the octree can address; use a smaller distance or a larger voxel size."
+        )
+    base = float(np.max(hi - lo - 2.0 * grow)) / voxel_size + 2 * MARGIN_CELLS
+    levels = int(levels) + max(0, int(math.floor(math.log2(max(span / max(base, 1.0), 1.0)))))
+    while levels > 1 and 2 ** (levels - 1) > span:  # a top cell no larger than the domain
+        levels -= 1
+    origin, top_dims = plan_domain(lo, hi, voxel_size, levels, MARGIN_CELLS)
+    check_budget(top_dims * 2 ** (levels - 1), int(np.prod(top_dims)), nodes)
+    return origin, top_dims, levels
+
+
+def check_meshes(meshes, *, voxel_size, levels=4, padding=1, thickness=None) -> int:
     """Refuse, before any work, a set of builds that is invalid or would not fit in memory together.
 
     Args:
         meshes: Iterable of (vertices, triangles) pairs.
-        voxel_size, levels, padding: As for :func:`build_field`.
+        voxel_size, levels, padding, thickness: As for :func:`build_fields`.
     Returns:
         The estimated bytes of all the builds.
     Raises:
+        ValueError: If ``thickness`` is not None, a number or one per mesh, or not positive and finite.
         AasdfError: The first invalid mesh (its index in the message), or the total being too large.
     """
-    return sum(plan["bytes"] for plan in checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding))
+    plans = checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding, thickness=thickness)
+    return sum(plan["bytes"] for plan in plans)
 
 
-def checked_plans(meshes, *, voxel_size, levels, padding) -> list[dict]:
-    """:func:`check_meshes`, returning each mesh's :func:`plan_field`."""
+def thicknesses(thickness, count: int, voxel_size) -> list:
+    """One thickness (or None) per mesh from ``thickness``: None, a number for every mesh, or one per mesh
+    (:func:`checked_wall` each)."""
+    if thickness is None or np.ndim(thickness) == 0:
+        thickness = [thickness] * count
+    thickness = list(thickness)
+    if len(thickness) != count:
+        raise ValueError(f"Expected one thickness per mesh ({count}), but got {len(thickness)}.")
+    return [None if t is None else checked_wall("thickness", t, float(voxel_size)) for t in thickness]
+
+
+def thick_plan(plan: dict, thickness) -> dict:
+    """``plan`` for the shell of ``thickness`` around its mesh's triangles: the domain grown by half the thickness,
+    refused (AasdfError) when the octree cannot address it or it would not fit in memory; ``plan`` itself for None."""
+    if thickness is None:
+        return plan
+    verts = plan["vertices"]
+    nodes = 2.0 * plan["fine_nodes"]  # the band runs along both sides of the surface
+    origin, top_dims, levels = plan_grown(
+        verts.min(axis=0),
+        verts.max(axis=0),
+        0.5 * thickness,
+        voxel_size=plan["voxel_size"],
+        levels=plan["levels"],
+        nodes=nodes,
+        what=f"A thickness of {thickness:g}",
+    )
+    top_count = int(np.prod(top_dims))
+    return {
+        **plan,
+        "thickness": thickness,
+        "origin": origin,
+        "top_dims": top_dims,
+        "levels": levels,
+        "fine_dims": top_dims * 2 ** (levels - 1),
+        "top_count": top_count,
+        "fine_nodes": nodes,
+        "bytes": int((nodes + top_count) * BUILD_BYTES_PER_NODE),
+    }
+
+
+def checked_plans(meshes, *, voxel_size, levels, padding, thickness=None) -> list[dict]:
+    """:func:`check_meshes`, returning each mesh's :func:`plan_field` (:func:`thick_plan` where it has a thickness)."""
+    meshes = list(meshes)
+    walls = thicknesses(thickness, len(meshes), voxel_size)
     plans = []
     for k, (verts, tris) in enumerate(meshes):
         try:
             plan = plan_field(verts, tris, voxel_size=voxel_size, levels=levels, padding=padding)
             check_budget(plan["fine_dims"], plan["top_count"], plan["fine_nodes"])
+            plan = thick_plan(plan, walls[k])
         except AasdfError as err:
             raise AasdfError(f"Mesh {k}: {err}") from err
         plans.append(plan)

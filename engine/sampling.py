@@ -23,6 +23,11 @@ vec27i = wp.types.vector(length=27, dtype=wp.int32)
 LEAF_TOLERANCE = 0.05
 
 
+# Values of opposite signs at two nodes are distances to a surface between them only when they add up to no more than
+# the nodes' distance (1-Lipschitz); the slack allows for rounding and smooth blends.
+JUMP_SLACK = 1.5
+
+
 @wp.struct
 class FieldArg:
     """What a kernel needs to query a field."""
@@ -42,6 +47,7 @@ class FieldArg:
     codes: wp.array[wp.int64]
     fine_count: int
     tri: wp.array[wp.int32]  # per finest node, its closest point's triangle (empty: not known)
+    exact: int  # 1: a re-distanced field (``stats["exact_distance"]``): every closest point on its surface
     # world = scale * rotation @ frame + translation, when the field is placed (``moved`` 1)
     moved: int
     rotation: wp.mat33
@@ -218,29 +224,37 @@ def sample_mls(f: FieldArg, x: wp.vec3) -> wp.vec4:
     """(phi, dphi/dx, dphi/dy, dphi/dz) at ``x`` inside the domain by moving least squares.
 
     In a finest leaf (the narrow band around the surface) this is the paper's linear MLS fit of the neighbours'
-    values (Eq. 9-10); in a coarser leaf :func:`coarse_mls`.
+    values (Eq. 9-10); in a coarser leaf :func:`coarse_mls`. A neighbour of the other sign than the leaf whose value
+    and the leaf's cannot both be distances to a surface between them (their sum beyond ``JUMP_SLACK`` times the
+    distance between the nodes: where an open mesh's inside ends across a hole, away from every triangle, the values
+    jump) is left out: the fit keeps the leaf's side instead of smearing the jump over two cells.
     """
     leaf = locate_leaf(f, x)
     s = level_spacing(f, leaf[1])
     count, ids, levels = leaf_neighbours(f, leaf[0], leaf[1])
+    leaf_value = f.values[leaf[0]]
     if leaf[1] > 0:
-        return coarse_mls(f, count, ids, levels, x, s, f.values[leaf[0]])
+        return coarse_mls(f, count, ids, levels, x, s, leaf_value)
+    x_leaf = node_center(f.origin, s, f.coords[leaf[0]])
     ata = wp.mat44(0.0)
     atb = wp.vec4(0.0)
     wsum = float(0.0)
     vsum = float(0.0)
     for t in range(count):
         xn, w = _neighbour_weight(f, ids[t], levels[t], x, s)
+        phi = f.values[ids[t]]
+        if (phi < 0.0) != (leaf_value < 0.0):
+            if wp.abs(phi) + wp.abs(leaf_value) > JUMP_SLACK * wp.length(xn - x_leaf):
+                w = 0.0
         if w > 0.0:
             d = (xn - x) / s
             b = wp.vec4(1.0, d[0], d[1], d[2])
             ata += w * wp.outer(b, b)
-            phi = f.values[ids[t]]
             atb += (w * phi) * b
             vsum += w * phi
             wsum += w
     if wsum <= 0.0:
-        return wp.vec4(f.values[leaf[0]], 0.0, 0.0, 0.0)
+        return wp.vec4(leaf_value, 0.0, 0.0, 0.0)
     # A small ridge on the gradient keeps one-sided neighbourhoods well posed.
     ridge = 1.0e-4 * wsum
     ata[1, 1] += ridge
@@ -274,18 +288,170 @@ def sample_linear(f: FieldArg, x: wp.vec3) -> float:
     return acc
 
 
+# ---- the nearest stored closest point ----
+
+# Steps of the walk to a point's nearest stored closest point (each moves to the nodes around a nearer one).
+MAX_WALK_STEPS = 16
+
+
+@wp.func
+def _nearer(f: FieldArg, x: wp.vec3, q: wp.vec3, level: int, best: float, best_p: wp.vec3, best_n: wp.vec3):
+    """The nearest to ``x`` of (``best``, ``best_p``) and the closest point of the node holding ``q`` on ``level`` (or
+    the coarser leaf holding it), with that node's surface normal line (``best_n``, from its closest point to it)."""
+    if inside_domain(f, q):
+        node = locate_node(f, q, level)
+        p = f.proj[node[0]]
+        d = wp.length(x - p)
+        if d < best:
+            best = d
+            best_p = p
+            best_n = node_center(f.origin, level_spacing(f, node[1]), f.coords[node[0]]) - p
+    return best, best_p, best_n
+
+
+@wp.func
+def _walk(f: FieldArg, x: wp.vec3, best: float, best_p: wp.vec3, best_n: wp.vec3):
+    """From (``best``, ``best_p``, ``best_n``) on through the finest band: while a nearer closest point turns up, the 8
+    finest nodes around ``x``'s foot on the tangent plane at the nearest point so far (a flat surface's exact foot:
+    one step), or else the 27 around that point (an edge, where the tangent plane misleads; these confirm the end: a
+    foot a voxel from a face's nearest point may lie past its edge)."""
+    h = f.voxel_size
+    # loop bounds held in variables keep Warp from unrolling the searches (compile time)
+    block = int(27)
+    octet = int(8)
+    steps = int(MAX_WALK_STEPS)
+    for _step in range(steps):
+        before = best
+        ln = wp.length(best_n)
+        if ln > 0.0:
+            nrm = best_n / ln
+            rel = (x - nrm * wp.dot(x - best_p, nrm) - f.origin) / h - wp.vec3(0.5)
+            base = wp.vec3(wp.floor(rel[0]), wp.floor(rel[1]), wp.floor(rel[2]))
+            for o in range(octet):
+                q = wp.vec3(float(o & 1) + 0.5, float((o >> 1) & 1) + 0.5, float(o >> 2) + 0.5)
+                best, best_p, best_n = _nearer(f, x, f.origin + h * (base + q), 0, best, best_p, best_n)
+        if best >= before:
+            rel = (best_p - f.origin) / h
+            base = wp.vec3(wp.floor(rel[0]), wp.floor(rel[1]), wp.floor(rel[2]))
+            for o in range(block):
+                q = wp.vec3(float(o % 3 - 1) + 0.5, float((o // 3) % 3 - 1) + 0.5, float(o // 9 - 1) + 0.5)
+                best, best_p, best_n = _nearer(f, x, f.origin + h * (base + q), 0, best, best_p, best_n)
+            if best >= before:
+                break
+    return best, best_p
+
+
+mat43 = wp.types.matrix(shape=(4, 3), dtype=wp.float32)
+
+
+@wp.func
+def closest_stored_point(f: FieldArg, x: wp.vec3):
+    """(distance, point) of the nearest of the field's stored closest points to ``x``: the nodes of the 27 cells
+    around the leaf holding ``x`` (clamped into the domain) give starts, from which walks (:func:`_walk`) go on
+    through the finest band. Those nodes' closest points overestimate ``x``'s distance by up to about s^2 / 2S (s
+    their spacing; on a build's top level they are within 5 % of the closest), so near a medial axis the nearest of
+    them may lie in the wrong basin: the nearest start in each of up to 4 basins (starts more than two cells apart)
+    walks when it is within two cells of the nearest end so far, and the nearest end wins. The finest band's closest
+    points sample the surface a voxel apart: for a field whose closest points lie on its surface, the distance is
+    exact but for that sampling (an upper bound within about h^2 / 4S)."""
+    xc = clamp_to_domain(f, x)
+    leaf = locate_leaf(f, xc)
+    s = level_spacing(f, leaf[1])
+    c = node_center(f.origin, s, f.coords[leaf[0]])
+    # the nearest start of each basin found: distances, points, normal lines (slots past ``count`` unused)
+    dists = wp.vec4(1.0e30)
+    points = mat43()
+    normals = mat43()
+    count = int(0)
+    # outside the domain x's foot may lie as far aside as x lies out: the block of cells around the clamped point
+    # widens with that distance (2 cells either side at most)
+    r = wp.min(2, 1 + int(wp.ceil(wp.length(x - xc) / s)))
+    w = 2 * r + 1
+    for o in range(w * w * w):
+        q = c + s * wp.vec3(float(o % w - r), float((o // w) % w - r), float(o // (w * w) - r))
+        d, p, n = _nearer(f, x, q, leaf[1], float(1.0e30), x, wp.vec3(0.0))
+        if d < 1.0e30:
+            slot = int(-1)
+            for b in range(count):
+                if wp.length(p - points[b]) <= 2.0 * s:
+                    slot = b
+            if slot < 0:
+                if count < 4:
+                    slot = count
+                    count += 1
+                else:  # a fifth basin: it replaces the farthest one if nearer
+                    far = int(0)
+                    for b in range(4):
+                        if dists[b] > dists[far]:
+                            far = b
+                    slot = far
+            if d < dists[slot]:
+                dists[slot] = d
+                points[slot] = p
+                normals[slot] = n
+    best = float(1.0e30)
+    best_p = x
+    # nearest start first, then the others that may end nearer
+    order = int(0)
+    for b in range(count):
+        if dists[b] < dists[order]:
+            order = b
+    best, best_p = _walk(f, x, dists[order], points[order], normals[order])
+    for b in range(count):
+        if b != order and dists[b] < best + 2.0 * s:
+            d2, p2 = _walk(f, x, dists[b], points[b], normals[b])
+            if d2 < best:
+                best = d2
+                best_p = p2
+    return best, best_p
+
+
+@wp.func
+def closest_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i) -> wp.vec4:
+    """(phi, grad) at ``x`` in coarse leaf ``leaf`` (or outside the domain) of a field whose closest points lie on its
+    surface: the distance to the nearest of them (:func:`closest_stored_point`), with the leaf's sign (a coarse leaf
+    holds no surface; outside the domain is outside)."""
+    d, p = closest_stored_point(f, x)
+    sign = wp.where(f.values[leaf[0]] < 0.0, -1.0, 1.0)
+    if not inside_domain(f, x):
+        sign = 1.0
+    g = wp.vec3(0.0)
+    if d > 0.0:
+        g = (sign / d) * (x - p)
+    return wp.vec4(sign * d, g[0], g[1], g[2])
+
+
 @wp.kernel(enable_backward=False)
 def sample_field_kernel(
     f: FieldArg, points: wp.array[wp.vec3], method: int, values: wp.array[wp.float32], grads: wp.array[wp.vec3]
 ):
     """Signed distance (negative inside) and gradient at each point; outside the domain the value grows with the
-    distance to the domain box and is never below it."""
+    distance to the domain box and is never below it. ``method`` 0: MLS, 1: linear, 2: the unsigned distance of a
+    field with no inside (the nearest of the neighbours' closest points, as in a coarse leaf: no fit smooths the kink
+    of the distance on the surface). In a coarse leaf of a re-distanced field (``f.exact``), the distance to the
+    nearest of its closest points (:func:`closest_sample`): within about h^2 / 4S where the MLS estimate of a coarse
+    leaf reads up to a tenth too far."""
     i = wp.tid()
     x = points[i]
     xc = clamp_to_domain(f, x)
     out = wp.length(x - xc)
     if method == 0:
+        leaf = locate_leaf(f, xc)
+        if f.exact == 1 and leaf[1] > 0:
+            # a coarse leaf of a field whose closest points lie on its surface: the nearest of them
+            r = closest_sample(f, x, leaf)
+            values[i] = r[0]
+            grads[i] = wp.vec3(r[1], r[2], r[3])
+            return
         r = sample_mls(f, xc)
+        phi = r[0]
+        g = wp.vec3(r[1], r[2], r[3])
+    elif method == 2:
+        # a finest leaf's nodes lie half a cell from the surface: their feet on it are a cell apart, and the tangent
+        # plane through the nearest is followed a cell along (as a coarse leaf of twice the size would)
+        leaf = locate_leaf(f, xc)
+        count, ids, levels = leaf_neighbours(f, leaf[0], leaf[1])
+        r = coarse_mls(f, count, ids, levels, xc, level_spacing(f, wp.max(leaf[1], 1)), f.values[leaf[0]])
         phi = r[0]
         g = wp.vec3(r[1], r[2], r[3])
     else:

@@ -1,9 +1,13 @@
-"""Signs of a mesh's field, top-down: inside means generalised winding number >= 0.5.
+"""Signs of a mesh's field, top-down: inside means |w| >= 1/2, w the generalised winding number (:mod:`.winding`).
 
 A node takes its parent's or a same-level neighbour's sign when their empty balls (unsigned distances) cover the
-segment between them, or when that segment crosses no triangle (away from an open mesh's holes, where the winding
-number changes only across triangles); only nodes left undecided pay the winding number (Warp's fast winding number,
-:func:`mesh_sign_kernel`): a lattice of seeds on the dense top level and a few nodes next to the surface.
+segment between them, or when that segment crosses no triangle: away from an open mesh's holes, where w stays within
+1/4 of an integer that changes only across triangles (:func:`.meshcheck.hole_caps`). Near the holes a node takes its
+parent's sign only when the parent proves it (:func:`.winding.sign_from_parent`: the parent's cell certified, or
+Taylor's theorem on the parent's expansion of w). Only nodes left undecided pay the winding number
+(:func:`.winding.mesh_sign_kernel`, or :func:`.winding.expand_winding_kernel` for the coarse nodes of an open mesh):
+a lattice of seeds on the dense top level, a few nodes next to the surface, and the nodes near the holes whose
+parents could not decide them.
 """
 
 from __future__ import annotations
@@ -14,19 +18,27 @@ import numpy as np
 import warp as wp
 
 from . import octree
-from .geometry import near_cap, segment_clear, winding_number
+from .geometry import near_cap, segment_clear
 from .octree import node_center
 from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
+from .winding import (
+    SEED_REACH,
+    WINDING_EXACT,
+    WINDING_NONE,
+    ExpansionArg,
+    WindingArg,
+    expand_winding_kernel,
+    expansion_arg,
+    mesh_sign_kernel,
+    sign_from_parent,
+    sign_from_seed_kernel,
+    take_known_expansion_kernel,
+)
 
 # Two empty balls prove a segment crosses no surface when their radii, times this, cover it: the margin allows for
 # float rounding and for the top level's leaf values, up to LEAF_TOLERANCE above their distances ((1 + 0.05) * 0.9
 # = 0.945 < 1).
 SIGN_SAFETY = 0.9
-
-
-# Fast winding number accuracy (Barill et al.'s beta): 1 is 3x faster than Warp's default 2 near the surface and
-# agreed with it on 99.996 % of points around the Stanford bunny.
-WINDING_ACCURACY = 1.0
 
 
 # Sweeps of same-level sign propagation, and the stride along each axis of the oracle's seeds on the dense top level
@@ -40,23 +52,6 @@ TOP_SEED_STRIDE = 4
 # A sweep of the empty-ball phase that signs fewer than this share of a level's nodes ends it (another sweep over the
 # whole level would sign a handful; the next phase takes them).
 SIGN_SWEEP_SETTLED = 1e-3
-
-
-@wp.kernel(enable_backward=False)
-def mesh_sign_kernel(
-    mesh: wp.uint64,
-    coords: wp.array[wp.vec3i],
-    nodes: wp.array[wp.int32],
-    origin: wp.vec3,
-    spacing: float,
-    sign: wp.array[wp.float32],
-):
-    """Sign oracle: inside where the generalised winding number is above 0.5 (robust on open and multi-shell
-    meshes)."""
-    t = wp.tid()
-    i = nodes[t]
-    x = node_center(origin, spacing, coords[i])
-    sign[i] = wp.where(winding_number(mesh, x, WINDING_ACCURACY) > 0.5, -1.0, 1.0)
 
 
 @wp.func
@@ -254,41 +249,73 @@ def _inherit_sign_kernel(
     dist: wp.array[wp.float32],
     sign: wp.array[wp.float32],
     safety: float,
-    no_inherit: wp.array[wp.uint8],
+    winding: WindingArg,
+    exact: int,
+    cap_lo: wp.array[wp.vec3],
+    cap_hi: wp.array[wp.vec3],
+    cap_radius: wp.array[wp.float32],
+    expansions: ExpansionArg,
+    coarse_children: int,
 ):
     """A node takes its parent's sign when the two empty balls around them cover the segment between them (no
     surface can cross it); otherwise its sign stays 0 (undecided) for the caller's oracle. Near an open mesh's holes
-    (``field.hole_caps``) a segment may cross the jump of the winding number over a hole without meeting a triangle:
-    nodes flagged in ``no_inherit`` (empty: none) are left undecided there (``field.cap_sign_presets``), elsewhere near
-    the holes this is a heuristic, which the band refinement of open meshes checks where it matters."""
+    (``near_cap``) a segment may cross the jump of the winding number over a hole without meeting a triangle: there,
+    for a mesh whose winding number is known exactly (``exact`` 1: ``winding`` in mode WINDING_EXACT), the parent
+    must prove the sign (``sign_from_parent``); otherwise (the fast winding number alone) empty balls are a heuristic,
+    which the band refinement of open meshes checks where it matters."""
     i = lo + wp.tid()
     p = parent[i]
-    if sign[i] != 0.0:  # already known (a node kept from an earlier build of the same mesh, or preset)
+    if sign[i] != 0.0 or p < 0:  # already known (a node kept from an earlier build of the same mesh), or the top
         return
-    if no_inherit.shape[0] > 0:
-        if no_inherit[i] != wp.uint8(0):
+    xi = node_center(origin, spacing, coords[i])
+    xp = node_center(origin, 2.0 * spacing, coords[p])
+    s = wp.length(xi - xp)
+    if exact == 1:
+        if near_cap(xi, cap_lo, cap_hi, cap_radius, s) or expansions.cert[p - expansions.first] != wp.uint8(0):
+            sign[i] = sign_from_parent(winding, i, p, xi, xp, s, dist, sign, safety, expansions, coarse_children)
             return
-    if p >= 0:
-        xi = node_center(origin, spacing, coords[i])
-        xp = node_center(origin, 2.0 * spacing, coords[p])
-        if (dist[i] + dist[p]) * safety > wp.length(xi - xp):
-            sign[i] = sign[p]
+    if (dist[i] + dist[p]) * safety > s:
+        sign[i] = sign[p]
 
 
 # ---- host side: the top-down pass ----
 
 
-def _winding_signs(mesh_id, coords, nodes_np: np.ndarray, origin, spacing: float, sign) -> None:
-    """The oracle: the sign of each of ``nodes_np`` (indices of one level's nodes) from the winding number."""
+def _winding_signs(
+    winding: WindingArg, layout: dict, nodes_np: np.ndarray, k: int, lattice, sign, expand, reach: float = 0.8661
+) -> None:
+    """The oracle: the sign of each of ``nodes_np`` (indices of level ``k``'s nodes) from the winding number, with
+    the coarse nodes' expansions when ``expand`` is (dist, ExpansionArg), see :func:`.winding.expand_winding_kernel`
+    (valid within ``reach`` cells: their own cell's radius and a little). ``lattice``: (origin vec3, finest voxel
+    size)."""
     if len(nodes_np) == 0:
         return
+    coords = layout["coords"]
     device = coords.device
     nodes = wp.array(nodes_np.astype(np.int32), dtype=wp.int32, device=device)
-    origin_v = wp.vec3(*origin)
+    spacing = float(lattice[1] * 2**k)
+    kernel = mesh_sign_kernel if expand is None else expand_winding_kernel
+
+    def args(lo, n):
+        if expand is None:
+            return [winding, coords, nodes[lo : lo + n], lattice[0], spacing, sign]
+        return [
+            winding,
+            coords,
+            nodes[lo : lo + n],
+            lattice[0],
+            spacing,
+            reach * spacing,
+            expand[0],
+            SIGN_SAFETY,
+            sign,
+            expand[1],
+        ]
+
     launch_split(
-        mesh_sign_kernel,
+        kernel,
         len(nodes_np),
-        lambda lo, n: [wp.uint64(mesh_id), coords, nodes[lo : lo + n], origin_v, float(spacing), sign],
+        args,
         device,
         min_dim=EMIT_SPLIT_MIN_DIM,  # a winding number costs microseconds: split from a few thousand
         balance=True,  # winding numbers cost most near holes, which a Morton-ordered list bunches
@@ -296,7 +323,7 @@ def _winding_signs(mesh_id, coords, nodes_np: np.ndarray, origin, spacing: float
 
 
 def sign_levels(
-    mesh_id,
+    winding: WindingArg,
     layout: dict,
     dist,
     neighbours,
@@ -304,33 +331,34 @@ def sign_levels(
     origin,
     voxel_size: float,
     hole_caps=None,
-    presets=None,
     previous=None,
     prev_index=None,
+    known=None,
     timings: dict,
 ):
     """Sign every node of a mesh's field, top-down, and return its signed values.
 
     The top level from a lattice of oracle seeds, spread between neighbours; every lower level from its parents, then
     from already signed neighbours (empty balls, then segments that cross no triangle); the oracle (the winding
-    number) only for what is left.
+    number) only for what is left. Near an open mesh's holes nothing spreads between neighbours, and a node takes
+    its parent's sign only when the parent proves it (:func:`.winding.sign_from_parent`).
 
     Args:
-        mesh_id: ``wp.Mesh.id`` of the mesh (built with winding-number support).
+        winding: The mesh's :class:`.winding.WindingArg` (its BVH, built with winding-number support, and boundary).
         layout: Every node's place (:func:`.octree.level_layout`).
         dist: (N,) float32 unsigned distances of every node.
         neighbours: (N - N0, 6) same-level neighbours of the coarse nodes (:func:`.distance.solve_levels`).
         origin, voxel_size: The field's lattice.
         hole_caps: (boxes lo, boxes hi, radii) of an open mesh's holes (:func:`.meshcheck.hole_caps`), near which
             signs do not spread; None for a closed mesh.
-        presets: (sign (N,) float32, 0 where undecided; no_inherit (N,) uint8, nodes that must not take their parent's
-            sign) set before the pass (:func:`.holes.cap_sign_presets`), or None.
         previous, prev_index: An earlier field of the same mesh and domain and each node's index in it: matching
             nodes keep its signs.
+        known: The expansions of that earlier build (the third result of this function), kept too.
         timings: ``signs`` seconds are added here.
     Returns:
-        ``(values, stats)``: (N,) float32 signed distances, and ``{"sign_queries": winding numbers per level,
-        "sign_sweeps": (empty-ball, segment) sweeps per level}``.
+        ``(values, stats, expansions)``: (N,) float32 signed distances, ``{"sign_queries": winding numbers per level,
+        "sign_sweeps": (empty-ball, segment) sweeps per level}``, and the coarse nodes' expansions (an
+        :class:`.winding.ExpansionArg`, for ``known`` in a later build).
     """
     t0 = time.perf_counter()
     codes, coords, offsets = layout["codes"], layout["coords"], layout["offsets"]
@@ -340,21 +368,30 @@ def sign_levels(
     top_dims = np.asarray(layout["top_dims"], dtype=np.int64)
     n, n0 = int(offsets[-1]), int(offsets[1])
     sign = wp.zeros(n, dtype=wp.float32, device=device)
-    no_inherit = wp.empty(0, dtype=wp.uint8, device=device)
-    if presets is not None:
-        sign = wp.array(presets[0], dtype=wp.float32, device=device)
-        no_inherit = wp.array(presets[1], dtype=wp.uint8, device=device)
-    if previous is not None:
+    if winding.mode == WINDING_NONE:  # nothing enclosed: outside everywhere
+        sign.fill_(1.0)
+    elif previous is not None:
         launch_split(_take_known_sign_kernel, n, lambda s, _n: [s, prev_index, previous.values, sign], device)
     top_lo, top_hi = int(offsets[levels - 1]), int(offsets[levels])
     oracle_counts = {}
     sign_sweeps = {}
-    origin_t = tuple(float(x) for x in origin)
-    origin_v = wp.vec3(*origin_t)
+    origin_v = wp.vec3(*(float(x) for x in origin))
     cap_args = box_arrays(hole_caps, device)
+    mesh_id = int(winding.mesh)
+    exact = winding.mode == WINDING_EXACT and hole_caps is not None
+    expansions = expansion_arg(n0, n - n0 if exact else 0, device)
+    if exact and known is not None and known.cert.shape[0] > 0:
+        where = prev_index.numpy()
+        renumber = np.full(int(previous.node_count), -1, dtype=np.int32)
+        renumber[where[where >= 0]] = np.flatnonzero(where >= 0)
+        renumber_wp = wp.array(renumber, dtype=wp.int32, device=device)
+        launch_split(
+            take_known_expansion_kernel, n - n0, lambda s, _n: [s, prev_index, renumber_wp, known, expansions], device
+        )
 
-    def oracle(nodes_np, k):
-        _winding_signs(mesh_id, coords, nodes_np, origin_t, voxel_size * 2**k, sign)
+    def oracle(nodes_np, k, reach=0.8661):
+        expand = (dist, expansions) if exact and k > 0 else None
+        _winding_signs(winding, layout, nodes_np, k, (origin_v, voxel_size), sign, expand, reach)
 
     def spread(k, lo, hi):
         changed = wp.zeros(1, dtype=wp.int32, device=device)
@@ -428,10 +465,35 @@ def sign_levels(
         # Across a hole of an open mesh the sign changes where no triangle is near, so empty balls prove nothing
         # near it: signs spread only away from the holes' caps (``hole_caps``), the oracle decides the rest.
         nx, ny, nz = (int(d) for d in top_dims)
-        ix, iy, iz = (np.arange(min(TOP_SEED_STRIDE // 2, m - 1), m, TOP_SEED_STRIDE) for m in (nx, ny, nz))
+        if exact:
+            # near the holes nothing spreads: a lattice of seeds every other node expands far enough to decide its
+            # neighbours by Taylor's theorem
+            ix, iy, iz = (np.arange(0, m, 2) for m in (nx, ny, nz))
+        else:
+            ix, iy, iz = (np.arange(min(TOP_SEED_STRIDE // 2, m - 1), m, TOP_SEED_STRIDE) for m in (nx, ny, nz))
         seeds = top_lo + (ix[None, None, :] + nx * (iy[None, :, None] + ny * iz[:, None, None])).ravel()
         seeds = seeds[sign.numpy()[seeds] == 0.0]
-        oracle(seeds, levels - 1)
+        oracle(seeds, levels - 1, SEED_REACH)
+        if exact:
+            launch_split(
+                sign_from_seed_kernel,
+                top_hi - top_lo,
+                lambda start, _n: [
+                    winding,
+                    coords,
+                    top_lo,
+                    start,
+                    wp.vec3i(nx, ny, nz),
+                    origin_v,
+                    float(voxel_size * 2 ** (levels - 1)),
+                    dist,
+                    SIGN_SAFETY,
+                    sign,
+                    expansions,
+                    int(levels > 2),
+                ],
+                device,
+            )
         rest = spread(levels - 1, top_lo, top_hi)
         oracle(rest, levels - 1)
         oracle_counts[levels - 1] = len(seeds) + len(rest)
@@ -449,7 +511,11 @@ def sign_levels(
                 dist,
                 sign,
                 SIGN_SAFETY,
-                no_inherit,
+                winding,
+                int(exact),
+                *cap_args,
+                expansions,
+                int(k >= 2),
             ],
             device,
         )
@@ -467,4 +533,4 @@ def sign_levels(
     values = wp.empty(n, dtype=wp.float32, device=device)
     launch_split(_apply_sign_kernel, n, lambda start, _n: [start, dist, sign, values], device)
     timings["signs"] = timings.get("signs", 0.0) + time.perf_counter() - t0
-    return values, {"sign_queries": oracle_counts, "sign_sweeps": sign_sweeps}
+    return values, {"sign_queries": oracle_counts, "sign_sweeps": sign_sweeps}, expansions

@@ -1,24 +1,34 @@
-"""``aasdf.boolean``: the selected mesh objects combined as an SDF boolean into a new object. Also
-``aasdf.debug_volume`` (the active mesh's field as a Volume object) and ``aasdf.clear_cache``.
+"""``aasdf.boolean``: the selected mesh objects combined as an SDF boolean into a new object. Also ``aasdf.offset`` and
+``aasdf.shell`` (the active mesh grown, shrunk or hollowed into a new object), ``aasdf.debug_volume`` (the active
+mesh's field as a Volume object) and ``aasdf.clear_cache``.
 
 The active object is the first operand. DIFFERENCE is the active object minus all the others; UNION and INTERSECT
 take them all. The operators read their settings, hand them to ``aasdf_addon.pipeline`` (which the CSG node tree uses
 as well) and report what it did.
 """
 
+import math
+import re
+
 import bpy
 
-from ..aasdf_addon import cache, pipeline, runtime
+from ..aasdf_addon import cache, pipeline, plan, runtime
 from ..aasdf_addon.pipeline import last_run  # noqa: F401  (scripts read ``operators.boolean.last_run``)
 from ..aasdf_addon.properties import (
+    blend_mode_property,
     blend_property,
     debug_volume_property,
     hide_inputs_property,
     levels_property,
+    offset_distance_property,
     operation_property,
     padding_property,
     resolution_property,
+    sharp_edges_property,
+    shell_side_property,
+    thickness_property,
     voxel_size_property,
+    wall_thickness_property,
 )
 
 
@@ -40,6 +50,9 @@ class AASDF_OT_boolean(bpy.types.Operator):
     levels: levels_property()
     padding: padding_property()
     blend: blend_property()
+    blend_mode: blend_mode_property()
+    thickness: thickness_property()
+    sharp_edges: sharp_edges_property()
     debug_volume: debug_volume_property()
     hide_inputs: hide_inputs_property()
 
@@ -58,35 +71,119 @@ class AASDF_OT_boolean(bpy.types.Operator):
         return True
 
     def execute(self, context):
-        engine = runtime.engine()  # lazy: keeps registration fast
         operands = mesh_operands(context)
-        output = pipeline.Output(
-            f"{operands[0].name}.aasdf", hide_inputs=self.hide_inputs, debug_volume=self.debug_volume
-        )
-        try:
-            numbers = pipeline.run(
-                context,
-                operands,
-                pipeline.boolean_plan(self.operation, len(operands), self.blend),
-                pipeline.FieldSettings.of(self),
-                output,
-                source="aasdf.boolean",
-                operation=self.operation,
-            )
-        except engine.AasdfError as err:
-            self.report({"ERROR"}, str(err))
+        steps = plan.boolean_plan(self.operation, len(operands), self.blend, self.blend_mode)
+        numbers = run(self, context, operands, steps, f"{operands[0].name}.aasdf", "The boolean result is empty")
+        if numbers is None:
             return {"CANCELLED"}
-        if numbers.get("empty"):
-            self.report({"WARNING"}, "The boolean result is empty: nothing was added")
-            return {"CANCELLED"}
-        for warning in numbers["warnings"]:
-            self.report({"WARNING"}, warning)
         self.report(
             {"INFO"},
             f"{numbers['object']}: {self.operation.lower()} of {len(operands)} objects in {numbers['seconds']:.2f} s, "
             f"{numbers['nodes']:,} field nodes, {numbers['triangles']:,} triangles, "
             f"{numbers['cache_hits']}/{len(operands)} fields from cache",
         )
+        return {"FINISHED"}
+
+
+def run(op, context, objects, steps, name, empty_message, operation=None):
+    """Run a plan for an operator ``op`` (its settings: field settings, thickness, sharp edges, hide inputs, debug
+    volume) and report problems; returns the run's numbers, or None when nothing was written."""
+    engine = runtime.engine()  # lazy: keeps registration fast
+    output = pipeline.Output(
+        name,
+        hide_inputs=op.hide_inputs,
+        debug_volume=getattr(op, "debug_volume", False),
+        sharp=op.sharp_edges,
+    )
+    try:
+        numbers = pipeline.run(
+            context,
+            [plan.Input(obj, op.thickness) for obj in objects],
+            steps,
+            pipeline.FieldSettings.of(op),
+            output,
+            source=op.bl_idname,
+            # bl_idname reads "AASDF_OT_offset" on a running operator, "aasdf.offset" on its class
+            operation=operation or getattr(op, "operation", re.split(r"_OT_|\.", op.bl_idname)[-1].upper()),
+        )
+    except engine.AasdfError as err:
+        op.report({"ERROR"}, str(err))
+        return None
+    if numbers.get("empty"):
+        op.report({"WARNING"}, f"{empty_message}: nothing was added")
+        return None
+    for warning in numbers["warnings"]:
+        op.report({"WARNING"}, warning)
+    return numbers
+
+
+class ActiveMeshOperator:
+    """Poll of the operators that work on the active mesh alone."""
+
+    @classmethod
+    def poll(cls, context):
+        if context.mode != "OBJECT":
+            cls.poll_message_set("Switch to Object Mode")
+            return False
+        obj = context.active_object
+        if obj is None or obj.type != "MESH":
+            cls.poll_message_set("Needs an active mesh object")
+            return False
+        return True
+
+
+class AASDF_OT_offset(ActiveMeshOperator, bpy.types.Operator):
+    """Grow or shrink the active mesh by a distance, as a new object (any distance, rounded at the edges)"""
+
+    bl_idname, bl_label, bl_options = "aasdf.offset", "SDF Offset", {"REGISTER", "UNDO"}
+
+    distance: offset_distance_property()
+    voxel_size: voxel_size_property()
+    resolution: resolution_property()
+    levels: levels_property()
+    padding: padding_property()
+    thickness: thickness_property()
+    sharp_edges: sharp_edges_property()
+    hide_inputs: hide_inputs_property(default=False)
+
+    def execute(self, context):
+        if not math.isfinite(self.distance):
+            self.report({"ERROR"}, f"The offset distance must be a finite number, not {self.distance}")
+            return {"CANCELLED"}
+        obj = context.active_object
+        steps = ("offset", float(self.distance), ("field", 0))
+        numbers = run(self, context, [obj], steps, f"{obj.name}.offset", "The offset leaves nothing")
+        if numbers is None:
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"{numbers['object']}: {self.distance:+.4g} in {numbers['seconds']:.2f} s")
+        return {"FINISHED"}
+
+
+class AASDF_OT_shell(ActiveMeshOperator, bpy.types.Operator):
+    """Hollow the active mesh into a shell with walls of a given thickness, as a new object (for 3D printing)"""
+
+    bl_idname, bl_label, bl_options = "aasdf.shell", "SDF Shell", {"REGISTER", "UNDO"}
+
+    wall: wall_thickness_property()
+    side: shell_side_property()
+    voxel_size: voxel_size_property()
+    resolution: resolution_property()
+    levels: levels_property()
+    padding: padding_property()
+    thickness: thickness_property()
+    sharp_edges: sharp_edges_property()
+    hide_inputs: hide_inputs_property(default=False)
+
+    def execute(self, context):
+        if not (math.isfinite(self.wall) and self.wall > 0.0):
+            self.report({"ERROR"}, f"The wall must be a positive thickness, not {self.wall}")
+            return {"CANCELLED"}
+        obj = context.active_object
+        steps = ("shell", float(self.wall), self.side, ("field", 0))
+        numbers = run(self, context, [obj], steps, f"{obj.name}.shell", "The shell is empty")
+        if numbers is None:
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"{numbers['object']}: a {self.wall:.4g} wall in {numbers['seconds']:.2f} s")
         return {"FINISHED"}
 
 

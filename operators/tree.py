@@ -103,6 +103,12 @@ class AASDF_OT_tree_from_selection(bpy.types.Operator):
         )
         tree.voxel_size, tree.resolution = settings.voxel_size, settings.resolution
         tree.levels, tree.padding, tree.hide_inputs = settings.levels, settings.padding, settings.hide_inputs
+        tree.sharp_edges = settings.sharp_edges
+        for node in tree.nodes:
+            if node.bl_idname in nodes.BOOLEAN_NODES:
+                node.blend_mode = settings.blend_mode
+            elif node.bl_idname == nodes.OBJECT:
+                node.thickness = settings.thickness
         settings.tree = tree
         for area in context.screen.areas if context.screen is not None else ():
             space = area.spaces.active

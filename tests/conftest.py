@@ -32,3 +32,13 @@ def load_addon_package(name: str = ADDON_PACKAGE):
 
 
 load_addon_package()
+
+
+def pytest_configure(config):
+    """Before a parallel run (``-n``, pytest-xdist) starts its workers, compile the kernels once for all of them
+    (``tests/warm_kernels.py``)."""
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    import subprocess
+
+    subprocess.run([sys.executable, str(ROOT / "tests" / "warm_kernels.py")], check=True)

@@ -43,6 +43,23 @@ def load_mesh(name: str) -> tuple[np.ndarray, np.ndarray]:
     return load_obj(mesh_path(name))
 
 
+def sample_points(verts, tris, h: float, n: int, seed: int = 0) -> np.ndarray:
+    """(n, 3) float32 points around a mesh: half uniform in its bounding box grown by 5 % of its diagonal on every side
+    (a flat mesh's box too has a volume), half near its surface (area-weighted surface samples moved by isotropic
+    normal noise of ``h``, and of ``4 h`` for every other one)."""
+    rng = np.random.default_rng(seed)
+    verts = np.asarray(verts, dtype=np.float64)
+    tris = np.asarray(tris)
+    lo, hi = verts.min(axis=0), verts.max(axis=0)
+    pad = 0.05 * float(np.linalg.norm(hi - lo))
+    uniform = rng.uniform(lo - pad, hi + pad, size=(n // 2, 3))
+    m = n - n // 2
+    face = rng.integers(0, len(tris), m)
+    base = (verts[tris[face]] * rng.dirichlet([1.0, 1.0, 1.0], m)[:, :, None]).sum(axis=1)
+    noise = rng.normal(0.0, 1.0, (m, 3)) * np.where(np.arange(m) % 2 == 0, h, 4.0 * h)[:, None]
+    return np.concatenate([uniform, base + noise]).astype(np.float32)
+
+
 def uv_sphere(radius: float = 1.0, center=(0.0, 0.0, 0.0), rings: int = 48, segments: int = 96):
     """A closed, outward-oriented UV sphere: (V,3) float32, (T,3) int32."""
     theta = np.linspace(0.0, np.pi, rings + 1)[1:-1]

@@ -17,6 +17,7 @@ from tests.metrics import (
     sample_surface,
     unsigned_distance,
     winding_inside,
+    winding_numbers,
 )
 from tests.support import box_mesh, is_watertight, torus_mesh, uv_sphere
 
@@ -168,6 +169,18 @@ def test_winding_inside_an_open_box():
 
 
 # ---- argument checks ----
+
+
+def test_exact_winding_numbers_of_closed_open_and_flipped_meshes():
+    verts, tris = box_mesh(subdivisions=2)
+    points = np.array([[0.0, 0.0, 0.0], [0.5, -0.3, 0.9], [3.0, 0.0, 0.0], [0.0, 0.0, 1.5]])
+    np.testing.assert_allclose(winding_numbers(verts, tris, points), [1, 1, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(winding_numbers(verts, tris[:, ::-1], points), [-1, -1, 0, 0], atol=1e-12)
+    # open box (+x face removed): seen from its centre the opening subtends a sixth of the sphere
+    open_verts, open_tris = open_box()
+    w = winding_numbers(open_verts, open_tris, [[0.0, 0.0, 0.0], [1.0 + 1e-9, 0.0, 0.0]])
+    assert w[0] == pytest.approx(5.0 / 6.0, abs=1e-12)
+    assert w[1] == pytest.approx(0.5, abs=1e-6)  # the centre of the opening's plane, seen from just outside it
 
 
 def test_points_of_the_wrong_shape_are_rejected():

@@ -18,6 +18,7 @@ import subprocess
 import sys
 import tempfile
 import zipfile
+from importlib.metadata import version
 from pathlib import Path
 
 import fetch_wheels
@@ -41,9 +42,9 @@ def narrowed_manifest(text: str, platforms, wheels) -> str:
     return text
 
 
-def stage(platforms, wheel_paths, stage_dir: Path = STAGE_DIR, *, kernels: bool = True) -> Path:
+def stage(platforms, wheel_paths, stage_dir: Path = STAGE_DIR, *, kernels: bool = True, archs=None) -> Path:
     """Copy the package files into ``stage_dir`` as the builder would select them, and (``kernels``) compile the
-    prebuilt kernels into it; return ``stage_dir``."""
+    prebuilt kernels into it (PTX for ``archs``, default all of ``CUDA_ARCHS``); return ``stage_dir``."""
     builder = blender_ext()
     manifest = fetch_wheels.read_manifest()
     excluded = builder.PathPatternMatch(manifest.get("build", {}).get("paths_exclude_pattern", []))
@@ -71,23 +72,27 @@ def stage(platforms, wheel_paths, stage_dir: Path = STAGE_DIR, *, kernels: bool 
     text = narrowed_manifest(MANIFEST.read_text(encoding="utf-8"), platforms, rel_wheels)
     (stage_dir / MANIFEST.name).write_text(text, encoding="utf-8")
     if kernels:
-        compile_kernels(stage_dir / "kernels")
+        compile_kernels(stage_dir / "kernels", archs)
     return stage_dir
 
 
-def compile_kernels(out_dir: Path) -> list[Path]:
-    """Prebuilt Warp kernels for the zip (CPU objects for this platform, PTX for common CUDA architectures),
-    compiled in fresh processes with empty kernel caches, one per CPU core, each taking every n-th module; sources
-    are left out. See ``engine/kernels.py``."""
+def compile_kernels(out_dir: Path, archs=None) -> list[Path]:
+    """Prebuilt Warp kernels for the zip (CPU objects for this platform, PTX for ``archs``, default the common CUDA
+    architectures), compiled in fresh processes with empty kernel caches, one per CPU core, each taking every n-th
+    module; sources are left out. CPU objects the development kernel cache already holds for the same module hashes
+    (``$WARP_CACHE_PATH``, default ``.warp-cache``, as the tests fill it) are copied. See ``engine/kernels.py``."""
     sys.path.insert(0, str(ROOT))
     try:
-        from engine.kernels import ENGINE_MODULES
+        from engine.kernels import CUDA_ARCHS, ENGINE_MODULES
     finally:
         sys.path.remove(str(ROOT))
+    archs = CUDA_ARCHS if archs is None else archs
+    reuse = Path(os.environ.get("WARP_CACHE_PATH", ROOT / ".warp-cache")) / version("warp-lang")
     code = (
         "import sys; sys.path.insert(0, sys.argv[1]); import warp; warp.config.log_level = warp.LOG_WARNING; "
         "from engine import kernels; "
-        "kernels.compile_prebuilt(sys.argv[2], modules=sys.argv[3].split(','))"
+        "kernels.compile_prebuilt(sys.argv[2], modules=sys.argv[3].split(','), "
+        "archs=[int(a) for a in sys.argv[4].split(',') if a], reuse=sys.argv[5])"
     )
     workers = max(1, min(os.cpu_count() or 1, len(ENGINE_MODULES)))
     shares = [",".join(ENGINE_MODULES[k::workers]) for k in range(workers)]
@@ -95,7 +100,7 @@ def compile_kernels(out_dir: Path) -> list[Path]:
         running = []
         for k, share in enumerate(shares):
             env = {**os.environ, "WARP_CACHE_PATH": os.path.join(caches, str(k))}
-            cmd = [sys.executable, "-c", code, str(ROOT), str(out_dir), share]
+            cmd = [sys.executable, "-c", code, str(ROOT), str(out_dir), share, ",".join(map(str, archs)), str(reuse)]
             running.append(subprocess.Popen(cmd, env=env))
         failed = [proc.args for proc in running if proc.wait() != 0]
         if failed:
@@ -110,10 +115,11 @@ def blender_ext():
     return fetch_wheels.blender_ext()
 
 
-def build(platforms, output_dir: Path) -> list[Path]:
-    """Fetch wheels, stage and build; return the zips written to ``output_dir``, one per platform."""
+def build(platforms, output_dir: Path, archs=None) -> list[Path]:
+    """Fetch wheels, stage and build; return the zips written to ``output_dir``, one per platform (PTX kernels for
+    ``archs``, default all of ``CUDA_ARCHS``)."""
     wheels = fetch_wheels.fetch(platforms)
-    source = stage(platforms, [path for plat in platforms for path in wheels[plat]])
+    source = stage(platforms, [path for plat in platforms for path in wheels[plat]], archs=archs)
     script = blender_ext().__file__
     tags = Path(script).parents[4] / TAGS
     output_dir.mkdir(parents=True, exist_ok=True)
@@ -133,9 +139,13 @@ def main(argv=None):
     parser.add_argument("--platform", action="append", help="Blender platform (repeatable); default: all")
     parser.add_argument("--output-dir", type=Path, default=ROOT / "dist")
     parser.add_argument("--list", action="store_true", help="also list each zip's files")
+    parser.add_argument(
+        "--cuda-archs", help="comma-separated CUDA architectures to emit PTX for (default: engine.kernels.CUDA_ARCHS)"
+    )
     args = parser.parse_args(argv)
     platforms = args.platform or fetch_wheels.read_manifest()["platforms"]
-    for path in build(platforms, args.output_dir.resolve()):
+    archs = None if args.cuda_archs is None else [int(a) for a in args.cuda_archs.split(",") if a]
+    for path in build(platforms, args.output_dir.resolve(), archs):
         shown = path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
         print(f"built {shown} ({path.stat().st_size / 2**20:.1f} MiB)")
         if args.list:

@@ -34,6 +34,11 @@ class AASDF_MT_csg_add_boolean(CsgAddMenu, bpy.types.Menu):
     node_types = (nodes.UNION, nodes.INTERSECT, nodes.DIFFERENCE)
 
 
+class AASDF_MT_csg_add_field(CsgAddMenu, bpy.types.Menu):
+    bl_label = "Field"
+    node_types = (nodes.OFFSET, nodes.SHELL)
+
+
 class AASDF_MT_csg_add_output(CsgAddMenu, bpy.types.Menu):
     bl_label = "Output"
     node_types = (nodes.OUTPUT,)
@@ -46,6 +51,7 @@ def draw_add_menu(self, context):
     layout = self.layout
     layout.menu(AASDF_MT_csg_add_input.__name__)
     layout.menu(AASDF_MT_csg_add_boolean.__name__)
+    layout.menu(AASDF_MT_csg_add_field.__name__)
     layout.menu(AASDF_MT_csg_add_output.__name__)
 
 

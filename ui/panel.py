@@ -41,9 +41,8 @@ class AASDF_PT_main(SidebarPanel, bpy.types.Panel):
         for ident, label, _ in OPERATIONS:
             op = row.operator("aasdf.boolean", text=label, icon=OPERATION_ICONS[ident])
             op.operation = ident
-            op.voxel_size, op.resolution, op.levels = settings.voxel_size, settings.resolution, settings.levels
-            op.padding, op.blend, op.hide_inputs = settings.padding, settings.blend, settings.hide_inputs
-            op.debug_volume = settings.debug_volume
+            _field_settings(op, settings)
+            op.blend, op.blend_mode, op.debug_volume = settings.blend, settings.blend_mode, settings.debug_volume
         col = layout.column()
         col.prop(settings, "voxel_size")
         sub = col.column()
@@ -52,7 +51,37 @@ class AASDF_PT_main(SidebarPanel, bpy.types.Panel):
         col.prop(settings, "levels")
         col.prop(settings, "padding")
         col.prop(settings, "blend")
+        sub = col.column()
+        sub.active = settings.blend > 0.0
+        sub.prop(settings, "blend_mode")
+        col.prop(settings, "thickness")
+        col.prop(settings, "sharp_edges")
         col.prop(settings, "hide_inputs")
+
+
+def _field_settings(op, settings):
+    """Give an operator the scene's field and result settings."""
+    op.voxel_size, op.resolution, op.levels = settings.voxel_size, settings.resolution, settings.levels
+    op.padding, op.thickness, op.sharp_edges = settings.padding, settings.thickness, settings.sharp_edges
+    op.hide_inputs = settings.hide_inputs
+
+
+class AASDF_PT_main_offset(SubPanel, bpy.types.Panel):
+    bl_label = "Offset and Shell"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split, layout.use_property_decorate = True, False
+        settings = context.scene.aasdf
+        layout.prop(settings, "offset_distance")
+        op = layout.operator("aasdf.offset", text="Offset Active", icon="MOD_SKIN")
+        _field_settings(op, settings)
+        op.distance, op.hide_inputs = settings.offset_distance, False
+        layout.prop(settings, "wall")
+        layout.prop(settings, "shell_side")
+        op = layout.operator("aasdf.shell", text="Shell Active", icon="MOD_SOLIDIFY")
+        _field_settings(op, settings)
+        op.wall, op.side, op.hide_inputs = settings.wall, settings.shell_side, False
 
 
 def draw_tree_settings(layout, tree):
@@ -65,6 +94,7 @@ def draw_tree_settings(layout, tree):
     sub.prop(tree, "resolution")
     col.prop(tree, "levels")
     col.prop(tree, "padding")
+    col.prop(tree, "sharp_edges")
     col.prop(tree, "hide_inputs")
     if tree.message:
         box = layout.box()

@@ -137,7 +137,7 @@ def test_engine_error_exits_1_and_writes_nothing(tmp_path):
     spot = mesh_path("spot.obj")
     done = run_batch("--operation", "union", "--inputs", spot, spot, "--voxel-size", 1e-6, "--output", out)
     assert done.returncode == 1, done.stdout[-2000:] + done.stderr[-2000:]
-    assert "aasdf_batch: the boolean failed: Error: spot: " in done.stderr
+    assert "aasdf_batch: the boolean failed: spot: " in done.stderr
     assert "use a larger voxel size" in done.stderr and not out.exists()
 
 

@@ -12,7 +12,7 @@ import bpy
 import numpy as np
 import pytest
 
-from aasdf.aasdf_addon import cache, nodes, pipeline, preferences, runtime
+from aasdf.aasdf_addon import cache, nodes, pipeline, plan, preferences, runtime
 from aasdf.ui import node_editor
 from aasdf.ui import panel as sidebar
 from tests.support import uv_sphere
@@ -116,7 +116,7 @@ def no_work(monkeypatch):
 
     monkeypatch.setattr(runtime, "engine", forbidden)
     monkeypatch.setattr(pipeline, "operand_fields", forbidden)
-    monkeypatch.setattr(pipeline, "combine", forbidden)
+    monkeypatch.setattr(plan, "evaluate", forbidden)
     monkeypatch.setattr(pipeline, "extract", forbidden)
 
 
@@ -161,7 +161,17 @@ def test_sidebar_with_nothing_selected(no_work, no_complaints):
     ]
     assert not bpy.ops.aasdf.boolean.poll()
     props = {prop.split(".")[1].split("[")[0] for prop in main["props"]}
-    assert props == {"voxel_size", "resolution", "levels", "padding", "blend", "hide_inputs"}
+    assert props == {
+        "voxel_size",
+        "resolution",
+        "levels",
+        "padding",
+        "blend",
+        "blend_mode",
+        "thickness",
+        "sharp_edges",
+        "hide_inputs",
+    }
     assert "No boolean has run yet" in drawn["AASDF_PT_main_stats"]["texts"]
     assert "0 fields, 0.0 MB of 1,024 MB" in drawn["AASDF_PT_main_cache"]["texts"]
     assert any(op.startswith("bpy.ops.aasdf.clear_cache(") for op in drawn["AASDF_PT_main_cache"]["operators"])

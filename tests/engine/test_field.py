@@ -9,8 +9,8 @@ import warp as wp
 import engine
 from engine import geometry
 from engine.octree import morton_encode_np
-from tests.metrics import exact_sdf, winding_inside
-from tests.support import box_mesh, cad_pairs, load_mesh, torus_mesh, uv_sphere
+from tests.metrics import exact_sdf, unsigned_distance, winding_inside, winding_numbers
+from tests.support import SHARED_MESHES, box_mesh, cad_pairs, load_mesh, sample_points, torus_mesh, uv_sphere
 
 RES = 256
 
@@ -117,15 +117,21 @@ def test_points_outside_the_domain_are_never_closer_than_the_domain():
 
 # ---- real meshes, including open ones ----
 
-REAL = ["stanford-bunny.obj", "teapot.obj", "suzanne.obj", "spot.obj"]
+REAL = sorted(path.name for path in SHARED_MESHES.glob("*.obj"))
 
 
 @pytest.mark.parametrize("name", REAL)
 def test_real_meshes_match_winding_number_sdf(name):
+    # Every test mesh at /256, against exact distances signed by the exact winding number (every triangle's solid
+    # angle), on points around it (half uniform in its bounding box, half near its surface: as many as 4e7
+    # point-triangle pairs allow, 576 on the bunny, 19,484 on the beetle). The beetle (holes as large as the car: w
+    # within 0.05 of 1/2 at a third of its nodes) measured sign agreement 99.6 % (96.7 % before), far p95 3.3 % (16 %)
+    # and near p99 0.47 voxel (1.17).
     verts, tris = load_mesh(name)
     field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
-    pts = _points(field, verts, tris)
-    exact = exact_sdf(verts, tris, pts)
+    pts = sample_points(verts, tris, field.voxel_size, min(20_000, int(4e7 / len(tris))))
+    inside = np.abs(winding_numbers(verts, tris, pts)) >= 0.5
+    exact = np.where(inside, -1.0, 1.0) * unsigned_distance(verts, tris, pts)
     err = _errors(field, pts, exact)
     assert err["near_p99"] <= 0.5, err
     assert err["sign"] >= 0.995, err
@@ -170,11 +176,13 @@ def test_closed_meshes_sign_the_finest_level_without_winding_numbers(case):
     top = field.levels - 1
     assert field.stats["sign_queries"][top] <= seeds + 0.02 * field.level_counts[top], field.stats["sign_queries"]
     values = field.values.numpy()[:n0]
-    # every node within a voxel of the surface (where empty balls cannot decide), and a sample of the rest; a node on
-    # the surface may take either sign
+    # nodes within a voxel of the surface (where empty balls cannot decide) and the rest, 20,000 of each (the oracle
+    # takes 60 us a point: all 125,000 near nodes of the rocker arm cost 7 s); a node on the surface may take either
+    # sign
     near = np.abs(values) < field.voxel_size
-    rest = np.flatnonzero(~near)
-    checked = np.union1d(np.flatnonzero(near), np.random.default_rng(0).choice(rest, min(20_000, len(rest))))
+    rng = np.random.default_rng(0)
+    near_ids, rest = np.flatnonzero(near), np.flatnonzero(~near)
+    checked = np.union1d(rng.choice(near_ids, min(20_000, len(near_ids))), rng.choice(rest, min(20_000, len(rest))))
     checked = checked[np.abs(values[checked]) > 0.01 * field.voxel_size]
     centres = field.node_centers()[checked].astype(np.float32)
     oracle = winding_inside(verts, tris, centres, accuracy=4.0)
@@ -233,7 +241,7 @@ def test_open_meshes_coarse_node_signs_agree_with_the_winding_number(name):
     centres, inside_field = centres[clear], values[clear] < 0.0
     # away from the caps: exactly what the build's own oracle says
     away = _away_from_caps(engine.meshcheck.hole_caps(verts, tris), centres)
-    oracle = winding_inside(verts, tris, centres[away], accuracy=engine.signs.WINDING_ACCURACY)
+    oracle = winding_inside(verts, tris, centres[away], accuracy=engine.winding.WINDING_ACCURACY)
     assert np.array_equal(inside_field[away], oracle), np.count_nonzero(inside_field[away] != oracle)
     # everywhere: the accurate winding number but for a few nodes
     accurate = winding_inside(verts, tris, centres, accuracy=4.0)
@@ -723,7 +731,7 @@ def test_sign_changes_off_the_band_are_found_near_the_hole_caps_only(monkeypatch
     field = engine.build_field(verts, tris, voxel_size=_voxel(verts, 128))
     everywhere = sign_change_octets(field)
     near = sign_change_octets(field, hole_caps(*weld_positions(verts, tris)))
-    assert len(everywhere) > 100
+    assert len(everywhere) >= 10  # measured 17 (more, up to hundreds, where the old oracle erred near 1/2)
     np.testing.assert_array_equal(near, everywhere)
     assert len(sign_change_octets(field, (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)))) == 0
     # a region of top cells limits the search to them
@@ -784,9 +792,10 @@ def test_a_refinement_round_reuses_the_nodes_of_the_build_before_it(monkeypatch)
 
 @pytest.mark.parametrize("name", ["stanford-bunny.obj", "teapot.obj"])
 def test_open_meshes_find_the_surface_across_their_holes_before_the_first_build(name):
-    # Winding numbers sampled around the holes' caps place the surface across the holes, and sign the nodes next to
-    # it, in the first build: no refinement round, no sign change left off the band, and every node the sign of the
-    # build's own oracle (a refinement round alone leaves nodes signed by their parent across that surface)
+    # Inside or outside decided around the holes' caps places the surface across the holes in the first build: no
+    # refinement round, no sign change left off the band, and every node the sign of the exact winding number (a
+    # refinement round alone leaves nodes signed by their parent across that surface). Checked exactly where the fast
+    # winding number disagrees (near 1/2 it errs: 149 of the bunny's nodes, 8 of the teapot's), and on a sample.
     from engine.holes import sign_change_octets
     from tests.support import is_watertight
 
@@ -795,17 +804,21 @@ def test_open_meshes_find_the_surface_across_their_holes_before_the_first_build(
     assert field.stats["sign_refinements"] == 0
     assert len(sign_change_octets(field)) == 0
     values = field.values.numpy()
-    clear = np.abs(values) > 0.5 * field.voxel_size  # the sign of a node on the surface is ill-conditioned
-    oracle = winding_inside(
-        verts, tris, field.node_centers()[clear].astype(np.float32), accuracy=engine.signs.WINDING_ACCURACY
-    )
-    assert np.count_nonzero((values[clear] < 0.0) != oracle) == 0
+    clear = np.flatnonzero(np.abs(values) > 0.5 * field.voxel_size)  # a node on the surface may take either sign
+    centres = field.node_centers()[clear].astype(np.float32)
+    fast = winding_inside(verts, tris, centres, accuracy=engine.winding.WINDING_ACCURACY)
+    differ = np.flatnonzero((values[clear] < 0.0) != fast)
+    assert 0 < len(differ) < 300
+    sample = np.union1d(differ, np.random.default_rng(0).choice(len(clear), 400, replace=False))
+    exact = np.abs(winding_numbers(verts, tris, centres[sample])) >= 0.5
+    np.testing.assert_array_equal(values[clear[sample]] < 0.0, exact)
     assert is_watertight(field.to_mesh()[1])
 
 
 def test_cap_lattices_find_the_surface_across_an_open_box_top():
     from engine.holes import cap_lattices
-    from engine.meshcheck import hole_caps
+    from engine.meshcheck import hole_boundary
+    from engine.winding import winding_arg
 
     verts, tris = box_mesh(subdivisions=4)
     normals = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])
@@ -816,7 +829,9 @@ def test_cap_lattices_find_the_surface_across_an_open_box_top():
         support_winding_number=True,
     )
     origin, octet = np.array([-2.0, -2.0, -2.0]), 0.1
-    found = cap_lattices(mesh.id, hole_caps(verts, tris), origin, (40, 40, 40), octet, 10**6, wp.get_device())
+    boundary = hole_boundary(verts, tris)
+    winding = winding_arg(mesh, boundary, wp.get_device())
+    found = cap_lattices(winding, boundary["caps"], origin, (40, 40, 40), octet, 10**6, wp.get_device())
     sheet = engine.octree.morton_decode_np(found["sheet"])
     # the top's plane z = 1 runs between octets 29 and 30; the side walls and the bottom (crossed by the triangles,
     # not by that surface) give none

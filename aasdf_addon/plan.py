@@ -1,0 +1,85 @@
+"""What a run computes from its operands' fields: a plan, and the combine stage that evaluates it.
+
+A plan is nested tuples over the operands (operand ``k`` is field ``k``):
+
+- ``("field", k)``: operand ``k``'s field;
+- ``("boolean", operation, blend, blend_mode, [children])``: ``UNION`` / ``INTERSECT`` of all children, or
+  ``DIFFERENCE``, the first minus the union of the others (that union is sharp; ``blend`` shapes the final cut), as
+  balanced binary trees of the engine's booleans;
+- ``("offset", distance, child)``: the child's surface moved by ``distance`` (outwards when positive);
+- ``("shell", thickness, side, child)``: a wall ``thickness`` thick on ``side`` (``INSIDE``, ``OUTSIDE``,
+  ``CENTER``) of the child's surface.
+
+``aasdf.boolean`` and ``aasdf.offset`` / ``aasdf.shell`` make one-node plans; a CSG tree makes any plan
+(``aasdf_addon.csg``). Plans are plain tuples, so equal plans over equal fields are the same result (the cache's).
+"""
+
+from dataclasses import dataclass
+
+from . import runtime
+
+OPERATIONS = ("UNION", "INTERSECT", "DIFFERENCE")
+_ENGINE_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
+
+
+@dataclass(frozen=True)
+class Input:
+    """One operand of a plan: a mesh object, and the thickness its surface is given (0: as it is)."""
+
+    obj: object
+    thickness: float = 0.0
+
+
+def boolean_plan(operation: str, count: int, blend: float = 0.0, blend_mode: str = "ROUND") -> tuple:
+    """The plan of ``aasdf.boolean`` over ``count`` operands."""
+    if operation not in OPERATIONS:
+        raise ValueError(f"Expected 'operation' in {OPERATIONS}, but got {operation!r}.")
+    return ("boolean", operation, float(blend), blend_mode, [("field", k) for k in range(count)])
+
+
+def evaluate(plan: tuple, fields: list, progress=None):
+    """The field of a plan over ``fields`` (the combine stage).
+
+    Raises:
+        AasdfError: From the engine (an offset past the octree's reach, a wall too thin for the voxels).
+    """
+    kind = plan[0]
+    if kind == "field":
+        return fields[plan[1]]
+    engine = runtime.engine()
+    if kind == "offset":
+        result = engine.offset(evaluate(plan[2], fields, progress), plan[1])
+        _step(progress, "offsetting")
+        return result
+    if kind == "shell":
+        result = engine.shell(evaluate(plan[3], fields, progress), plan[1], side=plan[2].lower())
+        _step(progress, "hollowing")
+        return result
+    _, operation, blend, mode, children = plan
+    items = [evaluate(child, fields, progress) for child in children]
+    options = {"blend": blend, "blend_mode": mode.lower()}
+    if operation == "DIFFERENCE" and len(items) > 1:
+        cutter = _fold(engine.union, items[1:], {"blend": 0.0}, progress)
+        result = engine.difference(items[0], cutter, **options)
+        _step(progress, "combining fields")
+        return result
+    return _fold(getattr(engine, _ENGINE_OPS[operation]), items, options, progress)
+
+
+def _fold(op, items, options, progress):
+    """``items`` combined pairwise, level by level: a balanced binary tree of ``op``."""
+    items = list(items)
+    while len(items) > 1:
+        paired = []
+        for i in range(0, len(items) - 1, 2):
+            paired.append(op(items[i], items[i + 1], **options))
+            _step(progress, "combining fields")
+        if len(items) % 2:
+            paired.append(items[-1])
+        items = paired
+    return items[0]
+
+
+def _step(progress, text):
+    if progress is not None:
+        progress.step(text)
