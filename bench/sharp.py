@@ -7,9 +7,10 @@ either surface within two voxels of an exact crease, the exact boolean's edges f
 triangle count, and the seconds: ``to_mesh`` alone (marching cubes against sharp, in alternating rounds, the ratio the
 median of the rounds' ratios) and the whole pipeline (both fields, boolean, sharp surface) against the geometry-nodes
 pipeline (Mesh to SDF Grid x2, SDF Grid Boolean, Grid to Mesh; alternating rounds, ``bench/paired.py``). Timings on
-this shared machine drift by 10-20 %: they are indicative.
+this shared machine drift by 10-20 %: they are indicative. ``--results`` also writes the table into that file's
+section (``## Sharp edges``: replaced, or added before ``## Accuracy``).
 
-    .venv/bin/python bench/sharp.py [--cases ...] [--repeat 5] [--samples 200000] [--no-gn]
+    .venv/bin/python bench/sharp.py [--cases ...] [--repeat 5] [--samples 200000] [--no-gn] [--results bench/RESULTS.md]
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import argparse
 import functools
 import os
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -75,20 +77,38 @@ def _ratio(pair: dict) -> str:
     return f"{pair['ratio']:.2f}x, {pair['low']:.2f}-{pair['high']:.2f}"
 
 
-def run(names, repeat, samples, with_gn):
+def emit(lines: list, line: str) -> None:
+    print(line, flush=True)
+    lines.append(line)
+
+
+def run(names, repeat, samples, with_gn) -> list:
+    """Print the table (markdown) and return its lines."""
     baselines = None
     if with_gn:
         from bench import baselines  # needs bpy
-    print(
-        f"# Sharp edges at /{RES} against manifold3d's exact booleans (voxels); {repeat} alternating rounds after a "
-        "warm-up\n"
+    lines = []
+    emit(lines, f"# Sharp edges at /{RES}")
+    emit(lines, "")
+    about = (
+        "`bench/sharp.py`: the CAD-like pairs of `tests.support.cad_pairs` (each operand normalised to bounding-box "
+        f"diagonal 1, voxel 1/{RES}) against manifold3d's exact booleans, two-sided Hausdorff distance in voxels from "
+        f"{samples:,} samples on each surface, overall and at the creases (samples within {CREASE_BAND:g} voxels of an "
+        "exact crease folding by more than 30 degrees). Marching cubes is `to_mesh(sharp=False)`, AASDF sharp "
+        "`to_mesh()`, GN the geometry-nodes SDF pipeline (Mesh to SDF Grid x2, SDF Grid Boolean, Grid to Mesh) at the "
+        "same voxel size. Seconds: `to_mesh` alone (sharp against marching cubes) and the whole pipeline (both "
+        f"fields, boolean, sharp surface) against GN, medians of {repeat} alternating rounds after a warm-up; a ratio "
+        "is the median of the rounds' ratios, with the smallest and largest."
     )
+    for line in textwrap.wrap(about, width=120):
+        emit(lines, line)
+    emit(lines, "")
     header = (
         "| pair | method | max | p95 | max at creases | p95 at creases | triangles | to_mesh s (vs MC) "
         "| pipeline s (vs GN) |"
     )
-    print(header)
-    print("|" + "|".join(["---"] * (header.count("|") - 1)) + "|")
+    emit(lines, header)
+    emit(lines, "|" + "|".join(["---"] * (header.count("|") - 1)) + "|")
     pairs = cad_pairs()
     for name in names:
         op, a, b = pairs[name]
@@ -127,8 +147,22 @@ def run(names, repeat, samples, with_gn):
             d = deviation((result["verts"], result["tris"]), exact, creases, h, samples)
             quality = f"{d['max']:.2f} | {d['p95']:.3f} | {d['crease_max']:.2f} | {d['crease_p95']:.3f}"
             label = name.replace("|", "\\|")  # a markdown table cell
-            print(f"| {label} | {method} | {quality} | {len(result['tris']):,} | {mesh_s} | {pipe_s} |")
-            sys.stdout.flush()
+            emit(lines, f"| {label} | {method} | {quality} | {len(result['tris']):,} | {mesh_s} | {pipe_s} |")
+    return lines
+
+
+def write_section(path: Path, lines: list) -> None:
+    """Put ``lines`` (their title made a ``##`` section) into ``path`` in place of its ``## Sharp edges`` section, or
+    before its ``## Accuracy`` section (at the end if it has none)."""
+    section = ["#" + lines[0], *lines[1:]]
+    text = path.read_text(encoding="utf-8").splitlines()
+    start = next((i for i, line in enumerate(text) if line.startswith("## Sharp edges")), None)
+    if start is None:
+        start = end = next((i for i, line in enumerate(text) if line.startswith("## Accuracy")), len(text))
+    else:
+        end = next((i for i in range(start + 1, len(text)) if text[i].startswith("## ")), len(text))
+    section.append("")
+    path.write_text("\n".join(text[:start] + section + text[end:]).rstrip("\n") + "\n", encoding="utf-8")
 
 
 def main(argv=None):
@@ -137,9 +171,12 @@ def main(argv=None):
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--samples", type=int, default=200_000)
     parser.add_argument("--no-gn", action="store_true", help="skip the geometry-nodes pipeline (no bpy needed)")
+    parser.add_argument("--results", type=Path, help="also write the table into this file's 'Sharp edges' section")
     args = parser.parse_args(argv)
     wp.config.quiet = True
-    run(args.cases, args.repeat, args.samples, not args.no_gn)
+    lines = run(args.cases, args.repeat, args.samples, not args.no_gn)
+    if args.results is not None:
+        write_section(args.results, lines)
 
 
 if __name__ == "__main__":

@@ -17,7 +17,7 @@ from .geometry import (
     closest_on_triangle,
     mesh_closest_face,
     mesh_closest_point,
-    triangle_edges,
+    triangle_frame,
 )
 from .octree import node_center
 from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
@@ -81,7 +81,7 @@ def _finest_octet_distance_kernel(
         a0 = m.points[m.indices[3 * centre_face]]
         b0 = m.points[m.indices[3 * centre_face + 1]]
         c0 = m.points[m.indices[3 * centre_face + 2]]
-        ab0, ac0, d00, d01, d11 = triangle_edges(a0, b0, c0)
+        edges0, inward0, lengths0, n0 = triangle_frame(a0, b0, c0)
         best = wp.vector(UNSET_DISTANCE, length=8, dtype=float)
         foot = wp.matrix(0.0, shape=(8, 3), dtype=float)
         face = wp.vector(centre_face, length=8, dtype=int)
@@ -91,7 +91,7 @@ def _finest_octet_distance_kernel(
         box_hi = c  # grown around every ball below (starting at the centre can only widen it)
         for k in range(8):
             x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
-            p0 = closest_on_triangle(x, a0, b0, c0, ab0, ac0, d00, d01, d11)
+            p0 = closest_on_triangle(x, a0, b0, c0, edges0, inward0, lengths0, n0)
             best[k] = wp.length_sq(x - p0)
             foot[k] = p0
             worst = wp.max(worst, best[k])
@@ -114,12 +114,13 @@ def _finest_octet_distance_kernel(
             gap = wp.max(wp.max(tri_lo - node_hi, node_lo - tri_hi), wp.vec3(0.0))
             if wp.length_sq(gap) < worst:
                 worst = float(0.0)
-                ab, ac, d00, d01, d11 = triangle_edges(a, b, cc)
+                edges, inward, lengths, n = triangle_frame(a, b, cc)
                 for k in range(8):
                     x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
                     gap = wp.max(wp.max(tri_lo - x, x - tri_hi), wp.vec3(0.0))
-                    if wp.length_sq(gap) < best[k]:
-                        p = closest_on_triangle(x, a, b, cc, ab, ac, d00, d01, d11)
+                    plane = wp.dot(n, x - a)  # nor nearer than its plane (0 for a degenerate triangle)
+                    if wp.length_sq(gap) < best[k] and plane * plane < best[k]:
+                        p = closest_on_triangle(x, a, b, cc, edges, inward, lengths, n)
                         d = wp.length_sq(x - p)
                         if d < best[k]:
                             best[k] = d

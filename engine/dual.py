@@ -29,9 +29,8 @@ import numpy as np
 import warp as wp
 
 from .marching import (
-    case_tables,
     edge_ends,
-    patch_tables,
+    patch_masks,
     quad_corner,
     quad_edge,
     quad_ends,
@@ -39,7 +38,20 @@ from .marching import (
 )
 from .meshcheck import open_tunnels
 from .parallel import launch_split
-from .quadric import clamp_box, cube_corner, quadric_at, solve_in_cube, solve_smooth, trilinear, vec8
+from .quadric import (
+    clamp_box,
+    cube_corner,
+    is_smooth,
+    pack_quadric,
+    plane_terms,
+    quadric_at,
+    solve_in_cube,
+    solve_smooth,
+    trilinear,
+    unpack_terms,
+    vec8,
+    vec10,
+)
 
 # Eigenvalues of a patch's plane quadric below this fraction of the largest are dropped (Ju et al. truncate singular
 # values below 0.1; the eigenvalues of A^T A are their squares): normals less than about 16 degrees apart make no
@@ -62,8 +74,8 @@ HERMITE_TOLERANCE = 0.02
 JUMP_RATIO = 1.5
 
 
-# A node's plane weighs (distance to its closest point / this)^2 below this distance (voxels), where the direction
-# to that point turns to noise.
+# Below this distance (voxels) from its closest point a node's plane is damped, to (distance / this)^2 of its weight,
+# where the direction to that point turns to noise: only in a patch whose crease or corner misses its cube otherwise.
 HERMITE_NEAR = 0.12
 
 
@@ -92,24 +104,9 @@ def _tables(device) -> dict:
     """Warp arrays of the dual tables on ``device`` (built once per device)."""
     key = str(device)
     if key not in _TABLE_CACHE:
-        tables = case_tables()
-        patch, count = patch_tables()
-        spans, second = tunnel_tables()
-        owner, upper = tables["edge_owner"], tables["edge_upper"]
-        # per case and patch (4 at most): the bit mask of its local edges and of the corners at their ends
-        edge_mask = np.zeros((256, 4), dtype=np.int32)
-        end_mask = np.zeros((256, 4), dtype=np.int32)
-        for e in range(12):
-            rows = np.flatnonzero(patch[:, e] >= 0)
-            np.bitwise_or.at(edge_mask, (rows, patch[rows, e]), 1 << e)
-            np.bitwise_or.at(end_mask, (rows, patch[rows, e]), (1 << int(owner[e])) | (1 << int(upper[e])))
-        _TABLE_CACHE[key] = {
-            "edge_mask": wp.array(edge_mask.ravel(), dtype=wp.int32, device=device),
-            "end_mask": wp.array(end_mask.ravel(), dtype=wp.int32, device=device),
-            "count": wp.array(count, dtype=wp.int32, device=device),
-            "spans": wp.array(spans, dtype=wp.int32, device=device),
-            "second": wp.array(second.ravel(), dtype=wp.int32, device=device),
-        }
+        tables = patch_masks()
+        tables["spans"], tables["second"] = tunnel_tables()
+        _TABLE_CACHE[key] = {k: wp.array(v.ravel(), dtype=wp.int32, device=device) for k, v in tables.items()}
     return _TABLE_CACHE[key]
 
 
@@ -135,42 +132,22 @@ def _count_patches_kernel(
     counts: wp.array[wp.int32],
     quad_counts: wp.array[wp.int32],
     cube_of_node: wp.array[wp.int32],
-    cube_case: wp.array[wp.int32],
+    below: wp.array[wp.uint8],
 ):
     """Patches of cube ``first + tid``, and the crossed edges whose quads it writes (see ``_quads_kernel``); the
-    cube's index at its minimum corner's node, and its case."""
+    cube's index at its minimum corner's node, and at the nodes that are the minimum corners of its face neighbours
+    towards +x, +y, +z a flag that the neighbour below them along that axis is active (``below`` (N, 3), zeroed)."""
     cube = first + wp.tid()
     case = _case(cube_corners, values, cube)
-    cube_case[cube] = case
     counts[cube] = patch_count[case]
     cube_of_node[cube_corners[cube, 0]] = cube
     quads = int(0)
     for a in range(3):
         ea, eb = quad_ends(a)
-        v0 = values[cube_corners[cube, ea]]
-        v1 = values[cube_corners[cube, eb]]
-        if (v0 < 0.0) != (v1 < 0.0):
+        if ((case >> ea) & 1) != ((case >> eb) & 1):
             quads += 1
+        below[cube_corners[cube, wp.where(a == 0, 1, wp.where(a == 1, 3, 4))] * 3 + a] = wp.uint8(1)
     quad_counts[cube] = quads
-
-
-@wp.kernel(enable_backward=False)
-def _face_neighbours_kernel(
-    first: int, cube_corners: wp.array2d[wp.int32], cube_of_node: wp.array[wp.int32], neighbours: wp.array[wp.int32]
-):
-    """Flag, for cube ``first + tid`` and each axis, whether its + neighbour is active, and in that neighbour that its
-    - neighbour is (``neighbours`` (M, 6) flat, zeroed: -x, +x, -y, +y, -z, +z; each entry has one writer)."""
-    cube = first + wp.tid()
-    for a in range(3):
-        c = int(1)
-        if a == 1:
-            c = 3
-        elif a == 2:
-            c = 4
-        other = cube_of_node[cube_corners[cube, c]]
-        if other >= 0:
-            neighbours[cube * 6 + 2 * a + 1] = 1
-            neighbours[other * 6 + 2 * a] = 1
 
 
 @wp.kernel(enable_backward=False)
@@ -178,7 +155,6 @@ def _place_vertices_kernel(
     first: int,
     cube_corners: wp.array2d[wp.int32],
     values: wp.array[wp.float32],
-    raw: wp.array[wp.float32],
     coords: wp.array[wp.vec3i],
     proj: wp.array[wp.vec3],
     origin: wp.vec3,
@@ -186,8 +162,10 @@ def _place_vertices_kernel(
     iso: float,
     edge_mask: wp.array[wp.int32],
     end_mask: wp.array[wp.int32],
+    spans: wp.array[wp.int32],
     vertex_start: wp.array[wp.int32],
-    neighbours: wp.array[wp.int32],
+    cube_of_node: wp.array[wp.int32],
+    below: wp.array[wp.uint8],
     reach: float,
     cutoff: float,
     smooth_cos: float,
@@ -197,12 +175,12 @@ def _place_vertices_kernel(
     verts: wp.array[wp.vec3],
     ranks: wp.array[wp.int32],
     cells: wp.array[wp.int32],
-    quadrics: wp.array[wp.mat33],
-    linear: wp.array[wp.vec4],
-    edge_vertex: wp.array[wp.int32],
+    quadrics: wp.array[vec10],
+    cube_info: wp.array[wp.vec2i],
 ):
     """One vertex per patch of cube ``first + tid``: its plane quadric (node planes, or crossing planes where a
-    node's Hermite data does not hold), solved in the cube; its id written into the slots of the patch's edges."""
+    node's Hermite data does not hold), solved in the cube. The cube's first vertex, case and tunnel faces go to
+    ``cube_info`` (its patches' vertices follow in patch order)."""
     cube = first + wp.tid()
     base_vertex = int(0)
     if cube > 0:
@@ -216,83 +194,99 @@ def _place_vertices_kernel(
         vals[c] = values[ids[c]]
         if vals[c] >= 0.0:
             case = case | (1 << c)
+    cube_info[cube] = wp.vec2i(base_vertex, case | (spans[case] << 8))
     c0 = coords[ids[0]]
     corner = origin + spacing * wp.vec3(float(c0[0]) + 0.5, float(c0[1]) + 0.5, float(c0[2]) + 0.5)
     inv = 1.0 / spacing
     lo = margin
     hi = 1.0 - margin
-    # crease and corner vertices may reach this far into a face neighbour the surface does not cross
-    wide_lo = wp.vec3(lo)
-    wide_hi = wp.vec3(hi)
-    for a in range(3):
-        if neighbours[cube * 6 + 2 * a] == 0:
-            wide_lo[a] = lo - reach
-        if neighbours[cube * 6 + 2 * a + 1] == 0:
-            wide_hi[a] = hi + reach
+    # each corner's plane (cube coordinates: voxels from the cube's minimum corner), shared by the cube's patches:
+    # unit normal (outward) and offset where the node's value is its distance to its closest point, else a zero
+    # normal; state 1 (a plane), 0 (Hermite data does not hold) or -1 (the node lies on the surface: no direction)
+    normals = wp.matrix(0.0, shape=(8, 3), dtype=float)
+    offsets = vec8()
+    weights = vec8()
+    state = wp.vector(0, 0, 0, 0, 0, 0, 0, 0, length=8, dtype=int)
+    for c in range(8):
+        q = (proj[ids[c]] - corner) * inv
+        d = cube_corner(c) - q
+        dl = wp.length(d)
+        r = vals[c] + iso
+        good = wp.abs(dl - wp.abs(r) * inv) <= tolerance
+        k = wp.where(dl > 1.0e-4, wp.where(good, wp.where(r < 0.0, -1.0, 1.0) / dl, 0.0), 0.0)
+        n = k * d
+        normals[c] = n
+        offsets[c] = wp.dot(n, q) + iso * inv
+        # the direction to a closest point is noise close to the surface: such planes may be damped (HERMITE_NEAR)
+        weights[c] = wp.min(1.0, (dl / near) * (dl / near))
+        state[c] = wp.where(dl <= 1.0e-4, -1, wp.where(good, 1, 0))
     for p in range(n_patches):
-        # the mass point of the patch's edge crossings, the corners at their ends, and the interpolant's gradient
+        # the mass point of the patch's edge crossings and the interpolant's value and gradient there
         mass = wp.vec3(0.0)
         crossings = float(0.0)
         edges = edge_mask[case * 4 + p]
         ends = end_mask[case * 4 + p]
         jump = int(0)  # values across a crossed edge further apart than its length: a sign jump (a hole's span)
-        for e in range(12):
-            if (edges >> e) & 1 == 1:
-                ca, cb = edge_ends(e)
-                t = vals[ca] / (vals[ca] - vals[cb])
-                mass += cube_corner(ca) + t * (cube_corner(cb) - cube_corner(ca))
-                crossings += 1.0
-                if vals[ca] - vals[cb] > JUMP_RATIO * spacing or vals[cb] - vals[ca] > JUMP_RATIO * spacing:
-                    jump = 1
+        bits = edges
+        while bits != 0:
+            low = bits & (-bits)
+            e = wp.bit_count(low - 1)
+            bits = bits ^ low
+            ca, cb = edge_ends(e)
+            t = vals[ca] / (vals[ca] - vals[cb])
+            mass += cube_corner(ca) + t * (cube_corner(cb) - cube_corner(ca))
+            crossings += 1.0
+            if wp.abs(vals[ca] - vals[cb]) > JUMP_RATIO * spacing:
+                jump = 1
         mass = mass / crossings
         f_mass, g_mass = trilinear(vals, mass)
-        ata = wp.mat33(0.0)
-        atb = wp.vec3(0.0)
-        btb = float(0.0)
+        # the planes of the patch's corners, summed (plane_terms), and the part of that which planes of nodes near
+        # the surface lose when damped (see HERMITE_NEAR)
+        sums = vec10()
         planes = float(0.0)
         normal_sum = wp.vec3(0.0)
+        near_sums = vec10()
+        near_planes = float(0.0)
+        near_normals = wp.vec3(0.0)
         first_normal = wp.vec3(0.0)
-        min_cos = float(1.0)
+        first_heavy = wp.vec3(0.0)
+        min_cos = float(1.0)  # of all planes
+        min_cos_heavy = float(1.0)  # of the planes that keep at least half their weight when damped
         fallback = float(0.0)
         skipped = float(0.0)
-        weighty = int(0)
-        for c in range(8):
-            if (ends >> c) & 1 == 0:
+        heavy = int(0)
+        bits = ends
+        while bits != 0:
+            low = bits & (-bits)
+            c = wp.bit_count(low - 1)
+            bits = bits ^ low
+            if state[c] != 1 or jump == 1:  # no plane, or the closest points lie on a hole's rim (a sign jump)
+                if state[c] == 0 or jump == 1:
+                    fallback += 1.0
+                else:
+                    skipped += 1.0
                 continue
-            node = ids[c]
-            q = (proj[node] - corner) * inv
-            d = cube_corner(c) - q
-            dl = wp.length(d)
-            r = raw[node]
-            use = int(0)
-            if jump == 1:
-                use = 0  # the closest points lie on the hole's rim, not on the surface crossing here
-            elif dl <= 1.0e-4:
-                use = -1  # on the surface: no direction at all
-            elif wp.abs(dl - wp.abs(r) * inv) <= tolerance:
-                n = d / dl
-                if r < 0.0:
-                    n = -n
-                if wp.dot(n, g_mass) > 0.0:  # not the far side of a plate thinner than a cell
-                    # the direction to a closest point is noise close to the surface (closest points on long thin
-                    # triangles are exact to about 1e-2 voxel): such planes weigh less
-                    w = wp.min(1.0, (dl / near) * (dl / near))
-                    b = wp.dot(n, q) + iso * inv
-                    ata += w * wp.outer(n, n)
-                    atb += w * n * b
-                    btb += w * b * b
-                    planes += w
-                    normal_sum += w * n
-                    if w >= 0.5:
-                        if weighty == 0:
-                            first_normal = n
-                            weighty = 1
-                        min_cos = wp.min(min_cos, wp.dot(n, first_normal))
-                    use = 1
-            if use == 0:
+            n = wp.vec3(normals[c, 0], normals[c, 1], normals[c, 2])
+            if wp.dot(n, g_mass) <= 0.0:  # the far side of a plate thinner than a cell
                 fallback += 1.0
-            elif use == -1:
-                skipped += 1.0
+                continue
+            terms = plane_terms(n, offsets[c])
+            sums += terms
+            if planes == 0.0:
+                first_normal = n
+            planes += 1.0
+            normal_sum += n
+            min_cos = wp.min(min_cos, wp.dot(n, first_normal))
+            lost = 1.0 - weights[c]
+            if lost > 0.0:
+                near_sums += lost * terms
+                near_planes += lost
+                near_normals += lost * n
+            if lost <= 0.5:
+                if heavy == 0:
+                    first_heavy = n
+                    heavy = 1
+                min_cos_heavy = wp.min(min_cos_heavy, wp.dot(n, first_heavy))
         if planes == 0.0:
             fallback += skipped
         gl = wp.length(g_mass)
@@ -300,40 +294,51 @@ def _place_vertices_kernel(
             # corners whose Hermite data does not hold: the interpolant's tangent plane at the mass point moved onto
             # its zero set (one Newton step; values are in world units, positions in voxels)
             n = g_mass / gl
-            b = wp.dot(n, mass) - f_mass / gl
-            ata += fallback * wp.outer(n, n)
-            atb += fallback * n * b
-            btb += fallback * b * b
+            sums += fallback * plane_terms(n, wp.dot(n, mass) - f_mass / gl)
+            if planes == 0.0:
+                first_normal = n
+            if heavy == 0:
+                first_heavy = n
             planes += fallback
             normal_sum += fallback * n
-            if weighty == 0:
-                first_normal = n
             min_cos = wp.min(min_cos, wp.dot(n, first_normal))
+            min_cos_heavy = wp.min(min_cos_heavy, wp.dot(n, first_heavy))
+        ata, atb, btb = unpack_terms(sums)
         vid = base_vertex + p
         x = mass
         rank = int(0)
         if planes > 0.0:
-            if min_cos >= smooth_cos:
-                x = solve_smooth(ata, atb - ata * mass, mass, normal_sum)
+            if is_smooth(ata, normal_sum, min_cos, smooth_cos, cutoff):
+                x = clamp_box(solve_smooth(ata, atb - ata * mass, mass, normal_sum), lo, hi)
                 rank = 1
-                x = clamp_box(x, lo, hi)
             else:
-                x, rank = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
-            # the quadric about the vertex, per plane: E(x + d) = d^T A d + 2 d . r + E(x)
-            w = 1.0 / planes
-            grad = ata * x - atb
-            ex = wp.dot(x, ata * x) - 2.0 * wp.dot(x, atb) + btb
-            quadrics[vid] = ata * w
-            linear[vid] = wp.vec4(grad[0] * w, grad[1] * w, grad[2] * w, wp.max(ex * w, 0.0))
+                # crease and corner vertices may reach this far into a face neighbour the surface does not cross
+                wide_lo = wp.vec3(lo)
+                wide_hi = wp.vec3(hi)
+                for a in range(3):
+                    if below[ids[0] * 3 + a] == wp.uint8(0):
+                        wide_lo[a] = lo - reach
+                    if cube_of_node[ids[wp.where(a == 0, 1, wp.where(a == 1, 3, 4))]] < 0:
+                        wide_hi[a] = hi + reach
+                x, rank, own = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
+                if own == 0 and near_planes > 0.0 and planes - near_planes > 0.0:
+                    # the crease or corner that planes of nodes near the surface make misses the cube (a crease just
+                    # past it, seen from a node within a fraction of a voxel of its other face): solved with those
+                    # planes damped
+                    ata, atb, btb = unpack_terms(sums - near_sums)
+                    planes = planes - near_planes
+                    normal_sum = normal_sum - near_normals
+                    if is_smooth(ata, normal_sum, min_cos_heavy, smooth_cos, cutoff):
+                        x = clamp_box(solve_smooth(ata, atb - ata * mass, mass, normal_sum), lo, hi)
+                        rank = 1
+                    else:
+                        x, rank, own = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
+            quadrics[vid] = pack_quadric(ata, atb, btb, x, 1.0 / planes)
         else:
-            quadrics[vid] = wp.mat33(0.0)
-            linear[vid] = wp.vec4(0.0)
+            quadrics[vid] = vec10()
         verts[vid] = corner + spacing * x
         ranks[vid] = rank
         cells[vid] = cube
-        for e in range(12):
-            if (edges >> e) & 1 == 1:
-                edge_vertex[cube * 12 + e] = vid
 
 
 # ---- quads ----
@@ -345,15 +350,13 @@ def _quads_kernel(
     cube_corners: wp.array2d[wp.int32],
     values: wp.array[wp.float32],
     cube_of_node: wp.array[wp.int32],
-    edge_vertex: wp.array[wp.int32],
+    cube_info: wp.array[wp.vec2i],
+    patch_of_edge: wp.array[wp.int32],
     quad_scan: wp.array[wp.int32],
     verts: wp.array[wp.vec3],
-    quadrics: wp.array[wp.mat33],
-    linear: wp.array[wp.vec4],
+    quadrics: wp.array[vec10],
     inv: float,
     min_area: float,
-    cube_case: wp.array[wp.int32],
-    spans: wp.array[wp.int32],
     second: wp.array[wp.int32],
     coords: wp.array[wp.vec3i],
     origin: wp.vec3,
@@ -372,23 +375,23 @@ def _quads_kernel(
     out = int(0)
     if cube > 0:
         out = quad_scan[cube - 1]
+    case = cube_info[cube][1] & 255
     count = int(0)
     for a in range(3):
         ea, eb = quad_ends(a)
-        v0 = values[cube_corners[cube, ea]]
-        v1 = values[cube_corners[cube, eb]]
-        if (v0 < 0.0) == (v1 < 0.0):
+        if ((case >> ea) & 1) == ((case >> eb) & 1):
             continue
         q = wp.vector(-1, -1, -1, -1, length=4, dtype=int)
-        owners = wp.vector(-1, -1, -1, -1, length=4, dtype=int)
+        info = wp.vector(0, 0, 0, 0, length=4, dtype=int)  # case and tunnel faces of each of the four cubes
         complete = int(1)
         for k in range(4):
             other = cube_of_node[cube_corners[cube, quad_corner(4 * a + k)]]
-            owners[k] = other
             if other < 0:
                 complete = 0
             else:
-                q[k] = edge_vertex[other * 12 + quad_edge(4 * a + k)]
+                o = cube_info[other]
+                info[k] = o[1]
+                q[k] = o[0] + ((patch_of_edge[o[1] & 255] >> (2 * quad_edge(4 * a + k))) & 3)
         quad = out + count
         row = 2 * quad
         count += 1
@@ -400,24 +403,27 @@ def _quads_kernel(
             continue
         # sides across a face both their cubes cross with one patch in two segments, this edge in the second
         sides = int(0)
-        for k in range(4):
-            face = 2 * ((a + 1 + k % 2) % 3) + wp.where(k < 2, 0, 1)
-            mate = face + 1 - 2 * (face % 2)  # the same face seen from the next cube
-            here = cube_case[owners[k]]
-            if (spans[here] >> face) & 1 == 1 and (spans[cube_case[owners[(k + 1) % 4]]] >> mate) & 1 == 1:
-                if second[(here * 12 + quad_edge(4 * a + k)) * 6 + face] == 1:
-                    sides = sides | (1 << k)
+        if (info[0] | info[1] | info[2] | info[3]) >> 8 != 0:
+            for k in range(4):
+                face = 2 * ((a + 1 + k % 2) % 3) + wp.where(k < 2, 0, 1)
+                mate = face + 1 - 2 * (face % 2)  # the same face seen from the next cube
+                if (info[k] >> (8 + face)) & 1 == 1 and (info[(k + 1) % 4] >> (8 + mate)) & 1 == 1:
+                    if second[((info[k] & 255) * 12 + quad_edge(4 * a + k)) * 6 + face] == 1:
+                        sides = sides | (1 << k)
         q0 = q[0]
         q1 = q[1]
         q2 = q[2]
         q3 = q[3]
-        if v0 >= 0.0:  # inside above: the outward normal is -axis, so turn the other way round
+        inside_above = (case >> ea) & 1 == 1
+        if inside_above:  # inside above: the outward normal is -axis, so turn the other way round
             q1 = q[3]
             q3 = q[1]
             # side k (q[k], q[k + 1]) is now side (3 - k) % 4
             sides = ((sides & 1) << 3) | ((sides & 2) << 1) | ((sides & 4) >> 1) | ((sides & 8) >> 3)
         if sides != 0:
             # written in order and split along q0-q2, for _open_tunnels to rebuild around the sides' new vertices
+            v0 = values[cube_corners[cube, ea]]
+            v1 = values[cube_corners[cube, eb]]
             n_a = coords[cube_corners[cube, ea]]
             x_a = origin + (wp.vec3(float(n_a[0]), float(n_a[1]), float(n_a[2])) + wp.vec3(0.5)) / inv
             x_b = x_a
@@ -437,14 +443,14 @@ def _quads_kernel(
         p3 = verts[q3]
         # each split's smaller triangle area seen along the edge (outward), in voxels^2 (twice the area)
         axis = wp.vec3(0.0)
-        axis[a] = wp.where(v0 < 0.0, inv * inv, -inv * inv)
+        axis[a] = wp.where(inside_above, -inv * inv, inv * inv)
         area02 = wp.min(wp.dot(wp.cross(p1 - p0, p2 - p0), axis), wp.dot(wp.cross(p2 - p0, p3 - p0), axis))
         area13 = wp.min(wp.dot(wp.cross(p1 - p0, p3 - p0), axis), wp.dot(wp.cross(p2 - p1, p3 - p1), axis))
         # the diagonal whose midpoint its two vertices' planes fit best, unless that folds a triangle the other does not
         m02 = 0.5 * (p0 + p2)
         m13 = 0.5 * (p1 + p3)
-        e02 = quadric_at(quadrics, linear, verts, q0, m02, inv) + quadric_at(quadrics, linear, verts, q2, m02, inv)
-        e13 = quadric_at(quadrics, linear, verts, q1, m13, inv) + quadric_at(quadrics, linear, verts, q3, m13, inv)
+        e02 = quadric_at(quadrics[q0], (m02 - p0) * inv) + quadric_at(quadrics[q2], (m02 - p2) * inv)
+        e13 = quadric_at(quadrics[q1], (m13 - p1) * inv) + quadric_at(quadrics[q3], (m13 - p3) * inv)
         split02 = e02 <= e13
         if split02 and area02 < min_area and area13 > area02:
             split02 = False
@@ -466,14 +472,14 @@ def _quads_kernel(
             tris[row + 1, 2] = q3
 
 
-def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, iso=0.0):
+def contour_dual(cube_corners, values, coords, proj, *, origin, spacing, iso=0.0):
     """Dual marching cubes over active cubes, each vertex at its patch's plane-quadric minimiser within its cube.
 
     Args:
         cube_corners: (M, 8) int32 Warp array: node indices of each active cube's corners (``CORNER_OFFSETS`` order).
         values: (N,) float32 Warp array of node values minus ``iso``, none exactly 0 (the nudged values marching
-            cubes uses, so both agree on every cube's case).
-        raw: (N,) float32 Warp array of the nodes' signed distances (before ``iso``).
+            cubes uses, so both agree on every cube's case; a node's Hermite data holds where its value plus ``iso``
+            is its distance to its closest point).
         coords: (N,) vec3i Warp array of the nodes' lattice coordinates (node at ``origin + (c + 0.5) * spacing``).
         proj: (N,) vec3 Warp array of each node's closest point on the surface its value came from.
         origin: (3,) world position of lattice point (0, 0, 0)'s cell minimum.
@@ -491,15 +497,13 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
     counts = wp.empty(m, dtype=wp.int32, device=device)
     quad_counts = wp.empty(m, dtype=wp.int32, device=device)
     cube_of_node = wp.full(n, -1, dtype=wp.int32, device=device)
-    cube_case = wp.empty(m, dtype=wp.int32, device=device)
+    below = wp.zeros(3 * n, dtype=wp.uint8, device=device)
     launch_split(
         _count_patches_kernel,
         m,
-        lambda s, c: [s, cube_corners, values, tables["count"], counts, quad_counts, cube_of_node, cube_case],
+        lambda s, c: [s, cube_corners, values, tables["count"], counts, quad_counts, cube_of_node, below],
         device,
     )
-    neighbours = wp.zeros(6 * m, dtype=wp.int32, device=device)
-    launch_split(_face_neighbours_kernel, m, lambda s, c: [s, cube_corners, cube_of_node, neighbours], device)
     vertex_start = wp.empty(m, dtype=wp.int32, device=device)
     wp.utils.array_scan(counts, vertex_start, inclusive=True)
     quad_scan = counts  # reused
@@ -509,9 +513,8 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
     verts = wp.empty(n_verts, dtype=wp.vec3, device=device)
     ranks = wp.empty(n_verts, dtype=wp.int32, device=device)
     cells = wp.empty(n_verts, dtype=wp.int32, device=device)
-    quadrics = wp.empty(n_verts, dtype=wp.mat33, device=device)
-    linear = wp.empty(n_verts, dtype=wp.vec4, device=device)
-    edge_vertex = wp.empty(12 * m, dtype=wp.int32, device=device)
+    quadrics = wp.empty(n_verts, dtype=vec10, device=device)
+    cube_info = wp.empty(m, dtype=wp.vec2i, device=device)
     origin_wp = wp.vec3(*(float(x) for x in origin))
     launch_split(
         _place_vertices_kernel,
@@ -520,7 +523,6 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             s,
             cube_corners,
             values,
-            raw,
             coords,
             proj,
             origin_wp,
@@ -528,8 +530,10 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             float(iso),
             tables["edge_mask"],
             tables["end_mask"],
+            tables["spans"],
             vertex_start,
-            neighbours,
+            cube_of_node,
+            below,
             EMPTY_REACH,
             EIGEN_CUTOFF,
             SMOOTH_COS,
@@ -540,8 +544,7 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             ranks,
             cells,
             quadrics,
-            linear,
-            edge_vertex,
+            cube_info,
         ],
         device,
         balance=True,
@@ -557,15 +560,13 @@ def contour_dual(cube_corners, values, raw, coords, proj, *, origin, spacing, is
             cube_corners,
             values,
             cube_of_node,
-            edge_vertex,
+            cube_info,
+            tables["patch_of_edge"],
             quad_scan,
             verts,
             quadrics,
-            linear,
             1.0 / float(spacing),
             MIN_SPLIT_AREA,
-            cube_case,
-            tables["spans"],
             tables["second"],
             coords,
             origin_wp,

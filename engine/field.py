@@ -521,7 +521,6 @@ class AdaptiveField:
             if cubes is not None and cubes["order"] is not None:
                 order = cubes["order"]
                 coords = wp.array(coords_np[order], dtype=wp.vec3i, device=self.device)
-                values = wp.array(self.values.numpy()[order], dtype=wp.float32, device=self.device)
                 proj = wp.array(self.proj.numpy()[order], dtype=wp.vec3, device=self.device)
         else:
             tree = (self.child, self.level_offsets[self.levels - 1], self.top_dims, self.levels)
@@ -532,7 +531,6 @@ class AdaptiveField:
         surface = contour_dual(
             cubes["cube_corners"],
             cubes["shifted"],
-            values,
             coords,
             proj,
             origin=self.origin,

@@ -67,50 +67,79 @@ def _closest_on_edges(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.vec3
     return q
 
 
+# A triangle whose largest angle's sine is below this is degenerate: its closest points are its edges' (it is at most
+# this fraction of its second-longest edge wide).
+DEGENERATE_SINE = 1.0e-5
+
+
 @wp.func
-def triangle_edges(a: wp.vec3, b: wp.vec3, c: wp.vec3):
-    """(ab, ac, ab.ab, ab.ac, ac.ac): what ``closest_on_triangle`` needs of a triangle, once for many points."""
+def triangle_frame(a: wp.vec3, b: wp.vec3, c: wp.vec3):
+    """What ``closest_on_triangle`` needs of triangle (a, b, c), once for the many points tested against it.
+
+    Returns (edges, inward, lengths, n): ``edges`` the rows ab = b - a, ac = c - a, bc = c - b; ``lengths`` their
+    squared lengths; ``n`` the unit normal (along ab x ac), zero for a degenerate triangle; ``inward`` the rows
+    n x ab, ac x n, n x bc, each edge's normal in the triangle's plane pointing inside, as long as the edge. The
+    normal is the cross product of the two edges at the largest angle (opposite the longest edge): a long thin
+    triangle's two long edges are nearly parallel, and float rounding of theirs would tilt it by up to 1/sine of
+    their angle times the rounding."""
     ab = b - a
     ac = c - a
-    return ab, ac, wp.dot(ab, ab), wp.dot(ab, ac), wp.dot(ac, ac)
+    bc = c - b
+    lengths = wp.vec3(wp.dot(ab, ab), wp.dot(ac, ac), wp.dot(bc, bc))
+    # the largest angle at a (bc the longest), b (ac) or c (ab): ab x ac = ab x bc = ac x bc
+    at_a = lengths[2] >= lengths[0] and lengths[2] >= lengths[1]
+    at_b = not at_a and lengths[1] >= lengths[0]
+    normal = wp.cross(wp.where(at_a or at_b, ab, ac), wp.where(at_a, ac, bc))
+    scale = wp.where(at_a, lengths[0] * lengths[1], wp.where(at_b, lengths[0] * lengths[2], lengths[1] * lengths[2]))
+    n = wp.vec3(0.0)
+    area2 = wp.dot(normal, normal)
+    if area2 > DEGENERATE_SINE * DEGENERATE_SINE * scale:
+        n = normal / wp.sqrt(area2)
+    inward = wp.matrix_from_rows(wp.cross(n, ab), wp.cross(ac, n), wp.cross(n, bc))
+    return wp.matrix_from_rows(ab, ac, bc), inward, lengths, n
 
 
 @wp.func
 def closest_on_triangle(
-    p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, ab: wp.vec3, ac: wp.vec3, d00: float, d01: float, d11: float
+    p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, edges: wp.mat33, inward: wp.mat33, lengths: wp.vec3, n: wp.vec3
 ) -> wp.vec3:
-    """Closest point to ``p`` on triangle (a, b, c) by Voronoi regions (Ericson, Real-Time Collision Detection
-    5.1.5), with the triangle's edges ``ab`` = b - a, ``ac`` = c - a and their products (``d00`` = ab.ab, ``d01`` =
-    ab.ac, ``d11`` = ac.ac) computed once for the many points tested against it: the six dot products of the regions
-    follow from two (ab.ap, ac.ap). A degenerate triangle (or one within float rounding of it) falls back to its
-    nearest edge."""
+    """Closest point to ``p`` on triangle (a, b, c), given its ``triangle_frame``: its plane's point below ``p`` where
+    that lies inside all three edges, else the nearest point of the edges it lies outside. Every quantity is a dot
+    product with one of the triangle's own edges or normals, each exact to float rounding of ``p``'s distance to it:
+    the barycentric coordinates of the Voronoi-region method (Ericson, Real-Time Collision Detection 5.1.5) are
+    differences of products of edge lengths, which on a long thin triangle (a cylinder's side: 0.94 by 0.006 of the
+    diagonal) cancel down to 1e-3 of their size, moving the point along the triangle by up to 0.2 voxel at /256. A
+    degenerate triangle falls back to its nearest edge."""
+    if n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0:
+        return _closest_on_edges(p, a, b, c)
     ap = p - a
-    d1 = wp.dot(ab, ap)
-    d2 = wp.dot(ac, ap)
-    if d1 <= 0.0 and d2 <= 0.0:
-        return a
-    d3 = d1 - d00  # ab.(p - b)
-    d4 = d2 - d01  # ac.(p - b)
-    if d3 >= 0.0 and d4 <= d3:
-        return b
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        return a + ab * (d1 / (d1 - d3))
-    d5 = d1 - d01  # ab.(p - c)
-    d6 = d2 - d11  # ac.(p - c)
-    if d6 >= 0.0 and d5 <= d6:
-        return c
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        return a + ac * (d2 / (d2 - d6))
-    va = d3 * d6 - d5 * d4
-    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))
-    total = va + vb + vc  # |ab x ac|^2, up to rounding
-    if total > 1.0e-6 * d00 * d11:
-        return a + ab * (vb / total) + ac * (vc / total)
-    # degenerate, or so nearly (its two edges' angle under 1e-3) that float rounding would decide the point
-    return _closest_on_edges(p, a, b, c)
+    bp = p - b
+    in_ab = wp.dot(wp.vec3(inward[0, 0], inward[0, 1], inward[0, 2]), ap)
+    in_ac = wp.dot(wp.vec3(inward[1, 0], inward[1, 1], inward[1, 2]), ap)
+    in_bc = wp.dot(wp.vec3(inward[2, 0], inward[2, 1], inward[2, 2]), bp)
+    if in_ab >= 0.0 and in_ac >= 0.0 and in_bc >= 0.0:
+        return p - n * wp.dot(n, ap)
+    # outside: the nearest point lies on an edge that p's projection is beyond (a convex polygon's nearest boundary
+    # point is seen from outside), one or two of them
+    best = float(1.0e30)
+    q = p
+    if in_ab < 0.0:
+        ab = wp.vec3(edges[0, 0], edges[0, 1], edges[0, 2])
+        q = a + ab * wp.clamp(wp.dot(ap, ab) / lengths[0], 0.0, 1.0)
+        best = wp.length_sq(p - q)
+    if in_ac < 0.0:
+        ac = wp.vec3(edges[1, 0], edges[1, 1], edges[1, 2])
+        r = a + ac * wp.clamp(wp.dot(ap, ac) / lengths[1], 0.0, 1.0)
+        d = wp.length_sq(p - r)
+        if d < best:
+            q = r
+            best = d
+    if in_bc < 0.0:
+        bc = wp.vec3(edges[2, 0], edges[2, 1], edges[2, 2])
+        r = b + bc * wp.clamp(wp.dot(bp, bc) / lengths[2], 0.0, 1.0)
+        if wp.length_sq(p - r) < best:
+            q = r
+    return q
 
 
 @wp.func_native("return wp::mesh_query_winding_number(mesh, x, accuracy);")
@@ -223,12 +252,69 @@ def segment_crossings(mesh: wp.uint64, p: wp.vec3, q: wp.vec3) -> int:
 
 
 # Warp's BVH closest-point search (``mesh_query_point_no_sign``), returning the point itself: the same traversal
-# (nearest child first, boxes farther than the best distance so far skipped), without its per-triangle sliver test (a
-# square root and a division each): a sliver's points are surface points like any other, and the finest level's own
-# search tests every triangle too (Warp's closest-point routine keeps its result on the triangle, or yields NaN on a
-# degenerate edge, which no comparison takes). About a fifth faster where a query tests many triangles (far from
-# the surface).
-_CLOSEST_POINT_SNIPPET = r"""
+# (nearest child first, boxes farther than the best distance so far skipped), with the closest point on each triangle
+# computed as ``closest_on_triangle`` does (Warp's routine is the Voronoi-region method, whose barycentric coordinates
+# lose all but a few bits on long thin triangles) and without Warp's per-triangle sliver test: a sliver's points are
+# surface points like any other. A triangle whose plane is farther than the best distance so far is passed over after
+# one dot product. The closest point of a triangle:
+_TRIANGLE_POINT = r"""
+            const wp::vec3 ab = q - p;
+            const wp::vec3 ac = r - p;
+            const wp::vec3 bc = r - q;
+            const wp::vec3 ap = x - p;
+            const float lab = wp::dot(ab, ab);
+            const float lac = wp::dot(ac, ac);
+            const float lbc = wp::dot(bc, bc);
+            // the normal from the two edges at the largest angle (see triangle_frame), unscaled
+            const bool at_a = lbc >= lab && lbc >= lac;
+            const bool at_b = !at_a && lac >= lab;
+            const wp::vec3 nrm = wp::cross(at_a || at_b ? ab : ac, at_a ? ac : bc);
+            const float area2 = wp::dot(nrm, nrm);
+            const float scale = at_a ? lab * lac : (at_b ? lab * lbc : lac * lbc);
+            const bool flat = area2 > DEGENERATE_SINE_SQ * scale;
+            const float plane = wp::dot(nrm, ap);
+            if (flat && plane * plane >= best * area2)
+                continue;  // its plane is no nearer than the best point so far
+            const wp::vec3 bp = x - q;
+            wp::vec3 y;
+            if (flat) {
+                // which side of each edge: signs of N . (edge x (x - its start)), exact to rounding of x's distance
+                const float in_ab = wp::dot(nrm, wp::cross(ab, ap));
+                const float in_ac = wp::dot(nrm, wp::cross(ap, ac));
+                const float in_bc = wp::dot(nrm, wp::cross(bc, bp));
+                if (in_ab >= 0.0f && in_ac >= 0.0f && in_bc >= 0.0f) {
+                    y = x - nrm * (plane / area2);
+                } else {
+                    // outside: the nearest point lies on an edge the point's projection is beyond
+                    float dy = 1.0e30f;
+                    if (in_ab < 0.0f) {
+                        y = p + ab * wp::clamp(wp::dot(ap, ab) / lab, 0.0f, 1.0f);
+                        dy = wp::length_sq(y - x);
+                    }
+                    if (in_ac < 0.0f) {
+                        const wp::vec3 e = p + ac * wp::clamp(wp::dot(ap, ac) / lac, 0.0f, 1.0f);
+                        const float de = wp::length_sq(e - x);
+                        if (de < dy) { dy = de; y = e; }
+                    }
+                    if (in_bc < 0.0f) {
+                        const wp::vec3 e = q + bc * wp::clamp(wp::dot(bp, bc) / lbc, 0.0f, 1.0f);
+                        if (wp::length_sq(e - x) < dy) y = e;
+                    }
+                }
+            } else {  // degenerate: its nearest edge
+                const wp::vec3 e0 = p + ab * wp::clamp(wp::dot(ap, ab) / wp::max(lab, 1.0e-30f), 0.0f, 1.0f);
+                const wp::vec3 e1 = p + ac * wp::clamp(wp::dot(ap, ac) / wp::max(lac, 1.0e-30f), 0.0f, 1.0f);
+                const wp::vec3 e2 = q + bc * wp::clamp(wp::dot(bp, bc) / wp::max(lbc, 1.0e-30f), 0.0f, 1.0f);
+                y = e0;
+                if (wp::length_sq(e1 - x) < wp::length_sq(y - x)) y = e1;
+                if (wp::length_sq(e2 - x) < wp::length_sq(y - x)) y = e2;
+            }
+            const float d = wp::length_sq(y - x);
+""".replace("DEGENERATE_SINE_SQ", repr(DEGENERATE_SINE * DEGENERATE_SINE) + "f")
+
+
+_CLOSEST_POINT_SNIPPET = (
+    r"""
 wp::Mesh m = wp::mesh_get(mesh);
 int stack[BVH_QUERY_STACK_SIZE];
 stack[0] = *m.bvh.root;
@@ -250,9 +336,9 @@ while (count) {
             const wp::vec3 p = m.points[wp::bvh_load_int(m.indices, t * 3 + 0)];
             const wp::vec3 q = m.points[wp::bvh_load_int(m.indices, t * 3 + 1)];
             const wp::vec3 r = m.points[wp::bvh_load_int(m.indices, t * 3 + 2)];
-            const wp::vec2 b = wp::closest_point_to_triangle(p, q, r, x);
-            const wp::vec3 y = b[0] * p + b[1] * q + (1.0f - b[0] - b[1]) * r;
-            const float d = wp::length_sq(y - x);
+"""
+    + _TRIANGLE_POINT
+    + r"""
             if (d < best) {
                 best = d;
                 reach = d * shrink;
@@ -278,6 +364,7 @@ while (count) {
 }
 return out;
 """
+)
 
 
 @wp.func_native(_CLOSEST_POINT_SNIPPET)

@@ -344,6 +344,27 @@ def patch_tables() -> tuple[np.ndarray, np.ndarray]:
     return patch, count
 
 
+def patch_masks() -> dict:
+    """The patches of :func:`patch_tables` as bit masks, for the dual of the marching cubes (:mod:`.dual`).
+
+    Returns:
+        dict of int32 arrays: ``edge_mask`` and ``end_mask`` (256, 4), per case and patch (4 at most) the bits of its
+        local edges and of the corners at their ends; ``patch_of_edge`` (256,), per case each crossed local edge's
+        patch in 2 bits (bits 2e, 2e + 1 for edge e); ``count`` (256,), the number of patches.
+    """
+    patch, count = patch_tables()
+    tables = case_tables()
+    owner, upper = tables["edge_owner"], tables["edge_upper"]
+    edge_mask = np.zeros((256, 4), dtype=np.int32)
+    end_mask = np.zeros((256, 4), dtype=np.int32)
+    patch_of_edge = (np.maximum(patch, 0).astype(np.int64) << (2 * np.arange(12))).sum(axis=1).astype(np.int32)
+    for e in range(12):
+        rows = np.flatnonzero(patch[:, e] >= 0)
+        np.bitwise_or.at(edge_mask, (rows, patch[rows, e]), 1 << e)
+        np.bitwise_or.at(end_mask, (rows, patch[rows, e]), (1 << int(owner[e])) | (1 << int(upper[e])))
+    return {"edge_mask": edge_mask, "end_mask": end_mask, "patch_of_edge": patch_of_edge, "count": count}
+
+
 def tunnel_tables() -> tuple[np.ndarray, np.ndarray]:
     """Where the dual of the marching cubes needs a vertex more: faces with four crossed edges (two segments) whose
     cube has one patch through both, so that two cubes doing so across a face meet along two dual edges at once.

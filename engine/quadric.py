@@ -19,6 +19,35 @@ CREASE_ANGLE = 25.0
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
 
+# A quadric in 10 floats: the upper triangle of A (a00, a01, a02, a11, a12, a22), then a vector and a constant. A sum
+# of planes' terms (plane_terms) holds A^T A, A^T b and b.b; a vertex's quadric about itself (pack_quadric) holds A,
+# the linear part r and the constant of E(x + d) = d^T A d + 2 d . r + E(x), per plane.
+vec10 = wp.types.vector(length=10, dtype=wp.float32)
+
+
+@wp.func
+def plane_terms(n: wp.vec3, b: float):
+    """What plane n.x = b adds to a sum of squared distances, as :data:`vec10`: n n^T (upper triangle), n b, b b."""
+    return vec10(
+        n[0] * n[0],
+        n[0] * n[1],
+        n[0] * n[2],
+        n[1] * n[1],
+        n[1] * n[2],
+        n[2] * n[2],
+        n[0] * b,
+        n[1] * b,
+        n[2] * b,
+        b * b,
+    )
+
+
+@wp.func
+def unpack_terms(s: vec10):
+    """(A^T A, A^T b, b.b) of a sum of :func:`plane_terms`."""
+    return wp.mat33(s[0], s[1], s[2], s[1], s[3], s[4], s[2], s[4], s[5]), wp.vec3(s[6], s[7], s[8]), s[9]
+
+
 # Bit c of these is corner c's offset along x, y, z (CORNER_OFFSETS as integer constants, no table reads).
 _BITS_X = int(sum(int(CORNER_OFFSETS[c][0]) << c for c in range(8)))
 _BITS_Y = int(sum(int(CORNER_OFFSETS[c][1]) << c for c in range(8)))
@@ -87,45 +116,168 @@ def clamp_box(x: wp.vec3, lo: float, hi: float):
 
 
 @wp.func
+def _eigenvector_for(
+    a00: wp.float64,
+    a01: wp.float64,
+    a02: wp.float64,
+    a11: wp.float64,
+    a12: wp.float64,
+    a22: wp.float64,
+    lam: wp.float64,
+):
+    """Unit eigenvector of the symmetric matrix (a00 a01 a02; . a11 a12; . . a22) for its eigenvalue ``lam``, one of
+    multiplicity 1: the largest cross product of two rows of A - lam I."""
+    r0 = wp.vec3d(a00 - lam, a01, a02)
+    r1 = wp.vec3d(a01, a11 - lam, a12)
+    r2 = wp.vec3d(a02, a12, a22 - lam)
+    v = wp.cross(r0, r1)
+    best = wp.dot(v, v)
+    c = wp.cross(r0, r2)
+    if wp.dot(c, c) > best:
+        v = c
+        best = wp.dot(c, c)
+    c = wp.cross(r1, r2)
+    if wp.dot(c, c) > best:
+        v = c
+        best = wp.dot(c, c)
+    if best <= wp.float64(0.0):
+        return wp.vec3d(wp.float64(1.0), wp.float64(0.0), wp.float64(0.0))
+    return v / wp.sqrt(best)
+
+
+@wp.func
+def _eigenvector_across(
+    a00: wp.float64,
+    a01: wp.float64,
+    a02: wp.float64,
+    a11: wp.float64,
+    a12: wp.float64,
+    a22: wp.float64,
+    w: wp.vec3d,
+    lam: wp.float64,
+):
+    """Unit eigenvector for eigenvalue ``lam`` orthogonal to the unit eigenvector ``w``: the null vector of A - lam I
+    restricted to the plane orthogonal to ``w`` (a 2x2 problem, well posed even where ``lam`` is repeated)."""
+    zero = wp.float64(0.0)
+    u = wp.vec3d(zero)
+    if wp.abs(w[0]) > wp.abs(w[1]):
+        s = wp.float64(1.0) / wp.sqrt(w[0] * w[0] + w[2] * w[2])
+        u = wp.vec3d(-w[2] * s, zero, w[0] * s)
+    else:
+        s = wp.float64(1.0) / wp.sqrt(w[1] * w[1] + w[2] * w[2])
+        u = wp.vec3d(zero, w[2] * s, -w[1] * s)
+    v = wp.cross(w, u)
+    au = wp.vec3d(
+        a00 * u[0] + a01 * u[1] + a02 * u[2], a01 * u[0] + a11 * u[1] + a12 * u[2], a02 * u[0] + a12 * u[1] + a22 * u[2]
+    )
+    av = wp.vec3d(
+        a00 * v[0] + a01 * v[1] + a02 * v[2], a01 * v[0] + a11 * v[1] + a12 * v[2], a02 * v[0] + a12 * v[1] + a22 * v[2]
+    )
+    m00 = wp.dot(u, au) - lam
+    m01 = wp.dot(u, av)
+    m11 = wp.dot(v, av) - lam
+    # the null vector (c, s) of [[m00, m01], [m01, m11]], from its larger row
+    if wp.abs(m00) >= wp.abs(m11):
+        if wp.abs(m00) + wp.abs(m01) > zero:
+            return wp.normalize(m01 * u - m00 * v)
+        return u
+    if wp.abs(m11) + wp.abs(m01) > zero:
+        return wp.normalize(m11 * u - m01 * v)
+    return u
+
+
+@wp.func
+def eigen_sym3(m: wp.mat33):
+    """Eigenvalues, largest first, and unit eigenvectors (e0, e1, e2, right-handed) of a symmetric 3x3 matrix, in
+    closed form (the trigonometric solution of the characteristic cubic, then cross products: Eberly, "A robust
+    eigensolver for 3x3 symmetric matrices", 2014), in double precision: accurate to float rounding of the largest
+    eigenvalue, where Warp's ``eig3`` (four Jacobi sweeps in float) is off by up to 1e-4 of it and costs twice as
+    much."""
+    a00 = wp.float64(m[0, 0])
+    a01 = wp.float64(m[0, 1])
+    a02 = wp.float64(m[0, 2])
+    a11 = wp.float64(m[1, 1])
+    a12 = wp.float64(m[1, 2])
+    a22 = wp.float64(m[2, 2])
+    scale = wp.max(
+        wp.max(wp.max(wp.abs(a00), wp.abs(a01)), wp.max(wp.abs(a02), wp.abs(a11))), wp.max(wp.abs(a12), wp.abs(a22))
+    )
+    ex = wp.vec3(1.0, 0.0, 0.0)
+    ey = wp.vec3(0.0, 1.0, 0.0)
+    ez = wp.vec3(0.0, 0.0, 1.0)
+    if scale <= wp.float64(0.0):
+        return wp.vec3(0.0), ex, ey, ez
+    inv = wp.float64(1.0) / scale
+    a00 = a00 * inv
+    a01 = a01 * inv
+    a02 = a02 * inv
+    a11 = a11 * inv
+    a12 = a12 * inv
+    a22 = a22 * inv
+    q = (a00 + a11 + a22) / wp.float64(3.0)
+    b00 = a00 - q
+    b11 = a11 - q
+    b22 = a22 - q
+    p = wp.sqrt(
+        (b00 * b00 + b11 * b11 + b22 * b22 + wp.float64(2.0) * (a01 * a01 + a02 * a02 + a12 * a12)) / wp.float64(6.0)
+    )
+    if p <= wp.float64(1.0e-12):  # a multiple of the identity
+        return wp.vec3(wp.float32(q * scale)), ex, ey, ez
+    # det(B / p) / 2 = cos(3 angle), B = A - q I
+    c00 = b11 * b22 - a12 * a12
+    c01 = a01 * b22 - a12 * a02
+    c02 = a01 * a12 - b11 * a02
+    half_det = wp.clamp(
+        (b00 * c00 - a01 * c01 + a02 * c02) / (wp.float64(2.0) * p * p * p), wp.float64(-1.0), wp.float64(1.0)
+    )
+    angle = wp.acos(half_det) / wp.float64(3.0)
+    beta0 = wp.float64(2.0) * wp.cos(angle)  # largest
+    beta2 = wp.float64(2.0) * wp.cos(angle + wp.float64(2.0943951023931954923))  # smallest
+    l0 = q + p * beta0
+    l1 = q - p * (beta0 + beta2)
+    l2 = q + p * beta2
+    e0 = wp.vec3d(wp.float64(0.0))
+    e1 = wp.vec3d(wp.float64(0.0))
+    e2 = wp.vec3d(wp.float64(0.0))
+    if half_det >= wp.float64(0.0):  # the largest eigenvalue is the better separated one: its vector first
+        e0 = _eigenvector_for(a00, a01, a02, a11, a12, a22, l0)
+        e1 = _eigenvector_across(a00, a01, a02, a11, a12, a22, e0, l1)
+        e2 = wp.cross(e0, e1)
+    else:
+        e2 = _eigenvector_for(a00, a01, a02, a11, a12, a22, l2)
+        e1 = _eigenvector_across(a00, a01, a02, a11, a12, a22, e2, l1)
+        e0 = wp.cross(e1, e2)
+    d = wp.vec3(wp.float32(l0 * scale), wp.float32(l1 * scale), wp.float32(l2 * scale))
+    return d, wp.vec3(e0), wp.vec3(e1), wp.vec3(e2)
+
+
+@wp.func
 def solve_in_cube(
     ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, cutoff: float, lo: float, hi: float, wide_lo: wp.vec3, wide_hi: wp.vec3
 ):
     """Minimiser of |A x - b|^2 near the mass point (``rhs = A^T b - A^T A mass``): the truncated pseudo-inverse
     solution if it lies in the box [wide_lo, wide_hi]; else the solution line of the two largest eigenvalues clipped
-    to that box; else the point of rank 1 clamped to the cube [lo, hi]^3. Returns (x, rank used)."""
-    q, d = wp.eig3(ata)
-    # order the eigenvalues, largest first
-    i0 = int(0)
-    i2 = int(0)
-    for k in range(3):
-        if d[k] > d[i0]:
-            i0 = k
-        if d[k] < d[i2]:
-            i2 = k
-    if i0 == i2:
-        i2 = (i0 + 1) % 3
-    i1 = 3 - i0 - i2
-    top = d[i0]
+    to that box; else the point of rank 1 clamped to the cube [lo, hi]^3. Returns (x, rank used, 0 where that is
+    the last because the crease missed the box, else 1)."""
+    d, e0, e1, e2 = eigen_sym3(ata)
+    top = d[0]
     x = mass
     if top <= 0.0:
-        return clamp_box(x, lo, hi), 0
-    e0 = wp.vec3(q[0, i0], q[1, i0], q[2, i0])
-    e1 = wp.vec3(q[0, i1], q[1, i1], q[2, i1])
-    e2 = wp.vec3(q[0, i2], q[1, i2], q[2, i2])
+        return clamp_box(x, lo, hi), 0, 1
     rank = int(1)
-    if d[i1] > cutoff * top:
+    if d[1] > cutoff * top:
         rank = 2
-    if d[i2] > cutoff * top:
+    if d[2] > cutoff * top:
         rank = 3
     x1 = mass + e0 * (wp.dot(e0, rhs) / top)
     x2 = x1
     if rank >= 2:
-        x2 = x1 + e1 * (wp.dot(e1, rhs) / d[i1])
+        x2 = x1 + e1 * (wp.dot(e1, rhs) / d[1])
     x3 = x2
     if rank == 3:
-        x3 = x2 + e2 * (wp.dot(e2, rhs) / d[i2])
+        x3 = x2 + e2 * (wp.dot(e2, rhs) / d[2])
         if inside_box(x3, wp.vec3(lo), wp.vec3(hi)):
-            return x3, 3
+            return x3, 3, 1
     if rank >= 2:
         # the crease line through the cube, else through the box that reaches into the empty neighbours: the point
         # nearest the mass point within the middle half of the part inside, so that the crease vertices of
@@ -136,11 +288,20 @@ def solve_in_cube(
         if s[0] <= s[1]:
             quarter = 0.25 * (s[1] - s[0])
             t = wp.clamp(0.0, s[0] + quarter, s[1] - quarter)
-            return x2 + t * e2, 2
-    x = x1
-    if rank >= 2:
-        rank = 1
-    return clamp_box(x, lo, hi), rank
+            return x2 + t * e2, 2, 1
+    return clamp_box(x1, lo, hi), 1, wp.where(rank == 1, 1, 0)
+
+
+@wp.func
+def is_smooth(ata: wp.mat33, normal_sum: wp.vec3, min_cos: float, smooth_cos: float, cutoff: float):
+    """Whether a quadric is of rank 1: all its (heavy) normals within ``smooth_cos`` of the first, or, for sure, the
+    planes' spread about their mean normal small (the mean normal's Rayleigh quotient bounds the largest eigenvalue
+    from below, the trace less it the other two from above)."""
+    if min_cos >= smooth_cos:
+        return True
+    mean = wp.normalize(normal_sum)
+    lam = wp.dot(mean, ata * mean)
+    return ata[0, 0] + ata[1, 1] + ata[2, 2] - lam <= cutoff * lam
 
 
 @wp.func
@@ -154,13 +315,34 @@ def solve_smooth(ata: wp.mat33, rhs: wp.vec3, mass: wp.vec3, normal_sum: wp.vec3
 
 
 @wp.func
-def quadric_at(
-    quadrics: wp.array[wp.mat33], linear: wp.array[wp.vec4], verts: wp.array[wp.vec3], v: int, y: wp.vec3, inv: float
-):
-    """Mean squared distance (in voxels^2) of point ``y`` to vertex ``v``'s planes."""
-    d = (y - verts[v]) * inv
-    r = linear[v]
-    return wp.dot(d, quadrics[v] * d) + 2.0 * (d[0] * r[0] + d[1] * r[1] + d[2] * r[2]) + r[3]
+def pack_quadric(ata: wp.mat33, atb: wp.vec3, btb: float, x: wp.vec3, w: float):
+    """The quadric of planes (sum of squared distances |A x - b|^2: ``ata`` = A^T A, ``atb`` = A^T b, ``btb`` =
+    b.b) about ``x``, times ``w`` (one over the number of planes), as :data:`vec10`."""
+    grad = ata * x - atb
+    ex = wp.dot(x, ata * x) - 2.0 * wp.dot(x, atb) + btb
+    q = vec10()
+    q[0] = ata[0, 0] * w
+    q[1] = ata[0, 1] * w
+    q[2] = ata[0, 2] * w
+    q[3] = ata[1, 1] * w
+    q[4] = ata[1, 2] * w
+    q[5] = ata[2, 2] * w
+    q[6] = grad[0] * w
+    q[7] = grad[1] * w
+    q[8] = grad[2] * w
+    q[9] = wp.max(ex * w, 0.0)
+    return q
+
+
+@wp.func
+def quadric_at(q: vec10, d: wp.vec3):
+    """Mean squared distance (in voxels^2) to a vertex's planes of the point ``d`` voxels from it (``q`` from
+    :func:`pack_quadric`)."""
+    x = d[0]
+    y = d[1]
+    z = d[2]
+    quad = q[0] * x * x + q[3] * y * y + q[5] * z * z + 2.0 * (q[1] * x * y + q[2] * x * z + q[4] * y * z)
+    return quad + 2.0 * (x * q[6] + y * q[7] + z * q[8]) + q[9]
 
 
 def crease_edges(verts, tris, ranks, angle: float = CREASE_ANGLE) -> np.ndarray:

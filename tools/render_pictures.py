@@ -5,7 +5,7 @@ does), the inputs built, ``bpy.ops.aasdf.boolean`` run as a user would, and a fi
 Small sizes, few samples and Cycles' denoiser keep each PNG under 200 KB; the seed, the sample count and every
 placement are fixed, so an unchanged result renders an unchanged picture.
 
-    .venv/bin/python tools/render_pictures.py [--only demo open-bunny blend octree] [--samples 24]
+    .venv/bin/python tools/render_pictures.py [--only demo open-bunny blend octree sharp] [--samples 24]
 """
 
 from __future__ import annotations
@@ -25,11 +25,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench import baselines  # noqa: E402
-from tests.support import load_mesh, uv_sphere  # noqa: E402
+from tests.support import cad_pairs, load_mesh, uv_sphere  # noqa: E402
 
 OUT = ROOT / "docs" / "images"
 SIZE = (640, 400)
-PICTURES = ("demo", "open-bunny", "blend", "octree", "textured")
+PICTURES = ("demo", "open-bunny", "blend", "octree", "textured", "sharp")
+# The direction the sharp picture's camera looks from, at the origin.
+SHARP_VIEW = (0.0, -1.0, 0.6)
 
 
 # ---- scene ----
@@ -202,6 +204,48 @@ def picture_open_bunny(samples):
     texts = [label("AASDF", (middle, 0.0, z), 0.2), label("Blender SDF nodes", (middle + shift[0], 0.0, z), 0.2)]
     frame([ours, gn, *texts], direction=(0.1, -1.0, 0.25), distance=2.9)
     render("open-bunny")
+
+
+def picture_sharp(samples):
+    """A CAD boolean, the fandisk minus a cylinder (``tests.support.cad_pairs``, each operand's diagonal 1) at voxel
+    1/128, three ways: AASDF's sharp surface (left: Sharp Edges on, the default; its reconstructed creases marked
+    sharp, smooth elsewhere), AASDF's marching cubes (middle: Sharp Edges off) and Blender's geometry-nodes SDF
+    pipeline (right) at the same voxel size. The last two are shaded smooth by angle (30 degrees), as a user would
+    shade them. Half the resolution of ``bench/sharp.py``, so that the rounding of the creases shows at this size."""
+    fresh_scene(samples)
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 960, 340
+    _op, (part_v, part_t), (bore_v, bore_t) = cad_pairs()["fandisk - cylinder"]
+    part, bore = mesh("fandisk", part_v, part_t), mesh("cylinder", bore_v, bore_t)
+    voxel = 1.0 / 128
+    sharp = boolean("DIFFERENCE", [part, bore], voxel_size=voxel, hide_inputs=False)
+    marching = boolean("DIFFERENCE", [part, bore], voxel_size=voxel, sharp_edges=False, hide_inputs=False)
+    theirs = baselines.gn_sdf_boolean((part_v, part_t), (bore_v, bore_t), "DIFFERENCE", voxel)
+    gn = mesh("Blender SDF nodes", theirs["verts"], theirs["tris"])
+    hide_inputs_from_render(part, bore)
+    step = 0.78
+    clay = material("clay", (0.70, 0.71, 0.74), 0.4)
+    for k, obj in enumerate((sharp, marching, gn)):
+        obj.location.x += (k - 1) * step
+        assign(obj, clay)
+        if obj is not sharp:
+            obj.data.shade_smooth()
+            obj.data.set_sharp_from_angle(angle=math.radians(30.0))
+    bpy.context.view_layer.update()
+    z = float(part_v[:, 2].min()) - 0.08
+    y = float(part_v[:, 1].min())
+    for k, text in enumerate(("AASDF (sharp)", "marching cubes", "Blender SDF nodes")):
+        label(text, ((k - 1) * step, y, z), 0.05)
+    # a long lens from far away, so that the three parts are seen alike
+    cam = bpy.data.cameras.new("Camera")
+    cam.lens = 90.0
+    camera = bpy.data.objects.new("Camera", cam)
+    direction = Vector(SHARP_VIEW).normalized()
+    camera.location = direction * 6.3
+    camera.rotation_euler = (-direction).to_track_quat("-Z", "Y").to_euler()
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    render("sharp")
 
 
 def checker(name: str, colors, scale: float):

@@ -7,9 +7,10 @@ import pytest
 import warp as wp
 
 import engine
+from engine import geometry
 from engine.octree import morton_encode_np
 from tests.metrics import exact_sdf, unsigned_distance, winding_inside, winding_numbers
-from tests.support import SHARED_MESHES, box_mesh, load_mesh, sample_points, torus_mesh, uv_sphere
+from tests.support import SHARED_MESHES, box_mesh, cad_pairs, load_mesh, sample_points, torus_mesh, uv_sphere
 
 RES = 256
 
@@ -431,6 +432,24 @@ def test_finest_distances_by_octet_boxes_equal_those_node_by_node(name, monkeypa
     assert np.mean(np.sign(boxes.values.numpy()) == np.sign(nodes.values.numpy())) > 0.9999
 
 
+@wp.kernel
+def _closest_on_triangles_kernel(t: wp.array[wp.vec3], x: wp.array[wp.vec3], out: wp.array[wp.vec3]):
+    i = wp.tid()
+    a = t[3 * i]
+    b = t[3 * i + 1]
+    c = t[3 * i + 2]
+    edges, inward, lengths, n = geometry.triangle_frame(a, b, c)
+    out[i] = geometry.closest_on_triangle(x[i], a, b, c, edges, inward, lengths, n)
+
+
+def _closest_on_triangles(tri, pts) -> np.ndarray:
+    """``geometry.closest_on_triangle`` of points (N, 3) on triangles (N, 3, 3), one each."""
+    out = wp.empty(len(pts), dtype=wp.vec3)
+    t = wp.array(np.asarray(tri, dtype=np.float32).reshape(-1, 3), dtype=wp.vec3)
+    wp.launch(_closest_on_triangles_kernel, len(pts), inputs=[t, wp.array(pts, dtype=wp.vec3), out])
+    return out.numpy()
+
+
 def test_closest_point_on_a_triangle_matches_a_dense_sampling_of_it():
     rng = np.random.default_rng(3)
     n = 600
@@ -439,20 +458,7 @@ def test_closest_point_on_a_triangle_matches_a_dense_sampling_of_it():
     tri[n // 10 : n // 5, 2] = 0.3 * tri[n // 10 : n // 5, 0] + 0.7 * tri[n // 10 : n // 5, 1]  # collinear
     pts = rng.normal(scale=1.5, size=(n, 3)).astype(np.float32)
 
-    from engine.geometry import closest_on_triangle, triangle_edges
-
-    @wp.kernel
-    def closest(t: wp.array[wp.vec3], x: wp.array[wp.vec3], out: wp.array[wp.vec3]):
-        i = wp.tid()
-        a = t[3 * i]
-        b = t[3 * i + 1]
-        c = t[3 * i + 2]
-        ab, ac, d00, d01, d11 = triangle_edges(a, b, c)
-        out[i] = closest_on_triangle(x[i], a, b, c, ab, ac, d00, d01, d11)
-
-    out = wp.empty(n, dtype=wp.vec3)
-    wp.launch(closest, n, inputs=[wp.array(tri.reshape(-1, 3), dtype=wp.vec3), wp.array(pts, dtype=wp.vec3), out])
-    got = out.numpy()
+    got = _closest_on_triangles(tri, pts)
     # the point lies on the triangle (a convex combination of its corners) ...
     u, v = np.meshgrid(np.linspace(0, 1, 101), np.linspace(0, 1, 101))
     keep = u + v <= 1.0
@@ -466,6 +472,86 @@ def test_closest_point_on_a_triangle_matches_a_dense_sampling_of_it():
     d = np.linalg.norm(got - pts, axis=1)
     assert np.all(d <= nearest + 1e-5)  # a nearly collinear triangle's rounded face point failed this by 1e-4
     assert np.all(d >= nearest - 0.015 * edge - 1e-5)
+
+
+def _closest_float64(points, tri) -> np.ndarray:
+    """Closest points (N, 3) float64 of points (N, 3) on triangles (N, 3, 3) (non-degenerate), in double precision: the
+    plane's point below where it lies inside the three edges, else the nearest point of the edges."""
+    p, (a, b, c) = points.astype(np.float64), (tri[:, k].astype(np.float64) for k in range(3))
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    dot = lambda u, v: np.einsum("ij,ij->i", u, v)  # noqa: E731
+    below = p - n * dot(p - a, n)[:, None]
+    inside = np.ones(len(p), dtype=bool)
+    best, best_d = below.copy(), np.full(len(p), np.inf)
+    for s, e in ((a, b), (b, c), (c, a)):
+        inside &= dot(np.cross(e - s, below - s), n) >= 0.0
+        on = s + (e - s) * np.clip(dot(p - s, e - s) / dot(e - s, e - s), 0.0, 1.0)[:, None]
+        d = np.linalg.norm(p - on, axis=1)
+        nearer = d < best_d
+        best[nearer], best_d[nearer] = on[nearer], d[nearer]
+    best[inside] = below[inside]
+    return best
+
+
+@wp.kernel
+def _mesh_closest_face_kernel(mesh: wp.uint64, x: wp.array[wp.vec3], out: wp.array[wp.vec3], face: wp.array[wp.int32]):
+    i = wp.tid()
+    p, f = geometry.mesh_closest_face(mesh, x[i], 1.0)
+    out[i] = p
+    face[i] = f
+
+
+def test_closest_points_on_long_thin_triangles_match_double_precision():
+    # A strip of a cylinder's sides: triangles 0.94 by 0.006 (the bore of tests.support.cad_pairs, diagonal 1), and
+    # points 0.002 to 1 voxel (1/256) from them, inside the strip and a little past its edges. Closest points of
+    # closest_on_triangle (the finest octets' search) and of the BVH search (mesh_closest_face) against double
+    # precision. Voronoi-region barycentrics in float (Ericson's method, Warp's closest_point_to_triangle) moved them
+    # along the triangle by up to 0.18 voxel: at 0.004 voxel from the surface their direction was off by up to 88
+    # degrees.
+    h = 1.0 / 256.0
+    verts, tris = cad_pairs()["cube - bore"][2]
+    strip = tris[:8]  # four neighbouring side facets, two triangles each (cylinder_mesh's side order)
+    strip = np.concatenate([strip, tris[128:136]])
+    tri = verts[strip]
+    rng = np.random.default_rng(7)
+    which = rng.integers(0, len(tri), 6000)
+    u, v = rng.uniform(-0.03, 1.03, (2, 6000))
+    flip = u + v > 1.03
+    u[flip], v[flip] = 1.03 - u[flip], 1.03 - v[flip]
+    a, b, c = (tri[which, k].astype(np.float64) for k in range(3))
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    dist = h * np.exp(rng.uniform(np.log(0.002), 0.0, 6000)) * rng.choice([-1.0, 1.0], 6000)
+    points = (a + u[:, None] * (b - a) + v[:, None] * (c - a) + dist[:, None] * n).astype(np.float32)
+    x = points.astype(np.float64)
+
+    # on the triangle each point was made from
+    got = _closest_on_triangles(tri[which], points).astype(np.float64)
+    ref = _closest_float64(points, tri[which])
+    err = np.linalg.norm(got - ref, axis=1) / h
+    assert err.max() < 1e-4, err.max()  # measured 3.1e-5 voxel (float rounding of coordinates about 0.5)
+    away = np.linalg.norm(x - ref, axis=1) > 0.004 * h
+    cos = (
+        np.einsum("ij,ij->i", x - got, x - ref)[away]
+        / (np.linalg.norm(x - got, axis=1) * np.linalg.norm(x - ref, axis=1))[away]
+    )
+    assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max() < 0.7  # measured 0.23 degrees
+
+    # the BVH search over the strip: its point on the triangle it found, and that triangle's distance the least
+    mesh = wp.Mesh(points=wp.array(verts, dtype=wp.vec3), indices=wp.array(strip.ravel(), dtype=wp.int32))
+    out = wp.empty(len(points), dtype=wp.vec3)
+    face = wp.empty(len(points), dtype=wp.int32)
+    wp.launch(_mesh_closest_face_kernel, len(points), inputs=[mesh.id, wp.array(points, dtype=wp.vec3), out, face])
+    found = face.numpy()
+    assert found.min() >= 0
+    bvh = out.numpy().astype(np.float64)
+    err = np.linalg.norm(bvh - _closest_float64(points, tri[found]), axis=1) / h
+    assert err.max() < 7e-5, err.max()  # measured 2.2e-5 voxel
+    each = [_closest_float64(points, np.repeat(t[None], len(x), axis=0)) for t in tri]
+    nearest = np.min([np.linalg.norm(x - on, axis=1) for on in each], axis=0)
+    gap = (np.linalg.norm(x - bvh, axis=1) - nearest) / h
+    assert np.abs(gap).max() < 2e-5, np.abs(gap).max()  # measured 7e-6 voxel
 
 
 def test_morton_codes_match_between_host_and_device():
