@@ -76,14 +76,47 @@ def _octets_per_triangle_kernel(
         i0[k] = wp.clamp(int(wp.floor((lo[k] - origin[k]) / octet_size)), 0, dims[k] - 1)
         i1[k] = wp.clamp(int(wp.floor((hi[k] - origin[k]) / octet_size)), 0, dims[k] - 1)
     half = wp.vec3(0.5 * octet_size + pad)
+    # Columns along the axis the triangle's normal leans on most: a column meets the slab of boxes that can touch
+    # the triangle's plane in a few cells, where the whole box of a large or slanted triangle holds tens of thousands
+    # (a superset of what the plane test below keeps, so the octets found are the same).
+    normal = wp.cross(b - a, c - a)
+    k = int(0)
+    if wp.abs(normal[1]) > wp.abs(normal[k]):
+        k = 1
+    if wp.abs(normal[2]) > wp.abs(normal[k]):
+        k = 2
+    u = (k + 1) % 3
+    v = (k + 2) % 3
+    # (a box of a few cells along k, as most triangles of a fine mesh have, or a degenerate triangle: the whole box)
+    columns = i1[k] - i0[k] >= 2 and wp.abs(normal[k]) > 1.0e-6 * wp.length(normal)
+    plane = wp.dot(normal, a)
+    # within a column the plane's k moves by at most this across a box's extent in u and v, and the box spans half
+    # more; a thousandth of a cell more for rounding
+    reach = float(0.0)
+    if columns:
+        reach = (wp.abs(normal[u]) + wp.abs(normal[v])) * half[0] / wp.abs(normal[k]) + half[0] + 1.0e-3 * octet_size
     n = int(0)
     base = int(0)
     if emit == 1:
         base = offsets[t]
-    for z in range(i0[2], i1[2] + 1):
-        for y in range(i0[1], i1[1] + 1):
-            for x in range(i0[0], i1[0] + 1):
-                cell = wp.vec3i(x, y, z)
+    for iv in range(i0[v], i1[v] + 1):
+        for iu in range(i0[u], i1[u] + 1):
+            k0 = i0[k]
+            k1 = i1[k]
+            if columns:
+                cu = origin[u] + octet_size * (float(iu) + 0.5)
+                cv = origin[v] + octet_size * (float(iv) + 0.5)
+                at = (plane - normal[u] * cu - normal[v] * cv) / normal[k]
+                k0 = wp.max(k0, int(wp.ceil((at - reach - origin[k]) / octet_size - 0.5)))
+                k1 = wp.min(k1, int(wp.floor((at + reach - origin[k]) / octet_size - 0.5)))
+            for ik in range(k0, k1 + 1):
+                cell = wp.vec3i(0)
+                cell[k] = ik
+                cell[u] = iu
+                cell[v] = iv
+                x = cell[0]
+                y = cell[1]
+                z = cell[2]
                 center = origin + octet_size * wp.vec3(float(x) + 0.5, float(y) + 0.5, float(z) + 0.5)
                 if emit == 2:
                     # an octet a neighbouring triangle marked already needs no test (races only write 1 twice)

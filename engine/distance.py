@@ -112,7 +112,16 @@ def _finest_octet_distance_kernel(
             tri_lo = wp.min(a, wp.min(b, cc))
             tri_hi = wp.max(a, wp.max(b, cc))
             gap = wp.max(wp.max(tri_lo - node_hi, node_lo - tri_hi), wp.vec3(0.0))
-            if wp.length_sq(gap) < worst:
+            near_box = wp.length_sq(gap) < worst
+            if near_box:
+                # nor nearer than its plane, which bounds all 8 nodes at once where the boxes of long slanted
+                # triangles (a cylinder's sides) meet the nodes' box without coming near it
+                normal = wp.cross(b - a, cc - a)
+                off = wp.abs(wp.dot(normal, c - a)) - 0.5 * spacing * (
+                    wp.abs(normal[0]) + wp.abs(normal[1]) + wp.abs(normal[2])
+                )
+                near_box = off <= 0.0 or off * off < worst * wp.length_sq(normal)
+            if near_box:
                 worst = float(0.0)
                 edges, inward, lengths, n = triangle_frame(a, b, cc)
                 for k in range(8):

@@ -9,7 +9,7 @@ import warp as wp
 import engine
 from engine import geometry
 from engine.octree import morton_encode_np
-from tests.metrics import exact_sdf, unsigned_distance, winding_inside, winding_numbers
+from tests.metrics import exact_sdf, sample_surface, unsigned_distance, winding_inside, winding_numbers
 from tests.support import SHARED_MESHES, box_mesh, cad_pairs, load_mesh, sample_points, torus_mesh, uv_sphere
 
 RES = 256
@@ -415,10 +415,27 @@ def test_octets_found_through_the_byte_mask_are_those_sorting_finds(name, monkey
     assert np.all(np.diff(octets) > 0)
 
 
-@pytest.mark.parametrize("name", ["stanford-bunny.obj", "spot.obj"])
+@pytest.mark.parametrize("which", [1, 2], ids=["turned cube", "bore"])
+def test_octets_of_large_slanted_triangles_hold_every_point_within_the_padding(which):
+    # a turned cube's faces span a third of the domain on every axis, the bore's sides are 0.94 by 0.006 slivers:
+    # octets are found column by column along each triangle's normal, not over its whole box
+    verts, tris = cad_pairs()["cube - bore"][which]
+    h = 1.0 / 128
+    field = engine.build_field(verts, tris, voxel_size=h)
+    octets = field.codes.numpy()[: field.level_counts[0] : 8] >> 3
+    rng = np.random.default_rng(3)
+    points = sample_surface(verts, tris, 100_000)
+    step = rng.normal(size=points.shape)
+    step *= (0.999 * h * rng.random(len(points)) / np.linalg.norm(step, axis=1))[:, None]  # within padding 1
+    cells = np.floor((points + step - field.origin) / (2.0 * h)).astype(np.int64)
+    assert np.all(np.isin(morton_encode_np(cells), octets))
+
+
+@pytest.mark.parametrize("name", ["stanford-bunny.obj", "spot.obj", "bore"])
 def test_finest_distances_by_octet_boxes_equal_those_node_by_node(name, monkeypatch):
-    # the bunny's triangles are about 0.4 cell faces here, spot's about 3: either search may be the one chosen
-    verts, tris = load_mesh(name)
+    # the bunny's triangles are about 0.4 cell faces here, spot's about 3: either search may be the one chosen; the
+    # bore's slanted slivers meet many octets' boxes without coming near them (rejected by their planes)
+    verts, tris = cad_pairs()["cube - bore"][2] if name == "bore" else load_mesh(name)
     h = _voxel(verts, 256)
     monkeypatch.setattr(engine.build, "OCTET_SEARCH_MIN_AREA", 0.0)
     boxes = engine.build_field(verts, tris, voxel_size=h)
