@@ -34,6 +34,29 @@ def _node_closest_point(mesh: wp.uint64, x: wp.vec3, max_dist: float, far_dist: 
     return wp.where(face >= 0, 1, 0), p, face
 
 
+@wp.func
+def _capsule_gap(x: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, normal: wp.vec3, shortest: float) -> float:
+    """A lower bound of the distance from ``x`` to triangle (a, b, c) (``normal``: (b - a) x (c - a)): its distance to
+    the longest edge less the triangle's height over that edge. The corner opposite the longest edge has its foot on
+    that edge (both other angles are acute), so every point of the triangle lies within the height of the edge. 0
+    (no bound) when no edge is longer than ``shortest``: a small triangle's box bounds it about as well."""
+    p = a
+    q = b
+    l2 = wp.length_sq(b - a)
+    if wp.length_sq(c - b) > l2:
+        p = b
+        q = c
+        l2 = wp.length_sq(c - b)
+    if wp.length_sq(a - c) > l2:
+        p = c
+        q = a
+        l2 = wp.length_sq(a - c)
+    if l2 <= shortest * shortest:
+        return 0.0
+    t = wp.clamp(wp.dot(x - p, q - p) / l2, 0.0, 1.0)
+    return wp.length(x - (p + t * (q - p))) - wp.length(normal) / wp.sqrt(l2)
+
+
 @wp.kernel(enable_backward=False)
 def _finest_octet_distance_kernel(
     first: int,
@@ -121,6 +144,11 @@ def _finest_octet_distance_kernel(
                     wp.abs(normal[0]) + wp.abs(normal[1]) + wp.abs(normal[2])
                 )
                 near_box = off <= 0.0 or off * off < worst * wp.length_sq(normal)
+            if near_box:
+                # nor nearer than its longest edge less its height: slivers beside the nearest one (a cylinder's
+                # sides around the nodes) share its plane nearly, not its place
+                beyond = _capsule_gap(c, a, b, cc, normal, 4.0 * spacing) - 0.8660254 * spacing  # less half a diagonal
+                near_box = beyond <= 0.0 or beyond * beyond < worst
             if near_box:
                 worst = float(0.0)
                 edges, inward, lengths, n = triangle_frame(a, b, cc)
