@@ -186,8 +186,7 @@ def build_fields(
     launched = (octree, distance, fim, winding, signs, holes, sys.modules[__name__])
     if any(plan.get("thickness") is not None for plan in plans):  # loading hashes a module's kernels: only if needed
         launched += (fieldops, sweeping, redistancing)
-    for module in launched:
-        wp.load_module(module, device=device)
+    parallel.load_modules(launched, device)
     workers = min(len(meshes), os.cpu_count() or 1)
     # worker w builds meshes w, w + workers, ...
     parallel.run_tasks([lambda w=w: [build(k) for k in range(w, len(meshes), workers)] for w in range(workers)], device)

@@ -219,6 +219,7 @@ class AdaptiveField:
         if self._encloses_volume is None:
             found = wp.zeros(1, dtype=wp.int32, device=self.device)
             if self.node_count:
+                parallel.load_modules([_find_inside_kernel.module], self.device)
                 wp.launch(_find_inside_kernel, dim=self.node_count, inputs=[self.values, found], device=self.device)
             self._encloses_volume = bool(found.numpy()[0])
         return self._encloses_volume

@@ -209,7 +209,7 @@ def sign_change_octets(field: AdaptiveField, near=None, region=None) -> np.ndarr
                 return
             capacity = found
 
-    wp.load_module(_band_gap_kernel.module, device=field.device)
+    parallel.load_modules([_band_gap_kernel.module], field.device)
     parallel.run_split(gather_part, n_octets, field.device, balance=True)  # only octets near the holes cost
     gap_octets = np.unique(np.concatenate([parts[k] for k in sorted(parts)] or [np.zeros(0, np.int64)]))
     n0 = field.level_counts[0]

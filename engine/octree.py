@@ -432,7 +432,7 @@ def level_neighbours(coords: wp.array, lo: int, hi: int, dims, neighbours: wp.ar
     dims_v = wp.vec3i(*(int(d) for d in dims))
     total_bits = int(np.ceil(np.log2(float(np.prod(np.asarray(dims, dtype=np.float64) + 1.0)) + 2.0)))
     # the three axes write their own columns: on the CPU each sorts on a thread of its own
-    wp.load_module(_axis_keys_kernel.module, device=device)
+    parallel.load_modules([_axis_keys_kernel.module], device)
 
     def axis_pass(axis):
         keys = wp.empty(2 * n, dtype=wp.int64, device=device)

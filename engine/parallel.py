@@ -33,6 +33,12 @@ BALANCE_MIN_PIECE = 1024
 _helpers = None
 
 
+_loaded = set()
+
+
+_loaded_lock = threading.Lock()
+
+
 _helpers_lock = threading.Lock()
 
 
@@ -116,6 +122,37 @@ def run_tasks(tasks, device) -> None:
     run_split(lambda k, _n: tasks[k](), len(tasks), device, parts=len(tasks), min_dim=0, own_threads=True)
 
 
+def load_modules(modules, device) -> None:
+    """Compile or load Warp modules (``wp.Module`` objects or Python modules with kernels) on ``device``, each once per
+    process, from a thread of their own.
+
+    Loading a module first hashes its kernels, and Warp's code generator catches an exception there whose traceback
+    and the frame holding it form a cycle: every frame above it stays alive until Python's cycle collector runs. From
+    a thread of its own those frames are the thread's; from the caller's they would keep its locals alive, such as
+    the fields of a boolean or an extraction (hundreds of megabytes at /1024: measured, the first run's fields still
+    resident through the second run's peak)."""
+    device = wp.get_device(device)
+    todo = [m for m in modules if (id(m), device.alias) not in _loaded]
+    if not todo:
+        return
+    errors = []
+
+    def load():
+        try:
+            for m in todo:
+                wp.load_module(m, device=device)
+        except Exception as err:  # noqa: BLE001 (re-raised in the caller's thread)
+            errors.append(err)
+
+    loader = threading.Thread(target=load)
+    loader.start()
+    loader.join()
+    if errors:
+        raise errors[0]
+    with _loaded_lock:
+        _loaded.update((id(m), device.alias) for m in todo)
+
+
 def launch_split(
     kernel, dim: int, args, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM, balance: bool = False
 ) -> None:
@@ -128,7 +165,7 @@ def launch_split(
     """
     if dim <= 0:
         return
-    wp.load_module(kernel.module, device=device)  # compile (or load) once, before threads race for it
+    load_modules([kernel.module], device)  # compile (or load) once, before threads race for it
     run_split(
         lambda lo, n: wp.launch(kernel, dim=n, inputs=args(lo, n), device=device),
         dim,

@@ -227,6 +227,7 @@ def operand_octets(f: AdaptiveField, origin, spacing, oct_dims, aligned, device)
         step = 8 if f.levels > 1 and not (offset_np % 2).any() else 1
         codes = wp.empty(n0 // step, dtype=wp.int64, device=device)
         offset = wp.vec3i(*(int(v) for v in offset_np))
+        parallel.load_modules([_aligned_octets_kernel.module], device)
         wp.launch(
             _aligned_octets_kernel, dim=n0 // step, inputs=[f.coords, offset, step], outputs=[codes], device=device
         )

@@ -17,7 +17,7 @@ import numpy as np
 import warp as wp
 
 from .geometry import mesh_closest_face
-from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
+from .parallel import EMIT_SPLIT_MIN_DIM, launch_split, load_modules
 
 
 class SourceMesh:
@@ -166,6 +166,7 @@ def corner_barycentrics(source: SourceMesh, faces, corners, device) -> np.ndarra
     pts = wp.array(corners, dtype=wp.vec3, device=device)
     faces_wp = wp.array(np.ascontiguousarray(faces, dtype=np.int32), dtype=wp.int32, device=device)
     bary = wp.empty(3 * n, dtype=wp.vec3, device=device)
+    load_modules([_corner_barycentrics_kernel.module], device)
     wp.launch(_corner_barycentrics_kernel, dim=n, inputs=[points, indices, pts, faces_wp, bary], device=device)
     return bary.numpy().reshape(n, 3, 3)
 

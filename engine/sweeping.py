@@ -25,7 +25,7 @@ import warp as wp
 from . import fim
 from .fim import nearest_projection
 from .octree import node_center
-from .parallel import run_tasks
+from .parallel import load_modules, run_tasks
 
 # Rounds of the 8 sweeps at most per level (a round that changes nothing ends the solve).
 MAX_SWEEP_ROUNDS = 8
@@ -189,6 +189,7 @@ def sweep_dense(
     origin_v = wp.vec3(*origin)
     changed = wp.zeros(8, dtype=wp.int32, device=device)
     sweeps = 0
+    load_modules([_dense_sweep_kernel.module], device)
     for _ in range(max_rounds):
         changed.zero_()
         for o in range(8):
@@ -240,7 +241,7 @@ def diagonal_orders(coords: wp.array, nodes: wp.array, dims) -> list:
         starts = np.concatenate([[0], np.flatnonzero(np.diff(sorted_keys)) + 1, [n]]).astype(np.int64)
         results[q] = (order[:n], starts)
 
-    wp.load_module(_diagonal_keys_kernel.module, device=device)
+    load_modules([_diagonal_keys_kernel.module], device)
     run_tasks([lambda q=q: sort(q) for q in range(len(DIAGONALS))], device)  # each sort on a core of its own
     return results
 
