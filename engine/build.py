@@ -437,7 +437,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
         t_refine = time.perf_counter()
         # off the caps over the holes the winding number stays near an integer (see hole_caps): the zero set can
         # only leave the band near them (no caps: the edges cancel, it never does)
-        extra = sign_change_octets(field, caps if caps is not None else NO_BOXES, region)
+        extra = sign_change_octets(field, caps if caps is not None else NO_BOXES, region, winding)
         refine_seconds += time.perf_counter() - t_refine
         if len(extra) == 0:
             break
