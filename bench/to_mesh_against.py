@@ -35,7 +35,7 @@ def worker(root: str, cache: str) -> None:
     wp.config.kernel_cache_dir = cache
     import engine
 
-    sys.path.insert(1, str(ROOT))  # this checkout's test meshes: both sides extract the same shapes
+    sys.path.insert(0, str(ROOT))  # this checkout's test shapes (engine imported already): both sides use the same
     from tests.support import cad_pairs, load_mesh, normalised
 
     ops = {"UNION": engine.union, "INTERSECT": engine.intersection, "DIFFERENCE": engine.difference}
