@@ -17,7 +17,6 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -55,32 +54,6 @@ def worker(root: str, cache: str) -> None:
         del field
 
 
-class Side:
-    """A worker process building with one checkout's engine."""
-
-    def __init__(self, root: Path, cache: Path):
-        self.process = subprocess.Popen(
-            [sys.executable, __file__, "--worker", str(root), str(cache)],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-
-    def build(self, name: str, res: int) -> dict:
-        self.process.stdin.write(f"{name} {res}\n")
-        self.process.stdin.flush()
-        while True:
-            line = self.process.stdout.readline()
-            if not line:
-                raise SystemExit("a worker stopped")
-            if line.startswith("@@"):
-                return json.loads(line[2:])
-
-    def close(self) -> None:
-        self.process.stdin.close()
-        self.process.wait()
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--before", type=Path)
@@ -96,23 +69,24 @@ def main() -> None:
     if args.before is None:
         parser.error("--before is required")
     sys.path.insert(0, str(ROOT))
+    from bench.child import Worker
     from bench.paired import round_ratios
 
     # another checkout's kernel cache goes elsewhere: nothing is written into it
     after = args.after.resolve()
-    ours = Side(after, after / ".warp-cache" if after == ROOT else Path("/tmp/aasdf-against-cache"))
-    theirs = Side(args.before.resolve(), Path("/tmp/aasdf-against-cache"))
+    ours = Worker(__file__, after, after / ".warp-cache" if after == ROOT else Path("/tmp/aasdf-against-cache"))
+    theirs = Worker(__file__, args.before.resolve(), Path("/tmp/aasdf-against-cache"))
     print(f"{os.cpu_count()} cores; {args.before} -> {after}; {args.repeat} alternating rounds; times indicative\n")
     print("| mesh | res | before s | after s | after / before | CPU after / before | signs before s | signs after s |")
     print("|---|---|---|---|---|---|---|---|")
     for name in args.meshes:
         for res in args.resolutions:
-            ours.build(name, res)  # warm-up: kernels compiled or loaded
-            theirs.build(name, res)
+            ours.ask(f"{name} {res}")  # warm-up: kernels compiled or loaded
+            theirs.ask(f"{name} {res}")
             runs = {"ours": [], "theirs": []}
             for k in range(args.repeat):
                 for side in ("ours", "theirs") if k % 2 == 0 else ("theirs", "ours"):
-                    runs[side].append((ours if side == "ours" else theirs).build(name, res))
+                    runs[side].append((ours if side == "ours" else theirs).ask(f"{name} {res}"))
             wall = round_ratios(*([r["seconds"] for r in runs[s]] for s in ("ours", "theirs")))
             cpu = round_ratios(*([r["cpu"] for r in runs[s]] for s in ("ours", "theirs")))
             med = {s: {key: statistics.median(r[key] for r in runs[s]) for key in ("seconds", "signs")} for s in runs}

@@ -1,4 +1,4 @@
-"""Run a benchmark measurement in a fresh Python process (its own peak memory, its own kernel cache state)."""
+"""Run benchmark measurements in fresh Python processes (their own peak memory, kernel cache state and engine)."""
 
 from __future__ import annotations
 
@@ -27,3 +27,30 @@ def run_child(script: str, *args, cache: str | None = None) -> dict:
     ).stdout
     line = next(line for line in out.splitlines() if line.startswith("RESULT "))
     return json.loads(line[len("RESULT ") :])
+
+
+class Worker:
+    """A worker process running ``script`` (a benchmark file) as ``script --worker root cache``: it reads one request a
+    line on stdin and answers each with one JSON line prefixed ``@@`` (other output is ignored), so two checkouts'
+    engines can be timed in turns, each imported in a process of its own."""
+
+    def __init__(self, script: str, root: Path, cache: Path):
+        self.process = subprocess.Popen(
+            [sys.executable, script, "--worker", str(root), str(cache)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+
+    def ask(self, request: str) -> dict:
+        """Send one request line; return the worker's answer."""
+        self.process.stdin.write(request + "\n")
+        self.process.stdin.flush()
+        for line in self.process.stdout:
+            if line.startswith("@@"):
+                return json.loads(line[2:])
+        raise SystemExit(f"a worker stopped on {request!r}")
+
+    def close(self) -> None:
+        self.process.stdin.close()
+        self.process.wait()

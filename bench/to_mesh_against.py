@@ -17,7 +17,6 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -55,27 +54,6 @@ def worker(root: str, cache: str) -> None:
         print("@@" + json.dumps({"seconds": time.perf_counter() - start, "triangles": len(tris)}), flush=True)
 
 
-class Side:
-    """A worker process extracting with one checkout's engine."""
-
-    def __init__(self, root: Path, cache: Path):
-        self.process = subprocess.Popen(
-            [sys.executable, __file__, "--worker", str(root), str(cache)],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL,
-            text=True,
-        )
-
-    def ask(self, name: str) -> dict:
-        self.process.stdin.write(name + "\n")
-        self.process.stdin.flush()
-        for line in self.process.stdout:
-            if line.startswith("@@"):
-                return json.loads(line[2:])
-        raise RuntimeError(f"the worker stopped on {name!r}")
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
@@ -90,10 +68,12 @@ def main() -> None:
     if args.before is None:
         parser.error("--before is required")
     sys.path.insert(0, str(ROOT))
+    from bench.child import Worker
     from bench.paired import round_ratios
 
-    ours = Side(ROOT, ROOT / ".warp-cache")
-    theirs = Side(args.before.resolve(), Path("/tmp/aasdf-against-cache"))  # nothing written into the other checkout
+    ours = Worker(__file__, ROOT, ROOT / ".warp-cache")
+    # the other checkout's kernels go elsewhere: nothing is written into it
+    theirs = Worker(__file__, args.before.resolve(), Path("/tmp/aasdf-against-cache"))
     print(f"{os.cpu_count()} cores; before = {args.before}; {args.repeat} alternating rounds; times indicative\n")
     print("| case | triangles after | after s | before s | after / before |")
     print("|---|---|---|---|---|")

@@ -20,7 +20,7 @@ from .geometry import near_cap, segment_clear, winding_number
 from .octree import find_key, morton_decode, morton_encode, node_center
 from .sampling import FieldArg, inside_domain, locate_leaf, top_cell
 from .signs import box_arrays
-from .winding import WindingArg, mesh_sign_kernel
+from .winding import WINDING_ACCURACY, WindingArg, mesh_sign_kernel, side_of
 
 if TYPE_CHECKING:
     from .field import AdaptiveField
@@ -37,10 +37,6 @@ CAP_LATTICE_MAX_RATIO = 1.0
 # ... and the least part of a box's octets that surface must cross, as seen from cells twice their size, for the box
 # to be sampled (Suzanne's eyes: 0.2 %, holes of the bunny and the teapot: 10-30 %)
 CAP_LATTICE_MIN_SHEET = 0.02
-
-
-# Fast winding number accuracy where refinement rounds look for the octets next to the surface across a hole.
-CROSSING_ACCURACY = 1.0
 
 
 @wp.kernel(enable_backward=False)
@@ -145,13 +141,12 @@ def _sign_change_kernel(
 def _octet_side_kernel(
     start: int, mesh: wp.uint64, origin: wp.vec3, size: float, codes: wp.array[wp.int64], inside: wp.array[wp.uint8]
 ):
-    """Whether the centre of octet ``codes[start + tid]`` (edge ``size``) is inside by the accurate fast winding
-    number."""
+    """Whether the centre of octet ``codes[start + tid]`` (edge ``size``) is inside by the fast winding number (the
+    sign oracle's first guess, see :func:`.winding.inside_sign`)."""
     t = start + wp.tid()
     o = morton_decode(codes[t])
     c = origin + size * wp.vec3(float(o[0]) + 0.5, float(o[1]) + 0.5, float(o[2]) + 0.5)
-    w = winding_number(mesh, c, CROSSING_ACCURACY)
-    inside[t] = wp.where(wp.abs(w) >= 0.5, wp.uint8(1), wp.uint8(0))
+    inside[t] = wp.where(side_of(winding_number(mesh, c, WINDING_ACCURACY)) < 0.0, wp.uint8(1), wp.uint8(0))
 
 
 @wp.kernel(enable_backward=False)
@@ -220,7 +215,7 @@ def sign_change_octets(field: AdaptiveField, near=None, region=None, winding=Non
     only through the band (no sign change away from a triangle): only leaves and octets within reach of them are
     checked (none for K = 0). None checks everywhere. ``region``: (top_dims) bool, the top-level cells whose leaves
     and octets are checked (None: all). ``winding``: the mesh's :class:`.winding.WindingArg`, to keep only the
-    octets of those leaves next to where the fast winding number crosses +-1/2 (:func:`_crossed_octets`); None:
+    octets of those leaves next to where the fast winding number crosses +-1/2 (:func:`_crossed_codes`); None:
     all their octets.
 
     Returns:
@@ -280,23 +275,21 @@ def sign_change_octets(field: AdaptiveField, near=None, region=None, winding=Non
         base = coords[lv == k] * n
         grid = np.stack(np.meshgrid(*([np.arange(n)] * 3), indexing="ij"), axis=-1).reshape(-1, 3)
         out.append((base[:, None, :] + grid[None, :, :]).reshape(-1, 3))
-    octets = np.concatenate(out)
+    codes = octree.morton_encode_np(np.concatenate(out))
     if winding is not None:
-        octets = _crossed_octets(field, winding, octets)
-    return np.union1d(octree.morton_encode_np(octets), gap_octets)
+        codes = _crossed_codes(field, winding, codes)
+    return np.union1d(codes, gap_octets)
 
 
-def _crossed_octets(field, winding, octets: np.ndarray) -> np.ndarray:
-    """The octets (M, 3) of marked leaves next to where w crosses +-1/2: inside or outside at their centres by the
-    fast winding number (``CROSSING_ACCURACY``), at the octets around them by the sign of the leaf or node holding
+def _crossed_codes(field, winding, octet_codes: np.ndarray) -> np.ndarray:
+    """The codes of the octets of marked leaves (``octet_codes``) next to where w crosses +-1/2: inside or outside at
+    their centres by the fast winding number, at the octets around them by the sign of the leaf or node holding
     their centres; kept are those with a neighbour (faces, edges or corners) on the other side. The rest of a leaf
     need not be finest, and what this misses the next round finds (beetle /256: 43,657 octets -> 18,807, finest nodes
     708,912 -> 513,960, still two rounds)."""
     device = field.device
     dims = np.asarray(field.top_dims, dtype=np.int64) * 2 ** (field.levels - 2)
-    codes = octree.sort_unique(
-        wp.array(octree.morton_encode_np(octets), dtype=wp.int64, device=device), end_bit=3 * octree.code_bits(dims)
-    )
+    codes = octree.sort_unique(wp.array(octet_codes, dtype=wp.int64, device=device), end_bit=3 * octree.code_bits(dims))
     inside = wp.empty(codes.shape[0], dtype=wp.uint8, device=device)
     parallel.launch_split(
         _octet_side_kernel,
@@ -312,7 +305,7 @@ def _crossed_octets(field, winding, octets: np.ndarray) -> np.ndarray:
     parallel.launch_split(
         _crossed_octet_kernel, codes.shape[0], lambda lo, n: [lo, arg, codes, inside, dims_v, keep], device
     )
-    return octree.morton_decode_np(codes.numpy()[keep.numpy() == 1])
+    return codes.numpy()[keep.numpy() == 1]
 
 
 # One of each pair of opposite steps to the 26 neighbours of a cell.
