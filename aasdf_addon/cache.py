@@ -32,7 +32,7 @@ _result: dict = {}  # the last combined result: {"key", "fields", "field", "surf
 
 DEFAULT_LIMIT_MB = 1024
 
-_FIELD_ARRAYS = ("codes", "coords", "values", "proj", "child", "source")
+_FIELD_ARRAYS = ("codes", "values", "proj", "child", "source", "tri")
 
 
 def field_nbytes(field) -> int:

@@ -102,8 +102,8 @@ for run in range(repeat):
     stages.append(times)
     if run == 0:
         steps = record
-        arrays = (c.codes, c.coords, c.values, c.proj, c.child, c.source)
-        out["bytes_per_node"] = sum(x.capacity for x in arrays) / c.node_count
+        arrays = (c.codes, c.values, c.proj, c.child, c.source, c.tri)
+        out["bytes_per_node"] = sum(x.capacity for x in arrays if x is not None) / c.node_count
         out["nodes"] = {"a": fa.node_count, "b": fb.node_count, "result": c.node_count}
         out["triangles"] = int(len(tris))
     del fa, fb, c, verts, tris

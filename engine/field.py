@@ -19,6 +19,7 @@ from .dual import contour_dual
 from .errors import AasdfError
 from .extract import extract_octree_level, extract_surface, lattice_cubes, octree_level_cubes
 from .marching import empty_mesh
+from .octree import decode_codes
 from .placement import Placement
 from .plan import available_memory
 from .quadric import crease_edges
@@ -49,7 +50,6 @@ class AdaptiveField:
         top_dims,
         level_offsets,
         codes,
-        coords,
         values,
         proj,
         child,
@@ -67,7 +67,7 @@ class AdaptiveField:
         self.origin = np.asarray(origin, dtype=np.float64)
         self.top_dims = np.asarray(top_dims, dtype=np.int64)
         self.level_offsets = np.asarray(level_offsets, dtype=np.int64)
-        self.codes, self.coords, self.values, self.proj = codes, coords, values, proj
+        self.codes, self.values, self.proj = codes, values, proj
         self.child, self.source = child, source
         self.field_ids = tuple(sorted(set(int(i) for i in field_ids)))
         self.device = device
@@ -111,7 +111,6 @@ class AdaptiveField:
             top_dims=layout["top_dims"],
             level_offsets=offsets,
             codes=layout["codes"],
-            coords=layout["coords"],
             values=values,
             proj=proj,
             child=layout["child"],
@@ -136,7 +135,6 @@ class AdaptiveField:
                 "offsets": self.level_offsets,
                 "top_dims": self.top_dims,
                 "codes": self.codes,
-                "coords": self.coords,
                 "child": self.child,
             },
             voxel_size=self.voxel_size,
@@ -209,6 +207,11 @@ class AdaptiveField:
         return int(self.level_offsets[-1])
 
     @property
+    def coords(self) -> wp.array:
+        """(N,) vec3i lattice coordinates of every node on its level, decoded from the codes (not kept)."""
+        return decode_codes(self.codes)
+
+    @property
     def encloses_volume(self) -> bool:
         """Whether the field has an inside: some node's value is negative.
 
@@ -256,7 +259,7 @@ class AdaptiveField:
         f.rotation = wp.mat33(*(placed.rotation.ravel() if placed is not None else np.eye(3).ravel()))
         f.translation = wp.vec3(*(placed.translation if placed is not None else np.zeros(3)))
         f.scale = float(placed.scale if placed is not None else 1.0)
-        f.coords, f.child, f.values, f.source, f.proj = self.coords, self.child, self.values, self.source, self.proj
+        f.child, f.values, f.source, f.proj = self.child, self.values, self.source, self.proj
         f.codes = self.codes
         f.fine_count = int(self.level_offsets[1])
         f.tri = self.tri if self.tri is not None else wp.empty(0, dtype=wp.int32, device=self.device)
@@ -508,9 +511,9 @@ class AdaptiveField:
         """The dual contouring of the finest level's active cubes (:func:`.dual.contour_dual`): ``verts``, ``tris``
         and, with ``creases``, the crease edges (:func:`.quadric.crease_edges`)."""
         n0 = self.level_counts[0]
-        coords, values, proj = self.coords[:n0], self.values[:n0], self.proj[:n0]
+        coords, values, proj = decode_codes(self.codes[:n0]), self.values[:n0], self.proj[:n0]
         if self.levels == 1:
-            coords_np = self.coords.numpy()
+            coords_np = coords.numpy()
             cubes = lattice_cubes(
                 coords_np,
                 self.values.numpy().astype(np.float64),
@@ -550,7 +553,7 @@ class AdaptiveField:
                 self.coords.numpy(), self.values.numpy(), origin=self.origin, spacing=self.voxel_size, iso=iso
             )
         return extract_octree_level(
-            self.coords[:n0],
+            decode_codes(self.codes[:n0]),
             self.values[:n0],
             (self.child, self.level_offsets[self.levels - 1], self.top_dims, self.levels),
             origin=self.origin,

@@ -21,7 +21,7 @@ import warp as wp
 
 from .field import AdaptiveField
 from .geometry import mesh_closest_point
-from .octree import code_bits, dense_level, level_layout, morton_decode, node_center, sort_unique
+from .octree import code_bits, decode_codes, dense_level, level_layout, morton_decode, node_center, sort_unique
 from .parallel import launch_split
 from .plan import check_budget, checked_wall, finite_number, plan_grown
 from .redistancing import KEEP_BAND, redistance
@@ -32,6 +32,7 @@ from .sampling import (
     level_spacing,
     locate_leaf,
     locate_node,
+    node_coords,
     sample_mls,
 )
 
@@ -73,7 +74,7 @@ def side_of(f: FieldArg, x: wp.vec3) -> float:
     leaf = locate_leaf(f, x)
     v = f.values[leaf[0]]
     if leaf[1] == 0:
-        c = node_center(f.origin, f.voxel_size, f.coords[leaf[0]])
+        c = node_center(f.origin, f.voxel_size, node_coords(f, leaf[0]))
         if wp.length(x - c) > 0.25 * f.voxel_size:
             v = sample_mls(f, x)[0]
     return wp.where(v < 0.0, -1.0, 1.0)
@@ -89,7 +90,7 @@ def surface_distance(mesh: wp.uint64, f: FieldArg, signs: int, x: wp.vec3, reach
         node = locate_node(f, x, level)
         if node[1] == level and level < f.levels - 1 and inside_domain(f, x):
             s = level_spacing(f, level)
-            if wp.length(node_center(f.origin, s, f.coords[node[0]]) - x) < 0.25 * s:
+            if wp.length(node_center(f.origin, s, node_coords(f, node[0])) - x) < 0.25 * s:
                 p = f.proj[node[0]]
                 return wp.length(x - p) * side_of(f, x), p, True
         d, p = closest_stored_point(f, x)
@@ -314,7 +315,6 @@ def levelset_field(
 
 def _empty_field_arg(device) -> FieldArg:
     f = FieldArg()
-    f.coords = wp.empty(0, dtype=wp.vec3i, device=device)
     f.child = wp.empty(0, dtype=wp.int32, device=device)
     f.values = wp.empty(0, dtype=wp.float32, device=device)
     f.proj = wp.empty(0, dtype=wp.vec3, device=device)
@@ -378,7 +378,7 @@ def _surface_box(field):
     n0 = field.level_counts[0]
     if field.levels == 1 or n0 == 0:
         return field.bounds
-    c = field.coords[:n0].numpy()
+    c = decode_codes(field.codes[:n0]).numpy()
     lo = np.array([c[:, k].min() for k in range(3)], dtype=np.float64)
     hi = np.array([c[:, k].max() + 1 for k in range(3)], dtype=np.float64)
     return field.origin + lo * field.voxel_size, field.origin + hi * field.voxel_size

@@ -18,7 +18,7 @@ import warp as wp
 from . import octree, parallel
 from .geometry import near_cap, segment_clear, winding_number
 from .octree import find_key, morton_decode, morton_encode, node_center
-from .sampling import FieldArg, inside_domain, locate_leaf, top_cell
+from .sampling import FieldArg, inside_domain, locate_leaf, node_coords, top_cell
 from .signs import box_arrays
 from .winding import WINDING_ACCURACY, WindingArg, mesh_sign_kernel, side_of
 
@@ -66,7 +66,7 @@ def _band_gap_kernel(
     codes are appended to ``out``."""
     t = start + wp.tid()
     first = 8 * t
-    octet = wp.vec3i(f.coords[first][0] >> 1, f.coords[first][1] >> 1, f.coords[first][2] >> 1)
+    octet = morton_decode(f.codes[first] >> wp.int64(3))
     size = 2.0 * f.voxel_size
     c = f.origin + size * wp.vec3(float(octet[0]) + 0.5, float(octet[1]) + 0.5, float(octet[2]) + 0.5)
     if not _in_region(f, region, c):
@@ -118,7 +118,7 @@ def _sign_change_kernel(
     if f.child[i] >= 0:
         return
     s = f.voxel_size * float(1 << node_level[i])
-    c = node_center(f.origin, s, f.coords[i])
+    c = node_center(f.origin, s, node_coords(f, i))
     if not _in_region(f, region, c):
         return
     if margin >= 0.0 and not near_cap(c, near_lo, near_hi, near_radius, margin):
@@ -267,7 +267,7 @@ def sign_change_octets(field: AdaptiveField, near=None, region=None, winding=Non
     marked = n0 + np.flatnonzero(marks.numpy())
     if len(marked) == 0:
         return gap_octets
-    coords = field.coords.numpy()[marked].astype(np.int64)
+    coords = octree.morton_decode_np(field.codes.numpy()[marked])
     lv = levels_np[marked]
     out = []
     for k in np.unique(lv):

@@ -292,6 +292,19 @@ def _expand_octets_kernel(
         coords[8 * i + int(o)] = morton_decode(m)
 
 
+@wp.kernel(enable_backward=False)
+def _decode_kernel(first: int, codes: wp.array[wp.int64], coords: wp.array[wp.vec3i]):
+    i = first + wp.tid()
+    coords[i] = morton_decode(codes[i])
+
+
+def decode_codes(codes: wp.array) -> wp.array:
+    """(N,) vec3i lattice coordinates of (N,) int64 Morton codes."""
+    coords = wp.empty(codes.shape[0], dtype=wp.vec3i, device=codes.device)
+    launch_split(_decode_kernel, codes.shape[0], lambda lo, _n: [lo, codes, coords], codes.device)
+    return coords
+
+
 def expand_octets(octets: wp.array, codes: wp.array | None = None, coords: wp.array | None = None):
     """Children of every parent code: (8M,) int64 codes sorted when ``octets`` is, and (8M,) vec3i coordinates
     (written into ``codes``/``coords`` when given)."""

@@ -28,6 +28,7 @@ from .sampling import (
     level_spacing,
     locate_leaf,
     locate_node,
+    node_coords,
     sample_mls,
     to_frame,
     to_world_sample,
@@ -186,7 +187,7 @@ def extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
     xc = clamp_to_domain(f, xf)
     leaf = locate_node(f, xc, wp.max(int(wp.round(wp.log2(spacing / (f.voxel_size * f.scale)))), 0))
     s = level_spacing(f, leaf[1])
-    centre = node_center(f.origin, s, f.coords[leaf[0]])
+    centre = node_center(f.origin, s, node_coords(f, leaf[0]))
     phi = f.values[leaf[0]]
     n = centre - f.proj[leaf[0]]
     ln = wp.length(n)
@@ -213,7 +214,7 @@ def estimate(f: FieldArg, x: wp.vec3):
     if leaf[1] == 0:
         return 0.0, -1.0, leaf
     s = level_spacing(f, leaf[1])
-    centre = node_center(f.origin, s, f.coords[leaf[0]])
+    centre = node_center(f.origin, s, node_coords(f, leaf[0]))
     phi = f.values[leaf[0]]
     out = wp.length(xf - xc)
     if out > 0.0:
@@ -231,7 +232,7 @@ def bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3
     phi, radius, leaf = estimate(f, x)
     if radius < 0.0:  # in the finest band: the finest node whose cell holds x (the field is 1-Lipschitz there too)
         xc = clamp_to_domain(f, to_frame(f, x))
-        centre = node_center(f.origin, f.voxel_size, f.coords[leaf[0]])
+        centre = node_center(f.origin, f.voxel_size, node_coords(f, leaf[0]))
         v = f.values[leaf[0]]
         return v * f.scale, (wp.length(xc - centre) + LEAF_SLACK * wp.abs(v)) * f.scale
     return phi, radius
@@ -267,7 +268,7 @@ def node_bracket(
     if first >= 0:
         return f.values[first + k], 0.0
     if leaf >= 0:
-        centre = node_center(f.origin, level_spacing(f, level), f.coords[leaf])
+        centre = node_center(f.origin, level_spacing(f, level), node_coords(f, leaf))
         phi = f.values[leaf]
         return phi, wp.length(x - centre) + LEAF_SLACK * wp.abs(phi)
     if level < 0:  # the octet lies outside the operand's domain: no node of it to look up

@@ -15,10 +15,10 @@ import warp as wp
 
 from . import octree, parallel
 from .blends import chamfer_bracket
-from .octree import code_bits, morton_encode, node_center
+from .octree import code_bits, morton_decode, morton_encode, node_center
 from .operands import node_bracket, octet_source
 from .plan import byte_grid_fits, check_budget
-from .sampling import FieldArg
+from .sampling import FieldArg, node_coords
 
 if TYPE_CHECKING:
     from .field import AdaptiveField
@@ -155,10 +155,10 @@ def _octet_signs_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def _aligned_octets_kernel(coords: wp.array[wp.vec3i], offset: wp.vec3i, step: int, codes: wp.array[wp.int64]):
+def _aligned_octets_kernel(node_codes: wp.array[wp.int64], offset: wp.vec3i, step: int, codes: wp.array[wp.int64]):
     """Octet code, on the result lattice, of every ``step``-th finest node of an aligned operand."""
     i = wp.tid()
-    c = coords[step * i] + offset
+    c = morton_decode(node_codes[step * i]) + offset
     codes[i] = morton_encode(wp.vec3i(c[0] >> 1, c[1] >> 1, c[2] >> 1))
 
 
@@ -181,10 +181,10 @@ def _octets_of_cells_kernel(
     at a time for a dense single level: ``per_cell``; those of a placed operand where it is placed, a turned box),
     counted (``emit`` 0), written (1) or marked in ``mask`` (2, see ``octree.mark_then_compact``)."""
     t = first + wp.tid()
-    c = node_center(f.origin, f.voxel_size, f.coords[t])
+    c = node_center(f.origin, f.voxel_size, node_coords(f, t))
     size = f.voxel_size  # the primitive's half width: a cell's half, or an octet's
     if per_cell == 0:
-        c = node_center(f.origin, f.voxel_size, f.coords[8 * t]) + wp.vec3(0.5 * f.voxel_size)
+        c = node_center(f.origin, f.voxel_size, node_coords(f, 8 * t)) + wp.vec3(0.5 * f.voxel_size)
         size = 2.0 * f.voxel_size
     half = wp.vec3(0.5 * size + pad)
     if f.moved == 1:
@@ -229,7 +229,7 @@ def operand_octets(f: AdaptiveField, origin, spacing, oct_dims, aligned, device)
         offset = wp.vec3i(*(int(v) for v in offset_np))
         parallel.load_modules([_aligned_octets_kernel.module], device)
         wp.launch(
-            _aligned_octets_kernel, dim=n0 // step, inputs=[f.coords, offset, step], outputs=[codes], device=device
+            _aligned_octets_kernel, dim=n0 // step, inputs=[f.codes, offset, step], outputs=[codes], device=device
         )
         return codes
     per_cell = int(f.levels == 1)  # a dense single level is not stored in octets

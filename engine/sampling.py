@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .octree import node_center
+from .octree import morton_decode, node_center
 
 vec27i = wp.types.vector(length=27, dtype=wp.int32)
 
@@ -39,7 +39,6 @@ class FieldArg:
     top_offset: int
     domain_min: wp.vec3
     domain_max: wp.vec3
-    coords: wp.array[wp.vec3i]
     child: wp.array[wp.int32]
     values: wp.array[wp.float32]
     proj: wp.array[wp.vec3]
@@ -53,6 +52,13 @@ class FieldArg:
     rotation: wp.mat33
     translation: wp.vec3
     scale: float
+
+
+@wp.func
+def node_coords(f: FieldArg, i: int) -> wp.vec3i:
+    """Lattice coordinates of node ``i`` on its level, decoded from its Morton code (a field keeps no coordinates:
+    12 bytes a node)."""
+    return morton_decode(f.codes[i])
 
 
 @wp.func
@@ -97,13 +103,20 @@ def inside_domain(f: FieldArg, x: wp.vec3) -> bool:
 
 
 @wp.func
+def _top_cell_coords(f: FieldArg, x: wp.vec3) -> wp.vec3i:
+    rel = (x - f.origin) / level_spacing(f, f.levels - 1)
+    return wp.vec3i(
+        wp.clamp(int(wp.floor(rel[0])), 0, f.top_dims[0] - 1),
+        wp.clamp(int(wp.floor(rel[1])), 0, f.top_dims[1] - 1),
+        wp.clamp(int(wp.floor(rel[2])), 0, f.top_dims[2] - 1),
+    )
+
+
+@wp.func
 def top_cell(f: FieldArg, x: wp.vec3) -> int:
     """Index within the dense top level (x fastest) of the top cell containing ``x`` (clamped into the domain)."""
-    rel = (x - f.origin) / level_spacing(f, f.levels - 1)
-    i = wp.clamp(int(wp.floor(rel[0])), 0, f.top_dims[0] - 1)
-    j = wp.clamp(int(wp.floor(rel[1])), 0, f.top_dims[1] - 1)
-    k = wp.clamp(int(wp.floor(rel[2])), 0, f.top_dims[2] - 1)
-    return i + f.top_dims[0] * (j + f.top_dims[1] * k)
+    c = _top_cell_coords(f, x)
+    return c[0] + f.top_dims[0] * (c[1] + f.top_dims[1] * c[2])
 
 
 @wp.func
@@ -112,16 +125,17 @@ def locate_node(f: FieldArg, x: wp.vec3, lowest: int) -> wp.vec2i:
     coarser leaf containing it: a descent from the dense top level through the child links."""
     level = f.levels - 1
     s = level_spacing(f, level)
-    node = f.top_offset + top_cell(f, x)
+    pc = _top_cell_coords(f, x)  # the node's coordinates, followed down (not decoded from its code)
+    node = f.top_offset + pc[0] + f.top_dims[0] * (pc[1] + f.top_dims[1] * pc[2])
     while level > lowest and f.child[node] >= 0:
         level = level - 1
         s = s * 0.5
-        pc = f.coords[node]
         rel = (x - f.origin) / s
         cx = wp.clamp(int(wp.floor(rel[0])) - 2 * pc[0], 0, 1)
         cy = wp.clamp(int(wp.floor(rel[1])) - 2 * pc[1], 0, 1)
         cz = wp.clamp(int(wp.floor(rel[2])) - 2 * pc[2], 0, 1)
         node = f.child[node] + cx + 2 * cy + 4 * cz
+        pc = wp.vec3i(2 * pc[0] + cx, 2 * pc[1] + cy, 2 * pc[2] + cz)
     return wp.vec2i(node, level)
 
 
@@ -148,7 +162,7 @@ def leaf_neighbours(f: FieldArg, leaf: int, level: int):
     the MLS fits read them: (count, their indices (27,), their levels (27,)). The same for every point of the leaf,
     so callers with many points in one leaf find them once."""
     s = level_spacing(f, level)
-    c = node_center(f.origin, s, f.coords[leaf])
+    c = node_center(f.origin, s, node_coords(f, leaf))
     ids = vec27i()
     levels = vec27i()
     count = int(0)
@@ -173,7 +187,7 @@ def _neighbour_weight(f: FieldArg, node: int, level: int, x: wp.vec3, s: float):
     """(centre, MLS weight at ``x``) of neighbour ``node`` on ``level`` of a leaf of spacing ``s``: the cubic spline
     over twice the larger of the two spacings."""
     sn = level_spacing(f, level)
-    xn = node_center(f.origin, sn, f.coords[node])
+    xn = node_center(f.origin, sn, node_coords(f, node))
     return xn, cubic_spline(2.0 * wp.length(xn - x) / (2.0 * wp.max(s, sn)))
 
 
@@ -235,7 +249,7 @@ def sample_mls(f: FieldArg, x: wp.vec3) -> wp.vec4:
     leaf_value = f.values[leaf[0]]
     if leaf[1] > 0:
         return coarse_mls(f, count, ids, levels, x, s, leaf_value)
-    x_leaf = node_center(f.origin, s, f.coords[leaf[0]])
+    x_leaf = node_center(f.origin, s, node_coords(f, leaf[0]))
     ata = wp.mat44(0.0)
     atb = wp.vec4(0.0)
     wsum = float(0.0)
@@ -305,7 +319,7 @@ def _nearer(f: FieldArg, x: wp.vec3, q: wp.vec3, level: int, best: float, best_p
         if d < best:
             best = d
             best_p = p
-            best_n = node_center(f.origin, level_spacing(f, node[1]), f.coords[node[0]]) - p
+            best_n = node_center(f.origin, level_spacing(f, node[1]), node_coords(f, node[0])) - p
     return best, best_p, best_n
 
 
@@ -357,7 +371,7 @@ def closest_stored_point(f: FieldArg, x: wp.vec3):
     xc = clamp_to_domain(f, x)
     leaf = locate_leaf(f, xc)
     s = level_spacing(f, leaf[1])
-    c = node_center(f.origin, s, f.coords[leaf[0]])
+    c = node_center(f.origin, s, node_coords(f, leaf[0]))
     # the nearest start of each basin found: distances, points, normal lines (slots past ``count`` unused)
     dists = wp.vec4(1.0e30)
     points = mat43()
