@@ -37,6 +37,7 @@ from .marching import (
     tunnel_tables,
 )
 from .meshcheck import open_tunnels
+from .octree import morton_decode
 from .parallel import launch_split
 from .quadric import (
     clamp_box,
@@ -155,7 +156,7 @@ def _place_vertices_kernel(
     first: int,
     cube_corners: wp.array2d[wp.int32],
     values: wp.array[wp.float32],
-    coords: wp.array[wp.vec3i],
+    codes: wp.array[wp.int64],
     proj: wp.array[wp.vec3],
     origin: wp.vec3,
     spacing: float,
@@ -195,7 +196,7 @@ def _place_vertices_kernel(
         if vals[c] >= 0.0:
             case = case | (1 << c)
     cube_info[cube] = wp.vec2i(base_vertex, case | (spans[case] << 8))
-    c0 = coords[ids[0]]
+    c0 = morton_decode(codes[ids[0]])
     corner = origin + spacing * wp.vec3(float(c0[0]) + 0.5, float(c0[1]) + 0.5, float(c0[2]) + 0.5)
     inv = 1.0 / spacing
     lo = margin
@@ -358,7 +359,7 @@ def _quads_kernel(
     inv: float,
     min_area: float,
     second: wp.array[wp.int32],
-    coords: wp.array[wp.vec3i],
+    codes: wp.array[wp.int64],
     origin: wp.vec3,
     tris: wp.array2d[wp.int32],
     tunnel: wp.array[wp.int32],
@@ -424,7 +425,7 @@ def _quads_kernel(
             # written in order and split along q0-q2, for _open_tunnels to rebuild around the sides' new vertices
             v0 = values[cube_corners[cube, ea]]
             v1 = values[cube_corners[cube, eb]]
-            n_a = coords[cube_corners[cube, ea]]
+            n_a = morton_decode(codes[cube_corners[cube, ea]])
             x_a = origin + (wp.vec3(float(n_a[0]), float(n_a[1]), float(n_a[2])) + wp.vec3(0.5)) / inv
             x_b = x_a
             x_b[a] = x_b[a] + 1.0 / inv
@@ -472,7 +473,7 @@ def _quads_kernel(
             tris[row + 1, 2] = q3
 
 
-def contour_dual(cube_corners, values, coords, proj, *, origin, spacing, iso=0.0):
+def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0):
     """Dual marching cubes over active cubes, each vertex at its patch's plane-quadric minimiser within its cube.
 
     Args:
@@ -480,7 +481,8 @@ def contour_dual(cube_corners, values, coords, proj, *, origin, spacing, iso=0.0
         values: (N,) float32 Warp array of node values minus ``iso``, none exactly 0 (the nudged values marching
             cubes uses, so both agree on every cube's case; a node's Hermite data holds where its value plus ``iso``
             is its distance to its closest point).
-        coords: (N,) vec3i Warp array of the nodes' lattice coordinates (node at ``origin + (c + 0.5) * spacing``).
+        codes: (N,) int64 Warp array of the nodes' Morton codes (node at ``origin + (c + 0.5) * spacing``, c its
+            lattice coordinates).
         proj: (N,) vec3 Warp array of each node's closest point on the surface its value came from.
         origin: (3,) world position of lattice point (0, 0, 0)'s cell minimum.
         spacing: Lattice spacing.
@@ -523,7 +525,7 @@ def contour_dual(cube_corners, values, coords, proj, *, origin, spacing, iso=0.0
             s,
             cube_corners,
             values,
-            coords,
+            codes,
             proj,
             origin_wp,
             float(spacing),
@@ -568,7 +570,7 @@ def contour_dual(cube_corners, values, coords, proj, *, origin, spacing, iso=0.0
             1.0 / float(spacing),
             MIN_SPLIT_AREA,
             tables["second"],
-            coords,
+            codes,
             origin_wp,
             tris,
             tunnel,

@@ -22,6 +22,7 @@ import warp as wp
 import warp.geometry
 
 from .marching import CORNER_OFFSETS, HAS_SHARED_CORNER_CORE, empty_mesh, iso_nudge, polygonise
+from .octree import decode_codes, morton_decode
 from .parallel import launch_split
 
 # The seven other corners in ascending key order (corner slot, then its offset). Keys are
@@ -232,7 +233,7 @@ def _octet_first_node(child: wp.array[wp.int32], top_offset: int, top_dims: wp.v
 @wp.kernel(enable_backward=False)
 def _octet_cube_corners_kernel(
     first: int,
-    coords: wp.array[wp.vec3i],
+    codes: wp.array[wp.int64],
     child: wp.array[wp.int32],
     top_offset: int,
     top_dims: wp.vec3i,
@@ -253,8 +254,7 @@ def _octet_cube_corners_kernel(
     nb = wp.vector(-1, -1, -1, -1, -1, -1, -1, -1, length=8, dtype=int)
     nb[0] = base
     if emit == 0:
-        node = coords[base]
-        octet = wp.vec3i(node[0] >> 1, node[1] >> 1, node[2] >> 1)
+        octet = morton_decode(codes[base] >> wp.int64(3))
         for d in range(1, 8):
             q = octet + wp.vec3i(d & 1, (d >> 1) & 1, (d >> 2) & 1)
             neighbours[t, d - 1] = _octet_first_node(child, top_offset, top_dims, levels, q)
@@ -301,7 +301,7 @@ def _used_node_points_kernel(
     first: int,
     used: wp.array[wp.int32],
     used_scan: wp.array[wp.int32],
-    coords: wp.array[wp.vec3i],
+    codes: wp.array[wp.int64],
     lo: wp.vec3i,
     values: wp.array[wp.float32],
     base: wp.vec3,
@@ -314,12 +314,12 @@ def _used_node_points_kernel(
     if used[i] == 0:
         return
     out = used_scan[i] - 1
-    c = coords[i] - lo
+    c = morton_decode(codes[i]) - lo
     points[out] = base + spacing * wp.vec3(float(c[0]), float(c[1]), float(c[2]))
     point_values[out] = values[i]
 
 
-def octree_level_cubes(coords, values, tree, *, origin, spacing, iso=0.0):
+def octree_level_cubes(codes, values, tree, *, origin, spacing, iso=0.0):
     """The active cubes of an octree's finest level as it is stored (see :func:`extract_octree_level`): each cube's
     corners come from its octet's neighbours (``_octet_cube_corners_kernel``), so nothing is sorted.
 
@@ -328,18 +328,17 @@ def octree_level_cubes(coords, values, tree, *, origin, spacing, iso=0.0):
         indices (``CORNER_OFFSETS`` order), ``shifted`` (N,) float32 Warp array of the values minus ``iso`` with
         entries within the nudge of 0 pushed off it, ``lo`` (3,) int64 lattice minimum of the level.
     """
-    n = coords.shape[0]
+    n = codes.shape[0]
     if n == 0:
         return None
-    device = coords.device
+    device = codes.device
     child, top_offset, top_dims, levels = tree
     tree_args = [child, int(top_offset), wp.vec3i(*(int(d) for d in top_dims)), int(levels)]
     origin = np.asarray(origin, dtype=np.float64)
     spacing = float(spacing)
-    coords_np = coords.numpy()
     # each octet spans its first node's coordinates plus 0 or 1 on every axis: the first nodes bound the level
     # (column by column: numpy reduces an (N, 3) array along its first axis several times slower)
-    first_nodes = coords_np[::8]
+    first_nodes = decode_codes(codes, step=8).numpy()
     lo = np.array([first_nodes[:, k].min() for k in range(3)], dtype=np.int64)
     hi = np.array([first_nodes[:, k].max() + 1 for k in range(3)], dtype=np.int64)
     nudge = iso_nudge(origin, lo, hi, spacing)
@@ -354,7 +353,7 @@ def octree_level_cubes(coords, values, tree, *, origin, spacing, iso=0.0):
     launch_split(
         _octet_cube_corners_kernel,
         n // 8,
-        lambda s, c: [s, coords, *tree_args, shifted, 0, neighbours, active_scan, active, no_corners],
+        lambda s, c: [s, codes, *tree_args, shifted, 0, neighbours, active_scan, active, no_corners],
         device,
     )
     wp.utils.array_scan(active, active_scan, inclusive=True)
@@ -365,14 +364,14 @@ def octree_level_cubes(coords, values, tree, *, origin, spacing, iso=0.0):
     launch_split(
         _octet_cube_corners_kernel,
         n // 8,
-        lambda s, c: [s, coords, *tree_args, shifted, 1, neighbours, active_scan, active, cube_corners],
+        lambda s, c: [s, codes, *tree_args, shifted, 1, neighbours, active_scan, active, cube_corners],
         device,
     )
-    return {"cube_corners": cube_corners, "shifted": shifted, "lo": lo, "coords_np": coords_np}
+    return {"cube_corners": cube_corners, "shifted": shifted, "lo": lo}
 
 
-def extract_octree_level(coords, values, tree, *, origin, spacing, iso=0.0):
-    """:func:`extract_surface` for an octree's finest level as it is stored: Warp arrays of lattice coordinates and
+def extract_octree_level(codes, values, tree, *, origin, spacing, iso=0.0):
+    """:func:`extract_surface` for an octree's finest level as it is stored: Warp arrays of Morton codes and
     values (signed distances, finite; Morton order, in complete octets of 8 consecutive nodes), all on one device, and
     ``tree`` = (child links of every node, index of the dense top level's first node, its dims, number of levels >= 2)
     to find neighbour octets by. Same mesh as ``extract_surface(coords, values, ...)``, found without leaving the
@@ -381,18 +380,18 @@ def extract_octree_level(coords, values, tree, *, origin, spacing, iso=0.0):
 
     Returns and raises as :func:`extract_surface` (no ValueError: the level is valid by construction).
     """
-    cubes = octree_level_cubes(coords, values, tree, origin=origin, spacing=spacing, iso=iso)
+    cubes = octree_level_cubes(codes, values, tree, origin=origin, spacing=spacing, iso=iso)
     if cubes is None:
         return empty_mesh()
-    device = coords.device
+    device = codes.device
     origin = np.asarray(origin, dtype=np.float64)
     spacing = float(spacing)
-    n, lo, shifted = coords.shape[0], cubes["lo"], cubes["shifted"]
+    n, lo, shifted = codes.shape[0], cubes["lo"], cubes["shifted"]
     if not HAS_SHARED_CORNER_CORE:  # another Warp version: through the generic path
         return extract_surface(
-            cubes["coords_np"], shifted.numpy(), origin=origin, spacing=spacing, iso=0.0, device=device
+            decode_codes(codes).numpy(), shifted.numpy(), origin=origin, spacing=spacing, iso=0.0, device=device
         )
-    point_inputs = [coords, wp.vec3i(*(int(x) for x in lo)), shifted]
+    point_inputs = [codes, wp.vec3i(*(int(x) for x in lo)), shifted]
     verts_wp, indices_wp = polygonise(
         cubes["cube_corners"], n, _used_node_points_kernel, point_inputs, lo, origin, spacing
     )

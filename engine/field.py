@@ -511,11 +511,10 @@ class AdaptiveField:
         """The dual contouring of the finest level's active cubes (:func:`.dual.contour_dual`): ``verts``, ``tris``
         and, with ``creases``, the crease edges (:func:`.quadric.crease_edges`)."""
         n0 = self.level_counts[0]
-        coords, values, proj = decode_codes(self.codes[:n0]), self.values[:n0], self.proj[:n0]
+        codes, values, proj = self.codes[:n0], self.values[:n0], self.proj[:n0]
         if self.levels == 1:
-            coords_np = coords.numpy()
             cubes = lattice_cubes(
-                coords_np,
+                self.coords.numpy(),
                 self.values.numpy().astype(np.float64),
                 origin=self.origin,
                 spacing=self.voxel_size,
@@ -524,18 +523,18 @@ class AdaptiveField:
             )
             if cubes is not None and cubes["order"] is not None:
                 order = cubes["order"]
-                coords = wp.array(coords_np[order], dtype=wp.vec3i, device=self.device)
+                codes = wp.array(self.codes.numpy()[order], dtype=wp.int64, device=self.device)
                 proj = wp.array(self.proj.numpy()[order], dtype=wp.vec3, device=self.device)
         else:
             tree = (self.child, self.level_offsets[self.levels - 1], self.top_dims, self.levels)
-            cubes = octree_level_cubes(coords, values, tree, origin=self.origin, spacing=self.voxel_size, iso=iso)
+            cubes = octree_level_cubes(codes, values, tree, origin=self.origin, spacing=self.voxel_size, iso=iso)
         if cubes is None:
             verts, tris = empty_mesh()
             return verts, tris, np.zeros((0, 2), dtype=np.int32)
         surface = contour_dual(
             cubes["cube_corners"],
             cubes["shifted"],
-            coords,
+            codes,
             proj,
             origin=self.origin,
             spacing=self.voxel_size,
@@ -553,7 +552,7 @@ class AdaptiveField:
                 self.coords.numpy(), self.values.numpy(), origin=self.origin, spacing=self.voxel_size, iso=iso
             )
         return extract_octree_level(
-            decode_codes(self.codes[:n0]),
+            self.codes[:n0],
             self.values[:n0],
             (self.child, self.level_offsets[self.levels - 1], self.top_dims, self.levels),
             origin=self.origin,

@@ -293,15 +293,16 @@ def _expand_octets_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def _decode_kernel(first: int, codes: wp.array[wp.int64], coords: wp.array[wp.vec3i]):
+def _decode_kernel(first: int, codes: wp.array[wp.int64], step: int, coords: wp.array[wp.vec3i]):
     i = first + wp.tid()
-    coords[i] = morton_decode(codes[i])
+    coords[i] = morton_decode(codes[step * i])
 
 
-def decode_codes(codes: wp.array) -> wp.array:
-    """(N,) vec3i lattice coordinates of (N,) int64 Morton codes."""
-    coords = wp.empty(codes.shape[0], dtype=wp.vec3i, device=codes.device)
-    launch_split(_decode_kernel, codes.shape[0], lambda lo, _n: [lo, codes, coords], codes.device)
+def decode_codes(codes: wp.array, step: int = 1) -> wp.array:
+    """(N,) vec3i lattice coordinates of (N,) int64 Morton codes (every ``step``-th)."""
+    n = (codes.shape[0] + step - 1) // step
+    coords = wp.empty(n, dtype=wp.vec3i, device=codes.device)
+    launch_split(_decode_kernel, n, lambda lo, _n: [lo, codes, int(step), coords], codes.device)
     return coords
 
 

@@ -599,7 +599,7 @@ def test_a_field_keeps_no_coordinates_and_decodes_them_from_its_codes():
     coords = field.coords.numpy()
     np.testing.assert_array_equal(coords, morton_decode_np(field.codes.numpy()))
     lv = field.level_of_nodes()
-    centres = field.origin + (coords + 0.5) * (field.voxel_size * 2.0 ** lv)[:, None]
+    centres = field.origin + (coords + 0.5) * (field.voxel_size * 2.0**lv)[:, None]
     np.testing.assert_allclose(centres, field.node_centers(), rtol=0, atol=1e-9)
     # the finest nodes' values are their centres' distances to the sphere (exact there, up to its facets)
     d = np.linalg.norm(centres[:n0], axis=1) - 1.0

@@ -11,6 +11,7 @@ from scipy.spatial import cKDTree
 
 import engine
 from engine import dual, extract
+from engine.octree import morton_encode_np
 from tests.metrics import (
     crease_points,
     exact_boolean,
@@ -128,11 +129,11 @@ def test_vertices_stay_in_their_cubes():
     op, a, b = PAIRS["rocker-arm - cube"]
     field = OPS[op](*engine.build_fields([a, b], voxel_size=H))
     n0 = field.level_counts[0]
-    coords, values, proj = field.coords[:n0], field.values[:n0], field.proj[:n0]
+    codes, values, proj = field.codes[:n0], field.values[:n0], field.proj[:n0]
     tree = (field.child, field.level_offsets[field.levels - 1], field.top_dims, field.levels)
-    cubes = extract.octree_level_cubes(coords, values, tree, origin=field.origin, spacing=H)
-    surface = dual.contour_dual(cubes["cube_corners"], cubes["shifted"], coords, proj, origin=field.origin, spacing=H)
-    lattice = coords.numpy()[cubes["cube_corners"].numpy()[:, 0]]
+    cubes = extract.octree_level_cubes(codes, values, tree, origin=field.origin, spacing=H)
+    surface = dual.contour_dual(cubes["cube_corners"], cubes["shifted"], codes, proj, origin=field.origin, spacing=H)
+    lattice = field.coords.numpy()[cubes["cube_corners"].numpy()[:, 0]]
     local = (surface["verts"].astype(np.float64) - field.origin) / H - 0.5 - lattice[surface["cells"]]
     inside = np.all((local >= 0.0) & (local <= 1.0), axis=1)
     assert inside.mean() > 0.999  # measured: all but 25 of 81,094
@@ -209,7 +210,7 @@ def test_sharp_false_is_the_marching_cubes():
     n0 = field.level_counts[0]
     tree = (field.child, field.level_offsets[field.levels - 1], field.top_dims, field.levels)
     verts, tris = extract.extract_octree_level(
-        field.coords[:n0], field.values[:n0], tree, origin=field.origin, spacing=field.voxel_size
+        field.codes[:n0], field.values[:n0], tree, origin=field.origin, spacing=field.voxel_size
     )
     mc_verts, mc_tris, creases = field.to_mesh(sharp=False, return_creases=True)
     assert np.array_equal(mc_verts, verts) and np.array_equal(mc_tris, tris)
@@ -256,12 +257,13 @@ def test_random_fields_give_closed_2_manifolds(seed):
     values[border] = 1.0
     cubes = extract.lattice_cubes(coords, values.astype(np.float64), origin=np.zeros(3), spacing=1.0, iso=0.0)
     order = cubes["order"] if cubes["order"] is not None else np.arange(len(coords))
+    lo = coords.min(axis=0)  # Morton codes of the lattice from its lowest point
     surface = dual.contour_dual(
         cubes["cube_corners"],
         cubes["shifted"],
-        wp.array(coords[order], dtype=wp.vec3i),
+        wp.array(morton_encode_np(coords[order] - lo), dtype=wp.int64),
         wp.array((coords[order] + 0.5).astype(np.float32), dtype=wp.vec3),  # no Hermite data: interpolant planes
-        origin=np.zeros(3),
+        origin=lo.astype(np.float64),
         spacing=1.0,
     )
     verts, tris = surface["verts"], surface["tris"]
