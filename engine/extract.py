@@ -212,9 +212,12 @@ _CORNER_BITS_Z = int(sum(int(CORNER_OFFSETS[c][2]) << c for c in range(8)))
 
 
 @wp.func
-def _octet_first_node(child: wp.array[wp.int32], top_offset: int, top_dims: wp.vec3i, levels: int, q: wp.vec3i) -> int:
+def _octet_first_node(
+    child: wp.array[wp.int32], fine_count: int, top_offset: int, top_dims: wp.vec3i, levels: int, q: wp.vec3i
+) -> int:
     """First finest node of the octet at octet coordinates ``q`` (level-1 lattice), or -1 when the tree has none there:
-    the top cell holding it, then the child links down to level 1 (children in Morton order)."""
+    the top cell holding it, then the child links down to level 1 (children in Morton order; ``child`` holds the
+    coarse nodes' links, node ``i`` at ``i - fine_count``)."""
     shift = levels - 2
     top = wp.vec3i(q[0] >> shift, q[1] >> shift, q[2] >> shift)
     for a in range(3):
@@ -222,12 +225,12 @@ def _octet_first_node(child: wp.array[wp.int32], top_offset: int, top_dims: wp.v
             return -1
     node = top_offset + top[0] + top_dims[0] * (top[1] + top_dims[1] * top[2])
     for s in range(shift):
-        first = child[node]
+        first = child[node - fine_count]
         if first < 0:
             return -1
         b = shift - 1 - s
         node = first + ((q[0] >> b) & 1) + 2 * ((q[1] >> b) & 1) + 4 * ((q[2] >> b) & 1)
-    return child[node]
+    return child[node - fine_count]
 
 
 @wp.kernel(enable_backward=False)
@@ -235,6 +238,7 @@ def _octet_cube_corners_kernel(
     first: int,
     codes: wp.array[wp.int64],
     child: wp.array[wp.int32],
+    fine_count: int,
     top_offset: int,
     top_dims: wp.vec3i,
     levels: int,
@@ -257,7 +261,7 @@ def _octet_cube_corners_kernel(
         octet = morton_decode(codes[base] >> wp.int64(3))
         for d in range(1, 8):
             q = octet + wp.vec3i(d & 1, (d >> 1) & 1, (d >> 2) & 1)
-            neighbours[t, d - 1] = _octet_first_node(child, top_offset, top_dims, levels, q)
+            neighbours[t, d - 1] = _octet_first_node(child, fine_count, top_offset, top_dims, levels, q)
     for d in range(1, 8):
         nb[d] = neighbours[t, d - 1]
     nodes = int(8)  # not unrolled (compile time)
@@ -332,8 +336,8 @@ def octree_level_cubes(codes, values, tree, *, origin, spacing, iso=0.0):
     if n == 0:
         return None
     device = codes.device
-    child, top_offset, top_dims, levels = tree
-    tree_args = [child, int(top_offset), wp.vec3i(*(int(d) for d in top_dims)), int(levels)]
+    child, fine_count, top_offset, top_dims, levels = tree
+    tree_args = [child, int(fine_count), int(top_offset), wp.vec3i(*(int(d) for d in top_dims)), int(levels)]
     origin = np.asarray(origin, dtype=np.float64)
     spacing = float(spacing)
     # each octet spans its first node's coordinates plus 0 or 1 on every axis: the first nodes bound the level
@@ -373,10 +377,10 @@ def octree_level_cubes(codes, values, tree, *, origin, spacing, iso=0.0):
 def extract_octree_level(codes, values, tree, *, origin, spacing, iso=0.0):
     """:func:`extract_surface` for an octree's finest level as it is stored: Warp arrays of Morton codes and
     values (signed distances, finite; Morton order, in complete octets of 8 consecutive nodes), all on one device, and
-    ``tree`` = (child links of every node, index of the dense top level's first node, its dims, number of levels >= 2)
-    to find neighbour octets by. Same mesh as ``extract_surface(coords, values, ...)``, found without leaving the
-    device: each cube's corners come from its octet's neighbours (``_octet_cube_corners_kernel``), so nothing is
-    sorted.
+    ``tree`` = (the coarse nodes' child links, the finest level's node count, index of the dense top level's first
+    node, its dims, number of levels >= 2; ``AdaptiveField.tree``) to find neighbour octets by. Same mesh as
+    ``extract_surface(coords, values, ...)``, found without leaving the device: each cube's corners come from its
+    octet's neighbours (``_octet_cube_corners_kernel``), so nothing is sorted.
 
     Returns and raises as :func:`extract_surface` (no ValueError: the level is valid by construction).
     """

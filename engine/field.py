@@ -104,6 +104,10 @@ class AdaptiveField:
         ``sources`` maps field ids to the :class:`.sources.SourceMesh` each was built from, ``triangles`` (N0,) int32
         gives each finest node's closest triangle there (None: not known)."""
         offsets = np.asarray(layout["offsets"], dtype=np.int64)
+        child = layout["child"]
+        n0 = int(offsets[1])
+        if child.shape[0] == offsets[-1]:  # a layout's links of every node: the finest level has none to keep
+            child = wp.clone(child[n0:]) if n0 < child.shape[0] else wp.empty(0, dtype=wp.int32, device=child.device)
         return cls(
             voxel_size=voxel_size,
             levels=len(offsets) - 1,
@@ -113,7 +117,7 @@ class AdaptiveField:
             codes=layout["codes"],
             values=values,
             proj=proj,
-            child=layout["child"],
+            child=child,
             source=source,
             field_ids=field_ids,
             device=values.device,
@@ -205,6 +209,18 @@ class AdaptiveField:
     @property
     def node_count(self) -> int:
         return int(self.level_offsets[-1])
+
+    @property
+    def tree(self) -> tuple:
+        """(coarse nodes' child links, finest node count, first top node, top dims, levels): what the extraction
+        walks the octree by."""
+        return (self.child, self.level_counts[0], int(self.level_offsets[self.levels - 1]), self.top_dims, self.levels)
+
+    def child_links(self) -> wp.array:
+        """(N,) int32 first child of every node (-1: a leaf; ``child`` keeps the coarse nodes' only)."""
+        links = wp.full(self.node_count, -1, dtype=wp.int32, device=self.device)
+        wp.copy(links, self.child, dest_offset=self.level_counts[0], count=self.child.shape[0])
+        return links
 
     @property
     def coords(self) -> wp.array:
@@ -439,7 +455,7 @@ class AdaptiveField:
             "sizes": (self.world_voxel_size * (2.0**lv)).astype(np.float32),
             "levels": lv,
             "sdf": self.values.numpy() * np.float32(self.placement.scale if self.placement is not None else 1.0),
-            "leaf": self.child.numpy() < 0,
+            "leaf": self.child_links().numpy() < 0,
         }
 
     def to_dense(self, bounds=None, spacing=None, *, max_bytes=None) -> dict:
@@ -526,7 +542,7 @@ class AdaptiveField:
                 codes = wp.array(self.codes.numpy()[order], dtype=wp.int64, device=self.device)
                 proj = wp.array(self.proj.numpy()[order], dtype=wp.vec3, device=self.device)
         else:
-            tree = (self.child, self.level_offsets[self.levels - 1], self.top_dims, self.levels)
+            tree = self.tree
             cubes = octree_level_cubes(codes, values, tree, origin=self.origin, spacing=self.voxel_size, iso=iso)
         if cubes is None:
             verts, tris = empty_mesh()
@@ -554,7 +570,7 @@ class AdaptiveField:
         return extract_octree_level(
             self.codes[:n0],
             self.values[:n0],
-            (self.child, self.level_offsets[self.levels - 1], self.top_dims, self.levels),
+            self.tree,
             origin=self.origin,
             spacing=self.voxel_size,
             iso=iso,

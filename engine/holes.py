@@ -115,7 +115,7 @@ def _sign_change_kernel(
     t = start + wp.tid()
     i = f.fine_count + t
     marks[t] = 0
-    if f.child[i] >= 0:
+    if f.child[t] >= 0:
         return
     s = f.voxel_size * float(1 << node_level[i])
     c = node_center(f.origin, s, node_coords(f, i))

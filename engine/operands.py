@@ -254,8 +254,8 @@ def octet_source(f: FieldArg, octet_mode: int, offset: wp.vec3i, oc: wp.vec3i, o
             c0 = wp.vec3i(2 * oc[0], 2 * oc[1], 2 * oc[2]) + offset
             return octree.find_key(f.codes, 0, f.fine_count, morton_encode(c0)), -1, 0
         leaf = locate_node(f, x, 1)
-        if leaf[1] == 1 and f.child[leaf[0]] >= 0:
-            return f.child[leaf[0]], -1, 0
+        if leaf[1] == 1 and f.child[leaf[0] - f.fine_count] >= 0:
+            return f.child[leaf[0] - f.fine_count], -1, 0
         return -1, leaf[0], leaf[1]
     return -1, -1, 0
 

@@ -39,7 +39,7 @@ class FieldArg:
     top_offset: int
     domain_min: wp.vec3
     domain_max: wp.vec3
-    child: wp.array[wp.int32]
+    child: wp.array[wp.int32]  # first child of each coarse node (node i at i - fine_count), -1: a leaf
     values: wp.array[wp.float32]
     proj: wp.array[wp.vec3]
     source: wp.array[wp.int32]
@@ -127,14 +127,14 @@ def locate_node(f: FieldArg, x: wp.vec3, lowest: int) -> wp.vec2i:
     s = level_spacing(f, level)
     pc = _top_cell_coords(f, x)  # the node's coordinates, followed down (not decoded from its code)
     node = f.top_offset + pc[0] + f.top_dims[0] * (pc[1] + f.top_dims[1] * pc[2])
-    while level > lowest and f.child[node] >= 0:
+    while level > lowest and f.child[node - f.fine_count] >= 0:
         level = level - 1
         s = s * 0.5
         rel = (x - f.origin) / s
         cx = wp.clamp(int(wp.floor(rel[0])) - 2 * pc[0], 0, 1)
         cy = wp.clamp(int(wp.floor(rel[1])) - 2 * pc[1], 0, 1)
         cz = wp.clamp(int(wp.floor(rel[2])) - 2 * pc[2], 0, 1)
-        node = f.child[node] + cx + 2 * cy + 4 * cz
+        node = f.child[node - f.fine_count] + cx + 2 * cy + 4 * cz
         pc = wp.vec3i(2 * pc[0] + cx, 2 * pc[1] + cy, 2 * pc[2] + cz)
     return wp.vec2i(node, level)
 

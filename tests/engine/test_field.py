@@ -350,7 +350,7 @@ def test_open_box_inside_is_decided_by_the_winding_number():
 def _check_structure(field):
     offsets = field.level_offsets
     codes = field.codes.numpy()
-    child = field.child.numpy()
+    child = field.child_links().numpy()
     assert sum(field.level_counts) == field.node_count
     for k in range(field.levels):
         level_codes = codes[offsets[k] : offsets[k + 1]]
@@ -592,8 +592,8 @@ def test_a_field_keeps_no_coordinates_and_decodes_them_from_its_codes():
     n, n0 = field.node_count, field.level_counts[0]
     held = [a for a in vars(field).values() if isinstance(a, wp.array)]
     assert not any(a.dtype == wp.vec3i for a in held)
-    # code 8, value 4, closest point 12, child link 4, source 4 a node; closest triangle 4 a finest node
-    assert sum(a.capacity for a in held) == 32 * n + 4 * n0
+    # code 8, value 4, closest point 12, source 4 a node; a child link a coarse node, a closest triangle a finest one
+    assert sum(a.capacity for a in held) == 28 * n + 4 * (n - n0) + 4 * n0
     from engine.octree import morton_decode_np
 
     coords = field.coords.numpy()

@@ -130,7 +130,7 @@ def test_vertices_stay_in_their_cubes():
     field = OPS[op](*engine.build_fields([a, b], voxel_size=H))
     n0 = field.level_counts[0]
     codes, values, proj = field.codes[:n0], field.values[:n0], field.proj[:n0]
-    tree = (field.child, field.level_offsets[field.levels - 1], field.top_dims, field.levels)
+    tree = field.tree
     cubes = extract.octree_level_cubes(codes, values, tree, origin=field.origin, spacing=H)
     surface = dual.contour_dual(cubes["cube_corners"], cubes["shifted"], codes, proj, origin=field.origin, spacing=H)
     lattice = field.coords.numpy()[cubes["cube_corners"].numpy()[:, 0]]
@@ -208,7 +208,7 @@ def test_sharp_false_is_the_marching_cubes():
     mesh = box_mesh(half=(0.3, 0.2, 0.25))
     field = engine.build_field(*mesh, voxel_size=0.02)
     n0 = field.level_counts[0]
-    tree = (field.child, field.level_offsets[field.levels - 1], field.top_dims, field.levels)
+    tree = field.tree
     verts, tris = extract.extract_octree_level(
         field.codes[:n0], field.values[:n0], tree, origin=field.origin, spacing=field.voxel_size
     )

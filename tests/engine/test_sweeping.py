@@ -134,7 +134,8 @@ def test_sweeping_and_the_fast_iterative_method_give_the_same_field(mesh_boolean
 
 def _level_solve(field, **solver_options):
     """The coarse levels of ``field`` solved from its finest level without a mesh (propagation only)."""
-    layout = {"codes": field.codes, "coords": field.coords, "offsets": field.level_offsets, "child": field.child}
+    layout = {"codes": field.codes, "coords": field.coords, "offsets": field.level_offsets}
+    layout["child"] = field.child_links()
     layout["top_dims"] = field.top_dims
     dist = wp.clone(field.values)
     n0 = field.level_counts[0]
@@ -172,7 +173,8 @@ def test_plane_parallel_sweeps_equal_ordered_sweeps(monkeypatch):
 def test_a_scaled_single_level_field_comes_back_to_distances():
     h = 0.08
     built = engine.build_field(*uv_sphere(1.0, rings=24, segments=48), voxel_size=h, levels=1)
-    layout = {"codes": built.codes, "coords": built.coords, "offsets": built.level_offsets, "child": built.child}
+    layout = {"codes": built.codes, "coords": built.coords, "offsets": built.level_offsets}
+    layout["child"] = built.child_links()
     layout["top_dims"] = built.top_dims
     scaled = engine.AdaptiveField.from_layout(
         layout,
