@@ -16,15 +16,23 @@ import numpy as np
 
 from .errors import AasdfError
 
+# Triangles per piece of the area computation: its float64 temporaries stay near 40 MB whatever the mesh's size.
+AREA_CHUNK = 1 << 18
+
 
 def _triangle_areas(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """(T,) areas, component by component (numpy's cross and norm over (T, 3) arrays are several times slower)."""
-    a, b, c = (verts[tris[:, k]] for k in range(3))
-    e, f = b - a, c - a
-    x = e[:, 1] * f[:, 2] - e[:, 2] * f[:, 1]
-    y = e[:, 2] * f[:, 0] - e[:, 0] * f[:, 2]
-    z = e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0]
-    return 0.5 * np.sqrt(x * x + y * y + z * z)
+    """(T,) areas, component by component (numpy's cross and norm over (T, 3) arrays are several times slower), a
+    piece of ``AREA_CHUNK`` triangles at a time."""
+    out = np.empty(len(tris), dtype=np.float64)
+    for lo in range(0, len(tris), AREA_CHUNK):
+        t = tris[lo : lo + AREA_CHUNK]
+        a, b, c = (verts[t[:, k]] for k in range(3))
+        e, f = b - a, c - a
+        x = e[:, 1] * f[:, 2] - e[:, 2] * f[:, 1]
+        y = e[:, 2] * f[:, 0] - e[:, 0] * f[:, 2]
+        z = e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0]
+        out[lo : lo + AREA_CHUNK] = 0.5 * np.sqrt(x * x + y * y + z * z)
+    return out
 
 
 def validate_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
@@ -81,21 +89,31 @@ def edge_table(tris: np.ndarray, n_verts: int) -> dict:
     """The undirected edges of a triangle list, for the mesh checks below.
 
     Returns:
-        ``{"pairs": (E, 2) int64 vertex pairs (low, high), "faces": (E,) faces per edge, "forward": (E,) of those
-        listing it low -> high}``.
+        ``{"pairs": (E, 2) int32 vertex pairs (low, high), "faces": (E,) int32 faces per edge, "forward": (E,) int32 of
+        those listing it low -> high}``. The temporaries are one int64 key per directed edge and int32 otherwise, and
+        are freed as soon as they are used (a 2 M-triangle mesh's checks ran at the build's peak memory).
     """
-    t = np.asarray(tris, dtype=np.int64)
+    t = np.asarray(tris, dtype=np.int32)
     a, b = t.ravel(), t[:, [1, 2, 0]].ravel()  # every directed edge a -> b
     # one sort of the edges' keys with their direction in the lowest bit (no inverse permutation needed)
-    keys = np.sort((np.minimum(a, b) * n_verts + np.maximum(a, b)) * 2 + (a < b))
-    edge = keys >> 1
-    start = np.flatnonzero(np.r_[True, edge[1:] != edge[:-1]])
-    unique = edge[start]
-    return {
-        "pairs": np.stack([unique // n_verts, unique % n_verts], axis=1),
-        "faces": np.diff(np.r_[start, len(keys)]),
-        "forward": np.add.reduceat(keys & 1, start),
-    }
+    keys = np.minimum(a, b).astype(np.int64)
+    keys *= n_verts
+    keys += np.maximum(a, b)
+    keys *= 2
+    keys += a < b
+    del a, b
+    keys.sort()
+    forward = (keys & 1).astype(np.int32)
+    keys >>= 1
+    start = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
+    unique = keys[start]
+    del keys
+    pairs = np.empty((len(unique), 2), dtype=np.int32)
+    pairs[:, 0] = unique // n_verts
+    pairs[:, 1] = unique % n_verts
+    del unique
+    faces = np.diff(np.r_[start, 3 * len(t)]).astype(np.int32)
+    return {"pairs": pairs, "faces": faces, "forward": np.add.reduceat(forward, start).astype(np.int32)}
 
 
 def problem_faces(tris: np.ndarray, n_verts: int, edges: dict | None = None) -> np.ndarray:
@@ -103,9 +121,11 @@ def problem_faces(tris: np.ndarray, n_verts: int, edges: dict | None = None) -> 
     without any is closed: no band refinement, signs spread everywhere). ``edges``: ``edge_table(tris, n_verts)``."""
     edges = edge_table(tris, n_verts) if edges is None else edges
     bad_edge = (edges["faces"] != 2) | (edges["forward"] != 1)
+    if not bad_edge.any():
+        return np.zeros(len(tris), dtype=np.int32)
     bad_vertex = np.zeros(n_verts, dtype=bool)
     bad_vertex[edges["pairs"][bad_edge].ravel()] = True
-    return bad_vertex[np.asarray(tris, dtype=np.int64)].any(axis=1).astype(np.int32)
+    return bad_vertex[np.asarray(tris)].any(axis=1).astype(np.int32)
 
 
 MAX_HOLE_CAPS = 32  # more boundary pieces than this share one cone
