@@ -46,6 +46,9 @@ MAX_SIGN_REFINEMENTS = 4
 # node by node against 0.083 s by boxes at 0.10 cell faces per triangle, 0.19 s against 0.145 s at 0.41).
 OCTET_SEARCH_MIN_AREA = 0.15
 
+# Triangles of all meshes above which build_fields builds one mesh after the other (see there).
+SEQUENTIAL_TRIANGLES = 1_000_000
+
 
 @wp.kernel(enable_backward=False)
 def _octets_per_triangle_kernel(
@@ -144,7 +147,9 @@ def build_fields(
 
     On the CPU the builds run at the same time, one Python thread each (up to the core count): every build has
     stretches that keep one core busy (sorts, in-place sweeps, small launches), which the other build fills. On
-    CUDA they run one after the other.
+    CUDA, and for meshes of more than ``SEQUENTIAL_TRIANGLES`` triangles in all, they run one after the other (each
+    on every core): a build's peak memory grows with its triangles (Warp's BVH with its winding-number data, about
+    130 bytes a triangle, the mesh checks), and two such peaks at once would add up.
 
     Args:
         meshes: Sequence of (vertices, triangles) pairs, as for :func:`build_field`.
@@ -175,7 +180,8 @@ def build_fields(
         except Exception as err:  # noqa: BLE001 (re-raised below, in the caller's thread)
             errors[k] = err
 
-    if device.is_cuda or len(meshes) < 2:
+    triangles = sum(len(plan["triangles"]) for plan in plans)
+    if device.is_cuda or len(meshes) < 2 or triangles > SEQUENTIAL_TRIANGLES:
         for k in range(len(meshes)):
             build(k)
             if k in errors:

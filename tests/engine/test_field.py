@@ -694,7 +694,13 @@ def test_sample_validates_points_and_method():
     assert field.sample(np.zeros((0, 3))).shape == (0,)
 
 
-def test_build_fields_builds_several_meshes_at_once_as_build_field_does_one_by_one():
+@pytest.mark.parametrize("sequential", [False, True])
+def test_build_fields_builds_several_meshes_at_once_as_build_field_does_one_by_one(monkeypatch, sequential):
+    # many triangles in all: one build after the other (their peak memory would add up)
+    monkeypatch.setattr(engine.build, "SEQUENTIAL_TRIANGLES", 1000 if sequential else 10**9)
+    threaded = []
+    run_tasks = engine.parallel.run_tasks
+    monkeypatch.setattr(engine.parallel, "run_tasks", lambda *a, **k: threaded.append(1) or run_tasks(*a, **k))
     spot = load_mesh("spot.obj")
     torus = torus_mesh(0.6, 0.2)
     h = _voxel(spot[0], 96)
@@ -705,6 +711,7 @@ def test_build_fields_builds_several_meshes_at_once_as_build_field_does_one_by_o
         assert a.level_counts == b.level_counts
         np.testing.assert_array_equal(a.sample(points), b.sample(points))
         assert a.field_ids == b.field_ids
+    assert bool(threaded) == (not sequential and (os.cpu_count() or 1) > 1)
     assert [f.field_ids for f in engine.build_fields([torus, torus], voxel_size=h, field_ids=[4, 7])] == [(4,), (7,)]
 
 
