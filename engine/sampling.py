@@ -200,17 +200,18 @@ def coarse_mls(
     neighbour predicts the distance from ``x`` to its own exact closest point, and the MLS fit is of constant order
     over those predictions: second-order accurate where the linear fit would smooth over curvature and medial axes."""
     leaf_sign = wp.where(leaf_value < 0.0, -1.0, 1.0)
-    wsum = float(0.0)
     gsum = wp.vec3(0.0)
     best = float(1.0e30)
     plane = float(1.0e30)
     for t in range(count):
-        xn, w = _neighbour_weight(f, ids[t], levels[t], x, s)
-        if w > 0.0:
-            p = f.proj[ids[t]]
-            r = x - p
-            dist = wp.length(r)
-            if dist < best:
+        # the nearest prediction of the neighbours the weight reaches: a neighbour's weight (its centre decoded, the
+        # spline) only where its prediction would be the nearest so far
+        p = f.proj[ids[t]]
+        r = x - p
+        dist = wp.length(r)
+        if dist < best:
+            xn, w = _neighbour_weight(f, ids[t], levels[t], x, s)
+            if w > 0.0:
                 best = dist
                 # the neighbour's surface normal: from its closest point towards the node
                 nrm = xn - p
@@ -219,8 +220,7 @@ def coarse_mls(
                 if ln > 0.0:
                     gsum = nrm / ln
                     plane = wp.abs(wp.dot(r, gsum))
-            wsum += w
-    if wsum <= 0.0:
+    if best >= 1.0e30:  # no neighbour within reach
         return wp.vec4(leaf_value, 0.0, 0.0, 0.0)
     g = leaf_sign * gsum
     # The tangent plane of the nearest closest point corrects the point distance when x's foot on that plane is
