@@ -69,24 +69,17 @@ def main() -> None:
     if args.before is None:
         parser.error("--before is required")
     sys.path.insert(0, str(ROOT))
-    from bench.child import Worker
+    from bench.child import against_workers, alternate
     from bench.paired import round_ratios
 
-    # another checkout's kernel cache goes elsewhere: nothing is written into it
-    after = args.after.resolve()
-    ours = Worker(__file__, after, after / ".warp-cache" if after == ROOT else Path("/tmp/aasdf-against-cache"))
-    theirs = Worker(__file__, args.before.resolve(), Path("/tmp/aasdf-against-cache"))
-    print(f"{os.cpu_count()} cores; {args.before} -> {after}; {args.repeat} alternating rounds; times indicative\n")
+    ours, theirs = against_workers(__file__, args.before, args.after)
+    print(f"{os.cpu_count()} cores; {args.before} -> {args.after}; {args.repeat} alternating rounds; times indicative")
+    print()
     print("| mesh | res | before s | after s | after / before | CPU after / before | signs before s | signs after s |")
     print("|---|---|---|---|---|---|---|---|")
     for name in args.meshes:
         for res in args.resolutions:
-            ours.ask(f"{name} {res}")  # warm-up: kernels compiled or loaded
-            theirs.ask(f"{name} {res}")
-            runs = {"ours": [], "theirs": []}
-            for k in range(args.repeat):
-                for side in ("ours", "theirs") if k % 2 == 0 else ("theirs", "ours"):
-                    runs[side].append((ours if side == "ours" else theirs).ask(f"{name} {res}"))
+            runs = dict(zip(("ours", "theirs"), alternate(ours, theirs, f"{name} {res}", args.repeat), strict=True))
             wall = round_ratios(*([r["seconds"] for r in runs[s]] for s in ("ours", "theirs")))
             cpu = round_ratios(*([r["cpu"] for r in runs[s]] for s in ("ours", "theirs")))
             med = {s: {key: statistics.median(r[key] for r in runs[s]) for key in ("seconds", "signs")} for s in runs}

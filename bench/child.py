@@ -54,3 +54,26 @@ class Worker:
     def close(self) -> None:
         self.process.stdin.close()
         self.process.wait()
+
+
+# Where a checkout other than this one compiles its kernels: nothing is written into it.
+AGAINST_CACHE = Path("/tmp/aasdf-against-cache")
+
+
+def against_workers(script: str, before: Path, after: Path = ROOT) -> tuple[Worker, Worker]:
+    """Workers running ``script`` on checkout ``after`` (default: this one) and on ``before``: (ours, theirs)."""
+    after, before = Path(after).resolve(), Path(before).resolve()
+    ours = Worker(script, after, after / ".warp-cache" if after == ROOT else AGAINST_CACHE)
+    return ours, Worker(script, before, AGAINST_CACHE)
+
+
+def alternate(ours: Worker, theirs: Worker, request: str, rounds: int) -> tuple[list, list]:
+    """One warm-up ``request`` to each (kernels compiled or loaded), then ``rounds`` rounds, ours first in even rounds
+    and theirs first in odd ones (see ``bench/paired.py``): (our answers, theirs)."""
+    ours.ask(request)
+    theirs.ask(request)
+    answers = {id(ours): [], id(theirs): []}
+    for k in range(rounds):
+        for side in (ours, theirs) if k % 2 == 0 else (theirs, ours):
+            answers[id(side)].append(side.ask(request))
+    return answers[id(ours)], answers[id(theirs)]

@@ -68,24 +68,15 @@ def main() -> None:
     if args.before is None:
         parser.error("--before is required")
     sys.path.insert(0, str(ROOT))
-    from bench.child import Worker
+    from bench.child import against_workers, alternate
     from bench.paired import round_ratios
 
-    ours = Worker(__file__, ROOT, ROOT / ".warp-cache")
-    # the other checkout's kernels go elsewhere: nothing is written into it
-    theirs = Worker(__file__, args.before.resolve(), Path("/tmp/aasdf-against-cache"))
+    ours, theirs = against_workers(__file__, args.before)
     print(f"{os.cpu_count()} cores; before = {args.before}; {args.repeat} alternating rounds; times indicative\n")
     print("| case | triangles after | after s | before s | after / before |")
     print("|---|---|---|---|---|")
     for name in args.cases:
-        ours.ask(name)
-        theirs.ask(name)
-        after, before = [], []
-        for k in range(args.repeat):
-            pair = (ours, theirs) if k % 2 == 0 else (theirs, ours)
-            runs = {id(side): side.ask(name) for side in pair}
-            after.append(runs[id(ours)])
-            before.append(runs[id(theirs)])
+        after, before = alternate(ours, theirs, name, args.repeat)
         ratio, low, high = round_ratios([r["seconds"] for r in after], [r["seconds"] for r in before])
         label = name.replace("|", "\\|")
         print(

@@ -542,8 +542,7 @@ class AdaptiveField:
                 codes = wp.array(self.codes.numpy()[order], dtype=wp.int64, device=self.device)
                 proj = wp.array(self.proj.numpy()[order], dtype=wp.vec3, device=self.device)
         else:
-            tree = self.tree
-            cubes = octree_level_cubes(codes, values, tree, origin=self.origin, spacing=self.voxel_size, iso=iso)
+            cubes = octree_level_cubes(codes, values, self.tree, origin=self.origin, spacing=self.voxel_size, iso=iso)
         if cubes is None:
             verts, tris = empty_mesh()
             return verts, tris, np.zeros((0, 2), dtype=np.int32)

@@ -378,9 +378,9 @@ def _surface_box(field):
     n0 = field.level_counts[0]
     if field.levels == 1 or n0 == 0:
         return field.bounds
-    c = decode_codes(field.codes[:n0]).numpy()
+    c = decode_codes(field.codes[:n0], step=8).numpy()  # each octet: its first node's coordinates plus 0 or 1
     lo = np.array([c[:, k].min() for k in range(3)], dtype=np.float64)
-    hi = np.array([c[:, k].max() + 1 for k in range(3)], dtype=np.float64)
+    hi = np.array([c[:, k].max() + 2 for k in range(3)], dtype=np.float64)
     return field.origin + lo * field.voxel_size, field.origin + hi * field.voxel_size
 
 
