@@ -22,7 +22,7 @@ import warp.geometry
 
 from . import octree, parallel
 from .blends import BLEND_MODES, chamfer_needs, sdf_combine
-from .octree import code_bits, level_layout, node_center
+from .octree import code_bits, level_layout, morton_decode, node_center
 from .operands import (
     blend_sample,
     estimate,
@@ -52,7 +52,7 @@ def _combine_nodes_kernel(
     b_aligned: int,
     a_offset: wp.vec3i,
     b_offset: wp.vec3i,
-    coords: wp.array[wp.vec3i],
+    codes: wp.array[wp.int64],
     first: int,
     end: int,
     group: int,
@@ -90,7 +90,7 @@ def _combine_nodes_kernel(
     ids_b = vec27i()
     levels_b = vec27i()
     for i in range(i0, i1):
-        c = coords[i]
+        c = morton_decode(codes[i])
         x = node_center(origin, spacing, c)
         # Exact node values where the lattices align; elsewhere a cheap bracket from the containing coarse leaf, and
         # the MLS sample only when that operand can decide the result (its bracket overlaps the other's within
@@ -286,11 +286,11 @@ def combine(
     )
     timings["finest_prune"] = time.perf_counter() - t0
     # every node's place first, so the finest values are computed where they are kept
-    layout = level_layout(octets, top_dims, levels, device, timings)
+    layout = level_layout(octets, top_dims, levels, device, timings, lean=True)
 
     no_octets = wp.empty(0, dtype=wp.int32, device=device)
 
-    def run(coords, lo_, hi_, spacing_, proj, source, values, tri):
+    def run(codes, lo_, hi_, spacing_, proj, source, values, tri):
         finest = spacing_ == h
         flags = [int(aligned[0] and finest), int(aligned[1] and finest)]
         octet_args = [
@@ -309,7 +309,7 @@ def combine(
                 *flags,
                 offs[0],
                 offs[1],
-                coords,
+                codes,
                 lo_ + group * start,
                 min(hi_, lo_ + group * (start + n)),
                 group,
@@ -339,7 +339,7 @@ def combine(
     tri = wp.empty(int(offsets[1]), dtype=wp.int32, device=device)
     for k in range(levels):
         tk = time.perf_counter()
-        run(layout["coords"], int(offsets[k]), int(offsets[k + 1]), h * 2**k, proj, source, values, tri)
+        run(layout["codes"], int(offsets[k]), int(offsets[k + 1]), h * 2**k, proj, source, values, tri)
         timings["finest_values" if k == 0 else "top_level" if k == levels - 1 else f"level_{k}"] = (
             time.perf_counter() - tk
         )

@@ -54,6 +54,9 @@ from .quadric import (
     vec10,
 )
 
+# A vertex's plane quadric as the quads need it (which diagonal to split along): half floats, 20 bytes a vertex.
+vec10h = wp.types.vector(length=10, dtype=wp.float16)
+
 # Eigenvalues of a patch's plane quadric below this fraction of the largest are dropped (Ju et al. truncate singular
 # values below 0.1; the eigenvalues of A^T A are their squares): normals less than about 16 degrees apart make no
 # crease.
@@ -176,7 +179,7 @@ def _place_vertices_kernel(
     verts: wp.array[wp.vec3],
     ranks: wp.array[wp.int32],
     cells: wp.array[wp.int32],
-    quadrics: wp.array[vec10],
+    quadrics: wp.array[vec10h],
     cube_info: wp.array[wp.vec2i],
 ):
     """One vertex per patch of cube ``first + tid``: its plane quadric (node planes, or crossing planes where a
@@ -334,9 +337,9 @@ def _place_vertices_kernel(
                         rank = 1
                     else:
                         x, rank, own = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
-            quadrics[vid] = pack_quadric(ata, atb, btb, x, 1.0 / planes)
+            quadrics[vid] = vec10h(pack_quadric(ata, atb, btb, x, 1.0 / planes))
         else:
-            quadrics[vid] = vec10()
+            quadrics[vid] = vec10h()
         verts[vid] = corner + spacing * x
         ranks[vid] = rank
         cells[vid] = cube
@@ -349,29 +352,25 @@ def _place_vertices_kernel(
 def _quads_kernel(
     first: int,
     cube_corners: wp.array2d[wp.int32],
-    values: wp.array[wp.float32],
     cube_of_node: wp.array[wp.int32],
     cube_info: wp.array[wp.vec2i],
     patch_of_edge: wp.array[wp.int32],
     quad_scan: wp.array[wp.int32],
     verts: wp.array[wp.vec3],
-    quadrics: wp.array[vec10],
+    quadrics: wp.array[vec10h],
     inv: float,
     min_area: float,
     second: wp.array[wp.int32],
-    codes: wp.array[wp.int64],
-    origin: wp.vec3,
     tris: wp.array2d[wp.int32],
-    tunnel: wp.array[wp.int32],
-    tunnel_point: wp.array[wp.vec3],
+    tunnel: wp.array[wp.uint8],
 ):
     """The quads of the crossed edges whose four cubes cube ``first + tid`` completes as the one below both other
     axes (each crossed edge has exactly one such cube), as two triangles, outward, split along the diagonal whose
     midpoint its two vertices' planes fit best; -1 rows where one of the four cubes is missing (the band's edge).
     Where two of its cubes meet across a face that each crosses with one patch in two segments and its edge lies in
     the second segment (``tunnel_tables``), the quad's ``tunnel`` entry has that side's bit (its sides numbered from
-    its first vertex as written) and its edge's crossing point goes to ``tunnel_point``: such sides get a vertex of
-    their own (see :func:`.meshcheck.open_tunnels`)."""
+    its first vertex as written; bits 4-5: the edge's axis, for :func:`_tunnel_points_kernel`): such sides get a
+    vertex of their own (see :func:`.meshcheck.open_tunnels`)."""
     cube = first + wp.tid()
     out = int(0)
     if cube > 0:
@@ -396,7 +395,7 @@ def _quads_kernel(
         quad = out + count
         row = 2 * quad
         count += 1
-        tunnel[quad] = 0
+        tunnel[quad] = wp.uint8(0)
         if complete == 0:
             for k in range(3):
                 tris[row, k] = -1
@@ -423,14 +422,7 @@ def _quads_kernel(
             sides = ((sides & 1) << 3) | ((sides & 2) << 1) | ((sides & 4) >> 1) | ((sides & 8) >> 3)
         if sides != 0:
             # written in order and split along q0-q2, for _open_tunnels to rebuild around the sides' new vertices
-            v0 = values[cube_corners[cube, ea]]
-            v1 = values[cube_corners[cube, eb]]
-            n_a = morton_decode(codes[cube_corners[cube, ea]])
-            x_a = origin + (wp.vec3(float(n_a[0]), float(n_a[1]), float(n_a[2])) + wp.vec3(0.5)) / inv
-            x_b = x_a
-            x_b[a] = x_b[a] + 1.0 / inv
-            tunnel[quad] = sides
-            tunnel_point[quad] = x_a + (v0 / (v0 - v1)) * (x_b - x_a)
+            tunnel[quad] = wp.uint8(sides | (a << 4))
             tris[row, 0] = q0
             tris[row, 1] = q1
             tris[row, 2] = q2
@@ -450,8 +442,8 @@ def _quads_kernel(
         # the diagonal whose midpoint its two vertices' planes fit best, unless that folds a triangle the other does not
         m02 = 0.5 * (p0 + p2)
         m13 = 0.5 * (p1 + p3)
-        e02 = quadric_at(quadrics[q0], (m02 - p0) * inv) + quadric_at(quadrics[q2], (m02 - p2) * inv)
-        e13 = quadric_at(quadrics[q1], (m13 - p1) * inv) + quadric_at(quadrics[q3], (m13 - p3) * inv)
+        e02 = quadric_at(vec10(quadrics[q0]), (m02 - p0) * inv) + quadric_at(vec10(quadrics[q2]), (m02 - p2) * inv)
+        e13 = quadric_at(vec10(quadrics[q1]), (m13 - p1) * inv) + quadric_at(vec10(quadrics[q3]), (m13 - p3) * inv)
         split02 = e02 <= e13
         if split02 and area02 < min_area and area13 > area02:
             split02 = False
@@ -471,6 +463,33 @@ def _quads_kernel(
             tris[row + 1, 0] = q1
             tris[row + 1, 1] = q2
             tris[row + 1, 2] = q3
+
+
+@wp.kernel(enable_backward=False)
+def _tunnel_points_kernel(
+    cube_of_quad: wp.array[wp.int32],
+    axis_of_quad: wp.array[wp.int32],
+    cube_corners: wp.array2d[wp.int32],
+    values: wp.array[wp.float32],
+    codes: wp.array[wp.int64],
+    origin: wp.vec3,
+    spacing: float,
+    points: wp.array[wp.vec3],
+):
+    """The crossing point of the edge of flagged quad ``tid`` (its cube and axis): where :func:`_quads_kernel` flags
+    a tunnel side, :func:`.meshcheck.open_tunnels` puts a vertex between such crossings (a handful of quads; stored
+    for those alone)."""
+    t = wp.tid()
+    cube = cube_of_quad[t]
+    a = axis_of_quad[t]
+    ea, eb = quad_ends(a)
+    v0 = values[cube_corners[cube, ea]]
+    v1 = values[cube_corners[cube, eb]]
+    n_a = morton_decode(codes[cube_corners[cube, ea]])
+    x_a = origin + (wp.vec3(float(n_a[0]), float(n_a[1]), float(n_a[2])) + wp.vec3(0.5)) * spacing
+    x_b = x_a
+    x_b[a] = x_b[a] + spacing
+    points[t] = x_a + (v0 / (v0 - v1)) * (x_b - x_a)
 
 
 def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0):
@@ -512,10 +531,11 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
     wp.utils.array_scan(quad_counts, quad_scan, inclusive=True)
     n_verts = int(vertex_start[-1:].numpy()[0])
     n_quads = int(quad_scan[-1:].numpy()[0])
+    quad_counts = None  # (arrays are let go as soon as they are used: the peak of a large extraction is here)
     verts = wp.empty(n_verts, dtype=wp.vec3, device=device)
     ranks = wp.empty(n_verts, dtype=wp.int32, device=device)
     cells = wp.empty(n_verts, dtype=wp.int32, device=device)
-    quadrics = wp.empty(n_verts, dtype=vec10, device=device)
+    quadrics = wp.empty(n_verts, dtype=vec10h, device=device)  # only to choose each quad's diagonal: half floats
     cube_info = wp.empty(m, dtype=wp.vec2i, device=device)
     origin_wp = wp.vec3(*(float(x) for x in origin))
     launch_split(
@@ -551,16 +571,15 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         device,
         balance=True,
     )
+    vertex_start = below = None
     tris = wp.empty((2 * n_quads, 3), dtype=wp.int32, device=device)
-    tunnel = wp.empty(n_quads, dtype=wp.int32, device=device)
-    tunnel_point = wp.empty(n_quads, dtype=wp.vec3, device=device)
+    tunnel = wp.empty(n_quads, dtype=wp.uint8, device=device)
     launch_split(
         _quads_kernel,
         m,
         lambda s, c: [
             s,
             cube_corners,
-            values,
             cube_of_node,
             cube_info,
             tables["patch_of_edge"],
@@ -570,11 +589,8 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
             1.0 / float(spacing),
             MIN_SPLIT_AREA,
             tables["second"],
-            codes,
-            origin_wp,
             tris,
             tunnel,
-            tunnel_point,
         ],
         device,
     )
@@ -585,10 +601,29 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         "cells": cells.numpy(),
         "tunnels": 0,
     }
+    quadrics = cube_info = None
     tunnel_np = tunnel.numpy()
-    if tunnel_np.any():
-        flagged = np.flatnonzero(tunnel_np)
-        open_tunnels(surface, flagged, tunnel_np[flagged], tunnel_point.numpy()[flagged])
+    flagged = np.flatnonzero(tunnel_np)
+    if len(flagged):
+        flags = tunnel_np[flagged].astype(np.int64)
+        cube_of_quad = np.searchsorted(quad_scan.numpy(), flagged, side="right").astype(np.int32)
+        points = wp.empty(len(flagged), dtype=wp.vec3, device=device)
+        wp.launch(
+            _tunnel_points_kernel,
+            dim=len(flagged),
+            inputs=[
+                wp.array(cube_of_quad, dtype=wp.int32, device=device),
+                wp.array((flags >> 4).astype(np.int32), dtype=wp.int32, device=device),
+                cube_corners,
+                values,
+                codes,
+                origin_wp,
+                float(spacing),
+            ],
+            outputs=[points],
+            device=device,
+        )
+        open_tunnels(surface, flagged, flags & 15, points.numpy())
     tris_np = surface["tris"]
     if len(tris_np) and tris_np[:, 0].min() < 0:  # quads at the band's edge, where a cube is missing (open surface)
         surface["tris"] = tris_np[tris_np[:, 0] >= 0]

@@ -283,13 +283,15 @@ def _shift_codes_kernel(first: int, codes: wp.array[wp.int64], shift: int, out: 
 def _expand_octets_kernel(
     first: int, octets: wp.array[wp.int64], codes: wp.array[wp.int64], coords: wp.array[wp.vec3i]
 ):
-    """Each octet code (a parent) becomes its 8 children, in Morton order. Octet ``first + tid``."""
+    """Each octet code (a parent) becomes its 8 children, in Morton order (``coords`` empty: codes alone). Octet
+    ``first + tid``."""
     i = first + wp.tid()
     base = octets[i] << wp.int64(3)
     for o in range(8):
         m = base | wp.int64(o)
         codes[8 * i + int(o)] = m
-        coords[8 * i + int(o)] = morton_decode(m)
+        if coords.shape[0] > 0:
+            coords[8 * i + int(o)] = morton_decode(m)
 
 
 @wp.kernel(enable_backward=False)
@@ -331,10 +333,11 @@ def parent_octets(codes: wp.array, levels_up: int, end_bit: int, *, presorted: b
 
 @wp.kernel(enable_backward=False)
 def _dense_level_kernel(dims: wp.vec3i, codes: wp.array[wp.int64], coords: wp.array[wp.vec3i]):
-    """Node ``tid`` of a dense level in x-fastest order: its coordinates and Morton code."""
+    """Node ``tid`` of a dense level in x-fastest order: its coordinates (``coords`` empty: none) and Morton code."""
     i = wp.tid()
     c = wp.vec3i(i % dims[0], (i // dims[0]) % dims[1], i // (dims[0] * dims[1]))
-    coords[i] = c
+    if coords.shape[0] > 0:
+        coords[i] = c
     codes[i] = morton_encode(c)
 
 
@@ -355,12 +358,14 @@ def _link_octets_kernel(
     parent_lo: int,
     top_dims: wp.vec3i,
     child: wp.array[wp.int32],
+    child_base: int,
     parent: wp.array[wp.int32],
 ):
     """Octet ``first + tid`` of a level (its 8 nodes from ``child_lo``, in octet order) and the node it is the
     children of on the level above (from ``parent_lo``): there node 8 * ``parent_index`` + its octant, where that
     level is sparse (built from its parents' sorted codes, see :func:`parent_octets`), or its place in the dense top
-    level (x fastest; ``parent_index`` empty)."""
+    level (x fastest; ``parent_index`` empty). The parent's link goes to ``child[p - child_base]``; ``parent``
+    empty: no links up."""
     i = first + wp.tid()
     code = octets[i]
     p = int(0)
@@ -369,9 +374,10 @@ def _link_octets_kernel(
     else:
         q = morton_decode(code)
         p = parent_lo + q[0] + top_dims[0] * (q[1] + top_dims[1] * q[2])
-    child[p] = child_lo + 8 * i
-    for o in range(8):
-        parent[child_lo + 8 * i + o] = p
+    child[p - child_base] = child_lo + 8 * i
+    if parent.shape[0] > 0:
+        for o in range(8):
+            parent[child_lo + 8 * i + o] = p
 
 
 @wp.kernel(enable_backward=False)
@@ -529,14 +535,15 @@ def code_bits(dims) -> int:
     return max(1, int(np.ceil(np.log2(float(np.max(dims)) + 1.0))))
 
 
-def level_layout(octets, top_dims, levels: int, device, timings: dict | None = None) -> dict:
+def level_layout(octets, top_dims, levels: int, device, timings: dict | None = None, *, lean: bool = False) -> dict:
     """Where every node of a field goes, before any value is computed.
 
     The finest level is the children of ``octets`` (sorted unique octet codes), or with ``octets`` None (and
     ``levels`` 1) the dense top level itself. Each level above holds the parents of the level below and their
     siblings (Eq. 6), sorted by code; the top level is dense. Returns ``codes`` and ``coords`` of all levels in one
     pair of arrays (finest first), the level ``offsets``, each node's first ``child`` and ``parent`` (-1: none), and
-    ``top_dims``.
+    ``top_dims``. ``lean``: only what a finished field keeps (codes, and child links of the coarse nodes alone, as
+    ``AdaptiveField.child``); ``coords`` and ``parent`` are None: 16 bytes a node less at the peak of a boolean.
     """
     t0 = time.perf_counter()
     top_dims = np.asarray(top_dims, dtype=np.int64)
@@ -556,13 +563,14 @@ def level_layout(octets, top_dims, levels: int, device, timings: dict | None = N
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     n = int(offsets[-1])
     codes = wp.empty(n, dtype=wp.int64, device=device)
-    coords = wp.empty(n, dtype=wp.vec3i, device=device)
+    coords = wp.empty(0 if lean else n, dtype=wp.vec3i, device=device)
     for k, o in enumerate(level_octets):
         lo, hi = int(offsets[k]), int(offsets[k + 1])
-        expand_octets(o, codes[lo:hi], coords[lo:hi])
-    dense_level(top_dims, codes[int(offsets[-2]) :], coords[int(offsets[-2]) :])
-    child = wp.full(n, -1, dtype=wp.int32, device=device)
-    parent = wp.full(n, -1, dtype=wp.int32, device=device)
+        expand_octets(o, codes[lo:hi], coords[lo:hi] if not lean else coords)
+    dense_level(top_dims, codes[int(offsets[-2]) :], coords[int(offsets[-2]) :] if not lean else coords)
+    child_base = int(offsets[1]) if lean else 0  # lean: the finest level has no children to link
+    child = wp.full(n - child_base, -1, dtype=wp.int32, device=device)
+    parent = wp.full(0 if lean else n, -1, dtype=wp.int32, device=device)
     dims_v = wp.vec3i(*(int(d) for d in top_dims))
     for k, o in enumerate(level_octets):
         parallel.launch_split(
@@ -576,6 +584,7 @@ def level_layout(octets, top_dims, levels: int, device, timings: dict | None = N
                 int(offsets[k + 1]),
                 dims_v,
                 child,
+                child_base,
                 parent,
             ],
             device,
@@ -584,9 +593,9 @@ def level_layout(octets, top_dims, levels: int, device, timings: dict | None = N
         timings["levels_structure"] = timings.get("levels_structure", 0.0) + time.perf_counter() - t0
     return {
         "codes": codes,
-        "coords": coords,
+        "coords": None if lean else coords,
         "offsets": offsets,
         "child": child,
-        "parent": parent,
+        "parent": None if lean else parent,
         "top_dims": top_dims,
     }
