@@ -11,10 +11,11 @@ from .build import build_field, build_fields
 from .errors import AasdfError
 from .field import AdaptiveField
 from .fieldops import offset, shell
-from .plan import check_meshes, plan_field
+from .plan import check_meshes, plan_field, tune_allocator
 from .redistancing import redistance
 
 kernels.configure_modules(__name__)
+tune_allocator()  # large arrays back to the system when freed (see plan.MMAP_THRESHOLD)
 
 __all__ = [
     "AasdfError",

@@ -63,7 +63,7 @@ def _combine_nodes_kernel(
     mode: int,
     walk: wp.vec2i,
     precise: int,
-    proj: wp.array[wp.vec3],
+    proj: wp.array[wp.vec3h],
     source: wp.array[wp.int32],
     values: wp.array[wp.float32],
     tri: wp.array[wp.int32],
@@ -179,7 +179,7 @@ def _combine_nodes_kernel(
             node = ja
             leaf = leaf_a[0]
         g = wp.vec3(r[1], r[2], r[3])
-        proj[i] = x - r[0] * g
+        proj[i] = wp.vec3h(-r[0] * g / spacing)  # the closest point x - phi g, as an offset from x in spacings
         values[i] = phi
         if precise == 0:  # a coarse node: signed zero is positive (no surface to take a side of)
             values[i] = wp.where(phi < 0.0, -1.0, 1.0) * wp.abs(phi)
@@ -333,7 +333,7 @@ def combine(
     # operands' own nodes there or their leaves extrapolated (Eq. 8 per node: a result is a field like any other).
     offsets = layout["offsets"]
     n = int(offsets[-1])
-    proj = wp.empty(n, dtype=wp.vec3, device=device)
+    proj = wp.empty(n, dtype=wp.vec3h, device=device)
     source = wp.empty(n, dtype=wp.int32, device=device)
     values = wp.empty(n, dtype=wp.float32, device=device)
     tri = wp.empty(int(offsets[1]), dtype=wp.int32, device=device)

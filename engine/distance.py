@@ -295,6 +295,7 @@ def finest_distances(
     if previous is not None:
         launch_split(_take_known_triangles_kernel, n0, lambda s, _n: [s, prev_index, previous.tri, tri], device)
         no_known = wp.empty(0, dtype=wp.int32, device=device)
+        prev_points = previous.closest_points
         launch_split(
             take_known_kernel,
             n0,
@@ -302,7 +303,7 @@ def finest_distances(
                 s,
                 prev_index,
                 previous.values,
-                previous.proj,
+                prev_points,
                 previous.source,
                 no_known,
                 dist0,

@@ -34,6 +34,7 @@ from .marching import (
     quad_corner,
     quad_edge,
     quad_ends,
+    tunnel_points,
     tunnel_tables,
 )
 from .meshcheck import open_tunnels
@@ -160,7 +161,7 @@ def _place_vertices_kernel(
     cube_corners: wp.array2d[wp.int32],
     values: wp.array[wp.float32],
     codes: wp.array[wp.int64],
-    proj: wp.array[wp.vec3],
+    proj: wp.array[wp.vec3h],
     origin: wp.vec3,
     spacing: float,
     iso: float,
@@ -212,8 +213,8 @@ def _place_vertices_kernel(
     weights = vec8()
     state = wp.vector(0, 0, 0, 0, 0, 0, 0, 0, length=8, dtype=int)
     for c in range(8):
-        q = (proj[ids[c]] - corner) * inv
-        d = cube_corner(c) - q
+        d = -wp.vec3(proj[ids[c]])  # from the closest point to the node, in voxels
+        q = cube_corner(c) - d
         dl = wp.length(d)
         r = vals[c] + iso
         good = wp.abs(dl - wp.abs(r) * inv) <= tolerance
@@ -465,33 +466,6 @@ def _quads_kernel(
             tris[row + 1, 2] = q3
 
 
-@wp.kernel(enable_backward=False)
-def _tunnel_points_kernel(
-    cube_of_quad: wp.array[wp.int32],
-    axis_of_quad: wp.array[wp.int32],
-    cube_corners: wp.array2d[wp.int32],
-    values: wp.array[wp.float32],
-    codes: wp.array[wp.int64],
-    origin: wp.vec3,
-    spacing: float,
-    points: wp.array[wp.vec3],
-):
-    """The crossing point of the edge of flagged quad ``tid`` (its cube and axis): where :func:`_quads_kernel` flags
-    a tunnel side, :func:`.meshcheck.open_tunnels` puts a vertex between such crossings (a handful of quads; stored
-    for those alone)."""
-    t = wp.tid()
-    cube = cube_of_quad[t]
-    a = axis_of_quad[t]
-    ea, eb = quad_ends(a)
-    v0 = values[cube_corners[cube, ea]]
-    v1 = values[cube_corners[cube, eb]]
-    n_a = morton_decode(codes[cube_corners[cube, ea]])
-    x_a = origin + (wp.vec3(float(n_a[0]), float(n_a[1]), float(n_a[2])) + wp.vec3(0.5)) * spacing
-    x_b = x_a
-    x_b[a] = x_b[a] + spacing
-    points[t] = x_a + (v0 / (v0 - v1)) * (x_b - x_a)
-
-
 def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0):
     """Dual marching cubes over active cubes, each vertex at its patch's plane-quadric minimiser within its cube.
 
@@ -502,7 +476,8 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
             is its distance to its closest point).
         codes: (N,) int64 Warp array of the nodes' Morton codes (node at ``origin + (c + 0.5) * spacing``, c its
             lattice coordinates).
-        proj: (N,) vec3 Warp array of each node's closest point on the surface its value came from.
+        proj: (N,) vec3h Warp array of each node's closest point on the surface its value came from, as a field keeps
+            it (the offset from the node in voxels, :func:`.sampling.stored_proj`).
         origin: (3,) world position of lattice point (0, 0, 0)'s cell minimum.
         spacing: Lattice spacing.
         iso: Level extracted (planes are moved by it along their normals).
@@ -605,25 +580,8 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
     tunnel_np = tunnel.numpy()
     flagged = np.flatnonzero(tunnel_np)
     if len(flagged):
-        flags = tunnel_np[flagged].astype(np.int64)
-        cube_of_quad = np.searchsorted(quad_scan.numpy(), flagged, side="right").astype(np.int32)
-        points = wp.empty(len(flagged), dtype=wp.vec3, device=device)
-        wp.launch(
-            _tunnel_points_kernel,
-            dim=len(flagged),
-            inputs=[
-                wp.array(cube_of_quad, dtype=wp.int32, device=device),
-                wp.array((flags >> 4).astype(np.int32), dtype=wp.int32, device=device),
-                cube_corners,
-                values,
-                codes,
-                origin_wp,
-                float(spacing),
-            ],
-            outputs=[points],
-            device=device,
-        )
-        open_tunnels(surface, flagged, flags & 15, points.numpy())
+        points = tunnel_points(flagged, tunnel_np[flagged], quad_scan, cube_corners, values, codes, origin_wp, spacing)
+        open_tunnels(surface, flagged, tunnel_np[flagged] & 15, points)
     tris_np = surface["tris"]
     if len(tris_np) and tris_np[:, 0].min() < 0:  # quads at the band's edge, where a cube is missing (open surface)
         surface["tris"] = tris_np[tris_np[:, 0] >= 0]

@@ -23,7 +23,7 @@ from .octree import decode_codes
 from .placement import Placement
 from .plan import available_memory
 from .quadric import crease_edges
-from .sampling import FieldArg, face_nodes_kernel, sample_field_kernel, source_ids_kernel
+from .sampling import FieldArg, code_proj, face_nodes_kernel, sample_field_kernel, source_ids_kernel
 
 
 @wp.kernel(enable_backward=False)
@@ -38,7 +38,9 @@ class AdaptiveField:
 
     Levels are stored finest first and concatenated; ``level_offsets[k]:level_offsets[k+1]`` is level ``k``.
     Intermediate levels are sorted by Morton code; the top level is dense in x-fastest order. ``encloses_volume``
-    says whether it has an inside at all.
+    says whether it has an inside at all. A node keeps its Morton code (8 bytes), value (4), closest point (``proj``,
+    6: a half-float offset from the node; ``closest_points`` decodes them) and source id (4); a coarse node its first
+    child (4), a finest node its closest triangle (4).
     """
 
     def __init__(
@@ -100,14 +102,17 @@ class AdaptiveField:
     ):
         """The field whose nodes are placed by ``layout`` (:func:`.octree.level_layout`: codes, coordinates, level
         offsets, child links, top-level dims) with these (N,) node arrays: ``values`` float32 signed distances,
-        ``proj`` vec3 closest surface points, ``source`` int32 ids of the operand each node's value came from;
-        ``sources`` maps field ids to the :class:`.sources.SourceMesh` each was built from, ``triangles`` (N0,) int32
-        gives each finest node's closest triangle there (None: not known)."""
+        ``proj`` vec3 closest surface points (or vec3h offsets, as the field keeps them: see ``closest_points``),
+        ``source`` int32 ids of the operand each node's value came from; ``sources`` maps field ids to the
+        :class:`.sources.SourceMesh` each was built from, ``triangles`` (N0,) int32 gives each finest node's closest
+        triangle there (None: not known)."""
         offsets = np.asarray(layout["offsets"], dtype=np.int64)
         child = layout["child"]
         n0 = int(offsets[1])
         if child.shape[0] == offsets[-1]:  # a layout's links of every node: the finest level has none to keep
             child = wp.clone(child[n0:]) if n0 < child.shape[0] else wp.empty(0, dtype=wp.int32, device=child.device)
+        if proj.dtype == wp.vec3:  # points: kept as offsets from their nodes
+            proj = code_proj(layout["codes"], offsets, origin, voxel_size, points=proj)
         return cls(
             voxel_size=voxel_size,
             levels=len(offsets) - 1,
@@ -226,6 +231,11 @@ class AdaptiveField:
     def coords(self) -> wp.array:
         """(N,) vec3i lattice coordinates of every node on its level, decoded from the codes (not kept)."""
         return decode_codes(self.codes)
+
+    @property
+    def closest_points(self) -> wp.array:
+        """(N,) vec3 closest surface point of every node (the field's frame), decoded from ``proj`` (not kept)."""
+        return code_proj(self.codes, self.level_offsets, self.origin, self.voxel_size, stored=self.proj)
 
     @property
     def encloses_volume(self) -> bool:
@@ -540,21 +550,14 @@ class AdaptiveField:
             if cubes is not None and cubes["order"] is not None:
                 order = cubes["order"]
                 codes = wp.array(self.codes.numpy()[order], dtype=wp.int64, device=self.device)
-                proj = wp.array(self.proj.numpy()[order], dtype=wp.vec3, device=self.device)
+                proj = wp.array(self.proj.numpy()[order], dtype=wp.vec3h, device=self.device)
         else:
             cubes = octree_level_cubes(codes, values, self.tree, origin=self.origin, spacing=self.voxel_size, iso=iso)
         if cubes is None:
             verts, tris = empty_mesh()
             return verts, tris, np.zeros((0, 2), dtype=np.int32)
-        surface = contour_dual(
-            cubes["cube_corners"],
-            cubes["shifted"],
-            codes,
-            proj,
-            origin=self.origin,
-            spacing=self.voxel_size,
-            iso=iso,
-        )
+        corners, shifted = cubes["cube_corners"], cubes["shifted"]
+        surface = contour_dual(corners, shifted, codes, proj, origin=self.origin, spacing=self.voxel_size, iso=iso)
         verts, tris = surface["verts"], surface["tris"]
         if not creases:
             return verts, tris, np.zeros((0, 2), dtype=np.int32)
@@ -566,14 +569,8 @@ class AdaptiveField:
             return extract_surface(
                 self.coords.numpy(), self.values.numpy(), origin=self.origin, spacing=self.voxel_size, iso=iso
             )
-        return extract_octree_level(
-            self.codes[:n0],
-            self.values[:n0],
-            self.tree,
-            origin=self.origin,
-            spacing=self.voxel_size,
-            iso=iso,
-        )
+        codes, values = self.codes[:n0], self.values[:n0]
+        return extract_octree_level(codes, values, self.tree, origin=self.origin, spacing=self.voxel_size, iso=iso)
 
     def in_frame(self) -> AdaptiveField:
         """This field in its own frame (unplaced): the same arrays."""

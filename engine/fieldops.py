@@ -34,6 +34,7 @@ from .sampling import (
     locate_node,
     node_coords,
     sample_mls,
+    stored_proj,
 )
 
 KIND_OFFSET, KIND_INSIDE, KIND_OUTSIDE, KIND_CENTER = 0, 1, 2, 3
@@ -90,8 +91,9 @@ def surface_distance(mesh: wp.uint64, f: FieldArg, signs: int, x: wp.vec3, reach
         node = locate_node(f, x, level)
         if node[1] == level and level < f.levels - 1 and inside_domain(f, x):
             s = level_spacing(f, level)
-            if wp.length(node_center(f.origin, s, node_coords(f, node[0])) - x) < 0.25 * s:
-                p = f.proj[node[0]]
+            centre = node_center(f.origin, s, node_coords(f, node[0]))
+            if wp.length(centre - x) < 0.25 * s:
+                p = stored_proj(f, node[0], centre, s)
                 return wp.length(x - p) * side_of(f, x), p, True
         d, p = closest_stored_point(f, x)
         return d * side_of(f, x), p, True
@@ -317,7 +319,7 @@ def _empty_field_arg(device) -> FieldArg:
     f = FieldArg()
     f.child = wp.empty(0, dtype=wp.int32, device=device)
     f.values = wp.empty(0, dtype=wp.float32, device=device)
-    f.proj = wp.empty(0, dtype=wp.vec3, device=device)
+    f.proj = wp.empty(0, dtype=wp.vec3h, device=device)
     f.source = wp.empty(0, dtype=wp.int32, device=device)
     f.codes = wp.empty(0, dtype=wp.int64, device=device)
     f.tri = wp.empty(0, dtype=wp.int32, device=device)

@@ -394,6 +394,7 @@ def solve_levels(
     # Coarse nodes an earlier build of the same mesh and domain has keep their distances (refinement rounds).
     known = wp.zeros(n, dtype=wp.int32, device=device)
     if previous is not None:
+        prev_points = previous.closest_points
         launch_split(
             take_known_kernel,
             n - n0,
@@ -401,7 +402,7 @@ def solve_levels(
                 n0 + s,
                 prev_index,
                 previous.values,
-                previous.proj,
+                prev_points,
                 previous.source,
                 known,
                 dist,

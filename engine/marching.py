@@ -14,6 +14,7 @@ import warp as wp
 import warp.geometry
 
 from .errors import AasdfError
+from .octree import morton_decode
 from .parallel import launch_split
 
 try:  # the marching-cubes core of Warp's sparse_marching_cubes_from_cells, given already shared corners
@@ -500,3 +501,55 @@ def quad_edge(k: int):
 def quad_ends(a: int):
     """The two corners (lower, upper) of the edge along axis ``a`` whose quad a cube writes."""
     return _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a), _unpack(_QENDS_LOW, _QENDS_HIGH, 3, 3, 2 * a + 1)
+
+
+@wp.kernel(enable_backward=False)
+def _tunnel_points_kernel(
+    cube_of_quad: wp.array[wp.int32],
+    axis_of_quad: wp.array[wp.int32],
+    cube_corners: wp.array2d[wp.int32],
+    values: wp.array[wp.float32],
+    codes: wp.array[wp.int64],
+    origin: wp.vec3,
+    spacing: float,
+    points: wp.array[wp.vec3],
+):
+    """The crossing point of the edge of flagged quad ``tid`` (its cube and axis): where :func:`.dual._quads_kernel`
+    flags a tunnel side, :func:`.meshcheck.open_tunnels` puts a vertex between such crossings."""
+    t = wp.tid()
+    cube = cube_of_quad[t]
+    a = axis_of_quad[t]
+    ea, eb = quad_ends(a)
+    v0 = values[cube_corners[cube, ea]]
+    v1 = values[cube_corners[cube, eb]]
+    n_a = morton_decode(codes[cube_corners[cube, ea]])
+    x_a = origin + (wp.vec3(float(n_a[0]), float(n_a[1]), float(n_a[2])) + wp.vec3(0.5)) * spacing
+    x_b = x_a
+    x_b[a] = x_b[a] + spacing
+    points[t] = x_a + (v0 / (v0 - v1)) * (x_b - x_a)
+
+
+def tunnel_points(quads, flags, quad_scan, cube_corners, values, codes, origin, spacing) -> np.ndarray:
+    """(Q, 3) crossing points of the edges of the dual contouring's flagged ``quads`` (``flags``: their tunnel bits,
+    the edge's axis in bits 4-5; ``quad_scan``: each cube's inclusive count of quads), computed for these alone (a
+    handful) rather than stored for every quad."""
+    device = cube_corners.device
+    flags = np.asarray(flags, dtype=np.int64)
+    cube_of_quad = np.searchsorted(quad_scan.numpy(), quads, side="right").astype(np.int32)
+    points = wp.empty(len(quads), dtype=wp.vec3, device=device)
+    wp.launch(
+        _tunnel_points_kernel,
+        dim=len(quads),
+        inputs=[
+            wp.array(cube_of_quad, dtype=wp.int32, device=device),
+            wp.array((flags >> 4).astype(np.int32), dtype=wp.int32, device=device),
+            cube_corners,
+            values,
+            codes,
+            origin,
+            float(spacing),
+        ],
+        outputs=[points],
+        device=device,
+    )
+    return points.numpy()

@@ -43,7 +43,7 @@ LEAF_SLACK = wp.constant(LEAF_TOLERANCE)
 @wp.func
 def _node_of(f: FieldArg, j: int, x: wp.vec3):
     """(1, phi, grad, j) of an operand's finest node ``j`` seen from ``x`` (its position)."""
-    g = x - f.proj[j]
+    g = -wp.vec3(f.proj[j])  # from its closest point to the node (in voxels)
     ln = wp.length(g)
     phi = f.values[j]
     if ln > 0.0:
@@ -189,7 +189,7 @@ def extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
     s = level_spacing(f, leaf[1])
     centre = node_center(f.origin, s, node_coords(f, leaf[0]))
     phi = f.values[leaf[0]]
-    n = centre - f.proj[leaf[0]]
+    n = -wp.vec3(f.proj[leaf[0]])  # from its closest point to the node
     ln = wp.length(n)
     g = wp.vec3(0.0)
     if ln > 0.0:

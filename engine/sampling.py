@@ -9,9 +9,11 @@ that covers it). Moving least squares fits ``phi = a + g . (x_i - x)`` with cubi
 
 from __future__ import annotations
 
+import numpy as np
 import warp as wp
 
 from .octree import morton_decode, node_center
+from .parallel import launch_split
 
 vec27i = wp.types.vector(length=27, dtype=wp.int32)
 
@@ -22,6 +24,11 @@ vec27i = wp.types.vector(length=27, dtype=wp.int32)
 # signs' empty balls stay within SIGN_SAFETY (a test checks), the booleans' brackets widen by it.
 LEAF_TOLERANCE = 0.05
 
+
+# A neighbour's prediction replaces the nearest so far only below this share of it: closest points kept in half
+# floats (:func:`stored_proj`) differ by up to 2^-11 of their distance, so neighbours sharing one closest point (a
+# vertex of the mesh) stay tied and the first keeps it, as with exact points.
+TIE_SHARE = wp.constant(1.0 - 2.0**-9)
 
 # Values of opposite signs at two nodes are distances to a surface between them only when they add up to no more than
 # the nodes' distance (1-Lipschitz); the slack allows for rounding and smooth blends.
@@ -41,7 +48,7 @@ class FieldArg:
     domain_max: wp.vec3
     child: wp.array[wp.int32]  # first child of each coarse node (node i at i - fine_count), -1: a leaf
     values: wp.array[wp.float32]
-    proj: wp.array[wp.vec3]
+    proj: wp.array[wp.vec3h]  # each node's closest point as an offset from its centre, in its level's spacings
     source: wp.array[wp.int32]
     codes: wp.array[wp.int64]
     fine_count: int
@@ -59,6 +66,21 @@ def node_coords(f: FieldArg, i: int) -> wp.vec3i:
     """Lattice coordinates of node ``i`` on its level, decoded from its Morton code (a field keeps no coordinates:
     12 bytes a node)."""
     return morton_decode(f.codes[i])
+
+
+@wp.func
+def stored_proj(f: FieldArg, i: int, centre: wp.vec3, spacing: float) -> wp.vec3:
+    """Node ``i``'s closest point (the field's frame) from its centre and its level's ``spacing``: a field keeps it as
+    a half-float offset from the centre in spacings (6 bytes a node; within 2^-11 of the distance, a finest node's
+    within 0.002 voxel)."""
+    return centre + spacing * wp.vec3(f.proj[i])
+
+
+@wp.func
+def node_proj(f: FieldArg, i: int, level: int) -> wp.vec3:
+    """Node ``i``'s closest point, its centre decoded from its code (``level``: its level)."""
+    s = level_spacing(f, level)
+    return stored_proj(f, i, node_center(f.origin, s, node_coords(f, i)), s)
 
 
 @wp.func
@@ -204,13 +226,13 @@ def coarse_mls(
     best = float(1.0e30)
     plane = float(1.0e30)
     for t in range(count):
-        # the nearest prediction of the neighbours the weight reaches: a neighbour's weight (its centre decoded, the
-        # spline) only where its prediction would be the nearest so far
-        p = f.proj[ids[t]]
+        # the nearest prediction of the neighbours the weight reaches
+        xn, w = _neighbour_weight(f, ids[t], levels[t], x, s)
+        p = stored_proj(f, ids[t], xn, level_spacing(f, levels[t]))
         r = x - p
         dist = wp.length(r)
-        if dist < best:
-            xn, w = _neighbour_weight(f, ids[t], levels[t], x, s)
+        # (nearer by more than the stored points' rounding: neighbours sharing a closest point keep the first)
+        if dist < best * TIE_SHARE:
             if w > 0.0:
                 best = dist
                 # the neighbour's surface normal: from its closest point towards the node
@@ -314,12 +336,14 @@ def _nearer(f: FieldArg, x: wp.vec3, q: wp.vec3, level: int, best: float, best_p
     the coarser leaf holding it), with that node's surface normal line (``best_n``, from its closest point to it)."""
     if inside_domain(f, q):
         node = locate_node(f, q, level)
-        p = f.proj[node[0]]
+        s = level_spacing(f, node[1])
+        centre = node_center(f.origin, s, node_coords(f, node[0]))
+        p = stored_proj(f, node[0], centre, s)
         d = wp.length(x - p)
         if d < best:
             best = d
             best_p = p
-            best_n = node_center(f.origin, level_spacing(f, node[1]), node_coords(f, node[0])) - p
+            best_n = centre - p
     return best, best_p, best_n
 
 
@@ -475,7 +499,8 @@ def sample_field_kernel(
         # Both are upper bounds of the distance and neither is below the distance to the domain box: the bound
         # through the clamped point, and the distance to the closest surface point stored at its leaf.
         through = wp.max(phi, 0.0) + out
-        direct = wp.length(x - f.proj[locate_leaf(f, xc)[0]])
+        at = locate_leaf(f, xc)
+        direct = wp.length(x - node_proj(f, at[0], at[1]))
         phi = wp.max(wp.min(through, direct), out)
         g = (x - xc) / out
     values[i] = phi
@@ -500,3 +525,51 @@ def face_nodes_kernel(f: FieldArg, corners: wp.array[wp.vec3], source: wp.array[
     tri[i] = -1
     if leaf[1] == 0 and f.tri.shape[0] > 0:
         tri[i] = f.tri[leaf[0]]
+
+
+@wp.kernel(enable_backward=False)
+def _code_proj_kernel(
+    first: int,
+    codes: wp.array[wp.int64],
+    offsets: wp.array[wp.int32],
+    origin: wp.vec3,
+    voxel_size: float,
+    encode: int,
+    points: wp.array[wp.vec3],
+    stored: wp.array[wp.vec3h],
+):
+    """Node ``first + tid``'s closest point between a point (``points``) and the half-float offset from its centre
+    in its level's spacings (``stored``): ``encode`` 1 from the first to the second, 0 back."""
+    i = first + wp.tid()
+    k = int(0)
+    while i >= offsets[k + 1]:
+        k += 1
+    s = voxel_size * float(1 << k)
+    centre = node_center(origin, s, morton_decode(codes[i]))
+    if encode == 1:
+        stored[i] = wp.vec3h((points[i] - centre) / s)
+    else:
+        points[i] = centre + s * wp.vec3(stored[i])
+
+
+def code_proj(codes, level_offsets, origin, voxel_size, *, points=None, stored=None):
+    """Closest points between world points and how a field keeps them (:func:`stored_proj`): given ``points`` (N,)
+    vec3, their (N,) vec3h offsets; given ``stored``, the (N,) vec3 points. ``codes``/``level_offsets``: the nodes'
+    Morton codes and the levels' offsets (finest first), ``origin``/``voxel_size`` the finest lattice."""
+    source = points if points is not None else stored
+    device = source.device
+    n = source.shape[0]
+    encode = int(points is not None)
+    if encode:
+        stored = wp.empty(n, dtype=wp.vec3h, device=device)
+    else:
+        points = wp.empty(n, dtype=wp.vec3, device=device)
+    offsets = wp.array(np.asarray(level_offsets, dtype=np.int32), dtype=wp.int32, device=device)
+    origin_v = wp.vec3(*(float(v) for v in origin))
+    launch_split(
+        _code_proj_kernel,
+        n,
+        lambda lo, _n: [lo, codes, offsets, origin_v, float(voxel_size), encode, points, stored],
+        device,
+    )
+    return stored if encode else points

@@ -592,8 +592,14 @@ def test_a_field_keeps_no_coordinates_and_decodes_them_from_its_codes():
     n, n0 = field.node_count, field.level_counts[0]
     held = [a for a in vars(field).values() if isinstance(a, wp.array)]
     assert not any(a.dtype == wp.vec3i for a in held)
-    # code 8, value 4, closest point 12, source 4 a node; a child link a coarse node, a closest triangle a finest one
-    assert sum(a.capacity for a in held) == 28 * n + 4 * (n - n0) + 4 * n0
+    # code 8, value 4, closest point 6 (half floats), source 4 a node; a child link a coarse node, a closest triangle
+    # a finest one
+    assert sum(a.capacity for a in held) == 22 * n + 4 * (n - n0) + 4 * n0
+    # the finest nodes' closest points, decoded, lie on the sphere (up to its facets) at their values' distance
+    points = field.closest_points.numpy()[:n0].astype(np.float64)
+    assert np.abs(np.linalg.norm(points, axis=1) - 1.0).max() < 0.01  # measured 0.0043
+    dist = np.linalg.norm(field.node_centers()[:n0] - points, axis=1)
+    assert np.abs(dist - np.abs(field.values.numpy()[:n0])).max() < 3e-3 * field.voxel_size  # measured 1.3e-3
     from engine.octree import morton_decode_np
 
     coords = field.coords.numpy()
@@ -991,3 +997,22 @@ def test_fields_are_freed_when_dropped_even_when_their_kernels_loaded_for_the_fi
         [sys.executable, "-c", _DROPPED], capture_output=True, text=True, cwd=ROOT, timeout=600, check=True
     )
     assert done.stdout.split()[-1] == "0", done.stdout
+
+
+def test_large_arrays_go_back_to_the_system_when_freed():
+    # the engine fixes glibc's mmap threshold (plan.MMAP_THRESHOLD): a freed 16 MB array leaves the process at once
+    # instead of staying in its heap (glibc's own threshold grows to the largest block freed, up to 32 MB)
+    from engine.plan import MMAP_THRESHOLD, tune_allocator
+
+    assert tune_allocator()  # Linux, glibc: set (again)
+    page = os.sysconf("SC_PAGE_SIZE")
+
+    def resident() -> int:
+        with open("/proc/self/statm", encoding="ascii") as handle:
+            return int(handle.read().split()[1]) * page
+
+    for _ in range(2):  # the second time after the first one's block was freed
+        block = wp.zeros(4 * MMAP_THRESHOLD // 4, dtype=wp.float32)  # 16 MB, touched
+        held = resident()
+        del block
+        assert held - resident() > 0.75 * 4 * MMAP_THRESHOLD

@@ -262,7 +262,7 @@ def test_random_fields_give_closed_2_manifolds(seed):
         cubes["cube_corners"],
         cubes["shifted"],
         wp.array(morton_encode_np(coords[order] - lo), dtype=wp.int64),
-        wp.array((coords[order] + 0.5).astype(np.float32), dtype=wp.vec3),  # no Hermite data: interpolant planes
+        wp.zeros(len(coords), dtype=wp.vec3h),  # closest points on the nodes: no Hermite data, interpolant planes
         origin=lo.astype(np.float64),
         spacing=1.0,
     )

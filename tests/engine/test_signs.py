@@ -204,9 +204,9 @@ def test_flat_surfaces_enclose_nothing(shape):
     points = verts[tris[rng.integers(0, len(tris), 500)]].mean(axis=1) + np.outer(rng.normal(0.0, h, 500), normal)
     exact = unsigned_distance(verts, tris, points.astype(np.float32))
     err = np.abs(field.sample(points) - exact) / h
-    # measured p99: 2.7e-5 voxel on the annulus (its nearest closest point is exact on a flat face), 0.28 on the
-    # alligator (its legs are a few voxels wide at / 64)
-    assert np.percentile(err, 99) <= (0.5 if shape == "alligator.obj" else 8e-5), np.percentile(err, 99)
+    # measured p99: 4.2e-4 voxel on the annulus (its nearest closest point is exact on a flat face, kept in half floats:
+    # within 2^-11 of its distance), 0.28 on the alligator (its legs are a few voxels wide at / 64)
+    assert np.percentile(err, 99) <= (0.5 if shape == "alligator.obj" else 1.2e-3), np.percentile(err, 99)
 
 
 def test_enclosing_nothing_is_proven_only_for_a_flat_sheet_covered_once():

@@ -140,7 +140,7 @@ def _level_solve(field, **solver_options):
     dist = wp.clone(field.values)
     n0 = field.level_counts[0]
     dist.assign(np.abs(field.values.numpy()))
-    proj, source = wp.clone(field.proj), wp.clone(field.source)
+    proj, source = field.closest_points, wp.clone(field.source)
     fim.solve_levels(
         0,
         layout,
