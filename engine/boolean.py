@@ -32,7 +32,7 @@ from .operands import (
 )
 from .plan import check_budget, plan_domain
 from .prune import offset_to, operand_octets, prune_octets
-from .sampling import FieldArg, clamp_to_domain, locate_leaf, to_frame, vec27i
+from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_source, to_frame, vec27i
 
 if TYPE_CHECKING:  # the field type imports this module for its operators
     from .field import AdaptiveField
@@ -187,7 +187,7 @@ def _combine_nodes_kernel(
             node = leaf
         if node < 0:
             node = locate_leaf(follow, clamp_to_domain(follow, to_frame(follow, x)))[0]
-        source[i] = follow.source[node]
+        source[i] = node_source(follow, node)
         if precise == 1:  # a finest node: the closest triangle of the operand's node the value came from
             tri[i] = -1
             if node < follow.fine_count and follow.tri.shape[0] > 0:

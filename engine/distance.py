@@ -295,7 +295,7 @@ def finest_distances(
     if previous is not None:
         launch_split(_take_known_triangles_kernel, n0, lambda s, _n: [s, prev_index, previous.tri, tri], device)
         no_known = wp.empty(0, dtype=wp.int32, device=device)
-        prev_points = previous.closest_points
+        prev_points, prev_sources = previous.closest_points, previous.node_sources()
         launch_split(
             take_known_kernel,
             n0,
@@ -304,7 +304,7 @@ def finest_distances(
                 prev_index,
                 previous.values,
                 prev_points,
-                previous.source,
+                prev_sources,
                 no_known,
                 dist0,
                 proj0,

@@ -70,8 +70,12 @@ class AdaptiveField:
         self.top_dims = np.asarray(top_dims, dtype=np.int64)
         self.level_offsets = np.asarray(level_offsets, dtype=np.int64)
         self.codes, self.values, self.proj = codes, values, proj
-        self.child, self.source = child, source
         self.field_ids = tuple(sorted(set(int(i) for i in field_ids)))
+        # (N,) int32 source id of every node; a field of one operand keeps its id alone (4 bytes a node less)
+        self.single_source = self.field_ids[0] if len(self.field_ids) == 1 else -1
+        if len(self.field_ids) == 1:
+            source = wp.empty(0, dtype=wp.int32, device=device)
+        self.child, self.source = child, source
         self.device = device
         self.timings = dict(timings or {})
         self.stats = dict(stats or {})
@@ -138,26 +142,11 @@ class AdaptiveField:
         field_id = int(field_id)
         if self.field_ids == (field_id,):
             return self
-        source = wp.full(self.source.shape[0], field_id, dtype=wp.int32, device=self.source.device)
-        relabelled = AdaptiveField.from_layout(
-            {
-                "offsets": self.level_offsets,
-                "top_dims": self.top_dims,
-                "codes": self.codes,
-                "child": self.child,
-            },
-            voxel_size=self.voxel_size,
-            origin=self.origin,
-            values=self.values,
-            proj=self.proj,
-            source=source,
-            field_ids=(field_id,),
-            timings=self.timings,
-            stats=self.stats,
-            sources={field_id: next(iter(self.sources.values()))} if len(self.sources) == 1 else None,
-            triangles=self.tri,
-        )
-        relabelled.placement = self.placement
+        relabelled = copy.copy(self)
+        relabelled.field_ids, relabelled.single_source = (field_id,), field_id
+        relabelled.source = wp.empty(0, dtype=wp.int32, device=self.device)  # one id: none kept per node
+        relabelled.sources = {field_id: next(iter(self.sources.values()))} if len(self.sources) == 1 else {}
+        relabelled.timings, relabelled.stats = dict(self.timings), dict(self.stats)
         return relabelled
 
     def transformed(self, matrix) -> AdaptiveField:
@@ -232,6 +221,12 @@ class AdaptiveField:
         """(N,) vec3i lattice coordinates of every node on its level, decoded from the codes (not kept)."""
         return decode_codes(self.codes)
 
+    def node_sources(self) -> wp.array:
+        """(N,) int32 source id of every node (made for a field of one operand, which keeps its id alone)."""
+        if self.source.shape[0] == 0:
+            return wp.full(self.node_count, self.single_source, dtype=wp.int32, device=self.device)
+        return self.source
+
     @property
     def closest_points(self) -> wp.array:
         """(N,) vec3 closest surface point of every node (the field's frame), decoded from ``proj`` (not kept)."""
@@ -286,6 +281,7 @@ class AdaptiveField:
         f.translation = wp.vec3(*(placed.translation if placed is not None else np.zeros(3)))
         f.scale = float(placed.scale if placed is not None else 1.0)
         f.child, f.values, f.source, f.proj = self.child, self.values, self.source, self.proj
+        f.single_source = self.single_source
         f.codes = self.codes
         f.fine_count = int(self.level_offsets[1])
         f.tri = self.tri if self.tri is not None else wp.empty(0, dtype=wp.int32, device=self.device)

@@ -33,6 +33,7 @@ from .sampling import (
     locate_leaf,
     locate_node,
     node_coords,
+    node_source,
     sample_mls,
     stored_proj,
 )
@@ -161,7 +162,7 @@ def _level_values_kernel(
     source[i] = source_id
     if signs == 1 and found:
         if inside_domain(f, p):
-            source[i] = f.source[locate_leaf(f, p)[0]]
+            source[i] = node_source(f, locate_leaf(f, p)[0])
 
 
 def level_reach(kind: int, a: float) -> float:
@@ -321,6 +322,7 @@ def _empty_field_arg(device) -> FieldArg:
     f.values = wp.empty(0, dtype=wp.float32, device=device)
     f.proj = wp.empty(0, dtype=wp.vec3h, device=device)
     f.source = wp.empty(0, dtype=wp.int32, device=device)
+    f.single_source = -1
     f.codes = wp.empty(0, dtype=wp.int64, device=device)
     f.tri = wp.empty(0, dtype=wp.int32, device=device)
     f.exact = 0

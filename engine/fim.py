@@ -394,7 +394,7 @@ def solve_levels(
     # Coarse nodes an earlier build of the same mesh and domain has keep their distances (refinement rounds).
     known = wp.zeros(n, dtype=wp.int32, device=device)
     if previous is not None:
-        prev_points = previous.closest_points
+        prev_points, prev_sources = previous.closest_points, previous.node_sources()
         launch_split(
             take_known_kernel,
             n - n0,
@@ -403,7 +403,7 @@ def solve_levels(
                 prev_index,
                 previous.values,
                 prev_points,
-                previous.source,
+                prev_sources,
                 known,
                 dist,
                 proj,

@@ -23,7 +23,7 @@ from .distance import finest_distances
 from .geometry import mesh_closest_point
 from .octree import find_key, level_layout, match_levels, morton_decode, morton_encode
 from .parallel import launch_split
-from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, locate_leaf
+from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, locate_leaf, node_source
 from .sweeping import solve_level
 
 # Finest octets are kept where some node is within this many voxels of the surface (as a boolean keeps them).
@@ -134,7 +134,7 @@ def _sign_and_source_kernel(
     if i < interface.shape[0]:
         if interface[i] == 1:
             values[i] = v * scale
-    source[i] = old.source[locate_leaf(old, clamp_to_domain(old, proj[i]))[0]]
+    source[i] = node_source(old, locate_leaf(old, clamp_to_domain(old, proj[i]))[0])
 
 
 def surface_mesh(field):

@@ -49,7 +49,8 @@ class FieldArg:
     child: wp.array[wp.int32]  # first child of each coarse node (node i at i - fine_count), -1: a leaf
     values: wp.array[wp.float32]
     proj: wp.array[wp.vec3h]  # each node's closest point as an offset from its centre, in its level's spacings
-    source: wp.array[wp.int32]
+    source: wp.array[wp.int32]  # empty: every node's source id is single_source
+    single_source: int
     codes: wp.array[wp.int64]
     fine_count: int
     tri: wp.array[wp.int32]  # per finest node, its closest point's triangle (empty: not known)
@@ -81,6 +82,14 @@ def node_proj(f: FieldArg, i: int, level: int) -> wp.vec3:
     """Node ``i``'s closest point, its centre decoded from its code (``level``: its level)."""
     s = level_spacing(f, level)
     return stored_proj(f, i, node_center(f.origin, s, node_coords(f, i)), s)
+
+
+@wp.func
+def node_source(f: FieldArg, i: int) -> int:
+    """Node ``i``'s source id (a field built from one mesh keeps one for all its nodes)."""
+    if f.source.shape[0] == 0:
+        return f.single_source
+    return f.source[i]
 
 
 @wp.func
@@ -511,7 +520,7 @@ def sample_field_kernel(
 def source_ids_kernel(f: FieldArg, points: wp.array[wp.vec3], ids: wp.array[wp.int32]):
     i = wp.tid()
     leaf = locate_leaf(f, clamp_to_domain(f, points[i]))
-    ids[i] = f.source[leaf[0]]
+    ids[i] = node_source(f, leaf[0])
 
 
 @wp.kernel(enable_backward=False)
@@ -521,7 +530,7 @@ def face_nodes_kernel(f: FieldArg, corners: wp.array[wp.vec3], source: wp.array[
     i = wp.tid()
     centre = (corners[3 * i] + corners[3 * i + 1] + corners[3 * i + 2]) / 3.0
     leaf = locate_leaf(f, clamp_to_domain(f, centre))
-    source[i] = f.source[leaf[0]]
+    source[i] = node_source(f, leaf[0])
     tri[i] = -1
     if leaf[1] == 0 and f.tri.shape[0] > 0:
         tri[i] = f.tri[leaf[0]]

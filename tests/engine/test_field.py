@@ -592,9 +592,16 @@ def test_a_field_keeps_no_coordinates_and_decodes_them_from_its_codes():
     n, n0 = field.node_count, field.level_counts[0]
     held = [a for a in vars(field).values() if isinstance(a, wp.array)]
     assert not any(a.dtype == wp.vec3i for a in held)
-    # code 8, value 4, closest point 6 (half floats), source 4 a node; a child link a coarse node, a closest triangle
-    # a finest one
-    assert sum(a.capacity for a in held) == 22 * n + 4 * (n - n0) + 4 * n0
+    # code 8, value 4, closest point 6 (half floats) a node (a field of one mesh keeps its source id once); a child
+    # link a coarse node, a closest triangle a finest one
+    assert field.single_source == field.field_id and field.source.shape[0] == 0
+    assert sum(a.capacity for a in held) == 18 * n + 4 * (n - n0) + 4 * n0
+    # a boolean's nodes keep theirs (4 bytes more): every node's, made on request, is its operand's id
+    other = field.relabel(7)
+    assert other.single_source == 7 and np.all(other.node_sources().numpy() == 7)
+    union = engine.union(field, other.transformed(np.diag([1.0, 1.0, 1.0, 1.0]) + np.eye(4, k=3) * 0.5))
+    assert union.source.shape[0] == union.node_count
+    assert set(np.unique(union.node_sources().numpy())) == {field.field_id, 7}
     # the finest nodes' closest points, decoded, lie on the sphere (up to its facets) at their values' distance
     points = field.closest_points.numpy()[:n0].astype(np.float64)
     assert np.abs(np.linalg.norm(points, axis=1) - 1.0).max() < 0.01  # measured 0.0043

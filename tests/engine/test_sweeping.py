@@ -140,7 +140,7 @@ def _level_solve(field, **solver_options):
     dist = wp.clone(field.values)
     n0 = field.level_counts[0]
     dist.assign(np.abs(field.values.numpy()))
-    proj, source = field.closest_points, wp.clone(field.source)
+    proj, source = field.closest_points, wp.clone(field.node_sources())
     fim.solve_levels(
         0,
         layout,
@@ -182,7 +182,7 @@ def test_a_scaled_single_level_field_comes_back_to_distances():
         origin=built.origin,
         values=wp.array(1.5 * built.values.numpy(), dtype=wp.float32),
         proj=built.proj,
-        source=built.source,
+        source=built.node_sources(),
         field_ids=built.field_ids,
     )
     result = engine.redistance(scaled)
