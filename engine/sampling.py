@@ -235,13 +235,16 @@ def coarse_mls(
     best = float(1.0e30)
     plane = float(1.0e30)
     for t in range(count):
-        # the nearest prediction of the neighbours the weight reaches
-        xn, w = _neighbour_weight(f, ids[t], levels[t], x, s)
-        p = stored_proj(f, ids[t], xn, level_spacing(f, levels[t]))
+        # the nearest prediction of the neighbours the weight reaches (its closest point from its centre, decoded; the
+        # spline only where the prediction would be the nearest so far, by more than the stored points' rounding:
+        # neighbours sharing a closest point keep the first)
+        sn = level_spacing(f, levels[t])
+        xn = node_center(f.origin, sn, node_coords(f, ids[t]))
+        p = stored_proj(f, ids[t], xn, sn)
         r = x - p
         dist = wp.length(r)
-        # (nearer by more than the stored points' rounding: neighbours sharing a closest point keep the first)
         if dist < best * TIE_SHARE:
+            w = cubic_spline(2.0 * wp.length(xn - x) / (2.0 * wp.max(s, sn)))
             if w > 0.0:
                 best = dist
                 # the neighbour's surface normal: from its closest point towards the node
