@@ -1,7 +1,7 @@
 """The adaptive field type: a hierarchical sparse octree of signed distances, its queries and its surface.
 
 An :class:`AdaptiveField` is what every build and boolean returns and what every boolean takes: levels stored finest
-first in one set of arrays (Morton codes, coordinates, values, closest points, child links, source ids). Queries
+first in one set of arrays (Morton codes, values, closest points, child links, source ids). Queries
 descend from the dense top level to a leaf and interpolate by moving least squares (:mod:`.sampling`); ``to_mesh``
 extracts the zero surface from the finest band (:mod:`.extract`); ``|``, ``&`` and ``-`` are the booleans
 (:mod:`.boolean`).
@@ -39,8 +39,8 @@ class AdaptiveField:
     Levels are stored finest first and concatenated; ``level_offsets[k]:level_offsets[k+1]`` is level ``k``.
     Intermediate levels are sorted by Morton code; the top level is dense in x-fastest order. ``encloses_volume``
     says whether it has an inside at all. A node keeps its Morton code (8 bytes), value (4), closest point (``proj``,
-    6: a half-float offset from the node; ``closest_points`` decodes them) and source id (4); a coarse node its first
-    child (4), a finest node its closest triangle (4).
+    6: a half-float offset from the node; ``closest_points`` decodes them) and source id (4; a field of one operand
+    keeps its id once, ``single_source``); a coarse node its first child (4), a finest node its closest triangle (4).
     """
 
     def __init__(
