@@ -36,7 +36,10 @@ MIN_WALL_VOXELS = 2.0
 # Blocks from this size up are mapped from the system and given back to it when freed (glibc's M_MMAP_THRESHOLD, set
 # fixed). Left alone, glibc raises the threshold to the largest block freed so far (up to 32 MB), after which a stage's
 # temporaries stay in its heap, fragmented, beside the next stage's arrays: spot | spot at /1024, a second run in the
-# same process, peaked 1,195-1,244 MB, and 1,008-1,031 MB with this (no difference in time measured; 4.1-4.5 s).
+# same process, peaked 1,195-1,244 MB, and 1,008-1,031 MB with this; at /512 480-498 -> 414-422 MB. The cost: big
+# arrays are mapped and faulted in afresh instead of reused from the heap, a warm /512 pipeline 1.11 -> 1.19 s and
+# warm /512 builds 3-11 % slower (none measured at /1024, where glibc maps most arrays anyway; 8 MB kept 459-470 MB
+# at /512).
 MMAP_THRESHOLD = 4 * 2**20
 _M_MMAP_THRESHOLD = -3  # mallopt's parameter number (malloc.h)
 

@@ -219,7 +219,13 @@ def _neighbour_weight(f: FieldArg, node: int, level: int, x: wp.vec3, s: float):
     over twice the larger of the two spacings."""
     sn = level_spacing(f, level)
     xn = node_center(f.origin, sn, node_coords(f, node))
-    return xn, cubic_spline(2.0 * wp.length(xn - x) / (2.0 * wp.max(s, sn)))
+    return xn, _spline_weight(xn, sn, x, s)
+
+
+@wp.func
+def _spline_weight(xn: wp.vec3, sn: float, x: wp.vec3, s: float) -> float:
+    """MLS weight at ``x`` of a neighbour at ``xn`` with spacing ``sn``, for a leaf of spacing ``s``."""
+    return cubic_spline(2.0 * wp.length(xn - x) / (2.0 * wp.max(s, sn)))
 
 
 @wp.func
@@ -244,7 +250,7 @@ def coarse_mls(
         r = x - p
         dist = wp.length(r)
         if dist < best * TIE_SHARE:
-            w = cubic_spline(2.0 * wp.length(xn - x) / (2.0 * wp.max(s, sn)))
+            w = _spline_weight(xn, sn, x, s)
             if w > 0.0:
                 best = dist
                 # the neighbour's surface normal: from its closest point towards the node
