@@ -50,15 +50,15 @@ def read_operands(objects, depsgraph) -> list[Operand]:
         evaluated = obj.evaluated_get(depsgraph)
         mesh = evaluated.to_mesh()
         try:
-            mesh.calc_loop_triangles()
+            corners, faces = _loop_triangles(mesh)
             operand = Operand(
                 obj.original,
                 obj.original.session_uid,
-                _get(mesh.vertices, "co", np.float32, 3),
-                _get(mesh.loop_triangles, "vertices", np.int32, 3),
+                _attribute(mesh, "position", "vector", np.float32, len(mesh.vertices), 3),
+                _attribute(mesh, ".corner_vert", "value", np.int32, len(mesh.loops))[corners],
                 np.array(evaluated.matrix_world, dtype=np.float64),
-                corners=_get(mesh.loop_triangles, "loops", np.int32, 3),
-                faces=_get(mesh.loop_triangles, "polygon_index", np.int32),
+                corners=corners,
+                faces=faces,
                 face_material=_attribute(mesh, "material_index", "value", np.int32, len(mesh.polygons)),
                 face_smooth=~_attribute(mesh, "sharp_face", "value", bool, len(mesh.polygons)),
                 materials=[slot.material for slot in obj.original.material_slots],
@@ -73,6 +73,17 @@ def read_operands(objects, depsgraph) -> list[Operand]:
             evaluated.to_mesh_clear()
         operands.append(operand)
     return operands
+
+
+def _loop_triangles(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Blender's triangulation of a mesh: (T, 3) int32 corners (loops) of each triangle and (T,) int32 the face of
+    each. Read through the attribute arrays where it can: ``loop_triangles``' own properties go item by item (26 ms
+    for the three of them on 70 k triangles, against 0.1 ms); a mesh of triangles alone is its own triangulation."""
+    mesh.calc_loop_triangles()
+    faces = _get(mesh.loop_triangle_polygons, "value", np.int32)
+    if len(faces) == len(mesh.polygons) and len(mesh.loops) == 3 * len(faces):  # every face a triangle, in order
+        return (3 * faces[:, None] + np.arange(3, dtype=np.int32)).astype(np.int32), faces
+    return _get(mesh.loop_triangles, "loops", np.int32, 3), faces
 
 
 def _get(collection, prop, dtype, width=1) -> np.ndarray:
@@ -102,14 +113,12 @@ def evaluated_local_mesh(obj, depsgraph) -> tuple[np.ndarray, np.ndarray]:
     evaluated = obj.evaluated_get(depsgraph)
     mesh = evaluated.to_mesh()
     try:
-        mesh.calc_loop_triangles()
-        verts = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
-        mesh.vertices.foreach_get("co", verts)
-        tris = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
-        mesh.loop_triangles.foreach_get("vertices", tris)
+        corners, _faces = _loop_triangles(mesh)
+        verts = _attribute(mesh, "position", "vector", np.float32, len(mesh.vertices), 3)
+        tris = _attribute(mesh, ".corner_vert", "value", np.int32, len(mesh.loops))[corners]
     finally:
         evaluated.to_mesh_clear()
-    return verts.reshape(-1, 3), tris.reshape(-1, 3)
+    return verts, tris
 
 
 def world_matrix(obj, depsgraph) -> np.ndarray:
@@ -241,13 +250,21 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
 
 
 def _mark_sharp_edges(mesh, creases, vertex_count):
-    """Set ``sharp_edge`` on the mesh's edges between the vertex pairs ``creases`` (E, 2)."""
-    pairs = np.empty(2 * len(mesh.edges), dtype=np.int64)
+    """Set ``sharp_edge`` on the mesh's edges between the vertex pairs ``creases`` (E, 2): only edges whose two
+    vertices both lie on some crease are looked up among the creases' sorted keys (a few thousand of ~10^5 edges)."""
+    pairs = np.empty(2 * len(mesh.edges), dtype=np.int32)
     mesh.attributes[".edge_verts"].data.foreach_get("value", pairs)
-    pairs = np.sort(pairs.reshape(-1, 2), axis=1)
-    wanted = np.sort(np.asarray(creases, dtype=np.int64).reshape(-1, 2), axis=1)
-    keys = pairs[:, 0] * vertex_count + pairs[:, 1]
-    sharp = np.isin(keys, wanted[:, 0] * vertex_count + wanted[:, 1])
+    pairs = pairs.reshape(-1, 2)
+    creases = np.asarray(creases, dtype=np.int64).reshape(-1, 2)
+    on_crease = np.zeros(vertex_count, dtype=bool)
+    on_crease[creases.ravel()] = True
+    candidates = np.flatnonzero(on_crease[pairs[:, 0]] & on_crease[pairs[:, 1]])
+    ends = pairs[candidates].astype(np.int64)
+    keys = ends.min(axis=1) * vertex_count + ends.max(axis=1)
+    wanted = np.sort(creases.min(axis=1) * vertex_count + creases.max(axis=1))
+    at = np.minimum(np.searchsorted(wanted, keys), len(wanted) - 1)
+    sharp = np.zeros(len(pairs), dtype=bool)
+    sharp[candidates[wanted[at] == keys]] = True
     _new_attribute(mesh, "sharp_edge", "BOOLEAN", "EDGE", "value", sharp, bool)
 
 

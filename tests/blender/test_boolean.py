@@ -122,6 +122,30 @@ def test_operands_are_evaluated_with_their_modifiers(fresh_cache):
     assert len(arrayed.data.vertices) == len(sphere[0]) and len(arrayed.modifiers) == 1  # the input is untouched
 
 
+def test_operands_are_read_as_blenders_own_triangulation(fresh_cache):
+    # quads split along the diagonal Blender picks, n-gons, and a mesh of triangles alone (read without a loop)
+    bpy.ops.mesh.primitive_monkey_add()
+    monkey = bpy.context.active_object
+    bpy.ops.mesh.primitive_cylinder_add(vertices=12, location=(3.0, 0.0, 0.0))
+    cylinder = bpy.context.active_object
+    triangles = add_mesh_object("Triangles", *uv_sphere(1.0, rings=8, segments=16))
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    operands = bridge.read_operands([monkey, cylinder, triangles], depsgraph)
+    for obj, operand in zip((monkey, cylinder, triangles), operands, strict=True):
+        mesh = obj.evaluated_get(depsgraph).data
+        mesh.calc_loop_triangles()
+        own = {}
+        for prop, width in (("vertices", 3), ("loops", 3), ("polygon_index", 1)):
+            values = np.empty(width * len(mesh.loop_triangles), dtype=np.int32)
+            mesh.loop_triangles.foreach_get(prop, values)
+            own[prop] = values.reshape(-1, width) if width > 1 else values
+        assert np.array_equal(operand.tris, own["vertices"]), obj.name
+        assert np.array_equal(operand.corners, own["loops"]), obj.name
+        assert np.array_equal(operand.faces, own["polygon_index"]), obj.name
+    assert np.array_equal(bridge.evaluated_local_mesh(monkey, depsgraph)[1], operands[0].tris)
+    assert len(operands[0].tris) > len(monkey.data.polygons)  # quads were split
+
+
 def sharp_faces(obj) -> np.ndarray:
     mesh = obj.data
     if "sharp_face" not in mesh.attributes:

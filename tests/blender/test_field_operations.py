@@ -9,7 +9,7 @@ import bpy
 import numpy as np
 import pytest
 
-from aasdf.aasdf_addon import nodes, pipeline
+from aasdf.aasdf_addon import cache, nodes, pipeline
 from tests.blender.scene import add_mesh_object, select, world_arrays
 from tests.metrics import mesh_volume
 from tests.support import box_mesh, is_watertight, uv_sphere
@@ -118,6 +118,12 @@ def test_sharp_edges_are_marked_and_can_be_turned_off(fresh_cache):
     sharp = np.empty(len(mesh.edges), dtype=bool)
     mesh.attributes["sharp_edge"].data.foreach_get("value", sharp)
     assert sharp.sum() > 100  # the box's and the slot's creases
+    # exactly the edges the extraction reconstructed as creases, whichever way round it lists their vertices
+    creases = cache.last_result()["surface"]["creases"]
+    edges = np.empty(2 * len(mesh.edges), dtype=np.int32)
+    mesh.attributes[".edge_verts"].data.foreach_get("value", edges)
+    marked = {tuple(sorted(pair)) for pair in edges.reshape(-1, 2)[sharp].tolist()}
+    assert marked == {tuple(sorted(pair)) for pair in creases.tolist()}
     select(a, b)
     bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96, sharp_edges=False, hide_inputs=False)
     assert "sharp_edge" not in bpy.context.active_object.data.attributes
