@@ -77,15 +77,32 @@ def face_attributes(operands, field_ids, triangle_ids, corner_bary) -> dict:
         weights = corner_bary[rows]  # (R, 3 corners of the result face, 3 corners of the source triangle)
         corner_rows = (3 * rows[:, None] + np.arange(3)).ravel()
         for name, values in operand.uv_maps.items():
-            out["uv_maps"][name][corner_rows] = _interpolate(values[operand.corners[tri]], weights)
+            _scatter_rows(out["uv_maps"][name], corner_rows, _interpolate(values, operand.corners[tri], weights))
         for name, (domain, _kind, values) in operand.colors.items():
             at = operand.corners[tri] if domain == "CORNER" else operand.tris[tri]
-            out["colors"][name][1][corner_rows] = _interpolate(values[at], weights)
+            _scatter_rows(out["colors"][name][1], corner_rows, _interpolate(values, at, weights))
     return out
 
 
-def _interpolate(source_values, weights) -> np.ndarray:
-    """(R, 3, C) values at each source triangle's corners, weighted per result corner by (R, 3, 3): (3R, C).
-    A batched matrix product (6x faster than the same contraction by ``einsum`` on 77 k faces)."""
-    values = np.asarray(source_values, dtype=np.float32)
-    return np.matmul(weights, values).reshape(-1, values.shape[-1])
+def _interpolate(values, at, weights) -> np.ndarray:
+    """(N, C) ``values`` at (R, 3) source corners ``at``, weighted per result corner by (R, 3, 3): (3R, C). A batched
+    matrix product (6x faster than the same contraction by ``einsum`` on 77 k faces)."""
+    corner_values = _gather_rows(np.asarray(values, dtype=np.float32), at)
+    return np.matmul(weights, corner_values).reshape(-1, corner_values.shape[-1])
+
+
+def _row_view(array: np.ndarray) -> np.ndarray:
+    """A C-contiguous (N, C) array seen as N opaque rows: numpy gathers and scatters those 5-10x faster than rows of
+    C numbers (77 k faces: 0.5 ms against 3-8 ms)."""
+    return array.view(np.dtype((np.void, array.shape[1] * array.itemsize))).reshape(len(array))
+
+
+def _gather_rows(values: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """``values[index]`` for (N, C) ``values``: shape ``index.shape + (C,)``."""
+    values = np.ascontiguousarray(values)
+    return _row_view(values)[index].view(values.dtype).reshape(*np.shape(index), values.shape[1])
+
+
+def _scatter_rows(out: np.ndarray, rows: np.ndarray, values: np.ndarray):
+    """``out[rows] = values`` for C-contiguous (N, C) ``out`` and (R, C) ``values`` of its type."""
+    _row_view(out)[rows] = _row_view(np.ascontiguousarray(values, dtype=out.dtype))

@@ -407,7 +407,7 @@ class AdaptiveField:
         ids, node_tri = ids.numpy(), node_tri.numpy()
         tri_ids = np.full(n, -1, dtype=np.int32)
         bary = np.zeros((n, 3, 3), dtype=np.float32)
-        for field_id in np.unique(ids):
+        for field_id in np.flatnonzero(np.bincount(ids[ids >= 0])):  # the ids present (a sort of F ids: 7 ms)
             source = self.sources.get(int(field_id))
             if source is None:
                 continue
