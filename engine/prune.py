@@ -233,7 +233,10 @@ def operand_octets(f: AdaptiveField, origin, spacing, oct_dims, aligned, device)
         )
         return codes
     per_cell = int(f.levels == 1)  # a dense single level is not stored in octets
-    args = [f.arg(), wp.vec3(*origin), 2.0 * spacing, 1.0 * spacing, wp.vec3i(*(int(d) for d in oct_dims)), per_cell]
+    # the result octets that overlap the operand's finest cells cover its band; an operand finer than the result
+    # (its band narrower than a result voxel) gets a voxel more
+    pad = spacing if f.world_voxel_size < spacing * (1.0 - 1e-6) else 0.0
+    args = [f.arg(), wp.vec3(*origin), 2.0 * spacing, pad, wp.vec3i(*(int(d) for d in oct_dims)), per_cell]
     n_octets = n0 if per_cell else n0 // 8
     if byte_grid_fits(oct_dims):  # each result octet marked once in a byte per octet, no (cell, octet) pairs sorted
         return octree.mark_then_compact(
@@ -268,7 +271,8 @@ def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, ble
         octets: (M,) int64 Warp array of octet codes.
         args: The operands' ``FieldArg`` structs (a, b).
         aligned: Per operand, 1 where its finest nodes are the result's (see ``combine``).
-        octet_flags: Per operand, 1 where its octets are also the result's (even lattice offsets).
+        octet_flags: Per operand, 1 where its octets are also the result's (even lattice offsets), 2 where it is not
+            aligned (``octet_source``), else 0.
         offsets: Per operand, its lattice offset from the result's (``wp.vec3i``; zero when not aligned).
         origin, h: The result lattice's origin and finest spacing.
         op, blend, mode: The boolean (``OP_*``), its blend size and blend mode (0 round / none, 1 chamfer).
