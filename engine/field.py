@@ -392,21 +392,20 @@ class AdaptiveField:
         tris = np.asarray(tris)
         if tris.ndim != 2 or tris.shape[1] != 3:
             raise ValueError(f"Expected 'tris' of shape (F, 3), but got {tris.shape}.")
-        corners = np.ascontiguousarray(verts[tris])
         n = len(tris)
+        verts_wp = wp.array(verts, dtype=wp.vec3, device=self.device)
+        tris_wp = wp.array(np.ascontiguousarray(tris, dtype=np.int32).ravel(), dtype=wp.int32, device=self.device)
         ids = wp.empty(n, dtype=wp.int32, device=self.device)
         node_tri = wp.empty(n, dtype=wp.int32, device=self.device)
+        bary = wp.zeros(3 * n, dtype=wp.vec3, device=self.device)
         if n:
-            arg, pts = self.arg(), wp.array(corners.reshape(-1, 3), dtype=wp.vec3, device=self.device)
+            arg = self.arg()
             parallel.launch_split(
-                face_nodes_kernel,
-                n,
-                lambda lo, k: [arg, pts[3 * lo : 3 * (lo + k)], ids[lo : lo + k], node_tri[lo : lo + k]],
-                self.device,
+                face_nodes_kernel, n, lambda lo, k: [arg, lo, verts_wp, tris_wp, ids, node_tri], self.device
             )
         ids, node_tri = ids.numpy(), node_tri.numpy()
         tri_ids = np.full(n, -1, dtype=np.int32)
-        bary = np.zeros((n, 3, 3), dtype=np.float32)
+        unknown_rows = []
         for field_id in np.flatnonzero(np.bincount(ids[ids >= 0])):  # the ids present (a sort of F ids: 7 ms)
             source = self.sources.get(int(field_id))
             if source is None:
@@ -415,12 +414,15 @@ class AdaptiveField:
             # the triangle of the finest node holding the face's centre: found by the build, no search needed
             known = rows[node_tri[rows] >= 0]
             tri_ids[known] = source.triangle_ids[node_tri[known]]
-            bary[known] = sources.corner_barycentrics(source, node_tri[known], corners[known], self.device)
+            sources.corner_barycentrics(source, node_tri[known], known, verts_wp, tris_wp, bary, self.device)
+            unknown_rows.append((source, rows[node_tri[rows] < 0]))
+        bary = bary.numpy().reshape(n, 3, 3)
+        for source, unknown in unknown_rows:
             # elsewhere (a field that does not keep its finest nodes' triangles): the closest one, by the BVH
-            unknown = rows[node_tri[rows] < 0]
             if len(unknown):
                 near = 0.5 * self.voxel_size  # a face lies within a fraction of a voxel of its source, but in fillets
-                tri_ids[unknown], bary[unknown] = sources.face_sources(source, corners[unknown], near, self.device)
+                corners = verts[tris[unknown]]
+                tri_ids[unknown], bary[unknown] = sources.face_sources(source, corners, near, self.device)
         return ids, tri_ids, bary
 
     def source_barycentrics(self, field_ids, triangle_ids, points) -> np.ndarray:

@@ -533,11 +533,19 @@ def source_ids_kernel(f: FieldArg, points: wp.array[wp.vec3], ids: wp.array[wp.i
 
 
 @wp.kernel(enable_backward=False)
-def face_nodes_kernel(f: FieldArg, corners: wp.array[wp.vec3], source: wp.array[wp.int32], tri: wp.array[wp.int32]):
-    """For face ``tid`` of a surface (corners 3 tid .. 3 tid + 2): the source id of the leaf holding its centre, and
-    that leaf's closest triangle when it is a finest node whose triangle the field knows (else -1)."""
-    i = wp.tid()
-    centre = (corners[3 * i] + corners[3 * i + 1] + corners[3 * i + 2]) / 3.0
+def face_nodes_kernel(
+    f: FieldArg,
+    first: int,
+    verts: wp.array[wp.vec3],
+    tris: wp.array[wp.int32],
+    source: wp.array[wp.int32],
+    tri: wp.array[wp.int32],
+):
+    """For face ``i = first + tid`` of a surface (corners ``verts[tris[3 i .. 3 i + 2]]``): the source id of the leaf
+    holding its centre, and that leaf's closest triangle when it is a finest node whose triangle the field knows (else
+    -1)."""
+    i = first + wp.tid()
+    centre = (verts[tris[3 * i]] + verts[tris[3 * i + 1]] + verts[tris[3 * i + 2]]) / 3.0
     leaf = locate_leaf(f, clamp_to_domain(f, centre))
     source[i] = node_source(f, leaf[0])
     tri[i] = -1
