@@ -65,6 +65,15 @@ def _octet_bracket_kernel(
         c = wp.vec3i(2 * oc[0] + (k & 1), 2 * oc[1] + ((k >> 1) & 1), 2 * oc[2] + ((k >> 2) & 1))
         x = node_center(origin, spacing, c)
         va, ra = node_bracket(a, a_first, a_leaf, a_level, k, a_aligned, a_offset, c, x)
+        # a hard boolean is surely beyond the band where a alone says so (a union inside a, an intersection or a
+        # difference outside it): b's bracket, a descent into b per node, would change nothing
+        if blend == 0.0 and mode == 0 and ra >= 0.0:
+            if op == 0 and va + ra < -band:
+                neg = 1
+                continue
+            if op != 0 and va - ra > band:
+                pos = 1
+                continue
         vb, rb = node_bracket(b, b_first, b_leaf, b_level, k, b_aligned, b_offset, c, x)
         if ra < 0.0 or rb < 0.0:
             n_near = 1
