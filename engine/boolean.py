@@ -27,6 +27,7 @@ from .operands import (
     blend_sample,
     estimate,
     extrapolate,
+    finest_bracket,
     finest_sample,
     lookup_node,
 )
@@ -120,16 +121,15 @@ def _combine_nodes_kernel(
                 va, rad_a, leaf_a = estimate(a, x)
             if fb == 0:
                 vb, rad_b, leaf_b = estimate(b, x)
+            # in an operand's finest band: its finest node's bracket first, the trilinear sample only where needed
+            fine_a = int(0)
+            fine_b = int(0)
             if rad_a < 0.0:
-                r = finest_sample(a, x)
-                va = r[0]
-                ga = wp.vec3(r[1], r[2], r[3])
-                rad_a = 0.0
+                va, rad_a = finest_bracket(a, x, leaf_a[0])
+                fine_a = 1
             if rad_b < 0.0:
-                r = finest_sample(b, x)
-                vb = r[0]
-                gb = wp.vec3(r[1], r[2], r[3])
-                rad_b = 0.0
+                vb, rad_b = finest_bracket(b, x, leaf_b[0])
+                fine_b = 1
             # bracket of the second argument as the operation sees it (difference uses -b)
             tb = vb
             if op == 2:
@@ -150,13 +150,21 @@ def _combine_nodes_kernel(
                     need_b = 0
                 elif va + rad_a <= tb - rad_b - blend:
                     need_a = 0
-            if need_a == 1 and rad_a > 0.0:
+            if need_a == 1 and fine_a == 1:
+                r = finest_sample(a, x)
+                va = r[0]
+                ga = wp.vec3(r[1], r[2], r[3])
+            elif need_a == 1 and rad_a > 0.0:
                 r, cached_a, count_a, ids_a, levels_a = blend_sample(
                     a, walk[0], x, leaf_a, cached_a, count_a, ids_a, levels_a
                 )
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
-            if need_b == 1 and rad_b > 0.0:
+            if need_b == 1 and fine_b == 1:
+                r = finest_sample(b, x)
+                vb = r[0]
+                gb = wp.vec3(r[1], r[2], r[3])
+            elif need_b == 1 and rad_b > 0.0:
                 r, cached_b, count_b, ids_b, levels_b = blend_sample(
                     b, walk[1], x, leaf_b, cached_b, count_b, ids_b, levels_b
                 )

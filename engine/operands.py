@@ -223,6 +223,16 @@ def estimate(f: FieldArg, x: wp.vec3):
 
 
 @wp.func
+def finest_bracket(f: FieldArg, x: wp.vec3, node: int):
+    """(phi, radius): an operand's value at world point ``x`` lies within ``radius`` of ``phi``, from its finest node
+    ``node`` whose cell holds ``x`` (the field is 1-Lipschitz; world units for a placed field)."""
+    xc = clamp_to_domain(f, to_frame(f, x))
+    centre = node_center(f.origin, f.voxel_size, node_coords(f, node))
+    v = f.values[node]
+    return v * f.scale, (wp.length(xc - centre) + LEAF_SLACK * wp.abs(v)) * f.scale
+
+
+@wp.func
 def bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3):
     """(phi, radius): an operand's value at result node ``c`` lies within ``radius`` of ``phi`` — exact (radius 0)
     where the lattices align, the containing coarse leaf's bracket elsewhere; radius -1 in a non-aligned finest band."""
@@ -231,10 +241,7 @@ def bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3
         return phi, 0.0
     phi, radius, leaf = estimate(f, x)
     if radius < 0.0:  # in the finest band: the finest node whose cell holds x (the field is 1-Lipschitz there too)
-        xc = clamp_to_domain(f, to_frame(f, x))
-        centre = node_center(f.origin, f.voxel_size, node_coords(f, leaf[0]))
-        v = f.values[leaf[0]]
-        return v * f.scale, (wp.length(xc - centre) + LEAF_SLACK * wp.abs(v)) * f.scale
+        return finest_bracket(f, x, leaf[0])
     return phi, radius
 
 
