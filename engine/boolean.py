@@ -288,12 +288,7 @@ def combine(
 
     # Keep the result adaptive: drop the octets the result's surface is far from, before any interpolation.
     t0 = time.perf_counter()
-    # per operand, how the pruning finds it per octet (``octet_source``): 1 its octets are the result's (even lattice
-    # offsets), 2 not aligned (the leaf holding each octet's centre), 0 node by node
-    octet_flags = [
-        (1 if not (offset_to(f, origin, h) % 2).any() else 0) if al else 2
-        for f, al in zip((a, b), aligned, strict=False)
-    ]
+    octet_flags = [int(al and not (offset_to(f, origin, h) % 2).any()) for f, al in zip((a, b), aligned, strict=False)]
     octets, a_first, b_first = prune_octets(
         octets, (a_arg, b_arg), [int(al) for al in aligned], octet_flags, offs, origin, h, op, blend, mode, oct_dims
     )
@@ -307,8 +302,8 @@ def combine(
         finest = spacing_ == h
         flags = [int(aligned[0] and finest), int(aligned[1] and finest)]
         octet_args = [
-            int(octet_flags[0] == 1 and finest),
-            int(octet_flags[1] == 1 and finest),
+            octet_flags[0] if finest else 0,
+            octet_flags[1] if finest else 0,
             a_first if finest else no_octets,
             b_first if finest else no_octets,
         ]

@@ -247,33 +247,24 @@ def bracket(f: FieldArg, aligned: int, offset: wp.vec3i, c: wp.vec3i, x: wp.vec3
 
 @wp.func
 def octet_source(f: FieldArg, octet_mode: int, offset: wp.vec3i, oc: wp.vec3i, origin: wp.vec3, spacing: float):
-    """Where an operand holds result octet ``oc``: (index of the octet's first child in its finest level, or -1; else
-    a coarse leaf that may hold the octet's nodes, or -1; its level, -1 when the octet lies outside the operand's
-    domain). ``octet_mode`` 1: the operand's lattice is aligned at octet granularity, so the octet is a level-1 cell
-    of it: a descent from its dense top level finds the node of that cell, whose 8 children are the octet when it has
-    any (an operand's finest level is octet-complete and every octet has its parent), or the coarser leaf that covers
-    it. ``octet_mode`` 2 (an operand not aligned, e.g. placed): the coarse leaf holding the octet's centre, which
-    brackets those of its nodes that lie in its cell (``node_bracket``); (-1, -1, 0) in its finest band."""
-    if octet_mode == 0:
-        return -1, -1, 0
-    x = origin + 2.0 * spacing * wp.vec3(float(oc[0]) + 0.5, float(oc[1]) + 0.5, float(oc[2]) + 0.5)
-    xf = to_frame(f, x)
-    if not inside_domain(f, xf):
-        if octet_mode == 2:
-            return -1, -1, 0
-        return -1, -1, -1  # outside the operand's domain, so none of its octets
-    if octet_mode == 2:
-        leaf = locate_leaf(f, xf)
-        if leaf[1] > 0:
-            return -1, leaf[0], leaf[1]
-        return -1, -1, 0
-    if f.levels == 1:  # the dense top level is the finest: the octet's first child by its code
-        c0 = wp.vec3i(2 * oc[0], 2 * oc[1], 2 * oc[2]) + offset
-        return octree.find_key(f.codes, 0, f.fine_count, morton_encode(c0)), -1, 0
-    leaf = locate_node(f, x, 1)
-    if leaf[1] == 1 and f.child[leaf[0] - f.fine_count] >= 0:
-        return f.child[leaf[0] - f.fine_count], -1, 0
-    return -1, leaf[0], leaf[1]
+    """Where an operand holds result octet ``oc`` when its lattice is aligned at octet granularity: (index of the
+    octet's first child in its finest level, or -1; else the coarse leaf covering the whole octet, or -1; its level,
+    -1 when the octet lies outside the operand's domain).
+    The octet is a level-1 cell of the operand: a descent from its dense top level finds the node of that cell, whose
+    8 children are the octet when it has any (an operand's finest level is octet-complete and every octet has its
+    parent), or the coarser leaf that covers it."""
+    if octet_mode == 1:
+        x = origin + 2.0 * spacing * wp.vec3(float(oc[0]) + 0.5, float(oc[1]) + 0.5, float(oc[2]) + 0.5)
+        if not inside_domain(f, x):
+            return -1, -1, -1  # outside the operand's domain, so none of its octets
+        if f.levels == 1:  # the dense top level is the finest: the octet's first child by its code
+            c0 = wp.vec3i(2 * oc[0], 2 * oc[1], 2 * oc[2]) + offset
+            return octree.find_key(f.codes, 0, f.fine_count, morton_encode(c0)), -1, 0
+        leaf = locate_node(f, x, 1)
+        if leaf[1] == 1 and f.child[leaf[0] - f.fine_count] >= 0:
+            return f.child[leaf[0] - f.fine_count], -1, 0
+        return -1, leaf[0], leaf[1]
+    return -1, -1, 0
 
 
 @wp.func
@@ -283,12 +274,10 @@ def node_bracket(
     """(phi, radius) of an operand at child ``k`` of an octet located by :func:`octet_source`."""
     if first >= 0:
         return f.values[first + k], 0.0
-    if leaf >= 0:  # the leaf's bracket where x lies in its cell (always, for an octet of an aligned operand)
-        s = level_spacing(f, level)
-        d = to_frame(f, x) - node_center(f.origin, s, node_coords(f, leaf))
-        if wp.max(wp.abs(d[0]), wp.max(wp.abs(d[1]), wp.abs(d[2]))) <= 0.5 * s:
-            phi = f.values[leaf]
-            return phi * f.scale, (wp.length(d) + LEAF_SLACK * wp.abs(phi)) * f.scale
+    if leaf >= 0:
+        centre = node_center(f.origin, level_spacing(f, level), node_coords(f, leaf))
+        phi = f.values[leaf]
+        return phi, wp.length(x - centre) + LEAF_SLACK * wp.abs(phi)
     if level < 0:  # the octet lies outside the operand's domain: no node of it to look up
         phi, radius, _leaf = estimate(f, x)
         return phi, radius

@@ -280,8 +280,7 @@ def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, ble
         octets: (M,) int64 Warp array of octet codes.
         args: The operands' ``FieldArg`` structs (a, b).
         aligned: Per operand, 1 where its finest nodes are the result's (see ``combine``).
-        octet_flags: Per operand, 1 where its octets are also the result's (even lattice offsets), 2 where it is not
-            aligned (``octet_source``), else 0.
+        octet_flags: Per operand, 1 where its octets are also the result's (even lattice offsets).
         offsets: Per operand, its lattice offset from the result's (``wp.vec3i``; zero when not aligned).
         origin, h: The result lattice's origin and finest spacing.
         op, blend, mode: The boolean (``OP_*``), its blend size and blend mode (0 round / none, 1 chamfer).
