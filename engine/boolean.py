@@ -335,6 +335,7 @@ def combine(
                 *octet_args,
             ],
             device,
+            balance=True,  # MLS samples bunch where the operands meet
         )
 
     # Every node, level by level: the finest from the operands' nodes or MLS samples, the coarser levels from the

@@ -322,6 +322,7 @@ def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, ble
             b_first,
         ],
         device,
+        balance=True,
     )
     dims_v = wp.vec3i(*(int(d) for d in oct_dims))
     if byte_grid_fits(oct_dims):
