@@ -81,7 +81,9 @@ def _loop_triangles(mesh) -> tuple[np.ndarray, np.ndarray]:
     for the three of them on 70 k triangles, against 0.1 ms); a mesh of triangles alone is its own triangulation."""
     mesh.calc_loop_triangles()
     faces = _get(mesh.loop_triangle_polygons, "value", np.int32)
-    if len(faces) == len(mesh.polygons) and len(mesh.loops) == 3 * len(faces):  # every face a triangle, in order
+    # every face a triangle, in order (a face of fewer than 3 corners, which Blender's validation removes, breaks the
+    # order: then the triangles are read)
+    if len(mesh.loops) == 3 * len(faces) and np.array_equal(faces, np.arange(len(mesh.polygons), dtype=np.int32)):
         return (3 * faces[:, None] + np.arange(3, dtype=np.int32)).astype(np.int32), faces
     return _get(mesh.loop_triangles, "loops", np.int32, 3), faces
 
