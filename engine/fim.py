@@ -21,7 +21,8 @@ from .geometry import (
     mesh_closest_point,
     mesh_near_point,
 )
-from .octree import level_neighbours, node_center
+from .neighbours import level_neighbours
+from .octree import node_center
 from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
 
 

@@ -1,12 +1,12 @@
-"""Structure of the hierarchical sparse octree: Morton codes, sort/unique, levels, links and neighbours.
+"""Structure of the hierarchical sparse octree: Morton codes, sort/unique, levels and links.
 
 Every level ``k`` (0 = finest) is a set of cells of edge ``voxel_size * 2**k`` whose integer coordinates are
 relative to the field's domain origin, itself a multiple of the top spacing measured from the shared world origin
 (Ren et al., Eq. 3). Cells come in complete octets, so every internal node has exactly 8 children; intermediate
 levels are sorted by 64-bit Morton code, the top level is a dense grid in x-fastest order. :func:`level_layout` places
 every node of a field from its finest octets (Eq. 6: parents and their siblings, level by level) and links parents and
-children; :func:`level_neighbours` finds same-level face neighbours by axis-wise key sorting (Eq. 7). These kernels
-know nothing of meshes or values, and nothing here knows whether it runs on the CPU or on CUDA.
+children (same-level face neighbours are :mod:`.neighbours`'). These kernels know nothing of meshes or values, and
+nothing here knows whether it runs on the CPU or on CUDA.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 import warp as wp
 
 from . import parallel
-from .parallel import EMIT_SPLIT_MIN_DIM, launch_split, run_tasks
+from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
 
 # Bits per axis in a Morton code: 21 * 3 = 63 bits fit a signed 64-bit key.
 MORTON_BITS = 21
@@ -406,64 +406,6 @@ def dilate_octets(octets: wp.array, dims, end_bit: int) -> wp.array:
         device=octets.device,
     )
     return sort_unique(grown, end_bit=end_bit)
-
-
-@wp.kernel(enable_backward=False)
-def _axis_keys_kernel(
-    coords: wp.array[wp.vec3i], lo: int, axis: int, dims: wp.vec3i, keys: wp.array[wp.int64], vals: wp.array[wp.int32]
-):
-    i = wp.tid()
-    c = coords[lo + i]
-    a = axis
-    b = (axis + 1) % 3
-    d = (axis + 2) % 3
-    # rows are dims[a] + 1 long, so the last node of a row and the first of the next are never one apart
-    keys[i] = (wp.int64(c[d]) * wp.int64(dims[b]) + wp.int64(c[b])) * wp.int64(dims[a] + 1) + wp.int64(c[a])
-    vals[i] = lo + i
-
-
-@wp.kernel(enable_backward=False)
-def _axis_neighbours_kernel(
-    keys: wp.array[wp.int64],
-    vals: wp.array[wp.int32],
-    n: int,
-    axis: int,
-    row0: int,
-    neighbours: wp.array2d[wp.int32],
-):
-    """In key order, consecutive keys one apart are neighbours along ``axis`` (rows are padded by one key, so a row's
-    last node is never taken for the next row's first). Node ``i``'s row is ``i - row0``."""
-    t = wp.tid()
-    i = vals[t]
-    if t + 1 < n:
-        if keys[t + 1] == keys[t] + wp.int64(1):
-            j = vals[t + 1]
-            neighbours[i - row0, 2 * axis + 1] = j
-            neighbours[j - row0, 2 * axis] = i
-
-
-def level_neighbours(coords: wp.array, lo: int, hi: int, dims, neighbours: wp.array, row0: int = 0) -> None:
-    """Fill the rows of nodes [lo, hi) of ``neighbours`` (int32, 6 columns, node ``i`` in row ``i - row0``) with their
-    -x,+x,-y,+y,-z,+z same-level neighbours (Eq. 7), as node indices."""
-    n = hi - lo
-    if n == 0:
-        return
-    device = coords.device
-    dims_v = wp.vec3i(*(int(d) for d in dims))
-    total_bits = int(np.ceil(np.log2(float(np.prod(np.asarray(dims, dtype=np.float64) + 1.0)) + 2.0)))
-    # the three axes write their own columns: on the CPU each sorts on a thread of its own
-    parallel.load_modules([_axis_keys_kernel.module], device)
-
-    def axis_pass(axis):
-        keys = wp.empty(2 * n, dtype=wp.int64, device=device)
-        vals = wp.empty(2 * n, dtype=wp.int32, device=device)
-        wp.launch(_axis_keys_kernel, dim=n, inputs=[coords, lo, axis, dims_v], outputs=[keys, vals], device=device)
-        wp.utils.radix_sort_pairs(keys, vals, n, end_bit=max(1, min(63, total_bits)))
-        wp.launch(
-            _axis_neighbours_kernel, dim=n, inputs=[keys, vals, n, axis, row0], outputs=[neighbours], device=device
-        )
-
-    run_tasks([lambda axis=axis: axis_pass(axis) for axis in range(3)], device)
 
 
 @wp.func
