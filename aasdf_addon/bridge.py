@@ -50,12 +50,12 @@ def read_operands(objects, depsgraph) -> list[Operand]:
         evaluated = obj.evaluated_get(depsgraph)
         mesh = evaluated.to_mesh()
         try:
-            corners, faces = _loop_triangles(mesh)
+            verts, tris, corners, faces = _triangles(mesh)
             operand = Operand(
                 obj.original,
                 obj.original.session_uid,
-                _attribute(mesh, "position", "vector", np.float32, len(mesh.vertices), 3),
-                _attribute(mesh, ".corner_vert", "value", np.int32, len(mesh.loops))[corners],
+                verts,
+                tris,
                 np.array(evaluated.matrix_world, dtype=np.float64),
                 corners=corners,
                 faces=faces,
@@ -75,17 +75,21 @@ def read_operands(objects, depsgraph) -> list[Operand]:
     return operands
 
 
-def _loop_triangles(mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Blender's triangulation of a mesh: (T, 3) int32 corners (loops) of each triangle and (T,) int32 the face of
-    each. Read through the attribute arrays where it can: ``loop_triangles``' own properties go item by item (26 ms
-    for the three of them on 70 k triangles, against 0.1 ms); a mesh of triangles alone is its own triangulation."""
+def _triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A mesh as Blender triangulates it: (V, 3) float32 vertices, (T, 3) int32 triangles (vertex indices), their
+    (T, 3) int32 corners (loops) and (T,) int32 faces. Read through the attribute arrays where it can:
+    ``loop_triangles``' own properties go item by item (26 ms for the three of them on 70 k triangles, against
+    0.1 ms); a mesh of triangles alone is its own triangulation."""
     mesh.calc_loop_triangles()
     faces = _get(mesh.loop_triangle_polygons, "value", np.int32)
     # every face a triangle, in order (a face of fewer than 3 corners, which Blender's validation removes, breaks the
     # order: then the triangles are read)
     if len(mesh.loops) == 3 * len(faces) and np.array_equal(faces, np.arange(len(mesh.polygons), dtype=np.int32)):
-        return (3 * faces[:, None] + np.arange(3, dtype=np.int32)).astype(np.int32), faces
-    return _get(mesh.loop_triangles, "loops", np.int32, 3), faces
+        corners = (3 * faces[:, None] + np.arange(3, dtype=np.int32)).astype(np.int32)
+    else:
+        corners = _get(mesh.loop_triangles, "loops", np.int32, 3)
+    verts = _attribute(mesh, "position", "vector", np.float32, len(mesh.vertices), 3)
+    return verts, _attribute(mesh, ".corner_vert", "value", np.int32, len(mesh.loops))[corners], corners, faces
 
 
 def _get(collection, prop, dtype, width=1) -> np.ndarray:
@@ -115,9 +119,7 @@ def evaluated_local_mesh(obj, depsgraph) -> tuple[np.ndarray, np.ndarray]:
     evaluated = obj.evaluated_get(depsgraph)
     mesh = evaluated.to_mesh()
     try:
-        corners, _faces = _loop_triangles(mesh)
-        verts = _attribute(mesh, "position", "vector", np.float32, len(mesh.vertices), 3)
-        tris = _attribute(mesh, ".corner_vert", "value", np.int32, len(mesh.loops))[corners]
+        verts, tris, _corners, _faces = _triangles(mesh)
     finally:
         evaluated.to_mesh_clear()
     return verts, tris

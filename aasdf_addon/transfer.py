@@ -61,32 +61,34 @@ def face_attributes(operands, field_ids, triangle_ids, corner_bary) -> dict:
     # operand it came from (no rows selected and scattered back per operand)
     first = np.cumsum([0] + [len(operand.tris) for operand in operands])
     has = (field_ids >= 0) & (field_ids < len(operands)) & (triangle_ids >= 0)
-    if not has.any():
-        for name in sorted({name for operand in operands for name in operand.uv_maps}):
-            out["uv_maps"][name] = np.zeros((3 * count, 2), dtype=np.float32)
-        for name in sorted({name for operand in operands for name in operand.colors}):
-            out["colors"][name] = (_color_kind(operands, name), np.zeros((3 * count, 4), dtype=np.float32))
-        return out
-    stacked = np.where(has, first[np.where(has, field_ids, 0)] + triangle_ids, 0)
-    weights = corner_bary if has.all() else np.where(has[:, None, None], corner_bary, np.float32(0.0))
-    slot = np.concatenate(
-        [
-            slots[np.clip(operand.face_material[operand.faces], 0, len(slots) - 1)]
-            for operand, slots in zip(operands, slot_maps, strict=True)
-        ]
-    )
-    smooth = np.concatenate([operand.face_smooth[operand.faces] for operand in operands])
-    out["material_index"] = np.where(has, slot[stacked], 0).astype(np.int32)
-    out["smooth"] = np.where(has, smooth[stacked], False)
-    for name in sorted({name for operand in operands for name in operand.uv_maps}):
-        parts = [(operand.corners, operand.uv_maps.get(name)) for operand in operands]
-        out["uv_maps"][name] = _interpolate(parts, 2, stacked, weights)
-    for name in sorted({name for operand in operands for name in operand.colors}):
+    uv_names = sorted({name for operand in operands for name in operand.uv_maps})
+    color_names = sorted({name for operand in operands for name in operand.colors})
+    if has.any():
+        stacked = np.where(has, first[np.where(has, field_ids, 0)] + triangle_ids, 0)
+        weights = corner_bary if has.all() else np.where(has[:, None, None], corner_bary, np.float32(0.0))
+        slot = np.concatenate(
+            [
+                slots[np.clip(operand.face_material[operand.faces], 0, len(slots) - 1)]
+                for operand, slots in zip(operands, slot_maps, strict=True)
+            ]
+        )
+        smooth = np.concatenate([operand.face_smooth[operand.faces] for operand in operands])
+        out["material_index"] = np.where(has, slot[stacked], 0).astype(np.int32)
+        out["smooth"] = np.where(has, smooth[stacked], False)
+
+    def interpolated(parts, width):
+        if not has.any():  # no face has a source (nor, maybe, any operand a triangle to gather from)
+            return np.zeros((3 * count, width), dtype=np.float32)
+        return _interpolate(parts, width, stacked, weights)
+
+    for name in uv_names:
+        out["uv_maps"][name] = interpolated([(operand.corners, operand.uv_maps.get(name)) for operand in operands], 2)
+    for name in color_names:
         parts = []
         for operand in operands:
             domain, _kind, values = operand.colors.get(name, ("CORNER", None, None))
             parts.append((operand.corners if domain == "CORNER" else operand.tris, values))
-        out["colors"][name] = (_color_kind(operands, name), _interpolate(parts, 4, stacked, weights))
+        out["colors"][name] = (_color_kind(operands, name), interpolated(parts, 4))
     return out
 
 

@@ -17,7 +17,7 @@ import numpy as np
 import warp as wp
 
 from .geometry import mesh_closest_face
-from .parallel import EMIT_SPLIT_MIN_DIM, launch_split, load_modules
+from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
 
 
 class SourceMesh:
@@ -170,7 +170,6 @@ def corner_barycentrics(source: SourceMesh, faces, rows, verts, tris, bary, devi
     points, indices = source.arrays(device)
     rows_wp = wp.array(np.ascontiguousarray(rows, dtype=np.int32), dtype=wp.int32, device=device)
     faces_wp = wp.array(np.ascontiguousarray(faces, dtype=np.int32), dtype=wp.int32, device=device)
-    load_modules([_corner_barycentrics_kernel.module], device)
     launch_split(
         _corner_barycentrics_kernel,
         n,
