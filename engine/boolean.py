@@ -30,6 +30,7 @@ from .operands import (
     finest_bracket,
     finest_sample,
     lookup_node,
+    mesh_sample,
 )
 from .plan import check_budget, plan_domain
 from .prune import offset_to, operand_octets, prune_octets
@@ -90,6 +91,10 @@ def _combine_nodes_kernel(
     count_b = int(0)
     ids_b = vec27i()
     levels_b = vec27i()
+    foot_a = wp.vec3(0.0)  # the last exact closest point on each operand's mesh (``mesh_sample``)
+    foot_b = wp.vec3(0.0)
+    has_a = int(0)
+    has_b = int(0)
     for i in range(i0, i1):
         c = morton_decode(codes[i])
         x = node_center(origin, spacing, c)
@@ -155,9 +160,14 @@ def _combine_nodes_kernel(
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
             elif need_a == 1 and rad_a > 0.0:
-                r, cached_a, count_a, ids_a, levels_a = blend_sample(
-                    a, walk[0], x, leaf_a, cached_a, count_a, ids_a, levels_a
-                )
+                found = int(0)
+                if a.mesh != wp.uint64(0):
+                    found, r, foot_a = mesh_sample(a, x, leaf_a, foot_a, has_a)
+                    has_a = wp.max(has_a, found)
+                if found == 0:
+                    r, cached_a, count_a, ids_a, levels_a = blend_sample(
+                        a, walk[0], x, leaf_a, cached_a, count_a, ids_a, levels_a
+                    )
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
             if need_b == 1 and fine_b == 1:
@@ -165,9 +175,14 @@ def _combine_nodes_kernel(
                 vb = r[0]
                 gb = wp.vec3(r[1], r[2], r[3])
             elif need_b == 1 and rad_b > 0.0:
-                r, cached_b, count_b, ids_b, levels_b = blend_sample(
-                    b, walk[1], x, leaf_b, cached_b, count_b, ids_b, levels_b
-                )
+                found = int(0)
+                if b.mesh != wp.uint64(0):
+                    found, r, foot_b = mesh_sample(b, x, leaf_b, foot_b, has_b)
+                    has_b = wp.max(has_b, found)
+                if found == 0:
+                    r, cached_b, count_b, ids_b, levels_b = blend_sample(
+                        b, walk[1], x, leaf_b, cached_b, count_b, ids_b, levels_b
+                    )
                 vb = r[0]
                 gb = wp.vec3(r[1], r[2], r[3])
         ra = wp.vec4(va, ga[0], ga[1], ga[2])

@@ -64,8 +64,7 @@ class AdaptiveField:
         triangles=None,
         placement=None,
     ):
-        self.voxel_size = float(voxel_size)
-        self.levels = int(levels)
+        self.voxel_size, self.levels = float(voxel_size), int(levels)
         self.origin = np.asarray(origin, dtype=np.float64)
         self.top_dims = np.asarray(top_dims, dtype=np.int64)
         self.level_offsets = np.asarray(level_offsets, dtype=np.int64)
@@ -79,11 +78,10 @@ class AdaptiveField:
         self.device = device
         self.timings = dict(timings or {})
         self.stats = dict(stats or {})
-        # field id -> SourceMesh: the triangles each operand's field was built from (see closest_sources)
-        self.sources = dict(sources or {})
-        # (N0,) int32 per finest node: its closest point's triangle in the source mesh of its source id (-1 or None:
-        # unknown); 4 bytes a finest node
-        self.tri = triangles
+        self.sources = dict(sources or {})  # field id -> the SourceMesh it was built from (see closest_sources)
+        self.tri = (
+            triangles  # (N0,) int32: each finest node's closest triangle in its source's mesh (-1, None: unknown)
+        )
         # where the field's own frame sits in the world (None: it is the world; see ``transformed``)
         self.placement = placement
         self._encloses_volume = None
@@ -236,9 +234,9 @@ class AdaptiveField:
     def encloses_volume(self) -> bool:
         """Whether the field has an inside: some node's value is negative.
 
-        False for a mesh that encloses nothing (a plane, a single triangle, a flat sheet: |w| < 1/2 everywhere, see
-        :func:`.build.build_field`) and for a boolean whose result is empty (e.g. the intersection of disjoint
-        solids); ``to_mesh()`` then returns empty arrays. Computed once, by one pass over the nodes.
+        False for a mesh that encloses nothing (a plane, a flat sheet: |w| < 1/2 everywhere, see
+        :func:`.build.build_field`) and for an empty boolean (disjoint solids intersected); ``to_mesh()`` then returns
+        empty arrays. Computed once.
         """
         if self._encloses_volume is None:
             found = wp.zeros(1, dtype=wp.int32, device=self.device)
@@ -286,7 +284,16 @@ class AdaptiveField:
         f.fine_count = int(self.level_offsets[1])
         f.tri = self.tri if self.tri is not None else wp.empty(0, dtype=wp.int32, device=self.device)
         f.exact = int(bool(self.stats.get("exact_distance", False)))
+        f.mesh = wp.uint64(getattr(self.distance_mesh, "id", 0))
         return f
+
+    @property
+    def distance_mesh(self):
+        """Warp's mesh (the field's own frame) whose signed distance this field is, kept by its build: a closed mesh's
+        (``stats["mesh_distance"]``); None for booleans, field operations and open meshes."""
+        if self.stats.get("mesh_distance", False) and len(self.sources) == 1:
+            return next(iter(self.sources.values())).kept_bvh(self.device)
+        return None
 
     def __repr__(self) -> str:
         return (

@@ -16,6 +16,7 @@ import warp as wp
 import warp.geometry
 
 from . import octree
+from .geometry import mesh_closest_face
 from .octree import morton_encode, node_center
 from .sampling import (
     LEAF_TOLERANCE,
@@ -30,6 +31,7 @@ from .sampling import (
     locate_node,
     node_coords,
     sample_mls,
+    stored_proj,
     to_frame,
     to_world_sample,
     vec27i,
@@ -165,15 +167,45 @@ def coarse_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, cached: int, count: i
 
 
 @wp.func
+def mesh_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, hint: wp.vec3, has_hint: int):
+    """(found, (phi, grad), closest point in the field's frame) at world point ``x`` in coarse leaf ``leaf`` (index,
+    level; ``x`` clamped into the domain) of a field that is the signed distance to its mesh (``f.mesh``): the exact
+    distance to that mesh, with the leaf's sign (a coarse leaf holds no triangle, so the winding number is constant
+    over it; outside the domain is outside). One closest-point query, within the distance to the nearer of two points
+    of the mesh: the leaf's own closest point (kept within 2^-11 of its distance per axis) and ``hint`` (with
+    ``has_hint``: the caller's previous sample's, a voxel away). Cheaper than the MLS fit it replaces (27 neighbours,
+    a 4x4 solve) on meshes of a few thousand triangles, about as cheap on larger ones, and exact where that fit reads
+    a few voxels off a flat face up to a tenth too far. Not found (rounding at the bound): the caller's MLS fit."""
+    xf = to_frame(f, x)
+    s = level_spacing(f, leaf[1])
+    v = f.values[leaf[0]]
+    foot = stored_proj(f, leaf[0], node_center(f.origin, s, node_coords(f, leaf[0])), s)
+    bound = wp.length(xf - foot) + 0.002 * wp.abs(v)
+    if has_hint == 1:
+        bound = wp.min(bound, wp.length(xf - hint))
+    p, face = mesh_closest_face(f.mesh, xf, bound + 0.001 * f.voxel_size)
+    if face < 0:
+        return 0, wp.vec4(0.0), hint
+    sign = wp.where(v < 0.0, -1.0, 1.0)
+    if not inside_domain(f, xf):
+        sign = 1.0
+    d = wp.length(xf - p)
+    g = wp.vec3(0.0)
+    if d > 0.0:
+        g = (sign / d) * (xf - p)
+    return 1, to_world_sample(f, wp.vec4(sign * d, g[0], g[1], g[2])), p
+
+
+@wp.func
 def blend_sample(
     f: FieldArg, walk: int, x: wp.vec3, leaf: wp.vec2i, cached: int, count: int, ids: vec27i, levels: vec27i
 ):
-    """:func:`coarse_sample`, or with ``walk`` the distance to the operand's nearest stored closest point
-    (:func:`.sampling.closest_sample`): exact where the MLS estimate of a coarse leaf is not (a few voxels off a flat
-    face it reads up to a tenth too far), for blends that reach that far and operands whose closest points lie on
-    their surface."""
+    """An operand's value in its coarse leaf ``leaf``: :func:`coarse_sample`, or with ``walk`` the distance to the
+    operand's nearest stored closest point (:func:`.sampling.closest_sample`): exact where the MLS estimate of a
+    coarse leaf is not (a few voxels off a flat face it reads up to a tenth too far), for blends that reach that far
+    and operands whose closest points lie on their surface. (A field of a mesh reads the mesh: :func:`mesh_sample`.)"""
     if walk == 1:
-        return closest_sample(f, x, leaf), cached, count, ids, levels
+        return to_world_sample(f, closest_sample(f, to_frame(f, x), leaf)), cached, count, ids, levels
     return coarse_sample(f, x, leaf, cached, count, ids, levels)
 
 

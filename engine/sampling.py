@@ -55,6 +55,7 @@ class FieldArg:
     fine_count: int
     tri: wp.array[wp.int32]  # per finest node, its closest point's triangle (empty: not known)
     exact: int  # 1: a re-distanced field (``stats["exact_distance"]``): every closest point on its surface
+    mesh: wp.uint64  # the BVH of the mesh whose signed distance the field is (``AdaptiveField.distance_mesh``); 0: none
     # world = scale * rotation @ frame + translation, when the field is placed (``moved`` 1)
     moved: int
     rotation: wp.mat33

@@ -57,6 +57,14 @@ class SourceMesh:
             )
         return self._arrays[device.alias]
 
+    def adopt(self, mesh: wp.Mesh) -> None:
+        """Keep ``mesh`` (Warp's mesh of these very triangles, made for the build) as the BVH on its device."""
+        self._bvh[mesh.device.alias] = mesh
+
+    def kept_bvh(self, device):
+        """The BVH on ``device`` if at hand (made or adopted already), else None."""
+        return self._bvh.get(wp.get_device(device).alias)
+
     def bvh(self, device) -> wp.Mesh:
         """Warp's mesh (with its BVH) of these triangles on ``device``, built on first use."""
         device = wp.get_device(device)
