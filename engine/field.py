@@ -114,7 +114,7 @@ class AdaptiveField:
         if child.shape[0] == offsets[-1]:  # a layout's links of every node: the finest level has none to keep
             child = wp.clone(child[n0:]) if n0 < child.shape[0] else wp.empty(0, dtype=wp.int32, device=child.device)
         if proj.dtype == wp.vec3:  # points: kept as offsets from their nodes
-            proj = code_proj(layout["codes"], offsets, origin, voxel_size, points=proj)
+            proj = code_proj(layout["codes"], offsets, origin, voxel_size, points=proj, coords=layout.get("coords"))
         return cls(
             voxel_size=voxel_size,
             levels=len(offsets) - 1,

@@ -558,6 +558,7 @@ def face_nodes_kernel(
 def _code_proj_kernel(
     first: int,
     codes: wp.array[wp.int64],
+    coords: wp.array[wp.vec3i],
     offsets: wp.array[wp.int32],
     origin: wp.vec3,
     voxel_size: float,
@@ -566,23 +567,30 @@ def _code_proj_kernel(
     stored: wp.array[wp.vec3h],
 ):
     """Node ``first + tid``'s closest point between a point (``points``) and the half-float offset from its centre
-    in its level's spacings (``stored``): ``encode`` 1 from the first to the second, 0 back."""
+    in its level's spacings (``stored``): ``encode`` 1 from the first to the second, 0 back. The node's coordinates
+    from ``coords`` where given (a layout's: half the time of decoding its code), else from its code."""
     i = first + wp.tid()
     k = int(0)
     while i >= offsets[k + 1]:
         k += 1
     s = voxel_size * float(1 << k)
-    centre = node_center(origin, s, morton_decode(codes[i]))
+    c = wp.vec3i()
+    if coords.shape[0] > 0:
+        c = coords[i]
+    else:
+        c = morton_decode(codes[i])
+    centre = node_center(origin, s, c)
     if encode == 1:
         stored[i] = wp.vec3h((points[i] - centre) / s)
     else:
         points[i] = centre + s * wp.vec3(stored[i])
 
 
-def code_proj(codes, level_offsets, origin, voxel_size, *, points=None, stored=None):
+def code_proj(codes, level_offsets, origin, voxel_size, *, points=None, stored=None, coords=None):
     """Closest points between world points and how a field keeps them (:func:`stored_proj`): given ``points`` (N,)
     vec3, their (N,) vec3h offsets; given ``stored``, the (N,) vec3 points. ``codes``/``level_offsets``: the nodes'
-    Morton codes and the levels' offsets (finest first), ``origin``/``voxel_size`` the finest lattice."""
+    Morton codes and the levels' offsets (finest first), ``origin``/``voxel_size`` the finest lattice; ``coords``:
+    the nodes' (N,) vec3i lattice coordinates where at hand (else decoded from the codes)."""
     source = points if points is not None else stored
     device = source.device
     n = source.shape[0]
@@ -591,12 +599,14 @@ def code_proj(codes, level_offsets, origin, voxel_size, *, points=None, stored=N
         stored = wp.empty(n, dtype=wp.vec3h, device=device)
     else:
         points = wp.empty(n, dtype=wp.vec3, device=device)
+    if coords is None:
+        coords = wp.empty(0, dtype=wp.vec3i, device=device)
     offsets = wp.array(np.asarray(level_offsets, dtype=np.int32), dtype=wp.int32, device=device)
     origin_v = wp.vec3(*(float(v) for v in origin))
     launch_split(
         _code_proj_kernel,
         n,
-        lambda lo, _n: [lo, codes, offsets, origin_v, float(voxel_size), encode, points, stored],
+        lambda lo, _n: [lo, codes, coords, offsets, origin_v, float(voxel_size), encode, points, stored],
         device,
     )
     return stored if encode else points
