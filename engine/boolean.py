@@ -156,7 +156,12 @@ def _combine_nodes_kernel(
                 elif va + rad_a <= tb - rad_b - blend:
                     need_a = 0
             if need_a == 1 and fine_a == 1:
-                r = finest_sample(a, x)
+                found = int(0)
+                if a.mesh != wp.uint64(0) and wp.abs(va) > rad_a:  # the node's sign holds at x
+                    found, r, foot_a = mesh_sample(a, x, leaf_a, foot_a, has_a)
+                    has_a = wp.max(has_a, found)
+                if found == 0:
+                    r = finest_sample(a, x)
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
             elif need_a == 1 and rad_a > 0.0:
@@ -171,7 +176,12 @@ def _combine_nodes_kernel(
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
             if need_b == 1 and fine_b == 1:
-                r = finest_sample(b, x)
+                found = int(0)
+                if b.mesh != wp.uint64(0) and wp.abs(vb) > rad_b:  # the node's sign holds at x
+                    found, r, foot_b = mesh_sample(b, x, leaf_b, foot_b, has_b)
+                    has_b = wp.max(has_b, found)
+                if found == 0:
+                    r = finest_sample(b, x)
                 vb = r[0]
                 gb = wp.vec3(r[1], r[2], r[3])
             elif need_b == 1 and rad_b > 0.0:

@@ -168,14 +168,16 @@ def coarse_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, cached: int, count: i
 
 @wp.func
 def mesh_sample(f: FieldArg, x: wp.vec3, leaf: wp.vec2i, hint: wp.vec3, has_hint: int):
-    """(found, (phi, grad), closest point in the field's frame) at world point ``x`` in coarse leaf ``leaf`` (index,
-    level; ``x`` clamped into the domain) of a field that is the signed distance to its mesh (``f.mesh``): the exact
-    distance to that mesh, with the leaf's sign (a coarse leaf holds no triangle, so the winding number is constant
-    over it; outside the domain is outside). One closest-point query, within the distance to the nearer of two points
-    of the mesh: the leaf's own closest point (kept within 2^-11 of its distance per axis) and ``hint`` (with
-    ``has_hint``: the caller's previous sample's, a voxel away). Cheaper than the MLS fit it replaces (27 neighbours,
-    a 4x4 solve) on meshes of a few thousand triangles, about as cheap on larger ones, and exact where that fit reads
-    a few voxels off a flat face up to a tenth too far. Not found (rounding at the bound): the caller's MLS fit."""
+    """(found, (phi, grad), closest point in the field's frame) at world point ``x`` in node ``leaf`` (index, level;
+    ``x`` clamped into the domain) of a field that is the signed distance to its mesh (``f.mesh``): the exact distance
+    to that mesh, with the node's sign, which must hold at ``x``: a coarse leaf holds no triangle, so the winding
+    number is constant over it; in a finest node's cell the caller's bracket must exclude zero (outside the domain is
+    outside). One closest-point query, within the distance to the nearer of two points of the mesh: the node's own
+    closest point (kept within 2^-11 of its distance per axis) and ``hint`` (with ``has_hint``: the caller's previous
+    sample's, a voxel away). Cheaper than the MLS fit it replaces in a coarse leaf (27 neighbours, a 4x4 solve) on
+    meshes of a few thousand triangles, about as cheap on larger ones, cheaper than a trilinear sample's 8 descents in
+    the finest band, and exact where the fit reads a few voxels off a flat face up to a tenth too far and the
+    trilinear sample beside an edge a tenth of a voxel off. Not found (rounding at the bound): the caller's own."""
     xf = to_frame(f, x)
     s = level_spacing(f, leaf[1])
     v = f.values[leaf[0]]
