@@ -58,6 +58,7 @@ def _combine_nodes_kernel(
     first: int,
     end: int,
     group: int,
+    sparse: int,
     origin: wp.vec3,
     spacing: float,
     op: int,
@@ -95,8 +96,16 @@ def _combine_nodes_kernel(
     foot_b = wp.vec3(0.0)
     has_a = int(0)
     has_b = int(0)
+    # a group of 8 on a sparse level is one octet (its first node's code decoded, its siblings offset from it)
+    c0 = morton_decode(codes[i0])
+    octet = sparse == 1 and group == 8 and i1 - i0 == 8
     for i in range(i0, i1):
-        c = morton_decode(codes[i])
+        c = c0
+        if octet:
+            k = i - i0
+            c = c0 + wp.vec3i(k & 1, (k >> 1) & 1, (k >> 2) & 1)
+        else:
+            c = morton_decode(codes[i])
         x = node_center(origin, spacing, c)
         # Exact node values where the lattices align; elsewhere a cheap bracket from the containing coarse leaf, and
         # the MLS sample only when that operand can decide the result (its bracket overlaps the other's within
@@ -323,7 +332,7 @@ def combine(
 
     no_octets = wp.empty(0, dtype=wp.int32, device=device)
 
-    def run(codes, lo_, hi_, spacing_, proj, source, values, tri):
+    def run(codes, lo_, hi_, spacing_, proj, source, values, tri, sparse):
         finest = spacing_ == h
         flags = [int(aligned[0] and finest), int(aligned[1] and finest)]
         octet_args = [
@@ -346,6 +355,7 @@ def combine(
                 lo_ + group * start,
                 min(hi_, lo_ + group * (start + n)),
                 group,
+                int(sparse),
                 origin_v,
                 float(spacing_),
                 int(op),
@@ -373,7 +383,7 @@ def combine(
     tri = wp.empty(int(offsets[1]), dtype=wp.int32, device=device)
     for k in range(levels):
         tk = time.perf_counter()
-        run(layout["codes"], int(offsets[k]), int(offsets[k + 1]), h * 2**k, proj, source, values, tri)
+        run(layout["codes"], int(offsets[k]), int(offsets[k + 1]), h * 2**k, proj, source, values, tri, k < levels - 1)
         timings["finest_values" if k == 0 else "top_level" if k == levels - 1 else f"level_{k}"] = (
             time.perf_counter() - tk
         )
