@@ -29,8 +29,10 @@ from .operands import (
     extrapolate,
     finest_bracket,
     finest_sample,
+    leaf_estimate,
     lookup_node,
     mesh_sample,
+    octet_leaf,
 )
 from .plan import check_budget, plan_domain
 from .prune import offset_to, operand_octets, prune_octets
@@ -132,9 +134,17 @@ def _combine_nodes_kernel(
             rad_a = float(0.0)
             rad_b = float(0.0)
             if fa == 0:
-                va, rad_a, leaf_a = estimate(a, x)
+                known = octet_leaf(a_octets, a_first, i)
+                if known[0] >= 0:
+                    va, rad_a, leaf_a = leaf_estimate(a, x, known)
+                else:
+                    va, rad_a, leaf_a = estimate(a, x)
             if fb == 0:
-                vb, rad_b, leaf_b = estimate(b, x)
+                known = octet_leaf(b_octets, b_first, i)
+                if known[0] >= 0:
+                    vb, rad_b, leaf_b = leaf_estimate(b, x, known)
+                else:
+                    vb, rad_b, leaf_b = estimate(b, x)
             # in an operand's finest band: its finest node's bracket first, the trilinear sample only where needed
             fine_a = int(0)
             fine_b = int(0)

@@ -237,14 +237,11 @@ def extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
 
 
 @wp.func
-def estimate(f: FieldArg, x: wp.vec3):
-    """A cheap bracket of an operand's value: (phi, radius) from the coarse leaf containing ``x`` (the field is
-    1-Lipschitz, so the value at ``x`` lies within ``radius`` of the leaf's, widened by ``LEAF_SLACK``); radius -1 in
-    the finest band. Also returns that leaf (index, level; ``x`` clamped into the domain). World units for a placed
-    field."""
+def leaf_estimate(f: FieldArg, x: wp.vec3, leaf: wp.vec2i):
+    """:func:`estimate` at ``x`` in the operand's leaf ``leaf`` (index, level), known to hold ``x`` (clamped into the
+    domain)."""
     xf = to_frame(f, x)
     xc = clamp_to_domain(f, xf)
-    leaf = locate_leaf(f, xc)
     if leaf[1] == 0:
         return 0.0, -1.0, leaf
     s = level_spacing(f, leaf[1])
@@ -254,6 +251,27 @@ def estimate(f: FieldArg, x: wp.vec3):
     if out > 0.0:
         phi = wp.max(phi, 0.0) + out
     return phi * f.scale, (wp.length(xc - centre) + LEAF_SLACK * wp.abs(f.values[leaf[0]])) * f.scale, leaf
+
+
+@wp.func
+def estimate(f: FieldArg, x: wp.vec3):
+    """A cheap bracket of an operand's value: (phi, radius) from the coarse leaf containing ``x`` (the field is
+    1-Lipschitz, so the value at ``x`` lies within ``radius`` of the leaf's, widened by ``LEAF_SLACK``); radius -1 in
+    the finest band. Also returns that leaf (index, level; ``x`` clamped into the domain). World units for a placed
+    field."""
+    return leaf_estimate(f, x, locate_leaf(f, clamp_to_domain(f, to_frame(f, x))))
+
+
+@wp.func
+def octet_leaf(octet_mode: int, octet_first: wp.array[wp.int32], i: int) -> wp.vec2i:
+    """The coarse leaf (index, level) covering result finest node ``i``'s octet in an operand whose octets coincide
+    with the result's (``octet_mode``), as the pruning found it (:func:`.prune.prune_octets`); (-1, 0): none known."""
+    if octet_mode == 1:
+        j0 = octet_first[i // 8]
+        if j0 <= -2:
+            code = -2 - j0
+            return wp.vec2i(code // 16, code % 16)
+    return wp.vec2i(-1, 0)
 
 
 @wp.func

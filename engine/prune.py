@@ -104,8 +104,9 @@ def _octet_bracket_kernel(
                 neg = 1
                 pos = 1
     near[t] = n_near
-    a_first_out[t] = a_first
-    b_first_out[t] = b_first
+    # an octet the operand lacks, inside one of its coarse leaves: that leaf, for the combination (no descent)
+    a_first_out[t] = wp.where(a_first < 0 and a_leaf >= 0, -2 - (16 * a_leaf + a_level), a_first)
+    b_first_out[t] = wp.where(b_first < 0 and b_leaf >= 0, -2 - (16 * b_leaf + b_level), b_first)
     has_neg[t] = neg
     has_pos[t] = pos
 
@@ -286,7 +287,8 @@ def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, ble
         op, blend, mode: The boolean (``OP_*``), its blend size and blend mode (0 round / none, 1 chamfer).
         oct_dims: The octet grid's dimensions.
     Returns:
-        (octets, a_first, b_first) Warp arrays of the kept octets.
+        (octets, a_first, b_first) Warp arrays of the kept octets: an operand's first node of each, -1 where none is
+        known, or -2 - (16 x index + level) of its coarse leaf covering the octet (:func:`.operands.octet_leaf`).
     """
     device = octets.device
     a_arg, b_arg = args
