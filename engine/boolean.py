@@ -174,41 +174,29 @@ def _combine_nodes_kernel(
                     need_b = 0
                 elif va + rad_a <= tb - rad_b - blend:
                     need_a = 0
-            if need_a == 1 and fine_a == 1:
+            if need_a == 1 and (fine_a == 1 or rad_a > 0.0):
                 found = int(0)
-                if a.mesh != wp.uint64(0) and wp.abs(va) > rad_a:  # the node's sign holds at x
+                # a mesh's own distance where the node's sign holds at x (a coarse leaf's always does)
+                if a.mesh != wp.uint64(0) and (fine_a == 0 or wp.abs(va) > rad_a):
                     found, r, foot_a = mesh_sample(a, x, leaf_a, foot_a, has_a)
                     has_a = wp.max(has_a, found)
-                if found == 0:
+                if found == 0 and fine_a == 1:
                     r = finest_sample(a, x)
-                va = r[0]
-                ga = wp.vec3(r[1], r[2], r[3])
-            elif need_a == 1 and rad_a > 0.0:
-                found = int(0)
-                if a.mesh != wp.uint64(0):
-                    found, r, foot_a = mesh_sample(a, x, leaf_a, foot_a, has_a)
-                    has_a = wp.max(has_a, found)
-                if found == 0:
+                elif found == 0:
                     r, cached_a, count_a, ids_a, levels_a = blend_sample(
                         a, walk[0], x, leaf_a, cached_a, count_a, ids_a, levels_a
                     )
                 va = r[0]
                 ga = wp.vec3(r[1], r[2], r[3])
-            if need_b == 1 and fine_b == 1:
+            if need_b == 1 and (fine_b == 1 or rad_b > 0.0):
                 found = int(0)
-                if b.mesh != wp.uint64(0) and wp.abs(vb) > rad_b:  # the node's sign holds at x
+                # a mesh's own distance where the node's sign holds at x (a coarse leaf's always does)
+                if b.mesh != wp.uint64(0) and (fine_b == 0 or wp.abs(vb) > rad_b):
                     found, r, foot_b = mesh_sample(b, x, leaf_b, foot_b, has_b)
                     has_b = wp.max(has_b, found)
-                if found == 0:
+                if found == 0 and fine_b == 1:
                     r = finest_sample(b, x)
-                vb = r[0]
-                gb = wp.vec3(r[1], r[2], r[3])
-            elif need_b == 1 and rad_b > 0.0:
-                found = int(0)
-                if b.mesh != wp.uint64(0):
-                    found, r, foot_b = mesh_sample(b, x, leaf_b, foot_b, has_b)
-                    has_b = wp.max(has_b, found)
-                if found == 0:
+                elif found == 0:
                     r, cached_b, count_b, ids_b, levels_b = blend_sample(
                         b, walk[1], x, leaf_b, cached_b, count_b, ids_b, levels_b
                     )
