@@ -346,8 +346,11 @@ def test_closed_operands_give_their_exact_distances_off_their_surfaces(placed):
     else:
         fb = engine.build_field((tilted[0] @ tilt.T).astype(np.float32), tilted[1], voxel_size=h, field_id=1)
         rot, size, center = tilt, half, (0.0, 0.0, 0.0)
+    assert fb.distance_mesh is not None  # placed or not, the field is its mesh's distance (in its own frame)
     result = engine.union(fa, fb)
     assert result.distance_mesh is None  # a boolean is no one mesh's distance
+    bunny = load_mesh("stanford-bunny.obj")  # open: its surface runs across its holes, away from the mesh
+    assert engine.build_field(*bunny, voxel_size=float(np.ptp(bunny[0], axis=0).max()) / 32).distance_mesh is None
     cells = result.debug_cells()
     fine = cells["levels"] == 0
     x = cells["centers"][fine]
