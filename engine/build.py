@@ -46,9 +46,11 @@ MAX_SIGN_REFINEMENTS = 4
 # node by node against 0.083 s by boxes at 0.10 cell faces per triangle, 0.19 s against 0.145 s at 0.41).
 OCTET_SEARCH_MIN_AREA = 0.15
 
-# Triangles up to which a closed mesh's field keeps the build's BVH of it, for exact values where booleans read its
-# coarse leaves (``AdaptiveField.distance_mesh``): about 90 bytes a triangle, against the field's 18 a node.
-KEEP_BVH_TRIANGLES = 500_000
+# A closed mesh's field keeps the build's BVH of it, for exact values where booleans sample it
+# (``AdaptiveField.distance_mesh``), when the mesh has at most one triangle per this many nodes: the BVH with its
+# winding-number data, points and indices holds about 140 bytes a triangle (measured: 112-135 beside the arrays, on
+# spheres of 100 k and 500 k triangles), the field 18 a node, so the BVH stays within the field's own size.
+KEEP_BVH_NODES_PER_TRIANGLE = 8
 
 # Triangles of all meshes above which build_fields builds one mesh after the other (see there).
 SEQUENTIAL_TRIANGLES = 1_000_000
@@ -469,9 +471,9 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     field.stats["surface_points"] = clean
     field.stats["problem_faces"] = int(problem.sum())
     source = SourceMesh(verts, tris, plan["triangle_ids"])
-    # a closed mesh's field is its signed distance everywhere: booleans read its coarse leaves from the mesh itself
-    # (its BVH kept, for meshes whose BVH costs little beside the field)
-    field.stats["mesh_distance"] = clean and encloses and len(tris) <= KEEP_BVH_TRIANGLES
+    # a closed mesh's field is its signed distance everywhere: booleans read it from the mesh itself where they sample
+    # it (its BVH kept, where that costs no more than the field)
+    field.stats["mesh_distance"] = clean and encloses and len(tris) * KEEP_BVH_NODES_PER_TRIANGLE <= field.node_count
     if field.stats["mesh_distance"]:
         source.adopt(mesh)
     field.sources = {field_id: source}
