@@ -28,6 +28,12 @@ if TYPE_CHECKING:
 KEEP_BAND = 2.5
 
 
+@wp.func
+def _codable(leaf: int, level: int) -> bool:
+    """Whether a coarse leaf fits the code ``-2 - (16 x index + level)`` in an int32 (see :func:`prune_octets`)."""
+    return leaf >= 0 and level < 16 and leaf < 134_000_000
+
+
 @wp.kernel(enable_backward=False)
 def _octet_bracket_kernel(
     first: int,
@@ -104,9 +110,10 @@ def _octet_bracket_kernel(
                 neg = 1
                 pos = 1
     near[t] = n_near
-    # an octet the operand lacks, inside one of its coarse leaves: that leaf, for the combination (no descent)
-    a_first_out[t] = wp.where(a_first < 0 and a_leaf >= 0, -2 - (16 * a_leaf + a_level), a_first)
-    b_first_out[t] = wp.where(b_first < 0 and b_leaf >= 0, -2 - (16 * b_leaf + b_level), b_first)
+    # an octet the operand lacks, inside one of its coarse leaves: that leaf, for the combination (no descent), where
+    # its index and level fit the code (else -1: the combination descends)
+    a_first_out[t] = wp.where(a_first < 0 and _codable(a_leaf, a_level), -2 - (16 * a_leaf + a_level), a_first)
+    b_first_out[t] = wp.where(b_first < 0 and _codable(b_leaf, b_level), -2 - (16 * b_leaf + b_level), b_first)
     has_neg[t] = neg
     has_pos[t] = pos
 
