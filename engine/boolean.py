@@ -34,7 +34,7 @@ from .operands import (
     mesh_sample,
     octet_leaf,
 )
-from .plan import check_budget, plan_domain
+from .plan import byte_grid_fits, check_budget, plan_domain
 from .prune import offset_to, operand_octets, prune_octets
 from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_source, to_frame, vec27i
 
@@ -298,11 +298,23 @@ def combine(
         for f in (a, b)
     ]
     oct_dims = fine_dims // 2
-    parts = [operand_octets(f, origin, h, oct_dims, al, device) for f, al in zip((a, b), aligned, strict=False)]
-    all_codes = wp.empty(parts[0].shape[0] + parts[1].shape[0], dtype=wp.int64, device=device)
-    wp.copy(all_codes, parts[0], count=parts[0].shape[0])
-    wp.copy(all_codes, parts[1], dest_offset=parts[0].shape[0], count=parts[1].shape[0])
-    octets = octree.sort_unique(all_codes, end_bit=3 * code_bits(oct_dims))
+    end_bit = 3 * code_bits(oct_dims)
+    if not all(aligned) and byte_grid_fits(oct_dims):
+        # a resampled operand's cells mark a byte per octet: the other's octets marked there too, one compaction and
+        # one sort (two aligned operands' codes are merged without a grid to scan)
+        mask = wp.zeros(int(np.prod(oct_dims)), dtype=wp.uint8, device=device)
+        for f, al in zip((a, b), aligned, strict=False):
+            operand_octets(f, origin, h, oct_dims, al, device, mask=mask)
+        octets = octree.compact_mask(
+            mask, oct_dims, device, end_bit, lambda total: check_budget(fine_dims, 0, 8 * total)
+        )
+        mask = None
+    else:
+        parts = [operand_octets(f, origin, h, oct_dims, al, device) for f, al in zip((a, b), aligned, strict=False)]
+        all_codes = wp.empty(parts[0].shape[0] + parts[1].shape[0], dtype=wp.int64, device=device)
+        wp.copy(all_codes, parts[0], count=parts[0].shape[0])
+        wp.copy(all_codes, parts[1], dest_offset=parts[0].shape[0], count=parts[1].shape[0])
+        octets = octree.sort_unique(all_codes, end_bit=end_bit)
     # a round blend moves the surface up to blend / 4 from both operands' surfaces, a chamfer up to blend / 2
     reach = (0.5 if mode == 1 else 0.25) * blend
     radius = int(math.ceil(reach / (2.0 * h))) if blend > 0.0 else 0

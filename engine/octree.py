@@ -60,14 +60,10 @@ def _exclusive_offsets(counts: wp.array, check=None) -> tuple[wp.array, int]:
 MASK_MAX_CELLS = 1 << 28
 
 
-def mark_then_compact(kernel, dim: int, args, dims, device, end_bit: int = 63, check=None) -> wp.array:
-    """Sorted unique octet codes marked by ``kernel`` (see :func:`count_then_emit`) called with ``emit=2``: item
-    ``first + tid`` sets ``mask[x + dims.x * (y + dims.y * z)] = 1`` for each of its octets, ``mask`` being a uint8
-    array of ``prod(dims)`` bytes passed after ``args`` (setting a byte to 1 from two threads is harmless); the kernel
-    takes ``(first, *args, mask, offsets, emit, counts, codes)``. ``check(total)`` may refuse the count of unique
-    octets before their codes are allocated."""
-    nx, ny, nz = (int(d) for d in dims)
-    mask = wp.zeros(nx * ny * nz, dtype=wp.uint8, device=device)
+def mark_octets(kernel, dim: int, args, mask: wp.array, device) -> None:
+    """Run ``kernel`` (see :func:`count_then_emit`) with ``emit=2``: item ``first + tid`` sets ``mask[x + dims.x * (y
+    + dims.y * z)] = 1`` for each of its octets (setting a byte to 1 from two threads is harmless); the kernel takes
+    ``(first, *args, mask, offsets, emit, counts, codes)``."""
     none_i32 = wp.empty(1, dtype=wp.int32, device=device)
     none_i64 = wp.empty(1, dtype=wp.int64, device=device)
     launch_split(
@@ -77,6 +73,12 @@ def mark_then_compact(kernel, dim: int, args, dims, device, end_bit: int = 63, c
         device,
         min_dim=EMIT_SPLIT_MIN_DIM,
     )
+
+
+def compact_mask(mask: wp.array, dims, device, end_bit: int = 63, check=None) -> wp.array:
+    """Sorted codes of the set bytes of a uint8 mask of ``prod(dims)`` bytes (x-fastest). ``check(total)`` may refuse
+    the count before the codes are allocated."""
+    nx, ny, nz = (int(d) for d in dims)
     rows = ny * nz
     counts = wp.empty(rows, dtype=wp.int32, device=device)
     launch_split(
@@ -93,6 +95,14 @@ def mark_then_compact(kernel, dim: int, args, dims, device, end_bit: int = 63, c
         min_dim=EMIT_SPLIT_MIN_DIM,
     )
     return _radix_sort(codes, total, end_bit)
+
+
+def mark_then_compact(kernel, dim: int, args, dims, device, end_bit: int = 63, check=None) -> wp.array:
+    """Sorted unique octet codes marked by ``kernel`` in a byte per octet of a (dims) grid (:func:`mark_octets`, then
+    :func:`compact_mask`)."""
+    mask = wp.zeros(int(np.prod([int(d) for d in dims])), dtype=wp.uint8, device=device)
+    mark_octets(kernel, dim, args, mask, device)
+    return compact_mask(mask, dims, device, end_bit, check)
 
 
 @wp.kernel(enable_backward=False)

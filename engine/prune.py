@@ -172,11 +172,23 @@ def _octet_signs_kernel(
 
 
 @wp.kernel(enable_backward=False)
-def _aligned_octets_kernel(node_codes: wp.array[wp.int64], offset: wp.vec3i, step: int, codes: wp.array[wp.int64]):
-    """Octet code, on the result lattice, of every ``step``-th finest node of an aligned operand."""
+def _aligned_octets_kernel(
+    node_codes: wp.array[wp.int64],
+    offset: wp.vec3i,
+    step: int,
+    dims: wp.vec3i,
+    mask: wp.array[wp.uint8],
+    codes: wp.array[wp.int64],
+):
+    """Octet, on the result lattice, of every ``step``-th finest node of an aligned operand: marked in ``mask`` (the
+    octet grid, x-fastest) when it is not empty, else its code written to ``codes``."""
     i = wp.tid()
     c = morton_decode(node_codes[step * i]) + offset
-    codes[i] = morton_encode(wp.vec3i(c[0] >> 1, c[1] >> 1, c[2] >> 1))
+    o = wp.vec3i(c[0] >> 1, c[1] >> 1, c[2] >> 1)
+    if mask.shape[0] > 0:
+        mask[o[0] + dims[0] * (o[1] + dims[1] * o[2])] = wp.uint8(1)
+    else:
+        codes[i] = morton_encode(o)
 
 
 @wp.kernel(enable_backward=False)
@@ -235,26 +247,36 @@ def offset_to(f: AdaptiveField, origin: np.ndarray, spacing: float) -> np.ndarra
     return np.rint((f.origin - origin) / spacing).astype(np.int64)
 
 
-def operand_octets(f: AdaptiveField, origin, spacing, oct_dims, aligned, device) -> wp.array:
-    """Octet codes (result lattice) that cover an operand's finest level."""
+def operand_octets(f: AdaptiveField, origin, spacing, oct_dims, aligned, device, mask=None):
+    """Octet codes (result lattice) that cover an operand's finest level; with ``mask`` (a byte per octet of the
+    grid, x-fastest), those octets marked there instead (returns None)."""
     n0 = int(f.level_offsets[1])
+    dims_v = wp.vec3i(*(int(d) for d in oct_dims))
     if aligned:
         offset_np = offset_to(f, origin, spacing)
         # with even offsets the operand's octets are result octets: one code per octet (its first node) will do
         step = 8 if f.levels > 1 and not (offset_np % 2).any() else 1
-        codes = wp.empty(n0 // step, dtype=wp.int64, device=device)
+        codes = wp.empty(0 if mask is not None else n0 // step, dtype=wp.int64, device=device)
         offset = wp.vec3i(*(int(v) for v in offset_np))
+        no_mask = wp.empty(0, dtype=wp.uint8, device=device)
         parallel.load_modules([_aligned_octets_kernel.module], device)
         wp.launch(
-            _aligned_octets_kernel, dim=n0 // step, inputs=[f.codes, offset, step], outputs=[codes], device=device
+            _aligned_octets_kernel,
+            dim=n0 // step,
+            inputs=[f.codes, offset, step, dims_v, mask if mask is not None else no_mask],
+            outputs=[codes],
+            device=device,
         )
-        return codes
+        return None if mask is not None else codes
     per_cell = int(f.levels == 1)  # a dense single level is not stored in octets
     # the result octets that overlap the operand's finest cells cover its band; an operand finer than the result
     # (its band narrower than a result voxel) gets a voxel more
     pad = spacing if f.world_voxel_size < spacing * (1.0 - 1e-6) else 0.0
-    args = [f.arg(), wp.vec3(*origin), 2.0 * spacing, pad, wp.vec3i(*(int(d) for d in oct_dims)), per_cell]
+    args = [f.arg(), wp.vec3(*origin), 2.0 * spacing, pad, dims_v, per_cell]
     n_octets = n0 if per_cell else n0 // 8
+    if mask is not None:
+        octree.mark_octets(_octets_of_cells_kernel, n_octets, args, mask, device)
+        return None
     if byte_grid_fits(oct_dims):  # each result octet marked once in a byte per octet, no (cell, octet) pairs sorted
         return octree.mark_then_compact(
             _octets_of_cells_kernel,
