@@ -80,9 +80,11 @@ def compact_mask(mask: wp.array, dims, device, end_bit: int = 63, check=None) ->
     the count before the codes are allocated."""
     nx, ny, nz = (int(d) for d in dims)
     rows = ny * nz
+    # the mask's whole 64-bit words, the same memory (a Warp allocation is aligned far beyond 8 bytes)
+    words = wp.array(ptr=mask.ptr, dtype=wp.uint64, shape=(mask.shape[0] // 8,), device=mask.device)
     counts = wp.empty(rows, dtype=wp.int32, device=device)
     launch_split(
-        _count_mask_rows_kernel, rows, lambda lo, n: [lo, mask, nx, counts], device, min_dim=EMIT_SPLIT_MIN_DIM
+        _count_mask_rows_kernel, rows, lambda lo, n: [lo, mask, words, nx, counts], device, min_dim=EMIT_SPLIT_MIN_DIM
     )
     offsets, total = _exclusive_offsets(counts, check)
     codes = wp.empty(2 * total, dtype=wp.int64, device=device)  # the second half: the radix sort's buffer
@@ -90,7 +92,7 @@ def compact_mask(mask: wp.array, dims, device, end_bit: int = 63, check=None) ->
     launch_split(
         _emit_mask_rows_kernel,
         rows,
-        lambda lo, n: [lo, mask, dims_v, offsets, codes],
+        lambda lo, n: [lo, mask, words, dims_v, offsets, codes],
         device,
         min_dim=EMIT_SPLIT_MIN_DIM,
     )
@@ -106,31 +108,55 @@ def mark_then_compact(kernel, dim: int, args, dims, device, end_bit: int = 63, c
 
 
 @wp.kernel(enable_backward=False)
-def _count_mask_rows_kernel(first: int, mask: wp.array[wp.uint8], nx: int, counts: wp.array[wp.int32]):
-    """Set bytes in row ``first + tid`` (``nx`` consecutive bytes) of a mask."""
+def _count_mask_rows_kernel(
+    first: int, mask: wp.array[wp.uint8], words: wp.array[wp.uint64], nx: int, counts: wp.array[wp.int32]
+):
+    """Set bytes (each 0 or 1) in row ``first + tid`` (``nx`` consecutive bytes) of a mask; ``words`` the same memory
+    as 64-bit words, read 8 bytes at a time where the row covers a whole word (the bytes' sum in the top byte of the
+    word times 0x0101010101010101)."""
     r = first + wp.tid()
-    base = r * nx
+    x = r * nx
+    end = x + nx
     n = int(0)
-    for x in range(nx):
-        n += int(mask[base + x])
+    while x < end and (x % 8 != 0 or end - x < 8):
+        n += int(mask[x])
+        x += 1
+    while end - x >= 8:
+        n += int((words[x / 8] * wp.uint64(0x0101010101010101)) >> wp.uint64(56))
+        x += 8
+    while x < end:
+        n += int(mask[x])
+        x += 1
     counts[r] = n
 
 
 @wp.kernel(enable_backward=False)
 def _emit_mask_rows_kernel(
-    first: int, mask: wp.array[wp.uint8], dims: wp.vec3i, offsets: wp.array[wp.int32], codes: wp.array[wp.int64]
+    first: int,
+    mask: wp.array[wp.uint8],
+    words: wp.array[wp.uint64],
+    dims: wp.vec3i,
+    offsets: wp.array[wp.int32],
+    codes: wp.array[wp.int64],
 ):
     """Morton codes of the set bytes of row ``first + tid`` of a (dims.x, dims.y, dims.z) x-fastest mask, from
-    ``offsets[row]``."""
+    ``offsets[row]``; whole 64-bit words of zeros (``words``: the same memory) skipped at once."""
     r = first + wp.tid()
     base = r * dims[0]
     y = r % dims[1]
     z = r / dims[1]
     k = offsets[r]
-    for x in range(dims[0]):
-        if mask[base + x] != wp.uint8(0):
+    x = int(0)
+    while x < dims[0]:
+        i = base + x
+        if i % 8 == 0 and dims[0] - x >= 8:
+            if words[i / 8] == wp.uint64(0):
+                x += 8
+                continue
+        if mask[i] != wp.uint8(0):
             codes[k] = morton_encode(wp.vec3i(x, y, z))
             k += 1
+        x += 1
 
 
 @wp.func
