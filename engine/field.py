@@ -79,9 +79,8 @@ class AdaptiveField:
         self.timings = dict(timings or {})
         self.stats = dict(stats or {})
         self.sources = dict(sources or {})  # field id -> the SourceMesh it was built from (see closest_sources)
-        self.tri = (
-            triangles  # (N0,) int32: each finest node's closest triangle in its source's mesh (-1, None: unknown)
-        )
+        # (N0,) int32: each finest node's closest triangle in its source's mesh (-1, None: unknown)
+        self.tri = triangles
         # where the field's own frame sits in the world (None: it is the world; see ``transformed``)
         self.placement = placement
         self._encloses_volume = None
