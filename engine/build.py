@@ -56,6 +56,34 @@ KEEP_BVH_NODES_PER_TRIANGLE = 8
 SEQUENTIAL_TRIANGLES = 1_000_000
 
 
+@wp.func
+def _slab_extent(a: wp.vec3, b: wp.vec3, c: wp.vec3, u: int, v: int, v_lo: float, v_hi: float):
+    """(lowest, highest) coordinate ``u`` of triangle (a, b, c) where its coordinate ``v`` lies in [v_lo, v_hi]: over
+    its corners inside that slab and its edges' crossings of the slab's two sides ((1e30, -1e30) where it misses the
+    slab)."""
+    u_lo = float(1.0e30)
+    u_hi = float(-1.0e30)
+    for e in range(3):
+        p = a
+        q = b
+        if e == 1:
+            p = b
+            q = c
+        elif e == 2:
+            p = c
+            q = a
+        if p[v] >= v_lo and p[v] <= v_hi:
+            u_lo = wp.min(u_lo, p[u])
+            u_hi = wp.max(u_hi, p[u])
+        for side in range(2):
+            line = wp.where(side == 0, v_lo, v_hi)
+            if (p[v] - line) * (q[v] - line) < 0.0:
+                at = p[u] + (line - p[v]) / (q[v] - p[v]) * (q[u] - p[u])
+                u_lo = wp.min(u_lo, at)
+                u_hi = wp.max(u_hi, at)
+    return u_lo, u_hi
+
+
 @wp.kernel(enable_backward=False)
 def _octets_per_triangle_kernel(
     first: int,
@@ -108,8 +136,15 @@ def _octets_per_triangle_kernel(
     base = int(0)
     if emit == 1:
         base = offsets[t]
+    slack = 1.0e-3 * octet_size  # a thousandth of a cell more for rounding
     for iv in range(i0[v], i1[v] + 1):
-        for iu in range(i0[u], i1[u] + 1):
+        # the row's boxes meet the triangle only where the slab of v they span (grown by ``half``) does: its u-extent
+        # there bounds the row (a long slanted triangle crosses a few boxes of each row of its bounding box)
+        cv = origin[v] + octet_size * (float(iv) + 0.5)
+        u_lo, u_hi = _slab_extent(a, b, c, u, v, cv - half[0] - slack, cv + half[0] + slack)
+        iu0 = wp.max(i0[u], int(wp.ceil((u_lo - half[0] - slack - origin[u]) / octet_size - 0.5)))
+        iu1 = wp.min(i1[u], int(wp.floor((u_hi + half[0] + slack - origin[u]) / octet_size - 0.5)))
+        for iu in range(iu0, iu1 + 1):
             k0 = i0[k]
             k1 = i1[k]
             if columns:
