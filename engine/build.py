@@ -356,6 +356,8 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     diag = float(np.linalg.norm(fine_dims * voxel_size))
     # candidate triangles per octet grow as cell area / triangle area: search boxes only where that stays small
     box_search = float(plan["areas"].mean()) >= OCTET_SEARCH_MIN_AREA * voxel_size**2
+    # the octets search a turned copy of a mesh whose slanted parts have loose bounding boxes (a turned cylinder)
+    frame = distance.search_frame(verts, tris, octet) if box_search and levels > 1 else None
     timings["mesh_checks"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -395,6 +397,14 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     if "error" in made:
         raise made["error"]
     mesh = made["mesh"]
+    search_mesh = mesh
+    if frame is not None:
+        t0 = time.perf_counter()
+        search_mesh = wp.Mesh(
+            points=wp.array((verts @ frame.T).astype(np.float32), dtype=wp.vec3, device=device),
+            indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
+        )
+        timings["search_frame"] = time.perf_counter() - t0
     winding = winding_arg(mesh, boundary, device, encloses=encloses)
     lattices = None
     if caps is not None and levels > 1:
@@ -418,7 +428,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
         # each node's index in the earlier build (-1: new), shared by distances and signs
         prev_index = None if previous is None else match_levels(layout["codes"], layout["offsets"], previous)
         dist, proj, source, tri, octet_points = distance.finest_distances(
-            mesh.id,
+            search_mesh.id,
             layout,
             origin=origin,
             voxel_size=voxel_size,
@@ -428,6 +438,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             box_search=box_search,
             previous=previous,
             prev_index=prev_index,
+            frame=frame,
         )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
         neighbours, sweeps = fim.solve_levels(

@@ -7,7 +7,7 @@ import pytest
 import warp as wp
 
 import engine
-from engine import geometry
+from engine import distance, geometry
 from engine.octree import morton_encode_np
 from tests.metrics import exact_sdf, sample_surface, unsigned_distance, winding_inside, winding_numbers
 from tests.support import ROOT, SHARED_MESHES, box_mesh, cad_pairs, load_mesh, sample_points, torus_mesh, uv_sphere
@@ -433,10 +433,34 @@ def test_octets_of_large_slanted_triangles_hold_every_point_within_the_padding(w
     assert np.all(np.isin(morton_encode_np(cells), octets))
 
 
+def test_slanted_meshes_are_searched_in_their_own_frame(monkeypatch):
+    # a cylinder turned about two axes is searched along its axis (its slivers' boxes shrink from a third of the
+    # diagonal to their own size); meshes without a dominant frame, or with too few triangles to gain, keep their own
+    octet = 2.0 / 256
+    _op, cube, bore = cad_pairs()["cube - bore"]
+    axis = np.linalg.svd(bore[0] - bore[0].mean(axis=0))[2][0]  # the cylinder's axis (its longest extent)
+    frame = distance.search_frame(*bore, octet)
+    assert frame is not None and np.max(np.abs(frame @ axis)) > 0.9999
+    # the box's own frame is found (every face normal along an axis), but its 12 triangles gain too little
+    turned = cad_pairs()["cube | tilted cube"][2]
+    for verts, tris in (cube, turned):
+        assert distance.search_frame(verts, tris, octet) is None
+    for name in ("spot.obj", "stanford-bunny.obj", "fandisk.obj"):
+        verts, tris = load_mesh(name)
+        assert distance.search_frame(verts, tris, 2.0 * _voxel(verts, 256)) is None
+    monkeypatch.setattr(distance, "SEARCH_FRAME_SAVING", 1.0)
+    for verts, tris in (cube, turned):
+        frame = distance.search_frame(verts, tris, octet)
+        normals = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        assert frame is not None and np.all(np.max(np.abs(normals @ frame.T), axis=1) > 0.9999)
+    assert distance.search_frame(*box_mesh(), octet) is None  # already along the axes
+
+
 @pytest.mark.parametrize("name", ["stanford-bunny.obj", "spot.obj", "bore"])
 def test_finest_distances_by_octet_boxes_equal_those_node_by_node(name, monkeypatch):
     # the bunny's triangles are about 0.4 cell faces here, spot's about 3: either search may be the one chosen; the
-    # bore's slanted slivers meet many octets' boxes without coming near them (rejected by their planes)
+    # bore's slanted slivers are searched in the cylinder's own frame (search_frame; the closest points turned back)
     verts, tris = cad_pairs()["cube - bore"][2] if name == "bore" else load_mesh(name)
     h = _voxel(verts, 256)
     monkeypatch.setattr(engine.build, "OCTET_SEARCH_MIN_AREA", 0.0)
