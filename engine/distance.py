@@ -283,30 +283,38 @@ def search_frame(verts: np.ndarray, tris: np.ndarray, octet: float) -> np.ndarra
     the principal axes of the vertices (a cylinder's axis) and the frame of the two largest triangles' normals most
     apart (a box's faces). The candidates an octet meets are estimated as the volume of the triangles' boxes, each
     grown by an octet, over the volume of the band around the surface, at most every triangle."""
-    corners = verts[tris].astype(np.float64)  # (T, 3, 3)
-    edges = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    verts = np.asarray(verts, dtype=np.float32)
+    a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
+    edges = np.cross(b - a, c - a)
     areas = np.linalg.norm(edges, axis=1)
-    band = max(float(areas.sum()) * octet, 1e-300)  # twice the area (the cross products') times an octet
+    band = max(float(areas.sum(dtype=np.float64)) * octet, 1e-30)  # twice the area (the cross products') times an octet
+    grow = np.float32(2.0 * octet)
 
     def candidates(rotation):
-        turned = corners @ rotation.T
-        grown = np.prod(turned.max(axis=1) - turned.min(axis=1) + 2.0 * octet, axis=1)
-        return min(float(grown.sum()) / band, float(len(tris)))
+        turned = verts @ rotation.T.astype(np.float32)
+        a, b, c = turned[tris[:, 0]], turned[tris[:, 1]], turned[tris[:, 2]]
+        grown = np.prod(np.maximum(np.maximum(a, b), c) - np.minimum(np.minimum(a, b), c) + grow, axis=1)
+        return min(float(grown.sum(dtype=np.float64)) / band, float(len(tris)))
 
+    # no frame makes a triangle's grown box smaller than the octet's own cube: fine meshes stop here
+    own = candidates(np.eye(3))
+    if own - min(len(tris) * float(grow) ** 3 / band, float(len(tris))) < SEARCH_FRAME_SAVING:
+        return None
     frames = []
     centred = verts.astype(np.float64) - verts.mean(axis=0)
     frames.append(np.linalg.eigh(centred.T @ centred)[1].T)
     if areas.max() > 0.0:
-        normals = edges / np.maximum(areas, 1e-300)[:, None]
-        first = normals[np.argmax(areas)]
+        normals = edges / np.maximum(areas, 1e-30)[:, None]
+        first = normals[np.argmax(areas)].astype(np.float64)
         large = normals[areas >= 0.5 * areas.max()]
-        second = large[np.argmin(np.abs(large @ first))]
+        second = large[np.argmin(np.abs(large @ first))].astype(np.float64)
         second = second - (second @ first) * first
         if np.linalg.norm(second) > 1e-3:
             second /= np.linalg.norm(second)
             frames.append(np.stack([first, second, np.cross(first, second)]))
-    best = min(frames, key=candidates)
-    return best if candidates(np.eye(3)) - candidates(best) >= SEARCH_FRAME_SAVING else None
+    counts = [candidates(frame) for frame in frames]
+    best = int(np.argmin(counts))
+    return frames[best] if own - counts[best] >= SEARCH_FRAME_SAVING else None
 
 
 def finest_distances(
