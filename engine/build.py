@@ -428,7 +428,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
         # each node's index in the earlier build (-1: new), shared by distances and signs
         prev_index = None if previous is None else match_levels(layout["codes"], layout["offsets"], previous)
         dist, proj, source, tri, octet_points = distance.finest_distances(
-            search_mesh.id,
+            mesh.id,
             layout,
             origin=origin,
             voxel_size=voxel_size,
@@ -438,6 +438,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             box_search=box_search,
             previous=previous,
             prev_index=prev_index,
+            search_id=search_mesh.id,
             frame=frame,
         )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0

@@ -72,7 +72,9 @@ def _finest_octet_distance_kernel(
     octet_dist: wp.array[wp.float32],
     octet_proj: wp.array[wp.vec3],
     box_search: int,
+    search: wp.uint64,
     frame: wp.mat33,
+    turned: int,
 ):
     """Exact closest points of the 8 nodes of one finest octet (first node ``octet_nodes[first + tid]``, children in
     Morton order). One BVH query at the octet's centre gives its closest triangle; each node's distance to that
@@ -84,33 +86,31 @@ def _finest_octet_distance_kernel(
     candidates (beetle /256: their 8 node queries took twice as long). Every octet queries node by node when
     ``box_search`` is 0 (a mesh whose triangles are much smaller than a cell would put hundreds in each box). The
     centre's closest point (the octet's parent node's) goes to ``octet_dist``/``octet_proj`` (UNSET_DISTANCE when not
-    found). Each node's closest triangle goes to ``tri``. ``mesh`` may be the mesh turned by the rotation ``frame``
-    (:func:`search_frame`; the identity otherwise): the queries run there, the closest points are turned back."""
+    found). Each node's closest triangle goes to ``tri``. The BVH queries of the box search run on ``search``, the
+    mesh turned by the rotation ``frame`` (:func:`search_frame`; ``turned`` 1, else the mesh itself and 0), with the
+    same triangles: the tests themselves read the mesh's own."""
     t = first + wp.tid()
     base = octet_nodes[t]
-    c = frame * (node_center(origin, spacing, coords[base]) + wp.vec3(0.5 * spacing))  # in the mesh's frame
-    back = wp.transpose(frame)
-    centre_foot, centre_face = mesh_closest_face(mesh, c, max_dist)
+    c = node_center(origin, spacing, coords[base]) + wp.vec3(0.5 * spacing)
+    cs = c
+    if turned == 1:
+        cs = frame * c
+    centre_foot, centre_face = mesh_closest_face(search, cs, max_dist)
     near = centre_face >= 0
     has_foot = near
     if not near:
         # an octet added where an open mesh's surface crosses a hole can be far from every triangle
-        centre_foot, centre_face = mesh_closest_face(mesh, c, far_dist)
+        centre_foot, centre_face = mesh_closest_face(search, cs, far_dist)
         has_foot = centre_face >= 0
+    if turned == 1:
+        centre_foot = wp.transpose(frame) * centre_foot
     octet_dist[base // 8] = UNSET_DISTANCE
     if has_foot:
         octet_dist[base // 8] = wp.length(c - centre_foot)
-        octet_proj[base // 8] = back * centre_foot
+        octet_proj[base // 8] = centre_foot
     if has_foot and box_search == 1:
-        # the box of the 8 node centres (around the turned cube they span)
-        half = 0.5 * spacing
-        reach = half * wp.vec3(
-            wp.abs(frame[0, 0]) + wp.abs(frame[0, 1]) + wp.abs(frame[0, 2]),
-            wp.abs(frame[1, 0]) + wp.abs(frame[1, 1]) + wp.abs(frame[1, 2]),
-            wp.abs(frame[2, 0]) + wp.abs(frame[2, 1]) + wp.abs(frame[2, 2]),
-        )
-        node_lo = c - reach
-        node_hi = c + reach
+        node_lo = c - wp.vec3(0.5 * spacing)  # the box of the 8 node centres
+        node_hi = c + wp.vec3(0.5 * spacing)
         # every node starts from its closest point on the centre's closest triangle (an upper bound)
         m = wp.mesh_get(mesh)
         a0 = m.points[m.indices[3 * centre_face]]
@@ -125,9 +125,7 @@ def _finest_octet_distance_kernel(
         box_lo = c
         box_hi = c  # grown around every ball below (starting at the centre can only widen it)
         for k in range(8):
-            x = c + frame * (
-                spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
-            )
+            x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
             p0 = closest_on_triangle(x, a0, b0, c0, edges0, inward0, lengths0, n0)
             best[k] = wp.length_sq(x - p0)
             foot[k] = p0
@@ -135,7 +133,17 @@ def _finest_octet_distance_kernel(
             r = wp.sqrt(best[k]) * 1.0001 + 1.0e-4 * spacing
             box_lo = wp.min(box_lo, x - wp.vec3(r))
             box_hi = wp.max(box_hi, x + wp.vec3(r))
-        candidates = wp.mesh_query_aabb(mesh, box_lo, box_hi)
+        if turned == 1:  # the box around the turned box
+            mid = frame * (0.5 * (box_lo + box_hi))
+            half = 0.5 * (box_hi - box_lo)
+            reach = wp.vec3(
+                wp.abs(frame[0, 0]) * half[0] + wp.abs(frame[0, 1]) * half[1] + wp.abs(frame[0, 2]) * half[2],
+                wp.abs(frame[1, 0]) * half[0] + wp.abs(frame[1, 1]) * half[1] + wp.abs(frame[1, 2]) * half[2],
+                wp.abs(frame[2, 0]) * half[0] + wp.abs(frame[2, 1]) * half[1] + wp.abs(frame[2, 2]) * half[2],
+            )
+            box_lo = mid - reach
+            box_hi = mid + reach
+        candidates = wp.mesh_query_aabb(search, box_lo, box_hi)
         f = int(0)
         while wp.mesh_query_aabb_next(candidates, f):
             if f == centre_face:
@@ -154,9 +162,8 @@ def _finest_octet_distance_kernel(
                 # nor nearer than its plane, which bounds all 8 nodes at once where the boxes of long slanted
                 # triangles (a cylinder's sides) meet the nodes' box without coming near it
                 normal = wp.cross(b - a, cc - a)
-                along = back * normal  # the normal along the nodes' own axes
                 off = wp.abs(wp.dot(normal, c - a)) - 0.5 * spacing * (
-                    wp.abs(along[0]) + wp.abs(along[1]) + wp.abs(along[2])
+                    wp.abs(normal[0]) + wp.abs(normal[1]) + wp.abs(normal[2])
                 )
                 near_box = off <= 0.0 or off * off < worst * wp.length_sq(normal)
             if near_box:
@@ -168,9 +175,7 @@ def _finest_octet_distance_kernel(
                 worst = float(0.0)
                 edges, inward, lengths, n = triangle_frame(a, b, cc)
                 for k in range(8):
-                    x = c + frame * (
-                        spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
-                    )
+                    x = c + spacing * wp.vec3(float(k & 1) - 0.5, float((k >> 1) & 1) - 0.5, float((k >> 2) & 1) - 0.5)
                     gap = wp.max(wp.max(tri_lo - x, x - tri_hi), wp.vec3(0.0))
                     plane = wp.dot(n, x - a)  # nor nearer than its plane (0 for a degenerate triangle)
                     if wp.length_sq(gap) < best[k] and plane * plane < best[k]:
@@ -184,13 +189,12 @@ def _finest_octet_distance_kernel(
         for k in range(8):
             x = node_center(origin, spacing, coords[base + k])
             if best[k] < UNSET_DISTANCE:
-                p = back * wp.vec3(foot[k, 0], foot[k, 1], foot[k, 2])
+                p = wp.vec3(foot[k, 0], foot[k, 1], foot[k, 2])
                 dist[base + k] = wp.length(x - p)
                 proj[base + k] = p
                 tri[base + k] = face[k]
             else:  # cannot happen but for rounding: the node's own query
-                found, p, node_face = _node_closest_point(mesh, frame * x, max_dist, far_dist)
-                p = back * p
+                found, p, node_face = _node_closest_point(mesh, x, max_dist, far_dist)
                 dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
                 proj[base + k] = p
                 tri[base + k] = node_face
@@ -199,9 +203,8 @@ def _finest_octet_distance_kernel(
         x = node_center(origin, spacing, coords[base + k])
         bound = max_dist
         if not near and has_foot:  # far from the mesh: the centre's closest point bounds each node's search
-            bound = wp.length(frame * x - centre_foot) * 1.0001 + 1.0e-4 * spacing
-        found, p, node_face = _node_closest_point(mesh, frame * x, bound, far_dist)
-        p = back * p
+            bound = wp.length(x - centre_foot) * 1.0001 + 1.0e-4 * spacing
+        found, p, node_face = _node_closest_point(mesh, x, bound, far_dist)
         dist[base + k] = wp.where(found == 1, wp.length(x - p), UNSET_DISTANCE)
         proj[base + k] = p
         tri[base + k] = node_face
@@ -329,6 +332,7 @@ def finest_distances(
     box_search: bool,
     previous=None,
     prev_index=None,
+    search_id=None,
     frame=None,
 ):
     """Exact closest points of the finest level of ``layout`` (:func:`.octree.level_layout`) on a mesh.
@@ -344,8 +348,8 @@ def finest_distances(
             cell), else query the BVH node by node.
         previous, prev_index: An earlier field of the same mesh and domain and each node's index in it (-1: new;
             :func:`.octree.match_levels`): its octets keep their closest points.
-        frame: With ``box_search`` and more than one level, a rotation (3, 3) the mesh of ``mesh_id`` is turned by
-            (:func:`search_frame`); None: the mesh as it is.
+        search_id, frame: With ``box_search`` and more than one level, the ``wp.Mesh.id`` of the mesh turned by the
+            rotation ``frame`` (3, 3; :func:`search_frame`), whose BVH the octets search; None: the mesh's own.
     Returns:
         ``(dist, proj, source, tri, octet_points)``: (N,) float32 unsigned distances, (N,) vec3 closest points and (N,)
         int32 source ids for every node of the layout, the finest level's filled in; (N0,) int32 the triangle (index
@@ -427,7 +431,9 @@ def finest_distances(
             octet_dist,
             octet_proj,
             int(box_search),
+            mesh_id if search_id is None else search_id,
             wp.mat33(*(float(x) for x in np.reshape(np.eye(3) if frame is None else frame, -1))),
+            int(frame is not None),
         ],
         device,
         min_dim=EMIT_SPLIT_MIN_DIM,
