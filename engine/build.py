@@ -358,6 +358,10 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     box_search = float(plan["areas"].mean()) >= OCTET_SEARCH_MIN_AREA * voxel_size**2
     # the octets search a turned copy of a mesh whose slanted parts have loose bounding boxes (a turned cylinder)
     frame = distance.search_frame(verts, tris, octet) if box_search and levels > 1 else None
+    thin = None  # the triangles the octets' capsule test is for
+    if box_search:
+        flags = distance.slivers(verts, tris, voxel_size)
+        thin = wp.array(flags, dtype=wp.uint8, device=device) if flags.any() else None
     timings["mesh_checks"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -440,6 +444,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             prev_index=prev_index,
             search_id=search_mesh.id,
             frame=frame,
+            slivers=thin,
         )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
         neighbours, sweeps = fim.solve_levels(

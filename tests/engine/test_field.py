@@ -457,6 +457,22 @@ def test_slanted_meshes_are_searched_in_their_own_frame(monkeypatch):
     assert distance.search_frame(*box_mesh(), octet) is None  # already along the axes
 
 
+def test_only_slivers_take_the_capsule_test_which_only_skips_triangles(monkeypatch):
+    # a cylinder's sides and cap wedges are slivers at /256 (0.85 and 0.12 long, 1.5 voxels wide), a few of an
+    # organic mesh's triangles are (spot: 4 %); the test is a bound: a field built with every triangle flagged, or
+    # none, is the same
+    _op, cube, bore = cad_pairs()["cube - bore"]
+    h = 1.0 / 256
+    assert distance.slivers(*bore, h).all()
+    verts, tris = load_mesh("spot.obj")
+    assert distance.slivers(verts, tris, _voxel(verts, 256)).mean() < 0.1
+    fields = []
+    for flag in (0, 1):
+        monkeypatch.setattr(distance, "slivers", lambda v, t, s, flag=flag: np.full(len(t), flag, dtype=np.uint8))
+        fields.append(engine.build_field(*bore, voxel_size=h))
+    np.testing.assert_array_equal(fields[0].values.numpy(), fields[1].values.numpy())
+
+
 @pytest.mark.parametrize("name", ["stanford-bunny.obj", "spot.obj", "bore"])
 def test_finest_distances_by_octet_boxes_equal_those_node_by_node(name, monkeypatch):
     # the bunny's triangles are about 0.4 cell faces here, spot's about 3: either search may be the one chosen; the
