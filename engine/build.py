@@ -357,10 +357,10 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     # candidate triangles per octet grow as cell area / triangle area: search boxes only where that stays small
     box_search = float(plan["areas"].mean()) >= OCTET_SEARCH_MIN_AREA * voxel_size**2
     # the octets search a turned copy of a mesh whose slanted parts have loose bounding boxes (a turned cylinder)
-    frame = distance.search_frame(verts, tris, octet) if box_search and levels > 1 else None
+    frame = distance.search_frame(verts, tris, octet, device) if box_search and levels > 1 else None
     thin = None  # the triangles the octets' capsule test is for
     if box_search:
-        flags = distance.slivers(verts, tris, voxel_size)
+        flags = distance.slivers(verts, tris, voxel_size, device)
         thin = wp.array(flags, dtype=wp.uint8, device=device) if flags.any() else None
     timings["mesh_checks"] = time.perf_counter() - t0
 

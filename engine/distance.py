@@ -278,17 +278,43 @@ SLIVER_LENGTH = 4.0
 SLIVER_HEIGHT = 2.0
 
 
-def slivers(verts: np.ndarray, tris: np.ndarray, spacing: float) -> np.ndarray:
+@wp.kernel(enable_backward=False)
+def _sliver_kernel(
+    verts: wp.array[wp.vec3],
+    tris: wp.array2d[wp.int32],
+    length: float,
+    height: float,
+    sliver: wp.array[wp.uint8],
+):
+    """Whether triangle ``tid``'s longest edge exceeds ``length`` and its height over that edge is under ``height``."""
+    t = wp.tid()
+    a = verts[tris[t, 0]]
+    b = verts[tris[t, 1]]
+    c = verts[tris[t, 2]]
+    longest = wp.sqrt(wp.max(wp.length_sq(b - a), wp.max(wp.length_sq(c - b), wp.length_sq(a - c))))
+    sliver[t] = wp.uint8(0)
+    if longest > length and wp.length(wp.cross(b - a, c - a)) < height * longest:
+        sliver[t] = wp.uint8(1)
+
+
+def slivers(verts: np.ndarray, tris: np.ndarray, spacing: float, device=None) -> np.ndarray:
     """(T,) uint8: 1 for the long thin triangles (SLIVER_LENGTH, SLIVER_HEIGHT) whose longest edge less their height
     bounds their distance much better than their plane and box do (a cylinder's sides beside each other). The test
     costs the other triangles 6-8 % of the finest distances (cow, fandisk, homer) and rejects none of theirs."""
-    verts = np.asarray(verts, dtype=np.float32)
-    a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
-    longest = np.sqrt(
-        np.maximum(np.maximum(np.sum((b - a) ** 2, axis=1), np.sum((c - b) ** 2, axis=1)), np.sum((a - c) ** 2, axis=1))
+    out = wp.empty(len(tris), dtype=wp.uint8, device=device)
+    wp.launch(
+        _sliver_kernel,
+        dim=len(tris),
+        inputs=[
+            wp.array(verts, dtype=wp.vec3, device=device),
+            wp.array(tris, dtype=wp.int32, device=device),
+            SLIVER_LENGTH * spacing,
+            SLIVER_HEIGHT * spacing,
+            out,
+        ],
+        device=device,
     )
-    height = np.linalg.norm(np.cross(b - a, c - a), axis=1) / np.maximum(longest, 1e-30)
-    return ((longest > SLIVER_LENGTH * spacing) & (height < SLIVER_HEIGHT * spacing)).astype(np.uint8)
+    return out.numpy()
 
 
 # A mesh is searched in another frame where that spares each octet at least this many candidate triangles (a turned
@@ -296,7 +322,31 @@ def slivers(verts: np.ndarray, tris: np.ndarray, spacing: float) -> np.ndarray:
 SEARCH_FRAME_SAVING = 16.0
 
 
-def search_frame(verts: np.ndarray, tris: np.ndarray, octet: float) -> np.ndarray | None:
+@wp.kernel(enable_backward=False)
+def _grown_boxes_kernel(
+    verts: wp.array[wp.vec3],
+    tris: wp.array2d[wp.int32],
+    frame: wp.mat33,
+    grow: float,
+    volume: wp.array[wp.float32],
+    cross: wp.array[wp.vec3],
+):
+    """The volume of triangle ``tid``'s bounding box in the rotation ``frame``, grown by ``grow`` on every axis, and
+    (where ``cross`` is not empty) its edges' cross product."""
+    t = wp.tid()
+    a = verts[tris[t, 0]]
+    b = verts[tris[t, 1]]
+    c = verts[tris[t, 2]]
+    if cross.shape[0] > 0:
+        cross[t] = wp.cross(b - a, c - a)
+    a = frame * a
+    b = frame * b
+    c = frame * c
+    size = wp.max(a, wp.max(b, c)) - wp.min(a, wp.min(b, c)) + wp.vec3(grow)
+    volume[t] = size[0] * size[1] * size[2]
+
+
+def search_frame(verts: np.ndarray, tris: np.ndarray, octet: float, device=None) -> np.ndarray | None:
     """A rotation (3, 3) under which the octets (of edge ``octet``) meet far fewer candidate triangles, or None.
 
     The octets' candidate search (:func:`_finest_octet_distance_kernel`) finds triangles by their boxes in the BVH. A
@@ -307,25 +357,37 @@ def search_frame(verts: np.ndarray, tris: np.ndarray, octet: float) -> np.ndarra
     the principal axes of the vertices (a cylinder's axis) and the frame of the two largest triangles' normals most
     apart (a box's faces). The candidates an octet meets are estimated as the volume of the triangles' boxes, each
     grown by an octet, over the volume of the band around the surface, at most every triangle."""
-    verts = np.asarray(verts, dtype=np.float32)
-    a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
-    edges = np.cross(b - a, c - a)
+    count = len(tris)
+    points = wp.array(verts, dtype=wp.vec3, device=device)
+    corners = wp.array(tris, dtype=wp.int32, device=device)
+    volume = wp.empty(count, dtype=wp.float32, device=device)
+    cross = wp.empty(count, dtype=wp.vec3, device=device)
+
+    def grown_volume(rotation, edges):
+        turn = wp.mat33(*(float(x) for x in np.reshape(rotation, -1)))
+        wp.launch(
+            _grown_boxes_kernel,
+            dim=count,
+            inputs=[points, corners, turn, 2.0 * octet],
+            outputs=[volume, edges],
+            device=device,
+        )
+        return float(volume.numpy().sum(dtype=np.float64))
+
+    own_volume = grown_volume(np.eye(3), cross)
+    edges = cross.numpy()
     areas = np.linalg.norm(edges, axis=1)
-    band = max(float(areas.sum(dtype=np.float64)) * octet, 1e-30)  # twice the area (the cross products') times an octet
-    grow = np.float32(2.0 * octet)
+    band = max(float(areas.sum(dtype=np.float64)) * octet, 1e-30)  # twice the area (the cross products') x octet
 
-    def candidates(rotation):
-        turned = verts @ rotation.T.astype(np.float32)
-        a, b, c = turned[tris[:, 0]], turned[tris[:, 1]], turned[tris[:, 2]]
-        grown = np.prod(np.maximum(np.maximum(a, b), c) - np.minimum(np.minimum(a, b), c) + grow, axis=1)
-        return min(float(grown.sum(dtype=np.float64)) / band, float(len(tris)))
+    def candidates(grown: float) -> float:
+        return min(grown / band, float(count))
 
+    own = candidates(own_volume)
     # no frame makes a triangle's grown box smaller than the octet's own cube: fine meshes stop here
-    own = candidates(np.eye(3))
-    if own - min(len(tris) * float(grow) ** 3 / band, float(len(tris))) < SEARCH_FRAME_SAVING:
+    if own - candidates(count * (2.0 * octet) ** 3) < SEARCH_FRAME_SAVING:
         return None
     frames = []
-    centred = verts.astype(np.float64) - verts.mean(axis=0)
+    centred = np.asarray(verts, dtype=np.float64) - np.mean(verts, axis=0)
     frames.append(np.linalg.eigh(centred.T @ centred)[1].T)
     if areas.max() > 0.0:
         normals = edges / np.maximum(areas, 1e-30)[:, None]
@@ -336,7 +398,8 @@ def search_frame(verts: np.ndarray, tris: np.ndarray, octet: float) -> np.ndarra
         if np.linalg.norm(second) > 1e-3:
             second /= np.linalg.norm(second)
             frames.append(np.stack([first, second, np.cross(first, second)]))
-    counts = [candidates(frame) for frame in frames]
+    no_edges = wp.empty(0, dtype=wp.vec3, device=device)
+    counts = [candidates(grown_volume(frame, no_edges)) for frame in frames]
     best = int(np.argmin(counts))
     return frames[best] if own - counts[best] >= SEARCH_FRAME_SAVING else None
 

@@ -468,7 +468,9 @@ def test_only_slivers_take_the_capsule_test_which_only_skips_triangles(monkeypat
     assert distance.slivers(verts, tris, _voxel(verts, 256)).mean() < 0.1
     fields = []
     for flag in (0, 1):
-        monkeypatch.setattr(distance, "slivers", lambda v, t, s, flag=flag: np.full(len(t), flag, dtype=np.uint8))
+        monkeypatch.setattr(
+            distance, "slivers", lambda v, t, s, device=None, flag=flag: np.full(len(t), flag, dtype=np.uint8)
+        )
         fields.append(engine.build_field(*bore, voxel_size=h))
     np.testing.assert_array_equal(fields[0].values.numpy(), fields[1].values.numpy())
 
