@@ -358,10 +358,8 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     box_search = float(plan["areas"].mean()) >= OCTET_SEARCH_MIN_AREA * voxel_size**2
     # the octets search a turned copy of a mesh whose slanted parts have loose bounding boxes (a turned cylinder)
     frame = distance.search_frame(verts, tris, octet, device) if box_search and levels > 1 else None
-    thin = None  # the triangles the octets' capsule test is for
-    if box_search:
-        flags = distance.slivers(verts, tris, voxel_size, device)
-        thin = wp.array(flags, dtype=wp.uint8, device=device) if flags.any() else None
+    # the triangles the octets' capsule test is for
+    thin = distance.slivers(verts, tris, voxel_size, device) if box_search else None
     timings["mesh_checks"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -297,10 +297,11 @@ def _sliver_kernel(
         sliver[t] = wp.uint8(1)
 
 
-def slivers(verts: np.ndarray, tris: np.ndarray, spacing: float, device=None) -> np.ndarray:
-    """(T,) uint8: 1 for the long thin triangles (SLIVER_LENGTH, SLIVER_HEIGHT) whose longest edge less their height
-    bounds their distance much better than their plane and box do (a cylinder's sides beside each other). Taken by
-    every long triangle, the test cost meshes without slivers 6-8 % of their finest distances (cow, fandisk, homer)."""
+def slivers(verts: np.ndarray, tris: np.ndarray, spacing: float, device=None) -> wp.array:
+    """(T,) uint8 Warp array: 1 for the long thin triangles (SLIVER_LENGTH, SLIVER_HEIGHT) whose longest edge less
+    their height bounds their distance much better than their plane and box do (a cylinder's sides beside each
+    other). Taken by every long triangle, the test cost meshes without slivers 6-8 % of their finest distances (cow,
+    fandisk, homer)."""
     out = wp.empty(len(tris), dtype=wp.uint8, device=device)
     wp.launch(
         _sliver_kernel,
@@ -314,7 +315,7 @@ def slivers(verts: np.ndarray, tris: np.ndarray, spacing: float, device=None) ->
         ],
         device=device,
     )
-    return out.numpy()
+    return out
 
 
 # A mesh is searched in another frame where that spares each octet at least this many candidate triangles (a turned

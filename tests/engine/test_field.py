@@ -463,13 +463,15 @@ def test_only_slivers_take_the_capsule_test_which_only_skips_triangles(monkeypat
     # none, is the same
     _op, cube, bore = cad_pairs()["cube - bore"]
     h = 1.0 / 256
-    assert distance.slivers(*bore, h).all()
+    assert distance.slivers(*bore, h).numpy().all()
     verts, tris = load_mesh("spot.obj")
-    assert distance.slivers(verts, tris, _voxel(verts, 256)).mean() < 0.1
+    assert distance.slivers(verts, tris, _voxel(verts, 256)).numpy().mean() < 0.1
     fields = []
     for flag in (0, 1):
         monkeypatch.setattr(
-            distance, "slivers", lambda v, t, s, device=None, flag=flag: np.full(len(t), flag, dtype=np.uint8)
+            distance,
+            "slivers",
+            lambda v, t, s, device=None, flag=flag: wp.array(np.full(len(t), flag, dtype=np.uint8), dtype=wp.uint8),
         )
         fields.append(engine.build_field(*bore, voxel_size=h))
     np.testing.assert_array_equal(fields[0].values.numpy(), fields[1].values.numpy())
