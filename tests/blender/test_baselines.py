@@ -38,7 +38,9 @@ def test_gn_union_of_two_spheres_matches_the_exact_union():
     result = baselines.gn_sdf_boolean(a, b, "UNION", voxel_size=0.02)
     exact = mesh_volume(*exact_boolean("UNION", *a, *b))
     assert mesh_volume(result["verts"], result["tris"]) == pytest.approx(exact, rel=0.02)
-    assert result["seconds"] > 0.0 and 0.0 < result["stage_seconds"]["modifier"] <= result["seconds"]
+    # the modifier's time is Blender's own clock, read inside the wall time around the evaluation: it fits within it
+    # but for the clocks' reading (once measured 0.6 ms over on a 0.29 s evaluation)
+    assert result["seconds"] > 0.0 and 0.0 < result["stage_seconds"]["modifier"] <= result["seconds"] + 0.005
     # Fresh objects and node groups per call, removed afterwards.
     assert len(bpy.data.objects) == 0 and len(bpy.data.node_groups) == 0
 
