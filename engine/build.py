@@ -24,7 +24,7 @@ import time
 import numpy as np
 import warp as wp
 
-from . import distance, fieldops, fim, holes, octree, parallel, redistancing, signs, sweeping, winding
+from . import distance, fieldops, fim, holes, octree, parallel, redistancing, search, signs, sweeping, winding
 from .errors import AasdfError
 from .field import AdaptiveField
 from .geometry import tri_box_overlap
@@ -357,9 +357,9 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     # candidate triangles per octet grow as cell area / triangle area: search boxes only where that stays small
     box_search = float(plan["areas"].mean()) >= OCTET_SEARCH_MIN_AREA * voxel_size**2
     # the octets search a turned copy of a mesh whose slanted parts have loose bounding boxes (a turned cylinder)
-    frame = distance.search_frame(verts, tris, octet, device) if box_search and levels > 1 else None
+    frame = search.search_frame(verts, tris, octet, device) if box_search and levels > 1 else None
     # the triangles the octets' capsule test is for
-    thin = distance.slivers(verts, tris, voxel_size, device) if box_search else None
+    thin = search.slivers(verts, tris, voxel_size, device) if box_search else None
     timings["mesh_checks"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -445,6 +445,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             slivers=thin,
         )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
+        level_search = search.OctetSearch(mesh.id, query_radius, diag, box_search, search_mesh.id, frame, thin)
         neighbours, sweeps = fim.solve_levels(
             mesh.id,
             layout,
@@ -458,6 +459,9 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             previous=previous,
             prev_index=prev_index,
             timings=timings,
+            exact_level=lambda k, known_nodes, below: distance.level_distances(
+                level_search, layout, k, dist, proj, known_nodes, below, origin=origin, voxel_size=voxel_size
+            ),
         )
         values, sign_stats, known["expansions"] = signs.sign_levels(
             winding,

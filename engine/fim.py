@@ -5,7 +5,9 @@ Each coarser level (:func:`solve_level`, bottom-up in :func:`solve_levels`) take
 children (the nearest of their closest points, made exact by a BVH query bounded by that distance), solves its leaves
 by the fast iterative method over same-level neighbours (closest points propagated: Jacobi sweeps on both cores, or
 ordered in-place sweeps on the dense top level, where information travels far), and refines every leaf by a BVH search
-bounded by that estimate: exact below the top level, within a tolerance on it.
+bounded by that estimate: exact below the top level, within a tolerance on it. A mesh's build gives the sparse levels
+their exact closest points octet by octet instead (``exact_level``, :func:`.distance.level_distances`) and solves only
+the top level here.
 """
 
 from __future__ import annotations
@@ -38,14 +40,16 @@ def _init_from_children_kernel(
     known: wp.array[wp.int32],
     octet_dist: wp.array[wp.float32],
     octet_proj: wp.array[wp.vec3],
+    octet_first: int,
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
     source: wp.array[wp.int32],
 ):
     """Internal nodes are sources: the nearest of their children's projection points (Ren et al.), which with a
     mesh is then made exact by a BVH query bounded by that distance. Leaves start unset. Nodes marked ``known`` keep
-    the values they were given. ``octet_dist``/``octet_proj`` (per octet of the level below, empty if none): exact
-    closest points of octet centres already found (UNSET_DISTANCE where not), which are this level's node centres."""
+    the values they were given. ``octet_dist``/``octet_proj`` (per octet of the level below from its octet
+    ``octet_first``, empty if none): exact closest points of octet centres already found (UNSET_DISTANCE where not),
+    which are this level's node centres."""
     i = lo + wp.tid()
     if known[i] == 1:
         return
@@ -67,9 +71,9 @@ def _init_from_children_kernel(
     proj[i] = proj[best_j]
     source[i] = source[best_j]
     if octet_dist.shape[0] > 0:
-        if octet_dist[c // 8] < UNSET_DISTANCE:
-            dist[i] = octet_dist[c // 8]
-            proj[i] = octet_proj[c // 8]
+        if octet_dist[c // 8 - octet_first] < UNSET_DISTANCE:
+            dist[i] = octet_dist[c // 8 - octet_first]
+            proj[i] = octet_proj[c // 8 - octet_first]
             return
     if mesh != wp.uint64(0):
         found, p = mesh_closest_point(mesh, x, wp.min(best * 1.0001 + spacing * 1.0e-4, max_dist))
@@ -210,7 +214,7 @@ def init_level(coords, first_child, lo, hi, origin, spacing, dist, proj, source,
     in ``known`` keep theirs. ``octet_points``: as for :func:`solve_level`."""
     device = coords.device
     if octet_points is None:
-        octet_points = (wp.empty(0, dtype=wp.float32, device=device), wp.empty(0, dtype=wp.vec3, device=device))
+        octet_points = (wp.empty(0, dtype=wp.float32, device=device), wp.empty(0, dtype=wp.vec3, device=device), 0)
     origin_v = wp.vec3(*origin)
     launch_split(
         _init_from_children_kernel,
@@ -254,7 +258,8 @@ def solve_level(
 ):
     """Initialise a level from its children (exactly from ``mesh_id`` when given) and run the fast iterative method
     until no leaf changes. Nodes flagged in ``known`` (N,) int32 keep their given distance and projection.
-    ``octet_points``: (distances, closest points) of the octet centres of the level below, where already known.
+    ``octet_points``: (distances, closest points, index of the first octet) of the octet centres of the level below,
+    where already known.
     ``neighbours``: the level's rows of the table of :func:`level_neighbours` (node ``i`` in row ``i - row0``).
     ``ordered_sweeps``: on a CPU, sweep in place on one thread in alternating index order instead of Jacobi sweeps on
     both cores (far fewer sweeps where information travels far, as on the dense top level). ``tolerance``: relative
@@ -367,6 +372,7 @@ def solve_levels(
     prev_index=None,
     timings: dict,
     level_solver=None,
+    exact_level=None,
 ):
     """Distances and closest points of every level above the finest (:func:`solve_level`, bottom-up), in place.
 
@@ -376,12 +382,16 @@ def solve_levels(
         dist, proj, source: (N,) arrays of :func:`finest_distances`, the finest level filled in.
         origin, voxel_size: The field's lattice.
         top_tolerance: Relative error allowed to the closest points of the dense top level's leaves.
-        octet_points: The finest octets' centre closest points (:func:`finest_distances`).
+        octet_points: The finest octets' centre closest points (:func:`.distance.finest_distances`).
         previous, prev_index: An earlier field of the same mesh and domain and each node's index in it: its
             coarse nodes keep their distances.
         timings: Seconds per level are added here.
         level_solver: Solves one level (default :func:`solve_level`; the same arguments, e.g.
             ``sweeping.solve_level``).
+        exact_level: Gives the levels below the top their exact closest points directly instead:
+            ``exact_level(k, known, below)`` with the level below's octet points (as ``octet_points``) returns this
+            level's (:func:`.distance.level_distances`); the level's source ids are copied from the finest level's
+            first node (a mesh's field has one).
     Returns:
         ``(neighbours, sweeps)``: the (N - N0, 6) int32 table of every coarse node's same-level face neighbours
         (node ``i`` in row ``i - N0``, -1 where none), and the fast iterative method's sweeps per level.
@@ -420,6 +430,13 @@ def solve_levels(
         name = "top_level" if k == levels - 1 else f"level_{k}"
         level_neighbours(coords, lo, hi, fine_dims >> k, neighbours, row0=n0)
         tn = time.perf_counter()
+        if exact_level is not None and k < levels - 1:
+            octet_points = exact_level(k, known, octet_points)
+            source[lo:hi].fill_(int(source[:1].numpy()[0]))
+            sweeps[k] = 0
+            timings[f"{name}_neighbours"] = timings.get(f"{name}_neighbours", 0.0) + tn - tk
+            timings[name] = timings.get(name, 0.0) + time.perf_counter() - tk
+            continue
         sweeps[k] = (level_solver or solve_level)(
             coords,
             child,
@@ -433,7 +450,7 @@ def solve_levels(
             source,
             mesh_id=mesh_id,
             known=known,
-            octet_points=octet_points if k == 1 else None,
+            octet_points=octet_points if k == 1 or exact_level is not None else None,
             row0=n0,
             ordered_sweeps=k == levels - 1,  # the dense top level: far from the surface, information travels far
             tolerance=top_tolerance if k == levels - 1 else 0.0,

@@ -23,6 +23,7 @@ ENGINE_MODULES = (
     "octree",
     "neighbours",
     "distance",
+    "search",
     "fim",
     "winding",
     "signs",
