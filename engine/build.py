@@ -355,7 +355,8 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     caps = None if boundary is None or not encloses else boundary["caps"]
     diag = float(np.linalg.norm(fine_dims * voxel_size))
     # candidate triangles per octet grow as cell area / triangle area: search boxes only where that stays small
-    box_search = float(plan["areas"].mean()) >= OCTET_SEARCH_MIN_AREA * voxel_size**2
+    mean_area = float(plan["areas"].mean())
+    box_search = mean_area >= OCTET_SEARCH_MIN_AREA * voxel_size**2
     # the octets search a turned copy of a mesh whose slanted parts have loose bounding boxes (a turned cylinder)
     frame = search.search_frame(verts, tris, octet, device) if box_search and levels > 1 else None
     # the triangles the octets' capsule test is for
@@ -429,23 +430,19 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
         t0 = time.perf_counter()
         # each node's index in the earlier build (-1: new), shared by distances and signs
         prev_index = None if previous is None else match_levels(layout["codes"], layout["offsets"], previous)
+        octets_search = search.OctetSearch(
+            mesh.id, query_radius, diag, box_search, search_mesh.id, frame, thin, mean_area=mean_area
+        )
         dist, proj, source, tri, octet_points = distance.finest_distances(
-            mesh.id,
+            octets_search,
             layout,
             origin=origin,
             voxel_size=voxel_size,
-            query_radius=query_radius,
-            far_dist=diag,
             field_id=field_id,
-            box_search=box_search,
             previous=previous,
             prev_index=prev_index,
-            search_id=search_mesh.id,
-            frame=frame,
-            slivers=thin,
         )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
-        level_search = search.OctetSearch(mesh.id, query_radius, diag, box_search, search_mesh.id, frame, thin)
         neighbours, sweeps = fim.solve_levels(
             mesh.id,
             layout,
@@ -460,7 +457,7 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             prev_index=prev_index,
             timings=timings,
             exact_level=lambda k, known_nodes, below: distance.level_distances(
-                level_search, layout, k, dist, proj, known_nodes, below, origin=origin, voxel_size=voxel_size
+                octets_search, layout, k, dist, proj, known_nodes, below, origin=origin, voxel_size=voxel_size
             ),
         )
         values, sign_stats, known["expansions"] = signs.sign_levels(

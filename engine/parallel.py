@@ -62,14 +62,15 @@ def run_split(
     min_dim: int = SPLIT_MIN_DIM,
     balance: bool = False,
     own_threads: bool = False,
+    min_piece: int = BALANCE_MIN_PIECE,
 ) -> None:
     """Call ``work(start, count)`` on consecutive pieces of [0, dim) from the caller's and one more Python thread per
     further CPU core (Warp CPU launches release the GIL), or from ``parts`` threads, one piece each; one call on CUDA
     or for small ``dim``. ``balance``: the work per item is uneven (items near an open mesh's holes, or far from the
     surface): each core takes the next of ``BALANCE_PIECES_PER_CORE`` pieces per core as it finishes one, so none
-    waits for the other. The helper threads come from a pool, and whichever thread is free takes the next piece (so a
-    busy pool only slows a split down); ``work`` that splits work itself needs ``own_threads`` (a thread started for
-    each piece). The first error is re-raised in the caller."""
+    waits for the other (pieces of at least ``min_piece`` items). The helper threads come from a pool, and whichever
+    thread is free takes the next piece (so a busy pool only slows a split down); ``work`` that splits work itself
+    needs ``own_threads`` (a thread started for each piece). The first error is re-raised in the caller."""
     if dim <= 0:
         return
     device = wp.get_device(device)
@@ -79,7 +80,7 @@ def run_split(
         return
     pieces = threads_n
     if balance and parts is None:
-        pieces = min(threads_n * BALANCE_PIECES_PER_CORE, max(threads_n, dim // BALANCE_MIN_PIECE))
+        pieces = min(threads_n * BALANCE_PIECES_PER_CORE, max(threads_n, dim // max(1, min_piece)))
     bounds = np.linspace(0, dim, pieces + 1).astype(np.int64)
     errors = []
     taken = iter(range(pieces))
@@ -154,14 +155,22 @@ def load_modules(modules, device) -> None:
 
 
 def launch_split(
-    kernel, dim: int, args, device, *, parts: int | None = None, min_dim: int = SPLIT_MIN_DIM, balance: bool = False
+    kernel,
+    dim: int,
+    args,
+    device,
+    *,
+    parts: int | None = None,
+    min_dim: int = SPLIT_MIN_DIM,
+    balance: bool = False,
+    min_piece: int = BALANCE_MIN_PIECE,
 ) -> None:
     """Launch ``kernel`` over [0, dim) — on the CPU, as one launch per core from as many Python threads.
 
     A Warp CPU launch runs on one thread but releases the GIL, so launches from two threads use two cores. ``args``
     is called with (start, count) and returns the launch's ``inputs`` list (slices of per-thread arrays, or an
     offset the kernel adds to its thread id). On CUDA, or for small launches, this is one ordinary launch.
-    ``balance``: see :func:`run_split`.
+    ``balance``, ``min_piece``: see :func:`run_split`.
     """
     if dim <= 0:
         return
@@ -173,4 +182,5 @@ def launch_split(
         parts=parts,
         min_dim=min_dim,
         balance=balance,
+        min_piece=min_piece,
     )

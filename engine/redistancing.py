@@ -24,6 +24,7 @@ from .geometry import mesh_closest_point
 from .octree import find_key, level_layout, match_levels, morton_decode, morton_encode
 from .parallel import launch_split
 from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, locate_leaf, node_source
+from .search import OctetSearch
 from .sweeping import solve_level
 
 # Finest octets are kept where some node is within this many voxels of the surface (as a boolean keeps them).
@@ -214,15 +215,9 @@ def redistance(field, *, method: str = "sweep", top_tolerance: float = LEAF_TOLE
     timings["band"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     diag = float(np.linalg.norm(field.fine_dims * h))
+    radius = (KEEP_BAND + np.sqrt(3.0) + 0.5) * h if levels > 1 else diag
     dist, proj, source, _tri, octet_points = finest_distances(
-        mesh.id,
-        layout,
-        origin=field.origin,
-        voxel_size=h,
-        query_radius=(KEEP_BAND + np.sqrt(3.0) + 0.5) * h if levels > 1 else diag,
-        far_dist=diag,
-        field_id=field.field_ids[0],
-        box_search=True,
+        OctetSearch(mesh.id, radius, diag, True), layout, origin=field.origin, voxel_size=h, field_id=field.field_ids[0]
     )
     timings["finest_distance"] = time.perf_counter() - t0
     sweeps = {}

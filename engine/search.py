@@ -14,12 +14,15 @@ import warp as wp
 class OctetSearch:
     """How a mesh's octets search it (the arguments of :func:`.distance.finest_distances` of those names): the
     mesh, the radius its centre queries try first and the fallback, the box search, the turned copy and its
-    rotation, the slivers."""
+    rotation, the slivers, the triangles' mean area (whether an octet may start from the triangles of the one before
+    it: :data:`.distance.OCTET_REUSE_MIN_AREA`)."""
 
-    def __init__(self, mesh_id, query_radius, far_dist, box_search, search_id=None, frame=None, slivers=None):
+    def __init__(
+        self, mesh_id, query_radius, far_dist, box_search, search_id=None, frame=None, slivers=None, mean_area=0.0
+    ):
         self.mesh_id, self.query_radius, self.far_dist, self.box_search = mesh_id, query_radius, far_dist, box_search
         self.search_id = mesh_id if search_id is None else search_id
-        self.frame, self.slivers = frame, slivers
+        self.frame, self.slivers, self.mean_area = frame, slivers, mean_area
 
 
 # A triangle is a sliver, for the octets' capsule test, when its longest edge exceeds this many cells and its height

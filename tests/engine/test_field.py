@@ -7,8 +7,9 @@ import pytest
 import warp as wp
 
 import engine
-from engine import geometry, search
+from engine import distance, geometry, search
 from engine.octree import morton_encode_np
+from engine.sampling import LEAF_TOLERANCE
 from tests.metrics import exact_sdf, sample_surface, unsigned_distance, winding_inside, winding_numbers
 from tests.support import ROOT, SHARED_MESHES, box_mesh, cad_pairs, load_mesh, sample_points, torus_mesh, uv_sphere
 
@@ -507,6 +508,27 @@ def test_sparse_levels_above_the_finest_hold_exact_distances(name, boxes, monkey
     above = slice(field.level_counts[0], field.node_count - field.level_counts[-1])
     exact = unsigned_distance(verts, tris, field.node_centers()[above])
     assert np.abs(np.abs(field.values.numpy()[above]) - exact).max() < 5e-5 * h  # measured 1.7e-5
+
+
+@pytest.mark.parametrize("name", ["spot.obj", "stanford-bunny.obj", "bore"])
+def test_octets_starting_from_the_triangles_of_the_octet_before_find_the_same_closest_points(name, monkeypatch):
+    # an octet next to the one before it takes that one's closest triangles as its bound instead of a BVH query at
+    # its centre (distance.OCTET_REUSE_MIN_AREA): only where triangles are large, but exact wherever it is used (the
+    # bunny's small triangles, the bore's slivers searched in the cylinder's frame)
+    verts, tris = cad_pairs()["cube - bore"][2] if name == "bore" else load_mesh(name)
+    h = _voxel(verts, 128 if name == "stanford-bunny.obj" else 256)
+    fields = []
+    for area in (0.0, np.inf):
+        monkeypatch.setattr(distance, "OCTET_REUSE_MIN_AREA", area)
+        fields.append(engine.build_field(verts, tris, voxel_size=h))
+    reused, queried = fields
+    assert reused.level_counts == queried.level_counts
+    np.testing.assert_array_equal(reused.codes.numpy(), queried.codes.numpy())
+    below_top = slice(0, reused.node_count - reused.level_counts[-1])
+    a, b = reused.values.numpy(), queried.values.numpy()
+    np.testing.assert_allclose(a[below_top], b[below_top], rtol=0, atol=1e-4 * h)
+    np.testing.assert_allclose(a, b, rtol=LEAF_TOLERANCE, atol=1e-4 * h)  # the top level within its tolerance
+    assert np.array_equal(np.sign(a), np.sign(b))
 
 
 @wp.kernel
