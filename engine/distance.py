@@ -64,12 +64,13 @@ def _capsule_gap(x: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, normal: wp.vec3
 # as the centre's bound instead of a BVH query, where the triangles' mean area is at least OCTET_REUSE_MIN_AREA cell
 # faces (a small triangle bounds the next octet loosely: its larger box costs more than the query spared). Measured,
 # finest distances against a query per octet: spot (9.5 cell faces a triangle) 0.87x, beetle (17) 0.91x, cow (7.6)
-# 0.95x, fandisk (5.3) 0.99x, homer (3.6) 1.03x, the bunny (0.86) 1.18x at /256; 0.80-0.91x at /512 from 12 up, the
-# bunny (3.4) 1.02x.
+# 0.93x, fandisk (5.3) 0.975x, homer (3.6) 0.945x, rocker-arm (3.1) 0.964x, the bunny (0.86) 1.12x at /256; 0.80-0.91x
+# at /512 from 12 up, the bunny (3.4) 1.00-1.03x. Capping the bound instead (a query where it exceeds 1-2 cells)
+# made every mesh 3-18 % slower.
 OCTET_GROUP = 16
 
 
-OCTET_REUSE_MIN_AREA = 6.0
+OCTET_REUSE_MIN_AREA = 3.0
 
 
 def _octet_distance_kernel(coarse: bool, reuse: bool):
