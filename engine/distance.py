@@ -543,8 +543,9 @@ def level_distances(search: OctetSearch, layout: dict, k: int, dist, proj, known
     """Exact closest points of the nodes of sparse level ``k`` (> 0) of ``layout``, octet by octet as on the finest
     level (the same kernel, :func:`finest_distances`): a node whose children's octet centre is known from the level
     below (``below``: that level's octet points) takes it, a node flagged in ``known`` keeps its values, and only the
-    rest are searched. Replaces the fast iterative method and its BVH refinement below the top level (measured: rocker-
-    arm /512 levels 1 and 2 56 + 28 -> 45 + 17 ms with every node searched, less with the internal nodes taken).
+    rest are searched. Replaces the fast iterative method and its BVH refinement below the top level, which were
+    slower (homer /512: levels 1 and 2 35.5 + 21 ms against 27.6 + 11) and not always exact (beetle's level 2 up to
+    0.07 voxel off: the refinement's bound missed).
 
     Returns:
         This level's octet points (the next level's internal nodes), as ``below``.
