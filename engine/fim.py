@@ -6,8 +6,8 @@ children (the nearest of their closest points, made exact by a BVH query bounded
 by the fast iterative method over same-level neighbours (closest points propagated: Jacobi sweeps on both cores, or
 ordered in-place sweeps on the dense top level, where information travels far), and refines every leaf by a BVH search
 bounded by that estimate: exact below the top level, within a tolerance on it. A mesh's build gives the sparse levels
-their exact closest points octet by octet instead (``exact_level``, :func:`.distance.level_distances`) and solves only
-the top level here.
+their exact closest points octet by octet instead (``exact_level``, :func:`.distance.level_distances`) and its top
+level by fast sweeping (``level_solver``, :func:`.sweeping.solve_level`), with the refinement here.
 """
 
 from __future__ import annotations
