@@ -5,12 +5,13 @@ centre gives its closest triangle, whose distance to each of the 8 nodes bounds 
 one box query lists those candidates and each node is tested against them. Meshes far finer than the cells query the
 BVH node by node, and a dense single level does throughout. The octet centres' closest points are kept: they are the
 next level's internal nodes'. The sparse levels above take theirs the same way (:func:`level_distances`), searching
-only their leaves; the dense top level is left to the fast iterative method (:mod:`.fim`).
+only their leaves; the dense top level is left to fast sweeping and a bounded refinement (:mod:`.sweeping`,
+:mod:`.fim`).
 """
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 
 import numpy as np
 import warp as wp
@@ -567,9 +568,11 @@ def level_distances(search: OctetSearch, layout: dict, k: int, dist, proj, known
         wp.empty((hi - lo) // 8, dtype=wp.vec3, device=device),
         lo // 8,
     )
-    level = copy.copy(search)
-    level.query_radius = 4.0 * spacing  # a coarse node lies within a few of its cells of the mesh
-    level.box_search = search.box_search and search.mean_area >= LEVEL_BOX_MIN_AREA * spacing**2
+    level = dataclasses.replace(
+        search,
+        query_radius=4.0 * spacing,  # a coarse node lies within a few of its cells of the mesh
+        box_search=search.box_search and search.mean_area >= LEVEL_BOX_MIN_AREA * spacing**2,
+    )
     octet_nodes = wp.array(np.arange(lo, hi, 8, dtype=np.int32), dtype=wp.int32, device=device)
     no_tri = wp.empty(0, dtype=wp.int32, device=device)
     origin_v = wp.vec3(*(float(x) for x in origin))

@@ -1,28 +1,38 @@
-"""How the octets search a mesh (:mod:`.distance`): which triangles are slivers, in which frame the BVH is searched.
+"""How the octets search a mesh (:mod:`.distance`): which triangles are slivers, in which frame the BVH is searched,
+and the :class:`OctetSearch` that carries these and the mesh to the octet kernels.
 
-Both are decided once per build from the triangles alone. Slivers (long thin triangles: a cylinder's sides) take the
-octets' capsule test, which skips those beside the nearest one; a mesh whose slanted parts give its triangles loose
-bounding boxes is searched through a turned copy whose boxes fit them (:func:`search_frame`).
+Slivers and the frame are decided once per build from the triangles alone. Slivers (long thin triangles: a cylinder's
+sides) take the octets' capsule test, which skips those beside the nearest one; a mesh whose slanted parts give its
+triangles loose bounding boxes is searched through a turned copy whose boxes fit them (:func:`search_frame`).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
 
 
+@dataclass
 class OctetSearch:
     """How a mesh's octets search it (the arguments of :func:`.distance.finest_distances` of those names): the
     mesh, the radius its centre queries try first and the fallback, the box search, the turned copy and its
     rotation, the slivers, the triangles' mean area (whether an octet may start from the triangles of the one before
     it: :data:`.distance.OCTET_REUSE_MIN_AREA`)."""
 
-    def __init__(
-        self, mesh_id, query_radius, far_dist, box_search, search_id=None, frame=None, slivers=None, mean_area=0.0
-    ):
-        self.mesh_id, self.query_radius, self.far_dist, self.box_search = mesh_id, query_radius, far_dist, box_search
-        self.search_id = mesh_id if search_id is None else search_id
-        self.frame, self.slivers, self.mean_area = frame, slivers, mean_area
+    mesh_id: int
+    query_radius: float
+    far_dist: float
+    box_search: bool
+    search_id: int | None = None  # None: the mesh itself
+    frame: np.ndarray | None = None
+    slivers: wp.array | None = None
+    mean_area: float = 0.0
+
+    def __post_init__(self):
+        if self.search_id is None:
+            self.search_id = self.mesh_id
 
 
 # A triangle is a sliver, for the octets' capsule test, when its longest edge exceeds this many cells and its height
