@@ -196,6 +196,15 @@ def _set_cached_edges(mesh, edge_cache) -> bool:
     return True
 
 
+def _mirrored_edges(edge_cache):
+    """The edges of triangles ``to_world`` flipped (a, b, c -> c, b, a): each triangle's first two corners swap edges;
+    ``None`` (Blender derives them, nothing kept) when there are none yet."""
+    if not edge_cache or "edge_verts" not in edge_cache:
+        return None
+    corner_edge = np.asarray(edge_cache["corner_edge"]).reshape(-1, 3)[:, [1, 0, 2]]
+    return {"edge_verts": edge_cache["edge_verts"], "corner_edge": np.ascontiguousarray(corner_edge).ravel()}
+
+
 def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
     """A new mesh datablock from arrays.
 
@@ -322,6 +331,8 @@ def update_result_object(obj, verts, tris, attributes=None, edge_cache=None):
     matrix = np.array(obj.matrix_world, dtype=np.float64)
     if not np.allclose(matrix, np.eye(4)):
         verts, tris = to_world(verts, tris, np.linalg.inv(matrix))
+        if np.linalg.det(matrix[:3, :3]) < 0.0:
+            edge_cache = _mirrored_edges(edge_cache)
     old = obj.data
     name = old.name
     obj.data = result_mesh(name, verts, tris, attributes, edge_cache)

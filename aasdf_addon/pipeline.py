@@ -262,7 +262,13 @@ def extract(field, surface: dict, *, sharp: bool = True) -> dict:
     """
     if "verts" not in surface:
         surface["verts"], surface["tris"], surface["creases"] = field.to_mesh(sharp=sharp, return_creases=True)
-    edges = surface.setdefault("edges", {})  # filled by the first write, reused by the next ones
+    edges = surface.setdefault("edges", {})
+    if "edge_verts" not in edges and len(surface["tris"]):
+        # found in kernels (half the time Blender takes to derive them); an unusual surface's are left to the first
+        # write to derive and keep
+        found = runtime.engine().surface_edges(surface["tris"], len(surface["verts"]))
+        if found is not None:
+            edges["edge_verts"], edges["corner_edge"] = found[0].ravel(), found[1]
     return {"verts": surface["verts"], "tris": surface["tris"], "creases": surface["creases"], "edges": edges}
 
 

@@ -8,6 +8,7 @@ passed as ``device`` (CPU here, CUDA wherever an NVIDIA GPU is present). Negativ
 from . import kernels
 from .boolean import difference, intersection, union
 from .build import build_field, build_fields
+from .edges import surface_edges
 from .errors import AasdfError
 from .field import AdaptiveField
 from .fieldops import offset, shell
@@ -29,5 +30,6 @@ __all__ = [
     "plan_field",
     "redistance",
     "shell",
+    "surface_edges",
     "union",
 ]

@@ -37,6 +37,7 @@ ENGINE_MODULES = (
     "extract",
     "sources",
     "dual",
+    "edges",
     "sweeping",
     "redistancing",
     "fieldops",

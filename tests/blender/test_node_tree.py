@@ -133,6 +133,33 @@ def test_moved_result_object_still_shows_the_boolean_in_place(evaluated):
     np.testing.assert_allclose(after.max(axis=0), before.max(axis=0), atol=1e-4)
 
 
+def _edges_match_corners(mesh) -> bool:
+    """Each corner's edge joins its vertex to the next corner's, every edge once (what Blender would derive)."""
+    n = len(mesh.loops)
+    corner_vert, corner_edge = np.empty(n, np.int32), np.empty(n, np.int32)
+    mesh.attributes[".corner_vert"].data.foreach_get("value", corner_vert)
+    mesh.attributes[".corner_edge"].data.foreach_get("value", corner_edge)
+    pairs = np.empty(2 * len(mesh.edges), np.int32)
+    mesh.attributes[".edge_verts"].data.foreach_get("value", pairs)
+    pairs = np.sort(pairs.reshape(-1, 2).astype(np.int64), axis=1)
+    tris = corner_vert.reshape(-1, 3).astype(np.int64)
+    heads, tails = tris.ravel(), np.roll(tris, -1, axis=1).ravel()
+    keys = np.minimum(heads, tails) * len(mesh.vertices) + np.maximum(heads, tails)
+    own = pairs[:, 0] * len(mesh.vertices) + pairs[:, 1]
+    return len(np.unique(own)) == len(own) and np.array_equal(own[corner_edge], keys)
+
+
+def test_result_edges_join_their_corners_also_in_a_mirrored_result_object(evaluated):
+    tree, result, _ = evaluated
+    assert _edges_match_corners(result.data) and not result.data.validate()
+    result.scale.x = -1.0  # its vertices are written mirrored, its triangles flipped: their edges must follow
+    bpy.context.view_layer.update()
+    bpy.ops.aasdf.evaluate_tree(tree=tree.name)
+    result = bpy.data.objects["Result"]
+    assert _edges_match_corners(result.data) and not result.data.validate()
+    assert is_watertight(world_arrays(result)[1])
+
+
 def test_tree_is_saved_with_the_blend_and_evaluates_after_reload(evaluated, tmp_path):
     tree, result, _ = evaluated
     vertices = len(result.data.vertices)

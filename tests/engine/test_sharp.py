@@ -95,6 +95,27 @@ def test_sharp_surface_is_a_closed_outward_2_manifold(cad):
     assert len(tris) <= len(cad["mc"][1]) + 4
 
 
+def test_surface_edges_are_each_surfaces_own_and_refuse_an_unclosed_surface(cad):
+    for verts, tris in (cad["sharp"], cad["mc"]):
+        edge_verts, corner_edge = engine.surface_edges(tris, len(verts))
+        t = tris.astype(np.int64)
+        heads, tails = t.ravel(), np.roll(t, -1, axis=1).ravel()  # each corner to the next corner of its triangle
+        keys = np.minimum(heads, tails) * len(verts) + np.maximum(heads, tails)
+        pairs = edge_verts.astype(np.int64)
+        assert np.all(pairs[:, 0] < pairs[:, 1])
+        # every undirected edge once, and each corner's edge joins it to the next corner
+        assert np.array_equal(np.sort(pairs[:, 0] * len(verts) + pairs[:, 1]), np.unique(keys))
+        assert np.array_equal(pairs[corner_edge, 0] * len(verts) + pairs[corner_edge, 1], keys)
+    verts, tris = cad["sharp"]
+    flipped = tris.copy()
+    flipped[7] = flipped[7, ::-1]
+    doubled = np.concatenate([tris, tris[:1]])  # an edge with three faces
+    degenerate = tris.copy()
+    degenerate[3, 1] = degenerate[3, 0]
+    for bad in (tris[1:], flipped, doubled, degenerate, tris[:0]):
+        assert engine.surface_edges(bad, len(verts)) is None
+
+
 def test_sharp_surface_does_not_cross_itself_at_creases(cad):
     # pairs of triangles whose edges pass through each other: none (before the fold-free splits and the damped planes
     # of nodes on the surface: 341, 379, 924, 571 and 372)
