@@ -14,6 +14,7 @@ from .field import AdaptiveField
 from .fieldops import offset, shell
 from .plan import check_meshes, plan_field, tune_allocator
 from .redistancing import redistance
+from .sources import interpolate_corners
 
 kernels.configure_modules(__name__)
 tune_allocator()  # large arrays back to the system when freed (see plan.MMAP_THRESHOLD)
@@ -25,6 +26,7 @@ __all__ = [
     "build_fields",
     "check_meshes",
     "difference",
+    "interpolate_corners",
     "intersection",
     "offset",
     "plan_field",

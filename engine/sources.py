@@ -264,6 +264,57 @@ def closest_triangles(source: SourceMesh, points, device) -> tuple[np.ndarray, n
     return tri_ids, bary.numpy()
 
 
+@wp.kernel(enable_backward=False)
+def _interpolate_kernel(
+    first: int,
+    values: wp.array2d[wp.float32],
+    corners: wp.array2d[wp.int32],
+    stacked: wp.array[wp.int32],
+    weights: wp.array3d[wp.float32],
+    out: wp.array2d[wp.float32],
+):
+    """Per face (from ``first``): each of its corners weights the values at its source triangle's three corners."""
+    f = first + wp.tid()
+    t = stacked[f]
+    for c in range(3):
+        for j in range(values.shape[1]):
+            acc = float(0.0)
+            for k in range(3):
+                acc += weights[f, c, k] * values[corners[t, k], j]
+            out[3 * f + c, j] = acc
+
+
+def interpolate_corners(values, corners, stacked, weights, device=None) -> np.ndarray:
+    """Values at the corners of F faces, each read off its source triangle by barycentric weights (what a result's
+    UV maps and colours are). A kernel: numpy's gathers and batched 3x3 products took 40 ms on 540 k faces.
+
+    Args:
+        values: (N, W) float values at the source triangles' corners.
+        corners: (T, 3) int indices into ``values`` of each source triangle's corners.
+        stacked: (F,) int the source triangle of each face (within ``corners``).
+        weights: (F, 3, 3) float per face corner, the weights of its source triangle's corners.
+        device: Warp device (default: Warp's default).
+    Returns:
+        (3F, W) float32, face after face, corner after corner.
+    """
+    device = wp.get_device(device)
+    values = np.ascontiguousarray(values, dtype=np.float32)
+    values = values.reshape(len(values), -1)
+    count = len(stacked)
+    out = wp.empty((3 * count, values.shape[1]), dtype=wp.float32, device=device)
+    host = [
+        values,
+        np.ascontiguousarray(corners, dtype=np.int32).reshape(-1, 3),
+        np.ascontiguousarray(stacked, dtype=np.int32),
+        np.ascontiguousarray(weights, dtype=np.float32).reshape(-1, 3, 3),
+    ]
+    # on the CPU the kernel reads the numpy arrays themselves (copying 540 k faces' weights took 11 ms)
+    args = [wp.array(a, dtype=wp.dtype_from_numpy(a.dtype), device=device, copy=not device.is_cpu) for a in host]
+    args.append(out)
+    launch_split(_interpolate_kernel, count, lambda lo, n: [lo, *args], device)
+    return out.numpy()
+
+
 def barycentrics(source: SourceMesh, triangle_ids, points) -> np.ndarray:
     """Barycentric coordinates of each point's projection onto the plane of its triangle (not clamped to the triangle,
     so an affine map over the triangle, such as its UVs, extends linearly).

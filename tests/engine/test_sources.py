@@ -77,3 +77,21 @@ def test_relabelled_fields_keep_their_source_under_the_new_id():
     assert list(relabelled.sources) == [5] and relabelled.sources[5] is field.sources[0]
     ids, tri, _ = relabelled.closest_sources(verts[:10])
     assert np.all(ids == 5) and np.all(tri >= 0)
+
+
+@pytest.mark.parametrize("width", [2, 4])
+def test_corner_values_are_their_source_triangles_corners_weighted(width):
+    rng = np.random.default_rng(7)
+    values = rng.normal(size=(50, width)).astype(np.float32)
+    corners = rng.integers(0, len(values), size=(30, 3))
+    stacked = rng.integers(0, len(corners), size=40_000)  # enough faces to split the launch across cores
+    weights = rng.random((len(stacked), 3, 3)).astype(np.float32)
+    out = engine.interpolate_corners(values, corners, stacked, weights)
+    expected = np.einsum("fck,fkw->fcw", weights, values[corners[stacked]]).reshape(-1, width)
+    assert out.shape == (3 * len(stacked), width) and out.dtype == np.float32
+    np.testing.assert_allclose(out, expected, rtol=1e-5, atol=1e-5)
+    # a face's corner at one of its triangle's corners reads that corner's value exactly
+    one_hot = np.broadcast_to(np.eye(3, dtype=np.float32), weights.shape)
+    np.testing.assert_array_equal(
+        engine.interpolate_corners(values, corners, stacked, one_hot)[:3], values[corners[stacked[0]]]
+    )
