@@ -285,8 +285,8 @@ def combine(
     device = a.device
     timings = {}
     t0 = time.perf_counter()
-    lo = np.minimum(a.bounds[0], b.bounds[0])
-    hi = np.maximum(a.bounds[1], b.bounds[1])
+    (a_lo, a_hi), (b_lo, b_hi) = a.bounds, b.bounds
+    lo, hi = np.minimum(a_lo, b_lo), np.maximum(a_hi, b_hi)
     origin, top_dims = plan_domain(lo, hi, h, levels, 0.0)
     fine_dims = top_dims * 2 ** (levels - 1)
     check_budget(fine_dims, int(np.prod(top_dims)), 8 * (a.level_counts[0] + b.level_counts[0]))

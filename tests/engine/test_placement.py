@@ -33,7 +33,10 @@ def test_a_placed_sphere_is_the_sphere_where_it_is_placed():
     near = np.abs(exact) < 0.1
     assert np.abs(got - exact)[near].max() < 0.08 * 0.045  # measured 0.026 voxel
     lo, hi = placed.bounds
-    assert np.all(lo < -1.1 + 0.4) and np.all(hi > 1.5 + 0.4)  # the placed domain's box
+    centre = np.array([0.4, -0.2, 0.3])
+    # the placed sphere's box with the domain's narrowest margin (0.3), not the turned domain's box (0.45-0.88 more)
+    assert np.all(lo < centre - 1.5 - 0.2) and np.all(hi > centre + 1.5 + 0.2)
+    assert np.all(lo > centre - 1.5 - 0.5) and np.all(hi < centre + 1.5 + 0.5)
     verts, tris = placed.to_mesh()
     assert is_watertight(tris)
     assert mesh_volume(verts, tris) == pytest.approx(4 / 3 * np.pi * 1.5**3, rel=0.005)
