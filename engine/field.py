@@ -189,21 +189,14 @@ class AdaptiveField:
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(min, max) world corners of the box around the domain (the domain itself unless the field is placed). A
-        placed field of one mesh gives the box around its placed vertices grown by the domain's narrowest margin
-        beyond them, not the box around its turned domain: that one reaches far beyond what the field holds (spot
-        turned 17 degrees about two axes: a box of 2.8 times the volume, a boolean's top level of 1.9 times the
-        nodes)."""
+        """(min, max) world corners of the box around the domain (the domain itself unless the field is placed; a
+        placed field of one mesh: around its placed vertices, see ``Placement.content_box``)."""
         lo, hi = self.frame_bounds
         if self.placement is None:
             return lo, hi
-        verts = next(iter(self.sources.values())).verts if len(self.sources) == 1 else np.zeros((0, 3))
-        if not len(verts):
-            return self.placement.box(lo, hi)
-        own_lo, own_hi = verts.min(axis=0), verts.max(axis=0)
-        margin = self.placement.scale * float(min((own_lo - lo).min(), (hi - own_hi).min()))
-        placed = self.placement.to_world(verts)
-        return placed.min(axis=0) - margin, placed.max(axis=0) + margin
+        if len(self.sources) == 1 and len(verts := next(iter(self.sources.values())).verts):
+            return self.placement.content_box(lo, hi, verts)
+        return self.placement.box(lo, hi)
 
     @property
     def fine_dims(self) -> np.ndarray:
@@ -538,8 +531,8 @@ class AdaptiveField:
             sharp = not self.stats.get("exact_distance", False)
         if self.placement is not None:  # extracted in its own frame, then placed
             frame = self.in_frame()
-            mesh = frame.to_mesh(iso / self.placement.scale, sharp=sharp, return_creases=return_creases)
-            return self._placed_mesh(mesh)
+            verts, tris, *rest = frame.to_mesh(iso / self.placement.scale, sharp=sharp, return_creases=return_creases)
+            return (*self.placement.place_surface(verts, tris), *rest)
         if sharp:
             verts, tris, creases = self._sharp_surface(iso, return_creases)
         else:
@@ -595,15 +588,6 @@ class AdaptiveField:
         frame = copy.copy(self)
         frame.placement = None
         return frame
-
-    def _placed_mesh(self, mesh):
-        """A surface extracted in the field's own frame, placed: (verts, tris, ...) with the vertices moved and, for a
-        reflection, every triangle turned over so it still faces out."""
-        verts, tris, *rest = mesh
-        verts = self.placement.to_world(verts).astype(np.float32)
-        if self.placement.mirrors:
-            tris = np.ascontiguousarray(tris[:, ::-1])
-        return (verts, tris, *rest)
 
     def _frame_points(self, points) -> np.ndarray:
         """(N, 3) float32 points (validated) in the field's own frame."""

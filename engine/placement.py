@@ -65,6 +65,22 @@ class Placement:
         """(N, 3) float64 positions in the field's frame of (N, 3) world points."""
         return ((np.asarray(points, dtype=np.float64) - self.translation) @ self.rotation) / self.scale
 
+    def place_surface(self, verts, tris) -> tuple[np.ndarray, np.ndarray]:
+        """A surface extracted in the field's own frame, placed: float32 vertices moved and, for a reflection, every
+        triangle turned over so it still faces out."""
+        verts = self.to_world(verts).astype(np.float32)
+        return verts, np.ascontiguousarray(tris[:, ::-1]) if self.mirrors else tris
+
+    def content_box(self, lo, hi, verts) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) world corners of the box around ``verts`` (the field's frame) placed, grown by the narrowest
+        margin of the domain (lo, hi) beyond them: what a placed field holds, where the box around its turned domain
+        (``box``) reaches far beyond it (spot turned 17 degrees about two axes: a box of 2.8 times the volume, a
+        boolean's top level of 1.9 times the nodes)."""
+        own_lo, own_hi = verts.min(axis=0), verts.max(axis=0)
+        margin = self.scale * float(min((own_lo - lo).min(), (hi - own_hi).min()))
+        placed = self.to_world(verts)
+        return placed.min(axis=0) - margin, placed.max(axis=0) + margin
+
     def box(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
         """(min, max) world corners of the box (lo, hi) of the field's frame, placed."""
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
