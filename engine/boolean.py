@@ -234,6 +234,12 @@ def _combine_nodes_kernel(
                 tri[i] = follow.tri[node]
 
 
+def continuous(f) -> bool:
+    """Whether a field has no jumps: a closed, clean mesh's, a re-distanced one, a boolean of such fields (an open
+    mesh's field jumps across its holes, where the winding number's sign flips)."""
+    return bool(f.stats.get("continuous", f.stats.get("clean_mesh", False) or f.stats.get("exact_distance", False)))
+
+
 def _check_operands(a, b, blend):
     for name, f in (("a", a), ("b", b)):
         if not callable(getattr(f, "arg", None)) or not hasattr(f, "level_offsets"):
@@ -333,8 +339,20 @@ def combine(
     # Keep the result adaptive: drop the octets the result's surface is far from, before any interpolation.
     t0 = time.perf_counter()
     octet_flags = [int(al and not (offset_to(f, origin, h) % 2).any()) for f, al in zip((a, b), aligned, strict=False)]
+    jumps = not (continuous(a) and continuous(b))
     octets, a_first, b_first = prune_octets(
-        octets, (a_arg, b_arg), [int(al) for al in aligned], octet_flags, offs, origin, h, op, blend, mode, oct_dims
+        octets,
+        (a_arg, b_arg),
+        [int(al) for al in aligned],
+        octet_flags,
+        offs,
+        origin,
+        h,
+        op,
+        blend,
+        mode,
+        oct_dims,
+        jumps=jumps,
     )
     timings["finest_prune"] = time.perf_counter() - t0
     # every node's place first, so the finest values are computed where they are kept
@@ -410,6 +428,7 @@ def combine(
         timings=timings,
         sources={**a.world_sources(), **b.world_sources()},
         triangles=tri,
+        stats={"continuous": not jumps},
     )
 
 

@@ -126,16 +126,19 @@ def _keep_octets_kernel(
     has_neg: wp.array[wp.int32],
     has_pos: wp.array[wp.int32],
     dims: wp.vec3i,
+    jumps: int,
     signs: wp.array[wp.uint8],
     keep: wp.array[wp.int32],
 ):
-    """Keep an octet near the surface, or with a sign change inside it or towards one of its 26 neighbours. The
-    neighbours' possible signs come from ``signs`` (the octet grid, x-fastest, see ``_octet_signs_kernel``) or, when
-    it is empty, by binary search among ``octets``."""
+    """Keep an octet near the surface, or with a sign change inside it or (where the operands may ``jumps``) towards
+    one of its 26 neighbours. The neighbours' possible signs come from ``signs`` (the octet grid, x-fastest, see
+    ``_octet_signs_kernel``) or, when it is empty, by binary search among ``octets``."""
     t = first + wp.tid()
     keep[t] = 0
     if near[t] == 1 or (has_neg[t] == 1 and has_pos[t] == 1):
         keep[t] = 1
+        return
+    if jumps == 0:
         return
     c = octree.morton_decode(octets[t])
     n = octets.shape[0]
@@ -296,7 +299,7 @@ def operand_octets(f: AdaptiveField, origin, spacing, oct_dims, aligned, device,
     )
 
 
-def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, blend, mode, oct_dims):
+def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, blend, mode, oct_dims, *, jumps=True):
     """The octets of ``octets`` (sorted Morton codes on the result lattice) that may change the result's surface,
     and for each its first node in either operand (``octet_source``; -1 where not octet-aligned).
 
@@ -304,7 +307,10 @@ def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, ble
     other operand, say), deciding from the operands' brackets before any interpolation, so only kept nodes pay
     for MLS. A marching cube with a corner farther than its diagonal from the surface cannot contain it, so
     octets whose nodes are all beyond KEEP_BAND voxels change no surface — unless the field jumps there (the
-    surface an open operand gets across a hole): octets with both signs, or next to one of the other sign, stay.
+    surface an open operand gets across a hole): octets with both signs, or next to one of the other sign, stay. Where
+    neither operand jumps (``jumps`` False: the combination is continuous and changes by at most sqrt(2) times the
+    distance moved, a chamfer's most, so every corner of a cube the surface crosses lies within sqrt(6) < KEEP_BAND
+    voxels of it) the band alone decides: the neighbours' signs kept an octet more on either side of the surface.
 
     Args:
         octets: (M,) int64 Warp array of octet codes.
@@ -315,6 +321,7 @@ def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, ble
         origin, h: The result lattice's origin and finest spacing.
         op, blend, mode: The boolean (``OP_*``), its blend size and blend mode (0 round / none, 1 chamfer).
         oct_dims: The octet grid's dimensions.
+        jumps: Whether an operand's field may jump (an open mesh's, across its holes).
     Returns:
         (octets, a_first, b_first) Warp arrays of the kept octets: an operand's first node of each, -1 where none is
         known, or -2 - (16 x index + level) of its coarse leaf covering the octet (:func:`.operands.octet_leaf`).
@@ -356,7 +363,7 @@ def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, ble
         balance=True,
     )
     dims_v = wp.vec3i(*(int(d) for d in oct_dims))
-    if byte_grid_fits(oct_dims):
+    if jumps and byte_grid_fits(oct_dims):
         # a byte per octet of the grid: the 26 neighbours are found by index rather than by binary search
         signs = wp.zeros(int(np.prod(oct_dims)), dtype=wp.uint8, device=device)
         parallel.launch_split(
@@ -367,7 +374,7 @@ def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, ble
     parallel.launch_split(
         _keep_octets_kernel,
         n_oct,
-        lambda start, n: [start, octets, near, has_neg, has_pos, dims_v, signs, keep_wp],
+        lambda start, n: [start, octets, near, has_neg, has_pos, dims_v, int(jumps), signs, keep_wp],
         device,
     )
     keep = keep_wp.numpy().astype(bool)

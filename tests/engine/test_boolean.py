@@ -359,3 +359,26 @@ def test_closed_operands_give_their_exact_distances_off_their_surfaces(placed):
     err = np.abs(cells["sdf"][fine] - exact) / h
     far = np.abs(exact_b) > 1.5 * h if placed else np.ones(len(x), bool)
     assert err[far].max() < 1e-3, np.percentile(err[far], [50, 99, 100])  # measured 4e-5 (3.7 voxels with MLS fits)
+
+
+def test_booleans_of_continuous_fields_drop_the_octets_kept_for_a_neighbours_sign(monkeypatch):
+    from scipy.spatial import cKDTree
+
+    from engine import boolean
+
+    a, b = _pair("spot.obj", "spot.obj", (0.2, 0.1, 0.0))
+    h = _voxel(a, b, res=128)
+    fa, fb = engine.build_fields([a, b], voxel_size=h)
+    bunny = engine.build_field(*_pair("stanford-bunny.obj", "spot.obj", (0.0, 0.0, 0.0))[0], voxel_size=h, field_id=2)
+    closed = engine.difference(fa, fb)
+    chained = engine.union(closed, fa.transformed(np.diag([1.0, 1.0, -1.0, 1.0])))
+    assert closed.stats["continuous"] and chained.stats["continuous"]
+    # the open bunny's field jumps across its holes: there the octets next to one of the other sign stay
+    assert not engine.union(bunny, fa).stats["continuous"]
+    monkeypatch.setattr(boolean, "continuous", lambda field: False)  # every octet next to the other sign kept
+    kept = engine.difference(fa, fb)
+    assert closed.level_counts[0] < kept.level_counts[0]
+    # the same surface, to float rounding
+    (verts, tris), (kept_verts, kept_tris) = closed.to_mesh(), kept.to_mesh()
+    assert len(tris) == len(kept_tris) and is_watertight(tris)
+    assert cKDTree(kept_verts).query(verts)[0].max() < 1e-4 * h
