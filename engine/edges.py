@@ -107,7 +107,7 @@ def surface_edges(tris: np.ndarray, vertex_count: int, device=None) -> tuple[np.
     if not len(tris):
         return None
     device = wp.get_device(device)
-    t = wp.array(tris, dtype=wp.int32, device=device)
+    t = wp.array(tris, dtype=wp.int32, device=device, copy=not device.is_cpu)  # read in place on the CPU
     n = len(tris)
     out_count = wp.zeros(vertex_count, dtype=wp.int32, device=device)
     tri_count = wp.empty(n, dtype=wp.int32, device=device)
