@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .parallel import launch_split
+from .parallel import host_view, launch_split
 
 
 @wp.kernel(enable_backward=False)
@@ -107,7 +107,7 @@ def surface_edges(tris: np.ndarray, vertex_count: int, device=None) -> tuple[np.
     if not len(tris):
         return None
     device = wp.get_device(device)
-    t = wp.array(tris, dtype=wp.int32, device=device, copy=not device.is_cpu)  # read in place on the CPU
+    t = host_view(tris, wp.int32, device)
     n = len(tris)
     out_count = wp.zeros(vertex_count, dtype=wp.int32, device=device)
     tri_count = wp.empty(n, dtype=wp.int32, device=device)

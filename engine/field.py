@@ -404,12 +404,11 @@ class AdaptiveField:
         if tris.ndim != 2 or tris.shape[1] != 3:
             raise ValueError(f"Expected 'tris' of shape (F, 3), but got {tris.shape}.")
         n = len(tris)
-        # the kernels read the numpy arrays in place on the CPU; every row of ``bary`` a kernel does not write is
-        # zeroed below (zeroing all of it first took 8 ms of 48 on 540 k faces)
-        copy = not wp.get_device(self.device).is_cpu
-        verts_wp = wp.array(verts, dtype=wp.vec3, device=self.device, copy=copy)
+        # every row of ``bary`` a kernel does not write is zeroed below (zeroing all of it first took 8 ms of 48 on
+        # 540 k faces)
+        verts_wp = parallel.host_view(verts, wp.vec3, self.device)
         flat = np.ascontiguousarray(tris, dtype=np.int32).ravel()
-        tris_wp = wp.array(flat, dtype=wp.int32, device=self.device, copy=copy)
+        tris_wp = parallel.host_view(flat, wp.int32, self.device)
         ids = wp.empty(n, dtype=wp.int32, device=self.device)
         node_tri = wp.empty(n, dtype=wp.int32, device=self.device)
         bary = wp.empty(3 * n, dtype=wp.vec3, device=self.device)
