@@ -15,8 +15,9 @@ within minutes); times are medians of ``--repeat`` rounds (default 5) after a wa
 call (it includes reading the evaluated meshes and writing the result object). Ratios are the median of the rounds'
 ratios to that round's GN SDF time, with the smallest and largest in brackets.
 
-Then the stages of the moved case, and a drag: ``--drag-moves`` (10) successive moves of the cutter through a CSG
-tree, the tree evaluated after each, against as many geometry-nodes evaluations.
+Then the stages of the cold and moved cases (the fields, and the output after the boolean, each against the round's
+GN SDF time), and a drag: ``--drag-moves`` (10) successive moves of the cutter through a CSG tree, the tree evaluated
+after each, against as many geometry-nodes evaluations.
 
     .venv/bin/python bench/addon.py [--cases bunny-spot spheres spheres-100k] [--resolutions 256 512] [--repeat 5]
 """
@@ -44,6 +45,9 @@ from bench.pipeline import cases as pipeline_cases  # noqa: E402
 from tests.conftest import load_addon_package  # noqa: E402
 
 OPERATION = "DIFFERENCE"
+
+# The stages after the boolean: the result's surface, the attributes its faces carry over, writing it into Blender.
+OUTPUT_STAGES = ("surface", "attributes", "write")
 
 
 def cases() -> dict:
@@ -126,7 +130,7 @@ def measure(a, b, voxel_size, repeat):
     bpy.context.view_layer.update()
     diag = float(np.linalg.norm(b[0].max(0) - b[0].min(0)))
     out = {"cold": [], "moved": [], "turned": [], "rerun": [], "gn": [], "attributes": []}
-    stages = []
+    stages = {"cold": [], "moved": []}
     built = {}
     step = 0
 
@@ -146,6 +150,7 @@ def measure(a, b, voxel_size, repeat):
         if k:
             out["cold"].append(seconds)
             out["attributes"].append(numbers["stages"]["attributes"] / seconds)
+            stages["cold"].append(numbers["stages"])
         for case in ("moved", "turned"):
             step += 1
             second.location.x = 1.0e-3 * diag * step
@@ -157,7 +162,7 @@ def measure(a, b, voxel_size, repeat):
             if k:
                 out[case].append(seconds)
                 if case == "moved":
-                    stages.append(numbers["stages"])
+                    stages["moved"].append(numbers["stages"])
         seconds, numbers = _run_operator(first, second, voxel_size)
         built["rerun"] = numbers["fields_built"]
         if k:
@@ -169,7 +174,12 @@ def measure(a, b, voxel_size, repeat):
     medians = {key: statistics.median(v) for key, v in out.items()}
     for key in ("cold", "moved", "turned", "rerun"):
         medians[f"{key}_ratio"] = round_ratios(out[key], out["gn"])
-    medians["stages"] = {name: statistics.median(run[name] for run in stages) for name in stages[0]}
+    for key, runs in stages.items():
+        medians[f"{key}_stages"] = {name: statistics.median(run[name] for run in runs) for name in runs[0]}
+        # what every evaluation pays whatever its fields cost, as a share of the geometry nodes' whole run
+        output = [sum(run[name] for name in OUTPUT_STAGES) for run in runs]
+        medians[f"{key}_output_ratio"] = round_ratios(output, out["gn"])
+        medians[f"{key}_fields_ratio"] = round_ratios([run["fields"] for run in runs], out["gn"])
     return medians, built
 
 
@@ -264,13 +274,18 @@ def main(argv=None):
                 f"| {100 * m['attributes']:.1f} % |",
                 flush=True,
             )
-            stage_rows.append((name, res, m["stages"]))
-    print("\n## One operand moved: seconds per stage (median)\n")
-    names = list(stage_rows[0][2]) if stage_rows else []
-    print("| case | res | " + " | ".join(names) + " |")
-    print("|" + "|".join(["---"] * (len(names) + 2)) + "|")
-    for name, res, stages in stage_rows:
-        print(f"| {name} | /{res} | " + " | ".join(f"{stages[n]:.3f}" for n in names) + " |")
+            stage_rows += [
+                (name, res, key, m[f"{key}_stages"], m[f"{key}_fields_ratio"], m[f"{key}_output_ratio"])
+                for key in ("cold", "moved")
+            ]
+    print("\n## Seconds per stage (median), cold and one operand moved\n")
+    print(f"Against the round's GN SDF time: the fields, and the output ({' + '.join(OUTPUT_STAGES)}).\n")
+    names = list(stage_rows[0][3]) if stage_rows else []
+    print("| case | res | run | " + " | ".join(names) + " | fields / GN | output / GN |")
+    print("|" + "|".join(["---"] * (len(names) + 5)) + "|")
+    for name, res, key, stages, fields, output in stage_rows:
+        row = " | ".join(f"{stages[n]:.3f}" for n in names)
+        print(f"| {name} | /{res} | {key} | {row} | {_ratio(fields, 2)} | {_ratio(output, 2)} |")
     a, b = all_cases["bunny-spot"]
     pts = np.vstack([a[0], b[0]])
     voxel = float(np.linalg.norm(pts.max(0) - pts.min(0))) / 256
