@@ -5,8 +5,9 @@ settings (``geometry_key``), with the world matrix it was built under. Objects w
 duplicates, copies) find the same entry, and an object that moved, turned or was scaled finds its own: the pipeline
 places the field where the object now is (``AdaptiveField.transformed``) instead of building it again. Entries are
 kept in least-recently-used order within the memory limit of the add-on preferences (``cache_limit_mb``; 0 turns the
-cache off). The last combined result is kept too (``find_result``), with its surface, so a run on unchanged inputs
-repeats neither the booleans nor the extraction.
+cache off); what the fields leave of it the engine may keep as resident pages for its next arrays (``spare_bytes``).
+The last combined result is kept too (``find_result``), with its surface, so a run on unchanged inputs repeats neither
+the booleans nor the extraction.
 
 A ``depsgraph_update_post`` handler drops the entry of an object whose geometry changed (``note_object`` says which
 entry an object uses), ``load_pre`` empties the cache, and ``unregister()`` removes the handlers and empties it too.
@@ -21,7 +22,7 @@ from collections import OrderedDict
 import bpy
 import numpy as np
 
-from . import preferences
+from . import preferences, runtime
 
 _entries: OrderedDict = OrderedDict()  # key -> (field, world matrix it was built under, nbytes), least recent first
 _objects: dict = {}  # session_uid -> the key of the entry the object used last
@@ -153,12 +154,18 @@ def invalidate(session_uid: int) -> bool:
 
 
 def clear():
-    """Drop every cached field and the last combined result."""
+    """Drop every cached field and the last combined result, and give the engine's pooled pages back."""
     global _bytes
     _entries.clear()
     _objects.clear()
     _bytes = 0
     _result.clear()
+    runtime.release_memory()
+
+
+def spare_bytes(context=None) -> int:
+    """What the memory limit leaves beside the cached fields: the most the engine may keep pooled between runs."""
+    return max(limit_bytes(context) - _bytes, 0)
 
 
 # ---- handlers ----

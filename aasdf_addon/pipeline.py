@@ -360,6 +360,8 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
                     operand.hide_set(True)
     finally:
         progress.end()
+        # the engine's freed arrays stay resident for the next run's (a drag's moves), within the cache's limit
+        runtime.release_memory(cache.spare_bytes(context))
     hits, builds = timer.cache_delta()
     last_run.clear()
     last_run.update(

@@ -88,6 +88,12 @@ def engine():
     return _engine
 
 
+def release_memory(keep: int = 0) -> int:
+    """Give the engine's pooled pages back to the system beyond ``keep`` bytes (``engine.release_memory``), if the
+    engine is loaded; returns the bytes given back."""
+    return _engine.release_memory(keep) if _engine is not None else 0
+
+
 def device(context=None) -> str:
     """Warp device for the preferred device: ``"cuda:<n>"`` when ``CUDA_<n>`` is chosen and present, else ``"cpu"``."""
     prefs = preferences.get(context)

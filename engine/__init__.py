@@ -12,6 +12,7 @@ from .edges import surface_edges
 from .errors import AasdfError
 from .field import AdaptiveField
 from .fieldops import offset, shell
+from .hostpool import pooled_bytes, release_memory
 from .plan import check_meshes, plan_field, tune_allocator
 from .redistancing import redistance
 from .sources import interpolate_corners
@@ -30,7 +31,9 @@ __all__ = [
     "intersection",
     "offset",
     "plan_field",
+    "pooled_bytes",
     "redistance",
+    "release_memory",
     "shell",
     "surface_edges",
     "union",

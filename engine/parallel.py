@@ -15,6 +15,8 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import warp as wp
 
+from . import hostpool
+
 # Below this many threads a launch is not worth splitting across CPU cores.
 SPLIT_MIN_DIM = 20_000
 
@@ -131,7 +133,9 @@ def load_modules(modules, device) -> None:
     and the frame holding it form a cycle: every frame above it stays alive until Python's cycle collector runs. From
     a thread of its own those frames are the thread's; from the caller's they would keep its locals alive, such as
     the fields of a boolean or an extraction (hundreds of megabytes at /1024: measured, the first run's fields still
-    resident through the second run's peak)."""
+    resident through the second run's peak).
+    Also puts the engine's pool of resident pages in front of Warp's CPU allocator, once (:mod:`.hostpool`)."""
+    hostpool.install()
     device = wp.get_device(device)
     todo = [m for m in modules if (id(m), device.alias) not in _loaded]
     if not todo:

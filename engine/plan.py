@@ -39,7 +39,7 @@ MIN_WALL_VOXELS = 2.0
 # same process, peaked 1,195-1,244 MB, and 1,008-1,031 MB with this; at /512 480-498 -> 414-422 MB. The cost: big
 # arrays are mapped and faulted in afresh instead of reused from the heap, a warm /512 pipeline 1.11 -> 1.19 s and
 # warm /512 builds 3-11 % slower (none measured at /1024, where glibc maps most arrays anyway; 8 MB kept 459-470 MB
-# at /512).
+# at /512). Warp's arrays from 1 MB up no longer pay it: they take the pages of freed ones (:mod:`.hostpool`).
 MMAP_THRESHOLD = 4 * 2**20
 _M_MMAP_THRESHOLD = -3  # mallopt's parameter number (malloc.h)
 

@@ -333,6 +333,28 @@ def test_cache_off_keeps_no_field(fresh_cache):
         prefs.cache_limit_mb = 1024
 
 
+def test_pooled_memory_stays_within_what_the_cache_limit_leaves(fresh_cache):
+    """The engine keeps freed arrays' pages for the next run only within the cache's memory limit."""
+    prefs = preferences.get()
+    a, b = spot_pair()
+    engine = runtime.engine()
+    try:
+        select(a, b)
+        bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=256, hide_inputs=False)
+        assert 0 < engine.pooled_bytes() <= cache.spare_bytes()
+        prefs.cache_limit_mb = int(cache.total_bytes() / 2**20) + 2  # room for the fields and 1-2 MB more
+        b.location.x += 0.01  # a new placement: the boolean runs again, no field is built
+        bpy.context.view_layer.update()
+        select(a, b)
+        bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=256, hide_inputs=False)
+        assert boolean_op.last_run["fields_built"] == 0
+        assert engine.pooled_bytes() <= cache.spare_bytes() <= 2 * 2**20
+        assert bpy.ops.aasdf.clear_cache() == {"FINISHED"}
+        assert engine.pooled_bytes() == 0
+    finally:
+        prefs.cache_limit_mb = 1024
+
+
 def test_cache_evicts_least_recently_used_fields_beyond_its_limit(fresh_cache):
     def fake_field(megabytes):  # field_nbytes() sums the arrays' capacities
         return SimpleNamespace(values=SimpleNamespace(capacity=megabytes * 2**20))

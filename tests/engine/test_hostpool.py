@@ -1,0 +1,144 @@
+"""The pool of resident pages behind Warp's large CPU arrays (engine/hostpool.py)."""
+
+import ctypes
+import sys
+
+import numpy as np
+import pytest
+import warp as wp
+
+import engine
+from engine import hostpool
+from tests.support import uv_sphere
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the pool is Linux's (mremap)")
+
+MB = 2**20
+
+
+def _view(ptr: int, size: int) -> np.ndarray:
+    return np.ctypeslib.as_array((ctypes.c_uint8 * size).from_address(ptr))
+
+
+def _resident_mb() -> float:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096 / MB
+
+
+class _Recorder:
+    """A stand-in for Warp's own allocator: counts what reaches it."""
+
+    memory_kind = None
+
+    def __init__(self):
+        self.allocated = self.freed = 0
+
+    def allocate(self, n):
+        self.allocated += 1
+        return ctypes.cast(ctypes.create_string_buffer(n), ctypes.c_void_p).value
+
+    def deallocate(self, ptr, n):
+        self.freed += 1
+
+
+def test_arrays_take_freed_pages_without_sharing_any():
+    pool = hostpool.HostPool(_Recorder(), hostpool.Pages())
+    live = {}
+    rng = np.random.default_rng(3)
+    for step in range(60):
+        if live and rng.random() < 0.45:  # free one
+            ptr = list(live)[rng.integers(len(live))]
+            size, _ = live.pop(ptr)
+            pool.deallocate(ptr, size)
+        else:  # sizes around each other's, some larger than anything pooled (moved side by side), some split
+            size = int(rng.integers(1, 24) * MB + rng.integers(0, 4096))
+            ptr = pool.allocate(size)
+            mark = step % 251 + 1
+            _view(ptr, size)[:] = mark
+            live[ptr] = (size, mark)
+        for ptr, (size, mark) in live.items():  # every live array still holds what was written to it
+            view = _view(ptr, size)
+            assert view[0] == mark and view[-1] == mark and view[size // 2] == mark
+    assert pool.reused > 0 and pool.base.allocated == 0  # large arrays only ever came from the pool's pages
+    for ptr, (size, _) in live.items():
+        pool.deallocate(ptr, size)
+    pool.trim()
+    assert pool.pooled == 0
+
+
+def test_the_pool_holds_no_more_than_the_process_held_at_its_peak():
+    pool = hostpool.HostPool(_Recorder(), hostpool.Pages())
+    page = pool.page
+    live, held, peak = {}, 0, 0
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        if live and rng.random() < 0.5:
+            ptr = list(live)[rng.integers(len(live))]
+            size = live.pop(ptr)
+            pool.deallocate(ptr, size)
+            held -= -(-size // page) * page
+        else:
+            size = int(rng.integers(3, 40) * MB // 3)  # large arrays (smaller ones are the C heap's)
+            live[pool.allocate(size)] = size
+            held += -(-size // page) * page
+        peak = max(peak, held)
+        # what would be resident without the pool (the live arrays) plus what the pool keeps never passes the peak
+        assert held + pool.pooled <= peak
+    assert pool.fresh <= peak
+    for ptr, size in live.items():
+        pool.deallocate(ptr, size)
+    pool.trim()
+
+
+def test_released_pages_leave_the_process():
+    pool = hostpool.HostPool(_Recorder(), hostpool.Pages())
+    size = 96 * MB
+    ptr = pool.allocate(size)
+    _view(ptr, size)[:] = 1  # resident
+    pool.deallocate(ptr, size)
+    before = _resident_mb()
+    assert pool.pooled == size
+    assert pool.trim(keep=32 * MB) == size and pool.pooled == 0  # one block: all of it goes
+    assert before - _resident_mb() > 80
+
+
+def test_small_arrays_and_foreign_pointers_stay_with_warps_allocator():
+    base = _Recorder()
+    pool = hostpool.HostPool(base, hostpool.Pages())
+    ptr = pool.allocate(hostpool.MIN_BYTES - 1)
+    pool.deallocate(ptr, hostpool.MIN_BYTES - 1)
+    pool.deallocate(12345, 8 * MB)  # an array made before the pool was installed
+    assert (base.allocated, base.freed, pool.pooled) == (1, 2, 0)
+
+
+def test_fields_from_reused_pages_equal_fields_from_fresh_ones(monkeypatch):
+    """Kernels write every element of the arrays they make: pooled pages full of garbage change no value."""
+    a, b = uv_sphere(1.0, rings=32, segments=64), uv_sphere(0.8, center=(0.9, 0.1, 0.0), rings=32, segments=64)
+    h = 3.2 / 256
+
+    def run():
+        fa, fb = engine.build_fields([a, b], voxel_size=h)
+        moved = np.eye(4)
+        moved[:3, 3] = (0.37 * h, -0.21 * h, 0.05 * h)
+        r = engine.difference(fa, fb.transformed(moved))
+        verts, tris = r.to_mesh()
+        return [fa.values.numpy().copy(), fb.values.numpy().copy(), r.values.numpy().copy(), verts, tris]
+
+    fresh = run()
+    pool = hostpool.installed()  # installed by the first launch (or shared with another copy of the engine)
+    assert pool is not None and pool is wp.get_device("cpu").default_allocator and engine.pooled_bytes() > 0
+    allocate = pool.allocate
+
+    def poisoned(n):
+        ptr = allocate(n)
+        if n >= hostpool.MIN_BYTES:
+            ctypes.memset(ptr, 0xFF, n)  # NaN floats, -1 integers
+        return ptr
+
+    monkeypatch.setattr(pool, "allocate", poisoned)
+    reused = pool.reused
+    again = run()
+    assert pool.reused - reused > 8 * MB  # the second run's large arrays came from pooled pages
+    for x, y in zip(fresh, again, strict=True):
+        np.testing.assert_array_equal(x, y)
+    assert engine.release_memory() > 0 and engine.pooled_bytes() == 0
