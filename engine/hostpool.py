@@ -115,7 +115,11 @@ class HostPool:
                 while self._sizes and filled < size:
                     block, src = self._take(len(self._sizes) - 1)
                     used = min(block, size - filled)
-                    self.pages.move(src, used, ptr + filled)
+                    try:
+                        self.pages.move(src, used, ptr + filled)
+                    except MemoryError:  # (the system's limit on mappings): the block stays pooled, the rest fresh
+                        self._put(block, src)
+                        break
                     if block > used:
                         self._put(block - used, src + used)
                     filled += used

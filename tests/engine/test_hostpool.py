@@ -142,3 +142,18 @@ def test_fields_from_reused_pages_equal_fields_from_fresh_ones(monkeypatch):
     for x, y in zip(fresh, again, strict=True):
         np.testing.assert_array_equal(x, y)
     assert engine.release_memory() > 0 and engine.pooled_bytes() == 0
+
+
+def test_a_move_the_system_refuses_leaves_the_block_pooled_and_the_array_fresh():
+    class Refusing(hostpool.Pages):
+        def move(self, src, size, dst):
+            raise MemoryError("Could not move: the system's limit on mappings")
+
+    pool = hostpool.HostPool(_Recorder(), Refusing())
+    first = pool.allocate(2 * MB)
+    pool.deallocate(first, 2 * MB)
+    ptr = pool.allocate(5 * MB)  # larger than the pooled block: would be gathered
+    _view(ptr, 5 * MB)[:] = 7
+    assert pool.pooled == 2 * MB and pool.fresh == 7 * MB and _view(ptr, 5 * MB)[-1] == 7
+    pool.deallocate(ptr, 5 * MB)
+    assert pool.trim() == 7 * MB
