@@ -94,6 +94,11 @@ def release_memory(keep: int = 0) -> int:
     return _engine.release_memory(keep) if _engine is not None else 0
 
 
+def pooled_bytes() -> int:
+    """Bytes of pages the engine keeps for its next arrays (0 while the engine is not loaded): cheap, for panels."""
+    return _engine.pooled_bytes() if _engine is not None else 0
+
+
 def device(context=None) -> str:
     """Warp device for the preferred device: ``"cuda:<n>"`` when ``CUDA_<n>`` is chosen and present, else ``"cpu"``."""
     prefs = preferences.get(context)

@@ -7,7 +7,7 @@ tooltip. Sub-panels hang below ``AASDF_PT_main`` through ``bl_parent_id``.
 
 import bpy
 
-from ..aasdf_addon import cache, pipeline, preferences
+from ..aasdf_addon import cache, pipeline, preferences, runtime
 from ..aasdf_addon.properties import OPERATIONS
 
 OPERATION_ICONS = {"UNION": "SELECT_EXTEND", "INTERSECT": "SELECT_INTERSECT", "DIFFERENCE": "SELECT_SUBTRACT"}
@@ -154,6 +154,9 @@ class AASDF_PT_main_cache(SubPanel, bpy.types.Panel):
         row = layout.row()
         row.label(text=f"{stats['entries']} fields, {stats['bytes'] / 2**20:.1f} MB{limit}")
         row.operator("aasdf.clear_cache", text="Clear", icon="TRASH")
+        pooled = runtime.pooled_bytes()
+        if pooled:  # pages of freed arrays the next evaluation reuses, within the limit
+            layout.label(text=f"Kept for the next run: {pooled / 2**20:.1f} MB")
 
 
 class AASDF_PT_main_debug(SubPanel, bpy.types.Panel):

@@ -191,6 +191,22 @@ def test_sidebar_with_one_mesh(no_work, no_complaints):
     assert any(op.startswith("bpy.ops.aasdf.debug_volume(") for op in drawn["AASDF_PT_main_debug"]["operators"])
 
 
+def test_sidebar_shows_the_memory_kept_for_the_next_run(fresh_cache, no_complaints):
+    a = add_mesh_object("A", *uv_sphere(1.0, rings=16, segments=32))
+    b = add_mesh_object("B", *uv_sphere(1.0, rings=16, segments=32), location=(0.8, 0.0, 0.0))
+    for x in (0.8, 0.81):  # the second run frees the first's result: arrays of megabytes
+        b.location.x = x
+        bpy.context.view_layer.update()
+        select(a, b)
+        bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=256, hide_inputs=False)
+    kept = runtime.pooled_bytes()
+    assert kept > 0
+    assert f"Kept for the next run: {kept / 2**20:.1f} MB" in draw_sidebar()["AASDF_PT_main_cache"]["texts"]
+    assert bpy.ops.aasdf.clear_cache() == {"FINISHED"}
+    assert runtime.pooled_bytes() == 0
+    assert not any(text.startswith("Kept") for text in draw_sidebar()["AASDF_PT_main_cache"]["texts"])
+
+
 def test_sidebar_with_a_result_and_its_statistics(monkeypatch, no_complaints):
     a = add_mesh_object("A", *uv_sphere(1.0, rings=16, segments=32))
     b = add_mesh_object("B", *uv_sphere(1.0, rings=16, segments=32), location=(0.8, 0.0, 0.0))
