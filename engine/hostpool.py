@@ -82,7 +82,11 @@ class HostPool:
         self._sizes: list[int] = []  # pooled blocks, sorted by size
         self._ptrs: list[int] = []
         self._live: dict[int, int] = {}  # pointer -> mapped size of the arrays handed out
-        self._lock = threading.Lock()
+        # Python's cycle collector may free arrays inside any change of the lists above (an allocation there runs
+        # it): such a free, in the thread holding the (re-entrant) lock, is set aside until the change is done
+        self._lock = threading.RLock()
+        self._busy = False
+        self._pending: list[tuple[int, int]] = []
         self._bisect_left = bisect.bisect_left  # kept: arrays may be freed while the interpreter shuts down
         self.pooled = 0  # bytes of pooled pages
         self.reused = 0  # bytes handed out from the pool so far
@@ -98,11 +102,38 @@ class HostPool:
         self._ptrs.insert(k, ptr)
         self.pooled += size
 
+    def _enter(self) -> bool:
+        """Take the lock for a change of the lists; False (lock released) when this thread is inside one already."""
+        self._lock.acquire()
+        if self._busy:
+            self._lock.release()
+            return False
+        self._busy = True
+        return True
+
+    def _leave(self) -> None:
+        """Free what was set aside during the change, then let go of the lock."""
+        try:
+            while self._pending:
+                self._free(*self._pending.pop())
+        finally:
+            self._busy = False
+            self._lock.release()
+
+    def _free(self, ptr: int, size_in_bytes: int) -> None:
+        size = self._live.pop(ptr, None)
+        if size is not None:
+            self._put(size, ptr)
+        else:
+            self.base.deallocate(ptr, size_in_bytes)
+
     def allocate(self, size_in_bytes: int) -> int:
         if size_in_bytes < MIN_BYTES:
             return self.base.allocate(size_in_bytes)
         size = -(-size_in_bytes // self.page) * self.page
-        with self._lock:
+        if not self._enter():  # an allocation inside a change of the lists (a finaliser): not from the pool
+            return self.base.allocate(size_in_bytes)
+        try:
             k = self._bisect_left(self._sizes, size)
             if k < len(self._sizes):  # the smallest pooled block that holds it, split
                 block, ptr = self._take(k)
@@ -126,23 +157,30 @@ class HostPool:
                 self.reused += filled
                 self.fresh += size - filled
             self._live[ptr] = size
+        finally:
+            self._leave()
         return ptr
 
     def deallocate(self, ptr: int, size_in_bytes: int) -> None:
-        with self._lock:
-            size = self._live.pop(ptr, None)
-            if size is not None:
-                self._put(size, ptr)
-                return
-        self.base.deallocate(ptr, size_in_bytes)
+        if not self._enter():
+            self._pending.append((ptr, size_in_bytes))
+            return
+        try:
+            self._free(ptr, size_in_bytes)
+        finally:
+            self._leave()
 
     def trim(self, keep: int = 0) -> int:
         """Give pooled pages back to the system (largest blocks first) until at most ``keep`` bytes stay pooled;
         returns the bytes given back."""
         released = []
-        with self._lock:
+        if not self._enter():
+            return 0
+        try:
             while self._sizes and self.pooled > keep:
                 released.append(self._take(len(self._sizes) - 1))
+        finally:
+            self._leave()
         for size, ptr in released:
             self.pages.unmap(ptr, size)
         return sum(size for size, _ in released)

@@ -157,3 +157,26 @@ def test_a_move_the_system_refuses_leaves_the_block_pooled_and_the_array_fresh()
     assert pool.pooled == 2 * MB and pool.fresh == 7 * MB and _view(ptr, 5 * MB)[-1] == 7
     pool.deallocate(ptr, 5 * MB)
     assert pool.trim() == 7 * MB
+
+
+def test_an_array_freed_inside_a_change_of_the_pool_waits_for_it():
+    """Python's cycle collector can free an array inside an allocation (in the same thread): no deadlock, no list
+    changed under the change's feet; the array is pooled once the change is done."""
+
+    class Collecting(hostpool.Pages):
+        def move(self, src, size, dst):
+            if garbage:
+                pool.deallocate(*garbage.pop())  # as a finaliser run by a collection would
+                assert pool.pooled == 0  # set aside: the block being moved is out of the lists, nothing else in
+            super().move(src, size, dst)
+
+    pool = hostpool.HostPool(_Recorder(), Collecting())
+    first, kept, dropped = pool.allocate(2 * MB), pool.allocate(3 * MB), pool.allocate(1 * MB)
+    pool.deallocate(first, 2 * MB)
+    garbage = [(dropped, 1 * MB)]
+    ptr = pool.allocate(4 * MB)  # no pooled block holds it: the 2 MB one is moved into it
+    assert not garbage and pool.pooled == 1 * MB and pool.reused == 2 * MB
+    for p, n in ((ptr, 4 * MB), (kept, 3 * MB)):
+        _view(p, n)[:] = 5
+        pool.deallocate(p, n)
+    assert pool.trim() == 8 * MB
