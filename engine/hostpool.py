@@ -37,7 +37,7 @@ _MAP_FAILED = ctypes.c_void_p(-1).value
 
 
 class Pages:
-    """mmap, mremap and munmap of the C library (None where there are none)."""
+    """mmap, mremap and munmap of the C library (OSError or AttributeError where it has none)."""
 
     def __init__(self):
         libc = ctypes.CDLL(None, use_errno=True)
@@ -189,13 +189,21 @@ class HostPool:
 _pool: HostPool | None = None
 
 
+_install_lock = threading.Lock()  # two builds at once load their modules from two threads
+
+
 def install() -> HostPool | None:
     """Put a :class:`HostPool` in front of Warp's CPU allocator (once per process: a pool another copy of the engine
     installed is shared; Warp initialised); None off Linux, where Warp's CPU device has no replaceable allocator, or
     with ``AASDF_HOST_POOL=0``."""
-    global _pool
     if _pool is not None or os.environ.get("AASDF_HOST_POOL", "1") == "0" or not sys.platform.startswith("linux"):
         return _pool
+    with _install_lock:
+        return _pool if _pool is not None else _install()
+
+
+def _install() -> HostPool | None:
+    global _pool
     import warp as wp
 
     cpu = wp.get_device("cpu")
