@@ -22,6 +22,7 @@ import warp.geometry
 
 from . import octree, parallel
 from .blends import BLEND_MODES, chamfer_needs, sdf_combine
+from .expression import OP_DIFFERENCE, OP_INTERSECTION, OP_UNION, combined
 from .octree import code_bits, level_layout, morton_decode, node_center
 from .operands import (
     blend_sample,
@@ -40,9 +41,6 @@ from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_source, to_fr
 
 if TYPE_CHECKING:  # the field type imports this module for its operators
     from .field import AdaptiveField
-
-OP_UNION, OP_INTERSECTION, OP_DIFFERENCE = 0, 1, 2
-
 
 # Consecutive nodes per thread of the combination (an octet on the sparse levels).
 COMBINE_GROUP = 8
@@ -417,7 +415,7 @@ def combine(
         )
         if k == 0:
             octets = a_first = b_first = None  # the pruning's arrays are not needed above the finest level
-    return type(a).from_layout(
+    result = type(a).from_layout(
         layout,
         voxel_size=h,
         origin=origin,
@@ -430,6 +428,8 @@ def combine(
         triangles=tri,
         stats={"continuous": not jumps},
     )
+    result.expression = combined(op, blend, a, b)  # what it was made of, for the faces it keeps (:mod:`.keep`)
+    return result
 
 
 def union(

@@ -18,6 +18,7 @@ from . import boolean, parallel, sources
 from .dual import contour_dual
 from .errors import AasdfError
 from .extract import extract_octree_level, extract_surface, lattice_cubes, octree_level_cubes
+from .hybrid import hybrid_surface, voxel_surface_only
 from .marching import empty_mesh
 from .octree import decode_codes
 from .placement import Placement
@@ -83,6 +84,8 @@ class AdaptiveField:
         self.tri = triangles
         # where the field's own frame sits in the world (None: it is the world; see ``transformed``)
         self.placement = placement
+        # a boolean's operation tree over its operand fields (:mod:`.expression`); None: the field is a leaf
+        self.expression = None
         self._encloses_volume = None
 
     @classmethod
@@ -511,7 +514,28 @@ class AdaptiveField:
         values = self.sample(grid).reshape(tuple(shape))
         return {"values": values, "origin": lo + 0.5 * spacing, "spacing": spacing}
 
-    def to_mesh(self, iso: float = 0.0, *, sharp: bool | None = None, return_creases: bool = False):
+    def kept_surface(self, *, sharp: bool | None = None) -> dict:
+        """The zero surface keeping the operands' own faces wherever it is theirs and no other surface or defect of
+        theirs is near, with new (voxel) surface only along the seams (:func:`.hybrid.hybrid_surface`). A field that
+        is no boolean of meshes (a built field, an offset, a shell) keeps nothing: its voxel surface.
+
+        Returns:
+            dict: ``verts`` (N, 3) float32, ``tris`` (M, 3) int32 (closed, counter-clockwise seen from outside),
+            per face ``kept`` bool, ``field_id`` and ``triangle_id`` int32 (its source triangle, -1 for new faces),
+            per vertex ``vertex_field`` and ``vertex_id`` int32 (a kept corner's source vertex, else -1), ``stats``.
+        """
+        if self.placement is not None:  # joined in its own frame, then placed
+            surface = self.in_frame().kept_surface(sharp=sharp)
+            surface["verts"], surface["tris"] = self.placement.place_surface(surface["verts"], surface["tris"])
+            return surface
+        verts, tris = self.to_mesh(sharp=sharp)
+        if self.expression is None or not len(tris):
+            return voxel_surface_only(verts, tris, "not a boolean of meshes")
+        return hybrid_surface(self, verts, tris)
+
+    def to_mesh(
+        self, iso: float = 0.0, *, sharp: bool | None = None, return_creases: bool = False, keep_faces: bool = False
+    ):
         """The ``iso`` surface of the finest level's narrow band.
 
         Args:
@@ -521,6 +545,8 @@ class AdaptiveField:
                 edges. Default: sharp, except for a re-distanced field (``stats["exact_distance"]``: offsets and
                 shells), whose closest points lie on a marching-cubes surface, so there is no crease to recover.
             return_creases: Also return the crease edges the sharp extraction reconstructed.
+            keep_faces: Keep the operands' own triangles wherever the surface is theirs, away from the seams
+                (:meth:`kept_surface`; ``iso`` 0 only; no crease edges are returned with them).
         Returns:
             ``verts`` (V, 3) float32 and ``tris`` (T, 3) int32, counter-clockwise seen from outside; with
             ``return_creases`` also ``creases`` (E, 2) int32 vertex index pairs, each edge of ``tris`` along which
@@ -531,6 +557,14 @@ class AdaptiveField:
         iso = float(iso)
         if not np.isfinite(iso):
             raise ValueError(f"Expected a finite 'iso', but got {iso}.")
+        if keep_faces:
+            if iso != 0.0:
+                raise ValueError(f"Kept faces lie on the zero surface: expected 'iso' 0 with 'keep_faces', got {iso}.")
+            surface = self.kept_surface(sharp=sharp)
+            creases = np.zeros((0, 2), dtype=np.int32)
+            return (
+                (surface["verts"], surface["tris"], creases) if return_creases else (surface["verts"], surface["tris"])
+            )
         if sharp is None:
             sharp = not self.stats.get("exact_distance", False)
         if self.placement is not None:  # extracted in its own frame, then placed

@@ -1,0 +1,190 @@
+"""A boolean's surface that keeps the operands' own faces: new surface only along the seams (hybrid booleans).
+
+After Pavić, Campen and Kobbelt's *Hybrid Booleans* (2010): the operands' polygons are kept wherever the result's
+surface is theirs, and new surface is made only in a band along the intersections. Here the band's surface is the
+field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives it), so whatever the field decides
+(open meshes capped across their holes, self-intersecting or inside-out shells, blends) holds there as everywhere:
+
+1. :func:`.keep.kept_triangles`: which triangles of which operand are the surface, facing which way;
+2. the voxel surface less its faces over the kept ones (:func:`.zipper.voxel_faces_over`);
+3. the border loops of both, paired, and the loops that cannot be paired given up (kept faces or voxel faces at
+   them), until all pair;
+4. a strip between each pair (:func:`.zipper.zip_loops`), and the three parts as one surface, checked closed and
+   consistently oriented; where the join cannot be made, the voxel surface alone (``stats["kept_fallback"]``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .edges import surface_edges
+from .keep import kept_triangles
+from .zipper import (
+    MAX_ROUNDS,
+    PAIR_VOXELS,
+    border_halves,
+    loop_labels,
+    nearest_points,
+    pinched,
+    voxel_faces_over,
+    zip_loops,
+)
+
+
+def kept_mesh(kept: list[dict]) -> dict:
+    """The kept triangles of every leaf as one mesh: ``verts`` (K, 3) float32 (the sources' own positions),
+    ``tris`` (T, 3) int64 (flipped where the result needs), and per face its ``field_id`` and ``triangle_id`` (the
+    index among the triangles the operand's field was built from), per vertex its ``vertex_field`` and
+    ``vertex_id`` (index among the source's vertices)."""
+    parts = {k: [] for k in ("verts", "tris", "field_id", "triangle_id", "vertex_field", "vertex_id")}
+    base = 0
+    for leaf in kept:
+        source, rows = leaf["source"], np.flatnonzero(leaf["kept"])
+        tris = source.tris[rows].astype(np.int64)
+        tris[leaf["flip"][rows]] = tris[leaf["flip"][rows]][:, [0, 2, 1]]
+        used, local = np.unique(tris, return_inverse=True)
+        parts["verts"].append(source.verts[used])
+        parts["tris"].append(local.reshape(-1, 3) + base)
+        parts["field_id"].append(np.full(len(rows), leaf["field_id"], dtype=np.int32))
+        parts["triangle_id"].append(source.triangle_ids[rows])
+        parts["vertex_field"].append(np.full(len(used), leaf["field_id"], dtype=np.int32))
+        parts["vertex_id"].append(used.astype(np.int32))
+        base += len(used)
+    if not parts["verts"]:
+        empty = {"verts": np.zeros((0, 3), np.float32), "tris": np.zeros((0, 3), np.int64)}
+        return {**empty, **{k: np.zeros(0, np.int32) for k in ("field_id", "triangle_id", "vertex_field", "vertex_id")}}
+    return {k: np.concatenate(v) for k, v in parts.items()}
+
+
+def _drop_pinched(tris: np.ndarray, alive: np.ndarray, n_verts: int, rounds: int = 8) -> np.ndarray:
+    """``alive`` less the faces at vertices where two border loops touch, until none does."""
+    for _ in range(rounds):
+        halves = border_halves(tris[alive], n_verts)
+        bad = pinched(halves, n_verts)
+        if not bad.any():
+            break
+        alive = alive & ~bad[tris].any(axis=1)
+    return alive
+
+
+def _loops(halves: np.ndarray, n: int, reverse: bool):
+    """``(next, members, labels)`` of a border's loops over ``n`` vertices (``reverse``: walked against the faces)."""
+    tails, heads = (halves[:, 1], halves[:, 0]) if reverse else (halves[:, 0], halves[:, 1])
+    nxt = np.arange(n, dtype=np.int64)
+    nxt[tails] = heads
+    members = np.unique(tails)
+    return nxt, members, loop_labels(nxt, members)
+
+
+def _pair_loops(points, k_loops, v_loops, reach: float, device) -> dict:
+    """Each kept loop's voxel loop: the one most of its vertices are nearest to (within ``reach``). Returns the pairs
+    (kept label, voxel label) and the loops of either side left unpaired."""
+    k_members, v_members = k_loops[1], v_loops[1]
+    k_labels, v_labels = k_loops[2][k_members], v_loops[2][v_members]
+    near = nearest_points(points[v_members], points[k_members], reach, device)
+    has = near >= 0
+    votes = np.stack([k_labels[has], v_labels[near[has]]], axis=1)
+    pairs, counts = np.unique(votes, axis=0, return_counts=True) if len(votes) else (np.zeros((0, 2), np.int64), [])
+    # the most voted voxel loop of every kept loop, then every voxel loop to its most voting kept loop
+    order = np.lexsort((-np.asarray(counts), pairs[:, 0])) if len(pairs) else np.zeros(0, np.int64)
+    pairs, counts = pairs[order], np.asarray(counts)[order]
+    best = np.r_[True, pairs[1:, 0] != pairs[:-1, 0]] if len(pairs) else np.zeros(0, bool)
+    pairs, counts = pairs[best], counts[best]
+    order = np.lexsort((-counts, pairs[:, 1])) if len(pairs) else np.zeros(0, np.int64)
+    pairs = pairs[order]
+    unique_v = np.r_[True, pairs[1:, 1] != pairs[:-1, 1]] if len(pairs) else np.zeros(0, bool)
+    pairs = pairs[unique_v]
+    return {
+        "pairs": pairs,
+        "kept_unpaired": np.setdiff1d(np.unique(k_labels), pairs[:, 0]),
+        "voxel_unpaired": np.setdiff1d(np.unique(v_labels), pairs[:, 1]),
+    }
+
+
+def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> dict:
+    """The result's surface with its operands' faces kept (see the module docstring).
+
+    Args:
+        field: An unplaced boolean result (:class:`.field.AdaptiveField` with an ``expression``).
+        voxel_verts, voxel_tris: Its voxel surface ((V, 3) float32, (F, 3) int32), closed and oriented.
+    Returns:
+        dict: ``verts`` (N, 3) float32, ``tris`` (M, 3) int32; per face ``kept`` bool, ``field_id`` and
+        ``triangle_id`` int32 (the source triangle of a kept face, -1 for new faces); per vertex ``vertex_field``
+        and ``vertex_id`` (the source vertex of a kept face's corner, -1 for new vertices); ``stats``.
+    """
+    device, voxel = field.device, field.voxel_size
+    kept = kept_mesh(kept_triangles(field))
+    n_k = len(kept["verts"])
+    points = np.concatenate([kept["verts"], voxel_verts]).astype(np.float32)
+    k_tris, v_tris = kept["tris"], np.asarray(voxel_tris, dtype=np.int64) + n_k
+    n = len(points)
+    k_alive = _drop_pinched(k_tris, np.ones(len(k_tris), dtype=bool), n)
+    v_gone = np.zeros(len(v_tris), dtype=bool)
+    for _ in range(MAX_ROUNDS):
+        k_border = border_halves(k_tris[k_alive], n)
+        v_alive = ~v_gone & ~voxel_faces_over(points, k_tris[k_alive], k_border, points, v_tris, voxel, device)
+        v_alive = _drop_pinched(v_tris, v_alive, n)
+        k_loops = _loops(k_border, n, reverse=False)
+        v_loops = _loops(border_halves(v_tris[v_alive], n), n, reverse=True)
+        paired = _pair_loops(points, k_loops, v_loops, PAIR_VOXELS * voxel, device)
+        if not len(paired["kept_unpaired"]) and not len(paired["voxel_unpaired"]):
+            break
+        k_alive &= ~np.isin(k_loops[2], paired["kept_unpaired"])[k_tris].any(axis=1)
+        v_gone |= np.isin(v_loops[2], paired["voxel_unpaired"])[v_tris].any(axis=1)
+        k_alive = _drop_pinched(k_tris, k_alive, n)
+    else:
+        return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
+    strips = _strips(points, k_loops, v_loops, paired["pairs"], device)
+    return _assemble(points, kept, k_tris, k_alive, v_tris[v_alive], strips, voxel_verts, voxel_tris, device)
+
+
+def _strips(points, k_loops, v_loops, pairs, device) -> np.ndarray:
+    k_next, k_members, k_labels = k_loops
+    v_next, v_members, v_labels = v_loops
+    k_count = np.bincount(k_labels[k_members], minlength=len(points))
+    v_count = np.bincount(v_labels[v_members], minlength=len(points))
+    return zip_loops(
+        points, k_next, v_next, pairs[:, 0], pairs[:, 1], k_count[pairs[:, 0]], v_count[pairs[:, 1]], device
+    )
+
+
+def voxel_surface_only(verts, tris, why: str) -> dict:
+    """A voxel surface as :func:`hybrid_surface` returns one, nothing kept (``why`` in its stats)."""
+    n_f, n_v = len(tris), len(verts)
+    return {
+        "verts": np.asarray(verts, dtype=np.float32),
+        "tris": np.asarray(tris, dtype=np.int32),
+        "kept": np.zeros(n_f, dtype=bool),
+        "field_id": np.full(n_f, -1, np.int32),
+        "triangle_id": np.full(n_f, -1, np.int32),
+        "vertex_field": np.full(n_v, -1, np.int32),
+        "vertex_id": np.full(n_v, -1, np.int32),
+        "stats": {"kept_faces": 0, "new_faces": n_f, "kept_fallback": why},
+    }
+
+
+def _assemble(points, kept, k_tris, k_alive, v_tris, strips, voxel_verts, voxel_tris, device) -> dict:
+    """The kept faces, the voxel faces left and the strips as one surface on the vertices they use, or the voxel
+    surface alone if that is not closed and consistently oriented."""
+    tris = np.concatenate([k_tris[k_alive], v_tris, strips.astype(np.int64)])
+    used, local = np.unique(tris, return_inverse=True)
+    tris = local.reshape(-1, 3).astype(np.int32)
+    if surface_edges(tris, len(used), device) is None:
+        return voxel_surface_only(voxel_verts, voxel_tris, "the join is not a closed oriented surface")
+    n_k, n_kept = len(kept["verts"]), int(k_alive.sum())
+    n_new = len(tris) - n_kept
+    from_kept = used < n_k
+    vertex_field = np.full(len(used), -1, np.int32)
+    vertex_id = np.full(len(used), -1, np.int32)
+    vertex_field[from_kept] = kept["vertex_field"][used[from_kept]]
+    vertex_id[from_kept] = kept["vertex_id"][used[from_kept]]
+    return {
+        "verts": points[used],
+        "tris": tris,
+        "kept": np.r_[np.ones(n_kept, bool), np.zeros(n_new, bool)],
+        "field_id": np.r_[kept["field_id"][k_alive], np.full(n_new, -1, np.int32)],
+        "triangle_id": np.r_[kept["triangle_id"][k_alive], np.full(n_new, -1, np.int32)],
+        "vertex_field": vertex_field,
+        "vertex_id": vertex_id,
+        "stats": {"kept_faces": n_kept, "new_faces": n_new, "strip_faces": len(strips), "kept_fallback": ""},
+    }

@@ -1,0 +1,237 @@
+"""The join of kept faces and the voxel surface: one closed surface out of the two, sharing vertices along the seam.
+
+The kept triangles (:mod:`.keep`) and the voxel surface of the whole result overlap wherever faces are kept. The
+voxel surface gives up every face with a corner *over* the kept faces (within a voxel of them, its closest point on
+them not on their border), so that it ends just beyond their border; the gap between the two borders, a voxel or
+less wide, is closed by a strip of triangles between each border loop of the kept faces and the loop of the voxel
+surface that faces it (the greedy shorter-diagonal advance of mesh zippering, Turk and Levoy 1994), whose corners are
+the two loops' own vertices: no new vertex, no T-junction. A loop that cannot be paired (a hole of one kept triangle
+that the voxel surface does not reach, an island of the voxel surface left over the kept faces) gives up the kept
+faces or voxel faces at it, and the pairing runs again.
+
+Written by hand: no library joins a triangle soup to a surface along borders it has to find first; the loops are
+walked in a kernel, a thread per loop, the rest is numpy and Warp's BVH and hash-grid queries.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .parallel import launch_split
+
+# A voxel-surface vertex is over the kept faces within this many voxels of them.
+OVER_VOXELS = 1.0
+# Border loops are paired through vertices within this many voxels of each other.
+PAIR_VOXELS = 4.0
+# Rounds of giving up faces at loops that cannot be paired before the join is abandoned.
+MAX_ROUNDS = 6
+
+
+# ---- the voxel surface over the kept faces ----
+@wp.func
+def _segment_distance(p: wp.vec3, a: wp.vec3, b: wp.vec3) -> float:
+    d = b - a
+    t = wp.clamp(wp.dot(p - a, d) / wp.max(wp.dot(d, d), 1.0e-30), 0.0, 1.0)
+    return wp.length(p - (a + t * d))
+
+
+@wp.kernel(enable_backward=False)
+def _over_kernel(
+    kept: wp.uint64,
+    border: wp.uint64,
+    border_a: wp.array[wp.vec3],
+    border_b: wp.array[wp.vec3],
+    points: wp.array[wp.vec3],
+    reach: float,
+    margin: float,
+    over: wp.array[wp.uint8],
+):
+    """Whether each point lies over the kept faces: within ``reach`` of them, its closest point not on their border
+    (every border segment farther than that closest point by ``margin``)."""
+    i = wp.tid()
+    p = points[i]
+    over[i] = wp.uint8(0)
+    q = wp.mesh_query_point_no_sign(kept, p, reach)
+    if not q.result:
+        return
+    u = wp.length(p - wp.mesh_eval_position(kept, q.face, q.u, q.v))
+    r = u + margin
+    query = wp.bvh_query_aabb(border, p - wp.vec3(r), p + wp.vec3(r))
+    s = int(0)
+    while wp.bvh_query_next(query, s):
+        if _segment_distance(p, border_a[s], border_b[s]) <= r:
+            return
+    over[i] = wp.uint8(1)
+
+
+def border_halves(tris: np.ndarray, n_verts: int) -> np.ndarray:
+    """(B, 2) int64 the directed edges (as the faces list them) whose reverse no face lists: a surface's border."""
+    t = np.asarray(tris, dtype=np.int64)
+    a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
+    keys = a * n_verts + b
+    twins = b * n_verts + a
+    open_ = ~np.isin(twins, keys)
+    return np.stack([a[open_], b[open_]], axis=1)
+
+
+def voxel_faces_over(kept_verts, kept_tris, border, verts, tris, voxel: float, device) -> np.ndarray:
+    """(F,) bool: the voxel-surface faces with a corner over the kept faces."""
+    if not len(kept_tris):
+        return np.zeros(len(tris), dtype=bool)
+    mesh = wp.Mesh(
+        points=wp.array(kept_verts, dtype=wp.vec3, device=device),
+        indices=wp.array(np.ascontiguousarray(kept_tris, dtype=np.int32).reshape(-1), dtype=wp.int32, device=device),
+    )
+    a = np.ascontiguousarray(kept_verts[border[:, 0]], dtype=np.float32)
+    b = np.ascontiguousarray(kept_verts[border[:, 1]], dtype=np.float32)
+    if not len(border):  # a closed kept surface: nothing is its border (a far-away segment stands in)
+        a = b = np.full((1, 3), 1e30, dtype=np.float32)
+    a_wp, b_wp = wp.array(a, dtype=wp.vec3, device=device), wp.array(b, dtype=wp.vec3, device=device)
+    bvh = wp.Bvh(
+        wp.array(np.minimum(a, b), dtype=wp.vec3, device=device),
+        wp.array(np.maximum(a, b), dtype=wp.vec3, device=device),
+    )
+    pts = wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device)
+    over = wp.empty(len(verts), dtype=wp.uint8, device=device)
+    reach, margin = OVER_VOXELS * voxel, 1e-3 * voxel
+    launch_split(
+        _over_kernel,
+        len(verts),
+        lambda lo, n: [mesh.id, bvh.id, a_wp, b_wp, pts[lo : lo + n], reach, margin, over[lo : lo + n]],
+        device,
+    )
+    return over.numpy().astype(bool)[tris].any(axis=1)
+
+
+# ---- border loops ----
+def pinched(halves: np.ndarray, n_verts: int) -> np.ndarray:
+    """(V,) bool: vertices where more than one border edge starts (two border loops touch there)."""
+    return np.bincount(halves[:, 0], minlength=n_verts) > 1
+
+
+def loop_labels(nxt: np.ndarray, members: np.ndarray) -> np.ndarray:
+    """Label of each vertex's loop under the permutation ``nxt`` of ``members`` (the least member of its loop; -1 for
+    vertices not on a loop), by pointer jumping: log2 of the longest loop rounds."""
+    label = np.full(len(nxt), -1, dtype=np.int64)
+    label[members] = members
+    jump = nxt.copy()
+    for _ in range(64):
+        step = np.minimum(label[members], label[jump[members]])
+        if np.array_equal(step, label[members]) and np.array_equal(jump[jump[members]], jump[members]):
+            break
+        label[members] = step
+        jump[members] = jump[jump[members]]
+    return label
+
+
+@wp.kernel(enable_backward=False)
+def _nearest_kernel(
+    grid: wp.uint64,
+    cloud: wp.array[wp.vec3],
+    points: wp.array[wp.vec3],
+    radius: float,
+    nearest: wp.array[wp.int32],
+):
+    """The nearest point of ``cloud`` to each point, within ``radius`` (-1: none)."""
+    i = wp.tid()
+    p = points[i]
+    best = radius
+    found = int(-1)
+    query = wp.hash_grid_query(grid, p, radius)
+    j = int(0)
+    while wp.hash_grid_query_next(query, j):
+        d = wp.length(cloud[j] - p)
+        if d < best:
+            best = d
+            found = j
+    nearest[i] = found
+
+
+def nearest_points(cloud: np.ndarray, points: np.ndarray, radius: float, device) -> np.ndarray:
+    """(N,) int32 index of the nearest of ``cloud`` (M, 3) to each point within ``radius`` (-1: none)."""
+    if not len(cloud) or not len(points):
+        return np.full(len(points), -1, dtype=np.int32)
+    grid = wp.HashGrid(128, 128, 128, device=device)
+    cloud_wp = wp.array(np.ascontiguousarray(cloud, dtype=np.float32), dtype=wp.vec3, device=device)
+    grid.build(cloud_wp, radius)
+    pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
+    out = wp.empty(len(points), dtype=wp.int32, device=device)
+    wp.launch(_nearest_kernel, len(points), inputs=[grid.id, cloud_wp, pts, float(radius), out], device=device)
+    return out.numpy()
+
+
+# ---- the strip ----
+@wp.kernel(enable_backward=False)
+def _zip_kernel(
+    points: wp.array[wp.vec3],
+    p_next: wp.array[wp.int32],
+    q_next: wp.array[wp.int32],
+    p_start: wp.array[wp.int32],
+    q_any: wp.array[wp.int32],
+    p_count: wp.array[wp.int32],
+    q_count: wp.array[wp.int32],
+    first: wp.array[wp.int32],
+    tris: wp.array[wp.vec3i],
+):
+    """One strip per loop pair: P walks a kept border loop as its faces list it, Q the voxel surface's loop against
+    its faces' direction, from the Q vertex nearest P's start; each step closes the shorter diagonal."""
+    k = wp.tid()
+    p = p_start[k]
+    n = p_count[k]
+    m = q_count[k]
+    # Q's start: its vertex nearest P's
+    q = q_any[k]
+    best = wp.length(points[q] - points[p])
+    walk = q_next[q]
+    for _ in range(m):
+        d = wp.length(points[walk] - points[p])
+        if d < best:
+            best = d
+            q = walk
+        walk = q_next[walk]
+    i = int(0)
+    j = int(0)
+    out = first[k]
+    for _ in range(n + m):
+        pn = p_next[p]
+        qn = q_next[q]
+        advance_p = j == m
+        if i < n and j < m:
+            advance_p = wp.length(points[pn] - points[q]) < wp.length(points[p] - points[qn])
+        if advance_p:
+            tris[out] = wp.vec3i(pn, p, q)
+            p = pn
+            i += 1
+        else:
+            tris[out] = wp.vec3i(q, qn, p)
+            q = qn
+            j += 1
+        out += 1
+
+
+def zip_loops(points, p_next, q_next, p_start, q_any, p_count, q_count, device) -> np.ndarray:
+    """(sum of the loops' lengths, 3) int32 the strips between paired loops (see :func:`_zip_kernel`); ``points``
+    and the ``*_next`` permutations index one vertex array."""
+    counts = np.asarray(p_count, dtype=np.int64) + np.asarray(q_count, dtype=np.int64)
+    first = np.zeros(len(counts), dtype=np.int32)
+    np.cumsum(counts[:-1], out=first[1:])
+    out = wp.empty(int(counts.sum()), dtype=wp.vec3i, device=device)
+    if len(counts):
+        wp.launch(
+            _zip_kernel,
+            len(counts),
+            inputs=[
+                wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device),
+                wp.array(p_next.astype(np.int32), dtype=wp.int32, device=device),
+                wp.array(q_next.astype(np.int32), dtype=wp.int32, device=device),
+                wp.array(np.asarray(p_start, dtype=np.int32), dtype=wp.int32, device=device),
+                wp.array(np.asarray(q_any, dtype=np.int32), dtype=wp.int32, device=device),
+                wp.array(np.asarray(p_count, dtype=np.int32), dtype=wp.int32, device=device),
+                wp.array(np.asarray(q_count, dtype=np.int32), dtype=wp.int32, device=device),
+                wp.array(first, dtype=wp.int32, device=device),
+                out,
+            ],
+            device=device,
+        )
+    return out.numpy().reshape(-1, 3).astype(np.int32)
