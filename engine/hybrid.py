@@ -26,6 +26,7 @@ from .zipper import (
     loop_labels,
     nearest_points,
     pinched,
+    vertex_components,
     voxel_faces_over,
     zip_loops,
 )
@@ -34,21 +35,21 @@ from .zipper import (
 def kept_mesh(kept: list[dict]) -> dict:
     """The kept triangles of every leaf as one mesh: ``verts`` (K, 3) float32 (the sources' own positions),
     ``tris`` (T, 3) int64 (flipped where the result needs), and per face its ``field_id`` and ``triangle_id`` (the
-    index among the triangles the operand's field was built from), per vertex its ``vertex_field`` and
-    ``vertex_id`` (index among the source's vertices)."""
+    index among the triangles the operand's field was built from: a piece of a split one names it), per vertex its
+    ``vertex_field`` and ``vertex_id`` (index among the source's vertices; -1 for a split's midpoint)."""
     parts = {k: [] for k in ("verts", "tris", "field_id", "triangle_id", "vertex_field", "vertex_id")}
     base = 0
     for leaf in kept:
         source, rows = leaf["source"], np.flatnonzero(leaf["kept"])
-        tris = source.tris[rows].astype(np.int64)
+        tris = leaf["tris"][rows].astype(np.int64)
         tris[leaf["flip"][rows]] = tris[leaf["flip"][rows]][:, [0, 2, 1]]
         used, local = np.unique(tris, return_inverse=True)
-        parts["verts"].append(source.verts[used])
+        parts["verts"].append(leaf["verts"][used])
         parts["tris"].append(local.reshape(-1, 3) + base)
         parts["field_id"].append(np.full(len(rows), leaf["field_id"], dtype=np.int32))
-        parts["triangle_id"].append(source.triangle_ids[rows])
+        parts["triangle_id"].append(source.triangle_ids[leaf["parent"][rows]])
         parts["vertex_field"].append(np.full(len(used), leaf["field_id"], dtype=np.int32))
-        parts["vertex_id"].append(used.astype(np.int32))
+        parts["vertex_id"].append(np.where(used < len(source.verts), used, -1).astype(np.int32))
         base += len(used)
     if not parts["verts"]:
         empty = {"verts": np.zeros((0, 3), np.float32), "tris": np.zeros((0, 3), np.int64)}
@@ -120,32 +121,44 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
     n = len(points)
     k_alive = _drop_pinched(k_tris, np.ones(len(k_tris), dtype=bool), n)
     v_gone = np.zeros(len(v_tris), dtype=bool)
-    for _ in range(MAX_ROUNDS):
+    for rounds in range(MAX_ROUNDS):
         k_border = border_halves(k_tris[k_alive], n)
         v_alive = ~v_gone & ~voxel_faces_over(points, k_tris[k_alive], k_border, points, v_tris, voxel, device)
         v_alive = _drop_pinched(v_tris, v_alive, n)
         k_loops = _loops(k_border, n, reverse=False)
         v_loops = _loops(border_halves(v_tris[v_alive], n), n, reverse=True)
         paired = _pair_loops(points, k_loops, v_loops, PAIR_VOXELS * voxel, device)
-        if not len(paired["kept_unpaired"]) and not len(paired["voxel_unpaired"]):
+        strips, stretched = _strips(points, k_loops, v_loops, paired["pairs"], PAIR_VOXELS * voxel, device)
+        kept_unpaired = np.r_[paired["kept_unpaired"], stretched]
+        if not len(kept_unpaired) and not len(paired["voxel_unpaired"]):
             break
-        k_alive &= ~np.isin(k_loops[2], paired["kept_unpaired"])[k_tris].any(axis=1)
+        at_failed = np.isin(k_loops[2], kept_unpaired)
+        if rounds:  # a second failure: the kept pieces the loops bound are given up whole
+            pieces = vertex_components(k_tris[k_alive], n)
+            at_failed = np.isin(pieces, np.unique(pieces[at_failed]))
+        k_alive &= ~at_failed[k_tris].any(axis=1)
         v_gone |= np.isin(v_loops[2], paired["voxel_unpaired"])[v_tris].any(axis=1)
         k_alive = _drop_pinched(k_tris, k_alive, n)
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
-    strips = _strips(points, k_loops, v_loops, paired["pairs"], device)
     return _assemble(points, kept, k_tris, k_alive, v_tris[v_alive], strips, voxel_verts, voxel_tris, device)
 
 
-def _strips(points, k_loops, v_loops, pairs, device) -> np.ndarray:
+def _strips(points, k_loops, v_loops, pairs, reach: float, device) -> tuple[np.ndarray, np.ndarray]:
+    """The strips between paired loops, and the kept loops whose strip has an edge longer than ``reach`` (the two
+    loops do not run side by side all along)."""
     k_next, k_members, k_labels = k_loops
     v_next, v_members, v_labels = v_loops
-    k_count = np.bincount(k_labels[k_members], minlength=len(points))
-    v_count = np.bincount(v_labels[v_members], minlength=len(points))
-    return zip_loops(
-        points, k_next, v_next, pairs[:, 0], pairs[:, 1], k_count[pairs[:, 0]], v_count[pairs[:, 1]], device
-    )
+    k_count = np.bincount(k_labels[k_members], minlength=len(points))[pairs[:, 0]]
+    v_count = np.bincount(v_labels[v_members], minlength=len(points))[pairs[:, 1]]
+    strips = zip_loops(points, k_next, v_next, pairs[:, 0], pairs[:, 1], k_count, v_count, device)
+    if not len(strips):
+        return strips, np.zeros(0, dtype=np.int64)
+    corners = points[strips]
+    longest = np.linalg.norm(corners - corners[:, [1, 2, 0]], axis=2).max(axis=1)
+    counts = k_count + v_count
+    first = np.r_[0, np.cumsum(counts)[:-1]]
+    return strips, pairs[np.maximum.reduceat(longest, first) > reach, 0]
 
 
 def voxel_surface_only(verts, tris, why: str) -> dict:
