@@ -132,16 +132,42 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
         kept_unpaired = np.r_[paired["kept_unpaired"], stretched]
         if not len(kept_unpaired) and not len(paired["voxel_unpaired"]):
             break
-        at_failed = np.isin(k_loops[2], kept_unpaired)
-        if rounds:  # a second failure: the kept pieces the loops bound are given up whole
-            pieces = vertex_components(k_tris[k_alive], n)
-            at_failed = np.isin(pieces, np.unique(pieces[at_failed]))
-        k_alive &= ~at_failed[k_tris].any(axis=1)
-        v_gone |= np.isin(v_loops[2], paired["voxel_unpaired"])[v_tris].any(axis=1)
-        k_alive = _drop_pinched(k_tris, k_alive, n)
+        k_alive, v_gone = _give_up(
+            points, (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone), kept_unpaired,
+            paired["voxel_unpaired"], rounds > 0, PAIR_VOXELS * voxel, device,
+        )  # fmt: skip
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
     return _assemble(points, kept, k_tris, k_alive, v_tris[v_alive], strips, voxel_verts, voxel_tris, device)
+
+
+def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach: float, device):
+    """After a round with loops left unpaired: the kept faces and voxel faces given up for the next one.
+
+    A kept loop that failed gives up the kept faces at it (``whole``: the kept pieces it bounds). A voxel loop that
+    failed gives up its piece of the voxel surface when that is an island (a tenth of the voxel faces or less, left
+    over kept faces), else the kept faces near it. Returns the kept faces' and the given-up voxel faces' masks."""
+    (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone) = kept, voxel
+    n = len(points)
+    at_failed = np.isin(k_loops[2], kept_failed)
+    if len(voxel_failed):
+        at_loop = np.isin(v_loops[2], voxel_failed)
+        pieces = vertex_components(v_tris[v_alive], n)
+        sizes = np.bincount(pieces[v_tris[v_alive][:, 0]], minlength=n)
+        failed = np.unique(pieces[at_loop])
+        islands = failed[sizes[failed] * 10 <= int(v_alive.sum())]
+        v_gone = v_gone | (np.isin(pieces, islands)[v_tris].any(axis=1) & v_alive)
+        open_loop = np.flatnonzero(at_loop & ~np.isin(pieces, islands))
+        members = k_loops[1]
+        near = nearest_points(points[members], points[open_loop], reach, device)
+        at_failed[members[near[near >= 0]]] = True
+    if whole:
+        pieces = vertex_components(k_tris[k_alive], n)
+        at_failed = np.isin(pieces, np.unique(pieces[at_failed]))
+    alive = _drop_pinched(k_tris, k_alive & ~at_failed[k_tris].any(axis=1), n)
+    if (alive != k_alive).any():  # the voxel faces over the kept ones given up come back: judged afresh
+        v_gone = np.zeros_like(v_gone)
+    return alive, v_gone
 
 
 def _strips(points, k_loops, v_loops, pairs, reach: float, device) -> tuple[np.ndarray, np.ndarray]:

@@ -26,11 +26,11 @@ import warp as wp
 from .expression import evaluate_signs, leaves, widest_blend
 from .meshcheck import edge_table, problem_faces, weld_positions
 from .parallel import launch_split
-from .refine import per_triangle_min, split_triangles, triangle_samples
+from .refine import merge_kept, per_triangle_min, split_triangles, triangle_samples
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
 # the seams is joined to them there (the join takes about a voxel of it).
-BAND_VOXELS = 2.0
+BAND_VOXELS = 1.0
 # Samples are this many voxels apart; a point of a triangle lies within SLACK of one of its samples.
 SAMPLE_VOXELS = 1.0
 SLACK_VOXELS = 0.75
@@ -221,6 +221,7 @@ def _judge_leaf(field, index: int, source) -> dict:
     parent = np.arange(len(tris), dtype=np.int64)
     status = np.zeros(len(tris), dtype=np.int8)
     flip = np.zeros(len(tris), dtype=bool)
+    ends = np.full((len(verts), 2), -1, dtype=np.int64)
     split_edge = SPLIT_VOXELS * field.voxel_size
     for _ in range(MAX_SPLIT_ROUNDS):
         todo = np.flatnonzero(status == UNKNOWN)
@@ -233,9 +234,11 @@ def _judge_leaf(field, index: int, source) -> dict:
             break
         mark = np.zeros(len(tris), dtype=bool)
         mark[todo[split]] = True
-        verts, tris, origin = split_triangles(verts, tris, mark)
+        verts, tris, origin, new_ends = split_triangles(verts, tris, mark)
+        ends = np.concatenate([ends, new_ends])
         parent, flip = parent[origin], flip[origin]
         # a split triangle's pieces are judged again; a neighbour's pieces keep its verdict
         status = np.where(mark[origin], UNKNOWN, status[origin])
     status[status == UNKNOWN] = DROPPED
-    return {"verts": verts, "tris": tris, "parent": parent, "kept": status == KEPT, "flip": flip}
+    tris, rows = merge_kept(tris, status == KEPT, ends)
+    return {"verts": verts, "tris": tris, "parent": parent[rows], "kept": status[rows] == KEPT, "flip": flip[rows]}

@@ -119,8 +119,8 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray):
     Args:
         verts: (V, 3) float32; tris: (T, 3) int64; split: (T,) bool.
     Returns:
-        ``(verts, tris, origin)``: the vertices with the midpoints appended, the new triangles, and (T',) int64 the
-        triangle of ``tris`` each new one lies in.
+        ``(verts, tris, origin, ends)``: the vertices with the midpoints appended, the new triangles, (T',) int64 the
+        triangle of ``tris`` each new one lies in, and (M, 2) int64 the edge each midpoint splits.
     """
     t = np.asarray(tris, dtype=np.int64)
     n = len(verts)
@@ -173,7 +173,7 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray):
                 (m[:, 0], m[:, 1], m[:, 2]),
             ],
         )
-    return np.concatenate([verts, new_verts]), np.concatenate(parts), np.concatenate(origin)
+    return np.concatenate([verts, new_verts]), np.concatenate(parts), np.concatenate(origin), np.stack([lo, hi], 1)
 
 
 def _turned(rows: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -185,3 +185,47 @@ def _emit(parts: list, origin: list, rows: np.ndarray, corners: list) -> None:
     for c in corners:
         parts.append(np.stack(c, axis=1))
         origin.append(rows)
+
+
+def merge_kept(tris: np.ndarray, keep: np.ndarray, ends: np.ndarray):
+    """Undo the splits inside kept regions: a midpoint whose four triangles are all kept is removed, its edge's two
+    halves joined again on either side (the two triangles on one side become one: the midpoint lies on the edge, so
+    the joined triangle covers the same plane and faces the same way). Midpoints along a kept region's border stay.
+
+    Args:
+        tris: (T, 3) int64 triangles after :func:`split_triangles`; keep: (T,) bool; ends: (V, 2) int64 the edge each
+            vertex splits (-1 for the original vertices).
+    Returns:
+        ``(tris, rows)``: the triangles left (joined ones in place of one of their halves) and (T',) int64 the row of
+        ``tris`` each stands in (its parent, its verdict).
+    """
+    tris = np.array(tris, dtype=np.int64)
+    rows = np.arange(len(tris), dtype=np.int64)
+    keep = np.asarray(keep, dtype=bool)
+    for _ in range(256):
+        flat = tris.ravel()
+        valence = np.bincount(flat, minlength=len(ends))
+        kept_valence = np.bincount(flat[np.repeat(keep, 3)], minlength=len(ends))
+        candidate = (ends[:, 0] >= 0) & (valence == 4) & (kept_valence == 4)
+        if not candidate.any():
+            break
+        at = np.flatnonzero(candidate[flat])
+        order = np.argsort(flat[at], kind="stable")
+        mid, face = flat[at][order].reshape(-1, 4), (at[order] // 3).reshape(-1, 4)
+        corners = tris[face]  # (C, 4, 3)
+        has_a = (corners == ends[mid, 0][:, :, None]).any(axis=2)
+        has_b = (corners == ends[mid, 1][:, :, None]).any(axis=2)
+        ok = ((has_a ^ has_b).all(axis=1)) & (has_a.sum(axis=1) == 2)
+        claim = np.full(len(tris), np.iinfo(np.int64).max, dtype=np.int64)
+        np.minimum.at(claim, face[ok].ravel(), np.repeat(mid[ok, 0], 4))
+        win = ok & (claim[face] == mid[:, :1]).all(axis=1)
+        if not win.any():
+            break
+        grow, drop = face[win][has_a[win]], face[win][has_b[win]]
+        m = np.repeat(mid[win, 0], 2)
+        b = np.repeat(ends[mid[win, 0], 1], 2)
+        tris[grow] = np.where(tris[grow] == m[:, None], b[:, None], tris[grow])
+        alive = np.ones(len(tris), dtype=bool)
+        alive[drop] = False
+        tris, rows, keep = tris[alive], rows[alive], keep[alive]
+    return tris, rows
