@@ -83,25 +83,24 @@ def mesh_leaf(field) -> bool:
 def _leaf_values(field, points: np.ndarray, reach: float, device) -> np.ndarray:
     """(N,) float32 how far the leaf's surface is from each point (up to ``reach``), negative inside it. A clean
     closed mesh's leaf answers from its mesh (exact, through its BVH); any other from its field."""
-    values = field.sample(points)
+    values = field.sample(points, method="linear")  # a tenth of MLS's time: signs, and distances within the slack
     if not (mesh_leaf(field) and field.stats.get("clean_mesh", False)):
         return np.clip(values, -reach, reach).astype(np.float32)
     source = next(iter(field.world_sources().values()))
     return np.copysign(mesh_distances(source.bvh(device), points, reach, device), values).astype(np.float32)
 
 
-def _far_from(field, points, band: float, slack: float, device) -> tuple[np.ndarray, np.ndarray]:
-    """Per sample: whether the leaf's surface is farther than ``band`` (with ``slack`` for the samples' spacing), and
-    the leaf's sign there. A field with jumps (an open mesh's, across its holes) must also keep its sign a band away
-    along each axis."""
-    values = _leaf_values(field, points, band + slack + 1.0, device)
-    far = np.abs(values) > band + slack
-    if not field.stats.get("continuous", field.stats.get("clean_mesh", False)) and far.any():
-        rows = np.flatnonzero(far)
+def _margin(field, points, band: float, reach: float, device) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample: how far the leaf's surface is (up to ``reach``), and the leaf's sign there. A field with jumps (an
+    open mesh's, across its holes) counts as near (0) wherever its sign changes a band away along an axis."""
+    values = _leaf_values(field, points, reach, device)
+    margin = np.abs(values)
+    if not field.stats.get("continuous", field.stats.get("clean_mesh", False)):
+        rows = np.flatnonzero(margin > band)
         around = (points[rows][:, None, :] + band * AXES[None]).reshape(-1, 3)
-        signs = np.sign(field.sample(around)).reshape(-1, 6)
-        far[rows] &= (signs == np.sign(values[rows])[:, None]).all(axis=1)
-    return far, np.sign(values).astype(np.int8)
+        signs = np.sign(field.sample(around, method="linear")).reshape(-1, 6)
+        margin[rows[~(signs == np.sign(values[rows])[:, None]).all(axis=1)]] = 0.0
+    return margin, np.sign(values).astype(np.int8)
 
 
 # ---- the leaf's own defects ----
@@ -147,32 +146,35 @@ class _Judge:
             )
 
     def judge(self, verts, tris, parent):
-        """Per triangle (pieces of original triangles ``parent``): kept, partly keepable, and flipped."""
+        """Per triangle (pieces of original triangles ``parent``): kept, partly keepable, and flipped. A triangle is
+        sampled about ``SAMPLE_VOXELS`` apart, or an eighth of its longest edge when that is more (a large triangle
+        near a seam is split anyway), its samples' spacing the slack of its checks."""
         used, local = np.unique(tris, return_inverse=True)
         local = local.reshape(-1, 3)
-        points, first = triangle_samples(verts[used], local, self.spacing, self.device)
-        good = np.ones(len(points), dtype=bool)
+        spacing = np.maximum(_longest_edges(verts, tris) / 8.0, self.spacing)
+        slack = spacing * (SLACK_VOXELS / SAMPLE_VOXELS)
+        points, first = triangle_samples(verts[used], local, spacing, self.device)
+        reach = self.band + float(slack.max()) + self.spacing
+        margin = np.full(len(points), reach, dtype=np.float32)
         same = ~self.defects[parent]
         signs = []
         for j, other in enumerate(self.leaves):
             if j == self.index:
                 signs.append(np.full(len(points), -1, np.int8))
                 continue
-            far, sign = _far_from(other, points, self.band, self.slack, self.device)
-            good &= far
+            near, sign = _margin(other, points, self.band, reach, self.device)
+            margin = np.minimum(margin, near)
             low = per_triangle_min(sign, local, len(used), first)
             same &= low == -per_triangle_min(-sign, local, len(used), first)
             signs.append(sign)
         if self.defect_mesh is not None:
-            good &= mesh_distances(self.defect_mesh, points, 2 * (self.band + self.slack), self.device) > (
-                self.band + self.slack
-            )
+            margin = np.minimum(margin, mesh_distances(self.defect_mesh, points, reach, self.device))
         crosses, flips = self._crossing(signs)
-        good &= crosses
-        kept = same & (per_triangle_min(good.astype(np.int8), local, len(used), first) > 0)
-        partly = -per_triangle_min(-good.astype(np.int8), local, len(used), first) > 0
-        flip = flips[local[:, 0]] ^ (self.side[parent] < 0)
-        return kept, partly & ~self.defects[parent], flip
+        least = per_triangle_min(np.where(crosses, margin, -1.0), local, len(used), first)
+        most = -per_triangle_min(np.where(crosses, -margin, 1.0), local, len(used), first)
+        kept = same & (least > self.band + slack)
+        partly = (most > self.band - slack) & ~self.defects[parent]
+        return kept, partly, flips[local[:, 0]] ^ (self.side[parent] < 0)
 
     def _crossing(self, signs: list) -> tuple[np.ndarray, np.ndarray]:
         """Per sample: whether the expression changes sign with this leaf's value (every other leaf's sign as it is

@@ -21,11 +21,12 @@ import warp as wp
 def _row_counts_kernel(
     verts: wp.array[wp.vec3],
     tris: wp.array2d[wp.int32],
-    spacing: float,
+    spacings: wp.array[wp.float32],
     counts: wp.array[wp.int32],
 ):
     """How many samples :func:`_row_samples_kernel` puts on each triangle besides its corners."""
     t = wp.tid()
+    spacing = spacings[t]
     a = verts[tris[t, 0]]
     b = verts[tris[t, 1]]
     c = verts[tris[t, 2]]
@@ -43,13 +44,14 @@ def _row_counts_kernel(
 def _row_samples_kernel(
     verts: wp.array[wp.vec3],
     tris: wp.array2d[wp.int32],
-    spacing: float,
+    spacings: wp.array[wp.float32],
     first: wp.array[wp.int32],
     points: wp.array[wp.vec3],
 ):
     """Rows parallel to the edge from corner 0 to corner 1 (the longest), no farther apart than ``spacing``, each
     sampled no farther apart than ``spacing``; the corners left out."""
     t = wp.tid()
+    spacing = spacings[t]
     a = verts[tris[t, 0]]
     b = verts[tris[t, 1]]
     c = verts[tris[t, 2]]
@@ -77,10 +79,12 @@ def longest_first(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
     return np.take_along_axis(tris, cols, axis=1)
 
 
-def triangle_samples(verts: np.ndarray, tris: np.ndarray, spacing: float, device):
-    """Points on every triangle no farther than about ``spacing`` from any of its points: the vertices, and on
+def triangle_samples(verts: np.ndarray, tris: np.ndarray, spacing: np.ndarray, device):
+    """Points on every triangle no farther than about its ``spacing`` from any of its points: the vertices, and on
     larger triangles rows of points (:func:`_row_samples_kernel`).
 
+    Args:
+        verts: (V, 3) float32; tris: (T, 3) int; spacing: (T,) float, each triangle's.
     Returns:
         ``(points, first)``: (V + G, 3) float32, the V vertices first, then each triangle's own samples, the (T + 1,)
         int64 offsets of the triangles' own among the G after the vertices.
@@ -88,15 +92,16 @@ def triangle_samples(verts: np.ndarray, tris: np.ndarray, spacing: float, device
     turned = np.ascontiguousarray(longest_first(verts, tris), dtype=np.int32)
     v_wp = wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device)
     t_wp = wp.array(turned, dtype=wp.int32, device=device)
+    s_wp = wp.array(np.ascontiguousarray(spacing, dtype=np.float32), dtype=wp.float32, device=device)
     counts = wp.empty(len(tris), dtype=wp.int32, device=device)
     if len(tris):
-        wp.launch(_row_counts_kernel, len(tris), inputs=[v_wp, t_wp, float(spacing), counts], device=device)
+        wp.launch(_row_counts_kernel, len(tris), inputs=[v_wp, t_wp, s_wp, counts], device=device)
     first = np.zeros(len(tris) + 1, dtype=np.int64)
     np.cumsum(counts.numpy(), out=first[1:])
     out = wp.empty(int(first[-1]), dtype=wp.vec3, device=device)
     if first[-1]:
         first_wp = wp.array(first[:-1].astype(np.int32), dtype=wp.int32, device=device)
-        wp.launch(_row_samples_kernel, len(tris), inputs=[v_wp, t_wp, float(spacing), first_wp, out], device=device)
+        wp.launch(_row_samples_kernel, len(tris), inputs=[v_wp, t_wp, s_wp, first_wp, out], device=device)
     points = np.concatenate([np.asarray(verts, dtype=np.float32), out.numpy().reshape(-1, 3)])
     return points, first
 
