@@ -6,7 +6,7 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
 (open meshes capped across their holes, self-intersecting or inside-out shells, blends) holds there as everywhere:
 
 1. :func:`.keep.kept_triangles`: which triangles of which operand are the surface, facing which way;
-2. the voxel surface less its faces over the kept ones (:func:`.zipper.voxel_faces_over`);
+2. the voxel surface less its faces with a corner over the kept ones (:func:`.zipper.vertices_over`);
 3. the border loops of both, paired, and the loops that cannot be paired given up (kept faces or voxel faces at
    them), until all pair;
 4. a strip between each pair (:func:`.zipper.zip_loops`), and the three parts as one surface, checked closed and
@@ -27,7 +27,7 @@ from .zipper import (
     nearest_points,
     pinched,
     vertex_components,
-    voxel_faces_over,
+    vertices_over,
     zip_loops,
 )
 
@@ -121,9 +121,13 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
     n = len(points)
     k_alive = _drop_pinched(k_tris, np.ones(len(k_tris), dtype=bool), n)
     v_gone = np.zeros(len(v_tris), dtype=bool)
+    candidates = np.arange(n_k, n)
     for rounds in range(MAX_ROUNDS):
         k_border = border_halves(k_tris[k_alive], n)
-        v_alive = ~v_gone & ~voxel_faces_over(points, k_tris[k_alive], k_border, points, v_tris, voxel, device)
+        # kept faces are only given up: a vertex not over them stays so
+        over = vertices_over(points, k_tris[k_alive], k_border, candidates, voxel, device)
+        candidates = np.flatnonzero(over)
+        v_alive = ~v_gone & ~over[v_tris].any(axis=1)
         v_alive = _drop_pinched(v_tris, v_alive, n)
         k_loops = _loops(k_border, n, reverse=False)
         v_loops = _loops(border_halves(v_tris[v_alive], n), n, reverse=True)

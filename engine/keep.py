@@ -121,7 +121,8 @@ def _own_side(leaf, verts, tris, voxel: float) -> np.ndarray:
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
     centres = verts[tris].mean(axis=1)
     offset = (SIDE_VOXELS * voxel * n).astype(np.float32)
-    front, back = leaf.sample(centres + offset), leaf.sample(centres - offset)
+    front = leaf.sample(centres + offset, method="linear")
+    back = leaf.sample(centres - offset, method="linear")
     return np.where((back < 0) & (front > 0), 1, np.where((back > 0) & (front < 0), -1, 0)).astype(np.int8)
 
 

@@ -68,17 +68,23 @@ def _over_kernel(
 def border_halves(tris: np.ndarray, n_verts: int) -> np.ndarray:
     """(B, 2) int64 the directed edges (as the faces list them) whose reverse no face lists: a surface's border."""
     t = np.asarray(tris, dtype=np.int64)
+    if not len(t):
+        return np.zeros((0, 2), dtype=np.int64)
     a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
-    keys = a * n_verts + b
+    keys = np.sort(a * n_verts + b)
     twins = b * n_verts + a
-    open_ = ~np.isin(twins, keys)
+    at = np.minimum(np.searchsorted(keys, twins), len(keys) - 1)
+    open_ = keys[at] != twins
     return np.stack([a[open_], b[open_]], axis=1)
 
 
-def voxel_faces_over(kept_verts, kept_tris, border, verts, tris, voxel: float, device) -> np.ndarray:
-    """(F,) bool: the voxel-surface faces with a corner over the kept faces."""
-    if not len(kept_tris):
-        return np.zeros(len(tris), dtype=bool)
+def vertices_over(points, kept_tris, border, candidates, voxel: float, device) -> np.ndarray:
+    """(N,) bool: which of the ``candidates`` (indices of ``points``) lie over the kept faces ``kept_tris`` (whose
+    border edges are ``border``), within ``OVER_VOXELS`` of them; every other point False."""
+    over_all = np.zeros(len(points), dtype=bool)
+    if not len(kept_tris) or not len(candidates):
+        return over_all
+    kept_verts = points
     mesh = wp.Mesh(
         points=wp.array(kept_verts, dtype=wp.vec3, device=device),
         indices=wp.array(np.ascontiguousarray(kept_tris, dtype=np.int32).reshape(-1), dtype=wp.int32, device=device),
@@ -92,16 +98,17 @@ def voxel_faces_over(kept_verts, kept_tris, border, verts, tris, voxel: float, d
         wp.array(np.minimum(a, b), dtype=wp.vec3, device=device),
         wp.array(np.maximum(a, b), dtype=wp.vec3, device=device),
     )
-    pts = wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device)
-    over = wp.empty(len(verts), dtype=wp.uint8, device=device)
+    pts = wp.array(np.ascontiguousarray(points[candidates], dtype=np.float32), dtype=wp.vec3, device=device)
+    over = wp.empty(len(candidates), dtype=wp.uint8, device=device)
     reach, margin = OVER_VOXELS * voxel, 1e-3 * voxel
     launch_split(
         _over_kernel,
-        len(verts),
+        len(candidates),
         lambda lo, n: [mesh.id, bvh.id, a_wp, b_wp, pts[lo : lo + n], reach, margin, over[lo : lo + n]],
         device,
     )
-    return over.numpy().astype(bool)[tris].any(axis=1)
+    over_all[candidates] = over.numpy().astype(bool)
+    return over_all
 
 
 # ---- border loops ----
