@@ -6,8 +6,8 @@ built from a mesh is *kept* when, everywhere on it (at samples about a voxel apa
 - every other leaf's surface is farther than the band, and the other leaf's sign is the same all over it (a field
   that jumps across an open mesh's holes is also read a band away along the axes, where its sign must not change);
 - none of its own mesh's defects is within the band: open, non-manifold or inconsistently oriented edges, duplicated
-  triangles, and triangles its own field does not cross from inside to outside (internal faces of overlapping or
-  self-intersecting shells);
+  triangles; and its own field crosses it from inside to outside everywhere (no part of it is an internal face of an
+  overlapping or self-intersecting shell);
 - its leaf's field changes sign across it, and the expression, with every other leaf's sign as it is there, changes
   sign with it: the triangle is on the result's surface, facing its outside (flipped for a subtracted operand, turned
   outward for an inside-out shell).
@@ -26,7 +26,7 @@ import warp as wp
 from .expression import evaluate_signs, leaves, widest_blend
 from .meshcheck import edge_table, problem_faces, weld_positions
 from .parallel import launch_split
-from .refine import merge_kept, per_triangle_min, split_triangles, triangle_samples
+from .refine import merge_kept, per_triangle_min, restore_whole, split_triangles, triangle_samples
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
 # the seams is joined to them there (the join takes about a voxel of it).
@@ -114,16 +114,21 @@ def _own_defects(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
     return bad | (counts[inverse.reshape(-1)] > 1)
 
 
-def _own_side(leaf, verts, tris, voxel: float) -> np.ndarray:
-    """(T,) +1 where the triangle's own field is inside behind it and outside in front, -1 the other way round (an
-    inside-out face), 0 where it does not change sign across it (an internal face)."""
+def _unit_normals(verts, tris) -> np.ndarray:
     n = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]]).astype(np.float64)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-    centres = verts[tris].mean(axis=1)
-    offset = (SIDE_VOXELS * voxel * n).astype(np.float32)
-    front = leaf.sample(centres + offset, method="linear")
-    back = leaf.sample(centres - offset, method="linear")
-    return np.where((back < 0) & (front > 0), 1, np.where((back > 0) & (front < 0), -1, 0)).astype(np.int8)
+    return (n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)).astype(np.float32)
+
+
+def _side_at(leaf, points, normals, offset: float) -> np.ndarray:
+    """(N,) +1 where the leaf's field grows across each point along its normal (inside ``offset`` behind it, outside
+    as far in front), -1 where it falls (an inside-out face), 0 where both sides are clearly on one side (by a
+    quarter of ``offset`` or more: an internal face). Near a crease of the mesh one side reads near 0 (interpolation
+    across the crease): that counts by the difference of the two."""
+    front = leaf.sample(points + offset * normals, method="linear")
+    back = leaf.sample(points - offset * normals, method="linear")
+    clear = 0.25 * offset
+    internal = (np.maximum(front, back) < -clear) | (np.minimum(front, back) > clear)
+    return np.where(internal, 0, np.where(front >= back, 1, -1)).astype(np.int8)
 
 
 class _Judge:
@@ -136,8 +141,13 @@ class _Judge:
         self.band = BAND_VOXELS * voxel + widest_blend(self.expression)
         self.spacing, self.slack = SAMPLE_VOXELS * voxel, SLACK_VOXELS * voxel
         self.tiny = 1e-3 * voxel
-        self.side = _own_side(self.leaves[index], verts, tris, voxel)
-        self.defects = _own_defects(verts, tris) | (self.side == 0)
+        self.defects = _own_defects(verts, tris)
+        # a shell with internal faces (overlapping or self-intersecting) is read a band away on both sides, so that
+        # kept faces stay a band from where it crosses itself; a clean one half a voxel away (a band would reach
+        # across its own concave creases)
+        leaf = self.leaves[index]
+        internal = _side_at(leaf, verts[tris].mean(axis=1), _unit_normals(verts, tris), SIDE_VOXELS * voxel) == 0
+        self.side_offset = self.band if internal.any() else SIDE_VOXELS * voxel
         bad = np.flatnonzero(self.defects)
         self.defect_mesh = None
         if len(bad) and len(bad) < len(tris):
@@ -173,9 +183,31 @@ class _Judge:
         crosses, flips = self._crossing(signs)
         least = per_triangle_min(np.where(crosses, margin, -1.0), local, len(used), first)
         most = -per_triangle_min(np.where(crosses, -margin, 1.0), local, len(used), first)
-        kept = same & (least > self.band + slack)
-        partly = (most > self.band - slack) & ~self.defects[parent]
-        return kept, partly, flips[local[:, 0]] ^ (self.side[parent] < 0)
+        side, crossed, partly_crossed = self._own_sides(verts[used], local, points, first)
+        kept = same & crossed & (least > self.band + slack)
+        partly = partly_crossed & (most > self.band - slack) & ~self.defects[parent]
+        return kept, partly, flips[local[:, 0]] ^ (side < 0)
+
+    def _own_sides(self, verts, tris, points, first):
+        """How the leaf's own field crosses each triangle: (T,) its side at the centre (:func:`_side_at`), whether
+        every sample (corners, rows) has that side, not 0, and whether any has one. Parts of a triangle that its own
+        field does not cross (a self-intersecting or overlapping shell's internal faces) are not kept."""
+        normals = _unit_normals(verts, tris)
+        owner = np.repeat(np.arange(len(tris)), np.diff(first))
+        centres = verts[tris].mean(axis=1)
+        at = np.concatenate([centres, verts[tris].reshape(-1, 3), points[len(verts) :]])
+        # samples pulled a voxel towards their triangle's centre: at a crease of the mesh the field is 0 just behind
+        # or in front of the edge itself
+        towards = np.concatenate([centres, np.repeat(centres, 3, axis=0), centres[owner]]) - at
+        length = np.linalg.norm(towards, axis=1, keepdims=True)
+        at = at + towards * np.minimum(1.0, self.spacing / np.maximum(length, 1e-30))
+        facing = np.concatenate([normals, np.repeat(normals, 3, axis=0), normals[owner]])
+        whose = np.concatenate([np.repeat(np.arange(len(tris)), 3), owner])
+        side = _side_at(self.leaves[self.index], at, facing, self.side_offset)
+        centre, rest = side[: len(tris)], side[len(tris) :]
+        wrong = np.bincount(whose, weights=rest != centre[whose], minlength=len(tris))
+        crossed = np.bincount(whose, weights=rest != 0, minlength=len(tris))
+        return centre, (wrong == 0) & (centre != 0), (crossed > 0) | (centre != 0)
 
     def _crossing(self, signs: list) -> tuple[np.ndarray, np.ndarray]:
         """Per sample: whether the expression changes sign with this leaf's value (every other leaf's sign as it is
@@ -243,5 +275,10 @@ def _judge_leaf(field, index: int, source) -> dict:
         # a split triangle's pieces are judged again; a neighbour's pieces keep its verdict
         status = np.where(mark[origin], UNKNOWN, status[origin])
     status[status == UNKNOWN] = DROPPED
-    tris, rows = merge_kept(tris, status == KEPT, ends)
-    return {"verts": verts, "tris": tris, "parent": parent[rows], "kept": status[rows] == KEPT, "flip": flip[rows]}
+    tris, rows = merge_kept(verts, tris, status == KEPT, ends)
+    parent, kept, flip = parent[rows], status[rows] == KEPT, flip[rows]
+    flip_of = np.zeros(len(source.tris), dtype=bool)
+    flip_of[parent[kept]] = flip[kept]
+    ends = np.concatenate([ends, np.full((len(verts) - len(ends), 2), -1, dtype=np.int64)])
+    verts, tris, parent, kept = restore_whole(verts, tris, parent, kept, ends, source.tris.astype(np.int64))
+    return {"verts": verts, "tris": tris, "parent": parent, "kept": kept, "flip": flip_of[parent] & kept}

@@ -192,45 +192,148 @@ def _emit(parts: list, origin: list, rows: np.ndarray, corners: list) -> None:
         origin.append(rows)
 
 
-def merge_kept(tris: np.ndarray, keep: np.ndarray, ends: np.ndarray):
-    """Undo the splits inside kept regions: a midpoint whose four triangles are all kept is removed, its edge's two
-    halves joined again on either side (the two triangles on one side become one: the midpoint lies on the edge, so
-    the joined triangle covers the same plane and faces the same way). Midpoints along a kept region's border stay.
+def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.ndarray):
+    """Undo the splits inside kept regions: a midpoint whose triangles are all kept is collapsed into one end of the
+    edge it splits (the triangles with that end go, the others take it in the midpoint's place: the midpoint lies on
+    the edge, so the region they cover stays, in the same plane), where no triangle turns over. Midpoints along a
+    kept region's border stay.
 
     Args:
-        tris: (T, 3) int64 triangles after :func:`split_triangles`; keep: (T,) bool; ends: (V, 2) int64 the edge each
-            vertex splits (-1 for the original vertices).
+        verts: (V, 3) float32; tris: (T, 3) int64 triangles after :func:`split_triangles`; keep: (T,) bool; ends:
+            (V, 2) int64 the edge each vertex splits (-1 for the source's vertices).
     Returns:
-        ``(tris, rows)``: the triangles left (joined ones in place of one of their halves) and (T',) int64 the row of
-        ``tris`` each stands in (its parent, its verdict).
+        ``(tris, rows)``: the triangles left and (T',) int64 the row of ``tris`` each stands in (its parent, its
+        verdict).
     """
     tris = np.array(tris, dtype=np.int64)
     rows = np.arange(len(tris), dtype=np.int64)
     keep = np.asarray(keep, dtype=bool)
+    v64 = verts.astype(np.float64)
     for _ in range(256):
-        flat = tris.ravel()
-        valence = np.bincount(flat, minlength=len(ends))
-        kept_valence = np.bincount(flat[np.repeat(keep, 3)], minlength=len(ends))
-        candidate = (ends[:, 0] >= 0) & (valence == 4) & (kept_valence == 4)
-        if not candidate.any():
+        merged = False
+        for side in (0, 1):
+            flat = tris.ravel()
+            valence = np.bincount(flat, minlength=len(ends))
+            kept_valence = np.bincount(flat[np.repeat(keep, 3)], minlength=len(ends))
+            candidate = (ends[:, 0] >= 0) & (valence == kept_valence) & (valence >= 4)
+            at = np.flatnonzero(candidate[flat])
+            if not len(at):
+                continue
+            face, mid = at // 3, flat[at]
+            end = ends[mid, side]
+            drop = (tris[face] == end[:, None]).any(axis=1)
+            moved = np.where(tris[face] == mid[:, None], end[:, None], tris[face])
+            old_n = np.cross(v64[tris[face, 1]] - v64[tris[face, 0]], v64[tris[face, 2]] - v64[tris[face, 0]])
+            new_n = np.cross(v64[moved[:, 1]] - v64[moved[:, 0]], v64[moved[:, 2]] - v64[moved[:, 0]])
+            area = np.linalg.norm(old_n, axis=1)
+            turns = ~drop & (np.einsum("ij,ij->i", old_n, new_n) <= 1e-6 * area * area)
+            bad = np.zeros(len(ends), dtype=bool)
+            bad[mid[turns]] = True
+            two_drops = np.bincount(mid[drop], minlength=len(ends)) == 2
+            ok = ~bad[mid] & two_drops[mid]
+            claim = np.full(len(tris), np.iinfo(np.int64).max, dtype=np.int64)
+            np.minimum.at(claim, face[ok], mid[ok])
+            lost = np.zeros(len(ends), dtype=bool)
+            lost[mid[ok & (claim[face] != mid)]] = True
+            win = ok & ~lost[mid]
+            if not win.any():
+                continue
+            merged = True
+            tris[face[win & ~drop]] = moved[win & ~drop]
+            alive = np.ones(len(tris), dtype=bool)
+            alive[face[win & drop]] = False
+            tris, rows, keep = tris[alive], rows[alive], keep[alive]
+        if not merged:
             break
-        at = np.flatnonzero(candidate[flat])
-        order = np.argsort(flat[at], kind="stable")
-        mid, face = flat[at][order].reshape(-1, 4), (at[order] // 3).reshape(-1, 4)
-        corners = tris[face]  # (C, 4, 3)
-        has_a = (corners == ends[mid, 0][:, :, None]).any(axis=2)
-        has_b = (corners == ends[mid, 1][:, :, None]).any(axis=2)
-        ok = ((has_a ^ has_b).all(axis=1)) & (has_a.sum(axis=1) == 2)
-        claim = np.full(len(tris), np.iinfo(np.int64).max, dtype=np.int64)
-        np.minimum.at(claim, face[ok].ravel(), np.repeat(mid[ok, 0], 4))
-        win = ok & (claim[face] == mid[:, :1]).all(axis=1)
-        if not win.any():
-            break
-        grow, drop = face[win][has_a[win]], face[win][has_b[win]]
-        m = np.repeat(mid[win, 0], 2)
-        b = np.repeat(ends[mid[win, 0], 1], 2)
-        tris[grow] = np.where(tris[grow] == m[:, None], b[:, None], tris[grow])
-        alive = np.ones(len(tris), dtype=bool)
-        alive[drop] = False
-        tris, rows, keep = tris[alive], rows[alive], keep[alive]
     return tris, rows
+
+
+def _edge_of_vertices(ends: np.ndarray, n_source: int) -> np.ndarray:
+    """(V, 2) int64 the source edge (low, high source vertex) each vertex lies on: (v, v) for a source vertex, -1
+    for one inside a source triangle. Midpoints follow their edges' ends, resolved in as many passes as splits
+    nested."""
+    on = np.full((len(ends), 2), -2, dtype=np.int64)
+    on[:n_source] = np.arange(n_source)[:, None]
+    mids = np.arange(n_source, len(ends))
+    for _ in range(len(ends)):
+        todo = mids[on[mids, 0] == -2]
+        if not len(todo):
+            break
+        a, b = on[ends[todo, 0]], on[ends[todo, 1]]
+        ready = (a[:, 0] != -2) & (b[:, 0] != -2)
+        todo, a, b = todo[ready], a[ready], b[ready]
+        vals = np.sort(np.concatenate([a, b], axis=1), axis=1)
+        distinct = 1 + (vals[:, 1:] != vals[:, :-1]).sum(axis=1)
+        edge = (vals[:, 0] >= 0) & (distinct == 2)
+        on[todo] = np.where(edge[:, None], vals[:, [0, 3]], -1)
+    return on
+
+
+def restore_whole(verts, tris, parent, keep, ends, source_tris):
+    """Give a source triangle whose pieces are all kept back as itself: its three corners (bit for bit, as the
+    source lists them), or, where neighbours that stay split need midpoints on its edges, the polygon of its corners
+    and those midpoints fanned from its centre (a new vertex on its plane).
+
+    Args:
+        verts: (V, 3) float32; tris: (T, 3) int64 pieces; parent: (T,) int64 their source triangles; keep: (T,)
+            bool; ends: (V, 2) int64 (see :func:`merge_kept`); source_tris: (S, 3) int64 the source's triangles.
+    Returns:
+        ``(verts, tris, parent, keep)`` with the restored triangles in place of their pieces (at the end).
+    """
+    n_source = int(source_tris.max(initial=-1)) + 1
+    pieces = np.bincount(parent, minlength=len(source_tris))
+    kept_pieces = np.bincount(parent[keep], minlength=len(source_tris))
+    whole = (pieces > 1) & (kept_pieces == pieces)
+    if not whole.any():
+        return verts, tris, parent, keep
+    on = _edge_of_vertices(ends, n_source)
+    split_faces = ~whole[parent]
+    needed = np.zeros(len(verts), dtype=bool)
+    needed[tris[split_faces].ravel()] = True
+    # every (source triangle, vertex) of the whole ones' pieces that lies on one of its edges and is needed there
+    rows = np.repeat(np.flatnonzero(~split_faces), 3)
+    p, v = parent[rows], tris[~split_faces].ravel()
+    pv = np.unique(np.stack([p, v], axis=1), axis=0)
+    p, v = pv[:, 0], pv[:, 1]
+    corners = source_tris[p]
+    corner_at = (corners == v[:, None]).argmax(axis=1)
+    is_corner = (corners == v[:, None]).any(axis=1)
+    edge_ends = np.stack([corners, np.roll(corners, -1, axis=1)], axis=2)  # edge k: corner k -> k + 1
+    lo, hi = np.minimum(edge_ends[..., 0], edge_ends[..., 1]), np.maximum(edge_ends[..., 0], edge_ends[..., 1])
+    on_edge = (lo == on[v, 0][:, None]) & (hi == on[v, 1][:, None])
+    ring = is_corner | (on_edge.any(axis=1) & needed[v])
+    p, v, corner_at, on_edge, corners = p[ring], v[ring], corner_at[ring], on_edge[ring], corners[ring]
+    is_corner = is_corner[ring]
+    k = np.where(is_corner, corner_at, on_edge.argmax(axis=1))
+    start = verts[corners[np.arange(len(k)), k]].astype(np.float64)
+    end = verts[corners[np.arange(len(k)), (k + 1) % 3]].astype(np.float64)
+    t = np.where(is_corner, 0.0, np.linalg.norm(verts[v] - start, axis=1) / np.linalg.norm(end - start, axis=1))
+    order = np.lexsort((t, k, p))
+    p, v = p[order], v[order]
+    counts = np.bincount(p, minlength=len(source_tris))
+    plain = whole & (counts == 3)
+    fan = whole & (counts > 3)
+    out_tris = [tris[split_faces], source_tris[plain]]
+    out_parent = [parent[split_faces], np.flatnonzero(plain)]
+    new_verts = verts
+    if fan.any():
+        at_fan = fan[p]
+        fp, fv = p[at_fan], v[at_fan]
+        centre_of = np.full(len(source_tris), -1, dtype=np.int64)
+        fan_rows = np.flatnonzero(fan)
+        centre_of[fan_rows] = len(verts) + np.arange(len(fan_rows))
+        centres = verts[source_tris[fan_rows]].astype(np.float64).mean(axis=1).astype(np.float32)
+        new_verts = np.concatenate([verts, centres])
+        first = np.r_[True, fp[1:] != fp[:-1]]
+        group_start = np.maximum.accumulate(np.where(first, np.arange(len(fp)), 0))
+        last = np.r_[fp[1:] != fp[:-1], True]
+        nxt = np.where(last, group_start, np.arange(len(fp)) + 1)
+        out_tris.append(np.stack([centre_of[fp], fv, fv[nxt]], axis=1))
+        out_parent.append(fp)
+    restored = sum(len(x) for x in out_tris[1:])
+    return (
+        new_verts,
+        np.concatenate(out_tris).astype(np.int64),
+        np.concatenate(out_parent).astype(np.int64),
+        np.r_[keep[split_faces], np.ones(restored, dtype=bool)],
+    )

@@ -217,3 +217,16 @@ def cad_pairs() -> dict:
             normalised(uv_sphere(1.0, rings=96, segments=192)),
         ),
     }
+
+
+def plate_and_bores(bore_segments: int = 36):
+    """A 12-triangle plate (2 x 2 x 0.2) and four bores through it (cylinders of radius 0.2, ``bore_segments`` sides,
+    one mesh): the plate minus the bores is the CAD case whose exact result has 604 triangles."""
+    plate = box_mesh(half=(1.0, 1.0, 0.1))
+    parts = [
+        cylinder_mesh(0.2, 0.6, segments=bore_segments, center=(x, y, 0.0)) for x in (-0.5, 0.5) for y in (-0.5, 0.5)
+    ]
+    offsets = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])
+    verts = np.concatenate([v for v, _ in parts]).astype(np.float32)
+    tris = np.concatenate([t + o for (_, t), o in zip(parts, offsets, strict=True)]).astype(np.int32)
+    return plate, (verts, tris)

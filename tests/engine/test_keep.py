@@ -1,0 +1,294 @@
+"""Booleans that keep the operands' own faces (``AdaptiveField.kept_surface``, ``to_mesh(keep_faces=True)``:
+engine/keep.py, engine/refine.py, engine/zipper.py, engine/hybrid.py) against manifold3d's exact booleans.
+
+Voxel = 1/256 of the operands' bounding-box diagonal; distances are stated in voxels. "Should be kept": points of an
+operand's surface that lie on the exact result's surface, farther than 3 voxels from every other operand's surface.
+"""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import engine
+from tests.metrics import (
+    exact_boolean,
+    hausdorff,
+    mesh_volume,
+    sample_surface,
+    to_manifold,
+    unsigned_distance,
+    winding_inside,
+)
+from tests.support import (
+    box_mesh,
+    cad_pairs,
+    is_watertight,
+    load_mesh,
+    normalised,
+    plate_and_bores,
+    rotation,
+    uv_sphere,
+)
+
+OPS = {"UNION": engine.union, "INTERSECT": engine.intersection, "DIFFERENCE": engine.difference}
+
+
+def _voxel(*meshes) -> float:
+    v = np.concatenate([m[0] for m in meshes])
+    return float(np.linalg.norm(v.max(0) - v.min(0))) / 256.0
+
+
+def _seam_length(exact, a) -> float:
+    """Length of the exact result's edges between a face on operand a and one that is not."""
+    verts, tris = exact
+    on_a = unsigned_distance(*a, verts[tris].mean(axis=1)) < 1e-5
+    t = tris.astype(np.int64)
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    face = np.tile(np.arange(len(t)), 3)
+    key = np.minimum(e[:, 0], e[:, 1]) * len(verts) + np.maximum(e[:, 0], e[:, 1])
+    order = np.argsort(key, kind="stable")
+    key, face, e = key[order], face[order], e[order]
+    pairs = np.flatnonzero(key[1:] == key[:-1])
+    seam = on_a[face[pairs]] != on_a[face[pairs + 1]]
+    ends = e[pairs[seam]]
+    return float(np.linalg.norm(verts[ends[:, 0]] - verts[ends[:, 1]], axis=1).sum())
+
+
+def _kept_share(surface, operands, exact, h: float, n: int = 60_000) -> float:
+    """The share of the surface that should be kept (module docstring) lying on kept faces."""
+    kv, kt = surface["verts"], surface["tris"][surface["kept"]]
+    covered, total = 0, 0
+    for i, (verts, tris) in enumerate(operands):
+        pts = sample_surface(verts, tris, n, seed=i)
+        on_result = unsigned_distance(*exact, pts) < 1e-5 * 256 * h
+        far = np.ones(len(pts), dtype=bool)
+        for j, other in enumerate(operands):
+            if j != i:
+                far &= unsigned_distance(*other, pts) > 3.0 * h
+        want = pts[on_result & far]
+        total += len(want)
+        covered += int((unsigned_distance(kv, kt, want) < 1e-5 * 256 * h).sum()) if len(kt) else 0
+    return covered / max(total, 1)
+
+
+def _check_closed(surface):
+    verts, tris = surface["verts"], surface["tris"]
+    assert is_watertight(tris)
+    assert engine.surface_edges(tris, len(verts)) is not None  # closed, consistently oriented
+    to_manifold(verts, tris, "kept surface")  # manifold3d takes it as a solid
+
+
+CASES = {
+    "plate - 4 bores": ("DIFFERENCE", *plate_and_bores()),
+    **{k: cad_pairs()[k] for k in ("cube - bore", "rocker-arm - cube", "hex prism & sphere", "cube | tilted cube")},
+}
+
+
+@pytest.fixture(scope="module", params=list(CASES))
+def case(request):
+    op, a, b = CASES[request.param]
+    h = _voxel(a, b)
+    fa, fb = engine.build_fields([a, b], voxel_size=h)
+    field = OPS[op](fa, fb)
+    return {
+        "name": request.param,
+        "h": h,
+        "operands": (a, b),
+        "surface": field.kept_surface(),
+        "remeshed": len(field.to_mesh()[1]),
+        "exact": exact_boolean(op, *a, *b),
+        "field": field,
+    }
+
+
+def test_kept_surface_is_closed_and_close_to_the_exact_boolean(case):
+    s, h = case["surface"], case["h"]
+    assert s["stats"]["kept_fallback"] == ""
+    _check_closed(s)
+    d = hausdorff(s["verts"], s["tris"], *case["exact"], n=100_000)
+    # measured: max 0.06-0.72 voxel (the rocker arm's 0.72 at a crease of the voxel part), p95 <= 0.016
+    assert d["max"] < 1.0 * h and d["p95"] < 0.05 * h, d
+    volume, exact = mesh_volume(s["verts"], s["tris"]), mesh_volume(*case["exact"])
+    assert abs(volume - exact) < 1e-3 * abs(exact)  # measured <= 5e-5
+
+
+def test_kept_faces_cover_what_should_be_kept_and_new_faces_only_the_seams(case):
+    s, h = case["surface"], case["h"]
+    share = _kept_share(s, case["operands"], case["exact"], h)
+    # measured: 1.000 on every pair but cube - bore, 0.957: its 128-sided bore's walls are slivers under a voxel wide
+    # whose split border does not pair with the voxel surface on one side; that side's wall is remeshed
+    assert share >= (0.9 if case["name"] == "cube - bore" else 0.99), share
+    seam = _seam_length(case["exact"], case["operands"][0]) / h
+    new = s["stats"]["new_faces"]
+    # measured: 13-24 new triangles a voxel of seam; the whole output 0.13-0.21x the remeshed one
+    # cube - bore: 50 (half its sliver-walled bore remeshed, see above)
+    assert new <= 24 * seam * (2.5 if case["name"] == "cube - bore" else 1.25), (new, seam)
+    assert len(s["tris"]) <= 0.3 * case["remeshed"]
+
+
+def test_kept_faces_are_their_sources_own(case):
+    """Corners of kept faces that are source vertices sit exactly where the source has them, and kept faces name
+    their source triangle: its plane holds them."""
+    s, field = case["surface"], case["field"]
+    kept = s["kept"]
+    assert kept.any()
+    for field_id, source in field.sources.items():
+        rows = np.flatnonzero(s["vertex_field"] == field_id)
+        rows = rows[s["vertex_id"][rows] >= 0]
+        np.testing.assert_array_equal(s["verts"][rows], source.verts[s["vertex_id"][rows]])
+        faces = np.flatnonzero(kept & (s["field_id"] == field_id))
+        src = source.verts[source.tris[np.searchsorted(source.triangle_ids, s["triangle_id"][faces])]]
+        n = np.cross(src[:, 1] - src[:, 0], src[:, 2] - src[:, 0])
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        corners = s["verts"][s["tris"][faces]]
+        off = np.abs(np.einsum("fkj,fj->fk", corners - src[:, :1], n))
+        assert off.max() < 1e-5 * 256 * case["h"]
+
+
+def test_kept_faces_face_their_sources_way_and_subtracted_ones_flipped():
+    """Kept faces lie in their source triangle, facing its way; a subtracted operand's kept faces come back
+    flipped (a bore's wall faces its axis)."""
+    op, a, b = CASES["plate - 4 bores"]
+    h = _voxel(a, b)
+    fa, fb = engine.build_fields([a, b], voxel_size=h, field_ids=[0, 1])
+    s = (fa - fb).kept_surface()
+    corners = s["verts"][s["tris"]]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    for field_id, (verts, tris), sign in ((0, a, 1.0), (1, b, -1.0)):
+        faces = np.flatnonzero(s["kept"] & (s["field_id"] == field_id))
+        assert len(faces)
+        src = verts[tris[s["triangle_id"][faces]]]
+        src_normal = np.cross(src[:, 1] - src[:, 0], src[:, 2] - src[:, 0])
+        assert (sign * np.einsum("ij,ij->i", normal[faces], src_normal) > 0).all()
+    bore = np.flatnonzero(s["kept"] & (s["field_id"] == 1))
+    centre = corners[bore].mean(axis=1)
+    axis = np.array([[-0.5, -0.5], [-0.5, 0.5], [0.5, -0.5], [0.5, 0.5]])
+    nearest = axis[np.argmin(((centre[:, None, :2] - axis[None]) ** 2).sum(axis=2), axis=1)]
+    assert (np.einsum("ij,ij->i", normal[bore, :2], nearest - centre[:, :2]) > 0).all()
+
+
+def test_small_triangles_far_from_the_seam_come_back_bit_for_bit():
+    spot = normalised(load_mesh("spot.obj"))
+    ball = normalised(uv_sphere(1.0, rings=24, segments=48), center=(0.25, 0.1, 0.2), diagonal=0.5)
+    h = _voxel(spot, ball)
+    fa, fb = engine.build_fields([spot, ball], voxel_size=h, field_ids=[0, 1])
+    s = (fa - fb).kept_surface()
+    faces = np.flatnonzero(s["kept"] & (s["field_id"] == 0))
+    corners = s["verts"][s["tris"][faces]]
+    source = spot[0][spot[1][s["triangle_id"][faces]]]
+    same = np.zeros(len(faces), dtype=bool)
+    for k in range(3):  # the same corners in any of the three turns
+        same |= (np.roll(corners, k, axis=1) == source).all(axis=(1, 2))
+    assert same.mean() > 0.99, same.mean()  # the same corners in the same turn, bit for bit
+    assert len(faces) > 0.8 * len(spot[1])
+
+
+def test_open_scan_united_with_a_ball_keeps_its_faces_away_from_the_holes():
+    bunny = normalised(load_mesh("stanford-bunny.obj"))
+    ball = normalised(uv_sphere(1.0), center=(0.2, 0.2, 0.2), diagonal=0.6)
+    h = _voxel(bunny, ball)
+    fa, fb = engine.build_fields([bunny, ball], voxel_size=h)
+    field = fa | fb
+    s = field.kept_surface()
+    _check_closed(s)
+    remeshed = field.to_mesh()
+    assert len(s["tris"]) < 0.5 * len(remeshed[1])  # measured 84 k against 191 k
+    # the bunny's own faces outside the ball, 3 voxels from it and from the bunny's holes, are kept
+    pts = sample_surface(*bunny, 40_000)
+    outside = ~winding_inside(*ball, pts) & (unsigned_distance(*ball, pts) > 3 * h)
+    far_from_holes = _distance_to_defects(*bunny, pts, 0.25 * h) > 3 * h
+    want = pts[outside & far_from_holes]
+    kept = unsigned_distance(s["verts"], s["tris"][s["kept"]], want) < 1e-6
+    assert kept.mean() >= 0.99, kept.mean()
+    # the holes are capped as the field caps them: the kept surface and the voxel surface agree there
+    d = hausdorff(s["verts"], s["tris"], *remeshed, n=50_000)
+    assert d["max"] < 1.0 * h, d
+
+
+def _distance_to_defects(verts, tris, points, step: float) -> np.ndarray:
+    """(N,) distance (within ``step``) from each point to the mesh's defects: its open and non-manifold edges and the
+    edges its two faces list in one direction (vertices at one position merged first), sampled ``step`` apart."""
+    unique, weld = np.unique(verts, axis=0, return_inverse=True)
+    t = weld.reshape(-1)[np.asarray(tris, dtype=np.int64)]
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    key = np.minimum(e[:, 0], e[:, 1]) * len(unique) + np.maximum(e[:, 0], e[:, 1])
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    forward = np.bincount(inverse, weights=e[:, 0] < e[:, 1], minlength=len(counts))
+    bad = e[((counts != 2) | (forward != 1))[inverse]]
+    a, b = unique[bad[:, 0]].astype(np.float64), unique[bad[:, 1]].astype(np.float64)
+    steps = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / step), 1).astype(np.int64)
+    edge = np.repeat(np.arange(len(bad)), steps + 1)
+    k = np.arange(len(edge)) - np.repeat(np.cumsum(steps + 1) - (steps + 1), steps + 1)
+    along = (k / steps[edge])[:, None]
+    cloud = a[edge] + along * (b[edge] - a[edge])
+    return cKDTree(cloud).query(points)[0]
+
+
+def test_a_chain_keeps_faces_of_every_operand_and_moved_operands_keep_theirs_where_placed():
+    a = normalised(box_mesh(), diagonal=1.0)
+    b = normalised(box_mesh(), center=(0.35, 0.1, 0.05), diagonal=0.8, matrix=rotation(2, 20.0))
+    c = normalised(uv_sphere(1.0, rings=32, segments=64), center=(-0.1, -0.3, 0.3), diagonal=0.5)
+    h = _voxel(a, b, c)
+    fa, fb, fc = engine.build_fields([a, b, c], voxel_size=h, field_ids=[0, 1, 2])
+    turn = np.eye(4)
+    turn[:3, :3] = rotation(1, 15.0)
+    turn[:3, 3] = (0.02, -0.03, 0.01)
+    fc_moved = fc.transformed(turn)
+    field = (fa | fb) - fc_moved
+    s = field.kept_surface()
+    _check_closed(s)
+    assert set(np.unique(s["field_id"][s["kept"]])) == {0, 1, 2}
+    placed_c = (c[0] @ turn[:3, :3].T + turn[:3, 3]).astype(np.float32)
+    exact_ab = exact_boolean("UNION", *a, *b)
+    exact = exact_boolean("DIFFERENCE", *exact_ab, placed_c, c[1])
+    d = hausdorff(s["verts"], s["tris"], *exact, n=50_000)
+    remeshed = hausdorff(*field.to_mesh(), *exact, n=50_000)
+    # measured: max 1.07 voxels, as the remeshed surface's (a wedge at a seam of the turned boxes), p95 < 0.001
+    assert d["max"] <= remeshed["max"] + 0.1 * h and d["p95"] < 0.05 * h, (d, remeshed)
+    rows = np.flatnonzero((s["vertex_field"] == 2) & (s["vertex_id"] >= 0))
+    np.testing.assert_allclose(s["verts"][rows], placed_c[s["vertex_id"][rows]], atol=1e-6)
+
+
+def test_inside_out_and_internal_faces():
+    """An inside-out box's kept faces face outward; the internal faces of two overlapping boxes given as one mesh
+    are not kept (they are not on the surface); both results stay closed."""
+    box_v, box_t = normalised(box_mesh(), diagonal=1.0)
+    flipped = (box_v, box_t[:, ::-1].copy())
+    ball = normalised(uv_sphere(1.0, rings=32, segments=64), center=(0.3, 0.3, 0.3), diagonal=0.5)
+    h = _voxel(flipped, ball)
+    fa, fb = engine.build_fields([flipped, ball], voxel_size=h)
+    s = (fa | fb).kept_surface()
+    _check_closed(s)
+    assert s["kept"].sum() >= 8 and mesh_volume(s["verts"], s["tris"]) > 0
+    exact = exact_boolean("UNION", box_v, box_t, *ball)
+    assert abs(mesh_volume(s["verts"], s["tris"]) / mesh_volume(*exact) - 1) < 1e-3
+    # two overlapping boxes as one self-intersecting mesh
+    other = normalised(box_mesh(), center=(0.25, 0.2, 0.15), diagonal=1.0)
+    overlap = (np.concatenate([box_v, other[0]]), np.concatenate([box_t, other[1] + len(box_v)]))
+    fa, fb = engine.build_fields([overlap, ball], voxel_size=_voxel(overlap, ball))
+    s = (fa - fb).kept_surface()
+    _check_closed(s)
+    # the ball's faces inside the boxes are kept (the cavity's wall); the boxes' own faces near their crossing are
+    # judged but their border does not pair with the voxel surface's there yet: remeshed, conservatively
+    assert (s["kept"] & (s["field_id"] == 1)).sum() > 1000
+    corners = s["verts"][s["tris"][s["kept"] & (s["field_id"] == 0)]]
+    inside_both = winding_inside(box_v, box_t, corners.mean(axis=1)) & winding_inside(*other, corners.mean(axis=1))
+    assert not inside_both.any()  # no kept face inside the other box
+    exact = exact_boolean("DIFFERENCE", *exact_boolean("UNION", box_v, box_t, *other), *ball)
+    assert abs(mesh_volume(s["verts"], s["tris"]) / mesh_volume(*exact) - 1) < 1e-3
+
+
+def test_fields_without_source_faces_are_remeshed_and_bad_requests_refused():
+    a = normalised(box_mesh(), diagonal=1.0)
+    (fa,) = engine.build_fields([a], voxel_size=1 / 128)
+    s = fa.kept_surface()  # a built field is no boolean: its voxel surface
+    assert not s["kept"].any() and len(s["tris"]) == len(fa.to_mesh()[1])
+    ball = normalised(uv_sphere(1.0, rings=24, segments=48), center=(0.3, 0.3, 0.3), diagonal=0.5)
+    (fb,) = engine.build_fields([ball], voxel_size=1 / 128, field_ids=[1])
+    grown = engine.offset(fa, 2 / 128) - fb  # an offset has no source faces: only the ball's are kept
+    s = grown.kept_surface()
+    _check_closed(s)
+    assert set(np.unique(s["field_id"][s["kept"]])) == {1}
+    with pytest.raises(ValueError, match="'iso' 0 with 'keep_faces'"):
+        grown.to_mesh(0.01, keep_faces=True)
