@@ -37,7 +37,7 @@ def kept_mesh(kept: list[dict]) -> dict:
     ``tris`` (T, 3) int64 (flipped where the result needs), and per face its ``field_id`` and ``triangle_id`` (the
     index among the triangles the operand's field was built from: a piece of a split one names it), per vertex its
     ``vertex_field`` and ``vertex_id`` (index among the source's vertices; -1 for a split's midpoint)."""
-    parts = {k: [] for k in ("verts", "tris", "field_id", "triangle_id", "vertex_field", "vertex_id")}
+    parts = {k: [] for k in ("verts", "tris", "field_id", "triangle_id", "vertex_field", "vertex_id", "corner_bary")}
     base = 0
     for leaf in kept:
         source, rows = leaf["source"], np.flatnonzero(leaf["kept"])
@@ -50,11 +50,31 @@ def kept_mesh(kept: list[dict]) -> dict:
         parts["triangle_id"].append(source.triangle_ids[leaf["parent"][rows]])
         parts["vertex_field"].append(np.full(len(used), leaf["field_id"], dtype=np.int32))
         parts["vertex_id"].append(np.where(used < len(source.verts), used, -1).astype(np.int32))
+        parts["corner_bary"].append(_corner_barycentrics(leaf["verts"], tris, source.tris[leaf["parent"][rows]]))
         base += len(used)
     if not parts["verts"]:
         empty = {"verts": np.zeros((0, 3), np.float32), "tris": np.zeros((0, 3), np.int64)}
+        empty["corner_bary"] = np.zeros((0, 3, 3), np.float32)
         return {**empty, **{k: np.zeros(0, np.int32) for k in ("field_id", "triangle_id", "vertex_field", "vertex_id")}}
     return {k: np.concatenate(v) for k, v in parts.items()}
+
+
+def _corner_barycentrics(verts, tris, source_tris) -> np.ndarray:
+    """(F, 3, 3) float32: each corner of each face as weights of its source triangle's corners (projected onto its
+    plane); a corner that is one of those corners gets exactly 1 there, so what it reads off them (UVs, colours) is
+    the source's own value, bit for bit."""
+    a, b, c = (verts[source_tris[:, k]].astype(np.float64) for k in range(3))
+    e0, e1 = b - a, c - a
+    d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
+    den = np.maximum(d00 * d11 - d01 * d01, 1e-300)[:, None]
+    d = verts[tris].astype(np.float64) - a[:, None, :]  # (F, 3 corners, 3)
+    v = d11[:, None] * np.einsum("fkj,fj->fk", d, e0) - d01[:, None] * np.einsum("fkj,fj->fk", d, e1)
+    w = d00[:, None] * np.einsum("fkj,fj->fk", d, e1) - d01[:, None] * np.einsum("fkj,fj->fk", d, e0)
+    v, w = v / den, w / den
+    bary = np.stack([1.0 - v - w, v, w], axis=2)
+    exact = tris[:, :, None] == source_tris[:, None, :]  # (F, corner, source corner)
+    bary = np.where(exact.any(axis=2, keepdims=True), exact.astype(np.float64), bary)
+    return bary.astype(np.float32)
 
 
 def _drop_pinched(tris: np.ndarray, alive: np.ndarray, n_verts: int, rounds: int = 8) -> np.ndarray:
@@ -111,7 +131,8 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
     Returns:
         dict: ``verts`` (N, 3) float32, ``tris`` (M, 3) int32; per face ``kept`` bool, ``field_id`` and
         ``triangle_id`` int32 (the source triangle of a kept face, -1 for new faces); per vertex ``vertex_field``
-        and ``vertex_id`` (the source vertex of a kept face's corner, -1 for new vertices); ``stats``.
+        and ``vertex_id`` (the source vertex of a kept face's corner, -1 for new vertices); ``corner_bary`` (M, 3, 3)
+        float32 each kept face's corners as weights of its source triangle's corners (zeros for new faces); ``stats``.
     """
     device, voxel = field.device, field.voxel_size
     kept = kept_mesh(kept_triangles(field))
@@ -202,6 +223,7 @@ def voxel_surface_only(verts, tris, why: str) -> dict:
         "triangle_id": np.full(n_f, -1, np.int32),
         "vertex_field": np.full(n_v, -1, np.int32),
         "vertex_id": np.full(n_v, -1, np.int32),
+        "corner_bary": np.zeros((n_f, 3, 3), np.float32),
         "stats": {"kept_faces": 0, "new_faces": n_f, "kept_fallback": why},
     }
 
@@ -229,5 +251,6 @@ def _assemble(points, kept, k_tris, k_alive, v_tris, strips, voxel_verts, voxel_
         "triangle_id": np.r_[kept["triangle_id"][k_alive], np.full(n_new, -1, np.int32)],
         "vertex_field": vertex_field,
         "vertex_id": vertex_id,
+        "corner_bary": np.concatenate([kept["corner_bary"][k_alive], np.zeros((n_new, 3, 3), np.float32)]),
         "stats": {"kept_faces": n_kept, "new_faces": n_new, "strip_faces": len(strips), "kept_fallback": ""},
     }

@@ -292,3 +292,21 @@ def test_fields_without_source_faces_are_remeshed_and_bad_requests_refused():
     assert set(np.unique(s["field_id"][s["kept"]])) == {1}
     with pytest.raises(ValueError, match="'iso' 0 with 'keep_faces'"):
         grown.to_mesh(0.01, keep_faces=True)
+
+
+def test_corner_weights_of_kept_faces_give_back_their_corners():
+    """Each kept face's corners as weights of its source triangle's corners: the weights give the corners back, and a
+    corner that is a source corner has weight exactly 1 there (UVs and colours read off it bit for bit)."""
+    op, a, b = CASES["plate - 4 bores"]
+    h = _voxel(a, b)
+    fa, fb = engine.build_fields([a, b], voxel_size=h, field_ids=[0, 1])
+    s = (fa - fb).kept_surface()
+    for field_id, (verts, tris) in ((0, a), (1, b)):
+        faces = np.flatnonzero(s["kept"] & (s["field_id"] == field_id))
+        src = verts[tris[s["triangle_id"][faces]]].astype(np.float64)  # (F, 3, 3)
+        back = np.einsum("fkc,fcj->fkj", s["corner_bary"][faces].astype(np.float64), src)
+        np.testing.assert_allclose(back, s["verts"][s["tris"][faces]], atol=1e-5)
+        corner = s["vertex_id"][s["tris"][faces]] >= 0
+        weights = s["corner_bary"][faces][corner]
+        assert ((weights == 0) | (weights == 1)).all() and (weights.sum(axis=1) == 1).all()
+    assert not s["corner_bary"][~s["kept"]].any()
