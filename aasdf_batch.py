@@ -67,6 +67,13 @@ def parse_args(args):
         default=True,
         help="keep creases sharp (default) or round them (--no-sharp-edges: marching cubes)",
     )
+    parser.add_argument(
+        "--keep-faces",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="keep the inputs' own faces away from the seams (default) or remesh the whole result (--no-keep-faces)",
+    )
+    parser.add_argument("--remesh", dest="keep_faces", action="store_false", help="the same as --no-keep-faces")
     parser.add_argument("--debug-volume", metavar="FILE", help="also write the result's field as a .vdb")
     parser.add_argument("--blend", metavar="FILE", help="open this .blend first (with the bpy module)")
     parser.add_argument("--verbose", action="store_true", help="also print Warp's start-up and kernel-loading lines")
@@ -253,6 +260,7 @@ def run(args) -> int:
         hide_inputs=True,
         debug_volume=args.debug_volume is not None,
         sharp=args.sharp_edges,
+        keep_faces=args.keep_faces,
     )
     try:
         summary = pipeline.run(

@@ -33,6 +33,8 @@ class Operand:
     materials: list = field(default_factory=list)  # the object's slots' materials (None: an empty slot)
     uv_maps: dict = field(default_factory=dict)  # name -> (L, 2) float32 per corner
     colors: dict = field(default_factory=dict)  # name -> (domain "POINT" | "CORNER", data type, (N, 4) float32)
+    loop_start: np.ndarray = None  # (P,) int32 first corner of each face
+    corner_vert: np.ndarray = None  # (L,) int32 vertex of each corner
 
     @property
     def name(self) -> str:
@@ -62,6 +64,8 @@ def read_operands(objects, depsgraph) -> list[Operand]:
                 face_material=_attribute(mesh, "material_index", "value", np.int32, len(mesh.polygons)),
                 face_smooth=~_attribute(mesh, "sharp_face", "value", bool, len(mesh.polygons)),
                 materials=[slot.material for slot in obj.original.material_slots],
+                loop_start=_get(mesh.polygons, "loop_start", np.int32),
+                corner_vert=_attribute(mesh, ".corner_vert", "value", np.int32, len(mesh.loops)),
             )
             for layer in mesh.uv_layers:
                 operand.uv_maps[layer.name] = _attribute(mesh, layer.name, "vector", np.float32, len(mesh.loops), 2)
@@ -215,8 +219,9 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
         attributes: What the faces carry (``transfer.face_attributes``): ``materials`` (the slots, ``None`` an empty
             one), ``material_index`` (F,), ``smooth`` (F,) bool, ``operand`` (F,) int (written as the face attribute
             ``transfer.OPERAND_ATTRIBUTE``), ``uv_maps`` {name: (3F, 2)} and ``colors`` {name: (data type, (3F, 4))}
-            per corner, ``creases`` (E, 2) vertex pairs of edges to mark sharp (``sharp_edge``); any may be missing
-            (default: flat faces, no materials).
+            per corner, ``creases`` (E, 2) vertex pairs of edges to mark sharp (``sharp_edge``), ``polygons``
+            (sizes (Q,), corner vertices) of faces written before the triangles (``polygons.as_polygons``: then
+            every face and corner array covers them first); any may be missing (default: flat faces, no materials).
         edge_cache: Optional dict kept with these triangles: an empty one receives the edges Blender derives, a filled
             one gives them back, so writing the same triangles again skips deriving them.
     Returns:
@@ -229,16 +234,20 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
     # The contiguous attribute arrays take numpy buffers directly: ~10x faster than the per-element RNA collections.
     mesh.vertices.add(len(verts))
     _set_attribute(mesh, "position", "vector", verts, mesh.vertices, "co")
-    mesh.loops.add(tris.size)
-    _set_attribute(mesh, ".corner_vert", "value", tris, mesh.loops, "vertex_index")
-    mesh.polygons.add(len(tris))
-    mesh.polygons.foreach_set("loop_start", np.arange(0, tris.size, 3, dtype=np.int32))
+    sizes, corner_vert = attributes.get("polygons") or (np.zeros(0, np.int32), np.zeros(0, np.int32))
+    corners = np.concatenate([np.asarray(corner_vert, dtype=np.int32), tris.ravel()])
+    mesh.loops.add(len(corners))
+    _set_attribute(mesh, ".corner_vert", "value", corners, mesh.loops, "vertex_index")
+    mesh.polygons.add(len(sizes) + len(tris))
+    poly_starts = np.cumsum(np.r_[0, sizes[:-1]]).astype(np.int32) if len(sizes) else np.zeros(0, np.int32)
+    starts = np.r_[poly_starts, len(corner_vert) + np.arange(0, tris.size, 3)].astype(np.int32)
+    mesh.polygons.foreach_set("loop_start", starts)
     for material in attributes.get("materials", ()):
         mesh.materials.append(material)
-    if not _set_cached_edges(mesh, edge_cache):
+    if len(sizes) or not _set_cached_edges(mesh, edge_cache):
         mesh.update(calc_edges=True)
         _cache_edges(mesh, edge_cache)
-    if not len(tris):
+    if not len(starts):
         return mesh
     creases = attributes.get("creases")
     if creases is not None and len(creases):
@@ -248,7 +257,7 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
     smooth = attributes.get("smooth")
     if smooth is None or not np.all(smooth):  # meshes without a "sharp_face" attribute are smooth
         # the attribute directly: Mesh.shade_flat() takes ~0.2 s on a million faces
-        sharp = np.ones(len(tris), dtype=bool) if smooth is None else ~np.asarray(smooth, dtype=bool)
+        sharp = np.ones(len(starts), dtype=bool) if smooth is None else ~np.asarray(smooth, dtype=bool)
         _new_attribute(mesh, "sharp_face", "BOOLEAN", "FACE", "value", sharp, bool)
     if attributes.get("operand") is not None:
         _new_attribute(mesh, OPERAND_ATTRIBUTE, "INT", "FACE", "value", attributes["operand"], np.int32)

@@ -204,6 +204,7 @@ def evaluate_tree(context, tree) -> list[dict]:
             select=False,
             hide_inputs=tree.hide_inputs,
             sharp=tree.sharp_edges,
+            keep_faces=out.keep_faces,
         )
         try:
             numbers = pipeline.run(

@@ -17,6 +17,7 @@ from .properties import (
     blend_mode_property,
     blend_property,
     hide_inputs_property,
+    keep_faces_property,
     levels_property,
     message_property,
     offset_distance_property,
@@ -238,12 +239,14 @@ class AASDF_N_output(CsgNode, bpy.types.Node):
         default="CSG Result",
         update=_changed,
     )
+    keep_faces: keep_faces_property(update=_changed)
 
     def init(self, context):
         self.inputs.new(SOCKET, "Field")
 
     def draw_settings(self, layout):
         layout.prop(self, "object_name", text="", icon="OBJECT_DATA")
+        layout.prop(self, "keep_faces")
 
 
 classes = (

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import bridge, cache, plan, runtime, transfer
+from . import bridge, cache, plan, polygons, runtime, transfer
 
 # Numbers of the last successful run (``aasdf.boolean`` or a CSG tree): read by the sidebar and by scripts.
 last_run: dict = {}
@@ -62,6 +62,7 @@ class Output:
     hide_inputs: bool = False
     debug_volume: bool = False
     sharp: bool = True  # creases kept sharp (dual contouring) or rounded (marching cubes)
+    keep_faces: bool = False  # the operands' own faces kept away from the seams (``AdaptiveField.kept_surface``)
 
 
 class Progress:
@@ -253,14 +254,22 @@ def _matrix_bytes(field) -> bytes:
     return b"" if field.placement is None else field.placement.matrix.tobytes()
 
 
-def extract(field, surface: dict, *, sharp: bool = True) -> dict:
-    """The zero surface of ``field``, computed once per result (``surface`` is the dict the cache keeps with it).
+def extract(field, surface: dict, *, sharp: bool = True, keep_faces: bool = False) -> dict:
+    """The zero surface of ``field``, computed once per result (``surface`` is the dict the cache keeps with it);
+    with ``keep_faces`` the operands' own faces away from the seams (``AdaptiveField.kept_surface``, its face
+    sources kept in ``surface["kept"]``).
 
     Returns:
         ``{"verts": (V,3) float32, "tris": (F,3) int32, "creases": (E,2) int32 vertex pairs of the edges
         reconstructed as creases, "edges": the surface's edge cache (see ``bridge.result_mesh``)}``.
     """
-    if "verts" not in surface:
+    if "verts" not in surface and keep_faces:
+        kept = field.kept_surface(sharp=sharp)
+        surface["verts"], surface["tris"] = kept["verts"], kept["tris"]
+        folds = runtime.engine().fold_edges(kept["verts"], kept["tris"]) if sharp else None
+        surface["creases"] = np.zeros((0, 2), dtype=np.int32) if folds is None else folds
+        surface["kept"] = kept
+    elif "verts" not in surface:
         surface["verts"], surface["tris"], surface["creases"] = field.to_mesh(sharp=sharp, return_creases=True)
     edges = surface.setdefault("edges", {})
     if "edge_verts" not in edges and len(surface["tris"]):
@@ -275,12 +284,34 @@ def extract(field, surface: dict, *, sharp: bool = True) -> dict:
 def carry_over(field, surface: dict, operands) -> dict:
     """What each face of the extracted ``surface`` carries over from its operand (``transfer.face_attributes``); each
     face's source is found once per result and kept in ``surface``."""
-    verts, tris = surface["verts"], surface["tris"]
+    tris = surface["tris"]
     if not len(tris):
         return {}
     if "sources" not in surface:  # every corner on its face's source triangle, so the source's seams stay seams
-        surface["sources"] = field.face_sources(verts, tris)
+        surface["sources"] = _face_sources(field, surface)
     return transfer.face_attributes(operands, *surface["sources"])
+
+
+def whole_faces_back(result: dict, surface: dict, operands, output: Output) -> dict:
+    """``result`` with the operands' faces kept whole given back as themselves (``polygons``): not into an object
+    whose transform mirrors (its faces would need their corners turned)."""
+    if surface.get("kept") is None or output.target is not None and np.linalg.det(output.target.matrix_world) < 0:
+        return result
+    whole = polygons.whole_faces(surface["kept"], result["tris"], operands)
+    return result if whole is None else polygons.as_polygons(result, whole, operands)
+
+
+def _face_sources(field, surface: dict) -> tuple:
+    """Each face's (field id, source triangle, corner weights): a kept face's are its own, a new face's found by the
+    field (``AdaptiveField.face_sources``)."""
+    verts, tris, kept = surface["verts"], surface["tris"], surface.get("kept")
+    if kept is None or not kept["kept"].any():
+        return field.face_sources(verts, tris)
+    ids, tri_ids, bary = kept["field_id"].copy(), kept["triangle_id"].copy(), kept["corner_bary"].copy()
+    new = np.flatnonzero(~kept["kept"])
+    if len(new):
+        ids[new], tri_ids[new], bary[new] = field.face_sources(verts, tris[new])
+    return ids, tri_ids, bary
 
 
 def write(context, result: dict, output: Output):
@@ -328,7 +359,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             )
         with timer.stage("booleans"):
             fingerprint = tuple((id(f.codes), f.field_ids, _matrix_bytes(f)) for f in fields)
-            key = (steps, fingerprint, output.sharp)
+            key = (steps, fingerprint, output.sharp, output.keep_faces)
             found = cache.find_result(key)
             if found is None:
                 field = plan.evaluate(steps, fields, progress)
@@ -337,11 +368,12 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
                 field, surface = found
         with timer.stage("surface"):
             progress.step("extracting the surface")
-            result = extract(field, surface, sharp=output.sharp)
+            result = extract(field, surface, sharp=output.sharp, keep_faces=output.keep_faces)
         if len(result["tris"]) == 0:
             return {"object": output.target.name if output.target is not None else output.name, "empty": True}
         with timer.stage("attributes"):
             result["attributes"] = carry_over(field, surface, operands)
+            result = whole_faces_back(result, surface, operands, output)
         with timer.stage("write"):
             progress.step("writing the result")
             obj = write(context, result, output)
@@ -371,6 +403,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
         level_counts=field.level_counts,
         vertices=len(result["verts"]),
         triangles=len(result["tris"]),
+        faces=len(result["tris"]) + len(result["attributes"].get("polygons", ((),))[0]),
         cache_hits=hits,
         fields_built=builds,
         voxel_size=voxel_size,

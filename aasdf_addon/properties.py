@@ -180,6 +180,16 @@ def sharp_edges_property(**overrides):
     return _make(BoolProperty, options, overrides)
 
 
+def keep_faces_property(**overrides):
+    options = {
+        "name": "Keep Original Faces",
+        "description": "Keep the inputs' own faces (polygons, UVs, seams, detail finer than a voxel) wherever the "
+        "result's surface is theirs, with new surface only along the seams; off: the whole result remeshed",
+        "default": True,
+    }
+    return _make(BoolProperty, options, overrides)
+
+
 def hide_inputs_property(**overrides):
     options = {
         "name": "Hide Inputs",
@@ -223,6 +233,7 @@ class AASDF_PG_scene(bpy.types.PropertyGroup):
     blend_mode: blend_mode_property()
     thickness: thickness_property()
     sharp_edges: sharp_edges_property()
+    keep_faces: keep_faces_property()
     hide_inputs: hide_inputs_property()
     debug_volume: debug_volume_property()
     offset_distance: offset_distance_property()

@@ -8,7 +8,7 @@ passed as ``device`` (CPU here, CUDA wherever an NVIDIA GPU is present). Negativ
 from . import kernels
 from .boolean import difference, intersection, union
 from .build import build_field, build_fields
-from .edges import surface_edges
+from .edges import fold_edges, surface_edges
 from .errors import AasdfError
 from .field import AdaptiveField
 from .fieldops import offset, shell
@@ -26,6 +26,7 @@ __all__ = [
     "build_field",
     "build_fields",
     "check_meshes",
+    "fold_edges",
     "difference",
     "interpolate_corners",
     "intersection",

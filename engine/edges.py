@@ -135,3 +135,27 @@ def surface_edges(tris: np.ndarray, vertex_count: int, device=None) -> tuple[np.
     if bad.numpy()[0] or not matched.numpy().all():
         return None
     return edge_verts.numpy(), corner_edge.numpy()
+
+
+def fold_edges(verts: np.ndarray, tris: np.ndarray, degrees: float = 30.0, device=None) -> np.ndarray:
+    """The edges of a closed, consistently oriented surface along which it folds by more than ``degrees``: the
+    creases of a surface whose faces were not placed on tangent planes (kept faces joined to a voxel surface).
+
+    Args:
+        verts: (V, 3) float vertices; tris: (F, 3) int triangles; degrees: The least fold of a crease.
+    Returns:
+        (E, 2) int32 vertex pairs (low, high); empty when the surface is not closed and oriented.
+    """
+    found = surface_edges(tris, len(verts), device)
+    if found is None:
+        return np.zeros((0, 2), dtype=np.int32)
+    edge_verts, corner_edge = found
+    t = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+    v = np.asarray(verts, dtype=np.float64)
+    normals = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    order = np.argsort(corner_edge, kind="stable")  # each edge's two corners side by side
+    faces = (order // 3).reshape(-1, 2)
+    folds = np.einsum("ij,ij->i", normals[faces[:, 0]], normals[faces[:, 1]]) < np.cos(np.radians(degrees))
+    edge_of_pair = corner_edge[order].reshape(-1, 2)[:, 0]
+    return np.ascontiguousarray(edge_verts.reshape(-1, 2)[edge_of_pair[folds]], dtype=np.int32)

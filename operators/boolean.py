@@ -19,6 +19,7 @@ from ..aasdf_addon.properties import (
     blend_property,
     debug_volume_property,
     hide_inputs_property,
+    keep_faces_property,
     levels_property,
     offset_distance_property,
     operation_property,
@@ -53,6 +54,7 @@ class AASDF_OT_boolean(bpy.types.Operator):
     blend_mode: blend_mode_property()
     thickness: thickness_property()
     sharp_edges: sharp_edges_property()
+    keep_faces: keep_faces_property()
     debug_volume: debug_volume_property()
     hide_inputs: hide_inputs_property()
 
@@ -79,7 +81,7 @@ class AASDF_OT_boolean(bpy.types.Operator):
         self.report(
             {"INFO"},
             f"{numbers['object']}: {self.operation.lower()} of {len(operands)} objects in {numbers['seconds']:.2f} s, "
-            f"{numbers['nodes']:,} field nodes, {numbers['triangles']:,} triangles, "
+            f"{numbers['nodes']:,} field nodes, {numbers['faces']:,} faces, "
             f"{numbers['cache_hits']}/{len(operands)} fields from cache",
         )
         return {"FINISHED"}
@@ -94,6 +96,7 @@ def run(op, context, objects, steps, name, empty_message, operation=None):
         hide_inputs=op.hide_inputs,
         debug_volume=getattr(op, "debug_volume", False),
         sharp=op.sharp_edges,
+        keep_faces=getattr(op, "keep_faces", False),
     )
     try:
         numbers = pipeline.run(

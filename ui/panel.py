@@ -43,6 +43,7 @@ class AASDF_PT_main(SidebarPanel, bpy.types.Panel):
             op.operation = ident
             _field_settings(op, settings)
             op.blend, op.blend_mode, op.debug_volume = settings.blend, settings.blend_mode, settings.debug_volume
+            op.keep_faces = settings.keep_faces
         col = layout.column()
         col.prop(settings, "voxel_size")
         sub = col.column()
@@ -56,6 +57,7 @@ class AASDF_PT_main(SidebarPanel, bpy.types.Panel):
         sub.prop(settings, "blend_mode")
         col.prop(settings, "thickness")
         col.prop(settings, "sharp_edges")
+        col.prop(settings, "keep_faces")
         col.prop(settings, "hide_inputs")
 
 

@@ -107,7 +107,7 @@ def result(request, fresh_cache):
     blend_voxels = request.param
     voxel = float(np.linalg.norm([2.0 + RADIUS, 2.0 + RADIUS, 2.0 + RADIUS])) / RESOLUTION
     assert bpy.ops.aasdf.boolean(
-        operation="DIFFERENCE", resolution=RESOLUTION, blend=blend_voxels * voxel, hide_inputs=False
+        operation="DIFFERENCE", resolution=RESOLUTION, blend=blend_voxels * voxel, hide_inputs=False, keep_faces=False
     ) == {"FINISHED"}
     obj = bpy.context.active_object
     verts, tris = world_arrays(obj)

@@ -60,7 +60,7 @@ def test_operation_on_real_meshes_matches_exact_boolean(operation, fresh_cache):
 def test_operator_result_equals_direct_engine_call(fresh_cache):
     a, b = spot_pair()
     select(a, b)
-    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=64, hide_inputs=False)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=64, hide_inputs=False, keep_faces=False)
     result_verts, result_tris = world_arrays(bpy.context.active_object)
     engine = runtime.engine()
     voxel_size = boolean_op.last_run["voxel_size"]

@@ -113,7 +113,7 @@ def test_sharp_edges_are_marked_and_can_be_turned_off(fresh_cache):
     a = add_mesh_object("A", *box_mesh(half=(1.0, 1.0, 1.0)))
     b = add_mesh_object("B", *box_mesh(half=(0.5, 0.5, 2.0), center=(1.0, 0.0, 0.0)))
     select(a, b)
-    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96, hide_inputs=False)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96, hide_inputs=False, keep_faces=False)
     mesh = bpy.context.active_object.data
     sharp = np.empty(len(mesh.edges), dtype=bool)
     mesh.attributes["sharp_edge"].data.foreach_get("value", sharp)
@@ -125,7 +125,7 @@ def test_sharp_edges_are_marked_and_can_be_turned_off(fresh_cache):
     marked = {tuple(sorted(pair)) for pair in edges.reshape(-1, 2)[sharp].tolist()}
     assert marked == {tuple(sorted(pair)) for pair in creases.tolist()}
     select(a, b)
-    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96, sharp_edges=False, hide_inputs=False)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96, sharp_edges=False, hide_inputs=False, keep_faces=False)
     assert "sharp_edge" not in bpy.context.active_object.data.attributes
 
 

@@ -78,10 +78,15 @@ def test_tree_equals_the_chain_of_boolean_operators(evaluated):
     assert pipeline.last_run["level_counts"][0] > 0 and set(pipeline.last_run["stages"]) == set(pipeline.STAGES)
 
     select(a, b)
-    bpy.ops.aasdf.boolean(operation="UNION", voxel_size=VOXEL, levels=4, padding=1, hide_inputs=False)
+    # remeshed on both sides: the chain's second step would keep the first result's faces, the tree the inputs'
+    next(node for node in tree.nodes if node.bl_idname == nodes.OUTPUT).keep_faces = False
+    assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
+    verts, tris = world_arrays(result)
+    chain = {"voxel_size": VOXEL, "levels": 4, "padding": 1, "hide_inputs": False, "keep_faces": False}
+    bpy.ops.aasdf.boolean(operation="UNION", **chain)
     united = bpy.context.active_object
     select(united, c1, c2)
-    bpy.ops.aasdf.boolean(operation="DIFFERENCE", voxel_size=VOXEL, levels=4, padding=1, hide_inputs=False)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", **chain)
     chain_verts, chain_tris = world_arrays(bpy.context.active_object)
     assert len(verts) == len(chain_verts)
     assert mesh_volume(verts, tris) == pytest.approx(mesh_volume(chain_verts, chain_tris), rel=1e-3)

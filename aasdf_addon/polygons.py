@@ -1,0 +1,158 @@
+"""Kept polygons stay polygons: a source face whose every triangle the result kept whole comes back as that face.
+
+The engine keeps triangles (Blender's triangulation of each operand, ``bridge.Operand.tris``). Where all the
+triangles of one of an operand's faces are kept, unsplit, the result gets the face itself back: its corners in its
+own order (reversed for a subtracted operand's), its material and shading, and every corner attribute (UV maps,
+colours) copied from its own corners, bit for bit. The rest of the result stays triangles with the attributes
+``transfer`` gives them. Arrays only; ``bridge.result_mesh`` writes the layout (``attributes["polygons"]``).
+"""
+
+import numpy as np
+
+from .transfer import merged_materials
+
+
+def whole_faces(kept: dict, tris: np.ndarray, operands) -> dict | None:
+    """The operands' faces that come back whole, from a kept surface (``AdaptiveField.kept_surface``) and its
+    triangles ``tris`` (F, 3).
+
+    Returns:
+        None when there is none, else ``{"rows": (K,) the result triangles they replace, "field": (Q,) operand,
+        "face": (Q,) its face, "sizes": (Q,), "corner_vert": (C,) result vertex of each corner, "loops": (C,) the
+        operand's corner (loop) each copies, "flip": (Q,) bool}``.
+    """
+    field_id, tri_id = kept["field_id"].astype(np.int64), kept["triangle_id"].astype(np.int64)
+    vertex_field, vertex_id = kept["vertex_field"].astype(np.int64), kept["vertex_id"].astype(np.int64)
+    rows = np.flatnonzero(kept["kept"] & (field_id >= 0) & (field_id < len(operands)))
+    rows = rows[(vertex_field[tris[rows]] == field_id[rows, None]).all(axis=1) & (vertex_id[tris[rows]] >= 0).all(1)]
+    if not len(rows):
+        return None
+    # stacked over the operands: triangle, face and corner numbers made unique by offsets
+    tri_first = np.cumsum([0] + [len(op.tris) for op in operands])
+    face_first = np.cumsum([0] + [len(op.loop_start) for op in operands])
+    loop_first = np.cumsum([0] + [len(op.corner_vert) for op in operands])
+    source_tris = np.concatenate([op.tris for op in operands]).astype(np.int64)
+    faces = np.concatenate([op.faces.astype(np.int64) + face_first[k] for k, op in enumerate(operands)])
+    stacked = tri_first[field_id[rows]] + tri_id[rows]
+    corners = vertex_id[tris[rows]]
+    same = np.zeros(len(rows), dtype=bool)
+    turned = np.zeros(len(rows), dtype=bool)
+    for k in range(3):  # the source triangle's corners, in its turn or reversed
+        same |= (np.roll(corners, k, axis=1) == source_tris[stacked]).all(axis=1)
+        turned |= (np.roll(corners[:, ::-1], k, axis=1) == source_tris[stacked]).all(axis=1)
+    rows, stacked = rows[same | turned], stacked[same | turned]
+    flip_of_row = turned[same | turned] & ~same[same | turned]
+    face = faces[stacked]
+    need = np.bincount(faces, minlength=int(face_first[-1]))
+    have = np.bincount(face, minlength=len(need))
+    whole = (have == need) & (need > 0)
+    keep_rows = whole[face]
+    rows, face, flip_of_row = rows[keep_rows], face[keep_rows], flip_of_row[keep_rows]
+    if not len(rows):
+        return None
+    # one entry per whole face, its corners in its own order
+    whole_faces_ = np.unique(face)
+    flip = np.zeros(len(need), dtype=bool)
+    flip[face] = flip_of_row
+    operand = np.searchsorted(face_first, whole_faces_, side="right") - 1
+    local = whole_faces_ - face_first[operand]
+    loop_start = np.concatenate([op.loop_start.astype(np.int64) + loop_first[k] for k, op in enumerate(operands)])
+    loop_end = np.concatenate(
+        [
+            np.r_[op.loop_start[1:], len(op.corner_vert)].astype(np.int64) + loop_first[k]
+            for k, op in enumerate(operands)
+        ]
+    )
+    sizes = (loop_end - loop_start)[whole_faces_]
+    offsets = np.repeat(loop_start[whole_faces_], sizes)
+    within = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    reverse = np.repeat(flip[whole_faces_], sizes)
+    size_rep = np.repeat(sizes, sizes)
+    loops = offsets + np.where(reverse, (size_rep - within) % size_rep, within)
+    corner_vert_all = np.concatenate([op.corner_vert.astype(np.int64) for op in operands])
+    source_vertex = corner_vert_all[loops]
+    corner_operand = np.repeat(operand, sizes)
+    result_vertex = _result_vertices(vertex_field, vertex_id, corner_operand, source_vertex)
+    return {
+        "rows": rows,
+        "field": operand,
+        "face": local,
+        "sizes": sizes,
+        "corner_vert": result_vertex,
+        "loops": loops - loop_first[corner_operand],
+        "flip": flip[whole_faces_],
+    }
+
+
+def _result_vertices(vertex_field, vertex_id, operand, source_vertex) -> np.ndarray:
+    """The result vertex that is each (operand, source vertex)."""
+    width = int(max(vertex_id.max(initial=0), source_vertex.max(initial=0))) + 1
+    keys = np.where(vertex_id >= 0, vertex_field * width + vertex_id, -1)
+    order = np.argsort(keys, kind="stable")
+    wanted = operand * width + source_vertex
+    at = np.searchsorted(keys[order], wanted)
+    return order[np.minimum(at, len(order) - 1)].astype(np.int32)
+
+
+def as_polygons(result: dict, whole: dict, operands) -> dict:
+    """``result`` (``pipeline.extract`` with ``attributes``) with the whole faces in place of their triangles: the
+    faces first (``attributes["polygons"]``: sizes and corner vertices), then the triangles left, each attribute in
+    that layout."""
+    tris, attrs = result["tris"], result["attributes"]
+    rest = np.ones(len(tris), dtype=bool)
+    rest[whole["rows"]] = False
+    corner_rest = np.repeat(rest, 3)
+    out = dict(attrs)
+    out["polygons"] = (whole["sizes"].astype(np.int32), whole["corner_vert"].astype(np.int32))
+    field, face = whole["field"], whole["face"]
+    _, slot_maps = merged_materials(operands)
+    slot_of_face = [
+        np.asarray(m)[np.clip(op.face_material, 0, len(m) - 1)] for op, m in zip(operands, slot_maps, strict=True)
+    ]
+    slots = _per_operand(field, face, slot_of_face)
+    smooth = _per_operand(field, face, [op.face_smooth for op in operands])
+    out["material_index"] = np.r_[slots, attrs["material_index"][rest]].astype(np.int32)
+    out["smooth"] = np.r_[smooth.astype(bool), attrs["smooth"][rest]]
+    out["operand"] = np.r_[field.astype(np.int32), attrs["operand"][rest]]
+    corner_operand = np.repeat(field, whole["sizes"])
+    out["uv_maps"] = {
+        name: np.concatenate(
+            [_corner_values(operands, corner_operand, whole["loops"], name, 2, "uv"), values[corner_rest]]
+        )
+        for name, values in attrs["uv_maps"].items()
+    }
+    out["colors"] = {
+        name: (
+            kind,
+            np.concatenate(
+                [_corner_values(operands, corner_operand, whole["loops"], name, 4, "color"), values[corner_rest]]
+            ),
+        )
+        for name, (kind, values) in attrs["colors"].items()
+    }
+    return {**result, "tris": tris[rest], "attributes": out, "edges": {}}
+
+
+def _per_operand(operand, index, arrays) -> np.ndarray:
+    """``arrays[operand[i]][index[i]]`` for every i, in one gather over the arrays stacked."""
+    first = np.cumsum([0] + [len(a) for a in arrays])
+    return np.concatenate([np.asarray(a) for a in arrays])[first[operand] + index]
+
+
+def _corner_values(operands, corner_operand, loops, name, width, kind) -> np.ndarray:
+    """One corner attribute of the whole faces' corners, copied from the operands' own corners (zeros for an
+    operand without it; a point colour read at the corner's vertex)."""
+    out = np.zeros((len(loops), width), dtype=np.float32)
+    for k, op in enumerate(operands):
+        rows = np.flatnonzero(corner_operand == k)
+        if not len(rows):
+            continue
+        if kind == "uv":
+            values = op.uv_maps.get(name)
+            if values is not None:
+                out[rows] = np.asarray(values, dtype=np.float32).reshape(-1, 2)[loops[rows]]
+        elif name in op.colors:
+            domain, _, values = op.colors[name]
+            at = loops[rows] if domain == "CORNER" else op.corner_vert[loops[rows]]
+            out[rows] = np.asarray(values, dtype=np.float32).reshape(-1, 4)[at]
+    return out

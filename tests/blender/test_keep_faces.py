@@ -1,0 +1,118 @@
+"""*Keep Original Faces* in Blender: a quad box with UV maps, materials and a colour minus a cylinder. The faces the
+cut leaves alone come back as the box's own quads, every attribute equal to the input's; the result is closed and
+matches the exact boolean; switched off, the result is remeshed everywhere."""
+
+import bpy
+import numpy as np
+import pytest
+
+from aasdf.aasdf_addon import pipeline
+from tests.blender.scene import select, world_arrays
+from tests.metrics import exact_boolean, hausdorff, mesh_volume
+from tests.support import is_watertight
+
+RESOLUTION = 128
+
+
+def attribute(mesh, name, prop, width, dtype=np.float32):
+    values = np.empty(len(mesh.attributes[name].data) * width, dtype=dtype)
+    mesh.attributes[name].data.foreach_get(prop, values)
+    return values.reshape(-1, width) if width > 1 else values
+
+
+def faces_of(mesh):
+    """Per face: its corners' vertex positions (as a sorted tuple key) and its loop range."""
+    starts = attribute(mesh, ".corner_vert", "value", 1, np.int32)
+    loop_start = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("loop_start", loop_start)
+    totals = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("loop_total", totals)
+    co = attribute(mesh, "position", "vector", 3)
+    return starts, loop_start, totals, co
+
+
+def scene():
+    """A 2 x 2 x 2 box of six quads (materials per face, "UVMap", a second map, a corner colour), subdivided once so
+    that its faces far from the cut are quads of their own, and a 12-sided cylinder through one corner of its top."""
+    bpy.ops.mesh.primitive_cube_add(size=2.0)
+    box = bpy.context.active_object
+    box.name = "Box"
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.subdivide(number_cuts=3)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for k in range(2):
+        box.data.materials.append(bpy.data.materials.new(f"Side{k}"))
+    n = len(box.data.polygons)
+    box.data.attributes.new("material_index", "INT", "FACE").data.foreach_set("value", np.arange(n, dtype=np.int32) % 2)
+    uv = attribute(box.data, "UVMap", "vector", 2)
+    box.data.attributes.new("Decal", "FLOAT2", "CORNER").data.foreach_set("vector", (0.3 * uv + 0.1).ravel())
+    colour = box.data.color_attributes.new("Paint", "FLOAT_COLOR", "CORNER")
+    colour.data.foreach_set(
+        "color", np.random.default_rng(0).random((len(box.data.loops), 4)).astype(np.float32).ravel()
+    )
+    bpy.ops.mesh.primitive_cylinder_add(vertices=12, radius=0.3, depth=3.0, location=(0.55, 0.55, 0.0))
+    cutter = bpy.context.active_object
+    cutter.name = "Cutter"
+    bpy.context.view_layer.update()
+    return box, cutter
+
+
+@pytest.fixture
+def kept(fresh_cache):
+    box, cutter = scene()
+    select(box, cutter)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=RESOLUTION, hide_inputs=False) == {"FINISHED"}
+    return box, cutter, bpy.context.active_object, dict(pipeline.last_run)
+
+
+def test_the_cut_leaves_the_box_quads_as_they_were(kept):
+    box, cutter, result, numbers = kept
+    src, dst = box.data, result.data
+    s_corner, s_start, s_total, s_co = faces_of(src)
+    r_corner, r_start, r_total, r_co = faces_of(dst)
+    assert (r_total == 4).sum() >= 60  # the box's 96 quads, less the few the bore comes near: measured 81
+    # every quad of the result is one of the box's, corner by corner: positions, UVs, the second map, the colour
+    key = {tuple(np.round(s_co[s_corner[s : s + 4]], 6).ravel()): (s, k) for k, s in enumerate(s_start)}
+    s_uv, r_uv = attribute(src, "UVMap", "vector", 2), attribute(dst, "UVMap", "vector", 2)
+    s_decal, r_decal = attribute(src, "Decal", "vector", 2), attribute(dst, "Decal", "vector", 2)
+    s_paint, r_paint = attribute(src, "Paint", "color", 4), attribute(dst, "Paint", "color", 4)
+    s_mat, r_mat = (
+        attribute(src, "material_index", "value", 1, np.int32),
+        attribute(dst, "material_index", "value", 1, np.int32),
+    )
+    for r in np.flatnonzero(r_total == 4):
+        loops = np.arange(r_start[r], r_start[r] + 4)
+        found = key.get(tuple(np.round(r_co[r_corner[loops]], 6).ravel()))
+        assert found is not None  # the same corners in the same order
+        s, face = found
+        source_loops = np.arange(s, s + 4)
+        np.testing.assert_array_equal(r_co[r_corner[loops]], s_co[s_corner[source_loops]])
+        np.testing.assert_array_equal(r_uv[loops], s_uv[source_loops])
+        np.testing.assert_array_equal(r_decal[loops], s_decal[source_loops])
+        np.testing.assert_array_equal(r_paint[loops], s_paint[source_loops])
+        assert dst.materials[r_mat[r]] == src.materials[s_mat[face]]
+    assert numbers["faces"] == len(dst.polygons) and numbers["faces"] < 3000
+
+
+def test_the_kept_result_is_closed_and_exact(kept):
+    box, cutter, result, _ = kept
+    verts, tris = world_arrays(result)
+    assert is_watertight(tris)
+    exact = exact_boolean("DIFFERENCE", *world_arrays(box), *world_arrays(cutter))
+    h = float(np.linalg.norm(np.ptp(np.r_[world_arrays(box)[0], world_arrays(cutter)[0]], axis=0))) / RESOLUTION
+    d = hausdorff(verts, tris, *exact, n=50_000)
+    assert d["max"] < 1.0 * h and d["p95"] < 0.05 * h, d  # measured: max 0.3 voxel
+    assert mesh_volume(verts, tris) == pytest.approx(mesh_volume(*exact), rel=1e-3)
+
+
+def test_keep_faces_off_remeshes(fresh_cache):
+    box, cutter = scene()
+    select(box, cutter)
+    assert bpy.ops.aasdf.boolean(
+        operation="DIFFERENCE", resolution=RESOLUTION, hide_inputs=False, keep_faces=False
+    ) == {"FINISHED"}
+    mesh = bpy.context.active_object.data
+    totals = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("loop_total", totals)
+    assert (totals == 3).all() and len(totals) > 20_000
+    assert bpy.context.scene.aasdf.keep_faces  # on by default
