@@ -373,6 +373,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             return {"object": output.target.name if output.target is not None else output.name, "empty": True}
         with timer.stage("attributes"):
             result["attributes"] = carry_over(field, surface, operands)
+            triangles = len(result["tris"])  # as many as Blender's triangulation of what is written
             result = whole_faces_back(result, surface, operands, output)
         with timer.stage("write"):
             progress.step("writing the result")
@@ -402,7 +403,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
         nodes=field.node_count,
         level_counts=field.level_counts,
         vertices=len(result["verts"]),
-        triangles=len(result["tris"]),
+        triangles=triangles,
         faces=len(result["tris"]) + len(result["attributes"].get("polygons", ((),))[0]),
         cache_hits=hits,
         fields_built=builds,
