@@ -11,6 +11,7 @@ nodes, so it is saved with the .blend even when no editor shows it.
 import bpy
 from bpy.props import PointerProperty, StringProperty
 
+from .operands import is_operand
 from .properties import CSG_TREE as TREE
 from .properties import (
     auto_update_property,
@@ -113,15 +114,15 @@ class CsgNode:
 
 
 class AASDF_N_object(CsgNode, bpy.types.Node):
-    """The field of a mesh object's evaluated geometry (modifiers applied), in world space"""
+    """The field of an object's evaluated geometry (a mesh, text, curve, surface or metaball), in world space"""
 
     bl_idname, bl_label, bl_icon = OBJECT, "Object", "OBJECT_DATA"
 
     object: PointerProperty(
         name="Object",
-        description="Mesh object whose surface becomes a field",
+        description="Object whose evaluated surface becomes a field",
         type=bpy.types.Object,
-        poll=lambda self, obj: obj.type == "MESH",
+        poll=lambda self, obj: is_operand(obj),
         update=_changed,
     )
     thickness: thickness_property(update=_changed)

@@ -1,7 +1,9 @@
 """The one path from mesh objects to a result object, shared by ``aasdf.boolean``, ``aasdf.debug_volume`` and the CSG
 tree: read → key → cache → build → combine → extract → write, in that order and only that way.
 
-1. read: ``bridge.read_operands`` gives each object's evaluated local geometry and world matrix;
+1. read: ``operands.read_operands`` gives each object's evaluated local geometry (a mesh, text, curve, surface or
+   metaball, its instances realized) and world matrix; ``transforms.check_operands`` refuses a matrix that cannot place
+   a field, or moves a flat operand that has a thickness to world space;
 2. key: ``cache.geometry_key`` per operand (geometry, transform, field settings, device);
 3. cache: ``cache.find`` returns the fields it has;
 4. build: the missing ones are built together (``engine.build_fields``, checked together first) and ``cache.store``d;
@@ -23,7 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import bridge, cache, plan, runtime, transfer
+from . import bridge, cache, plan, runtime, transfer, transforms
+from .operands import read_operands
 
 # Numbers of the last successful run (``aasdf.boolean`` or a CSG tree): read by the sidebar and by scripts.
 last_run: dict = {}
@@ -127,8 +130,8 @@ _voxel_steps: dict = {}  # frozenset of object uids -> the ladder step their las
 PLACE_MAX_SCALE = 2.0 ** (0.5 / VOXEL_STEPS_PER_OCTAVE)
 
 
-def voxel_size_for(objects, depsgraph, settings: FieldSettings) -> float:
-    """``settings.voxel_size`` when positive, else the diagonal of the objects' combined world bounding box /
+def voxel_size_for(read, settings: FieldSettings) -> float:
+    """``settings.voxel_size`` when positive, else the diagonal of the read operands' combined world bounding box /
     ``settings.resolution``, snapped to a ladder of sizes (``VOXEL_STEPS_PER_OCTAVE`` a factor of 2, never coarser
     than asked) and held at the objects' previous step while the box changes little (``VOXEL_HOLD_STEPS``).
 
@@ -137,12 +140,12 @@ def voxel_size_for(objects, depsgraph, settings: FieldSettings) -> float:
     """
     if settings.voxel_size > 0.0:
         return float(np.float32(settings.voxel_size))
-    lo, hi = bridge.world_bounds(objects, depsgraph)
+    lo, hi = world_bounds(read)
     raw = float(np.linalg.norm(hi - lo)) / int(settings.resolution)
     if not raw > 0.0:
         raise runtime.engine().AasdfError("The inputs have no extent: set a Voxel Size")
     step = int(np.floor(np.log2(raw) * VOXEL_STEPS_PER_OCTAVE))
-    group = frozenset(obj.original.session_uid for obj in objects)
+    group = frozenset(operand.uid for operand in read)
     previous = _voxel_steps.get(group)
     position = np.log2(raw) * VOXEL_STEPS_PER_OCTAVE  # the step itself while in [step, step + 1)
     if previous is not None and previous - VOXEL_HOLD_STEPS <= position < previous + 1 + VOXEL_HOLD_STEPS:
@@ -152,9 +155,36 @@ def voxel_size_for(objects, depsgraph, settings: FieldSettings) -> float:
     return float(np.float32(2.0 ** (step / VOXEL_STEPS_PER_OCTAVE)))
 
 
+def world_bounds(read) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) float64 (3,) world corners of the read operands' boxes (their local boxes' corners placed)."""
+    corners = [np.zeros((1, 3))]
+    for operand in read:
+        if len(operand.verts):
+            lo, hi = operand.verts.min(axis=0), operand.verts.max(axis=0)
+            box = np.array(np.meshgrid(*zip(lo, hi, strict=True), indexing="ij"), dtype=np.float64).reshape(3, -1).T
+            corners.append(box @ operand.matrix[:3, :3].T + operand.matrix[:3, 3])
+    points = np.concatenate(corners[1:] or corners)
+    return points.min(axis=0), points.max(axis=0)
+
+
+def read_checked(inputs, output: Output, depsgraph) -> list:
+    """Read the inputs (``plan.Input``) as operands and check their transforms and the result object's, before any
+    work (``operands.read_operands``, ``transforms.check_operands``, ``transforms.check_target``).
+
+    Raises:
+        AasdfError: Naming each object that has no geometry or a transform that cannot be used, and what to do.
+    """
+    read = read_operands([item.obj for item in inputs], depsgraph)
+    read = transforms.check_operands(read, [item.thickness for item in inputs])
+    transforms.check_target(output.target)
+    return read
+
+
 def _placement(matrix_now, matrix_built):
     """The similarity moving a field built under ``matrix_built`` to where ``matrix_now`` puts its object, or None
     when that needs an uneven scale, a shear or too large a scale (``PLACE_MAX_SCALE``)."""
+    if not (transforms.invertible(matrix_now) and transforms.invertible(matrix_built)):
+        return None
     relative = np.asarray(matrix_now, dtype=np.float64) @ np.linalg.inv(np.asarray(matrix_built, dtype=np.float64))
     linear = relative[:3, :3]
     scale = float(np.cbrt(abs(np.linalg.det(linear))))
@@ -319,12 +349,11 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
     try:
         with timer.stage("read"):
             progress.step(f"reading {len(objects)} objects")
-            depsgraph = context.evaluated_depsgraph_get()
-            voxel_size = voxel_size_for(objects, depsgraph, settings)
-            operands = bridge.read_operands(objects, depsgraph)
+            read = read_checked(inputs, output, context.evaluated_depsgraph_get())
+            voxel_size = voxel_size_for(read, settings)
         with timer.stage("fields"):
             fields = operand_fields(
-                context, operands, settings, voxel_size, progress, thickness=[item.thickness for item in inputs]
+                context, read, settings, voxel_size, progress, thickness=[item.thickness for item in inputs]
             )
         with timer.stage("booleans"):
             fingerprint = tuple((id(f.codes), f.field_ids, _matrix_bytes(f)) for f in fields)
@@ -341,7 +370,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
         if len(result["tris"]) == 0:
             return {"object": output.target.name if output.target is not None else output.name, "empty": True}
         with timer.stage("attributes"):
-            result["attributes"] = carry_over(field, surface, operands)
+            result["attributes"] = carry_over(field, surface, read)
         with timer.stage("write"):
             progress.step("writing the result")
             obj = write(context, result, output)
@@ -389,6 +418,5 @@ def object_field(context, obj, settings: FieldSettings):
     Raises:
         AasdfError: As ``operand_fields``.
     """
-    depsgraph = context.evaluated_depsgraph_get()
-    voxel_size = voxel_size_for([obj], depsgraph, settings)
-    return operand_fields(context, bridge.read_operands([obj], depsgraph), settings, voxel_size)[0]
+    read = read_checked([plan.Input(obj)], Output(obj.name), context.evaluated_depsgraph_get())
+    return operand_fields(context, read, settings, voxel_size_for(read, settings))[0]
