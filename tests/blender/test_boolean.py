@@ -427,20 +427,22 @@ def test_rerun_after_undo_reuses_the_cache(fresh_cache):
 # ---- poll messages and reports ----
 
 
-def test_poll_needs_two_selected_meshes():
+def test_poll_needs_two_selected_objects():
     a, _ = spot_pair()
     select(a)
-    with pytest.raises(RuntimeError, match="Select at least two mesh objects"):
+    with pytest.raises(RuntimeError, match="Select at least two objects"):
         bpy.ops.aasdf.boolean()
 
 
-def test_poll_ignores_non_mesh_objects():
+def test_an_object_without_geometry_is_refused_by_name(fresh_cache):
     a, _ = spot_pair()
     empty = bpy.data.objects.new("Empty", None)
     bpy.context.scene.collection.objects.link(empty)
     select(a, empty)
-    with pytest.raises(RuntimeError, match="Select at least two mesh objects"):
+    objects = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match="'Empty' is an empty and has no geometry: use a mesh, text, curve"):
         bpy.ops.aasdf.boolean()
+    assert len(bpy.data.objects) == objects and not a.hide_get() and cache.stats()["builds"] == 0
 
 
 def test_active_mesh_is_the_first_operand_even_when_not_selected(fresh_cache):
@@ -460,11 +462,11 @@ def test_poll_needs_an_active_mesh():
     empty = bpy.data.objects.new("Empty", None)
     bpy.context.scene.collection.objects.link(empty)
     select(a, b, empty, active=empty)
-    with pytest.raises(RuntimeError, match="Needs an active mesh object"):
+    with pytest.raises(RuntimeError, match="Needs an active mesh, text, curve, surface or metaball object"):
         bpy.ops.aasdf.boolean()
     select(a, b)
     bpy.context.view_layer.objects.active = None
-    with pytest.raises(RuntimeError, match="Needs an active mesh object"):
+    with pytest.raises(RuntimeError, match="Needs an active mesh, text, curve, surface or metaball object"):
         bpy.ops.aasdf.boolean()
 
 
@@ -584,7 +586,7 @@ def test_debug_volume_operator_polls_and_reports():
     empty = bpy.data.objects.new("Empty", None)
     bpy.context.scene.collection.objects.link(empty)
     select(empty)
-    with pytest.raises(RuntimeError, match="Needs an active mesh object"):
+    with pytest.raises(RuntimeError, match="Needs an active mesh, text, curve, surface or metaball object"):
         bpy.ops.aasdf.debug_volume()
     obj = add_mesh_object("Ball", *uv_sphere(1.0, rings=16, segments=32))
     select(obj)
