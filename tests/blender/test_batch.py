@@ -112,9 +112,9 @@ def test_objects_of_a_blend_in_blend_out(scene_blend, tmp_path):
         (["--inputs", "{spot}"], "give at least two operands"),
         (["--inputs", "{spot}", "{spot}", "--output", "out.fbx"], "cannot write out.fbx"),
         (["--blend", "{blend}", "--objects", "A", "Nope"], "no object named 'Nope'"),
-        (["--blend", "{blend}", "--objects", "A", "Empty"], "object 'Empty' is not a mesh (its type is EMPTY)"),
+        (["--blend", "{blend}", "--objects", "A", "Empty"], "'Empty' is an empty and has no geometry"),
     ],
-    ids=["missing-file", "one-operand", "bad-output", "unknown-object", "non-mesh"],
+    ids=["missing-file", "one-operand", "bad-output", "unknown-object", "no-geometry"],
 )
 def test_bad_input_exits_with_a_clear_message(args, message, scene_blend, tmp_path):
     args = [arg.format(spot=mesh_path("spot.obj"), blend=scene_blend) for arg in args]

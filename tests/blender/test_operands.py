@@ -76,16 +76,12 @@ def metaball(name="Meta"):
 # ---- every geometry object is an operand ----
 
 
+# The targets at resolution 256 (text, bevelled curve); surface and metaball at 128. Measured: volumes within
+# 3e-7 (text), 6e-5, 2.3e-4, 4e-5 of the exact ones; Hausdorff p95 0.0035, 0.0017, 0.0095, 0.0044 voxels.
 @pytest.mark.parametrize(
-    ("make", "resolution", "measured"),
-    [
-        (text_object, 256, 1e-6),  # measured: volume within 3e-7, Hausdorff p95 3.3e-5 (voxel ~0.005)
-        (bevelled_circle, 256, 1e-3),
-        (surface_sphere, 128, 1e-3),
-        (metaball, 128, 1e-3),
-    ],
+    ("make", "resolution"), [(text_object, 256), (bevelled_circle, 256), (surface_sphere, 128), (metaball, 128)]
 )
-def test_a_non_mesh_cutter_takes_part_by_its_evaluated_geometry(make, resolution, measured, fresh_cache):
+def test_a_non_mesh_cutter_takes_part_by_its_evaluated_geometry(make, resolution, fresh_cache):
     block = add_mesh_object("Block", *BLOCK)
     cutter = make()
     before = local_state(cutter)
