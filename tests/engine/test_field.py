@@ -244,7 +244,7 @@ def test_open_meshes_coarse_node_signs_agree_with_the_winding_number(name):
     sample = np.random.default_rng(0).choice(len(centres), min(600, len(centres)), replace=False)
     exact = np.abs(winding_numbers(verts, tris, centres[sample])) >= 0.5
     away = _away_from_caps(engine.meshcheck.hole_caps(verts, tris), centres[sample])
-    # away from the caps (none on the teapot, whose lid's rim caps it all): the exact winding number's inside, every node
+    # away from the caps (none on the teapot: its rims' caps cover it): the exact winding number's inside, every node
     assert np.array_equal(inside_field[sample][away], exact[away]), np.count_nonzero(inside_field[sample] != exact)
     # everywhere: but for a few nodes near the holes
     assert np.mean(inside_field[sample] == exact) >= 0.99
