@@ -263,8 +263,9 @@ def test_moving_turning_or_scaling_an_operand_builds_no_field(fresh_cache):
     bpy.ops.aasdf.boolean(operation="DIFFERENCE", voxel_size=voxel, hide_inputs=False)
     assert boolean_op.last_run["fields_built"] == 2
     rebuilt = world_arrays(bpy.context.active_object)
-    assert mesh_volume(*placed) == pytest.approx(mesh_volume(*rebuilt), rel=0.005)
-    assert hausdorff(*placed, *rebuilt, n=20_000)["p95"] <= 0.25 * voxel
+    # measured: volume within 0.036 %, Hausdorff p95 0.016 voxel
+    assert mesh_volume(*placed) == pytest.approx(mesh_volume(*rebuilt), rel=0.0011)
+    assert hausdorff(*placed, *rebuilt, n=20_000)["p95"] <= 0.05 * voxel
     # an uneven scale needs a field of its own; other settings, new fields for both
     b.scale = (1.0, 1.3, 1.0)
     bpy.context.view_layer.update()
