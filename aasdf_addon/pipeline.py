@@ -23,6 +23,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 
+import bpy
 import numpy as np
 
 from . import bridge, cache, plan, runtime, transfer, transforms
@@ -72,9 +73,9 @@ class Progress:
     no-ops headless), and the ``progress_listeners``."""
 
     def __init__(self, context, steps: int):
-        self.context, self.done = context, 0
+        self.context, self.done, self.total = context, 0, max(1, steps)
         self.wm = context.window_manager
-        self.wm.progress_begin(0, max(1, steps))
+        self.wm.progress_begin(0, self.total)
 
     def step(self, text: str):
         self.done += 1
@@ -83,6 +84,16 @@ class Progress:
             self.context.workspace.status_text_set(f"SDF boolean: {text}")
         for listener in progress_listeners:
             listener(text)
+
+    def compiling(self, k: int, count: int, name: str):
+        """A step per kernel module compiled on a first run (``runtime.prepare_kernels``), drawn at once: each takes
+        seconds, and the status bar is not redrawn while an operator runs."""
+        if k == 0:
+            self.total += count
+            self.wm.progress_begin(0, self.total)
+        self.step(f"compiling the engine's kernels for this machine (first run only): {k + 1} of {count}, {name}")
+        if not bpy.app.background and self.context.window is not None:
+            bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=1)
 
     def end(self):
         self.wm.progress_end()
@@ -250,6 +261,7 @@ def _placed_fields(context, operands, settings: FieldSettings, voxel_size: float
         else:
             placed[k] = found[0].transformed(relative)
     if missing:
+        runtime.prepare_kernels(device, progress.compiling if progress is not None else None)
         first = [ks[0] for ks in missing.values()]  # one build per distinct geometry, under its first object's matrix
         if progress is not None:
             progress.step(f"building the fields of {', '.join(operands[k].name for k in first)}")

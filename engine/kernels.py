@@ -61,6 +61,40 @@ def warp_modules(engine_package: str, names=None) -> list:
     return [importlib.import_module(f"{engine_package}.{name}") for name in chosen]
 
 
+def modules_to_compile(engine_package: str, device) -> list:
+    """The engine's Python modules (``warp_modules``) whose kernels Warp's kernel cache does not hold for ``device``
+    yet: those the first launch would compile (seconds each) rather than load.
+
+    Args:
+        engine_package: The engine's package name (``engine``, or the add-on's ``<addon>.engine``).
+        device: A Warp device or its alias.
+    Returns:
+        The modules, in ``ENGINE_MODULES`` order (empty when all are compiled).
+    """
+    import warp as wp
+
+    device = wp.get_device(device)
+    cache = Path(wp.config.kernel_cache_dir)
+    # a CPU module is compiled with one thread per block: its hash (and folder) is that variant's
+    block_dim, pattern = (1, "*.o") if device.is_cpu else (None, "*.sm*")
+    return [
+        module
+        for module in warp_modules(engine_package)
+        if not any((cache / wp.get_module(module.__name__).get_module_identifier(block_dim)).glob(pattern))
+    ]
+
+
+def compile_modules(modules, device, report=None) -> None:
+    """Compile (or load) ``modules`` on ``device`` one after the other, calling ``report(k, count, short name)``
+    before module ``k`` of ``count``, so that a first run can show its progress."""
+    from . import parallel
+
+    for k, module in enumerate(modules):
+        if report is not None:
+            report(k, len(modules), module.__name__.rpartition(".")[2])
+        parallel.load_modules([module], device)
+
+
 def configure_modules(engine_package: str) -> None:
     """Give every module the engine launches the portable CPU flags (before any of them loads)."""
     import warp as wp
