@@ -18,7 +18,7 @@ def test_a_first_run_shows_the_kernels_it_compiles_module_by_module(monkeypatch,
     a = add_mesh_object("A", *uv_sphere(1.0, rings=16, segments=32))
     b = add_mesh_object("B", *uv_sphere(1.0, rings=16, segments=32), location=(0.5, 0.0, 0.0))
     select(a, b)
-    assert bpy.ops.aasdf.boolean(operation="UNION", resolution=32) == {"FINISHED"}
+    assert bpy.ops.aasdf.boolean(operation="UNION", resolution=32, hide_inputs=False) == {"FINISHED"}
     first = "compiling the engine's kernels for this machine (first run only): "
     compiling = [step for step in steps if step.startswith(first)]
     assert compiling == [f"{first}1 of 2, octree", f"{first}2 of 2, distance"]
