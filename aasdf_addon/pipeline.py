@@ -18,7 +18,6 @@ tree: read → key → cache → build → combine → extract → write, in tha
 ``last_run`` for the sidebar and for scripts. Nothing here loops over vertices or triangles in Python.
 """
 
-import hashlib
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -26,7 +25,7 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from . import bridge, cache, plan, runtime, transfer, transforms
+from . import bridge, cache, placement, plan, runtime, transfer, transforms
 from .operands import read_operands
 
 # Numbers of the last successful run (``aasdf.boolean`` or a CSG tree): read by the sidebar and by scripts.
@@ -133,12 +132,9 @@ class Timer:
 # Voxel sizes derived from a resolution are snapped to this ladder (steps of 2^(1/4), about 19 %), and a run keeps
 # the step the previous run on the same objects took while the raw size stays within VOXEL_HOLD of it: dragging an
 # operand changes the combined bounding box a little, which must not change the voxel size of every field.
-VOXEL_STEPS_PER_OCTAVE = 4
+VOXEL_STEPS_PER_OCTAVE = placement.VOXEL_STEPS_PER_OCTAVE
 VOXEL_HOLD_STEPS = 0.75
 _voxel_steps: dict = {}  # frozenset of object uids -> the ladder step their last run took
-# A cached field is placed where its object now is when that takes a rigid motion and a uniform scale within this
-# factor of the one it was built under; beyond it (or under an uneven scale or shear) the field is built again.
-PLACE_MAX_SCALE = 2.0 ** (0.5 / VOXEL_STEPS_PER_OCTAVE)
 
 
 def voxel_size_for(read, settings: FieldSettings) -> float:
@@ -191,22 +187,6 @@ def read_checked(inputs, output: Output, depsgraph) -> list:
     return read
 
 
-def _placement(matrix_now, matrix_built):
-    """The similarity moving a field built under ``matrix_built`` to where ``matrix_now`` puts its object, or None
-    when that needs an uneven scale, a shear or too large a scale (``PLACE_MAX_SCALE``)."""
-    if not (transforms.invertible(matrix_now) and transforms.invertible(matrix_built)):
-        return None
-    relative = np.asarray(matrix_now, dtype=np.float64) @ np.linalg.inv(np.asarray(matrix_built, dtype=np.float64))
-    linear = relative[:3, :3]
-    scale = float(np.cbrt(abs(np.linalg.det(linear))))
-    if not scale > 0.0 or max(scale, 1.0 / scale) > PLACE_MAX_SCALE:
-        return None
-    rotation = linear / scale
-    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
-        return None
-    return relative
-
-
 def operand_fields(
     context, operands, settings: FieldSettings, voxel_size: float, progress=None, thickness=None
 ) -> list:
@@ -238,56 +218,61 @@ def operand_fields(
 
 def _placed_fields(context, operands, settings: FieldSettings, voxel_size: float, progress, thickness) -> list:
     """One field per operand, each with the wall ``thickness[k]`` (0: none), from the cache or built; placed."""
-    engine = runtime.engine()
     device = runtime.device(context)
     options = {"voxel_size": voxel_size, "levels": settings.levels, "padding": settings.padding}
     placed = [None] * len(operands)
-    missing = {}  # key -> the operands that need it built
+    missing = {}  # key -> (the matrix to build it under, the operands that need it)
     for k, operand in enumerate(operands):
         key = cache.geometry_key(operand.verts, operand.tris, **options, thickness=thickness[k], device=device)
-        found = cache.find(key) if key not in missing else None
-        relative = _placement(operand.matrix, found[1]) if found is not None else None
-        if relative is None and (found is not None or key in missing):
-            # the geometry's field sits where no similarity moves it to this object: a field of its own, keyed by
-            # its world matrix too (an unevenly scaled or sheared copy)
-            ref = found[1] if found is not None else operands[missing[key][0]].matrix
-            if _placement(operand.matrix, ref) is None:
-                key = f"{key}:{hashlib.blake2b(operand.matrix.tobytes(), digest_size=8).hexdigest()}"
-                found = cache.find(key) if key not in missing else None
-                relative = _placement(operand.matrix, found[1]) if found is not None else None
+        key, build, found = placement.field_key(key, operand.matrix, missing)
         cache.note_object(operand.uid, key)
-        if relative is None:
-            missing.setdefault(key, []).append(k)
+        if found is None:
+            missing.setdefault(key, (build, []))[1].append(k)
         else:
-            placed[k] = found[0].transformed(relative)
+            placed[k] = found[0].transformed(placement.placement(operand.matrix, found[1]))
     if missing:
         runtime.prepare_kernels(device, progress.compiling if progress is not None else None)
-        first = [ks[0] for ks in missing.values()]  # one build per distinct geometry, under its first object's matrix
         if progress is not None:
-            progress.step(f"building the fields of {', '.join(operands[k].name for k in first)}")
-        try:
-            built = [None] * len(first)
-            by_thickness = {}
-            for j, k in enumerate(first):
-                by_thickness.setdefault(thickness[k], []).append(j)
-            for wall, js in by_thickness.items():  # checked and built together, a group per thickness
-                meshes = [operands[first[j]].world() for j in js]
-                extra = {"thickness": wall} if wall > 0.0 else {}
-                for j, field in zip(js, engine.build_fields(meshes, **options, **extra, device=device), strict=True):
-                    built[j] = field
-        except engine.AasdfError as err:
-            message = str(err)
-            if message.startswith("Mesh "):  # "Mesh <j>: ..." counts the meshes built: name the object instead
-                head, _, rest = message.partition(": ")
-                message = f"{operands[first[int(head.split()[1])]].name}: {rest}"
-            raise engine.AasdfError(message) from err
+            names = ", ".join(operands[ks[0]].name for _build, ks in missing.values())
+            progress.step(f"building the fields of {names}")
+        built = _build(operands, list(missing.values()), options, thickness, device)
         limit = cache.limit_bytes(context)
-        for (key, ks), field in zip(missing.items(), built, strict=True):
-            cache.store(key, field, operands[ks[0]].matrix, limit)
+        for (key, (build, ks)), field in zip(missing.items(), built, strict=True):
+            cache.store(key, field, build, limit)
             for k in ks:
-                relative = _placement(operands[k].matrix, operands[ks[0]].matrix)
-                placed[k] = field if k == ks[0] else field.transformed(relative)
+                same = np.array_equal(operands[k].matrix, build)
+                placed[k] = field if same else field.transformed(placement.placement(operands[k].matrix, build))
     return placed
+
+
+def _build(operands, wanted, options, thickness, device) -> list:
+    """Build one field per ``(matrix, operand indices)`` of ``wanted``: the first operand's geometry placed by that
+    matrix, checked and built together, a group per thickness.
+
+    Raises:
+        AasdfError: From the engine, naming the object instead of the engine's "Mesh <j>".
+    """
+    engine = runtime.engine()
+    built = [None] * len(wanted)
+    by_thickness = {}
+    for j, (_matrix, ks) in enumerate(wanted):
+        by_thickness.setdefault(thickness[ks[0]], []).append(j)
+    try:
+        for wall, js in by_thickness.items():
+            meshes = [
+                bridge.to_world(operands[wanted[j][1][0]].verts, operands[wanted[j][1][0]].tris, wanted[j][0])
+                for j in js
+            ]
+            extra = {"thickness": wall} if wall > 0.0 else {}
+            for j, field in zip(js, engine.build_fields(meshes, **options, **extra, device=device), strict=True):
+                built[j] = field
+    except engine.AasdfError as err:
+        message = str(err)
+        if message.startswith("Mesh "):  # "Mesh <i>: ..." counts the meshes of a group: name the object instead
+            head, _, rest = message.partition(": ")
+            message = f"{operands[wanted[js[int(head.split()[1])]][1][0]].name}: {rest}"
+        raise engine.AasdfError(message) from err
+    return built
 
 
 def _matrix_bytes(field) -> bytes:
