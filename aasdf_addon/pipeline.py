@@ -84,13 +84,14 @@ class Progress:
         for listener in progress_listeners:
             listener(text)
 
-    def compiling(self, k: int, count: int, name: str):
+    def compiling(self, done: int, count: int, name: str):
         """A step per kernel module compiled on a first run (``runtime.prepare_kernels``), drawn at once: each takes
         seconds, and the status bar is not redrawn while an operator runs."""
-        if k == 0:
+        if done == 0:
             self.total += count
             self.wm.progress_begin(0, self.total)
-        self.step(f"compiling the engine's kernels for this machine (first run only): {k + 1} of {count}, {name}")
+        text = f"compiling the engine's kernels for this machine (first run only): {done} of {count} done"
+        self.step(f"{text}, {name}" if name else text)
         if not bpy.app.background and self.context.window is not None:
             bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=1)
 

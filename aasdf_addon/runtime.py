@@ -93,8 +93,9 @@ _kernels_ready: set = set()  # devices whose engine kernels were checked (and co
 
 def prepare_kernels(device: str, report=None) -> int:
     """Compile the engine's kernels that Warp's kernel cache lacks for ``device`` (a first run in a checkout, or after
-    an update; about two minutes for all of them on a CPU here) one module after the other, calling
-    ``report(k, count, name)`` before each; checked once per device and process. Returns the modules compiled."""
+    an update; about two minutes for all of them on a CPU here), a module per core at a time, calling
+    ``report(done, count, name)`` as each is done (``engine.kernels.compile_modules``); checked once per device and
+    process. Returns the modules compiled."""
     if device in _kernels_ready:
         return 0
     module = engine()

@@ -84,15 +84,26 @@ def modules_to_compile(engine_package: str, device) -> list:
     ]
 
 
-def compile_modules(modules, device, report=None) -> None:
-    """Compile (or load) ``modules`` on ``device`` one after the other, calling ``report(k, count, short name)``
-    before module ``k`` of ``count``, so that a first run can show its progress."""
+def compile_modules(modules, device, report=None, *, workers: int | None = None) -> None:
+    """Compile (or load) ``modules`` on ``device``, ``workers`` at a time (default: one per core; Warp's compiler
+    releases the GIL), so that a first run can show its progress: ``report(done, count, short name)`` is called in
+    the caller's thread, with ``(0, count, "")`` first, then as each module is done.
+
+    Raises:
+        Whatever compiling a module raised.
+    """
+    from concurrent.futures import ThreadPoolExecutor, as_completed
+
     from . import parallel
 
-    for k, module in enumerate(modules):
-        if report is not None:
-            report(k, len(modules), module.__name__.rpartition(".")[2])
-        parallel.load_modules([module], device)
+    if report is not None:
+        report(0, len(modules), "")
+    with ThreadPoolExecutor(max(1, min(len(modules), workers or os.cpu_count() or 1))) as pool:
+        running = {pool.submit(parallel.load_modules, [module], device): module for module in modules}
+        for done, future in enumerate(as_completed(running), 1):
+            future.result()
+            if report is not None:
+                report(done, len(modules), running[future].__name__.rpartition(".")[2])
 
 
 def configure_modules(engine_package: str) -> None:
