@@ -420,3 +420,19 @@ def test_duplicates_at_ten_scales_build_a_field_per_ladder_step(fresh_cache):
     verts, tris = world_arrays(bpy.context.active_object)
     # measured within 1.8e-5 and 6.4e-6 of the exact volume
     assert mesh_volume(verts, tris) == pytest.approx(mesh_volume(*exact_ring(cube, balls)), rel=6e-5)
+
+
+def test_the_poll_and_a_tree_from_the_selection_take_a_text(fresh_cache):
+    block = add_mesh_object("Block", *BLOCK)
+    text = text_object()
+    select(text, block)  # the text active: the base
+    assert bpy.ops.aasdf.boolean.poll() and bpy.ops.aasdf.offset.poll() and bpy.ops.aasdf.debug_volume.poll()
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    bpy.context.scene.collection.objects.link(camera)
+    select(camera, block)
+    assert not bpy.ops.aasdf.boolean.poll()  # an active object without geometry
+    select(block, text, camera)  # the camera is left out of a tree: a node cannot hold it
+    assert bpy.ops.aasdf.tree_from_selection(operation="DIFFERENCE") == {"FINISHED"}
+    tree = next(tree for tree in bpy.data.node_groups if tree.bl_idname == nodes.TREE)
+    assert sorted(node.object.name for node in tree.nodes if node.bl_idname == nodes.OBJECT) == ["Block", "Text"]
+    assert "Block.csg" in bpy.data.objects
