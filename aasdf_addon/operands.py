@@ -101,9 +101,9 @@ def joined(operand, pieces):
     corner_offsets = np.cumsum([0] + [p.corner_count for p in parts])[:-1]
     face_offsets = np.cumsum([0] + [len(p.face_material) for p in parts])[:-1]
     operand.verts = np.concatenate([p.verts for p in parts]).astype(np.float32)
-    operand.tris = np.concatenate([p.tris + o for p, o in zip(parts, vert_offsets, strict=True)]).astype(np.int32)
-    operand.corners = np.concatenate([p.corners + o for p, o in zip(parts, corner_offsets, strict=True)])
-    operand.faces = np.concatenate([p.faces + o for p, o in zip(parts, face_offsets, strict=True)]).astype(np.int32)
+    operand.tris = _renumbered([p.tris for p in parts], vert_offsets)
+    operand.corners = _renumbered([p.corners for p in parts], corner_offsets)
+    operand.faces = _renumbered([p.faces for p in parts], face_offsets)
     operand.face_material = np.concatenate([p.face_material for p in parts]).astype(np.int32)
     operand.face_smooth = np.concatenate([p.face_smooth for p in parts])
     operand.corner_count = sum(p.corner_count for p in parts)
@@ -118,3 +118,8 @@ def joined(operand, pieces):
         if all(name in p.colors and p.colors[name][0] == kind for p in parts)
     }
     return operand
+
+
+def _renumbered(arrays, offsets) -> np.ndarray:
+    """Index arrays of several parts as one int32 array, each part's indices shifted by its offset."""
+    return np.concatenate([array + offset for array, offset in zip(arrays, offsets, strict=True)]).astype(np.int32)
