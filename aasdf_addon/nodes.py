@@ -56,7 +56,7 @@ def is_csg_tree(tree) -> bool:
 
 
 class AASDF_NT_csg(bpy.types.NodeTree):
-    """Procedural SDF booleans of mesh objects, evaluated into result objects"""
+    """Procedural SDF booleans of objects (meshes, texts, curves, ...), evaluated into result objects"""
 
     bl_idname, bl_label, bl_icon = TREE, "AASDF CSG", "MOD_BOOLEAN"
 
@@ -136,13 +136,13 @@ class AASDF_N_object(CsgNode, bpy.types.Node):
 
 
 class AASDF_N_collection(CsgNode, bpy.types.Node):
-    """The union of the fields of a collection's mesh objects (child collections included)"""
+    """The union of the fields of a collection's objects with geometry (child collections included)"""
 
     bl_idname, bl_label, bl_icon = COLLECTION, "Collection", "OUTLINER_COLLECTION"
 
     collection: PointerProperty(
         name="Collection",
-        description="Collection whose mesh objects are united into one field",
+        description="Collection whose objects with geometry are united into one field",
         type=bpy.types.Collection,
         update=_changed,
     )

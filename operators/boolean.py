@@ -1,6 +1,6 @@
-"""``aasdf.boolean``: the selected mesh objects combined as an SDF boolean into a new object. Also ``aasdf.offset`` and
-``aasdf.shell`` (the active mesh grown, shrunk or hollowed into a new object), ``aasdf.debug_volume`` (the active
-mesh's field as a Volume object) and ``aasdf.clear_cache``.
+"""``aasdf.boolean``: the selected objects (meshes, texts, curves, surfaces, metaballs) combined as an SDF boolean into
+a new object. Also ``aasdf.offset`` and ``aasdf.shell`` (the active object grown, shrunk or hollowed into a new
+object), ``aasdf.debug_volume`` (the active object's field as a Volume object) and ``aasdf.clear_cache``.
 
 The active object is the first operand. DIFFERENCE is the active object minus all the others; UNION and INTERSECT
 take them all. The operators read their settings, hand them to ``aasdf_addon.pipeline`` (which the CSG node tree uses
@@ -53,7 +53,7 @@ class GeometryPoll:
 
 
 class AASDF_OT_boolean(bpy.types.Operator):
-    """Combine the active mesh with the other selected meshes as an SDF boolean, into a new object"""
+    """Combine the active object with the other selected ones (meshes, texts, curves...) as an SDF boolean"""
 
     bl_idname, bl_label, bl_options = "aasdf.boolean", "SDF Boolean", {"REGISTER", "UNDO"}
 
@@ -130,7 +130,7 @@ def run(op, context, objects, steps, name, empty_message, operation=None):
 
 
 class AASDF_OT_offset(GeometryPoll, bpy.types.Operator):
-    """Grow or shrink the active mesh by a distance, as a new object (any distance, rounded at the edges)"""
+    """Grow or shrink the active object by a distance, as a new object (any distance, rounded at the edges)"""
 
     bl_idname, bl_label, bl_options = "aasdf.offset", "SDF Offset", {"REGISTER", "UNDO"}
 
@@ -157,7 +157,7 @@ class AASDF_OT_offset(GeometryPoll, bpy.types.Operator):
 
 
 class AASDF_OT_shell(GeometryPoll, bpy.types.Operator):
-    """Hollow the active mesh into a shell with walls of a given thickness, as a new object (for 3D printing)"""
+    """Hollow the active object into a shell with walls of a given thickness, as a new object (for 3D printing)"""
 
     bl_idname, bl_label, bl_options = "aasdf.shell", "SDF Shell", {"REGISTER", "UNDO"}
 
@@ -185,7 +185,7 @@ class AASDF_OT_shell(GeometryPoll, bpy.types.Operator):
 
 
 class AASDF_OT_debug_volume(GeometryPoll, bpy.types.Operator):
-    """Show the signed distance field of the active mesh as a Volume object, with its octree cells as points"""
+    """Show the signed distance field of the active object as a Volume object, with its octree cells as points"""
 
     bl_idname, bl_label, bl_options = "aasdf.debug_volume", "Debug Volume", {"REGISTER", "UNDO"}
 

@@ -1,5 +1,5 @@
 """``aasdf.evaluate_tree``: evaluate an ``AASDF CSG`` node tree into its result objects; and
-``aasdf.tree_from_selection``: a new tree that combines the selected meshes, as ``aasdf.boolean`` would.
+``aasdf.tree_from_selection``: a new tree that combines the selected objects, as ``aasdf.boolean`` would.
 
 Evaluation goes through ``aasdf_addon.autoupdate.evaluate_now`` → ``aasdf_addon.csg``: the field cache, the engine's
 booleans and the result writing that ``aasdf.boolean`` uses. An invalid tree (its problems are shown on the nodes) is an
@@ -80,7 +80,7 @@ class AASDF_OT_evaluate_tree(bpy.types.Operator):
 
 
 class AASDF_OT_tree_from_selection(bpy.types.Operator):
-    """Create an AASDF CSG node tree combining the selected meshes (the active one first), and evaluate it"""
+    """Create an AASDF CSG node tree combining the selected objects (the active one first), and evaluate it"""
 
     bl_idname, bl_label, bl_options = "aasdf.tree_from_selection", "New CSG Tree from Selection", {"REGISTER", "UNDO"}
 
