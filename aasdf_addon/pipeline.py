@@ -4,7 +4,9 @@ tree: read → key → cache → build → combine → extract → write, in tha
 1. read: ``operands.read_operands`` gives each object's evaluated local geometry (a mesh, text, curve, surface or
    metaball, its instances realized) and world matrix; ``transforms.check_operands`` refuses a matrix that cannot place
    a field, or moves a flat operand that has a thickness to world space;
-2. key: ``cache.geometry_key`` per operand (geometry, transform, field settings, device);
+2. key: ``cache.geometry_key`` per operand (geometry in its own frame, field settings, device), refined by
+   ``placement.field_key`` for an object no field of its geometry can reach by a similarity (its scale's ladder step,
+   or its whole matrix under an uneven scale or a shear);
 3. cache: ``cache.find`` returns the fields it has;
 4. build: the missing ones are built together (``engine.build_fields``, checked together first) and ``cache.store``d;
    each field is relabelled with its operand's index (``field_id`` = position in the plan's operand list);
