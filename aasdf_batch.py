@@ -47,7 +47,9 @@ def parse_args(args):
     parser = argparse.ArgumentParser(prog="aasdf_batch.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("--operation", type=str.lower, choices=sorted(OPERATIONS), help="the boolean of the operands")
     parser.add_argument("--inputs", nargs="+", default=[], metavar="FILE", help="mesh files: .obj, .ply, .stl")
-    parser.add_argument("--objects", nargs="+", default=[], metavar="NAME", help="mesh objects of the open .blend")
+    parser.add_argument(
+        "--objects", nargs="+", default=[], metavar="NAME", help="objects of the open .blend: mesh, text, curve, ..."
+    )
     parser.add_argument("--output", required=True, metavar="FILE", help=".ply, .obj, .stl or .blend")
     parser.add_argument("--resolution", type=int, default=256, help="voxels along the inputs' bounding-box diagonal")
     parser.add_argument("--voxel-size", type=float, default=0.0, help="finest voxel size (overrides --resolution)")
@@ -148,14 +150,15 @@ def import_operand(path):
     return meshes[0]
 
 
-def scene_operand(name):
+def scene_operand(name, operands):
+    """A named object of the scene with geometry (``operands``: the add-on's ``aasdf_addon.operands``)."""
     import bpy
 
     obj = bpy.data.objects.get(name)
     if obj is None or obj.name not in bpy.context.view_layer.objects:
         raise BatchError(f"no object named {name!r} in the scene")
-    if obj.type != "MESH":
-        raise BatchError(f"object {name!r} is not a mesh (its type is {obj.type})")
+    if not operands.is_operand(obj):
+        raise BatchError(operands.refusal(obj))
     return obj
 
 
@@ -243,7 +246,7 @@ def run(args) -> int:
     if bpy.context.mode != "OBJECT":
         bpy.ops.object.mode_set(mode="OBJECT")
     # Names first: an unknown object fails before anything is imported.
-    named = [scene_operand(name) for name in args.objects]
+    named = [scene_operand(name, package.aasdf_addon.operands) for name in args.objects]
     operands = [import_operand(path) for path in args.inputs] + named
     if len(operands) > 1 and len({obj.name for obj in operands}) < 2:
         raise BatchError("give at least two different operands")

@@ -33,6 +33,7 @@ class Operand:
     materials: list = field(default_factory=list)  # the object's slots' materials (None: an empty slot)
     uv_maps: dict = field(default_factory=dict)  # name -> (L, 2) float32 per corner
     colors: dict = field(default_factory=dict)  # name -> (domain "POINT" | "CORNER", data type, (N, 4) float32)
+    corner_count: int = 0  # the mesh's face corners (loops)
     loop_start: np.ndarray = None  # (P,) int32 first corner of each face
     corner_vert: np.ndarray = None  # (L,) int32 vertex of each corner
 
@@ -50,33 +51,41 @@ def read_operands(objects, depsgraph) -> list[Operand]:
     operands = []
     for obj in objects:
         evaluated = obj.evaluated_get(depsgraph)
-        mesh = evaluated.to_mesh()
-        try:
-            verts, tris, corners, faces = _triangles(mesh)
-            operand = Operand(
-                obj.original,
-                obj.original.session_uid,
-                verts,
-                tris,
-                np.array(evaluated.matrix_world, dtype=np.float64),
-                corners=corners,
-                faces=faces,
-                face_material=_attribute(mesh, "material_index", "value", np.int32, len(mesh.polygons)),
-                face_smooth=~_attribute(mesh, "sharp_face", "value", bool, len(mesh.polygons)),
-                materials=[slot.material for slot in obj.original.material_slots],
-                loop_start=_get(mesh.polygons, "loop_start", np.int32),
-                corner_vert=_attribute(mesh, ".corner_vert", "value", np.int32, len(mesh.loops)),
-            )
-            for layer in mesh.uv_layers:
-                operand.uv_maps[layer.name] = _attribute(mesh, layer.name, "vector", np.float32, len(mesh.loops), 2)
-            for attr in mesh.color_attributes:
-                if attr.domain in ("POINT", "CORNER"):
-                    values = _get(attr.data, "color", np.float32, 4)
-                    operand.colors[attr.name] = (attr.domain, attr.data_type, values)
-        finally:
-            evaluated.to_mesh_clear()
-        operands.append(operand)
+        operands.append(read_mesh_operand(evaluated, np.array(evaluated.matrix_world, dtype=np.float64)))
     return operands
+
+
+def read_mesh_operand(evaluated, matrix) -> Operand:
+    """An evaluated object's mesh (``to_mesh()``: a mesh, or a text, curve, surface or metaball as Blender meshes it)
+    read as an operand placed by ``matrix`` (4, 4) float64."""
+    obj = evaluated.original
+    mesh = evaluated.to_mesh()
+    try:
+        verts, tris, corners, faces = _triangles(mesh)
+        operand = Operand(
+            obj,
+            obj.session_uid,
+            verts,
+            tris,
+            matrix,
+            corners=corners,
+            faces=faces,
+            face_material=_attribute(mesh, "material_index", "value", np.int32, len(mesh.polygons)),
+            face_smooth=~_attribute(mesh, "sharp_face", "value", bool, len(mesh.polygons)),
+            materials=[slot.material for slot in obj.material_slots],
+            corner_count=len(mesh.loops),
+            loop_start=_get(mesh.polygons, "loop_start", np.int32),
+            corner_vert=_attribute(mesh, ".corner_vert", "value", np.int32, len(mesh.loops)),
+        )
+        for layer in mesh.uv_layers:
+            operand.uv_maps[layer.name] = _attribute(mesh, layer.name, "vector", np.float32, len(mesh.loops), 2)
+        for attr in mesh.color_attributes:
+            if attr.domain in ("POINT", "CORNER"):
+                values = _get(attr.data, "color", np.float32, 4)
+                operand.colors[attr.name] = (attr.domain, attr.data_type, values)
+    finally:
+        evaluated.to_mesh_clear()
+    return operand
 
 
 def _triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -1,10 +1,10 @@
 """Evaluation of an ``AASDF CSG`` tree: validate, then walk it once bottom-up through the shared pipeline.
 
-``plan_tree`` checks the whole tree before any work starts: every input socket connected, each Object node on a mesh
-object, each Collection node on a collection with mesh objects, Output nodes with distinct names of objects that are
-not their own inputs. Problems are written on their nodes (``node.message``) and raised together as ``AasdfError``,
-so the previous results stay as they are. A valid output becomes a plan (``aasdf_addon.plan``) over its operands, the
-distinct (mesh object, thickness) inputs below it in depth-first order.
+``plan_tree`` checks the whole tree before any work starts: every input socket connected, each Object node on an
+object with geometry, each Collection node on a collection with such objects, Output nodes with distinct names of
+objects that are not their own inputs. Problems are written on their nodes (``node.message``) and raised together as
+``AasdfError``, so the previous results stay as they are. A valid output becomes a plan (``aasdf_addon.plan``) over its
+operands, the distinct (object, thickness) inputs below it in depth-first order.
 
 ``evaluate_tree`` then runs each output's plan through ``pipeline.run`` (read, key, cache, build, combine, extract,
 write), writing or updating the result object in place: the path ``aasdf.boolean`` takes.
@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import bpy
 
 from . import nodes, pipeline, plan, runtime
+from .operands import is_operand, refusal
 
 
 @dataclass
@@ -49,8 +50,9 @@ def result_names(tree) -> set:
 
 
 def collection_meshes(collection, exclude=()) -> list:
-    """Mesh objects of a collection and its children, except those named in ``exclude`` (the tree's results)."""
-    return [obj for obj in collection.all_objects if obj.type == "MESH" and obj.name not in exclude]
+    """Objects with geometry (``is_operand``) of a collection and its children, except those named in
+    ``exclude`` (the tree's results)."""
+    return [obj for obj in collection.all_objects if is_operand(obj) and obj.name not in exclude]
 
 
 def input_objects(tree) -> tuple[set, set]:
@@ -127,10 +129,10 @@ def _plan_node(node, operands, errors, exclude):
     if kind == nodes.OBJECT:
         obj = node.object
         if obj is None:
-            errors[node.name] = "Choose a mesh object"
+            errors[node.name] = "Choose an object"
             return None
-        if obj.type != "MESH":
-            errors[node.name] = f"'{obj.name}' is not a mesh object"
+        if not is_operand(obj):
+            errors[node.name] = refusal(obj)
             return None
         return _operand(obj, node.thickness, operands)
     if kind == nodes.COLLECTION:
@@ -140,7 +142,7 @@ def _plan_node(node, operands, errors, exclude):
             return None
         meshes = collection_meshes(collection, exclude)
         if not meshes:
-            errors[node.name] = f"Collection '{collection.name}' has no mesh objects"
+            errors[node.name] = f"Collection '{collection.name}' has no objects with geometry"
             return None
         return ("boolean", "UNION", 0.0, "ROUND", [_operand(obj, node.thickness, operands) for obj in meshes])
     if kind in nodes.BOOLEAN_NODES:

@@ -1,12 +1,14 @@
 """Debug views of a field: a Volume object with the signed distances, and the octree's cells as points.
 
 The volume is a real OpenVDB file written with the ``openvdb`` module Blender ships
-(``bpy.utils.expose_bundled_modules()``): one float grid named ``sdf`` (negative inside) whose transform puts voxel
-``[i, j, k]`` at the world position of dense sample ``[i, j, k]``. Files go to the extension's user folder
+(``bpy.utils.expose_bundled_modules()``, Blender 4.4 and later; where a Blender has none, ``openvdb_module`` refuses
+with a sentence): one float grid named ``sdf`` (negative inside) whose transform puts voxel ``[i, j, k]`` at the world
+position of dense sample ``[i, j, k]``. Files go to the extension's user folder
 (``.../aasdf/debug``), or a temporary folder when the add-on is not installed as an extension. Both objects are
 linked to a collection ``AASDF Debug``.
 """
 
+import importlib
 import os
 import re
 import tempfile
@@ -15,6 +17,7 @@ import uuid
 import bpy
 import numpy as np
 
+from . import runtime
 from .preferences import ADDON_ID
 
 COLLECTION = "AASDF Debug"
@@ -43,6 +46,27 @@ def dense_spacing(field, max_samples: int = MAX_DENSE_SAMPLES) -> float:
     return spacing
 
 
+def openvdb_module():
+    """Blender's OpenVDB Python module: ``openvdb`` made importable by ``bpy.utils.expose_bundled_modules()`` (Blender
+    4.4 and later), else an ``openvdb`` or ``pyopenvdb`` already on the path (older Blenders, some builds).
+
+    Raises:
+        AasdfError: When this Blender has none, saying so (the booleans themselves do not need it).
+    """
+    expose = getattr(bpy.utils, "expose_bundled_modules", None)
+    if expose is not None:
+        expose()
+    for name in ("openvdb", "pyopenvdb"):
+        try:
+            return importlib.import_module(name)
+        except ImportError:
+            continue
+    raise runtime.engine().AasdfError(
+        f"Debug Volume needs OpenVDB's Python module, which Blender {bpy.app.version_string} does not provide "
+        "(Blender 4.4 and later do): the booleans work without it"
+    )
+
+
 def write_vdb(field, filepath, *, spacing=None) -> str:
     """Write a field's dense signed distances as a float grid ``sdf`` to an OpenVDB file.
 
@@ -53,11 +77,9 @@ def write_vdb(field, filepath, *, spacing=None) -> str:
     Returns:
         ``filepath``.
     Raises:
-        AasdfError: If the dense block would not fit in memory.
+        AasdfError: If the dense block would not fit in memory, or this Blender has no OpenVDB module.
     """
-    bpy.utils.expose_bundled_modules()
-    import openvdb
-
+    openvdb = openvdb_module()
     dense = field.to_dense(spacing=spacing or dense_spacing(field))
     values = np.ascontiguousarray(dense["values"], dtype=np.float32)
     step, origin = float(dense["spacing"]), [float(x) for x in dense["origin"]]

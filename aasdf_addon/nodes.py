@@ -11,6 +11,7 @@ nodes, so it is saved with the .blend even when no editor shows it.
 import bpy
 from bpy.props import PointerProperty, StringProperty
 
+from .operands import is_operand
 from .properties import CSG_TREE as TREE
 from .properties import (
     auto_update_property,
@@ -56,7 +57,7 @@ def is_csg_tree(tree) -> bool:
 
 
 class AASDF_NT_csg(bpy.types.NodeTree):
-    """Procedural SDF booleans of mesh objects, evaluated into result objects"""
+    """Procedural SDF booleans of objects (meshes, texts, curves, ...), evaluated into result objects"""
 
     bl_idname, bl_label, bl_icon = TREE, "AASDF CSG", "MOD_BOOLEAN"
 
@@ -114,15 +115,15 @@ class CsgNode:
 
 
 class AASDF_N_object(CsgNode, bpy.types.Node):
-    """The field of a mesh object's evaluated geometry (modifiers applied), in world space"""
+    """The field of an object's evaluated geometry (a mesh, text, curve, surface or metaball), in world space"""
 
     bl_idname, bl_label, bl_icon = OBJECT, "Object", "OBJECT_DATA"
 
     object: PointerProperty(
         name="Object",
-        description="Mesh object whose surface becomes a field",
+        description="Object whose evaluated surface becomes a field",
         type=bpy.types.Object,
-        poll=lambda self, obj: obj.type == "MESH",
+        poll=lambda self, obj: is_operand(obj),
         update=_changed,
     )
     thickness: thickness_property(update=_changed)
@@ -136,13 +137,13 @@ class AASDF_N_object(CsgNode, bpy.types.Node):
 
 
 class AASDF_N_collection(CsgNode, bpy.types.Node):
-    """The union of the fields of a collection's mesh objects (child collections included)"""
+    """The union of the fields of a collection's objects with geometry (child collections included)"""
 
     bl_idname, bl_label, bl_icon = COLLECTION, "Collection", "OUTLINER_COLLECTION"
 
     collection: PointerProperty(
         name="Collection",
-        description="Collection whose mesh objects are united into one field",
+        description="Collection whose objects with geometry are united into one field",
         type=bpy.types.Collection,
         update=_changed,
     )

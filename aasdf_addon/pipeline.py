@@ -1,8 +1,12 @@
 """The one path from mesh objects to a result object, shared by ``aasdf.boolean``, ``aasdf.debug_volume`` and the CSG
 tree: read → key → cache → build → combine → extract → write, in that order and only that way.
 
-1. read: ``bridge.read_operands`` gives each object's evaluated local geometry and world matrix;
-2. key: ``cache.geometry_key`` per operand (geometry, transform, field settings, device);
+1. read: ``operands.read_operands`` gives each object's evaluated local geometry (a mesh, text, curve, surface or
+   metaball, its instances realized) and world matrix; ``transforms.check_operands`` refuses a matrix that cannot place
+   a field, or moves a flat operand that has a thickness to world space;
+2. key: ``cache.geometry_key`` per operand (geometry in its own frame, field settings, device), refined by
+   ``placement.field_key`` for an object no field of its geometry can reach by a similarity (its scale's ladder step,
+   or its whole matrix under an uneven scale or a shear);
 3. cache: ``cache.find`` returns the fields it has;
 4. build: the missing ones are built together (``engine.build_fields``, checked together first) and ``cache.store``d;
    each field is relabelled with its operand's index (``field_id`` = position in the plan's operand list);
@@ -16,14 +20,15 @@ tree: read → key → cache → build → combine → extract → write, in tha
 ``last_run`` for the sidebar and for scripts. Nothing here loops over vertices or triangles in Python.
 """
 
-import hashlib
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 
+import bpy
 import numpy as np
 
-from . import bridge, cache, plan, polygons, runtime, transfer
+from . import bridge, cache, placement, plan, polygons, runtime, transfer, transforms
+from .operands import read_operands
 
 # Numbers of the last successful run (``aasdf.boolean`` or a CSG tree): read by the sidebar and by scripts.
 last_run: dict = {}
@@ -70,9 +75,9 @@ class Progress:
     no-ops headless), and the ``progress_listeners``."""
 
     def __init__(self, context, steps: int):
-        self.context, self.done = context, 0
+        self.context, self.done, self.total = context, 0, max(1, steps)
         self.wm = context.window_manager
-        self.wm.progress_begin(0, max(1, steps))
+        self.wm.progress_begin(0, self.total)
 
     def step(self, text: str):
         self.done += 1
@@ -81,6 +86,17 @@ class Progress:
             self.context.workspace.status_text_set(f"SDF boolean: {text}")
         for listener in progress_listeners:
             listener(text)
+
+    def compiling(self, done: int, count: int, name: str):
+        """A step per kernel module compiled on a first run (``runtime.prepare_kernels``), drawn at once: each takes
+        seconds, and the status bar is not redrawn while an operator runs."""
+        if done == 0:
+            self.total += count
+            self.wm.progress_begin(0, self.total)
+        text = f"compiling the engine's kernels for this machine (first run only): {done} of {count} done"
+        self.step(f"{text}, {name}" if name else text)
+        if not bpy.app.background and self.context.window is not None:
+            bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=1)
 
     def end(self):
         self.wm.progress_end()
@@ -120,16 +136,13 @@ class Timer:
 # Voxel sizes derived from a resolution are snapped to this ladder (steps of 2^(1/4), about 19 %), and a run keeps
 # the step the previous run on the same objects took while the raw size stays within VOXEL_HOLD of it: dragging an
 # operand changes the combined bounding box a little, which must not change the voxel size of every field.
-VOXEL_STEPS_PER_OCTAVE = 4
+VOXEL_STEPS_PER_OCTAVE = placement.VOXEL_STEPS_PER_OCTAVE
 VOXEL_HOLD_STEPS = 0.75
 _voxel_steps: dict = {}  # frozenset of object uids -> the ladder step their last run took
-# A cached field is placed where its object now is when that takes a rigid motion and a uniform scale within this
-# factor of the one it was built under; beyond it (or under an uneven scale or shear) the field is built again.
-PLACE_MAX_SCALE = 2.0 ** (0.5 / VOXEL_STEPS_PER_OCTAVE)
 
 
-def voxel_size_for(objects, depsgraph, settings: FieldSettings) -> float:
-    """``settings.voxel_size`` when positive, else the diagonal of the objects' combined world bounding box /
+def voxel_size_for(read, settings: FieldSettings) -> float:
+    """``settings.voxel_size`` when positive, else the diagonal of the read operands' combined world bounding box /
     ``settings.resolution``, snapped to a ladder of sizes (``VOXEL_STEPS_PER_OCTAVE`` a factor of 2, never coarser
     than asked) and held at the objects' previous step while the box changes little (``VOXEL_HOLD_STEPS``).
 
@@ -138,12 +151,12 @@ def voxel_size_for(objects, depsgraph, settings: FieldSettings) -> float:
     """
     if settings.voxel_size > 0.0:
         return float(np.float32(settings.voxel_size))
-    lo, hi = bridge.world_bounds(objects, depsgraph)
+    lo, hi = world_bounds(read)
     raw = float(np.linalg.norm(hi - lo)) / int(settings.resolution)
     if not raw > 0.0:
         raise runtime.engine().AasdfError("The inputs have no extent: set a Voxel Size")
     step = int(np.floor(np.log2(raw) * VOXEL_STEPS_PER_OCTAVE))
-    group = frozenset(obj.original.session_uid for obj in objects)
+    group = frozenset(operand.uid for operand in read)
     previous = _voxel_steps.get(group)
     position = np.log2(raw) * VOXEL_STEPS_PER_OCTAVE  # the step itself while in [step, step + 1)
     if previous is not None and previous - VOXEL_HOLD_STEPS <= position < previous + 1 + VOXEL_HOLD_STEPS:
@@ -153,18 +166,29 @@ def voxel_size_for(objects, depsgraph, settings: FieldSettings) -> float:
     return float(np.float32(2.0 ** (step / VOXEL_STEPS_PER_OCTAVE)))
 
 
-def _placement(matrix_now, matrix_built):
-    """The similarity moving a field built under ``matrix_built`` to where ``matrix_now`` puts its object, or None
-    when that needs an uneven scale, a shear or too large a scale (``PLACE_MAX_SCALE``)."""
-    relative = np.asarray(matrix_now, dtype=np.float64) @ np.linalg.inv(np.asarray(matrix_built, dtype=np.float64))
-    linear = relative[:3, :3]
-    scale = float(np.cbrt(abs(np.linalg.det(linear))))
-    if not scale > 0.0 or max(scale, 1.0 / scale) > PLACE_MAX_SCALE:
-        return None
-    rotation = linear / scale
-    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
-        return None
-    return relative
+def world_bounds(read) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) float64 (3,) world corners of the read operands' boxes (their local boxes' corners placed)."""
+    corners = [np.zeros((1, 3))]
+    for operand in read:
+        if len(operand.verts):
+            lo, hi = operand.verts.min(axis=0), operand.verts.max(axis=0)
+            box = np.array(np.meshgrid(*zip(lo, hi, strict=True), indexing="ij"), dtype=np.float64).reshape(3, -1).T
+            corners.append(box @ operand.matrix[:3, :3].T + operand.matrix[:3, 3])
+    points = np.concatenate(corners[1:] or corners)
+    return points.min(axis=0), points.max(axis=0)
+
+
+def read_checked(inputs, output: Output, depsgraph) -> list:
+    """Read the inputs (``plan.Input``) as operands and check their transforms and the result object's, before any
+    work (``operands.read_operands``, ``transforms.check_operands``, ``transforms.check_target``).
+
+    Raises:
+        AasdfError: Naming each object that has no geometry or a transform that cannot be used, and what to do.
+    """
+    read = read_operands([item.obj for item in inputs], depsgraph)
+    read = transforms.check_operands(read, [item.thickness for item in inputs])
+    transforms.check_target(output.target)
+    return read
 
 
 def operand_fields(
@@ -198,55 +222,61 @@ def operand_fields(
 
 def _placed_fields(context, operands, settings: FieldSettings, voxel_size: float, progress, thickness) -> list:
     """One field per operand, each with the wall ``thickness[k]`` (0: none), from the cache or built; placed."""
-    engine = runtime.engine()
     device = runtime.device(context)
     options = {"voxel_size": voxel_size, "levels": settings.levels, "padding": settings.padding}
     placed = [None] * len(operands)
-    missing = {}  # key -> the operands that need it built
+    missing = {}  # key -> (the matrix to build it under, the operands that need it)
     for k, operand in enumerate(operands):
         key = cache.geometry_key(operand.verts, operand.tris, **options, thickness=thickness[k], device=device)
-        found = cache.find(key) if key not in missing else None
-        relative = _placement(operand.matrix, found[1]) if found is not None else None
-        if relative is None and (found is not None or key in missing):
-            # the geometry's field sits where no similarity moves it to this object: a field of its own, keyed by
-            # its world matrix too (an unevenly scaled or sheared copy)
-            ref = found[1] if found is not None else operands[missing[key][0]].matrix
-            if _placement(operand.matrix, ref) is None:
-                key = f"{key}:{hashlib.blake2b(operand.matrix.tobytes(), digest_size=8).hexdigest()}"
-                found = cache.find(key) if key not in missing else None
-                relative = _placement(operand.matrix, found[1]) if found is not None else None
+        key, build, found = placement.field_key(key, operand.matrix, missing)
         cache.note_object(operand.uid, key)
-        if relative is None:
-            missing.setdefault(key, []).append(k)
+        if found is None:
+            missing.setdefault(key, (build, []))[1].append(k)
         else:
-            placed[k] = found[0].transformed(relative)
+            placed[k] = found[0].transformed(placement.placement(operand.matrix, found[1]))
     if missing:
-        first = [ks[0] for ks in missing.values()]  # one build per distinct geometry, under its first object's matrix
+        runtime.prepare_kernels(device, progress.compiling if progress is not None else None)
         if progress is not None:
-            progress.step(f"building the fields of {', '.join(operands[k].name for k in first)}")
-        try:
-            built = [None] * len(first)
-            by_thickness = {}
-            for j, k in enumerate(first):
-                by_thickness.setdefault(thickness[k], []).append(j)
-            for wall, js in by_thickness.items():  # checked and built together, a group per thickness
-                meshes = [operands[first[j]].world() for j in js]
-                extra = {"thickness": wall} if wall > 0.0 else {}
-                for j, field in zip(js, engine.build_fields(meshes, **options, **extra, device=device), strict=True):
-                    built[j] = field
-        except engine.AasdfError as err:
-            message = str(err)
-            if message.startswith("Mesh "):  # "Mesh <j>: ..." counts the meshes built: name the object instead
-                head, _, rest = message.partition(": ")
-                message = f"{operands[first[int(head.split()[1])]].name}: {rest}"
-            raise engine.AasdfError(message) from err
+            names = ", ".join(operands[ks[0]].name for _build, ks in missing.values())
+            progress.step(f"building the fields of {names}")
+        built = _build(operands, list(missing.values()), options, thickness, device)
         limit = cache.limit_bytes(context)
-        for (key, ks), field in zip(missing.items(), built, strict=True):
-            cache.store(key, field, operands[ks[0]].matrix, limit)
+        for (key, (build, ks)), field in zip(missing.items(), built, strict=True):
+            cache.store(key, field, build, limit)
             for k in ks:
-                relative = _placement(operands[k].matrix, operands[ks[0]].matrix)
-                placed[k] = field if k == ks[0] else field.transformed(relative)
+                same = np.array_equal(operands[k].matrix, build)
+                placed[k] = field if same else field.transformed(placement.placement(operands[k].matrix, build))
     return placed
+
+
+def _build(operands, wanted, options, thickness, device) -> list:
+    """Build one field per ``(matrix, operand indices)`` of ``wanted``: the first operand's geometry placed by that
+    matrix, checked and built together, a group per thickness.
+
+    Raises:
+        AasdfError: From the engine, naming the object instead of the engine's "Mesh <j>".
+    """
+    engine = runtime.engine()
+    built = [None] * len(wanted)
+    by_thickness = {}
+    for j, (_matrix, ks) in enumerate(wanted):
+        by_thickness.setdefault(thickness[ks[0]], []).append(j)
+    try:
+        for wall, js in by_thickness.items():
+            meshes = [
+                bridge.to_world(operands[wanted[j][1][0]].verts, operands[wanted[j][1][0]].tris, wanted[j][0])
+                for j in js
+            ]
+            extra = {"thickness": wall} if wall > 0.0 else {}
+            for j, field in zip(js, engine.build_fields(meshes, **options, **extra, device=device), strict=True):
+                built[j] = field
+    except engine.AasdfError as err:
+        message = str(err)
+        if message.startswith("Mesh "):  # "Mesh <i>: ..." counts the meshes of a group: name the object instead
+            head, _, rest = message.partition(": ")
+            message = f"{operands[wanted[js[int(head.split()[1])]][1][0]].name}: {rest}"
+        raise engine.AasdfError(message) from err
+    return built
 
 
 def _matrix_bytes(field) -> bytes:
@@ -350,12 +380,11 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
     try:
         with timer.stage("read"):
             progress.step(f"reading {len(objects)} objects")
-            depsgraph = context.evaluated_depsgraph_get()
-            voxel_size = voxel_size_for(objects, depsgraph, settings)
-            operands = bridge.read_operands(objects, depsgraph)
+            read = read_checked(inputs, output, context.evaluated_depsgraph_get())
+            voxel_size = voxel_size_for(read, settings)
         with timer.stage("fields"):
             fields = operand_fields(
-                context, operands, settings, voxel_size, progress, thickness=[item.thickness for item in inputs]
+                context, read, settings, voxel_size, progress, thickness=[item.thickness for item in inputs]
             )
         with timer.stage("booleans"):
             fingerprint = tuple((id(f.codes), f.field_ids, _matrix_bytes(f)) for f in fields)
@@ -372,9 +401,9 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
         if len(result["tris"]) == 0:
             return {"object": output.target.name if output.target is not None else output.name, "empty": True}
         with timer.stage("attributes"):
-            result["attributes"] = carry_over(field, surface, operands)
+            result["attributes"] = carry_over(field, surface, read)
             triangles = len(result["tris"])  # as many as Blender's triangulation of what is written
-            result = whole_faces_back(result, surface, operands, output)
+            result = whole_faces_back(result, surface, read, output)
         with timer.stage("write"):
             progress.step("writing the result")
             obj = write(context, result, output)
@@ -423,6 +452,5 @@ def object_field(context, obj, settings: FieldSettings):
     Raises:
         AasdfError: As ``operand_fields``.
     """
-    depsgraph = context.evaluated_depsgraph_get()
-    voxel_size = voxel_size_for([obj], depsgraph, settings)
-    return operand_fields(context, bridge.read_operands([obj], depsgraph), settings, voxel_size)[0]
+    read = read_checked([plan.Input(obj)], Output(obj.name), context.evaluated_depsgraph_get())
+    return operand_fields(context, read, settings, voxel_size_for(read, settings))[0]

@@ -88,6 +88,24 @@ def engine():
     return _engine
 
 
+_kernels_ready: set = set()  # devices whose engine kernels were checked (and compiled if need be) in this process
+
+
+def prepare_kernels(device: str, report=None) -> int:
+    """Compile the engine's kernels that Warp's kernel cache lacks for ``device`` (a first run in a checkout, or after
+    an update; about two minutes for all of them on a CPU here), a module per core at a time, calling
+    ``report(done, count, name)`` as each is done (``engine.kernels.compile_modules``); checked once per device and
+    process. Returns the modules compiled."""
+    if device in _kernels_ready:
+        return 0
+    module = engine()
+    missing = module.kernels.modules_to_compile(module.__name__, device)
+    if missing:
+        module.kernels.compile_modules(missing, device, report)
+    _kernels_ready.add(device)
+    return len(missing)
+
+
 def release_memory(keep: int = 0) -> int:
     """Give the engine's pooled pages back to the system beyond ``keep`` bytes (``engine.release_memory``), if the
     engine is loaded; returns the bytes given back."""

@@ -61,6 +61,51 @@ def warp_modules(engine_package: str, names=None) -> list:
     return [importlib.import_module(f"{engine_package}.{name}") for name in chosen]
 
 
+def modules_to_compile(engine_package: str, device) -> list:
+    """The engine's Python modules (``warp_modules``) whose kernels Warp's kernel cache does not hold for ``device``
+    yet: those the first launch would compile (seconds each) rather than load.
+
+    Args:
+        engine_package: The engine's package name (``engine``, or the add-on's ``<addon>.engine``).
+        device: A Warp device or its alias.
+    Returns:
+        The modules, in ``ENGINE_MODULES`` order (empty when all are compiled).
+    """
+    import warp as wp
+
+    device = wp.get_device(device)
+    cache = Path(wp.config.kernel_cache_dir)
+    # a CPU module is compiled with one thread per block: its hash (and folder) is that variant's
+    block_dim, pattern = (1, "*.o") if device.is_cpu else (None, "*.sm*")
+    return [
+        module
+        for module in warp_modules(engine_package)
+        if not any((cache / wp.get_module(module.__name__).get_module_identifier(block_dim)).glob(pattern))
+    ]
+
+
+def compile_modules(modules, device, report=None, *, workers: int | None = None) -> None:
+    """Compile (or load) ``modules`` on ``device``, ``workers`` at a time (default: one per core; Warp's compiler
+    releases the GIL), so that a first run can show its progress: ``report(done, count, short name)`` is called in
+    the caller's thread, with ``(0, count, "")`` first, then as each module is done.
+
+    Raises:
+        Whatever compiling a module raised.
+    """
+    from concurrent.futures import ThreadPoolExecutor, as_completed
+
+    from . import parallel
+
+    if report is not None:
+        report(0, len(modules), "")
+    with ThreadPoolExecutor(max(1, min(len(modules), workers or os.cpu_count() or 1))) as pool:
+        running = {pool.submit(parallel.load_modules, [module], device): module for module in modules}
+        for done, future in enumerate(as_completed(running), 1):
+            future.result()
+            if report is not None:
+                report(done, len(modules), running[future].__name__.rpartition(".")[2])
+
+
 def configure_modules(engine_package: str) -> None:
     """Give every module the engine launches the portable CPU flags (before any of them loads)."""
     import warp as wp

@@ -1,6 +1,6 @@
-"""``aasdf.boolean``: the selected mesh objects combined as an SDF boolean into a new object. Also ``aasdf.offset`` and
-``aasdf.shell`` (the active mesh grown, shrunk or hollowed into a new object), ``aasdf.debug_volume`` (the active
-mesh's field as a Volume object) and ``aasdf.clear_cache``.
+"""``aasdf.boolean``: the selected objects (meshes, texts, curves, surfaces, metaballs) combined as an SDF boolean into
+a new object. Also ``aasdf.offset`` and ``aasdf.shell`` (the active object grown, shrunk or hollowed into a new
+object), ``aasdf.debug_volume`` (the active object's field as a Volume object) and ``aasdf.clear_cache``.
 
 The active object is the first operand. DIFFERENCE is the active object minus all the others; UNION and INTERSECT
 take them all. The operators read their settings, hand them to ``aasdf_addon.pipeline`` (which the CSG node tree uses
@@ -12,7 +12,7 @@ import re
 
 import bpy
 
-from ..aasdf_addon import cache, pipeline, plan, runtime
+from ..aasdf_addon import cache, operands, pipeline, plan, runtime
 from ..aasdf_addon.pipeline import last_run  # noqa: F401  (scripts read ``operators.boolean.last_run``)
 from ..aasdf_addon.properties import (
     blend_mode_property,
@@ -33,15 +33,28 @@ from ..aasdf_addon.properties import (
 )
 
 
-def mesh_operands(context) -> list:
-    """The active mesh object (selected or not) followed by the other selected mesh objects."""
-    active = context.active_object
-    first = [active] if active is not None and active.type == "MESH" else []
-    return first + [obj for obj in context.selected_objects if obj.type == "MESH" and obj not in first]
+def selected_operands(context) -> list:
+    """The active object (selected or not) when it has geometry, followed by the other selected objects (those
+    without geometry are refused by name when the operator runs)."""
+    return operands.selected_operands(context)
+
+
+class GeometryPoll:
+    """Poll of the operators that need an active object with geometry (a mesh, text, curve, surface or metaball)."""
+
+    @classmethod
+    def poll(cls, context):
+        if context.mode != "OBJECT":
+            cls.poll_message_set("Switch to Object Mode")
+            return False
+        if not operands.is_operand(context.active_object):
+            cls.poll_message_set(f"Needs an active {operands.OPERAND_TYPES_TEXT} object")
+            return False
+        return True
 
 
 class AASDF_OT_boolean(bpy.types.Operator):
-    """Combine the active mesh with the other selected meshes as an SDF boolean, into a new object"""
+    """Combine the active object with the other selected ones (meshes, texts, curves...) as an SDF boolean"""
 
     bl_idname, bl_label, bl_options = "aasdf.boolean", "SDF Boolean", {"REGISTER", "UNDO"}
 
@@ -63,26 +76,25 @@ class AASDF_OT_boolean(bpy.types.Operator):
         if context.mode != "OBJECT":
             cls.poll_message_set("Switch to Object Mode to run an SDF boolean")
             return False
-        obj = context.active_object
-        if obj is None or obj.type != "MESH":
-            cls.poll_message_set("Needs an active mesh object")
+        if not operands.is_operand(context.active_object):
+            cls.poll_message_set(f"Needs an active {operands.OPERAND_TYPES_TEXT} object")
             return False
-        if len(mesh_operands(context)) < 2:
-            cls.poll_message_set("Select at least two mesh objects")
+        if len(selected_operands(context)) < 2:
+            cls.poll_message_set("Select at least two objects")
             return False
         return True
 
     def execute(self, context):
-        operands = mesh_operands(context)
-        steps = plan.boolean_plan(self.operation, len(operands), self.blend, self.blend_mode)
-        numbers = run(self, context, operands, steps, f"{operands[0].name}.aasdf", "The boolean result is empty")
+        objects = selected_operands(context)
+        steps = plan.boolean_plan(self.operation, len(objects), self.blend, self.blend_mode)
+        numbers = run(self, context, objects, steps, f"{objects[0].name}.aasdf", "The boolean result is empty")
         if numbers is None:
             return {"CANCELLED"}
         self.report(
             {"INFO"},
-            f"{numbers['object']}: {self.operation.lower()} of {len(operands)} objects in {numbers['seconds']:.2f} s, "
+            f"{numbers['object']}: {self.operation.lower()} of {len(objects)} objects in {numbers['seconds']:.2f} s, "
             f"{numbers['nodes']:,} field nodes, {numbers['faces']:,} faces, "
-            f"{numbers['cache_hits']}/{len(operands)} fields from cache",
+            f"{numbers['cache_hits']}/{len(objects)} fields from cache",
         )
         return {"FINISHED"}
 
@@ -120,23 +132,8 @@ def run(op, context, objects, steps, name, empty_message, operation=None):
     return numbers
 
 
-class ActiveMeshOperator:
-    """Poll of the operators that work on the active mesh alone."""
-
-    @classmethod
-    def poll(cls, context):
-        if context.mode != "OBJECT":
-            cls.poll_message_set("Switch to Object Mode")
-            return False
-        obj = context.active_object
-        if obj is None or obj.type != "MESH":
-            cls.poll_message_set("Needs an active mesh object")
-            return False
-        return True
-
-
-class AASDF_OT_offset(ActiveMeshOperator, bpy.types.Operator):
-    """Grow or shrink the active mesh by a distance, as a new object (any distance, rounded at the edges)"""
+class AASDF_OT_offset(GeometryPoll, bpy.types.Operator):
+    """Grow or shrink the active object by a distance, as a new object (any distance, rounded at the edges)"""
 
     bl_idname, bl_label, bl_options = "aasdf.offset", "SDF Offset", {"REGISTER", "UNDO"}
 
@@ -162,8 +159,8 @@ class AASDF_OT_offset(ActiveMeshOperator, bpy.types.Operator):
         return {"FINISHED"}
 
 
-class AASDF_OT_shell(ActiveMeshOperator, bpy.types.Operator):
-    """Hollow the active mesh into a shell with walls of a given thickness, as a new object (for 3D printing)"""
+class AASDF_OT_shell(GeometryPoll, bpy.types.Operator):
+    """Hollow the active object into a shell with walls of a given thickness, as a new object (for 3D printing)"""
 
     bl_idname, bl_label, bl_options = "aasdf.shell", "SDF Shell", {"REGISTER", "UNDO"}
 
@@ -190,8 +187,8 @@ class AASDF_OT_shell(ActiveMeshOperator, bpy.types.Operator):
         return {"FINISHED"}
 
 
-class AASDF_OT_debug_volume(bpy.types.Operator):
-    """Show the signed distance field of the active mesh as a Volume object, with its octree cells as points"""
+class AASDF_OT_debug_volume(GeometryPoll, bpy.types.Operator):
+    """Show the signed distance field of the active object as a Volume object, with its octree cells as points"""
 
     bl_idname, bl_label, bl_options = "aasdf.debug_volume", "Debug Volume", {"REGISTER", "UNDO"}
 
@@ -199,17 +196,6 @@ class AASDF_OT_debug_volume(bpy.types.Operator):
     resolution: resolution_property(default=128)
     levels: levels_property()
     padding: padding_property()
-
-    @classmethod
-    def poll(cls, context):
-        if context.mode != "OBJECT":
-            cls.poll_message_set("Switch to Object Mode to add a debug volume")
-            return False
-        obj = context.active_object
-        if obj is None or obj.type != "MESH":
-            cls.poll_message_set("Needs an active mesh object")
-            return False
-        return True
 
     def execute(self, context):
         from ..aasdf_addon import debug

@@ -1,5 +1,5 @@
 """``aasdf.evaluate_tree``: evaluate an ``AASDF CSG`` node tree into its result objects; and
-``aasdf.tree_from_selection``: a new tree that combines the selected meshes, as ``aasdf.boolean`` would.
+``aasdf.tree_from_selection``: a new tree that combines the selected objects, as ``aasdf.boolean`` would.
 
 Evaluation goes through ``aasdf_addon.autoupdate.evaluate_now`` → ``aasdf_addon.csg``: the field cache, the engine's
 booleans and the result writing that ``aasdf.boolean`` uses. An invalid tree (its problems are shown on the nodes) is an
@@ -9,9 +9,14 @@ error report and writes nothing.
 import bpy
 from bpy.props import BoolProperty, StringProperty
 
-from ..aasdf_addon import autoupdate, nodes, runtime
+from ..aasdf_addon import autoupdate, nodes, operands, runtime
 from ..aasdf_addon.properties import auto_update_property, operation_property
-from .boolean import mesh_operands
+from .boolean import selected_operands
+
+
+def _geometry_selection(context) -> list:
+    """The selected objects that have geometry, the active one first."""
+    return [obj for obj in selected_operands(context) if operands.is_operand(obj)]
 
 
 def context_tree(context):
@@ -64,18 +69,18 @@ class AASDF_OT_evaluate_tree(bpy.types.Operator):
             return {"CANCELLED"}
         seconds = sum(run["seconds"] for run in written)
         built = sum(run["fields_built"] for run in written)
-        operands = sum(run["operands"] for run in written)
+        count = sum(run["operands"] for run in written)
         triangles = sum(run["triangles"] for run in written)
         self.report(
             {"INFO"},
             f"{tree.name}: {', '.join(run['object'] for run in written)} in {seconds:.2f} s, {triangles:,} triangles, "
-            f"{built}/{operands} fields built",
+            f"{built}/{count} fields built",
         )
         return {"FINISHED"}
 
 
 class AASDF_OT_tree_from_selection(bpy.types.Operator):
-    """Create an AASDF CSG node tree combining the selected meshes (the active one first), and evaluate it"""
+    """Create an AASDF CSG node tree combining the selected objects (the active one first), and evaluate it"""
 
     bl_idname, bl_label, bl_options = "aasdf.tree_from_selection", "New CSG Tree from Selection", {"REGISTER", "UNDO"}
 
@@ -88,18 +93,18 @@ class AASDF_OT_tree_from_selection(bpy.types.Operator):
         if context.mode != "OBJECT":
             cls.poll_message_set("Switch to Object Mode to create a CSG tree")
             return False
-        if len(mesh_operands(context)) < 2:
-            cls.poll_message_set("Select at least two mesh objects")
+        if len(_geometry_selection(context)) < 2:
+            cls.poll_message_set("Select at least two objects")
             return False
         return True
 
     def execute(self, context):
         engine = runtime.engine()
-        operands = mesh_operands(context)
-        active = operands[0]
+        objects = _geometry_selection(context)
+        active = objects[0]
         settings = context.scene.aasdf
         tree = build_tree(
-            f"{active.name} CSG", operands, self.operation, settings.blend, result_name=f"{active.name}.csg"
+            f"{active.name} CSG", objects, self.operation, settings.blend, result_name=f"{active.name}.csg"
         )
         tree.voxel_size, tree.resolution = settings.voxel_size, settings.resolution
         tree.levels, tree.padding, tree.hide_inputs = settings.levels, settings.padding, settings.hide_inputs
@@ -120,7 +125,7 @@ class AASDF_OT_tree_from_selection(bpy.types.Operator):
             except engine.AasdfError as err:
                 self.report({"WARNING"}, f"{tree.name} was created but does not evaluate: {err}")
         tree.auto_update = self.auto_update
-        self.report({"INFO"}, f"{tree.name}: {len(operands)} inputs, {self.operation.lower()}")
+        self.report({"INFO"}, f"{tree.name}: {len(objects)} inputs, {self.operation.lower()}")
         return {"FINISHED"}
 
 

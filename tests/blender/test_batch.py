@@ -8,7 +8,8 @@ import bpy
 import numpy as np
 import pytest
 
-from tests.metrics import merge_vertices
+from aasdf.aasdf_addon import bridge
+from tests.metrics import exact_boolean, hausdorff, merge_vertices, mesh_volume, unsigned_distance
 from tests.support import is_watertight, load_mesh, mesh_path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -34,6 +35,16 @@ def write_binary_stl(path, verts, tris):
     record["n"], record["v"] = normals, v
     with open(path, "wb") as handle:
         handle.write(b"\0" * 80 + np.uint32(len(tris)).tobytes() + record.tobytes())
+
+
+def imported_world(path):
+    """World-space vertices and triangles of the one mesh in a file, imported into an empty scene by Blender's own
+    importer (as the batch script imports its inputs), its vertices merged by position."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    importer = {".obj": "obj_import", ".ply": "ply_import", ".stl": "stl_import"}[Path(path).suffix]
+    getattr(bpy.ops.wm, importer)(filepath=str(path))
+    obj = bpy.context.selected_objects[0]
+    return merge_vertices(*bridge.evaluated_mesh(obj, bpy.context.evaluated_depsgraph_get()))
 
 
 def imported_arrays(path):
@@ -85,6 +96,12 @@ def test_mesh_files_in_ply_and_debug_volume_out(tmp_path):
     # the .ply carries spot's UVs, so vertices are split along UV seams: watertight once merged by position
     assert is_watertight(merge_vertices(result_verts, result_tris)[1])
     assert f"{len(result_tris):,} triangles" in summary[0]
+    # the union of the inputs as Blender imports them, exactly
+    exact = exact_boolean("UNION", *imported_world(mesh_path("spot.obj")), *imported_world(stl))
+    voxel = float(summary[0].split("voxel size ")[1].split(",")[0])
+    # measured: volume within 0.33 %, Hausdorff p95 0.074 voxel
+    assert mesh_volume(result_verts, result_tris) == pytest.approx(mesh_volume(*exact), rel=0.01)
+    assert hausdorff(result_verts, result_tris, *exact, n=50_000)["p95"] <= 0.22 * voxel
     assert vdb.stat().st_size > 0
     volume = bpy.data.volumes.new("Debug")
     volume.filepath = str(vdb)
@@ -100,9 +117,13 @@ def test_objects_of_a_blend_in_blend_out(scene_blend, tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     assert "Module " in done.stdout and "load on device 'cpu'" in done.stdout  # --verbose: Warp's lines too
     bpy.ops.wm.open_mainfile(filepath=str(out))
-    result = bpy.data.objects["A.aasdf"]
-    assert len(result.data.polygons) > 0
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    result, a, b = (bridge.evaluated_mesh(bpy.data.objects[name], depsgraph) for name in ("A.aasdf", "A", "B"))
     assert bpy.data.objects["A"].hide_get() and bpy.data.objects["B"].hide_get()
+    # A minus B, closed, as the exact difference of the two spheres saved in the .blend
+    exact = exact_boolean("DIFFERENCE", *a, *b)
+    assert is_watertight(result[1])
+    assert mesh_volume(*result) == pytest.approx(mesh_volume(*exact), rel=0.0075)  # measured -0.25 %
 
 
 @pytest.mark.parametrize(
@@ -112,9 +133,9 @@ def test_objects_of_a_blend_in_blend_out(scene_blend, tmp_path):
         (["--inputs", "{spot}"], "give at least two operands"),
         (["--inputs", "{spot}", "{spot}", "--output", "out.fbx"], "cannot write out.fbx"),
         (["--blend", "{blend}", "--objects", "A", "Nope"], "no object named 'Nope'"),
-        (["--blend", "{blend}", "--objects", "A", "Empty"], "object 'Empty' is not a mesh (its type is EMPTY)"),
+        (["--blend", "{blend}", "--objects", "A", "Empty"], "'Empty' is an empty and has no geometry"),
     ],
-    ids=["missing-file", "one-operand", "bad-output", "unknown-object", "non-mesh"],
+    ids=["missing-file", "one-operand", "bad-output", "unknown-object", "no-geometry"],
 )
 def test_bad_input_exits_with_a_clear_message(args, message, scene_blend, tmp_path):
     args = [arg.format(spot=mesh_path("spot.obj"), blend=scene_blend) for arg in args]
@@ -177,5 +198,26 @@ def test_uvs_reach_an_obj_and_colours_a_ply(tmp_path):
         assert done.returncode == 0, done.stderr[-3000:]
     uvs = [line.split()[1:] for line in (tmp_path / "result.obj").read_text().splitlines() if line.startswith("vt ")]
     assert len(uvs) > 100 and np.ptp(np.asarray(uvs, dtype=float), axis=0).min() > 0.1  # spot's texture coordinates
-    header = (tmp_path / "result.ply").read_bytes().split(b"end_header")[0].decode("ascii")
-    assert "property uchar red" in header  # the ball's colour, carried by the faces it gave
+    # the .obj is the union, closed
+    spot = imported_world(mesh_path("spot.obj"))
+    exact = exact_boolean("UNION", *spot, ball_v, ball_t)
+    verts, tris = imported_world(tmp_path / "result.obj")
+    assert is_watertight(tris)
+    assert mesh_volume(verts, tris) == pytest.approx(mesh_volume(*exact), rel=0.02)  # measured +0.71 % (at /48)
+    # the .ply's colours: the ball's on the faces it gave (its surface, away from spot), none elsewhere
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.wm.ply_import(filepath=str(tmp_path / "result.ply"))
+    mesh = bpy.context.selected_objects[0].data
+    points = np.empty(3 * len(mesh.vertices), dtype=np.float32)
+    mesh.vertices.foreach_get("co", points)
+    points = points.reshape(-1, 3)
+    colours = np.empty(4 * len(mesh.vertices), dtype=np.float32)
+    assert mesh.color_attributes[0].domain == "POINT"
+    mesh.color_attributes[0].data.foreach_get("color_srgb", colours)
+    colours = np.rint(colours.reshape(-1, 4)[:, :3] * 255)
+    on_ball = np.abs(np.linalg.norm(points - [0.3, 0.2, 0.5], axis=1) - 0.4) < 0.01
+    away = unsigned_distance(*spot, points) > 0.1  # a seam's corners blend both sides' colours (measured to 0.06)
+    assert (on_ball & away).sum() > 50  # measured 681 at 0.05
+    assert np.abs(colours[on_ball & away] - [200, 30, 60]).max() <= 1
+    far = np.linalg.norm(points - [0.3, 0.2, 0.5], axis=1) > 0.5  # spot's own faces
+    assert np.all(np.abs(colours[far] - [200, 30, 60]).max(axis=1) > 20)

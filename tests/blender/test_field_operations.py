@@ -11,7 +11,7 @@ import pytest
 
 from aasdf.aasdf_addon import cache, nodes, pipeline
 from tests.blender.scene import add_mesh_object, select, world_arrays
-from tests.metrics import mesh_volume
+from tests.metrics import merge_vertices, mesh_volume
 from tests.support import box_mesh, is_watertight, uv_sphere
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -165,6 +165,18 @@ def write_obj(path, verts, tris):
     path.write_text("\n".join(lines) + "\n", encoding="ascii")
 
 
+def read_ply(path):
+    """A .ply written by the batch script, imported into an empty scene: world vertices (merged) and triangles."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.wm.ply_import(filepath=str(path))
+    return merge_vertices(*world_arrays(bpy.context.selected_objects[0]))
+
+
+def rounded_box(r, size=2.0):
+    """Volume of a cube of side ``size`` grown by ``r``: faces, quarter cylinders along the edges, eighth balls."""
+    return size**3 + 6 * size**2 * r + 3 * np.pi * size * r**2 + 4 / 3 * np.pi * r**3
+
+
 def test_batch_refuses_a_plane_and_offsets_or_shells_one_operand(tmp_path):
     block, sheet = tmp_path / "block.obj", tmp_path / "sheet.obj"
     write_obj(block, *box_mesh(half=(1.0, 1.0, 1.0)))
@@ -178,7 +190,14 @@ def test_batch_refuses_a_plane_and_offsets_or_shells_one_operand(tmp_path):
         "--resolution", 64, "--output", out,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr[-2000:]
+    verts, tris = read_ply(out)
+    assert is_watertight(tris)
+    assert mesh_volume(verts, tris) == pytest.approx(8.0 - 4.0 * 0.2, rel=1.5e-4)  # measured -4.5e-5
     # a shell at least two voxels thick (voxel: the grown block's diagonal / 64)
     done = run_batch("--inputs", block, "--offset", 0.2, "--shell", 0.15, "--resolution", 64, "--output", out)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "offset +0.2 then shell 0.15" in done.stdout
+    # the cube grown by 0.2 (rounded), less the cube grown by 0.05: Minkowski sums of the 2-cube and a ball
+    verts, tris = read_ply(out)
+    assert is_watertight(tris)
+    assert mesh_volume(verts, tris) == pytest.approx(rounded_box(0.2) - rounded_box(0.05), rel=0.0025)  # +0.08 %

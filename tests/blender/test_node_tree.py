@@ -206,21 +206,21 @@ def break_unlinked(tree, objects):
 
 def break_no_object(tree, objects):
     tree.nodes["Object A"].object = None
-    return "Object A", "Choose a mesh object"
+    return "Object A", "Choose an object"
 
 
 def break_non_mesh(tree, objects):
     empty = bpy.data.objects.new("Empty", None)
     bpy.context.scene.collection.objects.link(empty)
     tree.nodes["Object A"].object = empty
-    return "Object A", "'Empty' is not a mesh object"
+    return "Object A", "'Empty' is an empty and has no geometry: use a mesh, text, curve, surface or metaball object"
 
 
 def break_empty_collection(tree, objects):
     cutters = objects[2]
     for obj in list(cutters.objects):
         cutters.objects.unlink(obj)
-    return "Collection", "Collection 'Cutters' has no mesh objects"
+    return "Collection", "Collection 'Cutters' has no objects with geometry"
 
 
 def break_same_output_name(tree, objects):
@@ -250,7 +250,7 @@ def test_invalid_tree_shows_its_message_and_keeps_the_previous_result(evaluated,
 def test_fixed_tree_clears_its_messages(evaluated):
     tree, _, (a, *_) = evaluated
     break_no_object(tree, None)
-    with pytest.raises(RuntimeError, match="Choose a mesh object"):
+    with pytest.raises(RuntimeError, match="Choose an object"):
         bpy.ops.aasdf.evaluate_tree(tree=tree.name)
     tree.nodes["Object A"].object = a
     assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
@@ -441,6 +441,6 @@ def test_tree_from_selection_matches_the_boolean_operator(fresh_cache):
 def test_tree_from_selection_needs_two_meshes():
     a = add_mesh_object("A", *SMALL)
     select(a)
-    with pytest.raises(RuntimeError, match="Select at least two mesh objects"):
+    with pytest.raises(RuntimeError, match="Select at least two objects"):
         bpy.ops.aasdf.tree_from_selection()
     assert not [tree for tree in bpy.data.node_groups if tree.bl_idname == nodes.TREE]

@@ -358,7 +358,7 @@ def test_closed_operands_give_their_exact_distances_off_their_surfaces(placed):
     exact = np.minimum(_box_distance(x, (half,) * 3), exact_b)
     err = np.abs(cells["sdf"][fine] - exact) / h
     far = np.abs(exact_b) > 1.5 * h if placed else np.ones(len(x), bool)
-    assert err[far].max() < 1e-3, np.percentile(err[far], [50, 99, 100])  # measured 4e-5 (3.7 voxels with MLS fits)
+    assert err[far].max() < 1.2e-4, np.percentile(err[far], [50, 99, 100])  # measured 4e-5 (3.7 voxels with MLS fits)
 
 
 def test_booleans_of_continuous_fields_drop_the_octets_kept_for_a_neighbours_sign(monkeypatch):

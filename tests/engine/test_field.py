@@ -232,7 +232,8 @@ def test_hole_caps_keep_the_winding_number_near_an_integer_outside_them():
 
 @pytest.mark.parametrize("name", ["stanford-bunny.obj", "suzanne.obj", "teapot.obj"])
 def test_open_meshes_coarse_node_signs_agree_with_the_winding_number(name):
-    # coarse signs spread between neighbours only away from the holes' caps, where that is exact
+    # coarse signs spread between neighbours only away from the holes' caps, where that is exact; checked against the
+    # float64 exact winding numbers (not the fast one the build uses) on a sample of the nodes clear of the surface
     verts, tris = load_mesh(name)
     field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
     coarse = slice(field.level_counts[0], field.node_count)
@@ -240,13 +241,13 @@ def test_open_meshes_coarse_node_signs_agree_with_the_winding_number(name):
     values = field.values.numpy()[coarse]
     clear = np.abs(values) > 0.5 * field.voxel_size  # the sign of a node on the surface is ill-conditioned
     centres, inside_field = centres[clear], values[clear] < 0.0
-    # away from the caps: exactly what the build's own oracle says
-    away = _away_from_caps(engine.meshcheck.hole_caps(verts, tris), centres)
-    oracle = winding_inside(verts, tris, centres[away], accuracy=engine.winding.WINDING_ACCURACY)
-    assert np.array_equal(inside_field[away], oracle), np.count_nonzero(inside_field[away] != oracle)
-    # everywhere: the accurate winding number but for a few nodes
-    accurate = winding_inside(verts, tris, centres, accuracy=4.0)
-    assert np.mean(inside_field == accurate) >= 0.995
+    sample = np.random.default_rng(0).choice(len(centres), min(600, len(centres)), replace=False)
+    exact = np.abs(winding_numbers(verts, tris, centres[sample])) >= 0.5
+    away = _away_from_caps(engine.meshcheck.hole_caps(verts, tris), centres[sample])
+    # away from the caps (none on the teapot: its rims' caps cover it): the exact winding number's inside, every node
+    assert np.array_equal(inside_field[sample][away], exact[away]), np.count_nonzero(inside_field[sample] != exact)
+    # everywhere: but for a few nodes near the holes
+    assert np.mean(inside_field[sample] == exact) >= 0.99
 
 
 def test_hole_caps_bound_the_boundary_of_open_meshes():
@@ -767,10 +768,14 @@ def test_degenerate_triangles_and_duplicate_vertices_are_handled():
         (np.eye(3), np.array([[0.0, 1.0, 2.0]]), {}, ValueError, "integer 'triangles'"),
     ],
 )
-def test_bad_input_is_refused_before_any_kernel_runs(verts, tris, kwargs, error, match):
+def test_bad_input_is_refused_before_any_kernel_runs(verts, tris, kwargs, error, match, monkeypatch):
     args = {"voxel_size": 0.1, **kwargs}
+    launched = []
+    monkeypatch.setattr(wp, "launch", lambda *a, **k: launched.append(a[0]))
+    monkeypatch.setattr(wp, "Mesh", lambda *a, **k: launched.append("wp.Mesh"))
     with pytest.raises(error, match=match):
         engine.build_field(verts, tris, **args)
+    assert launched == []
 
 
 def test_too_fine_for_memory_is_refused():

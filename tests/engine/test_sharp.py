@@ -84,8 +84,8 @@ def test_sharp_surface_is_a_closed_outward_2_manifold(cad):
     assert is_watertight(tris)
     assert np.array_equal(np.unique(tris), np.arange(len(verts))), "unused vertices"
     to_manifold(verts, tris, cad["name"])  # manifold3d accepts it (raises otherwise)
-    # outward, and the volume of the exact boolean (measured within 0.02 %)
-    assert abs(mesh_volume(verts, tris) / mesh_volume(*cad["exact"]) - 1.0) < 0.002
+    # outward, and the volume of the exact boolean (measured within 0.029 %, rocker-arm - cube)
+    assert abs(mesh_volume(verts, tris) / mesh_volume(*cad["exact"]) - 1.0) < 0.0009
     # no vertex where three or more sheets meet: every vertex's triangles form one fan (edges == triangles around it)
     assert _one_fan_per_vertex(verts, tris)
     # the dual of the marching cubes: a quad per marching-cubes vertex, so 2 * V_mc triangles (T_mc + 2 * Euler
@@ -247,10 +247,10 @@ def test_a_box_keeps_its_edges_and_corners():
     field = engine.build_field(*mesh, voxel_size=0.02)
     verts, tris, creases = field.to_mesh(return_creases=True)
     corners = center + half * np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
-    assert cKDTree(verts).query(corners)[0].max() < 0.05 * 0.02  # measured 1e-6
+    assert cKDTree(verts).query(corners)[0].max() < 1.4e-5  # measured 4.6e-6 (0.0002 voxel)
     mc_verts, _ = field.to_mesh(sharp=False)
     assert cKDTree(mc_verts).query(corners)[0].max() > 0.3 * 0.02  # bevelled (measured 0.5 voxel)
-    assert abs(mesh_volume(verts, tris) / np.prod(2 * half) - 1.0) < 1e-4
+    assert abs(mesh_volume(verts, tris) / np.prod(2 * half) - 1.0) < 8e-7  # measured 2.6e-7
     assert len(creases) > 0 and edge_use_counts(tris).max() == 2
 
 

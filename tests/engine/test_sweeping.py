@@ -191,10 +191,10 @@ def test_a_scaled_single_level_field_comes_back_to_distances():
     # one factor for the values kept next to the surface: the surface stays, the values become distances
     assert result.stats["interface_scale"] == pytest.approx(1.0 / 1.5, rel=0.02)
     assert (
-        hausdorff(*scaled.to_mesh(sharp=False), *result.to_mesh(sharp=False), n=5000)["max"] <= 1e-3 * h
-    )  # measured 4e-6 voxel
+        hausdorff(*scaled.to_mesh(sharp=False), *result.to_mesh(sharp=False), n=5000)["max"] <= 8e-6 * h
+    )  # measured 2.7e-6 voxel
     errors = _distance_errors(result)
-    assert errors["band_p99"] <= 0.11, errors  # measured 0.036 voxel (0.98 before)
+    assert errors["band_p99"] <= 0.1, errors  # measured 0.036 voxel (0.98 before)
     assert errors["grad_p95"] <= 0.042, errors  # measured 1.4 % (50 % before)
 
 

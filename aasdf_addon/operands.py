@@ -1,0 +1,127 @@
+"""Which objects are operands, and their evaluated geometry read whatever their type.
+
+Every object with geometry takes part by what Blender evaluates it to: a mesh, a text, a curve (its extrusion or
+bevel), a surface or a metaball (``evaluated_get(depsgraph).to_mesh()``), plus the instances its modifiers or
+geometry nodes make, realized into the same local space. ``read_operands`` gives one ``bridge.Operand`` per object,
+so the cache keys fields by this evaluated geometry and places them by the object's transform, as for meshes. Objects
+without geometry (empties, cameras, lights) are refused by name, as is a text or curve that evaluates to no faces.
+"""
+
+import numpy as np
+
+from . import bridge, runtime
+
+# Object types whose evaluated geometry becomes a mesh.
+GEOMETRY_TYPES = ("MESH", "CURVE", "FONT", "SURFACE", "META")
+KINDS = {
+    "EMPTY": "an empty",
+    "CAMERA": "a camera",
+    "LIGHT": "a light",
+    "LIGHT_PROBE": "a light probe",
+    "SPEAKER": "a speaker",
+    "ARMATURE": "an armature",
+    "LATTICE": "a lattice",
+}
+OPERAND_TYPES_TEXT = "mesh, text, curve, surface or metaball"
+
+
+def is_operand(obj) -> bool:
+    """Whether ``obj`` is an object whose geometry can take part (whatever its data holds right now)."""
+    return obj is not None and obj.type in GEOMETRY_TYPES
+
+
+def refusal(obj) -> str:
+    """The sentence refusing an object that has no geometry."""
+    kind = KINDS.get(obj.type, f"of type {obj.type.replace('_', ' ').lower()}")
+    return f"'{obj.name}' is {kind} and has no geometry: use a {OPERAND_TYPES_TEXT} object"
+
+
+def selected_operands(context) -> list:
+    """The active object (selected or not) when it has geometry, followed by the other selected objects."""
+    active = context.active_object
+    first = [active] if is_operand(active) else []
+    return first + [obj for obj in context.selected_objects if obj not in first]
+
+
+def read_operands(objects, depsgraph) -> list:
+    """One ``bridge.Operand`` per object: its evaluated geometry in its own space (its instances realized into it),
+    its world matrix and what its faces carry.
+
+    Raises:
+        AasdfError: Naming the objects that have no geometry, or a text or curve that evaluates to no faces.
+    """
+    engine = runtime.engine()
+    refused = [refusal(obj) for obj in objects if not is_operand(obj)]
+    if refused:
+        raise engine.AasdfError("; ".join(refused))
+    operands = []
+    for obj in objects:
+        evaluated = obj.evaluated_get(depsgraph)
+        matrix = np.array(evaluated.matrix_world, dtype=np.float64)
+        operand = bridge.read_mesh_operand(evaluated, matrix)
+        pieces = instance_pieces(evaluated, matrix, depsgraph)
+        if pieces:
+            operand = joined(operand, pieces)
+        if obj.type != "MESH" and not len(operand.tris):
+            raise engine.AasdfError(
+                f"'{obj.name}' has no faces: give it an extrusion or a bevel (its Geometry settings) or fill it"
+            )
+        operands.append(operand)
+    return operands
+
+
+def instance_pieces(evaluated, matrix, depsgraph) -> list:
+    """The instances ``evaluated`` makes (geometry nodes, instancing modifiers), each read as an operand in the
+    object's own space; empty when it makes none or its matrix has no inverse (refused later by ``transforms``)."""
+    if not any(modifier.type == "NODES" for modifier in evaluated.modifiers) and not evaluated.particle_systems:
+        return []
+    try:
+        to_local = np.linalg.inv(matrix)
+    except np.linalg.LinAlgError:
+        return []
+    if not np.all(np.isfinite(to_local)):
+        return []
+    pieces = []
+    for instance in depsgraph.object_instances:
+        if not instance.is_instance or instance.parent is None or instance.parent.original != evaluated.original:
+            continue
+        placed = to_local @ np.array(instance.matrix_world, dtype=np.float64)
+        piece = bridge.read_mesh_operand(instance.object, placed)
+        if len(piece.tris):
+            piece.verts, piece.tris = bridge.to_world(piece.verts, piece.tris, placed)
+            pieces.append(piece)
+    return pieces
+
+
+def joined(operand, pieces):
+    """``operand`` with the geometry of ``pieces`` (operands already in its space) appended: vertices, triangles,
+    corners and faces renumbered; UV maps and colours kept where every part has them."""
+    parts = [operand, *pieces]
+    vert_offsets = np.cumsum([0] + [len(p.verts) for p in parts])[:-1]
+    corner_offsets = np.cumsum([0] + [p.corner_count for p in parts])[:-1]
+    face_offsets = np.cumsum([0] + [len(p.face_material) for p in parts])[:-1]
+    operand.verts = np.concatenate([p.verts for p in parts]).astype(np.float32)
+    operand.tris = _renumbered([p.tris for p in parts], vert_offsets)
+    operand.corners = _renumbered([p.corners for p in parts], corner_offsets)
+    operand.faces = _renumbered([p.faces for p in parts], face_offsets)
+    operand.face_material = np.concatenate([p.face_material for p in parts]).astype(np.int32)
+    operand.face_smooth = np.concatenate([p.face_smooth for p in parts])
+    operand.corner_count = sum(p.corner_count for p in parts)
+    operand.loop_start = _renumbered([p.loop_start for p in parts], corner_offsets)
+    operand.corner_vert = _renumbered([p.corner_vert for p in parts], vert_offsets)
+    operand.uv_maps = {
+        name: np.concatenate([p.uv_maps[name] for p in parts])
+        for name in operand.uv_maps
+        if all(name in p.uv_maps for p in parts)
+    }
+    operand.colors = {
+        name: (kind, data_type, np.concatenate([p.colors[name][2] for p in parts]))
+        for name, (kind, data_type, _values) in operand.colors.items()
+        if all(name in p.colors and p.colors[name][0] == kind for p in parts)
+    }
+    return operand
+
+
+def _renumbered(arrays, offsets) -> np.ndarray:
+    """Index arrays of several parts as one int32 array, each part's indices shifted by its offset."""
+    return np.concatenate([array + offset for array, offset in zip(arrays, offsets, strict=True)]).astype(np.int32)
