@@ -29,7 +29,7 @@ from tests.support import cad_pairs, load_mesh, uv_sphere  # noqa: E402
 
 OUT = ROOT / "docs" / "images"
 SIZE = (640, 400)
-PICTURES = ("demo", "open-bunny", "blend", "octree", "textured", "sharp")
+PICTURES = ("demo", "open-bunny", "blend", "octree", "textured", "sharp", "kept-faces")
 # The direction the sharp picture's camera looks from, at the origin.
 SHARP_VIEW = (0.0, -1.0, 0.6)
 
@@ -347,6 +347,60 @@ def picture_octree(samples):
     frame([obj], direction=(0.0, -0.0001, 1.0), ortho=True)
     bpy.context.scene.cycles.samples = min(samples, 8)  # flat colours: few samples, and a smaller PNG
     render("octree")
+
+
+def wireframe(obj, thickness: float):
+    """A dark wire over ``obj``'s edges (a copy of it with a Wireframe modifier), as the viewport's wireframe shows
+    them."""
+    wire = obj.copy()
+    wire.data = obj.data.copy()
+    bpy.context.scene.collection.objects.link(wire)
+    modifier = wire.modifiers.new("Wire", "WIREFRAME")
+    modifier.thickness, modifier.use_even_offset, modifier.use_replace = thickness, False, True
+    assign(wire, material("wire", (0.02, 0.02, 0.03), 0.9))
+    return wire
+
+
+def picture_kept_faces(samples):
+    """A low-poly part (a plate of quads with a UV checker) minus a bore, three ways, left to right: Blender's Boolean
+    modifier (Exact solver), AASDF keeping the plate's own faces (new faces only along the seam), AASDF remeshed."""
+    fresh_scene(samples)
+    bpy.context.scene.render.resolution_x, bpy.context.scene.render.resolution_y = 960, 360
+    bpy.ops.mesh.primitive_cube_add(size=2.0)
+    plate = bpy.context.active_object
+    plate.scale = (1.0, 1.0, 0.25)
+    bpy.ops.object.transform_apply(scale=True)
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.subdivide(number_cuts=2)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    plate.data.materials.append(checker("checker", [(0.9, 0.88, 0.82), (0.2, 0.45, 0.75)], 16.0))
+    bpy.ops.mesh.primitive_cylinder_add(vertices=24, radius=0.45, depth=1.5, location=(0.2, 0.1, 0.0))
+    bore = bpy.context.active_object
+    bpy.context.view_layer.update()
+    results = []
+    exact = plate.copy()
+    exact.data = plate.data.copy()
+    bpy.context.scene.collection.objects.link(exact)
+    modifier = exact.modifiers.new("Boolean", "BOOLEAN")
+    modifier.operation, modifier.solver, modifier.object = "DIFFERENCE", "EXACT", bore
+    bpy.context.view_layer.update()
+    evaluated = exact.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    exact.data = bpy.data.meshes.new_from_object(evaluated)  # applied: the cutter stays where it cut
+    exact.modifiers.remove(modifier)
+    results.append(exact)
+    for keep in (True, False):
+        results.append(boolean("DIFFERENCE", [plate, bore], resolution=256, keep_faces=keep, hide_inputs=False))
+    hide_inputs_from_render(plate, bore)
+    for k, obj in enumerate(results):
+        obj.location.x += 2.6 * (k - 1)
+        bpy.context.view_layer.update()
+        wireframe(obj, 0.006).location = obj.location
+    names = ("Blender Boolean, Exact", "AASDF, Keep Original Faces", "AASDF, remeshed")
+    for k, text in enumerate(names):
+        label(text, (2.6 * (k - 1), -1.5, -0.5), 0.16)
+    bpy.context.view_layer.update()
+    frame(results, direction=(0.0, -1.0, 1.4), distance=2.75)
+    render("kept-faces")
 
 
 def main(argv=None):
