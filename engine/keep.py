@@ -147,7 +147,8 @@ class _Judge:
         # across its own concave creases)
         leaf = self.leaves[index]
         internal = _side_at(leaf, verts[tris].mean(axis=1), _unit_normals(verts, tris), SIDE_VOXELS * voxel) == 0
-        self.side_offset = self.band if internal.any() else SIDE_VOXELS * voxel
+        self.crossing = bool(internal.any())
+        self.side_offset = self.band if self.crossing else SIDE_VOXELS * voxel
         bad = np.flatnonzero(self.defects)
         self.defect_mesh = None
         if len(bad) and len(bad) < len(tris):
@@ -193,6 +194,9 @@ class _Judge:
         every sample (corners, rows) has that side, not 0, and whether any has one. Parts of a triangle that its own
         field does not cross (a self-intersecting or overlapping shell's internal faces) are not kept."""
         normals = _unit_normals(verts, tris)
+        if not self.crossing:  # a shell that nowhere crosses itself: its side at the centre holds all over
+            centre = _side_at(self.leaves[self.index], verts[tris].mean(axis=1), normals, self.side_offset)
+            return centre, centre != 0, centre != 0
         owner = np.repeat(np.arange(len(tris)), np.diff(first))
         centres = verts[tris].mean(axis=1)
         at = np.concatenate([centres, verts[tris].reshape(-1, 3), points[len(verts) :]])
