@@ -156,7 +156,12 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
         strips, stretched = _strips(points, k_loops, v_loops, paired["pairs"], PAIR_VOXELS * voxel, device)
         kept_unpaired = np.r_[paired["kept_unpaired"], stretched]
         if not len(kept_unpaired) and not len(paired["voxel_unpaired"]):
-            break
+            # the loops at an edge that is not shared by two faces turned against each other fail too
+            joined = np.concatenate([k_tris[k_alive], v_tris[v_alive], strips.astype(np.int64)])
+            kept_unpaired = np.unique(k_loops[2][unpaired_edge_vertices(joined, n)])
+            kept_unpaired = kept_unpaired[kept_unpaired >= 0]
+            if not len(kept_unpaired):
+                break
         k_alive, v_gone = _give_up(
             points, (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone), kept_unpaired,
             paired["voxel_unpaired"], rounds > 0, PAIR_VOXELS * voxel, device,
@@ -164,6 +169,23 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
     return _assemble(points, kept, k_tris, k_alive, v_tris[v_alive], strips, voxel_verts, voxel_tris, device)
+
+
+def unpaired_edge_vertices(tris: np.ndarray, n_verts: int) -> np.ndarray:
+    """The vertices of the directed edges that are not used once each way (a surface's open, doubled or flipped
+    edges): empty for a closed, consistently oriented surface."""
+    t = np.asarray(tris, dtype=np.int64)
+    a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
+    keys = a * n_verts + b
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    repeated = np.zeros(len(keys), dtype=bool)
+    dup = sorted_keys[1:] == sorted_keys[:-1]
+    repeated[order[1:][dup]] = repeated[order[:-1][dup]] = True
+    twins = b * n_verts + a
+    at = np.minimum(np.searchsorted(sorted_keys, twins), len(keys) - 1)
+    bad = repeated | (sorted_keys[at] != twins)
+    return np.unique(np.concatenate([a[bad], b[bad]]))
 
 
 def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach: float, device):
