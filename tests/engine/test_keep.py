@@ -310,3 +310,15 @@ def test_corner_weights_of_kept_faces_give_back_their_corners():
         weights = s["corner_bary"][faces][corner]
         assert ((weights == 0) | (weights == 1)).all() and (weights.sum(axis=1) == 1).all()
     assert not s["corner_bary"][~s["kept"]].any()
+
+
+def test_the_beetle_with_its_large_holes_united_with_a_ball_is_closed_and_keeps_faces():
+    beetle = normalised(load_mesh("beetle.obj"))
+    ball = normalised(uv_sphere(1.0), center=(0.2, 0.2, 0.2), diagonal=0.6)
+    fa, fb = engine.build_fields([beetle, ball], voxel_size=_voxel(beetle, ball))
+    field = fa | fb
+    s = field.kept_surface()
+    _check_closed(s)
+    assert s["stats"]["kept_fallback"] == ""
+    # measured: 9,038 faces kept, 144 k in all against 188 k remeshed (loops near its large holes give theirs up)
+    assert s["kept"].sum() > 3000 and len(s["tris"]) < 0.9 * len(field.to_mesh()[1])
