@@ -44,9 +44,8 @@ def cases() -> dict:
         "fandisk - cylinder": (*cad["fandisk - cylinder"], True),
         "rocker-arm - cube": (*cad["rocker-arm - cube"], True),
         "hex prism & sphere": (*cad["hex prism & sphere"], True),
-        "spot - ball": ("DIFFERENCE", spot, ball, True),
-        "bunny | spot (open scan)": ("UNION", bunny, spot, False),
-        "beetle | ball (open scan)": ("UNION", beetle, ball, False),
+        "bunny ∪ spot (open scan)": ("UNION", bunny, spot, False),
+        "beetle ∪ ball (open scan)": ("UNION", beetle, ball, False),
     }
 
 
@@ -55,6 +54,7 @@ def _aasdf(a, b, op, voxel, keep):
 
     cache.clear()
     first, second = baselines.mesh_object("A", *a), baselines.mesh_object("B", *b)
+    bpy.context.view_layer.update()
     for obj in bpy.context.view_layer.objects:
         obj.select_set(obj in (first, second))
     bpy.context.view_layer.objects.active = first
