@@ -18,13 +18,13 @@ from . import boolean, parallel, sources
 from .dual import contour_dual
 from .errors import AasdfError
 from .extract import extract_octree_level, extract_surface, lattice_cubes, octree_level_cubes
-from .hybrid import hybrid_surface, voxel_surface_only
+from .hybrid import kept_surface
 from .marching import empty_mesh
 from .octree import decode_codes
 from .placement import Placement
 from .plan import available_memory
 from .quadric import crease_edges
-from .sampling import FieldArg, code_proj, face_nodes_kernel, sample_field_kernel, source_ids_kernel
+from .sampling import FieldArg, code_proj, sample_field_kernel, source_ids_kernel
 
 
 @wp.kernel(enable_backward=False)
@@ -402,46 +402,7 @@ class AdaptiveField:
             source mesh for that id) and (F, 3, 3) float32 (per corner, the weights of the triangle's corners,
             projected onto its plane and not clamped).
         """
-        verts = self._frame_points(verts)  # barycentric coordinates do not change with a similarity
-        tris = np.asarray(tris)
-        if tris.ndim != 2 or tris.shape[1] != 3:
-            raise ValueError(f"Expected 'tris' of shape (F, 3), but got {tris.shape}.")
-        n = len(tris)
-        # every row of ``bary`` a kernel does not write is zeroed below (zeroing all of it first took 8 ms of 48 on
-        # 540 k faces)
-        verts_wp = parallel.host_view(verts, wp.vec3, self.device)
-        flat = np.ascontiguousarray(tris, dtype=np.int32).ravel()
-        tris_wp = parallel.host_view(flat, wp.int32, self.device)
-        ids = wp.empty(n, dtype=wp.int32, device=self.device)
-        node_tri = wp.empty(n, dtype=wp.int32, device=self.device)
-        bary = wp.empty(3 * n, dtype=wp.vec3, device=self.device)
-        if n:
-            arg = self.arg()
-            parallel.launch_split(
-                face_nodes_kernel, n, lambda lo, k: [arg, lo, verts_wp, tris_wp, ids, node_tri], self.device
-            )
-        ids, node_tri = ids.numpy(), node_tri.numpy()
-        tri_ids = np.full(n, -1, dtype=np.int32)
-        unknown_rows = []
-        for field_id in np.flatnonzero(np.bincount(ids[ids >= 0])):  # the ids present (a sort of F ids: 7 ms)
-            source = self.sources.get(int(field_id))
-            if source is None:
-                continue
-            rows = np.flatnonzero(ids == field_id)
-            # the triangle of the finest node holding the face's centre: found by the build, no search needed
-            known = rows[node_tri[rows] >= 0]
-            tri_ids[known] = source.triangle_ids[node_tri[known]]
-            sources.corner_barycentrics(source, node_tri[known], known, verts_wp, tris_wp, bary, self.device)
-            unknown_rows.append((source, rows[node_tri[rows] < 0]))
-        bary = bary.numpy().reshape(n, 3, 3)
-        for source, unknown in unknown_rows:
-            # elsewhere (a field that does not keep its finest nodes' triangles): the closest one, by the BVH
-            if len(unknown):
-                near = 0.5 * self.voxel_size  # a face lies within a fraction of a voxel of its source, but in fillets
-                corners = verts[tris[unknown]]
-                tri_ids[unknown], bary[unknown] = sources.face_sources(source, corners, near, self.device)
-        bary[tri_ids < 0] = 0.0  # no source: never written
-        return ids, tri_ids, bary
+        return sources.face_sources_of(self, self._frame_points(verts), tris)
 
     def source_barycentrics(self, field_ids, triangle_ids, points) -> np.ndarray:
         """(N, 3) float32 barycentric coordinates of each point projected onto a given source triangle (the plane of
@@ -515,23 +476,9 @@ class AdaptiveField:
         return {"values": values, "origin": lo + 0.5 * spacing, "spacing": spacing}
 
     def kept_surface(self, *, sharp: bool | None = None) -> dict:
-        """The zero surface keeping the operands' own faces wherever it is theirs and no other surface or defect of
-        theirs is near, with new (voxel) surface only along the seams (:func:`.hybrid.hybrid_surface`). A field that
-        is no boolean of meshes (a built field, an offset, a shell) keeps nothing: its voxel surface.
-
-        Returns:
-            dict: ``verts`` (N, 3) float32, ``tris`` (M, 3) int32 (closed, counter-clockwise seen from outside),
-            per face ``kept`` bool, ``field_id`` and ``triangle_id`` int32 (its source triangle, -1 for new faces),
-            per vertex ``vertex_field`` and ``vertex_id`` int32 (a kept corner's source vertex, else -1), ``stats``.
-        """
-        if self.placement is not None:  # joined in its own frame, then placed
-            surface = self.in_frame().kept_surface(sharp=sharp)
-            surface["verts"], surface["tris"] = self.placement.place_surface(surface["verts"], surface["tris"])
-            return surface
-        verts, tris = self.to_mesh(sharp=sharp)
-        if self.expression is None or not len(tris):
-            return voxel_surface_only(verts, tris, "not a boolean of meshes")
-        return hybrid_surface(self, verts, tris)
+        """The zero surface keeping the operands' own faces wherever it is theirs, new (voxel) surface only along the
+        seams: see :func:`.hybrid.kept_surface` (a field that is no boolean of meshes keeps nothing)."""
+        return kept_surface(self, sharp=sharp)
 
     def to_mesh(
         self, iso: float = 0.0, *, sharp: bool | None = None, return_creases: bool = False, keep_faces: bool = False

@@ -276,3 +276,24 @@ def _assemble(points, kept, k_tris, k_alive, v_tris, strips, voxel_verts, voxel_
         "corner_bary": np.concatenate([kept["corner_bary"][k_alive], np.zeros((n_new, 3, 3), np.float32)]),
         "stats": {"kept_faces": n_kept, "new_faces": n_new, "strip_faces": len(strips), "kept_fallback": ""},
     }
+
+
+def kept_surface(field, *, sharp: bool | None = None) -> dict:
+    """The zero surface of ``field`` keeping the operands' own faces wherever it is theirs and no other surface or
+    defect of theirs is near, with new (voxel) surface only along the seams (:func:`hybrid_surface`); a field that is
+    no boolean of meshes (a built field, an offset, a shell) keeps nothing: its voxel surface.
+
+    Returns:
+        dict: ``verts`` (N, 3) float32, ``tris`` (M, 3) int32 (closed, counter-clockwise seen from outside), per face
+        ``kept`` bool, ``field_id`` and ``triangle_id`` int32 (its source triangle, -1 for new faces), per vertex
+        ``vertex_field`` and ``vertex_id`` int32 (a kept corner's source vertex, else -1), ``corner_bary`` (M, 3, 3)
+        float32, ``stats``.
+    """
+    if field.placement is not None:  # joined in its own frame, then placed
+        surface = kept_surface(field.in_frame(), sharp=sharp)
+        surface["verts"], surface["tris"] = field.placement.place_surface(surface["verts"], surface["tris"])
+        return surface
+    verts, tris = field.to_mesh(sharp=sharp)
+    if field.expression is None or not len(tris):
+        return voxel_surface_only(verts, tris, "not a boolean of meshes")
+    return hybrid_surface(field, verts, tris)

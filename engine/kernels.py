@@ -41,6 +41,9 @@ ENGINE_MODULES = (
     "sweeping",
     "redistancing",
     "fieldops",
+    "keep",
+    "refine",
+    "zipper",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.
