@@ -140,7 +140,8 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
     points = np.concatenate([kept["verts"], voxel_verts]).astype(np.float32)
     k_tris, v_tris = kept["tris"], np.asarray(voxel_tris, dtype=np.int64) + n_k
     n = len(points)
-    k_alive = _drop_pinched(k_tris, np.ones(len(k_tris), dtype=bool), n)
+    # kept faces that list an edge another kept face lists the same way (pieces that overlap) are given up
+    k_alive = _drop_pinched(k_tris, ~_doubled_faces(k_tris, n), n)
     v_gone = np.zeros(len(v_tris), dtype=bool)
     candidates = np.arange(n_k, n)
     for rounds in range(MAX_ROUNDS):
@@ -154,21 +155,37 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
         v_loops = _loops(border_halves(v_tris[v_alive], n), n, reverse=True)
         paired = _pair_loops(points, k_loops, v_loops, PAIR_VOXELS * voxel, device)
         strips, stretched = _strips(points, k_loops, v_loops, paired["pairs"], PAIR_VOXELS * voxel, device)
-        kept_unpaired = np.r_[paired["kept_unpaired"], stretched]
-        if not len(kept_unpaired) and not len(paired["voxel_unpaired"]):
-            # the loops at an edge that is not shared by two faces turned against each other fail too
+        kept_failed = np.r_[paired["kept_unpaired"], stretched]
+        whole = rounds > 0  # a loop failing again gives up the kept piece it bounds
+        if not len(kept_failed) and not len(paired["voxel_unpaired"]):
             joined = np.concatenate([k_tris[k_alive], v_tris[v_alive], strips.astype(np.int64)])
-            kept_unpaired = np.unique(k_loops[2][unpaired_edge_vertices(joined, n)])
-            kept_unpaired = kept_unpaired[kept_unpaired >= 0]
-            if not len(kept_unpaired):
+            kept_failed, whole = _loops_at_unpaired_edges(joined, k_loops, v_loops, paired["pairs"], n), False
+            if not len(kept_failed):
                 break
         k_alive, v_gone = _give_up(
-            points, (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone), kept_unpaired,
-            paired["voxel_unpaired"], rounds > 0, PAIR_VOXELS * voxel, device,
+            points, (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone), kept_failed,
+            paired["voxel_unpaired"], whole, PAIR_VOXELS * voxel, device,
         )  # fmt: skip
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
     return _assemble(points, kept, k_tris, k_alive, v_tris[v_alive], strips, voxel_verts, voxel_tris, device)
+
+
+def _loops_at_unpaired_edges(tris, k_loops, v_loops, pairs, n_verts: int) -> np.ndarray:
+    """The kept loops at an edge of the joined surface that is not used once each way (directly, or through the
+    voxel loop paired with them): empty when the join is closed and consistently oriented."""
+    bad = unpaired_edge_vertices(tris, n_verts)
+    through_voxel_loops = pairs[np.isin(pairs[:, 1], v_loops[2][bad]), 0]
+    failed = np.unique(np.r_[k_loops[2][bad], through_voxel_loops])
+    return failed[failed >= 0]
+
+
+def _doubled_faces(tris: np.ndarray, n_verts: int) -> np.ndarray:
+    """(T,) bool: the faces with a directed edge some other face lists too."""
+    t = np.asarray(tris, dtype=np.int64)
+    keys = t.ravel() * n_verts + t[:, [1, 2, 0]].ravel()
+    _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    return (counts[inverse.reshape(-1)] > 1).reshape(-1, 3).any(axis=1)
 
 
 def unpaired_edge_vertices(tris: np.ndarray, n_verts: int) -> np.ndarray:

@@ -37,6 +37,8 @@ SLACK_VOXELS = 0.75
 # A triangle partly keepable is split while its longest edge is above this many voxels.
 SPLIT_VOXELS = 1.5
 MAX_SPLIT_ROUNDS = 24
+# Bisections a partly keepable triangle takes per round while it is over four times the split size.
+SPLITS_PER_ROUND = 1
 # A triangle's own field is read this many voxels in front of and behind it (its sign must change there).
 SIDE_VOXELS = 0.5
 
@@ -273,11 +275,16 @@ def _judge_leaf(field, index: int, source) -> dict:
             break
         mark = np.zeros(len(tris), dtype=bool)
         mark[todo[split]] = True
-        verts, tris, origin, new_ends = split_triangles(verts, tris, mark)
-        ends = np.concatenate([ends, new_ends])
-        parent, flip = parent[origin], flip[origin]
-        # a split triangle's pieces are judged again; a neighbour's pieces keep its verdict
-        status = np.where(mark[origin], UNKNOWN, status[origin])
+        # pieces still far larger than the split size are split again before they are judged (fewer rounds)
+        for _ in range(SPLITS_PER_ROUND):
+            verts, tris, origin, new_ends = split_triangles(verts, tris, mark)
+            ends = np.concatenate([ends, new_ends])
+            parent, flip, status = parent[origin], flip[origin], status[origin]
+            # a split triangle's pieces are judged again; a neighbour's pieces keep its verdict
+            status[mark[origin]] = UNKNOWN
+            mark = mark[origin] & (_longest_edges(verts, tris) > 4.0 * split_edge)
+            if not mark.any():
+                break
     status[status == UNKNOWN] = DROPPED
     tris, rows = merge_kept(verts, tris, status == KEPT, ends)
     parent, kept, flip = parent[rows], status[rows] == KEPT, flip[rows]
