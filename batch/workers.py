@@ -1,0 +1,192 @@
+"""Long-lived worker processes fed job by job: each imports ``bpy``, registers the add-on and loads the kernels once,
+then runs the jobs it is sent (``execute.run_job``) until told to stop. A job past its timeout has its worker killed
+and replaced, and is reported; a worker that dies mid-job (killed, out of memory) is replaced and its job tried once
+more, then reported. Workers are started with the ``spawn`` method, so they need a Python with the ``bpy`` module."""
+
+import multiprocessing
+import os
+import shutil
+import signal
+import time
+from collections import deque
+from multiprocessing.connection import wait
+
+from .jobs import partial_dir
+from .options import BatchError
+
+ATTEMPTS = 2  # a job whose worker dies is tried once more
+START_FAILURES = 3  # workers dying before their first job: give up, it will not get better
+
+
+def serve(conn, quiet: bool):
+    """A worker's main loop: ``("started", number)`` when a job begins, ``("done", number, outcome)`` when it ends."""
+    from . import report
+
+    if quiet:
+        report.silence_stdout()
+    from . import execute
+
+    execute.prepare()
+    conn.send(("ready",))
+    while True:
+        job = conn.recv()
+        if job is None:
+            return
+        conn.send(("started", job.number))
+        conn.send(("done", job.number, execute.run_job(job)))
+
+
+def death_of(process) -> str:
+    code = process.exitcode
+    if code is not None and code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit status {code}"
+
+
+class Worker:
+    """One worker process and its end of the pipe; ``job`` is the job it holds, ``started`` when it began it."""
+
+    def __init__(self, quiet: bool = True):
+        context = multiprocessing.get_context("spawn")
+        self.conn, child = context.Pipe()
+        self.process = context.Process(target=serve, args=(child, quiet), name="aasdf-worker")
+        self.process.start()
+        child.close()
+        self.job, self.started, self.ready = None, None, False
+
+    def give(self, job):
+        self.job, self.started = job, None
+        self.conn.send(job)
+
+    def stop(self, *, kill: bool = False):
+        if kill:
+            self.process.kill()
+        else:
+            try:
+                self.conn.send(None)
+            except OSError:
+                pass
+        self.process.join(5.0)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join()
+        self.conn.close()
+
+    def messages(self) -> list:
+        """What the worker has sent so far (nothing more once it has died)."""
+        found = []
+        try:
+            while self.conn.poll():
+                found.append(self.conn.recv())
+        except (EOFError, OSError):
+            pass
+        return found
+
+    def run_one(self, job, timeout=None) -> dict | None:
+        """Run one job and wait for it: its outcome, a timeout's, or None when the worker died."""
+        self.give(job)
+        while True:
+            wait([self.conn, self.process.sentinel], timeout=0.2)
+            for message in self.messages():
+                if message[0] == "started":
+                    self.started = time.monotonic()
+                elif message[0] == "ready":
+                    self.ready = True
+                elif message[0] == "done":
+                    self.job = None
+                    return message[2]
+            if not self.process.is_alive():
+                return None
+            if self.over_time(timeout):
+                self.stop(kill=True)
+                return stopped(job, f"stopped after the timeout of {timeout:g} s")
+
+    def over_time(self, timeout) -> bool:
+        return timeout is not None and self.started is not None and time.monotonic() - self.started > timeout
+
+
+def stopped(job, how: str) -> dict:
+    """The outcome of a job whose worker was stopped; what it was writing is removed."""
+    if job.output:
+        shutil.rmtree(partial_dir(job.output), ignore_errors=True)
+    return {"status": "failed", "seconds": 0.0, "message": how}
+
+
+class Pool:
+    """``count`` workers running ``jobs``; ``on_outcome(job, outcome)`` is called as each ends."""
+
+    def __init__(self, count: int, *, timeout: float | None = None, quiet: bool = True):
+        self.count, self.timeout, self.quiet = max(1, count), timeout, quiet
+        self.workers, self.queue, self.attempts, self.start_failures = [], deque(), {}, 0
+
+    def run(self, jobs, on_outcome):
+        self.queue.extend(jobs)
+        self.workers = [Worker(self.quiet) for _ in range(min(self.count, len(self.queue)))]
+        try:
+            while self.queue or any(worker.job is not None for worker in self.workers):
+                self.feed()
+                self.step(on_outcome)
+        finally:
+            for worker in self.workers:
+                worker.stop(kill=worker.job is not None)
+
+    def feed(self):
+        for worker in self.workers:
+            if worker.job is None and self.queue:
+                worker.give(self.queue.popleft())
+
+    def step(self, on_outcome):
+        """Wait for a message, a worker's death or a timeout, and act on it."""
+        busy = [w for w in self.workers if w.job is not None]
+        conns, sentinels = {id(w.conn): w for w in busy}, {w.process.sentinel: w for w in busy}
+        for handle in wait([w.conn for w in busy] + list(sentinels), timeout=0.2):
+            worker = sentinels[handle] if isinstance(handle, int) else conns[id(handle)]
+            if worker.job is None or worker not in self.workers:
+                continue
+            for message in worker.messages():
+                self.receive(worker, message, on_outcome)
+            if worker.job is not None and not worker.process.is_alive():
+                self.died(worker, on_outcome)
+        for worker in list(self.workers):
+            if worker.job is not None and worker.over_time(self.timeout):
+                on_outcome(worker.job, stopped(worker.job, f"stopped after the timeout of {self.timeout:g} s"))
+                self.replace(worker, kill=True)
+
+    def receive(self, worker, message, on_outcome):
+        if message[0] == "ready":
+            worker.ready = True
+        elif message[0] == "started":
+            worker.started = time.monotonic()
+        elif message[0] == "done":
+            job, worker.job, worker.started = worker.job, None, None
+            on_outcome(job, message[2])
+
+    def died(self, worker, on_outcome):
+        job, how = worker.job, death_of(worker.process)
+        if not worker.ready:
+            self.start_failures += 1
+            if self.start_failures >= START_FAILURES:
+                raise BatchError(f"worker processes die as they start ({how}): is the bpy module importable?")
+        self.attempts[job.number] = self.attempts.get(job.number, 0) + 1
+        if self.attempts[job.number] < ATTEMPTS:
+            self.queue.append(job)  # tried again by the next free worker
+            stopped(job, how)
+        else:
+            on_outcome(job, stopped(job, f"its worker died twice ({how})"))
+        worker.job = None
+        self.replace(worker, kill=False)
+
+    def replace(self, worker, *, kill: bool):
+        worker.job = None
+        worker.stop(kill=kill)
+        index = self.workers.index(worker)
+        self.workers.pop(index)
+        if self.queue:  # a new worker in its place while there are jobs left
+            self.workers.insert(index, Worker(self.quiet))
+
+
+def default_count() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
