@@ -81,7 +81,11 @@ def boolean_to_file(addon, args) -> dict:
     obj = bpy.data.objects[summary["object"]]
     scene.select_only([obj], obj)
     write_atomically(args, obj)
-    numbers = {"triangles": summary["triangles"], "volume": round(scene.mesh_volume(obj), 6)}
+    numbers = {
+        "triangles": summary["triangles"],
+        "volume": round(scene.mesh_volume(obj), 6),
+        "fields_built": summary["fields_built"],
+    }
     if summary["warnings"]:
         numbers["warning"] = "; ".join(summary["warnings"])
     return numbers

@@ -8,6 +8,7 @@ import hashlib
 import json
 import os
 import shlex
+from argparse import Namespace
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -63,17 +64,15 @@ JOB_KEYS = set(vars(job_parser({}).parse_args([])))
 
 
 def parse_entry(entry: dict, folder: str, defaults: dict, *, from_csv: bool) -> dict:
-    """One job's options (the command line's ``defaults`` overridden by ``entry``), checked.
+    """One job's options (the command line's ``defaults`` overridden by ``entry``).
 
     Raises:
-        BatchError: An unknown key, a bad value, or a job that cannot run (missing file, no output...).
+        BatchError: An unknown key or a bad value.
     """
     if not isinstance(entry, dict):
         raise BatchError(f"a job is an object of options, not {type(entry).__name__}")
     argv = [word for key, value in entry.items() for word in option_argv(key, value, folder, from_csv=from_csv)]
-    args = job_parser(defaults).parse_args(argv)
-    check_args(args)
-    return vars(args)
+    return vars(job_parser(defaults).parse_args(argv))
 
 
 def read_entries(path: Path):
@@ -114,6 +113,7 @@ def read_jobs(path, defaults: dict) -> list:
             if isinstance(entry, str):
                 raise BatchError(entry)
             job.options = parse_entry(entry, folder, defaults, from_csv=path.suffix.lower() == ".csv")
+            check_args(Namespace(**job.options))
             first = outputs.setdefault(os.path.normcase(job.output), job.where)
             if first != job.where:
                 raise BatchError(f"the same output as {first}: {job.output}")
@@ -130,6 +130,7 @@ def jobs_from_dicts(entries, defaults: dict, folder: str = ".") -> list:
         job = Job(number, f"job {number}")
         try:
             job.options = parse_entry(entry, os.path.abspath(folder), defaults, from_csv=False)
+            check_args(Namespace(**job.options))
         except BatchError as err:
             job.error = str(err)
         jobs.append(job)

@@ -54,6 +54,7 @@ def entry(job, outcome: dict) -> dict:
         "seconds": outcome.get("seconds", 0.0),
         "triangles": outcome.get("triangles"),
         "volume": outcome.get("volume"),
+        "fields_built": outcome.get("fields_built", 0),
         "message": outcome.get("message", ""),
     }
 
