@@ -70,3 +70,8 @@ def run(client, jobs, on_outcome, *, timeout=None):
         except Exception as err:  # noqa: BLE001 (a task lost with its Dask worker: reported, the others go on)
             outcome = stopped(job, f"the Dask task failed: {type(err).__name__}: {err}")
         on_outcome(job, outcome)
+
+
+def job_process_id() -> int:
+    """The process id of this Dask worker's job process (0: none running)."""
+    return _worker.process.pid if _worker is not None and _worker.process.is_alive() else 0

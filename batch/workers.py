@@ -7,6 +7,7 @@ import multiprocessing
 import os
 import shutil
 import signal
+import sys
 import time
 from collections import deque
 from multiprocessing.connection import wait
@@ -22,6 +23,7 @@ def serve(conn, quiet: bool):
     """A worker's main loop: ``("started", number)`` when a job begins, ``("done", number, outcome)`` when it ends."""
     from . import report
 
+    scripts_last()
     if quiet:
         report.silence_stdout()
     from . import execute
@@ -34,6 +36,15 @@ def serve(conn, quiet: bool):
             return
         conn.send(("started", job.number))
         conn.send(("done", job.number, execute.run_job(job)))
+
+
+def scripts_last():
+    """Move Blender's script folders (``.../bpy/<version>/scripts/...``, added to ``sys.path`` by a parent that had
+    imported ``bpy`` and inherited through ``spawn``) behind the rest: the ``bpy`` module must be found before its
+    own ``scripts/modules/bpy`` package."""
+    marker = f"{os.sep}bpy{os.sep}"
+    scripts = [path for path in sys.path if marker in path and f"{os.sep}scripts" in path]
+    sys.path[:] = [path for path in sys.path if path not in scripts] + scripts
 
 
 def death_of(process) -> str:
@@ -58,8 +69,12 @@ class Worker:
         self.job, self.started, self.ready = None, None, False
 
     def give(self, job):
+        """Send ``job``; a worker that has just died keeps it (its death is seen next, and the job tried again)."""
         self.job, self.started = job, None
-        self.conn.send(job)
+        try:
+            self.conn.send(job)
+        except OSError:
+            pass
 
     def stop(self, *, kill: bool = False):
         if kill:
@@ -121,6 +136,7 @@ class Pool:
     def __init__(self, count: int, *, timeout: float | None = None, quiet: bool = True):
         self.count, self.timeout, self.quiet = max(1, count), timeout, quiet
         self.workers, self.queue, self.attempts, self.start_failures = [], deque(), {}, 0
+        self.retried = {}  # job number -> how its first worker died
 
     def run(self, jobs, on_outcome):
         self.queue.extend(jobs)
@@ -162,7 +178,10 @@ class Pool:
             worker.started = time.monotonic()
         elif message[0] == "done":
             job, worker.job, worker.started = worker.job, None, None
-            on_outcome(job, message[2])
+            outcome = message[2]
+            if job.number in self.retried and outcome["status"] == "done":
+                outcome["message"] = f"tried again: its first worker died ({self.retried[job.number]})"
+            on_outcome(job, outcome)
 
     def died(self, worker, on_outcome):
         job, how = worker.job, death_of(worker.process)
@@ -173,6 +192,7 @@ class Pool:
         self.attempts[job.number] = self.attempts.get(job.number, 0) + 1
         if self.attempts[job.number] < ATTEMPTS:
             self.queue.append(job)  # tried again by the next free worker
+            self.retried[job.number] = how
             stopped(job, how)
         else:
             on_outcome(job, stopped(job, f"its worker died twice ({how})"))
