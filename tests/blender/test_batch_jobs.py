@@ -24,8 +24,8 @@ SCRIPT = ROOT / "aasdf_batch.py"
 SHARED = 0.5 * 0.7 * 0.8
 EXACT = {"union": 2.0 - SHARED, "intersect": SHARED, "difference": 1.0 - SHARED}
 RESOLUTION = "48"
-# A job of several seconds here (an offset of 4 voxels and more at /96): what a timeout or a kill interrupts.
-SLOW = {"inputs": [str(mesh_path("spot.obj"))], "offset": 0.1, "resolution": 96, "output": "slow.ply"}
+# A job of seconds here (an offset of 8 voxels at /200, 3 s or more): what a timeout or a kill interrupts.
+SLOW = {"inputs": [str(mesh_path("spot.obj"))], "offset": 0.1, "resolution": 200, "output": "slow.ply"}
 
 
 def write_obj(path, verts, tris):
@@ -258,7 +258,7 @@ def test_a_worker_killed_mid_job_is_replaced_and_its_job_tried_again(meshes, tmp
     )
     process = start_batch("--jobs", jobs, "--resolution", RESOLUTION, "--workers", 1, "--report", tmp_path / "r.json")
     wait_for(tmp_path / ".first.ply.aasdf.json", process)
-    time.sleep(0.5)  # in the slow job now
+    time.sleep(0.3)  # in the slow job now
     (worker,) = children(process.pid)
     os.kill(worker, signal.SIGKILL)
     out, err = process.communicate(timeout=240)
@@ -279,7 +279,7 @@ def test_a_rerun_after_the_whole_run_was_killed_does_only_what_was_left(meshes, 
     jobs = write_jobs(tmp_path / "jobs.jsonl", entries)
     process = start_batch("--jobs", jobs, "--resolution", RESOLUTION, "--workers", 1)
     wait_for(tmp_path / ".difference.ply.aasdf.json", process)
-    time.sleep(0.5)
+    time.sleep(0.3)
     os.killpg(process.pid, signal.SIGKILL)  # the run and its workers
     process.communicate(timeout=60)
     written = sorted(p.name for p in tmp_path.glob("*.ply"))
