@@ -49,7 +49,9 @@ def run_job(job: Job) -> dict:
     except (BatchError, engine.AasdfError) as err:
         return result("failed", started, str(err))
     except (OSError, RuntimeError) as err:  # an unreadable file (the importer's report), a full disk...
-        return result("failed", started, " ".join(str(err).split()))
+        return result("failed", started, " ".join(str(err).split()).removeprefix("Error: "))
+    except Exception as err:  # noqa: BLE001 (a fault of ours in one job must not stop the thousands after it)
+        return result("failed", started, f"unexpected {type(err).__name__}: {err}")
     finally:
         scene.clear_scene()
     write_record(job, numbers)

@@ -33,6 +33,8 @@ def worker_count(asked) -> int:
 def run_job_file(args, out, err) -> int:
     """``--jobs FILE``: every job of the file (or of its shard); exit status 1 when any failed."""
     count = worker_count(args.workers)
+    if args.timeout is not None and count == 0 and args.scheduler is None:
+        raise BatchError("--timeout needs worker processes (--workers 1 or more): this process cannot stop a job")
     client = None
     if args.scheduler is not None:
         from . import cluster

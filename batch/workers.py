@@ -1,8 +1,11 @@
 """Long-lived worker processes fed job by job: each imports ``bpy``, registers the add-on and loads the kernels once,
 then runs the jobs it is sent (``execute.run_job``) until told to stop. A job past its timeout has its worker killed
 and replaced, and is reported; a worker that dies mid-job (killed, out of memory) is replaced and its job tried once
-more, then reported. Workers are started with the ``spawn`` method, so they need a Python with the ``bpy`` module."""
+more, then reported. A free worker is given a job sharing an input with its last one when one is queued near the
+front (its field cache holds that input's field). Workers are started with the ``spawn`` method, so they need a Python
+with the ``bpy`` module."""
 
+import itertools
 import multiprocessing
 import os
 import shutil
@@ -17,6 +20,7 @@ from .options import BatchError
 
 ATTEMPTS = 2  # a job whose worker dies is tried once more
 START_FAILURES = 3  # workers dying before their first job: give up, it will not get better
+LOOKAHEAD = 64  # queued jobs a free worker looks through for one sharing its last job's inputs
 
 
 def serve(conn, quiet: bool):
@@ -67,10 +71,11 @@ class Worker:
         self.process.start()
         child.close()
         self.job, self.started, self.ready = None, None, False
+        self.inputs = set()  # the inputs of the job it was given last
 
     def give(self, job):
         """Send ``job``; a worker that has just died keeps it (its death is seen next, and the job tried again)."""
-        self.job, self.started = job, None
+        self.job, self.started, self.inputs = job, None, set(job.options.get("inputs", ()))
         try:
             self.conn.send(job)
         except OSError:
@@ -152,7 +157,16 @@ class Pool:
     def feed(self):
         for worker in self.workers:
             if worker.job is None and self.queue:
-                worker.give(self.queue.popleft())
+                worker.give(self.take_for(worker))
+
+    def take_for(self, worker):
+        """The next job for ``worker``: among the next ``LOOKAHEAD`` queued, the first sharing an input with the job
+        it ran last (whose field its cache holds), else the first."""
+        for k, job in enumerate(itertools.islice(self.queue, LOOKAHEAD)):
+            if worker.inputs & set(job.options.get("inputs", ())):
+                del self.queue[k]
+                return job
+        return self.queue.popleft()
 
     def step(self, on_outcome):
         """Wait for a message, a worker's death or a timeout, and act on it."""

@@ -164,3 +164,27 @@ def test_report_is_written_whole_in_job_order(tmp_path):
     assert [line["job"] for line in written["jobs"]] == [1, 2]
     assert set(written["jobs"][0]) >= {"status", "seconds", "triangles", "volume", "message"}
     assert os.listdir(tmp_path / "r") == ["report.json"]
+
+
+def test_a_free_worker_takes_a_queued_job_sharing_its_last_inputs_first():
+    from types import SimpleNamespace
+
+    from batch import workers
+
+    pool = workers.Pool(2)
+    queue = [jobs.Job(n, f"j:{n}", {"inputs": inputs}) for n, inputs in enumerate([["x", "y"], ["p", "q"], ["q"]])]
+    pool.queue.extend(queue)
+    assert pool.take_for(SimpleNamespace(inputs={"q"})).number == 1
+    assert pool.take_for(SimpleNamespace(inputs={"z"})).number == 0  # none shares: the first
+    assert [job.number for job in pool.queue] == [2]
+
+
+def test_worker_counts_and_a_timeout_without_workers_are_checked():
+    from batch import runner
+
+    assert runner.worker_count(None) >= 1 and runner.worker_count(0) == 0
+    with pytest.raises(options.BatchError, match="--workers must be 0 or more"):
+        runner.worker_count(-1)
+    args = options.command_line_parser("").parse_args(["--jobs", "j.jsonl", "--workers", "0", "--timeout", "5"])
+    with pytest.raises(options.BatchError, match="--timeout needs worker processes"):
+        runner.run_job_file(args, io.StringIO(), io.StringIO())

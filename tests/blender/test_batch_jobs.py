@@ -35,11 +35,15 @@ def write_obj(path, verts, tris):
 
 @pytest.fixture(scope="module")
 def meshes(tmp_path_factory):
-    """A folder with the cubes ``a.obj``, ``b.obj``, a cube ``far.obj`` touching neither and a square ``plane.obj``."""
+    """A folder with the cubes ``a.obj``, ``b.obj``, ``far.obj`` touching neither and ``c.obj`` placed on ``far.obj``
+    as ``b.obj`` is on ``a.obj``, and a square ``plane.obj``. Workers take a job sharing an input with their last one
+    first: jobs meant to run after the slow one use ``far.obj`` and ``c.obj``."""
     folder = tmp_path_factory.mktemp("meshes")
     write_obj(folder / "a.obj", *box_mesh((0.5, 0.5, 0.5)))
     write_obj(folder / "b.obj", *box_mesh((0.5, 0.5, 0.5), center=(0.5, 0.3, 0.2)))
     write_obj(folder / "far.obj", *box_mesh((0.5, 0.5, 0.5), center=(5.0, 0.0, 0.0)))
+    write_obj(folder / "c.obj", *box_mesh((0.5, 0.5, 0.5), center=(5.5, 0.3, 0.2)))  # far.obj's b.obj
+    (folder / "garbage.stl").write_text("not an STL file", encoding="ascii")
     square = np.array([[-1, -1, 0.1], [1, -1, 0.1], [1, 1, 0.1], [-1, 1, 0.1]], dtype=np.float32)
     write_obj(folder / "plane.obj", square, np.array([[0, 1, 2], [0, 2, 3]]))
     return folder
@@ -93,7 +97,7 @@ def leftovers(folder) -> list:
 
 @pytest.fixture(scope="module")
 def one_process(meshes, tmp_path_factory):
-    """Eight jobs in one process (``--workers 0``), four of them faulty, the operation a command-line default."""
+    """Eight jobs in one process (``--workers 0``), five of them faulty, the operation a command-line default."""
     folder = tmp_path_factory.mktemp("one")
     jobs = write_jobs(
         folder / "jobs.jsonl",
@@ -105,6 +109,7 @@ def one_process(meshes, tmp_path_factory):
             pair(meshes, "union", "out/missing.ply", second="nowhere.obj"),
             pair(meshes, "union", "out/plane.ply", second="plane.obj"),
             pair(meshes, "intersect", "out/empty.ply", second="far.obj"),
+            pair(meshes, "union", "out/unreadable.ply", second="garbage.stl"),
         ],
     )
     done = run_batch(
@@ -140,9 +145,9 @@ def test_one_process_builds_the_fields_of_shared_inputs_once(one_process):
 def test_report_lists_every_job_in_file_order(one_process):
     folder, done = one_process
     written = json.loads((folder / "report.json").read_text(encoding="utf-8"))
-    assert [job["job"] for job in written["jobs"]] == list(range(1, 8))
-    assert (written["summary"]["done"], written["summary"]["failed"], written["summary"]["jobs"]) == (3, 4, 7)
-    assert "7 jobs: 3 done, 0 up to date, 4 failed" in done.stdout
+    assert [job["job"] for job in written["jobs"]] == list(range(1, 9))
+    assert (written["summary"]["done"], written["summary"]["failed"], written["summary"]["jobs"]) == (3, 5, 8)
+    assert "8 jobs: 3 done, 0 up to date, 5 failed" in done.stdout
 
 
 @pytest.mark.parametrize(
@@ -152,8 +157,9 @@ def test_report_lists_every_job_in_file_order(one_process):
         ("missing.ply", "input file not found: "),
         ("plane.ply", "'plane' encloses no volume: give it a thickness or close it"),
         ("empty.ply", "the result is empty: nothing written"),
+        ("unreadable.ply", "STL Import: Failed to read file"),
     ],
-    ids=["malformed-line", "missing-file", "encloses-nothing", "empty-result"],
+    ids=["malformed-line", "missing-file", "encloses-nothing", "empty-result", "unreadable-file"],
 )
 def test_a_failing_job_is_reported_with_its_reason_and_writes_nothing(one_process, key, message):
     folder, done = one_process
@@ -254,7 +260,8 @@ def start_batch(*args):
 
 def test_a_worker_killed_mid_job_is_replaced_and_its_job_tried_again(meshes, tmp_path):
     jobs = write_jobs(
-        tmp_path / "jobs.jsonl", [pair(meshes, "union", "first.ply"), SLOW, pair(meshes, "intersect", "last.ply")]
+        tmp_path / "jobs.jsonl",
+        [pair(meshes, "union", "first.ply"), SLOW, pair(meshes, "intersect", "last.ply", "far.obj", "c.obj")],
     )
     process = start_batch("--jobs", jobs, "--resolution", RESOLUTION, "--workers", 1, "--report", tmp_path / "r.json")
     wait_for(tmp_path / ".first.ply.aasdf.json", process)
@@ -274,7 +281,7 @@ def test_a_worker_killed_mid_job_is_replaced_and_its_job_tried_again(meshes, tmp
 def test_a_rerun_after_the_whole_run_was_killed_does_only_what_was_left(meshes, tmp_path):
     entries = [pair(meshes, op, f"{op}.ply") for op in EXACT] + [
         SLOW,
-        pair(meshes, "union", "end.ply", "b.obj", "a.obj"),
+        pair(meshes, "union", "end.ply", "far.obj", "c.obj"),
     ]
     jobs = write_jobs(tmp_path / "jobs.jsonl", entries)
     process = start_batch("--jobs", jobs, "--resolution", RESOLUTION, "--workers", 1)
