@@ -56,6 +56,8 @@ def add_job_options(parser):
 
 
 def add_run_options(parser):
+    parser.add_argument("--verbose", action="store_true", help="also print Warp's start-up and kernel-loading lines")
+    parser.add_argument("--quiet", action="store_true", help="print only the summary, not each step")
     group = parser.add_argument_group("job files (the options above are then every job's defaults)")
     group.add_argument("--jobs", metavar="FILE", help="a job file: JSON lines or .csv, a job per line")
     group.add_argument("--report", metavar="FILE", help="write a JSON report: per job status, seconds, triangles...")
@@ -64,8 +66,6 @@ def add_run_options(parser):
     group.add_argument("--force", action="store_true", help="redo jobs whose output is up to date")
     group.add_argument("--shard", metavar="K/N", help="run only the K-th (1..N) of N disjoint slices of the jobs")
     group.add_argument("--scheduler", metavar="ADDRESS", help="run the jobs on this Dask scheduler's workers")
-    group.add_argument("--verbose", action="store_true", help="also print Warp's start-up and kernel-loading lines")
-    group.add_argument("--quiet", action="store_true", help="print only the summary, not each step")
 
 
 def command_line_parser(description: str) -> argparse.ArgumentParser:
