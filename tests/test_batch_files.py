@@ -5,6 +5,7 @@ lines and the report."""
 import io
 import json
 import os
+import sys
 import time
 
 import pytest
@@ -188,3 +189,13 @@ def test_worker_counts_and_a_timeout_without_workers_are_checked():
     args = options.command_line_parser("").parse_args(["--jobs", "j.jsonl", "--workers", "0", "--timeout", "5"])
     with pytest.raises(options.BatchError, match="--timeout needs worker processes"):
         runner.run_job_file(args, io.StringIO(), io.StringIO())
+
+
+def test_progress_falls_back_to_plain_lines_without_tqdm(monkeypatch):
+    monkeypatch.setitem(sys.modules, "tqdm", None)  # as in Blender's own Python: the import fails
+    out, terminal = io.StringIO(), FakeTerminal()
+    progress = report.Progress(1, out, terminal)
+    assert progress.bar is None
+    progress.add(jobs.Job(1, "j:1", {"output": "o.ply"}), {"status": "done", "seconds": 0.5, "triangles": 10})
+    progress.close()
+    assert "[1/1] done o.ply 10 triangles" in out.getvalue()
