@@ -1,11 +1,10 @@
 """Long-lived worker processes fed job by job: each imports ``bpy``, registers the add-on and loads the kernels once,
 then runs the jobs it is sent (``execute.run_job``) until told to stop. A job past its timeout has its worker killed
 and replaced, and is reported; a worker that dies mid-job (killed, out of memory) is replaced and its job tried once
-more, then reported. A free worker is given a job sharing an input with its last one when one is queued near the
-front (its field cache holds that input's field). Workers are started with the ``spawn`` method, so they need a Python
-with the ``bpy`` module."""
+more, then reported. Each worker works down a contiguous lane of the jobs (jobs sharing inputs stay on the worker
+whose field cache holds them). Workers are started with the ``spawn`` method, so they need a Python with the ``bpy``
+module."""
 
-import itertools
 import multiprocessing
 import os
 import shutil
@@ -20,7 +19,6 @@ from .options import BatchError
 
 ATTEMPTS = 2  # a job whose worker dies is tried once more
 START_FAILURES = 3  # workers dying before their first job: give up, it will not get better
-LOOKAHEAD = 64  # queued jobs a free worker looks through for one sharing its last job's inputs
 
 
 def serve(conn, quiet: bool):
@@ -71,11 +69,10 @@ class Worker:
         self.process.start()
         child.close()
         self.job, self.started, self.ready = None, None, False
-        self.inputs = set()  # the inputs of the job it was given last
 
     def give(self, job):
         """Send ``job``; a worker that has just died keeps it (its death is seen next, and the job tried again)."""
-        self.job, self.started, self.inputs = job, None, set(job.options.get("inputs", ()))
+        self.job, self.started = job, None
         try:
             self.conn.send(job)
         except OSError:
@@ -136,41 +133,48 @@ def stopped(job, how: str) -> dict:
 
 
 class Pool:
-    """``count`` workers running ``jobs``; ``on_outcome(job, outcome)`` is called as each ends."""
+    """``count`` workers running ``jobs``; ``on_outcome(job, outcome)`` is called as each ends.
+
+    The jobs are dealt out in ``count`` contiguous lanes, one per worker, as job files list jobs sharing inputs near
+    each other: each worker's field cache then holds what its next jobs need. A worker whose lane is empty takes the
+    last job of the longest other lane (the one its owner would reach last)."""
 
     def __init__(self, count: int, *, timeout: float | None = None, quiet: bool = True):
         self.count, self.timeout, self.quiet = max(1, count), timeout, quiet
-        self.workers, self.queue, self.attempts, self.start_failures = [], deque(), {}, 0
+        self.workers, self.lanes, self.attempts, self.start_failures = [], [], {}, 0
         self.retried = {}  # job number -> how its first worker died
 
     def run(self, jobs, on_outcome):
-        self.queue.extend(jobs)
-        self.workers = [Worker(self.quiet) for _ in range(min(self.count, len(self.queue)))]
+        jobs = list(jobs)
+        count = min(self.count, len(jobs))
+        self.lanes = [deque(jobs[k * len(jobs) // count : (k + 1) * len(jobs) // count]) for k in range(count)]
+        self.workers = [Worker(self.quiet) for _ in range(count)]
         try:
-            while self.queue or any(worker.job is not None for worker in self.workers):
+            while any(self.lanes) or self.busy():
                 self.feed()
                 self.step(on_outcome)
         finally:
             for worker in self.workers:
-                worker.stop(kill=worker.job is not None)
+                if worker is not None:
+                    worker.stop(kill=worker.job is not None)
+
+    def busy(self) -> list:
+        return [w for w in self.workers if w is not None and w.job is not None]
 
     def feed(self):
-        for worker in self.workers:
-            if worker.job is None and self.queue:
-                worker.give(self.take_for(worker))
+        for slot, worker in enumerate(self.workers):
+            if worker is not None and worker.job is None and any(self.lanes):
+                worker.give(self.take(slot))
 
-    def take_for(self, worker):
-        """The next job for ``worker``: among the next ``LOOKAHEAD`` queued, the first sharing an input with the job
-        it ran last (whose field its cache holds), else the first."""
-        for k, job in enumerate(itertools.islice(self.queue, LOOKAHEAD)):
-            if worker.inputs & set(job.options.get("inputs", ())):
-                del self.queue[k]
-                return job
-        return self.queue.popleft()
+    def take(self, slot: int):
+        """The next job of lane ``slot``, else the last of the longest other lane."""
+        if self.lanes[slot]:
+            return self.lanes[slot].popleft()
+        return max(self.lanes, key=len).pop()
 
     def step(self, on_outcome):
         """Wait for a message, a worker's death or a timeout, and act on it."""
-        busy = [w for w in self.workers if w.job is not None]
+        busy = self.busy()
         conns, sentinels = {id(w.conn): w for w in busy}, {w.process.sentinel: w for w in busy}
         for handle in wait([w.conn for w in busy] + list(sentinels), timeout=0.2):
             worker = sentinels[handle] if isinstance(handle, int) else conns[id(handle)]
@@ -180,8 +184,8 @@ class Pool:
                 self.receive(worker, message, on_outcome)
             if worker.job is not None and not worker.process.is_alive():
                 self.died(worker, on_outcome)
-        for worker in list(self.workers):
-            if worker.job is not None and worker.over_time(self.timeout):
+        for worker in self.busy():
+            if worker.over_time(self.timeout):
                 on_outcome(worker.job, stopped(worker.job, f"stopped after the timeout of {self.timeout:g} s"))
                 self.replace(worker, kill=True)
 
@@ -205,21 +209,18 @@ class Pool:
                 raise BatchError(f"worker processes die as they start ({how}): is the bpy module importable?")
         self.attempts[job.number] = self.attempts.get(job.number, 0) + 1
         if self.attempts[job.number] < ATTEMPTS:
-            self.queue.append(job)  # tried again by the next free worker
+            self.lanes[self.workers.index(worker)].appendleft(job)  # tried again first, by a new worker
             self.retried[job.number] = how
             stopped(job, how)
         else:
             on_outcome(job, stopped(job, f"its worker died twice ({how})"))
-        worker.job = None
         self.replace(worker, kill=False)
 
     def replace(self, worker, *, kill: bool):
+        """Stop ``worker``; a new one takes its place while jobs are left."""
         worker.job = None
         worker.stop(kill=kill)
-        index = self.workers.index(worker)
-        self.workers.pop(index)
-        if self.queue:  # a new worker in its place while there are jobs left
-            self.workers.insert(index, Worker(self.quiet))
+        self.workers[self.workers.index(worker)] = Worker(self.quiet) if any(self.lanes) else None
 
 
 def default_count() -> int:

@@ -167,17 +167,14 @@ def test_report_is_written_whole_in_job_order(tmp_path):
     assert os.listdir(tmp_path / "r") == ["report.json"]
 
 
-def test_a_free_worker_takes_a_queued_job_sharing_its_last_inputs_first():
-    from types import SimpleNamespace
-
+def test_workers_take_contiguous_lanes_then_the_end_of_the_longest_other():
     from batch import workers
 
     pool = workers.Pool(2)
-    queue = [jobs.Job(n, f"j:{n}", {"inputs": inputs}) for n, inputs in enumerate([["x", "y"], ["p", "q"], ["q"]])]
-    pool.queue.extend(queue)
-    assert pool.take_for(SimpleNamespace(inputs={"q"})).number == 1
-    assert pool.take_for(SimpleNamespace(inputs={"z"})).number == 0  # none shares: the first
-    assert [job.number for job in pool.queue] == [2]
+    pool.lanes = [workers.deque([0, 1, 2]), workers.deque([3, 4, 5, 6])]
+    assert [pool.take(0), pool.take(0), pool.take(1)] == [0, 1, 3]
+    assert [pool.take(0), pool.take(0), pool.take(0)] == [2, 6, 5]  # its own, then the far end of the other lane
+    assert list(pool.lanes[1]) == [4]
 
 
 def test_worker_counts_and_a_timeout_without_workers_are_checked():
