@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -102,10 +104,19 @@ def write_jobs(entries, path: Path, out: Path) -> Path:
     return path
 
 
-def timed(args) -> tuple[float, dict]:
-    start = time.perf_counter()
+CPU = {}  # run label -> CPU seconds (user + system) of its process tree, per round
+
+
+def cpu_seconds() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def timed(args, label: str = "") -> tuple[float, dict]:
+    start, cpu = time.perf_counter(), cpu_seconds()
     done = subprocess.run([sys.executable, str(SCRIPT), *map(str, args)], capture_output=True, text=True, check=False)
     seconds = time.perf_counter() - start
+    CPU[label] = CPU.get(label, 0.0) + cpu_seconds() - cpu  # the script and its workers (reaped), not Dask's
     if done.returncode not in (0, 1):
         raise SystemExit(f"aasdf_batch failed: {done.stderr[-2000:]}")
     return seconds, done
@@ -114,7 +125,7 @@ def timed(args) -> tuple[float, dict]:
 def run_file(entries, work: Path, label: str, *extra) -> tuple[float, dict]:
     out = work / label
     jobs = write_jobs(entries, work / f"{label}.jsonl", out)
-    seconds, _ = timed(["--jobs", jobs, "--resolution", RESOLUTION, "--report", work / f"{label}.json", *extra])
+    seconds, _ = timed(["--jobs", jobs, "--resolution", RESOLUTION, "--report", work / f"{label}.json", *extra], label)
     report = json.loads((work / f"{label}.json").read_text(encoding="utf-8"))
     return seconds, report["summary"]
 
@@ -128,7 +139,7 @@ def separate(entries, work: Path, sample: int) -> float:
         args = ["--inputs", *entry["inputs"], "--operation", entry["operation"], "--resolution", RESOLUTION]
         if "blend_radius" in entry:
             args += ["--blend-radius", entry["blend_radius"]]
-        seconds, _ = timed([*args, "--output", work / "separate" / f"job-{n:03d}.ply", "--quiet"])
+        seconds, _ = timed([*args, "--output", work / "separate" / f"job-{n:03d}.ply", "--quiet"], "separate")
         total += seconds
     return total * len(entries) / len(picked)
 
@@ -147,6 +158,7 @@ def main() -> None:
         with dask.config.set({"distributed.worker.daemon": False}):
             cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None)
         times = {name: [] for name in ("separate", "one", "w1", "w2", "dask")}
+        loads = []
         summaries = {}
         for r in range(options.rounds):
             runs = [
@@ -157,18 +169,25 @@ def main() -> None:
                 ("separate", lambda: (separate(entries, work, options.sample), {})),
             ]
             for name, run in runs if r % 2 == 0 else runs[::-1]:
+                load = os.getloadavg()[0]
                 seconds, summary = run()
                 times[name].append(seconds)
                 summaries[name] = summary
-                print(f"<!-- round {r + 1} {name}: {seconds:.1f} s {summary} -->", file=sys.stderr, flush=True)
+                loads.append(load)
+                print(f"<!-- round {r + 1} {name}: {seconds:.1f} s, load {load:.1f}, {summary} -->", file=sys.stderr)
         cluster.close()
+    print(f"<!-- {json.dumps({'times': times, 'cpu': CPU, 'loads': loads})} -->", file=sys.stderr)
     ratio = {
         "one process vs separate invocations": ("separate", "one"),
         "--workers 2 vs --workers 1": ("w1", "w2"),
         "Dask LocalCluster (2 workers) vs --workers 2": ("w2", "dask"),
     }
-    print(f"200 jobs at /{RESOLUTION}: {len(entries)} jobs, {summaries['one']['failed']} failed (empty results).")
-    print("\n| run | seconds (per round) |\n|---|---|")
+    print(
+        f"{len(entries)} jobs at /{RESOLUTION}, {summaries['one']['failed']} of them failing (empty differences); "
+        f"{options.rounds} rounds; 1-minute load average at the start of the runs {min(loads):.1f}-{max(loads):.1f} "
+        f"on {os.cpu_count()} cores (other work on the machine shares them)."
+    )
+    print("\n| run | seconds (per round) | CPU seconds of its processes (per round) |\n|---|---|---|")
     labels = {
         "separate": f"separate invocations (every {len(entries) // options.sample}th job timed, scaled)",
         "one": "one --jobs process (--workers 0)",
@@ -177,7 +196,12 @@ def main() -> None:
         "dask": "--scheduler (LocalCluster, 2 workers)",
     }
     for name, label in labels.items():
-        print(f"| {label} | {', '.join(f'{s:.1f}' for s in times[name])} |")
+        cpu = (
+            ", ".join(f"{CPU[f'{name}-{r}']:.1f}" for r in range(options.rounds))
+            if name in ("one", "w1", "w2")
+            else "-"
+        )
+        print(f"| {label} | {', '.join(f'{s:.1f}' for s in times[name])} | {cpu} |")
     print("\n| comparison | speed-up (range) |\n|---|---|")
     for label, (slow, fast) in ratio.items():
         values = [a / b for a, b in zip(times[slow], times[fast], strict=True)]
