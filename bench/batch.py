@@ -6,9 +6,9 @@ union, intersection and difference (135), and five closed meshes of ``../shared/
 (a sphere, a box, a cylinder, a second sphere, placed on the mesh) under the three operations, plus a blended union
 each (65): every primitive and every mesh is an input of several jobs. Separate invocations (today's command line,
 one process per job) are timed on every tenth job (20) and scaled to 200. Every run writes into a fresh folder
-(nothing skipped). The Dask cluster (2 worker processes, one thread each) is started before its run is timed; its
-workers' job processes start inside the timed run, as ``--workers``' do. Rounds alternate the order of the runs; a
-ratio is the median of the rounds' ratios (range). Prints markdown.
+(nothing skipped). Each Dask run gets a new cluster (2 worker processes, one thread each), started before the run is
+timed; its workers' job processes start inside the timed run, as ``--workers``' do. Rounds alternate the order of
+the runs; a ratio is the median of the rounds' ratios (range). Prints markdown.
 
     .venv/bin/python bench/batch.py [--rounds 2] [--sample 20]
 """
@@ -144,19 +144,28 @@ def separate(entries, work: Path, sample: int) -> float:
     return total * len(entries) / len(picked)
 
 
+def on_new_cluster(run):
+    """``run(["--scheduler", address])`` on a new LocalCluster of 2 worker processes (one thread each), started
+    before and closed after: its job processes and their field caches start empty, as ``--workers``' do."""
+    import dask
+    import distributed
+
+    with dask.config.set({"distributed.worker.daemon": False}):
+        cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None)
+    try:
+        return run(["--scheduler", cluster.scheduler_address])
+    finally:
+        cluster.close()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--sample", type=int, default=20)
     options = parser.parse_args()
-    import dask
-    import distributed
-
     with tempfile.TemporaryDirectory(prefix="aasdf-bench-batch-") as tmp:
         work = Path(tmp)
         entries = job_entries(work)
-        with dask.config.set({"distributed.worker.daemon": False}):
-            cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None)
         times = {name: [] for name in ("separate", "one", "w1", "w2", "dask")}
         loads = []
         summaries = {}
@@ -165,7 +174,7 @@ def main() -> None:
                 ("one", lambda r=r: run_file(entries, work, f"one-{r}", "--workers", 0)),
                 ("w1", lambda r=r: run_file(entries, work, f"w1-{r}", "--workers", 1)),
                 ("w2", lambda r=r: run_file(entries, work, f"w2-{r}", "--workers", 2)),
-                ("dask", lambda r=r: run_file(entries, work, f"dask-{r}", "--scheduler", cluster.scheduler_address)),
+                ("dask", lambda r=r: on_new_cluster(lambda address: run_file(entries, work, f"dask-{r}", *address))),
                 ("separate", lambda: (separate(entries, work, options.sample), {})),
             ]
             for name, run in runs if r % 2 == 0 else runs[::-1]:
@@ -175,7 +184,6 @@ def main() -> None:
                 summaries[name] = summary
                 loads.append(load)
                 print(f"<!-- round {r + 1} {name}: {seconds:.1f} s, load {load:.1f}, {summary} -->", file=sys.stderr)
-        cluster.close()
     print(f"<!-- {json.dumps({'times': times, 'cpu': CPU, 'loads': loads})} -->", file=sys.stderr)
     ratio = {
         "one process vs separate invocations": ("separate", "one"),
