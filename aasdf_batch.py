@@ -80,6 +80,9 @@ def main(argv=None) -> int:
     except options.BatchError as err:
         print(f"aasdf_batch: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("aasdf_batch: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

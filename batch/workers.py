@@ -30,14 +30,15 @@ def serve(conn, quiet: bool):
         report.silence_stdout()
     from . import execute
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle: it stops the workers
     execute.prepare()
-    conn.send(("ready",))
-    while True:
-        job = conn.recv()
-        if job is None:
-            return
-        conn.send(("started", job.number))
-        conn.send(("done", job.number, execute.run_job(job)))
+    try:
+        conn.send(("ready",))
+        while (job := conn.recv()) is not None:
+            conn.send(("started", job.number))
+            conn.send(("done", job.number, execute.run_job(job)))
+    except (EOFError, OSError):  # the parent is gone
+        return
 
 
 def scripts_last():
