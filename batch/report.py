@@ -1,6 +1,7 @@
 """What a batch run shows and keeps: this script's own lines while Blender's output is silenced, a progress bar with
 rate, ETA and failures on a terminal (tqdm, when it can be imported: Blender's own Python lacks it) or a plain line
-per job otherwise, and the JSON report (``--report``: per job status, seconds, triangles, volume, message)."""
+per job otherwise, and the JSON report (``--report``: per job status, seconds, triangles, volume, message; rewritten
+every few seconds as jobs end, so a killed run leaves what it did)."""
 
 import json
 import os
@@ -9,6 +10,7 @@ import time
 from contextlib import contextmanager
 
 STATUSES = ("done", "skipped", "failed")
+REPORT_EVERY = 5.0  # seconds between rewrites of the report while jobs run (a killed run keeps what it did)
 
 
 @contextmanager
@@ -63,9 +65,10 @@ class Progress:
     """Counts the jobs as they end and shows them: a tqdm bar on a terminal, else a line per job on ``out``.
     Failures are always printed, with their reason, on ``err``."""
 
-    def __init__(self, total: int, out, err, *, quiet: bool = False):
+    def __init__(self, total: int, out, err, *, quiet: bool = False, report=None, every: float = REPORT_EVERY):
         self.total, self.out, self.err, self.quiet = total, out, err, quiet
         self.entries, self.start = [], time.perf_counter()
+        self.report, self.every, self.written = report, every, self.start  # the report, rewritten as jobs end
         self.counts = dict.fromkeys(STATUSES, 0)
         self.bar = None
         if not quiet and total and getattr(err, "isatty", lambda: False)():
@@ -80,6 +83,9 @@ class Progress:
         line = entry(job, outcome)
         self.entries.append(line)
         self.counts[line["status"]] += 1
+        if self.report is not None and time.perf_counter() - self.written >= self.every:
+            write_report(self.report, self.summary(), self.entries)
+            self.written = time.perf_counter()
         if line["status"] == "failed":
             self.say(f"aasdf_batch: failed: {job.where}: {line['message']}", self.err)
         if self.bar is not None:
@@ -95,11 +101,19 @@ class Progress:
         else:
             print(text, file=stream or self.out, flush=True)
 
+    def summary(self) -> dict:
+        """The counts so far (``jobs`` ended out of ``total``)."""
+        seconds = time.perf_counter() - self.start
+        return {"jobs": len(self.entries), "total": self.total, **self.counts, "seconds": round(seconds, 3)}
+
     def close(self) -> dict:
+        """End the bar, print the summary line, write the report (when asked); returns the summary."""
         if self.bar is not None:
             self.bar.close()
-        seconds = time.perf_counter() - self.start
-        summary = {"jobs": len(self.entries), **self.counts, "seconds": round(seconds, 3)}
+        summary = self.summary()
+        seconds = summary["seconds"]
+        if self.report is not None:
+            write_report(self.report, summary, self.entries)
         self.say(
             f"aasdf_batch: {summary['jobs']} jobs: {self.counts['done']} done, {self.counts['skipped']} up to date, "
             f"{self.counts['failed']} failed, {seconds:.1f} s"

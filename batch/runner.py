@@ -41,22 +41,23 @@ def run_job_file(args, out, err) -> int:
 
         client = cluster.connect(args.scheduler)
     jobs = joblist.shard(joblist.read_jobs(args.jobs, job_defaults(args)), args.shard)
-    summary, entries = run_jobs(
-        jobs, workers=count, timeout=args.timeout, force=args.force, client=client, out=out, err=err, quiet=args.quiet
-    )
-    if args.report is not None:
-        report.write_report(args.report, summary, entries)
+    summary, _ = run_jobs(
+        jobs, workers=count, timeout=args.timeout, force=args.force, client=client,
+        out=out, err=err, quiet=args.quiet, report_path=args.report,
+    )  # fmt: skip
     return 1 if summary["failed"] else 0
 
 
-def run_jobs(jobs, *, workers=0, timeout=None, force=False, client=None, out=None, err=None, quiet=False):
+def run_jobs(
+    jobs, *, workers=0, timeout=None, force=False, client=None, out=None, err=None, quiet=False, report_path=None
+):
     """Run ``jobs`` (``jobs.Job``): those with an error are failed, those up to date skipped (unless ``force``),
-    the others run.
+    the others run; ``report_path``: the JSON report, kept up to date as they end.
 
     Returns:
         ``(summary, entries)``: the counts, and a report line per job.
     """
-    progress = report.Progress(len(jobs), out or sys.stdout, err or sys.stderr, quiet=quiet)
+    progress = report.Progress(len(jobs), out or sys.stdout, err or sys.stderr, quiet=quiet, report=report_path)
     todo = set_aside(jobs, progress, force=force)
     if todo and client is not None:
         from . import cluster

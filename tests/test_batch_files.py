@@ -196,3 +196,28 @@ def test_progress_falls_back_to_plain_lines_without_tqdm(monkeypatch):
     progress.add(jobs.Job(1, "j:1", {"output": "o.ply"}), {"status": "done", "seconds": 0.5, "triangles": 10})
     progress.close()
     assert "[1/1] done o.ply 10 triangles" in out.getvalue()
+
+
+def test_the_report_is_rewritten_as_jobs_end(tmp_path):
+    path = tmp_path / "report.json"
+    progress = report.Progress(3, io.StringIO(), io.StringIO(), report=path, every=0.0)
+    progress.add(jobs.Job(1, "j:1", {"output": "1.ply"}), {"status": "done", "seconds": 0.1, "triangles": 8})
+    written = json.loads(path.read_text(encoding="utf-8"))  # a run killed now keeps this
+    assert (written["summary"]["jobs"], written["summary"]["total"]) == (1, 3)
+    progress.add(jobs.Job(2, "j:2"), {"status": "failed", "message": "gone"})
+    progress.close()
+    written = json.loads(path.read_text(encoding="utf-8"))
+    assert [line["status"] for line in written["jobs"]] == ["done", "failed"]
+
+
+def test_inside_blenders_executable_jobs_run_in_its_one_process(monkeypatch):
+    from types import SimpleNamespace
+
+    from batch import runner
+
+    monkeypatch.setitem(sys.modules, "bpy", SimpleNamespace(app=SimpleNamespace(module=False)))
+    assert runner.inside_blender() and runner.worker_count(None) == 0
+    with pytest.raises(options.BatchError, match="worker processes need a Python with the bpy module"):
+        runner.worker_count(2)
+    monkeypatch.setitem(sys.modules, "bpy", SimpleNamespace(app=SimpleNamespace(module=True)))
+    assert not runner.inside_blender() and runner.worker_count(None) >= 1
