@@ -5,7 +5,8 @@ and write the report."""
 import sys
 
 from . import jobs as joblist
-from . import report, workers
+from . import report
+from . import workers as workers_module
 from .options import BatchError, job_defaults
 
 
@@ -22,7 +23,7 @@ def worker_count(asked) -> int:
         BatchError: Workers asked for inside Blender's executable, or a negative count.
     """
     if asked is None:
-        return 0 if inside_blender() else workers.default_count()
+        return 0 if inside_blender() else workers_module.default_count()
     if asked < 0:
         raise BatchError(f"--workers must be 0 or more, not {asked}")
     if asked > 0 and inside_blender():
@@ -66,7 +67,7 @@ def run_jobs(
     elif todo and workers == 0:
         run_here(todo, progress.add)
     elif todo:
-        workers_pool(workers, timeout).run(todo, progress.add)
+        workers_module.Pool(workers, timeout=timeout).run(todo, progress.add)
     return progress.close(), progress.entries
 
 
@@ -91,7 +92,3 @@ def run_here(jobs, on_outcome):
 
     for job in jobs:
         on_outcome(job, execute.run_job(job))
-
-
-def workers_pool(count: int, timeout):
-    return workers.Pool(count, timeout=timeout)
