@@ -18,7 +18,18 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = ("construction", "pipeline", "addon", "cold_start", "scaling", "breakdown", "sharp", "signs", "offset")
+SCRIPTS = (
+    "construction",
+    "pipeline",
+    "addon",
+    "cold_start",
+    "scaling",
+    "breakdown",
+    "sharp",
+    "signs",
+    "offset",
+    "batch",
+)
 # Lines Warp prints at start-up and per module it loads: not results.
 NOISE = ("Warp ", "Module ", "   CUDA", "   Devices", '     "cpu"', "   Kernel cache", "     /")
 

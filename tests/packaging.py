@@ -3,11 +3,11 @@
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGE_DIRS = ("aasdf_addon", "engine", "operators", "ui")
+PACKAGE_DIRS = ("aasdf_addon", "engine", "operators", "ui", "batch")  # batch: aasdf_batch.py's, shipped with it
 
 
 def package_files() -> set[str]:
-    """Repository files the zip must carry: the root ``__init__.py`` and every module of the four packages."""
+    """Repository files the zip must carry: the root ``__init__.py`` and every module of the packages."""
     files = {"__init__.py"}
     for folder in PACKAGE_DIRS:
         files |= {p.relative_to(ROOT).as_posix() for p in (ROOT / folder).rglob("*.py") if "__pycache__" not in p.parts}

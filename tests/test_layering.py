@@ -119,7 +119,7 @@ def test_engine_files_stay_small():
     assert {name: n for name, n in sizes.items() if n > MAX_LINES} == {}
 
 
-@pytest.mark.parametrize("folder", ["engine", "aasdf_addon", "operators", "ui"])
+@pytest.mark.parametrize("folder", ["engine", "aasdf_addon", "operators", "ui", "batch"])
 def test_no_private_name_is_imported_from_another_file(folder):
     private = []
     for name, tree in _modules(folder).items():

@@ -1,0 +1,118 @@
+"""The Blender side of a batch job: the add-on registered once per process, mesh files imported as operands, the
+scene emptied between jobs (the field cache kept), the result exported, and the numbers of a result mesh. Imported only
+in a process that runs jobs (it imports ``bpy``)."""
+
+import importlib.util
+import os
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from .options import EXPORTERS, IMPORTERS, OPERATIONS, BatchError
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = "aasdf"
+# Data a job leaves behind (imports, results, debug volumes), removed before the next job.
+JOB_DATA = ("objects", "meshes", "materials", "images", "volumes", "textures", "node_groups")
+
+
+def ensure_addon():
+    """The add-on's package: the enabled add-on's, else the repository registered as ``aasdf``."""
+    if not hasattr(bpy.types, "AASDF_OT_boolean"):
+        package = sys.modules.get(PACKAGE)
+        if package is None:
+            spec = importlib.util.spec_from_file_location(
+                PACKAGE, ROOT / "__init__.py", submodule_search_locations=[str(ROOT)]
+            )
+            package = importlib.util.module_from_spec(spec)
+            sys.modules[PACKAGE] = package
+            spec.loader.exec_module(package)
+        if PACKAGE not in bpy.context.preferences.addons:  # as enabling the add-on does: preferences exist
+            bpy.context.preferences.addons.new().module = PACKAGE
+        package.register()
+    return sys.modules[sys.modules[bpy.types.AASDF_OT_boolean.__module__].__name__.rpartition(".operators")[0]]
+
+
+def import_operand(path):
+    """Import one mesh file; several meshes in it are joined into one object."""
+    before = set(bpy.data.objects)
+    getattr(bpy.ops.wm, IMPORTERS[Path(path).suffix.lower()])(filepath=os.path.abspath(path))
+    meshes = [obj for obj in bpy.data.objects if obj not in before and obj.type == "MESH"]
+    if not meshes:
+        raise BatchError(f"{path} holds no mesh")
+    if len(meshes) > 1:
+        with bpy.context.temp_override(
+            active_object=meshes[0], selected_objects=meshes, selected_editable_objects=meshes
+        ):
+            bpy.ops.object.join()
+    return meshes[0]
+
+
+def scene_operand(name):
+    obj = bpy.data.objects.get(name)
+    if obj is None or obj.name not in bpy.context.view_layer.objects:
+        raise BatchError(f"no object named {name!r} in the scene")
+    if obj.type != "MESH":
+        raise BatchError(f"object {name!r} is not a mesh (its type is {obj.type})")
+    return obj
+
+
+def select_only(objects, active):
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in objects)
+    bpy.context.view_layer.objects.active = active
+
+
+def export_result(path):
+    """Write the selected result object to ``path`` (``.ply``, ``.obj``, ``.stl``; ``.blend``: the whole file)."""
+    path = os.path.abspath(path)
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    suffix = Path(path).suffix.lower()
+    if suffix == ".blend":
+        bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+    else:
+        # what each format can hold of what the result carries: UVs and materials in .obj, UVs and colours in .ply
+        options = {".obj": {"export_uv": True, "export_materials": True}, ".ply": {"export_uv": True}}
+        if suffix == ".ply":
+            options[".ply"]["export_colors"] = "SRGB"
+        getattr(bpy.ops.wm, EXPORTERS[suffix])(filepath=path, export_selected_objects=True, **options.get(suffix, {}))
+    return path
+
+
+def plan_of(args, count: int) -> tuple:
+    """What the run computes: the boolean of the operands (or the one operand), then the offset, then the shell."""
+    steps = ("field", 0)
+    if count > 1:
+        leaves = [("field", k) for k in range(count)]
+        steps = ("boolean", OPERATIONS[args.operation], args.blend_radius, args.blend_mode, leaves)
+    if args.offset is not None:
+        steps = ("offset", args.offset, steps)
+    if args.shell is not None:
+        steps = ("shell", args.shell, args.shell_side, steps)
+    return steps
+
+
+def clear_scene():
+    """Remove what the previous job left (objects, meshes, materials...) without reading a file: reading one would
+    empty the add-on's field cache, which the next jobs share."""
+    if bpy.context.mode != "OBJECT":
+        bpy.ops.object.mode_set(mode="OBJECT")
+    doomed = [block for name in JOB_DATA for block in getattr(bpy.data, name)]
+    if doomed:
+        bpy.data.batch_remove(doomed)
+
+
+def mesh_volume(obj) -> float:
+    """The volume a closed mesh object encloses in world space (divergence theorem over its triangles)."""
+    mesh = obj.data
+    mesh.calc_loop_triangles()
+    verts = np.empty(len(mesh.vertices) * 3, dtype=np.float64)
+    mesh.vertices.foreach_get("co", verts)
+    tris = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
+    mesh.loop_triangles.foreach_get("vertices", tris)
+    matrix = np.asarray(obj.matrix_world, dtype=np.float64)
+    world = verts.reshape(-1, 3) @ matrix[:3, :3].T + matrix[:3, 3]
+    corners = world[tris.reshape(-1, 3)]
+    return float(np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0)
