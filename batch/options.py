@@ -31,7 +31,9 @@ class JobParser(argparse.ArgumentParser):
 def add_job_options(parser):
     parser.add_argument("--operation", type=str.lower, choices=sorted(OPERATIONS), help="the boolean of the operands")
     parser.add_argument("--inputs", nargs="+", default=[], metavar="FILE", help="mesh files: .obj, .ply, .stl")
-    parser.add_argument("--objects", nargs="+", default=[], metavar="NAME", help="mesh objects of the open .blend")
+    parser.add_argument(
+        "--objects", nargs="+", default=[], metavar="NAME", help="objects of the open .blend: mesh, text, curve, ..."
+    )
     parser.add_argument("--output", metavar="FILE", help=".ply, .obj, .stl or .blend")
     parser.add_argument("--resolution", type=int, default=256, help="voxels along the inputs' bounding-box diagonal")
     parser.add_argument("--voxel-size", type=float, default=0.0, help="finest voxel size (overrides --resolution)")

@@ -51,11 +51,13 @@ def import_operand(path):
 
 
 def scene_operand(name):
+    """A named object of the scene with geometry (a mesh, text, curve, surface, metaball), else refused by name."""
+    operands = ensure_addon().aasdf_addon.operands
     obj = bpy.data.objects.get(name)
     if obj is None or obj.name not in bpy.context.view_layer.objects:
         raise BatchError(f"no object named {name!r} in the scene")
-    if obj.type != "MESH":
-        raise BatchError(f"object {name!r} is not a mesh (its type is {obj.type})")
+    if not operands.is_operand(obj):
+        raise BatchError(operands.refusal(obj))
     return obj
 
 
