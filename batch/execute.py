@@ -68,19 +68,8 @@ def boolean_to_file(addon, args) -> dict:
     if args.blend is not None:  # reading a file empties the field cache: such jobs share nothing
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
     pipeline, plan = addon.aasdf_addon.pipeline, addon.aasdf_addon.plan
-    named = [scene.scene_operand(name) for name in args.objects]
-    operands = [scene.import_operand(path) for path in args.inputs] + named
-    if len(operands) > 1 and len({obj.name for obj in operands}) < 2:
-        raise BatchError("give at least two different operands")
-    scene.select_only(operands, operands[0])
-    settings = pipeline.FieldSettings(args.voxel_size, args.resolution, args.levels, args.padding)
-    output = pipeline.Output(
-        f"{operands[0].name}.aasdf",
-        hide_inputs=True,
-        debug_volume=args.debug_volume is not None,
-        sharp=args.sharp_edges,
-        keep_faces=args.keep_faces,
-    )
+    operands = scene.gather_operands(args)
+    settings, output = scene.run_settings(pipeline, args, operands)
     inputs = [plan.Input(obj, args.thickness) for obj in operands]
     summary = pipeline.run(
         bpy.context, inputs, scene.plan_of(args, len(operands)), settings, output,

@@ -96,6 +96,30 @@ def plan_of(args, count: int) -> tuple:
     return steps
 
 
+def gather_operands(args) -> list:
+    """The job's operands, selected, the first active: its files imported, then its named objects (checked first:
+    an unknown one fails before anything is imported)."""
+    named = [scene_operand(name) for name in args.objects]
+    operands = [import_operand(path) for path in args.inputs] + named
+    if len(operands) > 1 and len({obj.name for obj in operands}) < 2:
+        raise BatchError("give at least two different operands")
+    select_only(operands, operands[0])
+    return operands
+
+
+def run_settings(pipeline, args, operands) -> tuple:
+    """The job's field settings and its output (``pipeline``: the add-on's ``aasdf_addon.pipeline``)."""
+    settings = pipeline.FieldSettings(args.voxel_size, args.resolution, args.levels, args.padding)
+    output = pipeline.Output(
+        f"{operands[0].name}.aasdf",
+        hide_inputs=True,
+        debug_volume=args.debug_volume is not None,
+        sharp=args.sharp_edges,
+        keep_faces=args.keep_faces,
+    )
+    return settings, output
+
+
 def clear_scene():
     """Remove what the previous job left (objects, meshes, materials...) without reading a file: reading one would
     empty the add-on's field cache, which the next jobs share."""

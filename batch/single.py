@@ -8,7 +8,7 @@ import time
 import bpy
 
 from . import scene
-from .options import BatchError, check_args
+from .options import check_args
 
 
 def progress_printer(start: float, out):
@@ -46,24 +46,12 @@ def run(args, out, err) -> int:
     engine = package.aasdf_addon.runtime.engine()
     if bpy.context.mode != "OBJECT":
         bpy.ops.object.mode_set(mode="OBJECT")
-    # Names first: an unknown object fails before anything is imported.
-    named = [scene.scene_operand(name) for name in args.objects]
-    operands = [scene.import_operand(path) for path in args.inputs] + named
-    if len(operands) > 1 and len({obj.name for obj in operands}) < 2:
-        raise BatchError("give at least two different operands")
-    scene.select_only(operands, operands[0])
+    operands = scene.gather_operands(args)
     start = time.perf_counter()
     listener = progress_printer(start, out)
     if not args.quiet:
         pipeline.progress_listeners.append(listener)
-    settings = pipeline.FieldSettings(args.voxel_size, args.resolution, args.levels, args.padding)
-    output = pipeline.Output(
-        f"{operands[0].name}.aasdf",
-        hide_inputs=True,
-        debug_volume=args.debug_volume is not None,
-        sharp=args.sharp_edges,
-        keep_faces=args.keep_faces,
-    )
+    settings, output = scene.run_settings(pipeline, args, operands)
     try:
         summary = pipeline.run(
             bpy.context,

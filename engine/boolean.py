@@ -302,29 +302,7 @@ def combine(
         for f in (a, b)
     ]
     oct_dims = fine_dims // 2
-    end_bit = 3 * code_bits(oct_dims)
-    if not all(aligned) and byte_grid_fits(oct_dims):
-        # a resampled operand's cells mark a byte per octet: the other's octets marked there too, one compaction and
-        # one sort (two aligned operands' codes are merged without a grid to scan)
-        mask = wp.zeros(int(np.prod(oct_dims)), dtype=wp.uint8, device=device)
-        for f, al in zip((a, b), aligned, strict=False):
-            operand_octets(f, origin, h, oct_dims, al, device, mask=mask)
-        octets = octree.compact_mask(
-            mask, oct_dims, device, end_bit, lambda total: check_budget(fine_dims, 0, 8 * total)
-        )
-        mask = None
-    else:
-        parts = [operand_octets(f, origin, h, oct_dims, al, device) for f, al in zip((a, b), aligned, strict=False)]
-        all_codes = wp.empty(parts[0].shape[0] + parts[1].shape[0], dtype=wp.int64, device=device)
-        wp.copy(all_codes, parts[0], count=parts[0].shape[0])
-        wp.copy(all_codes, parts[1], dest_offset=parts[0].shape[0], count=parts[1].shape[0])
-        octets = octree.sort_unique(all_codes, end_bit=end_bit)
-    # a round blend moves the surface up to blend / 4 from both operands' surfaces, a chamfer up to blend / 2
-    reach = (0.5 if mode == 1 else 0.25) * blend
-    radius = int(math.ceil(reach / (2.0 * h))) if blend > 0.0 else 0
-    for _ in range(radius):  # grow one octet at a time: 27x the set, then de-duplicate
-        check_budget(fine_dims, 0, 8 * 27 * octets.shape[0])
-        octets = octree.dilate_octets(octets, oct_dims, end_bit=3 * code_bits(oct_dims))
+    octets = _candidate_octets((a, b), aligned, origin, h, fine_dims, blend, mode, device)
     timings["finest_cells"] = time.perf_counter() - t0
 
     a_arg, b_arg = a.arg(), b.arg()
@@ -430,6 +408,36 @@ def combine(
     )
     result.expression = combined(op, blend, a, b)  # what it was made of, for the faces it keeps (:mod:`.keep`)
     return result
+
+
+def _candidate_octets(operands, aligned, origin, h: float, fine_dims, blend: float, mode: int, device) -> wp.array:
+    """(K,) int64 sorted Morton codes of the result's finest octets before pruning: every octet either operand has
+    there (a resampled operand's cells marked on a byte grid when it fits, else the codes merged), grown by the reach
+    of a blend."""
+    oct_dims = fine_dims // 2
+    end_bit = 3 * code_bits(oct_dims)
+    if not all(aligned) and byte_grid_fits(oct_dims):
+        # a resampled operand's cells mark a byte per octet: the other's octets marked there too, one compaction and
+        # one sort (two aligned operands' codes are merged without a grid to scan)
+        mask = wp.zeros(int(np.prod(oct_dims)), dtype=wp.uint8, device=device)
+        for f, al in zip(operands, aligned, strict=False):
+            operand_octets(f, origin, h, oct_dims, al, device, mask=mask)
+        octets = octree.compact_mask(
+            mask, oct_dims, device, end_bit, lambda total: check_budget(fine_dims, 0, 8 * total)
+        )
+    else:
+        parts = [operand_octets(f, origin, h, oct_dims, al, device) for f, al in zip(operands, aligned, strict=False)]
+        all_codes = wp.empty(parts[0].shape[0] + parts[1].shape[0], dtype=wp.int64, device=device)
+        wp.copy(all_codes, parts[0], count=parts[0].shape[0])
+        wp.copy(all_codes, parts[1], dest_offset=parts[0].shape[0], count=parts[1].shape[0])
+        octets = octree.sort_unique(all_codes, end_bit=end_bit)
+    # a round blend moves the surface up to blend / 4 from both operands' surfaces, a chamfer up to blend / 2
+    reach = (0.5 if mode == 1 else 0.25) * blend
+    radius = int(math.ceil(reach / (2.0 * h))) if blend > 0.0 else 0
+    for _ in range(radius):  # grow one octet at a time: 27x the set, then de-duplicate
+        check_budget(fine_dims, 0, 8 * 27 * octets.shape[0])
+        octets = octree.dilate_octets(octets, oct_dims, end_bit=end_bit)
+    return octets
 
 
 def union(

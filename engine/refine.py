@@ -17,6 +17,14 @@ import warp as wp
 # ---- samples ----
 
 
+@wp.func
+def _row_grid(a: wp.vec3, b: wp.vec3, c: wp.vec3, spacing: float) -> wp.vec2:
+    """(the edge from a to b's length, how many rows parallel to it cover the triangle ``spacing`` apart)."""
+    base = wp.length(b - a)
+    height = wp.length(wp.cross(b - a, c - a)) / wp.max(base, 1.0e-30)
+    return wp.vec2(base, float(wp.max(int(wp.ceil(height / spacing)), 1)))
+
+
 @wp.kernel(enable_backward=False)
 def _row_counts_kernel(
     verts: wp.array[wp.vec3],
@@ -30,9 +38,9 @@ def _row_counts_kernel(
     a = verts[tris[t, 0]]
     b = verts[tris[t, 1]]
     c = verts[tris[t, 2]]
-    base = wp.length(b - a)
-    height = wp.length(wp.cross(b - a, c - a)) / wp.max(base, 1.0e-30)
-    rows = wp.max(int(wp.ceil(height / spacing)), 1)
+    grid = _row_grid(a, b, c, spacing)
+    base = grid[0]
+    rows = int(grid[1])
     n = int(0)
     for r in range(rows):
         along = (1.0 - float(r) / float(rows)) * base
@@ -55,9 +63,9 @@ def _row_samples_kernel(
     a = verts[tris[t, 0]]
     b = verts[tris[t, 1]]
     c = verts[tris[t, 2]]
-    base = wp.length(b - a)
-    height = wp.length(wp.cross(b - a, c - a)) / wp.max(base, 1.0e-30)
-    rows = wp.max(int(wp.ceil(height / spacing)), 1)
+    grid = _row_grid(a, b, c, spacing)
+    base = grid[0]
+    rows = int(grid[1])
     out = first[t]
     for r in range(rows):
         s = float(r) / float(rows)
