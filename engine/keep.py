@@ -276,13 +276,17 @@ def _judge_leaf(field, index: int, source) -> dict:
         mark = np.zeros(len(tris), dtype=bool)
         mark[todo[split]] = True
         # pieces still far larger than the split size are split again before they are judged (fewer rounds)
-        for _ in range(SPLITS_PER_ROUND):
+        for split_pass in range(SPLITS_PER_ROUND):
             verts, tris, origin, new_ends = split_triangles(verts, tris, mark)
             ends = np.concatenate([ends, new_ends])
             parent, flip, status = parent[origin], flip[origin], status[origin]
             # a split triangle's pieces are judged again; a neighbour's pieces keep its verdict
             status[mark[origin]] = UNKNOWN
-            mark = mark[origin] & (_longest_edges(verts, tris) > 4.0 * split_edge)
+            if split_pass + 1 == SPLITS_PER_ROUND:  # the last pass needs no next marks
+                break
+            mark = mark[origin]
+            rows = np.flatnonzero(mark)
+            mark[rows] = _longest_edges(verts, tris[rows]) > 4.0 * split_edge
             if not mark.any():
                 break
     status[status == UNKNOWN] = DROPPED
