@@ -25,7 +25,7 @@ import warp as wp
 
 from .expression import evaluate_signs, leaves, widest_blend
 from .meshcheck import edge_table, problem_faces, weld_positions
-from .parallel import launch_split
+from .parallel import launch_split, run_tasks
 from .refine import merge_kept, per_triangle_min, restore_whole, split_triangles, triangle_samples
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
@@ -82,20 +82,27 @@ def mesh_leaf(field) -> bool:
 
 
 # ---- what the other leaves say ----
-def _leaf_values(field, points: np.ndarray, reach: float, device) -> np.ndarray:
-    """(N,) float32 how far the leaf's surface is from each point (up to ``reach``), negative inside it. A clean
-    closed mesh's leaf answers from its mesh (exact, through its BVH); any other from its field."""
-    values = field.sample(points, method="linear")  # a tenth of MLS's time: signs, and distances within the slack
+def leaf_bvh(field, device):
+    """The BVH of a clean closed mesh leaf's triangles where the leaf is placed (None for any other leaf): its
+    distances are read off its mesh, exactly."""
     if not (mesh_leaf(field) and field.stats.get("clean_mesh", False)):
+        return None
+    return next(iter(field.world_sources().values())).bvh(device)
+
+
+def _leaf_values(field, bvh, points: np.ndarray, reach: float, device) -> np.ndarray:
+    """(N,) float32 how far the leaf's surface is from each point (up to ``reach``), negative inside it: from its
+    mesh's ``bvh`` (:func:`leaf_bvh`) where it has one, else from its field."""
+    values = field.sample(points, method="linear")  # a tenth of MLS's time: signs, and distances within the slack
+    if bvh is None:
         return np.clip(values, -reach, reach).astype(np.float32)
-    source = next(iter(field.world_sources().values()))
-    return np.copysign(mesh_distances(source.bvh(device), points, reach, device), values).astype(np.float32)
+    return np.copysign(mesh_distances(bvh, points, reach, device), values).astype(np.float32)
 
 
-def _margin(field, points, band: float, reach: float, device) -> tuple[np.ndarray, np.ndarray]:
+def _margin(field, bvh, points, band: float, reach: float, device) -> tuple[np.ndarray, np.ndarray]:
     """Per sample: how far the leaf's surface is (up to ``reach``), and the leaf's sign there. A field with jumps (an
     open mesh's, across its holes) counts as near (0) wherever its sign changes a band away along an axis."""
-    values = _leaf_values(field, points, reach, device)
+    values = _leaf_values(field, bvh, points, reach, device)
     margin = np.abs(values)
     if not field.stats.get("continuous", field.stats.get("clean_mesh", False)):
         rows = np.flatnonzero(margin > band)
@@ -136,13 +143,14 @@ def _side_at(leaf, points, normals, offset: float) -> np.ndarray:
 class _Judge:
     """The checks of one leaf's triangles against the rest of the expression (see the module docstring)."""
 
-    def __init__(self, field, index: int, verts, tris):
+    def __init__(self, field, index: int, verts, tris, bvhs: list):
         self.expression = field.expression
         self.leaves = leaves(self.expression)
         self.index, self.device, voxel = index, field.device, field.voxel_size
         self.band = BAND_VOXELS * voxel + widest_blend(self.expression)
         self.spacing, self.slack = SAMPLE_VOXELS * voxel, SLACK_VOXELS * voxel
         self.tiny = 1e-3 * voxel
+        self.bvhs = bvhs  # per leaf, :func:`leaf_bvh`
         self.defects = _own_defects(verts, tris)
         # a shell with internal faces (overlapping or self-intersecting) is read a band away on both sides, so that
         # kept faces stay a band from where it crosses itself; a clean one half a voxel away (a band would reach
@@ -176,7 +184,7 @@ class _Judge:
             if j == self.index:
                 signs.append(np.full(len(points), -1, np.int8))
                 continue
-            near, sign = _margin(other, points, self.band, reach, self.device)
+            near, sign = _margin(other, self.bvhs[j], points, self.band, reach, self.device)
             margin = np.minimum(margin, near)
             low = per_triangle_min(sign, local, len(used), first)
             same &= low == -per_triangle_min(-sign, local, len(used), first)
@@ -246,19 +254,27 @@ def kept_triangles(field) -> list[dict]:
     expression = getattr(field, "expression", None)
     if expression is None:
         return []
-    out = []
-    for i, leaf in enumerate(leaves(expression)):
-        if not mesh_leaf(leaf) or not len(next(iter(leaf.sources.values())).tris):
-            continue
-        field_id, source = next(iter(leaf.world_sources().items()))
-        out.append({"field_id": field_id, "source": source, **_judge_leaf(field, i, source)})
+    every = leaves(expression)
+    bvhs = [leaf_bvh(leaf, field.device) for leaf in every]  # built once, before the leaves are judged side by side
+    judged = [
+        (i, *next(iter(leaf.world_sources().items())))
+        for i, leaf in enumerate(every)
+        if mesh_leaf(leaf) and len(next(iter(leaf.sources.values())).tris)
+    ]
+    out = [None] * len(judged)
+
+    def task(k):
+        i, field_id, source = judged[k]
+        out[k] = {"field_id": field_id, "source": source, **_judge_leaf(field, i, source, bvhs)}
+
+    run_tasks([lambda k=k: task(k) for k in range(len(judged))], field.device)
     return out
 
 
-def _judge_leaf(field, index: int, source) -> dict:
+def _judge_leaf(field, index: int, source, bvhs: list) -> dict:
     """Judge a leaf's triangles, splitting the partly keepable ones until they are small (module docstring)."""
     verts, tris = source.verts, source.tris.astype(np.int64)
-    judge = _Judge(field, index, verts, tris)
+    judge = _Judge(field, index, verts, tris, bvhs)
     parent = np.arange(len(tris), dtype=np.int64)
     status = np.zeros(len(tris), dtype=np.int8)
     flip = np.zeros(len(tris), dtype=bool)
