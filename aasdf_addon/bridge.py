@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from .edge_attributes import EDGE_ATTRIBUTES, kept_edge_values
 from .transfer import OPERAND_ATTRIBUTE
 
 
@@ -36,6 +37,8 @@ class Operand:
     corner_count: int = 0  # the mesh's face corners (loops)
     loop_start: np.ndarray = None  # (P,) int32 first corner of each face
     corner_vert: np.ndarray = None  # (L,) int32 vertex of each corner
+    edge_verts: np.ndarray = None  # (E, 2) int32 vertices of each edge
+    edge_attributes: dict = field(default_factory=dict)  # name -> (E,) values (``edge_attributes.EDGE_ATTRIBUTES``)
 
     @property
     def name(self) -> str:
@@ -76,7 +79,11 @@ def read_mesh_operand(evaluated, matrix) -> Operand:
             corner_count=len(mesh.loops),
             loop_start=_get(mesh.polygons, "loop_start", np.int32),
             corner_vert=_attribute(mesh, ".corner_vert", "value", np.int32, len(mesh.loops)),
+            edge_verts=_attribute(mesh, ".edge_verts", "value", np.int32, len(mesh.edges), 2),
         )
+        for name, (_, dtype) in EDGE_ATTRIBUTES.items():
+            if name in mesh.attributes:
+                operand.edge_attributes[name] = _attribute(mesh, name, "value", dtype, len(mesh.edges))
         for layer in mesh.uv_layers:
             operand.uv_maps[layer.name] = _attribute(mesh, layer.name, "vector", np.float32, len(mesh.loops), 2)
         for attr in mesh.color_attributes:
@@ -261,6 +268,8 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
     creases = attributes.get("creases")
     if creases is not None and len(creases):
         _mark_sharp_edges(mesh, creases, len(verts))
+    if attributes.get("kept_edges") is not None:
+        _carry_edge_attributes(mesh, *attributes["kept_edges"])
     if attributes.get("material_index") is not None:
         _new_attribute(mesh, "material_index", "INT", "FACE", "value", attributes["material_index"], np.int32)
     smooth = attributes.get("smooth")
@@ -297,6 +306,18 @@ def _mark_sharp_edges(mesh, creases, vertex_count):
     sharp = np.zeros(len(pairs), dtype=bool)
     sharp[candidates[wanted[at] == keys]] = True
     _new_attribute(mesh, "sharp_edge", "BOOLEAN", "EDGE", "value", sharp, bool)
+
+
+def _carry_edge_attributes(mesh, kept, operands):
+    """The operands' UV seams, sharp edges and edge creases on the result's edges that are theirs (a sharp edge
+    stays sharp where the surface folds too)."""
+    pairs = _get(mesh.attributes[".edge_verts"].data, "value", np.int32, 2)
+    for name, values in kept_edge_values(kept, operands, pairs).items():
+        kind, dtype = EDGE_ATTRIBUTES[name]
+        if name == "sharp_edge" and name in mesh.attributes:
+            values = values | _get(mesh.attributes[name].data, "value", bool)
+        if values.any():
+            _new_attribute(mesh, name, kind, "EDGE", "value", values, dtype)
 
 
 def _new_attribute(mesh, name, kind, domain, prop, values, dtype):

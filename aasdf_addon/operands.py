@@ -109,6 +109,11 @@ def joined(operand, pieces):
     operand.corner_count = sum(p.corner_count for p in parts)
     operand.loop_start = _renumbered([p.loop_start for p in parts], corner_offsets)
     operand.corner_vert = _renumbered([p.corner_vert for p in parts], vert_offsets)
+    operand.edge_verts = _renumbered([p.edge_verts for p in parts], vert_offsets).reshape(-1, 2)
+    operand.edge_attributes = {
+        name: np.concatenate([p.edge_attributes.get(name, np.zeros(len(p.edge_verts), values.dtype)) for p in parts])
+        for name, values in operand.edge_attributes.items()
+    }
     operand.uv_maps = {
         name: np.concatenate([p.uv_maps[name] for p in parts])
         for name in operand.uv_maps

@@ -327,6 +327,7 @@ def whole_faces_back(result: dict, surface: dict, operands, output: Output) -> d
     whose transform mirrors (its faces would need their corners turned)."""
     if surface.get("kept") is None or output.target is not None and np.linalg.det(output.target.matrix_world) < 0:
         return result
+    result["attributes"]["kept_edges"] = (surface["kept"], operands)  # their seams, sharp edges, creases
     whole = polygons.whole_faces(surface["kept"], result["tris"], operands)
     return result if whole is None else polygons.as_polygons(result, whole, operands)
 

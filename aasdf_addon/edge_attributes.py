@@ -1,0 +1,56 @@
+"""Edge attributes of kept faces: UV seams, sharp edges and edge creases of the operands, where a result edge is one
+of their own edges.
+
+An edge of the result whose two ends are vertices of one operand's kept faces, and which that operand has as an edge,
+takes the operand's values of ``uv_seam``, ``sharp_edge`` and ``crease_edge`` (a sharp edge stays sharp as well where
+the surface folds). Arrays only: ``bridge`` reads the operands' edges and writes the result's.
+"""
+
+import numpy as np
+
+# name -> (Blender's attribute type, numpy dtype) of the edge attributes carried over
+EDGE_ATTRIBUTES = {"uv_seam": ("BOOLEAN", bool), "sharp_edge": ("BOOLEAN", bool), "crease_edge": ("FLOAT", np.float32)}
+
+
+def kept_edge_values(kept: dict, operands, edge_verts: np.ndarray) -> dict:
+    """Per result edge, its source edge's attribute values.
+
+    Args:
+        kept: The kept surface's vertex sources (``vertex_field``, ``vertex_id``; ``AdaptiveField.kept_surface``).
+        operands: ``bridge.Operand`` per field id, with ``edge_verts`` and ``edge_attributes``.
+        edge_verts: (E, 2) int result vertex pairs.
+    Returns:
+        name -> (E,) values (zeros where the edge is no operand's) for each attribute some operand has.
+    """
+    names = sorted({name for op in operands for name in op.edge_attributes})
+    if not names or not len(edge_verts):
+        return {}
+    field, vertex = kept["vertex_field"].astype(np.int64), kept["vertex_id"].astype(np.int64)
+    a, b = edge_verts[:, 0].astype(np.int64), edge_verts[:, 1].astype(np.int64)
+    rows = np.flatnonzero((field[a] == field[b]) & (field[a] >= 0) & (vertex[a] >= 0) & (vertex[b] >= 0))
+    rows = rows[field[a[rows]] < len(operands)]
+    width = 1 + max(len(op.verts) for op in operands)
+    source_keys = np.concatenate(
+        [_keys(k, op.edge_verts[:, 0], op.edge_verts[:, 1], width) for k, op in enumerate(operands)]
+    )
+    order = np.argsort(source_keys)
+    wanted = _keys(field[a[rows]], vertex[a[rows]], vertex[b[rows]], width)
+    at = np.minimum(np.searchsorted(source_keys[order], wanted), max(len(order) - 1, 0))
+    found = len(order) > 0
+    hit = (source_keys[order][at] == wanted) if found else np.zeros(len(rows), dtype=bool)
+    rows, source_edge = rows[hit], order[at[hit]]
+    out = {}
+    for name in names:
+        dtype = EDGE_ATTRIBUTES[name][1]
+        stacked = np.concatenate(
+            [np.asarray(op.edge_attributes.get(name, np.zeros(len(op.edge_verts))), dtype=dtype) for op in operands]
+        )
+        values = np.zeros(len(edge_verts), dtype=dtype)
+        values[rows] = stacked[source_edge]
+        out[name] = values
+    return out
+
+
+def _keys(operand, u, v, width: int) -> np.ndarray:
+    u, v = np.asarray(u, dtype=np.int64), np.asarray(v, dtype=np.int64)
+    return (np.asarray(operand, dtype=np.int64) * width + np.minimum(u, v)) * width + np.maximum(u, v)
