@@ -72,7 +72,7 @@ def _aasdf(a, b, op, voxel, keep):
 
 def _modifier(a, b, op, solver):
     out = baselines.boolean_modifier(a, b, op, solver, keep=True)
-    obj = bpy.data.objects[out.get("object", "boolean_a")] if "object" in out else bpy.data.objects.get("boolean_a")
+    obj = bpy.data.objects.get("boolean_a")  # kept by the call: its evaluated polygons are the faces written
     faces = len(obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data.polygons) if obj else len(out["tris"])
     for name in ("boolean_a", "boolean_b"):
         if name in bpy.data.objects:

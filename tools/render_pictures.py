@@ -395,9 +395,6 @@ def picture_kept_faces(samples):
         obj.location.x += 2.6 * (k - 1)
         bpy.context.view_layer.update()
         wireframe(obj, 0.006).location = obj.location
-    names = ("Blender Boolean, Exact", "AASDF, Keep Original Faces", "AASDF, remeshed")
-    for k, text in enumerate(names):
-        label(text, (2.6 * (k - 1), -1.5, -0.5), 0.16)
     bpy.context.view_layer.update()
     frame(results, direction=(0.0, -1.0, 1.4), distance=2.75)
     render("kept-faces")
