@@ -22,6 +22,7 @@ from .keep import kept_triangles
 from .zipper import (
     MAX_ROUNDS,
     PAIR_VOXELS,
+    WIDEN_RINGS,
     border_halves,
     loop_labels,
     nearest_points,
@@ -208,7 +209,8 @@ def unpaired_edge_vertices(tris: np.ndarray, n_verts: int) -> np.ndarray:
 def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach: float, device):
     """After a round with loops left unpaired: the kept faces and voxel faces given up for the next one.
 
-    A kept loop that failed gives up the kept faces at it (``whole``: the kept pieces it bounds). A voxel loop that
+    A kept loop that failed gives up the kept faces at it (``whole``: a small kept piece it bounds whole, a large one
+    a few rings of faces deep, see :func:`_widened`). A voxel loop that
     failed gives up its piece of the voxel surface when that is an island (a tenth of the voxel faces or less, left
     over kept faces), else the kept faces near it. Returns the kept faces' and the given-up voxel faces' masks."""
     (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone) = kept, voxel
@@ -226,12 +228,27 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
         near = nearest_points(points[members], points[open_loop], reach, device)
         at_failed[members[near[near >= 0]]] = True
     if whole:
-        pieces = vertex_components(k_tris[k_alive], n)
-        at_failed = np.isin(pieces, np.unique(pieces[at_failed]))
+        at_failed = _widened(k_tris, k_alive, at_failed, n)
     alive = _drop_pinched(k_tris, k_alive & ~at_failed[k_tris].any(axis=1), n)
     if (alive != k_alive).any():  # the voxel faces over the kept ones given up come back: judged afresh
         v_gone = np.zeros_like(v_gone)
     return alive, v_gone
+
+
+def _widened(tris, alive, at: np.ndarray, n: int, rings: int = WIDEN_RINGS) -> np.ndarray:
+    """``at`` (per vertex) grown over the kept pieces it touches: a piece of a tenth of the kept faces or less whole,
+    a larger one ``rings`` rings of faces deep (a scan's one large piece is not given up for a loop at its edge)."""
+    faces = tris[alive]
+    pieces = vertex_components(faces, n)
+    sizes = np.bincount(pieces[faces[:, 0]], minlength=n)
+    touched = np.unique(pieces[at])
+    small = touched[sizes[touched] * 10 <= len(faces)]
+    grown = at | np.isin(pieces, small)
+    for _ in range(rings):
+        reached = np.zeros(n, dtype=bool)
+        reached[faces[grown[faces].any(axis=1)].ravel()] = True
+        grown |= reached
+    return grown
 
 
 def _strips(points, k_loops, v_loops, pairs, reach: float, device) -> tuple[np.ndarray, np.ndarray]:

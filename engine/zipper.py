@@ -26,6 +26,8 @@ OVER_VOXELS = 1.0
 PAIR_VOXELS = 4.0
 # Rounds of giving up faces at loops that cannot be paired before the join is abandoned.
 MAX_ROUNDS = 6
+# A loop failing again gives up this many rings of kept faces around it (a small kept piece: all of it).
+WIDEN_RINGS = 3
 
 
 # ---- the voxel surface over the kept faces ----
