@@ -79,3 +79,29 @@ def chamfer_bracket(op: int, va: float, ra: float, tb: float, rb: float, k: floa
     if op == 0:
         return wp.vec2(sdf_chamfer_min(va - ra, tb - rb, k), sdf_chamfer_min(va + ra, tb + rb, k))
     return wp.vec2(-sdf_chamfer_min(-(va - ra), -(tb - rb), k), -sdf_chamfer_min(-(va + ra), -(tb + rb), k))
+
+
+@wp.func
+def result_bracket(op: int, va: float, ra: float, tb: float, rb: float, k: float, mode: int) -> wp.vec2:
+    """(lowest, highest) value of the boolean, blended by ``k`` (round or chamfer ``mode``), over the operands'
+    brackets (``va`` +- ``ra``, and the second as the operation sees it, ``tb`` +- ``rb``): min, max and both blends
+    are monotone in each argument (the smooth minimum's derivatives are h and 1 - h), so their values at the
+    brackets' ends."""
+    if mode == 1:
+        return chamfer_bracket(op, va, ra, tb, rb, k)
+    if op == 0:
+        return wp.vec2(sdf_smooth_min(va - ra, tb - rb, k), sdf_smooth_min(va + ra, tb + rb, k))
+    return wp.vec2(-sdf_smooth_min(-(va - ra), -(tb - rb), k), -sdf_smooth_min(-(va + ra), -(tb + rb), k))
+
+
+@wp.func
+def blend_matters(op: int, va: float, ra: float, tb: float, rb: float, k: float, mode: int) -> bool:
+    """Whether both operands can shape the blended result over their brackets (elsewhere it is one of them alone,
+    as the hard boolean is): they differ by less than ``k`` somewhere for a round blend; :func:`chamfer_needs` both
+    for a chamfer."""
+    if k <= 0.0:
+        return False
+    if mode == 1:
+        needs = chamfer_needs(op, va, ra, tb, rb, k)
+        return needs[0] == 1 and needs[1] == 1
+    return wp.abs(va - tb) - ra - rb < k

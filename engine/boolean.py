@@ -22,6 +22,7 @@ import warp.geometry
 
 from . import octree, parallel
 from .blends import BLEND_MODES, chamfer_needs, sdf_combine
+from .blendzone import blend_octets
 from .expression import OP_DIFFERENCE, OP_INTERSECTION, OP_UNION, combined
 from .octree import code_bits, level_layout, morton_decode, node_center
 from .operands import (
@@ -36,7 +37,7 @@ from .operands import (
     octet_leaf,
 )
 from .plan import byte_grid_fits, check_budget, plan_domain
-from .prune import offset_to, operand_octets, prune_octets
+from .prune import KEEP_BAND, offset_to, operand_octets, prune_octets
 from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_source, to_frame, vec27i
 
 if TYPE_CHECKING:  # the field type imports this module for its operators
@@ -291,7 +292,9 @@ def combine(
     t0 = time.perf_counter()
     (a_lo, a_hi), (b_lo, b_hi) = a.bounds, b.bounds
     lo, hi = np.minimum(a_lo, b_lo), np.maximum(a_hi, b_hi)
-    origin, top_dims = plan_domain(lo, hi, h, levels, 0.0)
+    # a blend may fill outside both operands' boxes: up to blend / 4 (round) or blend / 2 (a chamfer's plane)
+    reach = (0.5 if mode == 1 else 0.25) * blend
+    origin, top_dims = plan_domain(lo, hi, h, levels, reach / h + 1.0 if blend > 0.0 else 0.0)
     fine_dims = top_dims * 2 ** (levels - 1)
     check_budget(fine_dims, int(np.prod(top_dims)), 8 * (a.level_counts[0] + b.level_counts[0]))
     # a placed operand is resampled from its cells, never aligned
@@ -302,10 +305,13 @@ def combine(
         for f in (a, b)
     ]
     oct_dims = fine_dims // 2
-    octets = _candidate_octets((a, b), aligned, origin, h, fine_dims, blend, mode, device)
+    a_arg, b_arg = a.arg(), b.arg()
+    octets = _candidate_octets((a, b), aligned, origin, h, fine_dims, device)
+    if blend > 0.0:  # and where the blend shapes the surface, away from both operands' own octets
+        zone = blend_octets(a_arg, b_arg, origin, h, top_dims, levels, op, blend, mode, KEEP_BAND * h)
+        octets = octree.merge_unique(octets, zone, end_bit=3 * code_bits(oct_dims))
     timings["finest_cells"] = time.perf_counter() - t0
 
-    a_arg, b_arg = a.arg(), b.arg()
     offs = [
         wp.vec3i(*(int(v) for v in (-offset_to(f, origin, h) if al else (0, 0, 0))))
         for f, al in zip((a, b), aligned, strict=False)
@@ -410,10 +416,9 @@ def combine(
     return result
 
 
-def _candidate_octets(operands, aligned, origin, h: float, fine_dims, blend: float, mode: int, device) -> wp.array:
+def _candidate_octets(operands, aligned, origin, h: float, fine_dims, device) -> wp.array:
     """(K,) int64 sorted Morton codes of the result's finest octets before pruning: every octet either operand has
-    there (a resampled operand's cells marked on a byte grid when it fits, else the codes merged), grown by the reach
-    of a blend."""
+    there (a resampled operand's cells marked on a byte grid when it fits, else the codes merged)."""
     oct_dims = fine_dims // 2
     end_bit = 3 * code_bits(oct_dims)
     if not all(aligned) and byte_grid_fits(oct_dims):
@@ -422,22 +427,9 @@ def _candidate_octets(operands, aligned, origin, h: float, fine_dims, blend: flo
         mask = wp.zeros(int(np.prod(oct_dims)), dtype=wp.uint8, device=device)
         for f, al in zip(operands, aligned, strict=False):
             operand_octets(f, origin, h, oct_dims, al, device, mask=mask)
-        octets = octree.compact_mask(
-            mask, oct_dims, device, end_bit, lambda total: check_budget(fine_dims, 0, 8 * total)
-        )
-    else:
-        parts = [operand_octets(f, origin, h, oct_dims, al, device) for f, al in zip(operands, aligned, strict=False)]
-        all_codes = wp.empty(parts[0].shape[0] + parts[1].shape[0], dtype=wp.int64, device=device)
-        wp.copy(all_codes, parts[0], count=parts[0].shape[0])
-        wp.copy(all_codes, parts[1], dest_offset=parts[0].shape[0], count=parts[1].shape[0])
-        octets = octree.sort_unique(all_codes, end_bit=end_bit)
-    # a round blend moves the surface up to blend / 4 from both operands' surfaces, a chamfer up to blend / 2
-    reach = (0.5 if mode == 1 else 0.25) * blend
-    radius = int(math.ceil(reach / (2.0 * h))) if blend > 0.0 else 0
-    for _ in range(radius):  # grow one octet at a time: 27x the set, then de-duplicate
-        check_budget(fine_dims, 0, 8 * 27 * octets.shape[0])
-        octets = octree.dilate_octets(octets, oct_dims, end_bit=end_bit)
-    return octets
+        return octree.compact_mask(mask, oct_dims, device, end_bit, lambda total: check_budget(fine_dims, 0, 8 * total))
+    parts = [operand_octets(f, origin, h, oct_dims, al, device) for f, al in zip(operands, aligned, strict=False)]
+    return octree.merge_unique(*parts, end_bit=end_bit)
 
 
 def union(

@@ -31,6 +31,7 @@ ENGINE_MODULES = (
     "build",
     "field",
     "sampling",
+    "blendzone",
     "prune",
     "boolean",
     "marching",

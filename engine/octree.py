@@ -309,6 +309,18 @@ def sort_unique(keys: wp.array, end_bit: int = 63, *, presorted: bool = False, r
     return (out, index) if return_index else out
 
 
+def merge_unique(*parts: wp.array, end_bit: int = 63) -> wp.array:
+    """Sorted unique codes of all ``parts`` (int64 code arrays on one device) together."""
+    total = sum(p.shape[0] for p in parts)
+    merged = wp.empty(total, dtype=wp.int64, device=parts[0].device)
+    at = 0
+    for p in parts:
+        if p.shape[0]:
+            wp.copy(merged, p, dest_offset=at, count=p.shape[0])
+        at += p.shape[0]
+    return sort_unique(merged, end_bit=end_bit)
+
+
 @wp.kernel(enable_backward=False)
 def _shift_codes_kernel(first: int, codes: wp.array[wp.int64], shift: int, out: wp.array[wp.int64]):
     i = first + wp.tid()

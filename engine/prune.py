@@ -14,7 +14,8 @@ import numpy as np
 import warp as wp
 
 from . import octree, parallel
-from .blends import chamfer_bracket
+from .blends import result_bracket
+from .blendzone import WIDE_BRACKET, centre_sample, sharper_bracket
 from .octree import code_bits, morton_decode, morton_encode, node_center
 from .operands import node_bracket, octet_source
 from .plan import byte_grid_fits, check_budget
@@ -67,6 +68,11 @@ def _octet_bracket_kernel(
     n_near = int(0)
     neg = int(0)
     pos = int(0)
+    centre = origin + 2.0 * spacing * wp.vec3(float(oc[0]) + 0.5, float(oc[1]) + 0.5, float(oc[2]) + 0.5)
+    sampled_a = False
+    sampled_b = False
+    sample_a = wp.vec3(0.0)
+    sample_b = wp.vec3(0.0)
     for k in range(8):
         c = wp.vec3i(2 * oc[0] + (k & 1), 2 * oc[1] + ((k >> 1) & 1), 2 * oc[2] + ((k >> 2) & 1))
         x = node_center(origin, spacing, c)
@@ -81,6 +87,17 @@ def _octet_bracket_kernel(
                 pos = 1
                 continue
         vb, rb = node_bracket(b, b_first, b_leaf, b_level, k, b_aligned, b_offset, c, x)
+        if blend > 0.0 and ra >= 0.0 and rb >= 0.0:  # a blend's zone lies in both operands' coarse leaves
+            if ra > WIDE_BRACKET * spacing:
+                if not sampled_a:
+                    sample_a = centre_sample(a, centre, spacing)
+                    sampled_a = True
+                va, ra = sharper_bracket(sample_a, centre, x, va, ra)
+            if rb > WIDE_BRACKET * spacing:
+                if not sampled_b:
+                    sample_b = centre_sample(b, centre, spacing)
+                    sampled_b = True
+                vb, rb = sharper_bracket(sample_b, centre, x, vb, rb)
         if ra < 0.0 or rb < 0.0:
             n_near = 1
             neg = 1
@@ -89,16 +106,9 @@ def _octet_bracket_kernel(
             tb = vb
             if op == 2:
                 tb = -vb
-            # min and max are monotone; the polynomial smooth min lies within blend / 4 below the min
-            lo = wp.min(va - ra, tb - rb) - 0.25 * blend
-            hi = wp.min(va + ra, tb + rb)
-            if op != 0:
-                lo = wp.max(va - ra, tb - rb)
-                hi = wp.max(va + ra, tb + rb) + 0.25 * blend
-            if mode == 1:
-                bounds = chamfer_bracket(op, va, ra, tb, rb, blend)
-                lo = bounds[0]
-                hi = bounds[1]
+            bounds = result_bracket(op, va, ra, tb, rb, blend, mode)
+            lo = bounds[0]
+            hi = bounds[1]
             if lo <= band and hi >= -band:
                 n_near = 1
             # a node whose bracket contains zero may have either sign

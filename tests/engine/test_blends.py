@@ -1,0 +1,111 @@
+"""Blends of any width: finest nodes only where a blend shapes the surface (the zone where both operands come within
+its radius), the surface exactly what a uniformly grown band gives, the added volume of a chamfer its exact one."""
+
+import math
+
+import numpy as np
+import pytest
+
+import engine
+import engine.boolean as boolean
+from engine import octree
+from engine.prune import operand_octets
+from tests.support import box_mesh, is_watertight, signed_volume
+
+H = 1 / 256
+SHIFT = np.array([0.4, 0.3, 0.2])
+
+
+def _box_sdf(p, centre, half):
+    q = np.abs(p - centre) - half
+    return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(-1), 0.0)
+
+
+def _blend(a, b, k: float, mode: str):
+    if mode == "chamfer":
+        return np.minimum(np.minimum(a, b), (a + b - k) / math.sqrt(2.0))
+    t = np.clip(0.5 + 0.5 * (b - a) / k, 0.0, 1.0)
+    return b + (a - b) * t - k * t * (1.0 - t)
+
+
+def _exact_added_volumes(cases, s: float = 1 / 240) -> dict:
+    """Per (blend, mode), the volume a blend adds to the two boxes' union, from their exact distances: summed slice by
+    slice, the occupancy clamp(1/2 - phi / s) of each cell (exact for planes through a cell; the blend's curvature
+    error is second order) of the blended union less the hard one's."""
+    reach = max(k for k, _ in cases)
+    lo, hi = np.array([-0.4, -0.4, -0.4]) - reach, np.array([0.8, 0.7, 0.6]) + reach
+    xs = [np.arange(a + s / 2, b, s, dtype=np.float32) for a, b in zip(lo, hi, strict=True)]
+    x, y = np.meshgrid(xs[0], xs[1], indexing="ij")
+    added = dict.fromkeys(cases, 0.0)
+    for z in xs[2]:
+        p = np.stack([x, y, np.full_like(x, z)], -1)
+        a, b = _box_sdf(p, 0.0, 0.4), _box_sdf(p, SHIFT.astype(np.float32), 0.4)
+        hard = np.clip(0.5 - np.minimum(a, b) / s, 0.0, 1.0).sum()
+        for k, mode in cases:
+            added[k, mode] += np.clip(0.5 - _blend(a, b, k, mode) / s, 0.0, 1.0).sum() - hard
+    return {case: v * s**3 for case, v in added.items()}
+
+
+@pytest.fixture(scope="module")
+def boxes():
+    """Two boxes of 0.8 crossing each other, at voxel 1/256, and their hard union."""
+    fa = engine.build_field(*box_mesh(half=(0.4, 0.4, 0.4)), voxel_size=H)
+    fb = engine.build_field(*box_mesh(half=(0.4, 0.4, 0.4), center=tuple(SHIFT)), voxel_size=H)
+    return fa, fb, engine.union(fa, fb)
+
+
+def test_wide_blends_cost_at_most_a_half_more_nodes_than_the_hard_union_and_add_their_exact_volume(boxes):
+    # a blend of a quarter of the boxes' size (51 voxels) was refused before ("needs about 16 GiB"): every operand
+    # octet grown by the blend's reach; now nodes 1.07-1.28x the hard union's (2.03 M)
+    fa, fb, hard = boxes
+    cases = [(0.1, "round"), (0.1, "chamfer"), (0.2, "round"), (0.2, "chamfer")]
+    exact = _exact_added_volumes(cases)
+    for k, mode in cases:
+        blended = engine.union(fa, fb, blend=k, blend_mode=mode)
+        assert 1.0 < sum(blended.level_counts) / sum(hard.level_counts) < 1.45, (k, mode)
+        verts, tris = blended.to_mesh()
+        assert is_watertight(tris)
+        # measured within 0.3 % (chamfer 0.0166, 0.0726; round 0.0053, 0.0225); the issue asks 15 % of a chamfer's
+        assert signed_volume(verts, tris) - 0.904 == pytest.approx(exact[k, mode], rel=0.01), (k, mode)
+
+
+def _grown_octets(fa, fb):
+    """The earlier candidates: every operand octet grown by the blend's reach, octet by octet."""
+
+    def candidates(a_arg, b_arg, origin, h, top_dims, levels, op, blend, mode, band):
+        oct_dims = np.asarray(top_dims) * 2 ** (levels - 2)
+        end_bit = 3 * octree.code_bits(oct_dims)
+        octets = octree.merge_unique(
+            *(operand_octets(f, origin, h, oct_dims, True, "cpu") for f in (fa, fb)), end_bit=end_bit
+        )
+        for _ in range(math.ceil((0.5 if mode == 1 else 0.25) * blend / (2.0 * h))):
+            octets = octree.dilate_octets(octets, oct_dims, end_bit=end_bit)
+        return octets
+
+    return candidates
+
+
+@pytest.mark.parametrize("mode", ["round", "chamfer"])
+def test_the_blend_zone_gives_the_surface_a_grown_band_gives(monkeypatch, mode):
+    h = 1 / 96
+    fa = engine.build_field(*box_mesh(half=(0.4, 0.4, 0.4)), voxel_size=h)
+    fb = engine.build_field(*box_mesh(half=(0.4, 0.4, 0.4), center=tuple(SHIFT)), voxel_size=h)
+    zone = engine.union(fa, fb, blend=0.15, blend_mode=mode)
+    monkeypatch.setattr(boolean, "blend_octets", _grown_octets(fa, fb))
+    grown = engine.union(fa, fb, blend=0.15, blend_mode=mode)
+    assert zone.level_counts[0] < 0.9 * grown.level_counts[0]  # measured 0.78x (round), 0.80x (chamfer)
+    (v1, t1), (v2, t2) = zone.to_mesh(), grown.to_mesh()
+    assert len(t1) == len(t2)
+    # the same vertices, whatever order the nodes came in
+    assert np.abs(np.sort(v1, axis=0) - np.sort(v2, axis=0)).max() < 1e-5
+
+
+def test_a_chamfer_wider_than_the_boxes_gap_fills_beyond_them_and_stays_closed():
+    # a chamfer's plane reaches half its size outside both operands: the result's domain grows by that much (an
+    # earlier domain cut the surface 0.033 below the lower box: 684 open edges)
+    h = 1 / 128
+    fa = engine.build_field(*box_mesh(half=(0.4, 0.4, 0.4)), voxel_size=h)
+    fb = engine.build_field(*box_mesh(half=(0.4, 0.4, 0.4), center=tuple(SHIFT)), voxel_size=h)
+    verts, tris = engine.union(fa, fb, blend=0.3, blend_mode="chamfer").to_mesh()
+    assert is_watertight(tris)
+    assert verts[:, 2].min() < -0.42  # below the lower box's face (z = -0.4): measured -0.433
