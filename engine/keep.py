@@ -196,7 +196,7 @@ class _Judge:
         most = -per_triangle_min(np.where(crosses, -margin, 1.0), local, len(used), first)
         side, crossed, partly_crossed = self._own_sides(verts[used], local, points, first)
         kept = same & crossed & (least > self.band + slack)
-        partly = partly_crossed & (most > self.band - slack) & ~self.defects[parent]
+        partly = partly_crossed & (most + slack > self.band + self.slack) & ~self.defects[parent]
         return kept, partly, flips[local[:, 0]] ^ (side < 0)
 
     def _own_sides(self, verts, tris, points, first):
