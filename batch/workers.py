@@ -18,13 +18,17 @@ from .jobs import partial_dir
 from .options import BatchError
 
 ATTEMPTS = 2  # a job whose worker dies is tried once more
+THREADS_VARIABLE = "AASDF_THREADS"  # the engine's threads per process (``engine.parallel.THREADS_VARIABLE``)
 START_FAILURES = 3  # workers dying before their first job: give up, it will not get better
 
 
-def serve(conn, quiet: bool):
-    """A worker's main loop: ``("started", number)`` when a job begins, ``("done", number, outcome)`` when it ends."""
+def serve(conn, quiet: bool, threads: int | None = None):
+    """A worker's main loop: ``("started", number)`` when a job begins, ``("done", number, outcome)`` when it ends.
+    ``threads``: the CPU threads its engine splits work over (its share of the cores), when given."""
     from . import report
 
+    if threads:
+        os.environ[THREADS_VARIABLE] = str(threads)  # read by the engine (``engine.parallel.cores``)
     scripts_last()
     if quiet:
         report.silence_stdout()
@@ -63,10 +67,10 @@ def death_of(process) -> str:
 class Worker:
     """One worker process and its end of the pipe; ``job`` is the job it holds, ``started`` when it began it."""
 
-    def __init__(self, quiet: bool = True):
+    def __init__(self, quiet: bool = True, threads: int | None = None):
         context = multiprocessing.get_context("spawn")
         self.conn, child = context.Pipe()
-        self.process = context.Process(target=serve, args=(child, quiet), name="aasdf-worker")
+        self.process = context.Process(target=serve, args=(child, quiet, threads), name="aasdf-worker")
         self.process.start()
         child.close()
         self.job, self.started, self.ready = None, None, False
@@ -144,12 +148,14 @@ class Pool:
         self.count, self.timeout, self.quiet = max(1, count), timeout, quiet
         self.workers, self.lanes, self.attempts, self.start_failures = [], [], {}, 0
         self.retried = {}  # job number -> how its first worker died
+        self.threads = None
 
     def run(self, jobs, on_outcome):
         jobs = list(jobs)
         count = min(self.count, len(jobs))
         self.lanes = [deque(jobs[k * len(jobs) // count : (k + 1) * len(jobs) // count]) for k in range(count)]
-        self.workers = [Worker(self.quiet) for _ in range(count)]
+        self.threads = max(1, default_count() // count)  # each worker's share of the cores
+        self.workers = [Worker(self.quiet, self.threads) for _ in range(count)]
         try:
             while any(self.lanes) or self.busy():
                 self.feed()
@@ -221,7 +227,7 @@ class Pool:
         """Stop ``worker``; a new one takes its place while jobs are left."""
         worker.job = None
         worker.stop(kill=kill)
-        self.workers[self.workers.index(worker)] = Worker(self.quiet) if any(self.lanes) else None
+        self.workers[self.workers.index(worker)] = Worker(self.quiet, self.threads) if any(self.lanes) else None
 
 
 def default_count() -> int:

@@ -150,8 +150,17 @@ def on_new_cluster(run):
     import dask
     import distributed
 
-    with dask.config.set({"distributed.worker.daemon": False}):
-        cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None)
+    # each worker's engine takes its share of the cores, as --workers gives it (docs/usage.md)
+    saved = os.environ.get("AASDF_THREADS")
+    os.environ["AASDF_THREADS"] = str(max(1, (os.cpu_count() or 1) // 2))
+    try:
+        with dask.config.set({"distributed.worker.daemon": False}):
+            cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None)
+    finally:
+        if saved is None:
+            del os.environ["AASDF_THREADS"]
+        else:
+            os.environ["AASDF_THREADS"] = saved
     try:
         return run(["--scheduler", cluster.scheduler_address])
     finally:

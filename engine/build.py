@@ -16,7 +16,6 @@ Sign convention: negative inside, positive outside (Blender/OpenVDB); the paper 
 
 from __future__ import annotations
 
-import os
 import sys
 import threading
 import time
@@ -234,7 +233,7 @@ def build_fields(
     if any(plan.get("thickness") is not None for plan in plans):  # loading hashes a module's kernels: only if needed
         launched += (fieldops, sweeping, redistancing)
     parallel.load_modules(launched, device)
-    workers = min(len(meshes), os.cpu_count() or 1)
+    workers = min(len(meshes), parallel.cores())
     # worker w builds meshes w, w + workers, ...
     parallel.run_tasks([lambda w=w: [build(k) for k in range(w, len(meshes), workers)] for w in range(workers)], device)
     if errors:

@@ -32,6 +32,19 @@ BALANCE_PIECES_PER_CORE = 4
 BALANCE_MIN_PIECE = 1024
 
 
+# The CPU threads a process splits its work over: all the cores, or AASDF_THREADS when set (processes sharing a
+# machine, such as the batch script's workers, each take their share instead of all competing for every core).
+THREADS_VARIABLE = "AASDF_THREADS"
+
+
+def cores() -> int:
+    """How many CPU threads work is split over: ``AASDF_THREADS`` when it is a positive integer, else the cores."""
+    value = os.environ.get(THREADS_VARIABLE, "")
+    if value.isdigit() and int(value) > 0:
+        return int(value)
+    return os.cpu_count() or 1
+
+
 _helpers = None
 
 
@@ -51,7 +64,7 @@ def _helper_pool() -> ThreadPoolExecutor:
     with _helpers_lock:
         if _helpers is None:
             # two builds may split launches at the same time (build_fields)
-            _helpers = ThreadPoolExecutor(max_workers=2 * (os.cpu_count() or 1), thread_name_prefix="aasdf-split")
+            _helpers = ThreadPoolExecutor(max_workers=2 * cores(), thread_name_prefix="aasdf-split")
         return _helpers
 
 
@@ -76,7 +89,7 @@ def run_split(
     if dim <= 0:
         return
     device = wp.get_device(device)
-    threads_n = parts or os.cpu_count() or 1
+    threads_n = parts or cores()
     if device.is_cuda or threads_n < 2 or dim < min_dim:
         work(0, dim)
         return
@@ -118,7 +131,7 @@ def run_split(
 def run_tasks(tasks, device) -> None:
     """Call each of ``tasks`` (callables without arguments that launch independent work) from a Python thread of its
     own on the CPU, one after the other on CUDA. The first error is re-raised in the caller."""
-    if wp.get_device(device).is_cuda or len(tasks) < 2 or (os.cpu_count() or 1) < 2:
+    if wp.get_device(device).is_cuda or len(tasks) < 2 or cores() < 2:
         for task in tasks:
             task()
         return

@@ -1,6 +1,7 @@
 """Construction of the adaptive field: accuracy against analytic and exact SDFs, structure, sparsity, validation."""
 
 import os
+import threading
 
 import numpy as np
 import pytest
@@ -729,6 +730,22 @@ def test_split_launches_cover_every_item_once_and_pass_errors_on(balance):
         seen.clear()
         run_split(lambda lo, n: seen.append((lo, n)), 50_000, "cpu", min_dim=1, balance=balance, own_threads=own)
         assert sorted(seen)[0][0] == 0 and sum(n for _lo, n in seen) == 50_000
+
+
+def test_aasdf_threads_caps_the_threads_work_is_split_over(monkeypatch):
+    from engine.parallel import cores, run_split
+
+    monkeypatch.setenv("AASDF_THREADS", "1")  # one worker of several sharing the machine
+    seen = []
+    run_split(lambda lo, n: seen.append(threading.get_ident()), 100_000, "cpu", min_dim=1)
+    assert cores() == 1 and len(seen) == 1 and seen[0] == threading.get_ident()  # the caller's thread alone
+    monkeypatch.setenv("AASDF_THREADS", "3")
+    seen.clear()
+    run_split(lambda lo, n: seen.append(n), 100_000, "cpu", min_dim=1)
+    assert cores() == 3 and len(seen) == 3 and sum(seen) == 100_000
+    for unset in ("", "0", "two"):  # not a positive integer: every core
+        monkeypatch.setenv("AASDF_THREADS", unset)
+        assert cores() == (os.cpu_count() or 1)
 
 
 @pytest.mark.parametrize("name", ["stanford-bunny.obj", "spot.obj"])
