@@ -39,6 +39,7 @@ class Operand:
     corner_vert: np.ndarray = None  # (L,) int32 vertex of each corner
     edge_verts: np.ndarray = None  # (E, 2) int32 vertices of each edge
     edge_attributes: dict = field(default_factory=dict)  # name -> (E,) values (``edge_attributes.EDGE_ATTRIBUTES``)
+    custom_normals: np.ndarray = None  # (L, 3) float32 per corner, local space, where the mesh has custom normals
 
     @property
     def name(self) -> str:
@@ -90,6 +91,8 @@ def read_mesh_operand(evaluated, matrix) -> Operand:
             if attr.domain in ("POINT", "CORNER"):
                 values = _get(attr.data, "color", np.float32, 4)
                 operand.colors[attr.name] = (attr.domain, attr.data_type, values)
+        if mesh.has_custom_normals:  # the normals Blender shades with, the custom ones applied
+            operand.custom_normals = _get(mesh.corner_normals, "vector", np.float32, 3)
     finally:
         evaluated.to_mesh_clear()
     return operand
@@ -286,6 +289,8 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
         layer.data.foreach_set("color", np.ascontiguousarray(values, dtype=np.float32).ravel())
     if len(mesh.color_attributes):  # what exporters and the viewport show: the first one
         mesh.color_attributes.active_color_index = mesh.color_attributes.render_color_index = 0
+    if attributes.get("custom_normals") is not None:  # zero vectors: Blender's own normal there
+        mesh.normals_split_custom_set(np.ascontiguousarray(attributes["custom_normals"], dtype=np.float32))
     return mesh
 
 

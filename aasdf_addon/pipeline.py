@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from . import bridge, cache, placement, plan, polygons, runtime, transfer, transforms
+from . import bridge, cache, custom_normals, placement, plan, polygons, runtime, transfer, transforms
 from .operands import read_operands
 
 # Numbers of the last successful run (``aasdf.boolean`` or a CSG tree): read by the sidebar and by scripts.
@@ -319,7 +319,13 @@ def carry_over(field, surface: dict, operands) -> dict:
         return {}
     if "sources" not in surface:  # every corner on its face's source triangle, so the source's seams stay seams
         surface["sources"] = _face_sources(field, surface)
-    return transfer.face_attributes(operands, *surface["sources"])
+    attributes = transfer.face_attributes(operands, *surface["sources"])
+    normals = custom_normals.kept_corner_normals(
+        operands, surface["verts"], tris, surface.get("kept"), surface["sources"]
+    )
+    if normals is not None:
+        attributes["custom_normals"] = normals
+    return attributes
 
 
 def whole_faces_back(result: dict, surface: dict, operands, output: Output) -> dict:

@@ -9,6 +9,7 @@ colours) copied from its own corners, bit for bit. The rest of the result stays 
 
 import numpy as np
 
+from . import custom_normals
 from .transfer import merged_materials
 
 
@@ -130,6 +131,10 @@ def as_polygons(result: dict, whole: dict, operands) -> dict:
         )
         for name, (kind, values) in attrs["colors"].items()
     }
+    if attrs.get("custom_normals") is not None:
+        flip = np.repeat(whole["flip"], whole["sizes"])
+        copied = custom_normals.whole_face_normals(operands, corner_operand, whole["loops"], flip)
+        out["custom_normals"] = np.concatenate([copied, attrs["custom_normals"][corner_rest]])
     return {**result, "tris": tris[rest], "attributes": out, "edges": {}}
 
 

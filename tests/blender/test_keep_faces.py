@@ -141,3 +141,43 @@ def test_kept_edges_keep_their_seams_sharpness_and_creases(fresh_cache):
     np.testing.assert_array_equal(attribute(result, "uv_seam", "value", 1, bool)[dst], seam[src])
     np.testing.assert_array_equal(attribute(result, "crease_edge", "value", 1)[dst], crease[src])
     assert attribute(result, "sharp_edge", "value", 1, bool)[dst][sharp[src]].all()  # sharp stays sharp
+
+
+def corner_normals(mesh):
+    return attribute_of(mesh.corner_normals, "vector", 3)
+
+
+def attribute_of(collection, prop, width):
+    values = np.empty(len(collection) * width, dtype=np.float32)
+    collection.foreach_get(prop, values)
+    return values.reshape(-1, width)
+
+
+def test_kept_faces_keep_their_custom_normals_turned_as_their_faces(fresh_cache):
+    box, cutter = scene()
+    # the box shaded as a ball (each corner's normal along its position), the cylinder's sides radially
+    corner_co = attribute(box.data, "position", "vector", 3)[attribute(box.data, ".corner_vert", "value", 1, np.int32)]
+    box.data.normals_split_custom_set(corner_co / np.linalg.norm(corner_co, axis=1, keepdims=True))
+    c_co = attribute(cutter.data, "position", "vector", 3)[attribute(cutter.data, ".corner_vert", "value", 1, np.int32)]
+    radial = c_co * np.float32([1.0, 1.0, 0.0])
+    cutter.data.normals_split_custom_set(radial / np.linalg.norm(radial, axis=1, keepdims=True))
+    select(box, cutter)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=RESOLUTION, hide_inputs=False) == {"FINISHED"}
+    result = bpy.context.active_object.data
+    assert result.has_custom_normals
+    r_corner, r_start, r_total, r_co = faces_of(result)
+    normals = corner_normals(result)
+    at = r_co[r_corner]
+    # the box's quads given back whole: each corner's normal is the box's there (the ball's shading)
+    quads = np.flatnonzero(r_total == 4)
+    quad_corners = (r_start[quads, None] + np.arange(4)).ravel()
+    assert len(quads) >= 60  # measured 88
+    expected = at[quad_corners] / np.linalg.norm(at[quad_corners], axis=1, keepdims=True)
+    assert np.abs(normals[quad_corners] - expected).max() < 3e-4  # measured 9e-5: as Blender stores them
+    # the bore's wall: the cylinder's kept faces, turned over, face its axis, their normals with them
+    centre = np.float32([0.55, 0.55, 0.0])
+    offset = (at - centre) * np.float32([1.0, 1.0, 0.0])
+    wall = (np.abs(np.linalg.norm(offset, axis=1) - 0.3) < 1e-4) & (np.abs(at[:, 2]) < 0.9)
+    assert wall.sum() >= 60  # measured 160 corners
+    inward = -offset[wall] / np.linalg.norm(offset[wall], axis=1, keepdims=True)
+    assert np.einsum("ij,ij->i", normals[wall], inward).min() > 0.999  # measured 1 - 1e-7
