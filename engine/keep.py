@@ -209,15 +209,18 @@ class _Judge:
             return centre, centre != 0, centre != 0
         owner = np.repeat(np.arange(len(tris)), np.diff(first))
         centres = verts[tris].mean(axis=1)
-        at = np.concatenate([centres, verts[tris].reshape(-1, 3), points[len(verts) :]])
-        # samples pulled a voxel towards their triangle's centre: at a crease of the mesh the field is 0 just behind
-        # or in front of the edge itself
-        towards = np.concatenate([centres, np.repeat(centres, 3, axis=0), centres[owner]]) - at
-        length = np.linalg.norm(towards, axis=1, keepdims=True)
-        at = at + towards * np.minimum(1.0, self.spacing / np.maximum(length, 1e-30))
-        facing = np.concatenate([normals, np.repeat(normals, 3, axis=0), normals[owner]])
         whose = np.concatenate([np.repeat(np.arange(len(tris)), 3), owner])
-        side = _side_at(self.leaves[self.index], at, facing, self.side_offset)
+        at = np.concatenate([verts[tris].reshape(-1, 3), points[len(verts) :]])
+        # samples pulled a voxel towards their triangle's centre: at a crease of the mesh the field is 0 just behind
+        # or in front of the edge itself. Those within a voxel of it would land on it: the centre's own test (a scan's
+        # triangles, all under a voxel, are read once each rather than four times)
+        towards = centres[whose] - at
+        length = np.linalg.norm(towards, axis=1, keepdims=True)
+        far = length[:, 0] > self.spacing
+        whose, at = whose[far], at[far] + towards[far] * (self.spacing / length[far])
+        side = _side_at(
+            self.leaves[self.index], np.concatenate([centres, at]), np.r_[normals, normals[whose]], self.side_offset
+        )
         centre, rest = side[: len(tris)], side[len(tris) :]
         wrong = np.bincount(whose, weights=rest != centre[whose], minlength=len(tris))
         crossed = np.bincount(whose, weights=rest != 0, minlength=len(tris))
