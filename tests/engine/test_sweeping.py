@@ -71,8 +71,9 @@ def mesh_boolean():
 def test_a_smooth_union_becomes_the_distance_to_its_surface(blended_spheres):
     before, after = blended_spheres
     old, new = _distance_errors(before), _distance_errors(after)
-    # before: the blend's values are far from distances (measured far p95 58 %, grad p95 8.8 %)
-    assert old["far_p95"] > 0.2 and old["grad_p95"] > 0.05, old
+    # before: the blend's values are far from distances (measured far p95 27 %; grad p95 0.74 % since the blend's
+    # zone alone is refined: the grown band's nodes, 8.8 %, are gone)
+    assert old["far_p95"] > 0.2, old
     assert new["band_p99"] <= 0.11, new  # measured 0.036 voxel (issue: 0.5)
     assert new["far_p95"] <= 0.0024, new  # measured 0.079 % (issue: 2 %)
     assert new["grad_p95"] <= 0.022, new  # measured 0.73 % (issue: 5 %)
@@ -116,8 +117,9 @@ def test_redistancing_keeps_source_ids_and_prunes_the_blend_band(blended_spheres
     assert after.field_ids == (7, 9)
     pts = np.array([[-1.0, 0.0, 0.0], [2.0, 0.2, 0.1], [0.0, 0.0, 1.0], [1.0, 0.2, -0.9]], dtype=np.float32)
     np.testing.assert_array_equal(after.source_ids(pts), [7, 9, 7, 9])
-    # the blend dilated the band up to 15 voxels from the surface; the re-distanced one keeps 2.5 (measured 2.1x)
-    assert after.level_counts[0] * 1.5 <= before.level_counts[0]
+    # the re-distanced band keeps 2.5 voxels: no more than the blend's zone kept (measured 0.93x; 0.48x when a blend
+    # grew every operand octet by its reach)
+    assert after.level_counts[0] <= before.level_counts[0]
 
 
 def test_sweeping_and_the_fast_iterative_method_give_the_same_field(mesh_boolean):
