@@ -61,7 +61,7 @@ def _update(digest, value) -> None:
             digest.update(repr(name).encode())
             _update(digest, value[name])
         digest.update(b"}")
-    elif isinstance(value, (list, tuple)):
+    elif isinstance(value, list | tuple):
         digest.update(f"[{len(value)}".encode())
         for item in value:
             _update(digest, item)
