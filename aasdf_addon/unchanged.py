@@ -13,8 +13,9 @@ writes nothing (``is_current``).
 The key lives in the .blend: a file saved and opened again finds its results current without any field (the field
 cache is in memory and emptied on load). It holds whether an object shows its inputs' result, never whether the cache
 holds fields: any input changed (its mesh, modifiers, transform, materials, the settings) gives another key, so the
-run is done. Keys hash the arrays the read stage got by ``foreach_get`` (blake2b over their bytes): a few
-milliseconds for meshes of 100 k triangles, nothing read again from Blender item by item.
+run is done. Keys hash the arrays the read stage got by ``foreach_get`` (SHA-1 over their bytes, a fingerprint and no
+security measure: twice blake2b's speed here, with the processor's SHA instructions): about 5 ms for the 4.7 MB of a
+70 k-triangle mesh, nothing read again from Blender item by item.
 """
 
 import dataclasses
@@ -48,6 +49,10 @@ _ATTRIBUTE_ARRAYS = {
 
 # Attributes the user changes without editing the mesh (selection, hiding in Edit Mode): left out of the fingerprint.
 _STATE_PREFIXES = (".select", ".uv_select", ".hide", ".uv_pin")
+
+
+def _digest():
+    return hashlib.sha1(usedforsecurity=False)
 
 
 def _update(digest, value) -> None:
@@ -84,7 +89,7 @@ def inputs_key(read, thickness, steps, options: dict, *, sharp: bool, keep_faces
     Returns:
         A hex digest.
     """
-    digest = hashlib.blake2b(digest_size=20)
+    digest = _digest()
     _update(digest, (KEY_VERSION, steps, sharp, keep_faces, len(read)))
     for operand, wall in zip(read, thickness, strict=True):
         digest.update(cache.geometry_key(operand.verts, operand.tris, **options, thickness=wall).encode())
@@ -100,7 +105,7 @@ def object_key(obj) -> str:
     """A fingerprint of a mesh object as it is: every attribute of its mesh (but selection and hiding), its counts,
     its material slots' materials and its world matrix."""
     mesh = obj.data
-    digest = hashlib.blake2b(digest_size=20)
+    digest = _digest()
     counts = (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops))
     _update(digest, (counts, [slot.material for slot in obj.material_slots]))
     _update(digest, np.array(obj.matrix_world, dtype=np.float64))
