@@ -369,8 +369,9 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
     Returns:
         The numbers of the run (also in ``last_run`` unless the result is empty): ``seconds``, ``stages``, ``nodes``,
         ``level_counts``, ``vertices``, ``triangles``, ``cache_hits``, ``fields_built``, ``voxel_size``, ``object``,
-        ``source``, ``operation``, ``operands``, ``warnings`` (list of messages); ``{"object": name, "empty": True}``
-        when the result has no surface (nothing is written).
+        ``source``, ``operation``, ``operands``, ``warnings`` (list of messages), ``unchanged`` (True when
+        ``output.target`` already showed this result: nothing built, combined, extracted or written);
+        ``{"object": name, "empty": True}`` when the result has no surface (nothing is written).
     Raises:
         AasdfError: Bad input or too fine for memory, the object named; nothing is written.
     """
