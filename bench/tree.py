@@ -16,7 +16,7 @@ Then the drag of ``bench/addon.py`` (``--drag-moves`` moves of the cutter throug
 /256, against as many geometry-nodes SDF evaluations, alternating rounds), with kept faces and remeshed, and the
 seconds of each stage summed over the drag's moves: where a drag's time goes.
 
-    .venv/bin/python bench/tree.py [--repeat 5] [--drag-moves 10] [--drag-repeat 3] [--no-drag]
+    .venv/bin/python bench/tree.py [--repeat 5] [--drag-moves 10] [--drag-repeat 3] [--no-drag] [--no-tree]
 """
 
 from __future__ import annotations
@@ -139,18 +139,21 @@ def main(argv=None):
     parser.add_argument("--drag-moves", type=int, default=10)
     parser.add_argument("--drag-repeat", type=int, default=3)
     parser.add_argument("--no-drag", action="store_true")
+    parser.add_argument("--no-tree", action="store_true", help="the drag alone")
     args = parser.parse_args(argv)
     addon.register()
     print(f"# CSG tree benchmark — {addon.machine()}; {args.repeat} rounds after a warm-up\n")
-    m = measure(args.repeat)
-    built = m["built"]
-    print("| cold s | again s | again / cold | reloaded s | reloaded / cold | fields built cold / again / reloaded |")
-    print("|---|---|---|---|---|---|")
-    print(
-        f"| {m['cold']:.3f} | {m['again']:.3f} | {ratio(m['again_ratio'])} | {m['reloaded']:.3f} "
-        f"| {ratio(m['reloaded_ratio'])} | {built['cold']} / {built['again']} / {built['reloaded']} |",
-        flush=True,
-    )
+    if not args.no_tree:
+        m = measure(args.repeat)
+        built = m["built"]
+        print("| cold s | again s | again / cold | reloaded s | reloaded / cold ", end="")
+        print("| fields built cold / again / reloaded |")
+        print("|---|---|---|---|---|---|")
+        print(
+            f"| {m['cold']:.3f} | {m['again']:.3f} | {ratio(m['again_ratio'])} | {m['reloaded']:.3f} "
+            f"| {ratio(m['reloaded_ratio'])} | {built['cold']} / {built['again']} / {built['reloaded']} |",
+            flush=True,
+        )
     if args.no_drag:
         return
     a, b = cases()["bunny+spot"]
