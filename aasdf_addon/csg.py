@@ -7,7 +7,9 @@ objects that are not their own inputs. Problems are written on their nodes (``no
 operands, the distinct (object, thickness) inputs below it in depth-first order.
 
 ``evaluate_tree`` then runs each output's plan through ``pipeline.run`` (read, key, cache, build, combine, extract,
-write), writing or updating the result object in place: the path ``aasdf.boolean`` takes.
+write), writing or updating the result object in place: the path ``aasdf.boolean`` takes. An output whose object still
+shows the result of the same inputs, as it was written, is left as it is (``aasdf_addon.unchanged``): evaluating an
+unchanged tree again, or after its file was saved and opened again, reads and keys the inputs and does nothing else.
 """
 
 from dataclasses import dataclass, field
@@ -188,7 +190,8 @@ def evaluate_tree(context, tree) -> list[dict]:
         context: The caller's context (preferences, depsgraph, scene).
         tree: An ``AASDF CSG`` node tree.
     Returns:
-        One ``pipeline.last_run``-style dict per output; an empty result has ``"empty": True`` and writes nothing.
+        One ``pipeline.last_run``-style dict per output; an empty result has ``"empty": True`` and writes nothing, an
+        output left as it was ``"unchanged": True``.
     Raises:
         AasdfError: Invalid tree (nothing written) or an engine error (message on the Output node; earlier outputs
             are written, this one keeps its previous result).
@@ -207,6 +210,7 @@ def evaluate_tree(context, tree) -> list[dict]:
             hide_inputs=tree.hide_inputs,
             sharp=tree.sharp_edges,
             keep_faces=out.keep_faces,
+            reuse=True,
         )
         try:
             numbers = pipeline.run(

@@ -6,7 +6,8 @@ tree: read → key → cache → build → combine → extract → write, in tha
    a field, or moves a flat operand that has a thickness to world space;
 2. key: ``cache.geometry_key`` per operand (geometry in its own frame, field settings, device), refined by
    ``placement.field_key`` for an object no field of its geometry can reach by a similarity (its scale's ladder step,
-   or its whole matrix under an uneven scale or a shear);
+   or its whole matrix under an uneven scale or a shear); a run into a named object (``Output.reuse``) keys its whole
+   result first (``unchanged.inputs_key``) and stops there when the object still shows that result as written;
 3. cache: ``cache.find`` returns the fields it has;
 4. build: the missing ones are built together (``engine.build_fields``, checked together first) and ``cache.store``d;
    each field is relabelled with its operand's index (``field_id`` = position in the plan's operand list);
@@ -27,13 +28,13 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from . import bridge, cache, custom_normals, placement, plan, polygons, runtime, transfer, transforms
+from . import bridge, cache, custom_normals, placement, plan, polygons, runtime, transfer, transforms, unchanged
 from .operands import read_operands
 
 # Numbers of the last successful run (``aasdf.boolean`` or a CSG tree): read by the sidebar and by scripts.
 last_run: dict = {}
 
-STAGES = ("read", "fields", "booleans", "surface", "attributes", "write")
+STAGES = ("read", "key", "fields", "booleans", "surface", "attributes", "write")
 
 # Callables ``listener(text)`` told each step of a run (the batch script prints them).
 progress_listeners: list = []
@@ -68,6 +69,7 @@ class Output:
     debug_volume: bool = False
     sharp: bool = True  # creases kept sharp (dual contouring) or rounded (marching cubes)
     keep_faces: bool = False  # the operands' own faces kept away from the seams (``AdaptiveField.kept_surface``)
+    reuse: bool = False  # nothing done when ``target`` still shows the result of the same inputs (``unchanged``)
 
 
 class Progress:
@@ -373,8 +375,9 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
     Returns:
         The numbers of the run (also in ``last_run`` unless the result is empty): ``seconds``, ``stages``, ``nodes``,
         ``level_counts``, ``vertices``, ``triangles``, ``cache_hits``, ``fields_built``, ``voxel_size``, ``object``,
-        ``source``, ``operation``, ``operands``, ``warnings`` (list of messages); ``{"object": name, "empty": True}``
-        when the result has no surface (nothing is written).
+        ``source``, ``operation``, ``operands``, ``warnings`` (list of messages), ``unchanged`` (True when
+        ``output.target`` already showed this result: nothing built, combined, extracted or written);
+        ``{"object": name, "empty": True}`` when the result has no surface (nothing is written).
     Raises:
         AasdfError: Bad input or too fine for memory, the object named; nothing is written.
     """
@@ -389,6 +392,14 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             progress.step(f"reading {len(objects)} objects")
             read = read_checked(inputs, output, context.evaluated_depsgraph_get())
             voxel_size = voxel_size_for(read, settings)
+        with timer.stage("key"):
+            keyed = result_key(context, read, inputs, steps, settings, voxel_size, output)
+            current = keyed is not None and unchanged.is_current(output.target, keyed)
+        if current:  # the result object shows this result as it was written: nothing to build, extract or write
+            if output.hide_inputs:
+                for operand in objects:
+                    operand.hide_set(True)
+            return _record(timer, output.target, voxel_size, source, operation, len(objects))
         with timer.stage("fields"):
             fields = operand_fields(
                 context, read, settings, voxel_size, progress, thickness=[item.thickness for item in inputs]
@@ -414,6 +425,8 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
         with timer.stage("write"):
             progress.step("writing the result")
             obj = write(context, result, output)
+            if keyed is not None:
+                unchanged.remember(obj, keyed)
             if output.debug_volume:
                 from . import debug
 
@@ -432,23 +445,59 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
         # the engine's freed arrays stay resident for the next run's (a drag's moves), within the cache's limit
         runtime.release_memory(cache.spare_bytes(context))
     hits, builds = timer.cache_delta()
+    faces = len(result["tris"]) + len(result["attributes"].get("polygons", ((),))[0])
+    return _record(
+        timer,
+        obj,
+        voxel_size,
+        source,
+        operation,
+        len(objects),
+        field=field,
+        warnings=warnings,
+        counts=(len(result["verts"]), triangles, faces),
+        cache_delta=(hits, builds),
+    )
+
+
+def result_key(context, read, inputs, steps, settings: FieldSettings, voxel_size: float, output: Output):
+    """The key of everything the run's result depends on (``unchanged.inputs_key``) when the output reuses results,
+    else None."""
+    if not output.reuse or output.debug_volume:
+        return None
+    options = {"voxel_size": voxel_size, "levels": settings.levels, "padding": settings.padding}
+    options["device"] = runtime.device(context)
+    thickness = [item.thickness for item in inputs]
+    return unchanged.inputs_key(read, thickness, steps, options, sharp=output.sharp, keep_faces=output.keep_faces)
+
+
+def _record(
+    timer, obj, voxel_size, source, operation, count, *, field=None, warnings=(), counts=None, cache_delta=None
+):
+    """The numbers of a run, kept in ``last_run``; with no ``field``, those of a run that found ``obj`` current
+    (``"unchanged": True``: nothing built, combined, extracted or written; its counts are the object's)."""
+    if counts is None:
+        mesh = obj.data  # triangles: as many as Blender's triangulation of its faces
+        counts = (len(mesh.vertices), len(mesh.loops) - 2 * len(mesh.polygons), len(mesh.polygons))
+    hits, builds = cache_delta or (0, 0)
     last_run.clear()
     last_run.update(
         seconds=timer.seconds,
         stages=dict(timer.stages),
-        nodes=field.node_count,
-        level_counts=field.level_counts,
-        vertices=len(result["verts"]),
-        triangles=triangles,
-        faces=len(result["tris"]) + len(result["attributes"].get("polygons", ((),))[0]),
+        nodes=field.node_count if field is not None else 0,
+        level_counts=field.level_counts if field is not None else [],
+        vertices=counts[0],
+        triangles=counts[1],
+        faces=counts[2],
         cache_hits=hits,
         fields_built=builds,
         voxel_size=voxel_size,
         object=obj.name,
         source=source,
         operation=operation,
-        operands=len(objects),
-        warnings=warnings,
+        operands=count,
+        warnings=list(warnings),
+        unchanged=field is None,
     )
     return dict(last_run)
 

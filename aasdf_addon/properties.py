@@ -247,16 +247,29 @@ class AASDF_PG_scene(bpy.types.PropertyGroup):
     )
 
 
+class AASDF_PG_object(bpy.types.PropertyGroup):
+    """What AASDF keeps on an object it wrote: the key of the inputs of its result (``aasdf_addon.unchanged``)."""
+
+    result_key: StringProperty(
+        name="Result Key",
+        description="Key of the inputs and settings this object's mesh was computed from, and of the mesh as written",
+        default="",
+        options={"HIDDEN"},
+    )
+
+
 # PropertyGroups in registration order (a group used by a PointerProperty must come before its user).
-classes = (AASDF_PG_scene,)
+classes = (AASDF_PG_scene, AASDF_PG_object)
 
 
 def register():
     """Attach the settings pointers; called after ``classes`` are registered."""
     bpy.types.Scene.aasdf = PointerProperty(type=AASDF_PG_scene)
+    bpy.types.Object.aasdf = PointerProperty(type=AASDF_PG_object, options={"HIDDEN"})
 
 
 def unregister():
     """Remove the settings pointers; called before ``classes`` are unregistered."""
-    if hasattr(bpy.types.Scene, "aasdf"):
-        del bpy.types.Scene.aasdf
+    for owner in (bpy.types.Object, bpy.types.Scene):
+        if hasattr(owner, "aasdf"):
+            del owner.aasdf

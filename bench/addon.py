@@ -183,10 +183,11 @@ def measure(a, b, voxel_size, repeat):
     return medians, built
 
 
-def drag(a, b, voxel_size, moves: int = 10, repeat: int = 3) -> dict:
+def drag(a, b, voxel_size, moves: int = 10, repeat: int = 3, keep_faces: bool = True) -> dict:
     """A drag through a CSG tree: ``moves`` successive moves of the cutter, the tree evaluated after each, against as
-    many geometry-nodes evaluations; ``repeat`` alternating rounds. Returns seconds per drag and the ratios."""
-    from aasdf.aasdf_addon import cache, csg, nodes
+    many geometry-nodes evaluations; ``repeat`` alternating rounds. Returns seconds per drag, the ratios and the
+    seconds per stage of a drag (the median drag's, summed over its moves)."""
+    from aasdf.aasdf_addon import cache, csg, nodes, pipeline
 
     bpy.ops.wm.read_homefile(use_empty=True)
     first = baselines.mesh_object("operand_a", *a)
@@ -197,19 +198,24 @@ def drag(a, b, voxel_size, moves: int = 10, repeat: int = 3) -> dict:
     node_a, node_b = tree.nodes.new(nodes.OBJECT), tree.nodes.new(nodes.OBJECT)
     node_a.object, node_b.object = first, second
     difference, output = tree.nodes.new(nodes.DIFFERENCE), tree.nodes.new(nodes.OUTPUT)
+    output.keep_faces = keep_faces
     tree.links.new(node_a.outputs[0], difference.inputs["Base"])
     tree.links.new(node_b.outputs[0], difference.inputs["Cutters"])
     tree.links.new(difference.outputs[0], output.inputs[0])
     diag = float(np.linalg.norm(b[0].max(0) - b[0].min(0)))
-    ours, theirs, built = [], [], []
+    ours, theirs, built, stages = [], [], [], []
 
     def our_drag():
         t0, before = time.perf_counter(), cache.stats()["builds"]
+        summed = {}
         for step in range(moves):
             second.location.x = 0.01 * diag * step
             bpy.context.view_layer.update()
             csg.evaluate_tree(bpy.context, tree)
+            for name, seconds in pipeline.last_run["stages"].items():
+                summed[name] = summed.get(name, 0.0) + seconds
         built.append(cache.stats()["builds"] - before)
+        stages.append(summed)
         return time.perf_counter() - t0
 
     def their_drag():
@@ -229,11 +235,13 @@ def drag(a, b, voxel_size, moves: int = 10, repeat: int = 3) -> dict:
         else:
             ours.append(our_drag())
             theirs.append(their_drag())
+    middle = sorted(range(len(ours)), key=ours.__getitem__)[len(ours) // 2]
     return {
         "ours": statistics.median(ours),
         "theirs": statistics.median(theirs),
         "ratio": round_ratios(ours, theirs),
         "built": max(built),
+        "stages": stages[middle],
     }
 
 

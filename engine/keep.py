@@ -20,6 +20,9 @@ band is ``BAND_VOXELS`` of the result's voxels, widened by the widest blend.
 
 from __future__ import annotations
 
+import weakref
+from dataclasses import dataclass
+
 import numpy as np
 import warp as wp
 
@@ -140,10 +143,51 @@ def _side_at(leaf, points, normals, offset: float) -> np.ndarray:
     return np.where(internal, 0, np.where(front >= back, 1, -1)).astype(np.int8)
 
 
+@dataclass
+class _Own:
+    """What a leaf's own triangles give whatever the other leaves are: their defects (:func:`_own_defects`), each
+    one's side of the leaf's own field (:func:`_side_at`, half a voxel out) and the mesh of the defective ones."""
+
+    values: object  # the leaf field's values array it was read from (the same field: the same array)
+    offset: float
+    device: object
+    defects: np.ndarray  # (T,) bool
+    side: np.ndarray  # (T,) int8
+    defect_mesh: object  # wp.Mesh or None
+
+
+# A leaf's own part, kept with its source mesh: an unplaced leaf's source is the same object at every boolean its
+# cached field enters (a drag's every move judges the unmoved operand's triangles against the moved one), a placed
+# leaf's is made anew (nothing kept). Entries go with their sources.
+_OWN: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _own_part(leaf, source, voxel: float, device) -> _Own:
+    """The :class:`_Own` of a leaf and its (world) ``source``, from the last boolean that judged that source with the
+    same field and voxel size, else found."""
+    offset = SIDE_VOXELS * voxel
+    own = _OWN.get(source)
+    if own is not None and own.values is leaf.values and own.offset == offset and own.device == device:
+        return own
+    verts, tris = source.verts, source.tris.astype(np.int64)
+    defects = _own_defects(verts, tris)
+    side = _side_at(leaf, verts[tris].mean(axis=1), _unit_normals(verts, tris), offset)
+    bad = np.flatnonzero(defects)
+    defect_mesh = None
+    if len(bad) and len(bad) < len(tris):
+        defect_mesh = wp.Mesh(
+            points=wp.array(verts, dtype=wp.vec3, device=device),
+            indices=wp.array(tris[bad].reshape(-1).astype(np.int32), dtype=wp.int32, device=device),
+        )
+    own = _Own(leaf.values, offset, device, defects, side, defect_mesh)
+    _OWN[source] = own
+    return own
+
+
 class _Judge:
     """The checks of one leaf's triangles against the rest of the expression (see the module docstring)."""
 
-    def __init__(self, field, index: int, verts, tris, bvhs: list):
+    def __init__(self, field, index: int, source, bvhs: list):
         self.expression = field.expression
         self.leaves = leaves(self.expression)
         self.index, self.device, voxel = index, field.device, field.voxel_size
@@ -151,21 +195,14 @@ class _Judge:
         self.spacing, self.slack = SAMPLE_VOXELS * voxel, SLACK_VOXELS * voxel
         self.tiny = 1e-3 * voxel
         self.bvhs = bvhs  # per leaf, :func:`leaf_bvh`
-        self.defects = _own_defects(verts, tris)
+        own = _own_part(self.leaves[index], source, voxel, self.device)
+        self.tris, self.defects, self.defect_mesh = source.tris.astype(np.int64), own.defects, own.defect_mesh
         # a shell with internal faces (overlapping or self-intersecting) is read a band away on both sides, so that
         # kept faces stay a band from where it crosses itself; a clean one half a voxel away (a band would reach
         # across its own concave creases)
-        leaf = self.leaves[index]
-        internal = _side_at(leaf, verts[tris].mean(axis=1), _unit_normals(verts, tris), SIDE_VOXELS * voxel) == 0
-        self.crossing = bool(internal.any())
-        self.side_offset = self.band if self.crossing else SIDE_VOXELS * voxel
-        bad = np.flatnonzero(self.defects)
-        self.defect_mesh = None
-        if len(bad) and len(bad) < len(tris):
-            self.defect_mesh = wp.Mesh(
-                points=wp.array(verts, dtype=wp.vec3, device=self.device),
-                indices=wp.array(tris[bad].reshape(-1).astype(np.int32), dtype=wp.int32, device=self.device),
-            )
+        self.crossing = bool((own.side == 0).any())
+        self.side_offset = self.band if self.crossing else own.offset
+        self.side = own.side  # each source triangle's, at ``side_offset`` when the shell nowhere crosses itself
 
     def judge(self, verts, tris, parent):
         """Per triangle (pieces of original triangles ``parent``): kept, partly keepable, and flipped. A triangle is
@@ -194,18 +231,24 @@ class _Judge:
         crosses, flips = self._crossing(signs)
         least = per_triangle_min(np.where(crosses, margin, -1.0), local, len(used), first)
         most = -per_triangle_min(np.where(crosses, -margin, 1.0), local, len(used), first)
-        side, crossed, partly_crossed = self._own_sides(verts[used], local, points, first)
+        whole = (tris == self.tris[parent]).all(axis=1)  # source triangles as they are, not split pieces
+        side, crossed, partly_crossed = self._own_sides(verts[used], local, points, first, np.where(whole, parent, -1))
         kept = same & crossed & (least > self.band + slack)
         partly = partly_crossed & (most + slack > self.band + self.slack) & ~self.defects[parent]
         return kept, partly, flips[local[:, 0]] ^ (side < 0)
 
-    def _own_sides(self, verts, tris, points, first):
+    def _own_sides(self, verts, tris, points, first, source_rows):
         """How the leaf's own field crosses each triangle: (T,) its side at the centre (:func:`_side_at`), whether
         every sample (corners, rows) has that side, not 0, and whether any has one. Parts of a triangle that its own
-        field does not cross (a self-intersecting or overlapping shell's internal faces) are not kept."""
+        field does not cross (a self-intersecting or overlapping shell's internal faces) are not kept. A triangle that
+        is a whole source triangle (``source_rows`` >= 0, else -1) has its side at the centre found already."""
         normals = _unit_normals(verts, tris)
         if not self.crossing:  # a shell that nowhere crosses itself: its side at the centre holds all over
-            centre = _side_at(self.leaves[self.index], verts[tris].mean(axis=1), normals, self.side_offset)
+            centre = self.side[np.maximum(source_rows, 0)]
+            pieces = np.flatnonzero(source_rows < 0)
+            if len(pieces):
+                at = verts[tris[pieces]].mean(axis=1)
+                centre[pieces] = _side_at(self.leaves[self.index], at, normals[pieces], self.side_offset)
             return centre, centre != 0, centre != 0
         owner = np.repeat(np.arange(len(tris)), np.diff(first))
         centres = verts[tris].mean(axis=1)
@@ -277,7 +320,7 @@ def kept_triangles(field) -> list[dict]:
 def _judge_leaf(field, index: int, source, bvhs: list) -> dict:
     """Judge a leaf's triangles, splitting the partly keepable ones until they are small (module docstring)."""
     verts, tris = source.verts, source.tris.astype(np.int64)
-    judge = _Judge(field, index, verts, tris, bvhs)
+    judge = _Judge(field, index, source, bvhs)
     parent = np.arange(len(tris), dtype=np.int64)
     status = np.zeros(len(tris), dtype=np.int8)
     flip = np.zeros(len(tris), dtype=bool)

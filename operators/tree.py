@@ -71,10 +71,11 @@ class AASDF_OT_evaluate_tree(bpy.types.Operator):
         built = sum(run["fields_built"] for run in written)
         count = sum(run["operands"] for run in written)
         triangles = sum(run["triangles"] for run in written)
+        same = [run["object"] for run in written if run.get("unchanged")]
         self.report(
             {"INFO"},
             f"{tree.name}: {', '.join(run['object'] for run in written)} in {seconds:.2f} s, {triangles:,} triangles, "
-            f"{built}/{count} fields built",
+            f"{built}/{count} fields built" + (f"; unchanged: {', '.join(same)}" if same else ""),
         )
         return {"FINISHED"}
 

@@ -13,6 +13,7 @@ from ..aasdf_addon.properties import OPERATIONS
 OPERATION_ICONS = {"UNION": "SELECT_EXTEND", "INTERSECT": "SELECT_INTERSECT", "DIFFERENCE": "SELECT_SUBTRACT"}
 STAGE_LABELS = {
     "read": "Read",
+    "key": "Key",
     "fields": "Fields",
     "booleans": "Booleans",
     "surface": "Surface",
@@ -133,6 +134,8 @@ class AASDF_PT_main_stats(SubPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.label(text=f"{run['object']} ({run['source']})", icon="OBJECT_DATA")
         col.label(text=f"Total: {run['seconds']:.2f} s")
+        if run.get("unchanged"):
+            col.label(text="Nothing changed: the result was left as it was", icon="CHECKMARK")
         for stage, seconds in run["stages"].items():
             col.label(text=f"  {STAGE_LABELS.get(stage, stage)}: {seconds:.3f} s")
         col = layout.column(align=True)
