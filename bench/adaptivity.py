@@ -1,0 +1,142 @@
+"""Adaptivity and quads against Blender's own remeshers, on the bench pairs at /256.
+
+For each pair and each adaptivity 0, 0.25, 0.5, 0.75, 1: Blender's geometry-nodes SDF boolean (Mesh to SDF Grid x2,
+SDF Grid Boolean, Grid to Mesh with that Adaptivity) and AASDF's ``to_mesh(quads=True, adaptivity=...)`` on its
+fields at the same voxel size: polygons, the share of quads, and the Hausdorff p95 / max to manifold3d's exact
+boolean (voxels). Beside them Blender's Voxel Remesh (the operator, on the exact boolean at the same voxel size):
+its polygons and share of quads. Extraction seconds: AASDF's ``to_mesh`` at each adaptivity against today's
+``to_mesh()`` (triangles), alternating rounds (``bench/paired.py``), medians. Voxel = the pair's bounding-box
+diagonal / 256.
+
+    .venv/bin/python bench/adaptivity.py [--repeat 3] [--cases cube ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp-cache"))
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+from bench import baselines  # noqa: E402
+from tests.metrics import exact_boolean, hausdorff  # noqa: E402
+from tests.support import cad_pairs, plate_and_bores  # noqa: E402
+
+RESOLUTION = 256
+ADAPTIVITIES = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+def cases() -> dict:
+    """name -> (operation, a, b): the closed bench pairs of ``bench/keep_faces.py``."""
+    cad = cad_pairs()
+    return {
+        "plate - 4 bores": ("DIFFERENCE", *plate_and_bores()),
+        "cube - bore": cad["cube - bore"],
+        "fandisk - cylinder": cad["fandisk - cylinder"],
+        "rocker-arm - cube": cad["rocker-arm - cube"],
+        "hex prism & sphere": cad["hex prism & sphere"],
+    }
+
+
+def _error(verts, tris, exact, voxel) -> tuple[float, float]:
+    d = hausdorff(verts, tris, *exact, n=100_000)
+    return d["p95"] / voxel, d["max"] / voxel
+
+
+def voxel_remesh(exact, voxel) -> dict:
+    """Blender's Voxel Remesh operator on the exact boolean: polygons and share of quads."""
+    obj = baselines.mesh_object("remesh", *exact)
+    obj.data.remesh_voxel_size = voxel
+    obj.data.remesh_voxel_adaptivity = 0.0
+    bpy.context.view_layer.objects.active = obj
+    with bpy.context.temp_override(active_object=obj, object=obj):
+        bpy.ops.object.voxel_remesh()
+    sizes = np.empty(len(obj.data.polygons), np.int32)
+    obj.data.polygons.foreach_get("loop_total", sizes)
+    bpy.data.objects.remove(obj, do_unlink=True)
+    return {"faces": len(sizes), "quads": float(np.mean(sizes == 4)) if len(sizes) else 0.0}
+
+
+def grid_to_mesh(a, b, op, voxel, adaptivity, exact) -> dict:
+    out = baselines.gn_sdf_boolean(a, b, op, voxel, adaptivity=adaptivity)
+    p95, worst = _error(out["verts"], out["tris"], exact, voxel)
+    return {"faces": out["faces"], "p95": p95, "max": worst, "seconds": out["seconds"]}
+
+
+def aasdf(field, adaptivity, exact, voxel) -> dict:
+    from aasdf.engine.quads import triangulate
+
+    verts, faces, sizes = field.to_mesh(quads=True, adaptivity=adaptivity)
+    p95, worst = _error(verts, triangulate(faces, sizes), exact, voxel)
+    return {"faces": len(sizes), "quads": float(np.mean(sizes == 4)), "p95": p95, "max": worst}
+
+
+def extraction_seconds(field, repeat) -> dict:
+    """Median seconds of ``to_mesh()`` (today: triangles) and of ``to_mesh(quads=True, adaptivity=a)``, rounds
+    alternating their order."""
+    runs = {"today": lambda: field.to_mesh()}
+    runs.update({a: (lambda a=a: field.to_mesh(quads=True, adaptivity=a)) for a in ADAPTIVITIES})
+    times = {k: [] for k in runs}
+    for r in range(repeat + 1):  # the first round warms up
+        for key in list(runs) if r % 2 else list(runs)[::-1]:
+            t0 = time.perf_counter()
+            runs[key]()
+            if r:
+                times[key].append(time.perf_counter() - t0)
+    return {k: statistics.median(v) for k, v in times.items()}
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--cases", nargs="*")
+    args = parser.parse_args(argv)
+    from bench.addon import register
+
+    register()
+    from aasdf import engine
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    chosen = {k: v for k, v in cases().items() if not args.cases or any(c in k for c in args.cases)}
+    ops = {"UNION": engine.union, "INTERSECT": engine.intersection, "DIFFERENCE": engine.difference}
+    print(f"adaptivity: {platform.machine()}, {os.cpu_count()} cores, Blender {bpy.app.version_string}, /{RESOLUTION}")
+    print(
+        "| pair | adaptivity | Grid to Mesh polygons | p95 / max | AASDF polygons | quads | p95 / max | "
+        "AASDF to_mesh s (today's triangles s) |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    remesh_rows = []
+    for name, (op, a, b) in chosen.items():
+        voxel = baselines._diagonal(a, b) / RESOLUTION
+        exact = exact_boolean(op, *a, *b)
+        field = ops[op](*engine.build_fields([a, b], voxel_size=voxel))
+        seconds = extraction_seconds(field, args.repeat)
+        for adaptivity in ADAPTIVITIES:
+            gn = grid_to_mesh(a, b, op, voxel, adaptivity, exact)
+            ours = aasdf(field, adaptivity, exact, voxel)
+            print(
+                f"| {name} | {adaptivity:g} | {gn['faces']:,} | {gn['p95']:.3f} / {gn['max']:.2f} | "
+                f"{ours['faces']:,} | {ours['quads']:.3f} | {ours['p95']:.3f} / {ours['max']:.2f} | "
+                f"{seconds[adaptivity]:.3f} ({seconds['today']:.3f}) |",
+                flush=True,
+            )
+            if adaptivity == 0.0:
+                remesh_rows.append((name, voxel_remesh(exact, voxel), ours))
+    print("\n| pair | Voxel Remesh polygons | Voxel Remesh quads | AASDF polygons | AASDF quads |")
+    print("|---|---|---|---|---|")
+    for name, remesh, ours in remesh_rows:
+        print(f"| {name} | {remesh['faces']:,} | {remesh['quads']:.3f} | {ours['faces']:,} | {ours['quads']:.3f} |")
+
+
+if __name__ == "__main__":
+    main()
