@@ -207,6 +207,7 @@ def evaluate_tree(context, tree) -> list[dict]:
             hide_inputs=tree.hide_inputs,
             sharp=tree.sharp_edges,
             keep_faces=out.keep_faces,
+            adaptivity=out.adaptivity,
         )
         try:
             numbers = pipeline.run(

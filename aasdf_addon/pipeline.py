@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from . import bridge, cache, placement, plan, polygons, quad_faces, runtime, transfer, transforms
+from . import bridge, cache, placement, plan, polygons, quad_faces, regions, runtime, transfer, transforms
 from .operands import read_operands
 
 # Numbers of the last successful run (``aasdf.boolean`` or a CSG tree): read by the sidebar and by scripts.
@@ -285,11 +285,14 @@ def _matrix_bytes(field) -> bytes:
     return b"" if field.placement is None else field.placement.matrix.tobytes()
 
 
-def extract(field, surface: dict, *, sharp: bool = True, keep_faces: bool = False, adaptivity: float = 0.0) -> dict:
+def extract(
+    field, surface: dict, *, sharp: bool = True, keep_faces: bool = False, adaptivity: float = 0.0, operands=()
+) -> dict:
     """The zero surface of ``field``, computed once per result (``surface`` is the dict the cache keeps with it);
     with ``keep_faces`` the operands' own faces away from the seams (``AdaptiveField.kept_surface``, its face
     sources kept in ``surface["kept"]``); else the remeshed surface's polygons (``adaptivity``: merged where flat)
-    taken apart into triangles, its quads first (``quad_faces.fans``).
+    taken apart into triangles, its quads first (``quad_faces.fans``); merged only within the ``operands``' regions
+    (``regions.source_regions``: never across a material border or UV seam).
 
     Returns:
         ``{"verts": (V,3) float32, "tris": (F,3) int32, "creases": (E,2) int32 vertex pairs of the edges
@@ -303,8 +306,10 @@ def extract(field, surface: dict, *, sharp: bool = True, keep_faces: bool = Fals
         surface["creases"] = np.zeros((0, 2), dtype=np.int32) if folds is None else folds
         surface["kept"] = kept
     elif "verts" not in surface:
+        adaptivity = adaptivity if sharp else 0.0
+        seams = regions.source_regions(operands) if adaptivity > 0.0 and operands else None
         verts, faces, sizes, creases = field.to_mesh(
-            sharp=sharp, return_creases=True, quads=True, adaptivity=adaptivity if sharp else 0.0
+            sharp=sharp, return_creases=True, quads=True, adaptivity=adaptivity, regions=seams
         )
         surface["verts"], surface["creases"] = verts, creases
         surface["tris"], surface["quads"] = quad_faces.fans(faces, sizes)
@@ -415,7 +420,12 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
         with timer.stage("surface"):
             progress.step("extracting the surface")
             result = extract(
-                field, surface, sharp=output.sharp, keep_faces=output.keep_faces, adaptivity=output.adaptivity
+                field,
+                surface,
+                sharp=output.sharp,
+                keep_faces=output.keep_faces,
+                adaptivity=output.adaptivity,
+                operands=read,
             )
         if len(result["tris"]) == 0:
             return {"object": output.target.name if output.target is not None else output.name, "empty": True}

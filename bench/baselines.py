@@ -174,7 +174,8 @@ def gn_sdf_boolean(
         adaptivity: Grid to Mesh's Adaptivity (0 to 1).
     Returns:
         ``{"verts", "tris", "faces" (polygons), "seconds", "stage_seconds"}`` where ``stage_seconds`` holds the
-        modifier's own ``execution_time`` as ``"modifier"`` (the rest of ``seconds`` is depsgraph and ``to_mesh`` overhead).
+        modifier's own ``execution_time`` as ``"modifier"`` (the rest of ``seconds`` is depsgraph and ``to_mesh``
+        overhead).
     Raises:
         ValueError: If ``op`` is unknown.
     """

@@ -6,13 +6,13 @@ cell one vertex per surface component in it and merging only where each is a dis
 extracted polygons, as vertex clustering over the octree's blocks:
 
 1. Vertices are sorted into classes: smooth ones, ones inside a reconstructed crease line (rank 2, two crease
-   edges) and corners or crease ends, which never merge, so creases and corners stay where they are.
+   edges) and corners, crease ends and vertices along a seam between two source regions (operands, or the regions
+   the caller names: materials, UV islands), which never merge, so creases, corners and seams stay where they are.
 2. Level by level (blocks of 2, 4, 8... cells a side, up to :func:`max_level`), the vertices of a block that merged
    at the level below are split into components: smooth vertices joined by the mesh's edges, crease vertices by the
-   crease edges, never across two source regions (operands, or the regions the caller names: materials, UV islands,
-   so no merge crosses a seam). A component merges into one vertex when it is a disk (V - E + F = 1 over the faces,
-   edges and vertices inside it) and every vertex in it lies within :func:`tolerance` of the plane fitted through
-   them (a crease component: of the line).
+   crease edges, never across two source regions. A component merges into one vertex when it is a disk (V - E + F
+   = 1 over the faces, edges and vertices inside it) and every vertex in it lies within :func:`tolerance` of the
+   plane fitted through them (a crease component: of the line).
 3. Each merged component becomes one vertex at its vertices' mean; faces are re-indexed, repeated corners dropped, a
    face left with fewer than 3 corners vanishes. A quad left bent (not planar and convex within
    :data:`.quads.QUAD_ANGLE`) is split along the diagonal between two crease vertices, else the less folded one.
@@ -72,6 +72,8 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     creases = np.asarray(surface["creases"], dtype=np.int64).reshape(-1, 2)
     cls = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
+    edges = polygon_edges(faces, sizes)
+    cls[edges[label[edges[:, 0]] != label[edges[:, 1]]].ravel()] = 0  # a seam's vertices stay, as a crease's
     crease_key = np.sort(creases, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
     level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity)
     for round_ in range(CHECK_ROUNDS + 1):

@@ -486,6 +486,7 @@ class AdaptiveField:
         keep_faces: bool = False,
         quads: bool = False,
         adaptivity: float = 0.0,
+        regions: dict | None = None,
     ):
         """The ``iso`` surface of the finest level's narrow band.
 
@@ -502,6 +503,8 @@ class AdaptiveField:
                 the rest triangles (sharp surfaces only; marching cubes stays triangles).
             adaptivity: 0 to 1: merge cells where the surface is flat within a bound that grows with it
                 (:mod:`.adaptive`; 0 is the surface of every cell; sharp surfaces only).
+            regions: Optional {field id: (T,) int label of each source triangle}: cells merge only within a label
+                (materials, UV islands: no merged polygon spans a seam); default: within an operand.
         Returns:
             ``verts`` (V, 3) float32 and ``tris`` (T, 3) int32, counter-clockwise seen from outside; with ``quads``
             ``verts``, ``faces`` (C,) int32 corner vertices face after face and ``sizes`` (P,) int32 corners per face
@@ -524,7 +527,9 @@ class AdaptiveField:
             return (*mesh, np.zeros((0, 2), dtype=np.int32)) if return_creases else mesh
         if sharp is None:
             sharp = not self.stats.get("exact_distance", False)
-        out = field_mesh(self, iso, sharp=sharp, creases=return_creases, quads=quads, adaptivity=adaptivity)
+        out = field_mesh(
+            self, iso, sharp=sharp, creases=return_creases, quads=quads, adaptivity=adaptivity, regions=regions
+        )
         mesh = (out["verts"], out["faces"], out["sizes"]) if quads else (out["verts"], out["tris"])
         return (*mesh, out["creases"]) if return_creases else mesh
 

@@ -19,7 +19,7 @@ from .quadric import crease_edges
 from .quads import merge_pairs, triangulate
 
 
-def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, adaptivity: float) -> dict:
+def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, adaptivity: float, regions=None) -> dict:
     """The ``iso`` surface of ``field`` (see ``AdaptiveField.to_mesh``): extracted, simplified and paired into quads
     in the field's own frame, then placed.
 
@@ -42,7 +42,7 @@ def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, ad
         return _placed(field, out)
     out["faces"], out["sizes"] = merge_pairs(surface["tris"], surface["whole"])
     if adaptivity > 0.0 and sharp and len(out["sizes"]):
-        out = simplify(frame, {**out, "ranks": surface["ranks"]}, adaptivity)
+        out = simplify(frame, {**out, "ranks": surface["ranks"]}, adaptivity, regions)
     if not quads:
         out["tris"] = triangulate(out.pop("faces"), out.pop("sizes"))
     return _placed(field, out)
