@@ -20,6 +20,7 @@ tree: read → key → cache → build → combine → extract → write, in tha
 ``last_run`` for the sidebar and for scripts. Nothing here loops over vertices or triangles in Python.
 """
 
+import hashlib
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -286,12 +287,12 @@ def _matrix_bytes(field) -> bytes:
 
 
 def extract(
-    field, surface: dict, *, sharp: bool = True, keep_faces: bool = False, adaptivity: float = 0.0, operands=()
+    field, surface: dict, *, sharp: bool = True, keep_faces: bool = False, adaptivity: float = 0.0, seams=None
 ) -> dict:
     """The zero surface of ``field``, computed once per result (``surface`` is the dict the cache keeps with it);
     with ``keep_faces`` the operands' own faces away from the seams (``AdaptiveField.kept_surface``, its face
     sources kept in ``surface["kept"]``); else the remeshed surface's polygons (``adaptivity``: merged where flat)
-    taken apart into triangles, its quads first (``quad_faces.fans``); merged only within the ``operands``' regions
+    taken apart into triangles, its quads first (``quad_faces.fans``); merged only within the regions ``seams``
     (``regions.source_regions``: never across a material border or UV seam).
 
     Returns:
@@ -307,7 +308,6 @@ def extract(
         surface["kept"] = kept
     elif "verts" not in surface:
         adaptivity = adaptivity if sharp else 0.0
-        seams = regions.source_regions(operands) if adaptivity > 0.0 and operands else None
         verts, faces, sizes, creases = field.to_mesh(
             sharp=sharp, return_creases=True, quads=True, adaptivity=adaptivity, regions=seams
         )
@@ -343,6 +343,20 @@ def whole_faces_back(result: dict, surface: dict, operands, output: Output) -> d
     result["attributes"]["kept_edges"] = (surface["kept"], operands)  # their seams, sharp edges, creases
     whole = polygons.whole_faces(surface["kept"], result["tris"], operands)
     return result if whole is None else polygons.as_polygons(result, whole, operands)
+
+
+def _seams(operands, output: Output):
+    """The operands' regions an adaptive remeshed surface merges within (``regions.source_regions``), else None."""
+    if output.adaptivity <= 0.0 or output.keep_faces or not output.sharp:
+        return None
+    return regions.source_regions(operands)
+
+
+def _seams_key(seams) -> bytes:
+    """The regions as a key: a surface merged within other materials or UV islands is another surface."""
+    if seams is None:
+        return b""
+    return hashlib.blake2b(b"".join(np.ascontiguousarray(v).tobytes() for v in seams.values())).digest()
 
 
 def quads_back(result: dict, output: Output) -> dict:
@@ -410,7 +424,8 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             )
         with timer.stage("booleans"):
             fingerprint = tuple((id(f.codes), f.field_ids, _matrix_bytes(f)) for f in fields)
-            key = (steps, fingerprint, output.sharp, output.keep_faces, output.adaptivity)
+            seams = _seams(read, output)
+            key = (steps, fingerprint, output.sharp, output.keep_faces, output.adaptivity, _seams_key(seams))
             found = cache.find_result(key)
             if found is None:
                 field = plan.evaluate(steps, fields, progress)
@@ -425,7 +440,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
                 sharp=output.sharp,
                 keep_faces=output.keep_faces,
                 adaptivity=output.adaptivity,
-                operands=read,
+                seams=seams,
             )
         if len(result["tris"]) == 0:
             return {"object": output.target.name if output.target is not None else output.name, "empty": True}

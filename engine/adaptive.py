@@ -73,7 +73,9 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     cls = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
     edges = polygon_edges(faces, sizes)
-    cls[edges[label[edges[:, 0]] != label[edges[:, 1]]].ravel()] = 0  # a seam's vertices stay, as a crease's
+    # a seam's vertices stay, as a crease's (where the seam is a crease, its crease vertices merge along it)
+    seam = (label[edges[:, 0]] != label[edges[:, 1]]) & (cls[edges[:, 0]] == 1) & (cls[edges[:, 1]] == 1)
+    cls[edges[seam].ravel()] = 0
     crease_key = np.sort(creases, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
     level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity)
     for round_ in range(CHECK_ROUNDS + 1):
@@ -202,7 +204,7 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
     edges = edges[edges[:, 0] < edges[:, 1]]  # each undirected edge once (closed, oriented mesh)
     u, v = edges[:, 0], edges[:, 1]
     along_crease = np.isin(u * np.int64(n) + v, crease_key)
-    joinable = (cls[u] == cls[v]) & (cls[u] > 0) & (label[u] == label[v]) & ((cls[u] == 1) | along_crease)
+    joinable = (cls[u] == cls[v]) & (cls[u] > 0) & (((cls[u] == 1) & (label[u] == label[v])) | along_crease)
     first = np.cumsum(sizes) - sizes
     for lv in range(1, max_level(adaptivity) + 1):
         _, block = _block_keys(cell, lv)
@@ -210,21 +212,24 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
         prev = ids[lv - 1]  # each ready vertex's cluster at the level below
         use = joinable & ready[u] & ready[v] & (block[u] == block[v])
         root = _components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
-        comp = np.where(ready, root[np.where(ready, prev, 0)], -1)
-        # a disk: V - E + F = 1 over the component's vertices, the edges and faces with every vertex in it
-        key = np.where(ready, comp, n)  # n: none
-        n_e = np.bincount(key[u[key[u] == key[v]]], minlength=n + 1)[:n]
-        corner_key = key[faces]
-        same = np.minimum.reduceat(corner_key, first) == np.maximum.reduceat(corner_key, first)
-        n_f = np.bincount(corner_key[first[same]], minlength=n + 1)[:n]
         members = np.flatnonzero(ready)
-        n_v, mean, axes = _moments(comp[members], local[members], n)
+        roots, member_comp = np.unique(root[prev[members]], return_inverse=True)
+        k = len(roots)  # the components, numbered 0 .. k - 1
+        comp = np.full(n, k)  # k: none
+        comp[members] = member_comp.ravel()
+        # a disk: V - E + F = 1 over the component's vertices, the edges and faces with every vertex in it
+        n_e = np.bincount(comp[u[comp[u] == comp[v]]], minlength=k + 1)[:k]
+        corner_comp = comp[faces]
+        same = np.minimum.reduceat(corner_comp, first) == np.maximum.reduceat(corner_comp, first)
+        n_f = np.bincount(corner_comp[first[same]], minlength=k + 1)[:k]
+        n_v, mean, axes = _moments(comp[members], local[members], k)
         ok = (n_v - n_e + n_f == 1) & (n_v > 0)
         # flat: every vertex within tol of the plane through the mean (a crease's: of the line)
-        worst = np.zeros(n)
+        worst = np.zeros(k)
         np.maximum.at(worst, comp[members], _offsets(local[members], comp[members], cls[members] == 2, mean, axes))
         ok &= worst <= tol
-        merged = ready & ok[np.where(ready, comp, 0)]
+        merged = np.zeros(n, dtype=bool)
+        merged[members] = ok[comp[members]]
         level[merged] = lv
         ids.append(np.where(merged, comp, -1))
     return level, ids
