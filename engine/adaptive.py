@@ -13,15 +13,16 @@ extracted polygons, as vertex clustering over the octree's blocks:
    crease edges, never across two source regions. A component merges into one vertex when it is a disk (V - E + F
    = 1 over the faces, edges and vertices inside it) and every vertex in it lies within :func:`tolerance` of the
    plane fitted through them (a crease component: of the line).
-3. Each merged component becomes one vertex at its vertices' mean; faces are re-indexed, repeated corners dropped, a
+3. Each merged component becomes one vertex at its vertices' mean (a smooth one taken a Newton step onto the
+   field's surface); faces are re-indexed, repeated corners dropped, a
    face left with fewer than 3 corners vanishes. A quad left bent (not planar and convex within
    :data:`.quads.QUAD_ANGLE`) is split along the diagonal between two crease vertices, else the less folded one.
 4. The result is checked: every edge in exactly two faces, opposite ways, every vertex's faces one fan, no face
    repeating a corner. The components at any failure drop one level and the check runs again, until none fails (at
    worst every vertex is back at level 0: the surface as extracted), so the result is closed and 2-manifold always.
 
-Self-intersection is not checked: a merged vertex is the mean of vertices within the tolerance of its plane, so the
-faces move by about the tolerance (more on curved parts: the faces between two merged vertices span two blocks).
+Self-intersection is not checked: a merged vertex lies within about the tolerance of its vertices' plane and the
+faces' centres within FACE_REACH tolerances of the surface.
 """
 
 from __future__ import annotations
@@ -41,9 +42,11 @@ CHECK_ROUNDS = 8
 
 def tolerance(adaptivity: float) -> float:
     """Largest distance (voxels) of a merged block's vertices from its plane (or crease line): 0.01 voxel at
-    adaptivity 0 (only what is flat to float rounding) growing linearly to 0.25 voxel at 1. The faces between two
-    merged vertices span about twice a block, so on a curved surface they stray farther (up to about 4 times)."""
-    return 0.01 + 0.24 * float(adaptivity)
+    adaptivity 0 (only what is flat to float rounding), 0.22 at 0.5, 1 at 1 (linear, then cubic: the high
+    adaptivities trade accuracy for polygons, as Grid to Mesh's do). The faces between two merged vertices span two
+    blocks, so on a curved surface they stray farther."""
+    a = float(adaptivity)
+    return 0.01 + 0.24 * a + 0.75 * a**3
 
 
 def max_level(adaptivity: float) -> int:
@@ -73,13 +76,19 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     cls = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
     edges = polygon_edges(faces, sizes)
-    # a seam's vertices stay, as a crease's (where the seam is a crease, its crease vertices merge along it)
+    # a smooth seam's vertices stay, as a crease's; where the seam is a crease (next to crease vertices: an edge
+    # across it joins two smooth vertices) the crease keeps it
+    by_crease = np.zeros(len(verts), dtype=bool)
+    for a, b in ((edges[:, 0], edges[:, 1]), (edges[:, 1], edges[:, 0])):
+        by_crease[a[cls[b] != 1]] = True
     seam = (label[edges[:, 0]] != label[edges[:, 1]]) & (cls[edges[:, 0]] == 1) & (cls[edges[:, 1]] == 1)
+    seam &= ~by_crease[edges[:, 0]] & ~by_crease[edges[:, 1]]
     cls[edges[seam].ravel()] = 0
     crease_key = np.sort(creases, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
     level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity)
     for round_ in range(CHECK_ROUNDS + 1):
         cluster, position, feature = _clusters(local, level, ids, cls)
+        position = _onto_surface(field, position, ~feature & (np.bincount(cluster) > 1))
         new_faces, new_sizes = _split_bent_quads(
             position, feature, *_collapse(faces, sizes, cluster), tolerance(adaptivity)
         )
@@ -115,6 +124,22 @@ def _strays(field, position, faces, sizes, reach: float) -> np.ndarray:
     bad = np.zeros(len(position), dtype=bool)
     bad[tris[far].ravel()] = True
     return bad
+
+
+def _onto_surface(field, position, moved) -> np.ndarray:
+    """``position`` (K, 3 voxels) with the rows ``moved`` taken one Newton step onto the field's surface (a merged
+    smooth vertex, its vertices' mean, lies off a curved surface by the sagitta)."""
+    rows = np.flatnonzero(moved)
+    if not len(rows):
+        return position
+    h = float(field.voxel_size)
+    points = np.asarray(field.origin, dtype=np.float64) + h * position[rows]
+    value, grad = field.sample(points.astype(np.float32), return_gradient=True)
+    grad = grad.astype(np.float64)
+    step = value[:, None] * grad / np.maximum((grad * grad).sum(axis=1), 1e-12)[:, None] / h
+    out = position.copy()
+    out[rows] -= np.clip(step, -1.0, 1.0)  # at most a voxel a side: a mean beside a thin part stays put
+    return out
 
 
 def _fans(faces, sizes) -> np.ndarray:
