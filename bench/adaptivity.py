@@ -4,9 +4,10 @@ For each pair and each adaptivity 0, 0.25, 0.5, 0.75, 1: Blender's geometry-node
 SDF Grid Boolean, Grid to Mesh with that Adaptivity) and AASDF's ``to_mesh(quads=True, adaptivity=...)`` on its
 fields at the same voxel size: polygons, the share of quads, and the Hausdorff p95 / max to manifold3d's exact
 boolean (voxels). Beside them Blender's Voxel Remesh (the operator, on the exact boolean at the same voxel size):
-its polygons and share of quads. Extraction seconds: AASDF's ``to_mesh`` at each adaptivity against today's
-``to_mesh()`` (triangles), alternating rounds (``bench/paired.py``), medians. Voxel = the pair's bounding-box
-diagonal / 256.
+its polygons and share of quads. For each Grid to Mesh point, the AASDF adaptivities (of 0, 0.05, 0.1, 0.25, 0.5,
+0.75, 1) that give fewer polygons at a lower p95: the curve lies below that point there. Extraction seconds: AASDF's
+``to_mesh(quads=True, adaptivity=a)`` against today's ``to_mesh()`` (triangles), alternating rounds
+(``bench/paired.py``), medians. Voxel = the pair's bounding-box diagonal / 256.
 
     .venv/bin/python bench/adaptivity.py [--repeat 3] [--cases cube ...]
 """
@@ -34,6 +35,7 @@ from tests.support import cad_pairs, plate_and_bores  # noqa: E402
 
 RESOLUTION = 256
 ADAPTIVITIES = (0.0, 0.25, 0.5, 0.75, 1.0)
+OUR_ADAPTIVITIES = (0.0, 0.05, 0.1, 0.25, 0.5, 0.75, 1.0)  # the points of AASDF's curve
 
 
 def cases() -> dict:
@@ -96,6 +98,12 @@ def extraction_seconds(field, repeat) -> dict:
     return {k: statistics.median(v) for k, v in times.items()}
 
 
+def dominated_by(gn: dict, ours: dict) -> str:
+    """The AASDF adaptivities with fewer polygons and a lower p95 than a Grid to Mesh point ("-": none)."""
+    better = [f"{a:g}" for a, o in ours.items() if o["faces"] < gn["faces"] and o["p95"] < gn["p95"]]
+    return ", ".join(better) or "-"
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeat", type=int, default=3)
@@ -110,32 +118,39 @@ def main(argv=None):
     chosen = {k: v for k, v in cases().items() if not args.cases or any(c in k for c in args.cases)}
     ops = {"UNION": engine.union, "INTERSECT": engine.intersection, "DIFFERENCE": engine.difference}
     print(f"adaptivity: {platform.machine()}, {os.cpu_count()} cores, Blender {bpy.app.version_string}, /{RESOLUTION}")
-    print(
-        "| pair | adaptivity | Grid to Mesh polygons | p95 / max | AASDF polygons | quads | p95 / max | "
-        "AASDF to_mesh s (today's triangles s) |"
-    )
-    print("|---|---|---|---|---|---|---|---|")
-    remesh_rows = []
+    curves, times, remesh_rows = [], [], []
     for name, (op, a, b) in chosen.items():
         voxel = baselines._diagonal(a, b) / RESOLUTION
         exact = exact_boolean(op, *a, *b)
         field = ops[op](*engine.build_fields([a, b], voxel_size=voxel))
         seconds = extraction_seconds(field, args.repeat)
+        ours = {a: aasdf(field, a, exact, voxel) for a in OUR_ADAPTIVITIES}
         for adaptivity in ADAPTIVITIES:
             gn = grid_to_mesh(a, b, op, voxel, adaptivity, exact)
-            ours = aasdf(field, adaptivity, exact, voxel)
-            print(
-                f"| {name} | {adaptivity:g} | {gn['faces']:,} | {gn['p95']:.3f} / {gn['max']:.2f} | "
-                f"{ours['faces']:,} | {ours['quads']:.3f} | {ours['p95']:.3f} / {ours['max']:.2f} | "
-                f"{seconds[adaptivity]:.3f} ({seconds['today']:.3f}) |",
-                flush=True,
+            o = ours[adaptivity]
+            curves.append(
+                f"| {name} | {adaptivity:g} | {gn['faces']:,} | {gn['p95']:.3f} / {gn['max']:.2f} | {o['faces']:,} | "
+                f"{o['quads']:.3f} | {o['p95']:.3f} / {o['max']:.2f} | {dominated_by(gn, ours)} |"
             )
-            if adaptivity == 0.0:
-                remesh_rows.append((name, voxel_remesh(exact, voxel), ours))
+            print(curves[-1], flush=True)
+        extra = ", ".join(f"{a:g}: {o['faces']:,} ({o['p95']:.3f})" for a, o in ours.items() if a not in ADAPTIVITIES)
+        curves.append(f"| {name} | {extra} | | | | | | |")
+        ratio = " | ".join(f"{seconds[a]:.3f} ({seconds[a] / seconds['today']:.1f}x)" for a in ADAPTIVITIES)
+        times.append(f"| {name} | {seconds['today']:.3f} | {ratio} |")
+        remesh_rows.append((name, voxel_remesh(exact, voxel), ours[0.0]))
+    print(
+        "\n| pair | adaptivity | Grid to Mesh polygons | p95 / max | AASDF polygons | quads | p95 / max | "
+        "AASDF below it at |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    print("\n".join(curves))
+    print("\n| pair | to_mesh() today s | " + " | ".join(f"quads, adaptivity {a:g}" for a in ADAPTIVITIES) + " |")
+    print("|---|---|" + "---|" * len(ADAPTIVITIES))
+    print("\n".join(times))
     print("\n| pair | Voxel Remesh polygons | Voxel Remesh quads | AASDF polygons | AASDF quads |")
     print("|---|---|---|---|---|")
-    for name, remesh, ours in remesh_rows:
-        print(f"| {name} | {remesh['faces']:,} | {remesh['quads']:.3f} | {ours['faces']:,} | {ours['quads']:.3f} |")
+    for name, remesh, o in remesh_rows:
+        print(f"| {name} | {remesh['faces']:,} | {remesh['quads']:.3f} | {o['faces']:,} | {o['quads']:.3f} |")
 
 
 if __name__ == "__main__":
