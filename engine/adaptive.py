@@ -76,14 +76,15 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     cls = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
     edges = polygon_edges(faces, sizes)
-    # a smooth seam's vertices stay, as a crease's; where the seam is a crease (next to crease vertices: an edge
-    # across it joins two smooth vertices) the crease keeps it
+    # a seam's vertices stay, as a crease's; where two operands meet at a crease (next to crease vertices: an edge
+    # across it joins two smooth vertices) the crease keeps the seam
     by_crease = np.zeros(len(verts), dtype=bool)
     for a, b in ((edges[:, 0], edges[:, 1]), (edges[:, 1], edges[:, 0])):
         by_crease[a[cls[b] != 1]] = True
-    seam = (label[edges[:, 0]] != label[edges[:, 1]]) & (cls[edges[:, 0]] == 1) & (cls[edges[:, 1]] == 1)
-    seam &= ~by_crease[edges[:, 0]] & ~by_crease[edges[:, 1]]
-    cls[edges[seam].ravel()] = 0
+    la, lb = label[edges[:, 0]], label[edges[:, 1]]
+    near = by_crease[edges[:, 0]] | by_crease[edges[:, 1]] | (cls[edges[:, 0]] != 1) | (cls[edges[:, 1]] != 1)
+    operands_at_crease = ((la >> 32) != (lb >> 32)) & near
+    cls[edges[(la != lb) & ~operands_at_crease].ravel()] = 0
     crease_key = np.sort(creases, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
     level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity)
     for round_ in range(CHECK_ROUNDS + 1):
@@ -153,10 +154,12 @@ def _fans(faces, sizes) -> np.ndarray:
 
 
 def _labels(field, verts, regions) -> np.ndarray:
-    """(V,) int64 source region of each vertex: its operand's field id, with ``regions`` that times a large number
-    plus the region of its closest source triangle."""
+    """(V,) int64 source region of each vertex: its operand's field id times 2^32, plus with ``regions`` the region
+    of its closest source triangle."""
     if regions is None:
-        return field.source_ids(verts).astype(np.int64) if len(field.field_ids) > 1 else np.zeros(len(verts), np.int64)
+        if len(field.field_ids) < 2:
+            return np.zeros(len(verts), np.int64)
+        return field.source_ids(verts).astype(np.int64) << np.int64(32)
     ids, tris, _ = field.closest_sources(verts)
     region = np.zeros(len(verts), dtype=np.int64)
     for field_id, labels in regions.items():
@@ -229,7 +232,11 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
     edges = edges[edges[:, 0] < edges[:, 1]]  # each undirected edge once (closed, oriented mesh)
     u, v = edges[:, 0], edges[:, 1]
     along_crease = np.isin(u * np.int64(n) + v, crease_key)
-    joinable = (cls[u] == cls[v]) & (cls[u] > 0) & (((cls[u] == 1) & (label[u] == label[v])) | along_crease)
+    # smooth vertices of one region; crease vertices along a crease, within one region of an operand (between two
+    # operands the crease is their seam, where each vertex's operand is either)
+    same = label[u] == label[v]
+    joinable = (cls[u] == cls[v]) & (cls[u] > 0)
+    joinable &= ((cls[u] == 1) & same) | (along_crease & (same | ((label[u] >> 32) != (label[v] >> 32))))
     first = np.cumsum(sizes) - sizes
     for lv in range(1, max_level(adaptivity) + 1):
         _, block = _block_keys(cell, lv)
