@@ -7,7 +7,9 @@ boolean (voxels). Beside them Blender's Voxel Remesh (the operator, on the exact
 its polygons and share of quads. For each Grid to Mesh point, the AASDF adaptivities (of 0, 0.05, 0.1, 0.25, 0.5,
 0.75, 1) that give fewer polygons at a lower p95: the curve lies below that point there. Extraction seconds: AASDF's
 ``to_mesh(quads=True, adaptivity=a)`` against today's ``to_mesh()`` (triangles), alternating rounds
-(``bench/paired.py``), medians. Voxel = the pair's bounding-box diagonal / 256.
+(``bench/paired.py``), medians; and the add-on's ``aasdf.boolean`` (keep faces off, both fields cached: the
+boolean, the surface, its attributes and the written object) at each adaptivity. Voxel = the pair's bounding-box
+diagonal / 256.
 
     .venv/bin/python bench/adaptivity.py [--repeat 3] [--cases cube ...]
 """
@@ -98,6 +100,35 @@ def extraction_seconds(field, repeat) -> dict:
     return {k: statistics.median(v) for k, v in times.items()}
 
 
+def addon_seconds(a, b, op, voxel, repeat) -> dict:
+    """Median seconds of ``aasdf.boolean`` (keep faces off) at each adaptivity with both fields cached: the boolean,
+    the surface, its attributes and the written object (rounds alternating their order), and the faces written."""
+    from aasdf.aasdf_addon import cache, pipeline
+
+    cache.clear()
+    first, second = baselines.mesh_object("A", *a), baselines.mesh_object("B", *b)
+    times, faces = {x: [] for x in ADAPTIVITIES}, {}
+    for r in range(repeat + 1):  # the first round builds the fields and warms up
+        for adaptivity in ADAPTIVITIES if r % 2 else ADAPTIVITIES[::-1]:
+            for obj in bpy.context.view_layer.objects:
+                obj.select_set(obj in (first, second))
+            bpy.context.view_layer.objects.active = first
+            t0 = time.perf_counter()
+            status = bpy.ops.aasdf.boolean(
+                operation=op, voxel_size=voxel, hide_inputs=False, keep_faces=False, adaptivity=adaptivity
+            )
+            seconds = time.perf_counter() - t0
+            assert status == {"FINISHED"}, status
+            result = bpy.data.objects[pipeline.last_run["object"]]
+            faces[adaptivity] = len(result.data.polygons)
+            bpy.data.objects.remove(result, do_unlink=True)
+            if r:
+                times[adaptivity].append(seconds)
+    for obj in (first, second):
+        bpy.data.objects.remove(obj, do_unlink=True)
+    return {x: (statistics.median(times[x]), faces[x]) for x in ADAPTIVITIES}
+
+
 def dominated_by(gn: dict, ours: dict) -> str:
     """The AASDF adaptivities with fewer polygons and a lower p95 than a Grid to Mesh point ("-": none)."""
     better = [f"{a:g}" for a, o in ours.items() if o["faces"] < gn["faces"] and o["p95"] < gn["p95"]]
@@ -118,7 +149,7 @@ def main(argv=None):
     chosen = {k: v for k, v in cases().items() if not args.cases or any(c in k for c in args.cases)}
     ops = {"UNION": engine.union, "INTERSECT": engine.intersection, "DIFFERENCE": engine.difference}
     print(f"adaptivity: {platform.machine()}, {os.cpu_count()} cores, Blender {bpy.app.version_string}, /{RESOLUTION}")
-    curves, times, remesh_rows = [], [], []
+    curves, times, addon_rows, remesh_rows = [], [], [], []
     for name, (op, a, b) in chosen.items():
         voxel = baselines._diagonal(a, b) / RESOLUTION
         exact = exact_boolean(op, *a, *b)
@@ -137,6 +168,9 @@ def main(argv=None):
         curves.append(f"| {name} | {extra} | | | | | | |")
         ratio = " | ".join(f"{seconds[a]:.3f} ({seconds[a] / seconds['today']:.1f}x)" for a in ADAPTIVITIES)
         times.append(f"| {name} | {seconds['today']:.3f} | {ratio} |")
+        run = addon_seconds(a, b, op, voxel, args.repeat)
+        cells = " | ".join(f"{run[x][0]:.2f} ({run[x][0] / run[0.0][0]:.2f}x, {run[x][1]:,})" for x in ADAPTIVITIES)
+        addon_rows.append(f"| {name} | {cells} |")
         remesh_rows.append((name, voxel_remesh(exact, voxel), ours[0.0]))
     print(
         "\n| pair | adaptivity | Grid to Mesh polygons | p95 / max | AASDF polygons | quads | p95 / max | "
@@ -147,6 +181,9 @@ def main(argv=None):
     print("\n| pair | to_mesh() today s | " + " | ".join(f"quads, adaptivity {a:g}" for a in ADAPTIVITIES) + " |")
     print("|---|---|" + "---|" * len(ADAPTIVITIES))
     print("\n".join(times))
+    print("\n| pair | " + " | ".join(f"aasdf.boolean s, adaptivity {a:g} (faces)" for a in ADAPTIVITIES) + " |")
+    print("|---|" + "---|" * len(ADAPTIVITIES))
+    print("\n".join(addon_rows))
     print("\n| pair | Voxel Remesh polygons | Voxel Remesh quads | AASDF polygons | AASDF quads |")
     print("|---|---|---|---|---|")
     for name, remesh, o in remesh_rows:

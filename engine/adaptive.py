@@ -37,7 +37,7 @@ FACE_REACH = 3.0
 
 
 # Rounds of the manifold check (step 4); after them any block still at a failure goes back to level 0.
-CHECK_ROUNDS = 8
+CHECK_ROUNDS = 6
 
 
 def tolerance(adaptivity: float) -> float:
@@ -94,11 +94,13 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
             position, feature, *_collapse(faces, sizes, cluster), tolerance(adaptivity)
         )
         bad = _failures(len(position), new_faces, new_sizes)
-        bad |= _strays(field, position, new_faces, new_sizes, FACE_REACH * tolerance(adaptivity))
+        merged = np.bincount(cluster, minlength=len(position)) > 1
+        bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tolerance(adaptivity))
         if not bad.any():
             break
         drop = bad[cluster] & (level > 0)
-        level[drop] = 0 if round_ >= CHECK_ROUNDS - 1 else level[drop] - 1
+        level[drop] = 0 if round_ >= CHECK_ROUNDS - 1 else level[drop] - (1 + round_ // 2)
+        np.maximum(level, 0, out=level)
     out_verts = (np.asarray(field.origin, dtype=np.float64) + h * position).astype(np.float32)
     alone = level == 0
     out_verts[cluster[alone]] = surface["verts"][alone]  # unmerged vertices exactly where they were
@@ -115,13 +117,14 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     }
 
 
-def _strays(field, position, faces, sizes, reach: float) -> np.ndarray:
+def _strays(field, position, faces, sizes, merged, reach: float) -> np.ndarray:
     """(K,) the vertices of faces whose fan triangles' centres lie more than ``reach`` voxels from the field's
-    surface (a face between two merged vertices across a curved part)."""
+    surface (a face between two merged vertices across a curved part); only faces with a ``merged`` corner."""
     tris = _fans(faces, sizes)
+    tris = tris[merged[tris].any(axis=1)]
     h = float(field.voxel_size)
     centres = np.asarray(field.origin, dtype=np.float64) + h * position[tris].mean(axis=1)
-    far = np.abs(field.sample(centres.astype(np.float32))) > reach * h
+    far = np.abs(field.sample(centres.astype(np.float32), method="linear")) > reach * h
     bad = np.zeros(len(position), dtype=bool)
     bad[tris[far].ravel()] = True
     return bad
@@ -135,7 +138,7 @@ def _onto_surface(field, position, moved) -> np.ndarray:
         return position
     h = float(field.voxel_size)
     points = np.asarray(field.origin, dtype=np.float64) + h * position[rows]
-    value, grad = field.sample(points.astype(np.float32), return_gradient=True)
+    value, grad = field.sample(points.astype(np.float32), method="linear", return_gradient=True)
     grad = grad.astype(np.float64)
     step = value[:, None] * grad / np.maximum((grad * grad).sum(axis=1), 1e-12)[:, None] / h
     out = position.copy()
