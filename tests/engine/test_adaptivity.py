@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 
 import engine
 from engine.quads import triangulate
-from tests.engine.test_quads import _closed_2_manifold
+from tests.engine.test_quads import closed_2_manifold
 from tests.metrics import crease_points, exact_boolean, hausdorff, mesh_volume
 from tests.support import cad_pairs, normalised, uv_sphere
 
@@ -39,7 +39,7 @@ def test_adaptivity_merges_flat_parts_and_keeps_the_surface(pair, adaptivity):
     # and 1,421
     assert len(sizes) < 0.1 * len(pair["base"][2]), (pair["name"], len(sizes))
     assert set(np.unique(sizes)) <= {3, 4}
-    assert _closed_2_manifold(len(verts), faces, sizes)
+    assert closed_2_manifold(len(verts), faces, sizes)
     assert np.array_equal(np.unique(faces), np.arange(len(verts))), "unused vertices"
     tris = triangulate(faces, sizes)
     dist = hausdorff(verts, tris, *pair["exact"], n=100_000)
@@ -74,7 +74,7 @@ def test_no_merge_across_source_regions():
     plain = field.to_mesh(quads=True, adaptivity=1.0)
     split = field.to_mesh(quads=True, adaptivity=1.0, regions={0: upper})
     for out_verts, faces, sizes in (plain, split):
-        assert _closed_2_manifold(len(out_verts), faces, sizes)
+        assert closed_2_manifold(len(out_verts), faces, sizes)
 
     def spanning(out_verts, faces, sizes):
         # polygons reaching more than 2 voxels to both sides of z = 0 (a merged vertex each side)

@@ -35,7 +35,7 @@ def case(request):
     return {"name": request.param, "tris": (verts, tris), "polygons": (pverts, faces, sizes), "creases": creases}
 
 
-def _closed_2_manifold(n_verts, faces, sizes) -> bool:
+def closed_2_manifold(n_verts, faces, sizes) -> bool:
     """Every directed edge once and its reverse once (closed, consistently oriented), and around every vertex as many
     edges as faces (its faces form one fan: no two sheets touching at a vertex)."""
     edges = polygon_edges(faces, sizes)
@@ -69,7 +69,7 @@ def test_polygons_are_the_triangles_surface_closed_and_2_manifold(case):
     again = triangulate(faces, sizes)
     assert len(again) == len(tris)
     assert np.array_equal(np.unique(np.sort(again, axis=1), axis=0), np.unique(np.sort(tris, axis=1), axis=0))
-    assert _closed_2_manifold(len(pverts), faces, sizes)
+    assert closed_2_manifold(len(pverts), faces, sizes)
     # each quad is planar and convex: its two triangles within QUAD_ANGLE along both diagonals
     quads = faces[: 4 * np.count_nonzero(sizes == 4)].reshape(-1, 4)
     p = pverts[quads].astype(np.float64)
@@ -91,11 +91,11 @@ def test_a_mirrored_field_gives_the_same_polygons_turned_over():
     # turned over with the triangles: the first fan triangle of each face is one of them, corner order and all
     turned = {tuple(np.roll(t, k)) for t in tris[:2000].tolist() for k in range(3)}
     assert sum(tuple(t) in turned for t in again.tolist()) >= 1000
-    assert _closed_2_manifold(len(pverts), faces, sizes)
+    assert closed_2_manifold(len(pverts), faces, sizes)
 
 
 @pytest.mark.parametrize("seed", [1, 2])
-def test_random_fields_with_tunnels_give_closed_2_manifold_polygons(seed):
+def test_random_fields_with_tunnels_giveclosed_2_manifold_polygons(seed):
     from tests.engine.test_extract import lattice
 
     rng = np.random.default_rng(seed)
@@ -116,7 +116,7 @@ def test_random_fields_with_tunnels_give_closed_2_manifold_polygons(seed):
     )
     assert surface["tunnels"] > 0
     faces, sizes = merge_pairs(surface["tris"], surface["whole"])
-    assert _closed_2_manifold(len(surface["verts"]), faces, sizes)
+    assert closed_2_manifold(len(surface["verts"]), faces, sizes)
     assert len(triangulate(faces, sizes)) == len(surface["tris"])
     # random values: twisted quads everywhere, yet some stay whole (measured 0.27 and 0.25 of the faces)
     assert 0.05 < np.mean(sizes == 4) < 0.9
