@@ -148,7 +148,8 @@ def main(argv=None):
     bpy.ops.wm.read_homefile(use_empty=True)
     chosen = {k: v for k, v in cases().items() if not args.cases or any(c in k for c in args.cases)}
     ops = {"UNION": engine.union, "INTERSECT": engine.intersection, "DIFFERENCE": engine.difference}
-    print(f"adaptivity: {platform.machine()}, {os.cpu_count()} cores, Blender {bpy.app.version_string}, /{RESOLUTION}")
+    print("# Adaptivity and quads\n")
+    print(f"{platform.machine()}, {os.cpu_count()} cores, Blender {bpy.app.version_string}, /{RESOLUTION}")
     curves, times, addon_rows, remesh_rows = [], [], [], []
     for name, (op, a, b) in chosen.items():
         voxel = baselines._diagonal(a, b) / RESOLUTION
