@@ -3,13 +3,13 @@
 For each pair and each adaptivity 0, 0.25, 0.5, 0.75, 1: Blender's geometry-nodes SDF boolean (Mesh to SDF Grid x2,
 SDF Grid Boolean, Grid to Mesh with that Adaptivity) and AASDF's ``to_mesh(quads=True, adaptivity=...)`` on its
 fields at the same voxel size: polygons, the share of quads, and the Hausdorff p95 / max to manifold3d's exact
-boolean (voxels). Beside them Blender's Voxel Remesh (the operator, on the exact boolean at the same voxel size):
-its polygons and share of quads. For each Grid to Mesh point, the AASDF adaptivities (of 0, 0.05, 0.1, 0.25, 0.5,
-0.75, 1) that give fewer polygons at a lower p95: the curve lies below that point there. Extraction seconds: AASDF's
+boolean (voxels). For each Grid to Mesh point, the AASDF adaptivities (of 0, 0.05, 0.1, 0.25, 0.4, 0.5, 0.6, 0.75,
+0.9, 1) that give fewer polygons at a lower p95: AASDF's curve lies below that point there. Seconds: AASDF's
 ``to_mesh(quads=True, adaptivity=a)`` against today's ``to_mesh()`` (triangles), alternating rounds
-(``bench/paired.py``), medians; and the add-on's ``aasdf.boolean`` (keep faces off, both fields cached: the
-boolean, the surface, its attributes and the written object) at each adaptivity. Voxel = the pair's bounding-box
-diagonal / 256.
+(``bench/paired.py``), medians; and the add-on's ``aasdf.boolean`` (keep faces off, both fields cached: the boolean,
+the surface, its attributes and the written object) at each adaptivity. Beside them Blender's Voxel Remesh (the
+operator, on the exact boolean at the same voxel size): its polygons and share of quads. Voxel = the pair's
+bounding-box diagonal / 256.
 
     .venv/bin/python bench/adaptivity.py [--repeat 3] [--cases cube ...]
 """
@@ -37,7 +37,7 @@ from tests.support import cad_pairs, plate_and_bores  # noqa: E402
 
 RESOLUTION = 256
 ADAPTIVITIES = (0.0, 0.25, 0.5, 0.75, 1.0)
-OUR_ADAPTIVITIES = (0.0, 0.05, 0.1, 0.25, 0.5, 0.75, 1.0)  # the points of AASDF's curve
+OUR_ADAPTIVITIES = (0.0, 0.05, 0.1, 0.25, 0.4, 0.5, 0.6, 0.75, 0.9, 1.0)  # the points of AASDF's curve
 
 
 def cases() -> dict:
@@ -110,8 +110,9 @@ def addon_seconds(a, b, op, voxel, repeat) -> dict:
     times, faces = {x: [] for x in ADAPTIVITIES}, {}
     for r in range(repeat + 1):  # the first round builds the fields and warms up
         for adaptivity in ADAPTIVITIES if r % 2 else ADAPTIVITIES[::-1]:
-            for obj in bpy.context.view_layer.objects:
-                obj.select_set(obj in (first, second))
+            for obj in list(bpy.context.view_layer.objects):
+                if obj is not None:
+                    obj.select_set(obj in (first, second))
             bpy.context.view_layer.objects.active = first
             t0 = time.perf_counter()
             status = bpy.ops.aasdf.boolean(

@@ -36,6 +36,10 @@ from .quads import QUAD_ANGLE, polygon_edges
 FACE_REACH = 3.0
 
 
+# Crease lines of fewer vertices are no creases here (their vertices merge as smooth ones where flat enough).
+MIN_CREASE = 6
+
+
 # Rounds of the manifold check (step 4); after them any block still at a failure goes back to level 0.
 CHECK_ROUNDS = 6
 
@@ -73,7 +77,7 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     local = (verts - np.asarray(field.origin, dtype=np.float64)) / h  # voxels
     cell = np.floor(local - 0.5).astype(np.int64)
     creases = np.asarray(surface["creases"], dtype=np.int64).reshape(-1, 2)
-    cls = _classes(surface["ranks"], creases, len(verts))
+    cls, lines = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
     edges = polygon_edges(faces, sizes)
     # a seam's vertices stay, as a crease's; where two operands meet at a crease (next to crease vertices: an edge
@@ -85,11 +89,11 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     near = by_crease[edges[:, 0]] | by_crease[edges[:, 1]] | (cls[edges[:, 0]] != 1) | (cls[edges[:, 1]] != 1)
     operands_at_crease = ((la >> 32) != (lb >> 32)) & near
     cls[edges[(la != lb) & ~operands_at_crease].ravel()] = 0
-    crease_key = np.sort(creases, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
+    crease_key = np.sort(lines, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
     level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity)
     for round_ in range(CHECK_ROUNDS + 1):
         cluster, position, feature = _clusters(local, level, ids, cls)
-        position = _onto_surface(field, position, ~feature & (np.bincount(cluster) > 1))
+        position = _onto_surface(field, position, ~feature & (np.bincount(cluster) > 1), tolerance(adaptivity))
         new_faces, new_sizes = _split_bent_quads(
             position, feature, *_collapse(faces, sizes, cluster), tolerance(adaptivity)
         )
@@ -130,9 +134,10 @@ def _strays(field, position, faces, sizes, merged, reach: float) -> np.ndarray:
     return bad
 
 
-def _onto_surface(field, position, moved) -> np.ndarray:
-    """``position`` (K, 3 voxels) with the rows ``moved`` taken one Newton step onto the field's surface (a merged
-    smooth vertex, its vertices' mean, lies off a curved surface by the sagitta)."""
+def _onto_surface(field, position, moved, tol: float) -> np.ndarray:
+    """``position`` (K, 3 voxels) with the rows ``moved`` that lie more than half ``tol`` voxels off the field's
+    surface taken one Newton step onto it (a merged smooth vertex, its vertices' mean, lies off a curved surface by
+    the sagitta; on a flat one it stays, where the trilinear values bend near a crease)."""
     rows = np.flatnonzero(moved)
     if not len(rows):
         return position
@@ -141,6 +146,7 @@ def _onto_surface(field, position, moved) -> np.ndarray:
     value, grad = field.sample(points.astype(np.float32), method="linear", return_gradient=True)
     grad = grad.astype(np.float64)
     step = value[:, None] * grad / np.maximum((grad * grad).sum(axis=1), 1e-12)[:, None] / h
+    step[np.abs(value) <= 0.5 * tol * h] = 0.0
     out = position.copy()
     out[rows] -= np.clip(step, -1.0, 1.0)  # at most a voxel a side: a mean beside a thin part stays put
     return out
@@ -193,14 +199,19 @@ def _moments(index, points, n):
 _PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
-def _classes(ranks, creases, n) -> np.ndarray:
+def _classes(ranks, creases, n) -> tuple[np.ndarray, np.ndarray]:
     """(V,) int8 what may merge with what: 1 smooth vertices, 2 vertices inside a crease line (rank 2, two crease
-    edges), 0 corners and crease ends (never merge)."""
+    edges), 0 corners and crease ends (never merge); and the creases kept as such. A crease line of fewer than
+    MIN_CREASE vertices (a soft fold found here and there along a fillet) is no crease: its vertices are smooth."""
     creases = np.asarray(creases, dtype=np.int64).reshape(-1, 2)
+    if len(creases):
+        root = _components(n, creases[:, 0], creases[:, 1])
+        size = np.bincount(root, minlength=n)
+        creases = creases[size[root[creases[:, 0]]] >= MIN_CREASE]
     degree = np.bincount(creases.ravel(), minlength=n)
     ranks = np.asarray(ranks)
     cls = np.where(degree == 0, np.where(ranks <= 2, 1, 0), np.where((degree == 2) & (ranks == 2), 2, 0))
-    return cls.astype(np.int8)
+    return cls.astype(np.int8), creases
 
 
 def _components(n: int, a, b) -> np.ndarray:

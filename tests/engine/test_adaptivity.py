@@ -29,7 +29,8 @@ def pair(request):
 
 # Hausdorff p95 and max bounds (voxels) per adaptivity: about 3x the worst measured (p95 / max, cube - bore and
 # fandisk - cylinder): 0.13 / 1.2 and 0.17 / 1.25 at 0.5; 0.41 / 4.1 and 0.68 / 5.5 at 1
-BOUNDS = {0.5: (0.5, 3.5), 1.0: (2.0, 12.0)}
+# and of the volume's relative error (measured at 1: 1.2 %, fandisk - cylinder)
+BOUNDS = {0.5: (0.5, 3.5, 0.01), 1.0: (2.0, 12.0, 0.035)}
 
 
 @pytest.mark.parametrize("adaptivity", [0.5, 1.0])
@@ -45,7 +46,7 @@ def test_adaptivity_merges_flat_parts_and_keeps_the_surface(pair, adaptivity):
     dist = hausdorff(verts, tris, *pair["exact"], n=100_000)
     assert dist["p95"] <= BOUNDS[adaptivity][0] * H, (pair["name"], dist["p95"] / H)
     assert dist["max"] <= BOUNDS[adaptivity][1] * H, (pair["name"], dist["max"] / H)
-    assert abs(mesh_volume(verts, tris) / mesh_volume(*pair["exact"]) - 1.0) < 0.01
+    assert abs(mesh_volume(verts, tris) / mesh_volume(*pair["exact"]) - 1.0) < BOUNDS[adaptivity][2]
     # creases kept: the exact creases folding by more than 30 degrees lie along the crease edges returned
     mid = 0.5 * (verts[creases[:, 0]] + verts[creases[:, 1]])
     ends = np.concatenate([verts[creases[:, 0]], verts[creases[:, 1]], mid])
