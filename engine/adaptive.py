@@ -79,36 +79,68 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     creases = np.asarray(surface["creases"], dtype=np.int64).reshape(-1, 2)
     cls, lines = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
-    edges = polygon_edges(faces, sizes)
-    # a seam's vertices stay, as a crease's; where two operands meet at a crease (next to crease vertices: an edge
-    # across it joins two smooth vertices) the crease keeps the seam
-    by_crease = np.zeros(len(verts), dtype=bool)
+    _hold_seams(cls, label, polygon_edges(faces, sizes))
+    crease_key = np.sort(lines, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
+    level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity)
+    merged = _checked(field, local, faces, sizes, cls, level, ids, tolerance(adaptivity))
+    return _renumbered(field, surface, creases, level, merged)
+
+
+def _hold_seams(cls, label, edges) -> None:
+    """Mark (``cls`` 0, in place) the vertices along a seam between two source regions: they stay, as a crease's.
+    Where two operands meet at a crease (next to crease vertices: an edge across it joins two smooth vertices) the
+    crease keeps the seam."""
+    by_crease = np.zeros(len(cls), dtype=bool)
     for a, b in ((edges[:, 0], edges[:, 1]), (edges[:, 1], edges[:, 0])):
         by_crease[a[cls[b] != 1]] = True
     la, lb = label[edges[:, 0]], label[edges[:, 1]]
     near = by_crease[edges[:, 0]] | by_crease[edges[:, 1]] | (cls[edges[:, 0]] != 1) | (cls[edges[:, 1]] != 1)
     operands_at_crease = ((la >> 32) != (lb >> 32)) & near
     cls[edges[(la != lb) & ~operands_at_crease].ravel()] = 0
-    crease_key = np.sort(lines, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
-    level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity)
-    for round_ in range(CHECK_ROUNDS + 1):
+
+
+def _checked(field, local, faces, sizes, cls, level, ids, tol) -> dict:
+    """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed and checked, the components at a failure
+    dropped (by a level, then faster, after CHECK_ROUNDS to level 0) until none fails. Returns the surface that
+    passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
+    round_ = 0
+    while True:  # ends: every round drops a merged component, and the surface as extracted passes
         cluster, position, feature = _clusters(local, level, ids, cls)
-        position = _onto_surface(field, position, ~feature & (np.bincount(cluster) > 1), tolerance(adaptivity))
-        new_faces, new_sizes = _split_bent_quads(
-            position, feature, *_collapse(faces, sizes, cluster), tolerance(adaptivity)
-        )
-        bad = _failures(len(position), new_faces, new_sizes)
         merged = np.bincount(cluster, minlength=len(position)) > 1
-        bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tolerance(adaptivity))
-        if not bad.any():
+        position = _onto_surface(field, position, ~feature & merged, tol)
+        new_faces, new_sizes = _split_bent_quads(position, feature, merged, *_collapse(faces, sizes, cluster), tol)
+        bad = _failures(len(position), new_faces, new_sizes)
+        bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tol)
+        if not bad.any() or not (level > 0).any():
             break
         drop = bad[cluster] & (level > 0)
-        level[drop] = 0 if round_ >= CHECK_ROUNDS - 1 else level[drop] - (1 + round_ // 2)
-        np.maximum(level, 0, out=level)
+        if not drop.any():  # a failure at vertices left alone: their merged neighbours'
+            drop = _spread(bad, new_faces, new_sizes)[cluster] & (level > 0)
+        if not drop.any():  # (a failure of the surface as extracted) nothing merged
+            drop = level > 0
+        level[drop] = 0 if round_ >= CHECK_ROUNDS - 1 else np.maximum(level[drop] - (1 + round_ // 2), 0)
+        round_ += 1
+    return {"cluster": cluster, "position": position, "faces": new_faces, "sizes": new_sizes}
+
+
+def _spread(bad, faces, sizes) -> np.ndarray:
+    """``bad`` (K,) grown to every corner of the faces with a corner in it."""
+    face_of = np.repeat(np.arange(len(sizes)), sizes)
+    hit = np.zeros(len(sizes), dtype=bool)
+    hit[face_of[bad[faces]]] = True
+    out = bad.copy()
+    out[faces[hit[face_of]]] = True
+    return out
+
+
+def _renumbered(field, surface, creases, level, merged) -> dict:
+    """The checked surface in world units, unmerged vertices exactly where they were, unused vertices dropped."""
+    cluster, position, new_faces = merged["cluster"], merged["position"], merged["faces"]
+    h = float(field.voxel_size)
     out_verts = (np.asarray(field.origin, dtype=np.float64) + h * position).astype(np.float32)
     alone = level == 0
-    out_verts[cluster[alone]] = surface["verts"][alone]  # unmerged vertices exactly where they were
-    crease = np.unique(np.sort(cluster[creases], axis=1), axis=0)
+    out_verts[cluster[alone]] = surface["verts"][alone]
+    crease = np.unique(np.sort(cluster[creases], axis=1), axis=0).reshape(-1, 2)
     crease = crease[crease[:, 0] != crease[:, 1]]
     used = np.zeros(len(out_verts), dtype=bool)
     used[new_faces] = True
@@ -116,7 +148,7 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     return {
         "verts": out_verts[used],
         "faces": number[new_faces].astype(np.int32),
-        "sizes": new_sizes.astype(np.int32),
+        "sizes": merged["sizes"].astype(np.int32),
         "creases": number[crease].astype(np.int32),
     }
 
@@ -352,11 +384,11 @@ def _failures(n_verts, faces, sizes) -> np.ndarray:
     return bad | fan
 
 
-def _split_bent_quads(position, feature, faces, sizes, tol):
-    """Quads no longer planar and convex (folded by more than QUAD_ANGLE, or their diagonals more than ``tol``
-    voxels apart) split in two: along the diagonal between two crease or corner vertices where only one diagonal is
-    (the crease stays an edge), else along the less folded one; returns faces, sizes (quads first, then
-    triangles)."""
+def _split_bent_quads(position, feature, merged, faces, sizes, tol):
+    """Quads with a ``merged`` corner no longer planar and convex (folded by more than QUAD_ANGLE, or their
+    diagonals more than ``tol`` voxels apart) split in two: along the diagonal between two crease or corner vertices
+    where only one diagonal is (the crease stays an edge), else along the less folded one; returns faces, sizes
+    (quads first, then triangles)."""
     start = np.cumsum(sizes) - sizes
     is_quad = sizes == 4
     quads = faces[start[is_quad][:, None] + np.arange(4)]
@@ -368,6 +400,7 @@ def _split_bent_quads(position, feature, faces, sizes, tol):
     normal = np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1])
     twist = np.abs(np.einsum("ij,ij->i", p[:, 0] + p[:, 2] - p[:, 1] - p[:, 3], normal))
     flat &= 0.5 * twist <= tol * np.linalg.norm(normal, axis=1)
+    flat |= ~merged[quads].any(axis=1)  # a quad as extracted stays as it was
     bent = quads[~flat]
     crease02 = feature[bent[:, 0]] & feature[bent[:, 2]]
     crease13 = feature[bent[:, 1]] & feature[bent[:, 3]]
