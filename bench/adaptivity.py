@@ -102,18 +102,21 @@ def extraction_seconds(field, repeat) -> dict:
 
 def addon_seconds(a, b, op, voxel, repeat) -> dict:
     """Median seconds of ``aasdf.boolean`` (keep faces off) at each adaptivity with both fields cached: the boolean,
-    the surface, its attributes and the written object (rounds alternating their order), and the faces written."""
+    the surface, its attributes and the written object (each round's order turned a step), and the faces written."""
     from aasdf.aasdf_addon import cache, pipeline
 
     cache.clear()
     first, second = baselines.mesh_object("A", *a), baselines.mesh_object("B", *b)
+    bpy.context.view_layer.update()
     times, faces = {x: [] for x in ADAPTIVITIES}, {}
     for r in range(repeat + 1):  # the first round builds the fields and warms up
-        for adaptivity in ADAPTIVITIES if r % 2 else ADAPTIVITIES[::-1]:
+        # turned a step each round: no run repeats the one before (that would be the result the add-on keeps)
+        for adaptivity in ADAPTIVITIES[r % len(ADAPTIVITIES) :] + ADAPTIVITIES[: r % len(ADAPTIVITIES)]:
             for obj in list(bpy.context.view_layer.objects):
                 if obj is not None:
                     obj.select_set(obj in (first, second))
             bpy.context.view_layer.objects.active = first
+            bpy.context.view_layer.update()
             t0 = time.perf_counter()
             status = bpy.ops.aasdf.boolean(
                 operation=op, voxel_size=voxel, hide_inputs=False, keep_faces=False, adaptivity=adaptivity
