@@ -127,3 +127,35 @@ def test_the_csg_output_node_has_an_adaptivity(fresh_cache):
         assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
         counts.append(len(bpy.data.objects[output.object_name].data.polygons))
     assert counts[1] < 0.2 * counts[0], counts
+
+
+def test_source_regions_split_at_material_borders_and_uv_seams():
+    from types import SimpleNamespace
+
+    from aasdf.aasdf_addon import regions
+
+    # a strip of four triangles (two quads side by side, each split in two), corners numbered per triangle
+    verts = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0]], np.float32)
+    tris = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]], np.int32)
+    corners = np.arange(12, dtype=np.int32).reshape(4, 3)
+    uv = verts[tris.ravel(), :2].copy()
+
+    def operand(material, uv_map):
+        return SimpleNamespace(
+            tris=tris,
+            verts=verts,
+            corners=corners,
+            faces=np.arange(4),
+            face_material=np.asarray(material),
+            uv_maps={"UVMap": uv_map},
+        )
+
+    def groups(op):
+        r = regions.source_regions([op])[0]
+        return [int(np.flatnonzero(r == x)[0]) for x in r]  # each triangle's first triangle of its region
+
+    assert groups(operand([0, 0, 0, 0], uv)) == [0, 0, 0, 0]
+    assert groups(operand([0, 0, 1, 1], uv)) == [0, 0, 2, 2]  # a material border between the quads
+    seam = uv.copy()
+    seam[6:12, 0] += 5.0  # the second quad's UVs moved: a seam along the shared edge
+    assert groups(operand([0, 0, 0, 0], seam)) == [0, 0, 2, 2]
