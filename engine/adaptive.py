@@ -303,9 +303,8 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
         n_v, mean, axes = _moments(comp[members], local[members], k)
         ok = (n_v - n_e + n_f == 1) & (n_v > 0)
         # flat: every vertex within tol of the plane through the mean (a crease's: of the line)
-        worst = np.zeros(k)
-        np.maximum.at(worst, comp[members], _offsets(local[members], comp[members], cls[members] == 2, mean, axes))
-        ok &= worst <= tol
+        off = _offsets(local[members], comp[members], cls[members] == 2, mean, axes)
+        ok[comp[members][off > tol]] = False
         merged = np.zeros(n, dtype=bool)
         merged[members] = ok[comp[members]]
         level[merged] = lv
