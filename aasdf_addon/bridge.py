@@ -263,7 +263,7 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
     mesh.polygons.foreach_set("loop_start", starts)
     for material in attributes.get("materials", ()):
         mesh.materials.append(material)
-    if len(sizes) or not _set_cached_edges(mesh, edge_cache):
+    if not _set_cached_edges(mesh, edge_cache):
         mesh.update(calc_edges=True)
         _cache_edges(mesh, edge_cache)
     if not len(starts):

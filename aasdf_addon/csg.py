@@ -211,6 +211,7 @@ def evaluate_tree(context, tree) -> list[dict]:
             sharp=tree.sharp_edges,
             keep_faces=out.keep_faces,
             reuse=True,
+            adaptivity=out.adaptivity,
         )
         try:
             numbers = pipeline.run(

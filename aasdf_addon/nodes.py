@@ -14,6 +14,7 @@ from bpy.props import PointerProperty, StringProperty
 from .operands import is_operand
 from .properties import CSG_TREE as TREE
 from .properties import (
+    adaptivity_property,
     auto_update_property,
     blend_mode_property,
     blend_property,
@@ -241,6 +242,7 @@ class AASDF_N_output(CsgNode, bpy.types.Node):
         update=_changed,
     )
     keep_faces: keep_faces_property(update=_changed)
+    adaptivity: adaptivity_property(update=_changed)
 
     def init(self, context):
         self.inputs.new(SOCKET, "Field")
@@ -248,6 +250,7 @@ class AASDF_N_output(CsgNode, bpy.types.Node):
     def draw_settings(self, layout):
         layout.prop(self, "object_name", text="", icon="OBJECT_DATA")
         layout.prop(self, "keep_faces")
+        layout.prop(self, "adaptivity")
 
 
 classes = (

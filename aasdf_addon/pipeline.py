@@ -21,6 +21,7 @@ tree: read → key → cache → build → combine → extract → write, in tha
 ``last_run`` for the sidebar and for scripts. Nothing here loops over vertices or triangles in Python.
 """
 
+import hashlib
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -28,7 +29,20 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from . import bridge, cache, custom_normals, placement, plan, polygons, runtime, transfer, transforms, unchanged
+from . import (
+    bridge,
+    cache,
+    custom_normals,
+    placement,
+    plan,
+    polygons,
+    quad_faces,
+    regions,
+    runtime,
+    transfer,
+    transforms,
+    unchanged,
+)
 from .operands import read_operands
 
 # Numbers of the last successful run (``aasdf.boolean`` or a CSG tree): read by the sidebar and by scripts.
@@ -70,6 +84,7 @@ class Output:
     sharp: bool = True  # creases kept sharp (dual contouring) or rounded (marching cubes)
     keep_faces: bool = False  # the operands' own faces kept away from the seams (``AdaptiveField.kept_surface``)
     reuse: bool = False  # nothing done when ``target`` still shows the result of the same inputs (``unchanged``)
+    adaptivity: float = 0.0  # 0 to 1: cells merged where the remeshed surface is flat (``AdaptiveField.to_mesh``)
 
 
 class Progress:
@@ -286,14 +301,19 @@ def _matrix_bytes(field) -> bytes:
     return b"" if field.placement is None else field.placement.matrix.tobytes()
 
 
-def extract(field, surface: dict, *, sharp: bool = True, keep_faces: bool = False) -> dict:
+def extract(
+    field, surface: dict, *, sharp: bool = True, keep_faces: bool = False, adaptivity: float = 0.0, seams=None
+) -> dict:
     """The zero surface of ``field``, computed once per result (``surface`` is the dict the cache keeps with it);
     with ``keep_faces`` the operands' own faces away from the seams (``AdaptiveField.kept_surface``, its face
-    sources kept in ``surface["kept"]``).
+    sources kept in ``surface["kept"]``); else the remeshed surface's polygons (``adaptivity``: merged where flat)
+    taken apart into triangles, its quads first (``quad_faces.fans``); merged only within the regions ``seams``
+    (``regions.source_regions``: never across a material border or UV seam).
 
     Returns:
         ``{"verts": (V,3) float32, "tris": (F,3) int32, "creases": (E,2) int32 vertex pairs of the edges
-        reconstructed as creases, "edges": the surface's edge cache (see ``bridge.result_mesh``)}``.
+        reconstructed as creases, "edges": the surface's edge cache (see ``bridge.result_mesh``), "quads": how many
+        quads the first triangles pair into}``.
     """
     if "verts" not in surface and keep_faces:
         kept = field.kept_surface(sharp=sharp)
@@ -302,7 +322,12 @@ def extract(field, surface: dict, *, sharp: bool = True, keep_faces: bool = Fals
         surface["creases"] = np.zeros((0, 2), dtype=np.int32) if folds is None else folds
         surface["kept"] = kept
     elif "verts" not in surface:
-        surface["verts"], surface["tris"], surface["creases"] = field.to_mesh(sharp=sharp, return_creases=True)
+        adaptivity = adaptivity if sharp else 0.0
+        verts, faces, sizes, creases = field.to_mesh(
+            sharp=sharp, return_creases=True, quads=True, adaptivity=adaptivity, regions=seams
+        )
+        surface["verts"], surface["creases"] = verts, creases
+        surface["tris"], surface["quads"] = quad_faces.fans(faces, sizes)
     edges = surface.setdefault("edges", {})
     if "edge_verts" not in edges and len(surface["tris"]):
         # found in kernels (half the time Blender takes to derive them); an unusual surface's are left to the first
@@ -310,7 +335,8 @@ def extract(field, surface: dict, *, sharp: bool = True, keep_faces: bool = Fals
         found = runtime.engine().surface_edges(surface["tris"], len(surface["verts"]))
         if found is not None:
             edges["edge_verts"], edges["corner_edge"] = found[0].ravel(), found[1]
-    return {"verts": surface["verts"], "tris": surface["tris"], "creases": surface["creases"], "edges": edges}
+    result = {"verts": surface["verts"], "tris": surface["tris"], "creases": surface["creases"], "edges": edges}
+    return {**result, "quads": surface.get("quads", 0)}
 
 
 def carry_over(field, surface: dict, operands) -> dict:
@@ -338,6 +364,28 @@ def whole_faces_back(result: dict, surface: dict, operands, output: Output) -> d
     result["attributes"]["kept_edges"] = (surface["kept"], operands)  # their seams, sharp edges, creases
     whole = polygons.whole_faces(surface["kept"], result["tris"], operands)
     return result if whole is None else polygons.as_polygons(result, whole, operands)
+
+
+def _seams(operands, output: Output):
+    """The operands' regions an adaptive remeshed surface merges within (``regions.source_regions``), else None."""
+    if output.adaptivity <= 0.0 or output.keep_faces or not output.sharp:
+        return None
+    return regions.source_regions(operands)
+
+
+def _seams_key(seams) -> bytes:
+    """The regions as a key: a surface merged within other materials or UV islands is another surface."""
+    if seams is None:
+        return b""
+    return hashlib.blake2b(b"".join(np.ascontiguousarray(v).tobytes() for v in seams.values())).digest()
+
+
+def quads_back(result: dict, output: Output) -> dict:
+    """``result`` with its quads whose halves agree written as quads (``quad_faces.quads_back``): not into an object
+    whose transform mirrors (their corners would need turning)."""
+    if output.target is not None and np.linalg.det(output.target.matrix_world) < 0:
+        return result
+    return quad_faces.quads_back(result, result["quads"])
 
 
 def _face_sources(field, surface: dict) -> tuple:
@@ -406,7 +454,8 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             )
         with timer.stage("booleans"):
             fingerprint = tuple((id(f.codes), f.field_ids, _matrix_bytes(f)) for f in fields)
-            key = (steps, fingerprint, output.sharp, output.keep_faces)
+            seams = _seams(read, output)
+            key = (steps, fingerprint, output.sharp, output.keep_faces, output.adaptivity, _seams_key(seams))
             found = cache.find_result(key)
             if found is None:
                 field = plan.evaluate(steps, fields, progress)
@@ -415,13 +464,20 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
                 field, surface = found
         with timer.stage("surface"):
             progress.step("extracting the surface")
-            result = extract(field, surface, sharp=output.sharp, keep_faces=output.keep_faces)
+            result = extract(
+                field,
+                surface,
+                sharp=output.sharp,
+                keep_faces=output.keep_faces,
+                adaptivity=output.adaptivity,
+                seams=seams,
+            )
         if len(result["tris"]) == 0:
             return {"object": output.target.name if output.target is not None else output.name, "empty": True}
         with timer.stage("attributes"):
             result["attributes"] = carry_over(field, surface, read)
             triangles = len(result["tris"])  # as many as Blender's triangulation of what is written
-            result = whole_faces_back(result, surface, read, output)
+            result = quads_back(whole_faces_back(result, surface, read, output), output)
         with timer.stage("write"):
             progress.step("writing the result")
             obj = write(context, result, output)
@@ -468,7 +524,9 @@ def result_key(context, read, inputs, steps, settings: FieldSettings, voxel_size
     options = {"voxel_size": voxel_size, "levels": settings.levels, "padding": settings.padding}
     options["device"] = runtime.device(context)
     thickness = [item.thickness for item in inputs]
-    return unchanged.inputs_key(read, thickness, steps, options, sharp=output.sharp, keep_faces=output.keep_faces)
+    return unchanged.inputs_key(
+        read, thickness, steps, options, sharp=output.sharp, keep_faces=output.keep_faces, adaptivity=output.adaptivity
+    )
 
 
 def _record(

@@ -190,6 +190,19 @@ def keep_faces_property(**overrides):
     return _make(BoolProperty, options, overrides)
 
 
+def adaptivity_property(**overrides):
+    options = {
+        "name": "Adaptivity",
+        "description": "Merge the remeshed surface's cells where it is flat, into fewer, larger polygons (creases, "
+        "corners and the inputs' material and UV seams kept); 0: a polygon per voxel",
+        "default": 0.0,
+        "min": 0.0,
+        "max": 1.0,
+        "subtype": "FACTOR",
+    }
+    return _make(FloatProperty, options, overrides)
+
+
 def hide_inputs_property(**overrides):
     options = {
         "name": "Hide Inputs",
@@ -234,6 +247,7 @@ class AASDF_PG_scene(bpy.types.PropertyGroup):
     thickness: thickness_property()
     sharp_edges: sharp_edges_property()
     keep_faces: keep_faces_property()
+    adaptivity: adaptivity_property()
     hide_inputs: hide_inputs_property()
     debug_volume: debug_volume_property()
     offset_distance: offset_distance_property()

@@ -76,7 +76,7 @@ def _update(digest, value) -> None:
         digest.update(repr(value).encode())
 
 
-def inputs_key(read, thickness, steps, options: dict, *, sharp: bool, keep_faces: bool) -> str:
+def inputs_key(read, thickness, steps, options: dict, *, sharp: bool, keep_faces: bool, adaptivity: float = 0.0) -> str:
     """The key of a run's result.
 
     Args:
@@ -85,12 +85,12 @@ def inputs_key(read, thickness, steps, options: dict, *, sharp: bool, keep_faces
         steps: The plan (``aasdf_addon.plan``), a nested tuple.
         options: Field settings as ``cache.geometry_key`` takes them: ``voxel_size`` (resolved), ``levels``,
             ``padding``, ``device``.
-        sharp, keep_faces: The output's options.
+        sharp, keep_faces, adaptivity: The output's options.
     Returns:
         A hex digest.
     """
     digest = _digest()
-    _update(digest, (KEY_VERSION, steps, sharp, keep_faces, len(read)))
+    _update(digest, (KEY_VERSION, steps, sharp, keep_faces, float(adaptivity), len(read)))
     for operand, wall in zip(read, thickness, strict=True):
         digest.update(cache.geometry_key(operand.verts, operand.tris, **options, thickness=wall).encode())
         _update(digest, np.asarray(operand.matrix, dtype=np.float64))

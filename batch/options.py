@@ -60,6 +60,12 @@ def add_job_options(parser):
         help="keep the inputs' own faces away from the seams (default) or remesh the whole result (--no-keep-faces)",
     )
     parser.add_argument("--remesh", dest="keep_faces", action="store_false", help="the same as --no-keep-faces")
+    parser.add_argument(
+        "--adaptivity",
+        type=float,
+        default=0.0,
+        help="0 to 1: merge the remeshed surface's cells where it is flat, into fewer, larger polygons (default 0)",
+    )
     parser.add_argument("--debug-volume", metavar="FILE", help="also write the result's field as a .vdb")
     parser.add_argument("--blend", metavar="FILE", help="open this .blend first (with the bpy module)")
 
@@ -133,5 +139,7 @@ def check_args(args):
             raise BatchError(f"--{name.replace('_', '-')} must be a finite number, not {value}")
     if args.thickness < 0.0 or (args.shell is not None and args.shell <= 0.0):
         raise BatchError("--thickness must not be negative and --shell must be positive")
+    if not 0.0 <= args.adaptivity <= 1.0:
+        raise BatchError(f"--adaptivity must be from 0 to 1, not {args.adaptivity}")
     if args.resolution < 8 or args.voxel_size < 0.0:
         raise BatchError("--resolution must be at least 8 and --voxel-size not negative")

@@ -116,6 +116,7 @@ def run_settings(pipeline, args, operands) -> tuple:
         debug_volume=args.debug_volume is not None,
         sharp=args.sharp_edges,
         keep_faces=args.keep_faces,
+        adaptivity=args.adaptivity,
     )
     return settings, output
 

@@ -91,11 +91,19 @@ def _evaluate(obj: bpy.types.Object) -> dict:
     mesh = evaluated.to_mesh()
     seconds = time.perf_counter() - start
     verts, tris = mesh_arrays(mesh)
+    faces = len(mesh.polygons)
     evaluated.to_mesh_clear()
     modifier_seconds = {m.name: m.execution_time for m in evaluated.modifiers}
     geometry = evaluated.evaluated_geometry()  # keep a reference: its volume dies with it
     grids = [(g.name, g.data_type) for g in geometry.volume.grids] if geometry.volume is not None else []
-    return {"verts": verts, "tris": tris, "seconds": seconds, "modifier_seconds": modifier_seconds, "grids": grids}
+    return {
+        "verts": verts,
+        "tris": tris,
+        "faces": faces,
+        "seconds": seconds,
+        "modifier_seconds": modifier_seconds,
+        "grids": grids,
+    }
 
 
 def _settle() -> None:
@@ -141,15 +149,17 @@ def _gn_sdf(group, operand: bpy.types.Object, voxel_size: float, band_width: int
     return to_sdf.outputs["SDF Grid"]
 
 
-def _gn_to_mesh(group, grid_socket, group_out) -> None:
+def _gn_to_mesh(group, grid_socket, group_out, adaptivity: float = 0.0) -> None:
     to_mesh = group.nodes.new("GeometryNodeGridToMesh")
     to_mesh.inputs["Threshold"].default_value = 0.0  # the default 0.1 would offset the surface
-    to_mesh.inputs["Adaptivity"].default_value = 0.0
+    to_mesh.inputs["Adaptivity"].default_value = adaptivity
     group.links.new(grid_socket, to_mesh.inputs["Grid"])
     group.links.new(to_mesh.outputs["Mesh"], group_out.inputs["Geometry"])
 
 
-def gn_sdf_boolean(a, b, op: str, voxel_size: float, band_width: int = 3, *, keep: bool = False) -> dict:
+def gn_sdf_boolean(
+    a, b, op: str, voxel_size: float, band_width: int = 3, *, keep: bool = False, adaptivity: float = 0.0
+) -> dict:
     """Geometry-nodes SDF boolean: Mesh to SDF Grid ×2 → SDF Grid Boolean → Grid to Mesh (Threshold 0).
 
     Timed: one depsgraph evaluation of a fresh object with a fresh node group plus ``to_mesh()`` — both SDF
@@ -161,9 +171,11 @@ def gn_sdf_boolean(a, b, op: str, voxel_size: float, band_width: int = 3, *, kee
         voxel_size: Voxel size of both grids (world units).
         band_width: Narrow-band half width in voxels.
         keep: Keep the created objects and node group (otherwise they are removed).
+        adaptivity: Grid to Mesh's Adaptivity (0 to 1).
     Returns:
-        ``{"verts", "tris", "seconds", "stage_seconds"}`` where ``stage_seconds`` holds the modifier's own
-        ``execution_time`` as ``"modifier"`` (the rest of ``seconds`` is depsgraph and ``to_mesh`` overhead).
+        ``{"verts", "tris", "faces" (polygons), "seconds", "stage_seconds"}`` where ``stage_seconds`` holds the
+        modifier's own ``execution_time`` as ``"modifier"`` (the rest of ``seconds`` is depsgraph and ``to_mesh``
+        overhead).
     Raises:
         ValueError: If ``op`` is unknown.
     """
@@ -182,7 +194,7 @@ def gn_sdf_boolean(a, b, op: str, voxel_size: float, band_width: int = 3, *, kee
     else:  # UNION / INTERSECT take every grid on one multi-input socket
         group.links.new(grid_a, boolean.inputs["Grid 2"])
         group.links.new(grid_b, boolean.inputs["Grid 2"])
-    _gn_to_mesh(group, boolean.outputs["Grid"], group_out)
+    _gn_to_mesh(group, boolean.outputs["Grid"], group_out, adaptivity)
     host = _gn_host("gn_sdf_boolean", group)
     result = _evaluate(host)
     result["stage_seconds"] = {"modifier": result.pop("modifier_seconds")["GeometryNodes"]}

@@ -26,6 +26,7 @@ SCRIPTS = (
     "scaling",
     "breakdown",
     "sharp",
+    "adaptivity",
     "signs",
     "offset",
     "batch",

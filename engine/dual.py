@@ -43,6 +43,7 @@ from .parallel import launch_split
 from .quadric import (
     clamp_box,
     cube_corner,
+    fold_cos,
     is_smooth,
     pack_quadric,
     plane_terms,
@@ -54,6 +55,7 @@ from .quadric import (
     vec8,
     vec10,
 )
+from .quads import QUAD_ANGLE
 
 # A vertex's plane quadric as the quads need it (which diagonal to split along): half floats, 20 bytes a vertex.
 vec10h = wp.types.vector(length=10, dtype=wp.float16)
@@ -361,9 +363,11 @@ def _quads_kernel(
     quadrics: wp.array[vec10h],
     inv: float,
     min_area: float,
+    quad_cos: float,
     second: wp.array[wp.int32],
     tris: wp.array2d[wp.int32],
     tunnel: wp.array[wp.uint8],
+    whole: wp.array[wp.uint8],
 ):
     """The quads of the crossed edges whose four cubes cube ``first + tid`` completes as the one below both other
     axes (each crossed edge has exactly one such cube), as two triangles, outward, split along the diagonal whose
@@ -371,7 +375,9 @@ def _quads_kernel(
     Where two of its cubes meet across a face that each crosses with one patch in two segments and its edge lies in
     the second segment (``tunnel_tables``), the quad's ``tunnel`` entry has that side's bit (its sides numbered from
     its first vertex as written; bits 4-5: the edge's axis, for :func:`_tunnel_points_kernel`): such sides get a
-    vertex of their own (see :func:`.meshcheck.open_tunnels`)."""
+    vertex of their own (see :func:`.meshcheck.open_tunnels`). A quad whose two triangles lie within ``quad_cos``
+    of each other's plane along both diagonals (planar and convex) is flagged ``whole``: 1 split along q0-q2, 2
+    along q1-q3 (see :func:`.quads.merge_pairs`)."""
     cube = first + wp.tid()
     out = int(0)
     if cube > 0:
@@ -397,6 +403,7 @@ def _quads_kernel(
         row = 2 * quad
         count += 1
         tunnel[quad] = wp.uint8(0)
+        whole[quad] = wp.uint8(0)
         if complete == 0:
             for k in range(3):
                 tris[row, k] = -1
@@ -450,6 +457,9 @@ def _quads_kernel(
             split02 = False
         elif not split02 and area13 < min_area and area02 > area13:
             split02 = True
+        # planar and convex: both splits' triangles within quad_cos of each other (a quad of its own)
+        if fold_cos(p0, p1, p2, p3) >= quad_cos and fold_cos(p1, p2, p3, p0) >= quad_cos:
+            whole[quad] = wp.where(split02, wp.uint8(1), wp.uint8(2))
         if split02:
             tris[row, 0] = q0
             tris[row, 1] = q1
@@ -485,7 +495,9 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         dict: ``verts`` (V, 3) float32, ``tris`` (T, 3) int32 (outward, counter-clockwise), ``ranks`` (V,) int32
         (significant eigenvalues of each vertex's quadric: 1 smooth, 2 crease, 3 corner; 0 without planes) and
         ``cells`` (V,) int32 (the active cube each vertex belongs to, a row of ``cube_corners``), ``tunnels``: how
-        many of the vertices were added between two cubes meeting along two dual edges (``meshcheck.open_tunnels``).
+        many of the vertices were added between two cubes meeting along two dual edges (``meshcheck.open_tunnels``),
+        ``whole`` (Q,) uint8: per pair of rows 2q, 2q + 1 (first in ``tris``; a tunnel's fans follow them),
+        whether their quad is planar and convex enough to stay one polygon, and its split (:func:`.quads.merge_pairs`).
     """
     device = cube_corners.device
     tables = _tables(device)
@@ -549,6 +561,7 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
     vertex_start = below = None
     tris = wp.empty((2 * n_quads, 3), dtype=wp.int32, device=device)
     tunnel = wp.empty(n_quads, dtype=wp.uint8, device=device)
+    whole = wp.empty(n_quads, dtype=wp.uint8, device=device)
     launch_split(
         _quads_kernel,
         m,
@@ -563,9 +576,11 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
             quadrics,
             1.0 / float(spacing),
             MIN_SPLIT_AREA,
+            float(np.cos(np.radians(QUAD_ANGLE))),
             tables["second"],
             tris,
             tunnel,
+            whole,
         ],
         device,
     )
@@ -575,6 +590,7 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         "ranks": ranks.numpy(),
         "cells": cells.numpy(),
         "tunnels": 0,
+        "whole": whole.numpy(),
     }
     quadrics = cube_info = None
     tunnel_np = tunnel.numpy()
@@ -584,5 +600,7 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         open_tunnels(surface, flagged, tunnel_np[flagged] & 15, points)
     tris_np = surface["tris"]
     if len(tris_np) and tris_np[:, 0].min() < 0:  # quads at the band's edge, where a cube is missing (open surface)
-        surface["tris"] = tris_np[tris_np[:, 0] >= 0]
+        complete = tris_np[:, 0] >= 0
+        surface["tris"] = tris_np[complete]
+        surface["whole"] = surface["whole"][complete[: 2 * len(surface["whole"]) : 2]]  # (a tunnel's fans: last)
     return surface

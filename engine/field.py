@@ -15,15 +15,12 @@ import numpy as np
 import warp as wp
 
 from . import boolean, parallel, sources
-from .dual import contour_dual
 from .errors import AasdfError
-from .extract import extract_octree_level, extract_surface, lattice_cubes, octree_level_cubes
 from .hybrid import kept_surface
-from .marching import empty_mesh
+from .meshing import field_mesh
 from .octree import decode_codes
 from .placement import Placement
 from .plan import available_memory
-from .quadric import crease_edges
 from .sampling import FieldArg, code_proj, sample_field_kernel, source_ids_kernel
 
 
@@ -481,7 +478,15 @@ class AdaptiveField:
         return kept_surface(self, sharp=sharp)
 
     def to_mesh(
-        self, iso: float = 0.0, *, sharp: bool | None = None, return_creases: bool = False, keep_faces: bool = False
+        self,
+        iso: float = 0.0,
+        *,
+        sharp: bool | None = None,
+        return_creases: bool = False,
+        keep_faces: bool = False,
+        quads: bool = False,
+        adaptivity: float = 0.0,
+        regions: dict | None = None,
     ):
         """The ``iso`` surface of the finest level's narrow band.
 
@@ -494,77 +499,39 @@ class AdaptiveField:
             return_creases: Also return the crease edges the sharp extraction reconstructed.
             keep_faces: Keep the operands' own triangles wherever the surface is theirs, away from the seams
                 (:meth:`kept_surface`; ``iso`` 0 only; no crease edges are returned with them).
+            quads: Return polygons: the dual quads kept whole where they are planar and convex (:mod:`.quads`),
+                the rest triangles (sharp surfaces only; marching cubes stays triangles).
+            adaptivity: 0 to 1: merge cells where the surface is flat within a bound that grows with it
+                (:mod:`.adaptive`; 0 is the surface of every cell; sharp surfaces only).
+            regions: Optional {field id: (T,) int label of each source triangle}: cells merge only within a label
+                (materials, UV islands: no merged polygon spans a seam); default: within an operand.
         Returns:
-            ``verts`` (V, 3) float32 and ``tris`` (T, 3) int32, counter-clockwise seen from outside; with
-            ``return_creases`` also ``creases`` (E, 2) int32 vertex index pairs, each edge of ``tris`` along which
-            the surface folds at a crease (empty when ``sharp`` is ``False``).
+            ``verts`` (V, 3) float32 and ``tris`` (T, 3) int32, counter-clockwise seen from outside; with ``quads``
+            ``verts``, ``faces`` (C,) int32 corner vertices face after face and ``sizes`` (P,) int32 corners per face
+            (quads first); with ``return_creases`` also ``creases`` (E, 2) int32 vertex index pairs, each edge of
+            the mesh along which the surface folds at a crease (empty when ``sharp`` is ``False``).
         Raises:
-            ValueError: If ``iso`` is not finite.
+            ValueError: If ``iso`` is not finite or ``adaptivity`` is not within [0, 1].
         """
-        iso = float(iso)
+        iso, adaptivity = float(iso), float(adaptivity)
         if not np.isfinite(iso):
             raise ValueError(f"Expected a finite 'iso', but got {iso}.")
+        if not 0.0 <= adaptivity <= 1.0:
+            raise ValueError(f"Expected an 'adaptivity' from 0 to 1, but got {adaptivity}.")
         if keep_faces:
             if iso != 0.0:
                 raise ValueError(f"Kept faces lie on the zero surface: expected 'iso' 0 with 'keep_faces', got {iso}.")
             surface = self.kept_surface(sharp=sharp)
-            creases = np.zeros((0, 2), dtype=np.int32)
-            return (
-                (surface["verts"], surface["tris"], creases) if return_creases else (surface["verts"], surface["tris"])
-            )
+            verts, tris = surface["verts"], surface["tris"]
+            mesh = (verts, tris) if not quads else (verts, tris.ravel(), np.full(len(tris), 3, np.int32))
+            return (*mesh, np.zeros((0, 2), dtype=np.int32)) if return_creases else mesh
         if sharp is None:
             sharp = not self.stats.get("exact_distance", False)
-        if self.placement is not None:  # extracted in its own frame, then placed
-            frame = self.in_frame()
-            verts, tris, *rest = frame.to_mesh(iso / self.placement.scale, sharp=sharp, return_creases=return_creases)
-            return (*self.placement.place_surface(verts, tris), *rest)
-        if sharp:
-            verts, tris, creases = self._sharp_surface(iso, return_creases)
-        else:
-            verts, tris = self._marching_cubes(iso)
-            creases = np.zeros((0, 2), dtype=np.int32)
-        if return_creases:
-            return verts, tris, creases
-        return verts, tris
-
-    def _sharp_surface(self, iso: float, creases: bool):
-        """The dual contouring of the finest level's active cubes (:func:`.dual.contour_dual`): ``verts``, ``tris``
-        and, with ``creases``, the crease edges (:func:`.quadric.crease_edges`)."""
-        n0 = self.level_counts[0]
-        codes, values, proj = self.codes[:n0], self.values[:n0], self.proj[:n0]
-        if self.levels == 1:
-            cubes = lattice_cubes(
-                self.coords.numpy(),
-                self.values.numpy().astype(np.float64),
-                origin=self.origin,
-                spacing=self.voxel_size,
-                iso=iso,
-                device=self.device,
-            )
-            if cubes is not None and cubes["order"] is not None:
-                order = cubes["order"]
-                codes = wp.array(self.codes.numpy()[order], dtype=wp.int64, device=self.device)
-                proj = wp.array(self.proj.numpy()[order], dtype=wp.vec3h, device=self.device)
-        else:
-            cubes = octree_level_cubes(codes, values, self.tree, origin=self.origin, spacing=self.voxel_size, iso=iso)
-        if cubes is None:
-            verts, tris = empty_mesh()
-            return verts, tris, np.zeros((0, 2), dtype=np.int32)
-        corners, shifted = cubes["cube_corners"], cubes["shifted"]
-        surface = contour_dual(corners, shifted, codes, proj, origin=self.origin, spacing=self.voxel_size, iso=iso)
-        verts, tris = surface["verts"], surface["tris"]
-        if not creases:
-            return verts, tris, np.zeros((0, 2), dtype=np.int32)
-        return verts, tris, crease_edges(verts, tris, surface["ranks"])
-
-    def _marching_cubes(self, iso: float):
-        n0 = self.level_counts[0]
-        if self.levels == 1:  # the dense top level is the finest: no octets to walk
-            return extract_surface(
-                self.coords.numpy(), self.values.numpy(), origin=self.origin, spacing=self.voxel_size, iso=iso
-            )
-        codes, values = self.codes[:n0], self.values[:n0]
-        return extract_octree_level(codes, values, self.tree, origin=self.origin, spacing=self.voxel_size, iso=iso)
+        out = field_mesh(
+            self, iso, sharp=sharp, creases=return_creases, quads=quads, adaptivity=adaptivity, regions=regions
+        )
+        mesh = (out["verts"], out["faces"], out["sizes"]) if quads else (out["verts"], out["tris"])
+        return (*mesh, out["creases"]) if return_creases else mesh
 
     def in_frame(self) -> AdaptiveField:
         """This field in its own frame (unplaced): the same arrays."""

@@ -395,6 +395,8 @@ def open_tunnels(surface: dict, quads: np.ndarray, sides: np.ndarray, points: np
     keep = np.ones(len(tris), dtype=bool)
     keep[2 * quads] = keep[2 * quads + 1] = False
     surface["tris"] = np.concatenate([tris[keep], fans.astype(np.int32)])
+    if "whole" in surface:  # the fans are no quads
+        surface["whole"] = surface["whole"][keep[1::2]]
     surface["verts"] = np.concatenate([verts, new_points.astype(np.float32)])
     surface["ranks"] = np.concatenate([surface["ranks"], np.ones(len(keys), dtype=np.int32)])
     first = np.unique(group, return_index=True)[1]

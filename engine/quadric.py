@@ -335,6 +335,15 @@ def pack_quadric(ata: wp.mat33, atb: wp.vec3, btb: float, x: wp.vec3, w: float):
 
 
 @wp.func
+def fold_cos(a: wp.vec3, b: wp.vec3, c: wp.vec3, d: wp.vec3):
+    """Cosine of the angle between triangles ``a b c`` and ``a c d`` (-1 where either is degenerate)."""
+    n1 = wp.cross(b - a, c - a)
+    n2 = wp.cross(c - a, d - a)
+    den = wp.length(n1) * wp.length(n2)
+    return wp.where(den > 0.0, wp.dot(n1, n2) / wp.max(den, 1.0e-30), -1.0)
+
+
+@wp.func
 def quadric_at(q: vec10, d: wp.vec3):
     """Mean squared distance (in voxels^2) to a vertex's planes of the point ``d`` voxels from it (``q`` from
     :func:`pack_quadric`)."""

@@ -15,6 +15,7 @@ import bpy
 from ..aasdf_addon import cache, operands, pipeline, plan, runtime
 from ..aasdf_addon.pipeline import last_run  # noqa: F401  (scripts read ``operators.boolean.last_run``)
 from ..aasdf_addon.properties import (
+    adaptivity_property,
     blend_mode_property,
     blend_property,
     debug_volume_property,
@@ -68,6 +69,7 @@ class AASDF_OT_boolean(bpy.types.Operator):
     thickness: thickness_property()
     sharp_edges: sharp_edges_property()
     keep_faces: keep_faces_property()
+    adaptivity: adaptivity_property()
     debug_volume: debug_volume_property()
     hide_inputs: hide_inputs_property()
 
@@ -109,6 +111,7 @@ def run(op, context, objects, steps, name, empty_message, operation=None):
         debug_volume=getattr(op, "debug_volume", False),
         sharp=op.sharp_edges,
         keep_faces=getattr(op, "keep_faces", False),
+        adaptivity=op.adaptivity,
     )
     try:
         numbers = pipeline.run(
@@ -144,6 +147,7 @@ class AASDF_OT_offset(GeometryPoll, bpy.types.Operator):
     padding: padding_property()
     thickness: thickness_property()
     sharp_edges: sharp_edges_property()
+    adaptivity: adaptivity_property()
     hide_inputs: hide_inputs_property(default=False)
 
     def execute(self, context):
@@ -172,6 +176,7 @@ class AASDF_OT_shell(GeometryPoll, bpy.types.Operator):
     padding: padding_property()
     thickness: thickness_property()
     sharp_edges: sharp_edges_property()
+    adaptivity: adaptivity_property()
     hide_inputs: hide_inputs_property(default=False)
 
     def execute(self, context):

@@ -221,3 +221,15 @@ def test_inside_blenders_executable_jobs_run_in_its_one_process(monkeypatch):
         runner.worker_count(2)
     monkeypatch.setitem(sys.modules, "bpy", SimpleNamespace(app=SimpleNamespace(module=True)))
     assert not runner.inside_blender() and runner.worker_count(None) >= 1
+
+
+def test_adaptivity_is_a_job_option_checked_from_0_to_1(tmp_path):
+    box, ball, out = tmp_path / "a.stl", tmp_path / "b.stl", tmp_path / "o.ply"
+    box.write_bytes(b""), ball.write_bytes(b"")
+    parser = options.command_line_parser("")
+    base = ["--operation", "union", "--inputs", str(box), str(ball), "--output", str(out)]
+    assert parser.parse_args(base).adaptivity == 0.0
+    options.check_args(parser.parse_args([*base, "--adaptivity", "0.5"]))
+    for bad in ("1.5", "-0.1", "nan"):
+        with pytest.raises(options.BatchError, match="--adaptivity must be from 0 to 1"):
+            options.check_args(parser.parse_args([*base, "--adaptivity", bad]))

@@ -5,7 +5,7 @@ does), the inputs built, ``bpy.ops.aasdf.boolean`` run as a user would, and a fi
 Small sizes, few samples and Cycles' denoiser keep each PNG under 200 KB; the seed, the sample count and every
 placement are fixed, so an unchanged result renders an unchanged picture.
 
-    .venv/bin/python tools/render_pictures.py [--only demo open-bunny blend octree sharp] [--samples 24]
+    .venv/bin/python tools/render_pictures.py [--only demo open-bunny blend octree sharp adaptivity] [--samples 24]
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from tests.support import cad_pairs, load_mesh, uv_sphere  # noqa: E402
 
 OUT = ROOT / "docs" / "images"
 SIZE = (640, 400)
-PICTURES = ("demo", "open-bunny", "blend", "octree", "textured", "sharp", "kept-faces")
+PICTURES = ("demo", "open-bunny", "blend", "octree", "textured", "sharp", "kept-faces", "adaptivity")
 # The direction the sharp picture's camera looks from, at the origin.
 SHARP_VIEW = (0.0, -1.0, 0.6)
 
@@ -398,6 +398,41 @@ def picture_kept_faces(samples):
     bpy.context.view_layer.update()
     frame(results, direction=(0.0, -1.0, 1.4), distance=2.75)
     render("kept-faces")
+
+
+def picture_adaptivity(samples):
+    """A plate minus a bore, remeshed at 1/96 of its diagonal, three ways, left to right, in wireframe: AASDF at
+    adaptivity 0 (a quad per voxel), AASDF at adaptivity 1, the geometry nodes' Grid to Mesh at its Adaptivity 1."""
+    fresh_scene(samples)
+    bpy.context.scene.render.resolution_x, bpy.context.scene.render.resolution_y = 960, 360
+    bpy.ops.mesh.primitive_cube_add(size=2.0)
+    plate = bpy.context.active_object
+    plate.scale = (1.0, 1.0, 0.25)
+    bpy.ops.object.transform_apply(scale=True)
+    bpy.ops.mesh.primitive_cylinder_add(vertices=64, radius=0.45, depth=1.5, location=(0.2, 0.1, 0.0))
+    bore = bpy.context.active_object
+    bpy.context.view_layer.update()
+    voxel = float(np.linalg.norm([2.0, 2.0, 1.5])) / 96
+    results = [
+        boolean("DIFFERENCE", [plate, bore], voxel_size=voxel, keep_faces=False, adaptivity=a, hide_inputs=False)
+        for a in (0.0, 1.0)
+    ]
+    baselines.gn_sdf_boolean(plate, bore, "DIFFERENCE", voxel, keep=True, adaptivity=1.0)
+    host = bpy.data.objects["gn_sdf_boolean"]
+    evaluated = host.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    grid = bpy.data.objects.new("Grid to Mesh", bpy.data.meshes.new_from_object(evaluated))
+    bpy.context.scene.collection.objects.link(grid)
+    bpy.data.objects.remove(host, do_unlink=True)
+    results.append(grid)
+    hide_inputs_from_render(plate, bore)
+    for k, obj in enumerate(results):
+        assign(obj, material("part", (0.8, 0.78, 0.72)))
+        obj.location.x += 2.6 * (k - 1)
+        bpy.context.view_layer.update()
+        wireframe(obj, 0.004).location = obj.location
+    bpy.context.view_layer.update()
+    frame(results, direction=(0.0, -1.0, 1.4), distance=2.75)
+    render("adaptivity")
 
 
 def main(argv=None):

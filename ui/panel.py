@@ -59,6 +59,9 @@ class AASDF_PT_main(SidebarPanel, bpy.types.Panel):
         col.prop(settings, "thickness")
         col.prop(settings, "sharp_edges")
         col.prop(settings, "keep_faces")
+        sub = col.column()
+        sub.active = not settings.keep_faces  # the remeshed surface's
+        sub.prop(settings, "adaptivity")
         col.prop(settings, "hide_inputs")
 
 
@@ -66,7 +69,7 @@ def _field_settings(op, settings):
     """Give an operator the scene's field and result settings."""
     op.voxel_size, op.resolution, op.levels = settings.voxel_size, settings.resolution, settings.levels
     op.padding, op.thickness, op.sharp_edges = settings.padding, settings.thickness, settings.sharp_edges
-    op.hide_inputs = settings.hide_inputs
+    op.hide_inputs, op.adaptivity = settings.hide_inputs, settings.adaptivity
 
 
 class AASDF_PT_main_offset(SubPanel, bpy.types.Panel):

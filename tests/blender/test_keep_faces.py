@@ -114,7 +114,9 @@ def test_keep_faces_off_remeshes(fresh_cache):
     mesh = bpy.context.active_object.data
     totals = np.empty(len(mesh.polygons), np.int32)
     mesh.polygons.foreach_get("loop_total", totals)
-    assert (totals == 3).all() and len(totals) > 20_000
+    # remeshed: quads and triangles (measured 0.996 quads), as many triangles as before in all
+    assert set(np.unique(totals)) == {3, 4} and np.mean(totals == 4) > 0.8
+    assert np.sum(totals - 2) > 20_000
     assert bpy.context.scene.aasdf.keep_faces  # on by default
 
 

@@ -171,6 +171,7 @@ def test_sidebar_with_nothing_selected(no_work, no_complaints):
         "thickness",
         "sharp_edges",
         "keep_faces",
+        "adaptivity",
         "hide_inputs",
     }
     assert "No boolean has run yet" in drawn["AASDF_PT_main_stats"]["texts"]

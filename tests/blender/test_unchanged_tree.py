@@ -121,6 +121,11 @@ def change_output_option(tree, objects):
     return {"Result"}
 
 
+def change_output_adaptivity(tree, objects):
+    tree.nodes["Output"].adaptivity = 0.5
+    return {"Result"}
+
+
 def edit_result_mesh(tree, objects):
     bpy.data.objects["United"].data.vertices[0].co.z += 0.3
     return {"United"}
@@ -152,6 +157,7 @@ def unlink_result(tree, objects):
         change_tree_setting,
         change_node_setting,
         change_output_option,
+        change_output_adaptivity,
         edit_result_mesh,
         move_result,
         delete_result,

@@ -1,0 +1,102 @@
+"""Remeshed surfaces written as quads, as Blender's Voxel Remesh writes them.
+
+The engine gives a remeshed surface as polygons (``AdaptiveField.to_mesh(quads=True)``: the quads first, then
+triangles). The add-on's stages work on triangles (each face's source, its attributes, its edges), so the polygons
+are first taken apart into their fans (:func:`fans`: quad k is rows 2k and 2k + 1, ``a b c`` and ``a c d``), and
+put back together just before writing (:func:`quads_back`): a quad whose two halves carry the same material,
+shading and operand, and the same UVs and colours at the two corners they share, is written as one face. A quad
+across a seam of its sources (a UV island's edge, a colour border, a material change) stays two triangles, each
+with its own corner values. Arrays only; ``bridge.result_mesh`` writes the layout (``attributes["polygons"]``).
+"""
+
+import numpy as np
+
+# Corner values of the two halves at a shared corner agree within this fraction of the first half's mean UV edge
+# (plus an absolute 1e-6: a map that is zero everywhere); farther apart, a seam runs along the diagonal.
+UV_TOLERANCE = 0.05
+
+
+# Corner colours agree within this (a byte colour's step is 1/255).
+COLOR_TOLERANCE = 0.5 / 255.0
+
+
+def fans(faces, sizes) -> tuple[np.ndarray, int]:
+    """(T, 3) int32 triangles of polygons whose quads come first (``to_mesh(quads=True)``), each quad ``a b c d``
+    as rows ``a b c``, ``a c d``, and the number of quads."""
+    faces, sizes = np.asarray(faces, dtype=np.int32), np.asarray(sizes)
+    count = int(np.count_nonzero(sizes == 4))
+    quads = faces[: 4 * count].reshape(-1, 4)
+    halves = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+    return np.concatenate([halves, faces[4 * count :].reshape(-1, 3)]), count
+
+
+def quads_back(result: dict, quads: int) -> dict:
+    """``result`` (``pipeline.extract`` with ``attributes``, its first ``2 * quads`` triangles the halves of quads)
+    with each quad whose halves agree (:func:`mergeable`) written as one face: those faces first
+    (``attributes["polygons"]``), then the triangles left, each attribute in that layout."""
+    attrs = result["attributes"]
+    if not quads or "polygons" in attrs:
+        return result
+    tris = result["tris"]
+    first = 2 * np.flatnonzero(mergeable(attrs, quads))
+    if not len(first):
+        return result
+    rest = np.ones(len(tris), dtype=bool)
+    rest[first] = rest[first + 1] = False
+    corners = np.stack([3 * first, 3 * first + 1, 3 * first + 2, 3 * first + 5], axis=1).ravel()  # a b c, d
+    corner_rest = np.repeat(rest, 3)
+    out = dict(attrs)
+    out["polygons"] = (np.full(len(first), 4, np.int32), tris.ravel()[corners].astype(np.int32))
+    for name in ("material_index", "smooth", "operand"):
+        if attrs.get(name) is not None:
+            out[name] = np.r_[attrs[name][first], attrs[name][rest]].astype(attrs[name].dtype)
+    out["uv_maps"] = {k: np.concatenate([v[corners], v[corner_rest]]) for k, v in attrs.get("uv_maps", {}).items()}
+    out["colors"] = {
+        k: (kind, np.concatenate([v[corners], v[corner_rest]])) for k, (kind, v) in attrs.get("colors", {}).items()
+    }
+    if attrs.get("custom_normals") is not None:
+        out["custom_normals"] = np.concatenate([attrs["custom_normals"][corners], attrs["custom_normals"][corner_rest]])
+    return {**result, "tris": tris[rest], "attributes": out, "edges": _polygon_edges(result["edges"], first, rest)}
+
+
+def _polygon_edges(edges: dict, first, rest) -> dict:
+    """The triangles' edge cache (``bridge.result_mesh``: ``edge_verts`` flat pairs, ``corner_edge`` per corner)
+    for the polygons: each quad's corners take their halves' outer edges (``a b``, ``b c`` of the first, ``c d``,
+    ``d a`` of the second), the diagonals go and the edges are numbered again. Empty when there is none to reuse."""
+    if not edges or "corner_edge" not in edges:
+        return {}
+    corner_edge = np.asarray(edges["corner_edge"], dtype=np.int64).reshape(-1, 3)
+    quad_edges = np.stack(
+        [corner_edge[first, 0], corner_edge[first, 1], corner_edge[first + 1, 1], corner_edge[first + 1, 2]], axis=1
+    )
+    used = np.concatenate([quad_edges.ravel(), corner_edge[rest].ravel()])
+    n_edges = len(edges["edge_verts"]) // 2
+    keep = np.zeros(n_edges, dtype=bool)
+    keep[used] = True
+    number = np.cumsum(keep) - 1
+    pairs = np.asarray(edges["edge_verts"]).reshape(-1, 2)[keep]
+    return {"edge_verts": pairs.ravel(), "corner_edge": number[used].astype(np.int32)}
+
+
+def mergeable(attrs: dict, quads: int) -> np.ndarray:
+    """(quads,) bool: the quads whose two halves (rows 2k, 2k + 1) carry the same face attributes and the same
+    corner attributes at their shared corners (``a`` and ``c``: corners 0 and 2 of the first, 0 and 1 of the
+    second)."""
+    ok = np.ones(quads, dtype=bool)
+    for name in ("material_index", "smooth", "operand"):
+        values = attrs.get(name)
+        if values is not None and len(values):
+            ok &= values[0 : 2 * quads : 2] == values[1 : 2 * quads : 2]
+    for values in attrs.get("uv_maps", {}).values():
+        uv = np.asarray(values, dtype=np.float32)[: 6 * quads].reshape(quads, 6, 2)
+        scale = np.linalg.norm(uv[:, [1, 2, 0]] - uv[:, [0, 1, 2]], axis=2).mean(axis=1)
+        jump = np.maximum(_gap(uv[:, 0], uv[:, 3]), _gap(uv[:, 2], uv[:, 4]))
+        ok &= jump <= UV_TOLERANCE * scale + 1e-6
+    for _kind, values in attrs.get("colors", {}).values():
+        rgba = np.asarray(values, dtype=np.float32)[: 6 * quads].reshape(quads, 6, 4)
+        ok &= np.maximum(_gap(rgba[:, 0], rgba[:, 3]), _gap(rgba[:, 2], rgba[:, 4])) <= COLOR_TOLERANCE
+    return ok
+
+
+def _gap(a, b) -> np.ndarray:
+    return np.abs(a - b).max(axis=1)

@@ -1,0 +1,421 @@
+"""Adaptivity: the dual surface's vertices clustered over octree blocks where the surface is flat, checked 2-manifold.
+
+Ju et al.'s octree simplification of dual contouring (2002) merges the cells of an octree bottom-up while the error
+of the merged cell's vertex stays under a bound; Schaefer, Ju and Warren (2007) keep that 2-manifold by giving a
+cell one vertex per surface component in it and merging only where each is a disk. This module does the same on the
+extracted polygons, as vertex clustering over the octree's blocks:
+
+1. Vertices are sorted into classes: smooth ones, ones inside a reconstructed crease line (rank 2, two crease
+   edges) and corners, crease ends and vertices along a seam between two source regions (operands, or the regions
+   the caller names: materials, UV islands), which never merge, so creases, corners and seams stay where they are.
+2. Level by level (blocks of 2, 4, 8... cells a side, up to :func:`max_level`), the vertices of a block that merged
+   at the level below are split into components: smooth vertices joined by the mesh's edges, crease vertices by the
+   crease edges, never across two source regions. A component merges into one vertex when it is a disk (V - E + F
+   = 1 over the faces, edges and vertices inside it) and every vertex in it lies within :func:`tolerance` of the
+   plane fitted through them (a crease component: of the line).
+3. Each merged component becomes one vertex at its vertices' mean (a smooth one taken a Newton step onto the
+   field's surface); faces are re-indexed, repeated corners dropped, a
+   face left with fewer than 3 corners vanishes. A quad left bent (not planar and convex within
+   :data:`.quads.QUAD_ANGLE`) is split along the diagonal between two crease vertices, else the less folded one.
+4. The result is checked: every edge in exactly two faces, opposite ways, every vertex's faces one fan, no face
+   repeating a corner. The components at any failure drop one level and the check runs again, until none fails (at
+   worst every vertex is back at level 0: the surface as extracted), so the result is closed and 2-manifold always.
+
+Self-intersection is not checked: a merged vertex lies within about the tolerance of its vertices' plane and the
+faces' centres within FACE_REACH tolerances of the surface.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .quads import QUAD_ANGLE, polygon_edges
+
+# A merged surface's faces keep their centres within this many times the tolerance of the field's surface (else
+# their vertices' components drop a level, as at a manifold failure).
+FACE_REACH = 3.0
+
+
+# Crease lines of fewer vertices are no creases here (their vertices merge as smooth ones where flat enough).
+MIN_CREASE = 6
+
+
+# Rounds of the manifold check (step 4); after them any block still at a failure goes back to level 0.
+CHECK_ROUNDS = 6
+
+
+def tolerance(adaptivity: float) -> float:
+    """Largest distance (voxels) of a merged block's vertices from its plane (or crease line): 0.01 voxel at
+    adaptivity 0 (only what is flat to float rounding), 0.22 at 0.5, 1 at 1 (linear, then cubic: the high
+    adaptivities trade accuracy for polygons, as Grid to Mesh's do). The faces between two merged vertices span two
+    blocks, so on a curved surface they stray farther."""
+    a = float(adaptivity)
+    return 0.01 + 0.24 * a + 0.75 * a**3
+
+
+def max_level(adaptivity: float) -> int:
+    """Largest block merged: 2^level cells a side, 2 (4 cells) at adaptivity up to 0.25 ... 6 (64 cells) at 1."""
+    return max(1, int(np.ceil(6.0 * float(adaptivity))))
+
+
+def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
+    """Merge the polygons of an unplaced field's dual surface where it is flat (see the module's steps).
+
+    Args:
+        field: The unplaced ``AdaptiveField`` the surface came from (its lattice and sources).
+        surface: ``verts`` (V, 3) float32, ``faces`` (C,) and ``sizes`` (P,) polygons, ``creases`` (E, 2),
+            ``ranks`` (V,) quadric ranks (:func:`.dual.contour_dual`).
+        adaptivity: In (0, 1].
+        regions: Optional {field id: (T,) int label per source triangle}: vertices whose closest triangles have
+            different labels never merge.
+    Returns:
+        dict as ``surface`` (``verts``, ``faces``, ``sizes``, ``creases`` renumbered), unused vertices dropped.
+    """
+    verts = np.asarray(surface["verts"], dtype=np.float64)
+    faces, sizes = np.asarray(surface["faces"], dtype=np.int64), np.asarray(surface["sizes"], dtype=np.int64)
+    h = float(field.voxel_size)
+    local = (verts - np.asarray(field.origin, dtype=np.float64)) / h  # voxels
+    cell = np.floor(local - 0.5).astype(np.int64)
+    creases = np.asarray(surface["creases"], dtype=np.int64).reshape(-1, 2)
+    cls, lines = _classes(surface["ranks"], creases, len(verts))
+    label = _labels(field, surface["verts"], regions)
+    _hold_seams(cls, label, polygon_edges(faces, sizes))
+    crease_key = np.sort(lines, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
+    level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity)
+    merged = _checked(field, local, faces, sizes, cls, level, ids, tolerance(adaptivity))
+    return _renumbered(field, surface, creases, level, merged)
+
+
+def _hold_seams(cls, label, edges) -> None:
+    """Mark (``cls`` 0, in place) the vertices along a seam between two source regions: they stay, as a crease's.
+    Where two operands meet at a crease (next to crease vertices: an edge across it joins two smooth vertices) the
+    crease keeps the seam."""
+    by_crease = np.zeros(len(cls), dtype=bool)
+    for a, b in ((edges[:, 0], edges[:, 1]), (edges[:, 1], edges[:, 0])):
+        by_crease[a[cls[b] != 1]] = True
+    la, lb = label[edges[:, 0]], label[edges[:, 1]]
+    near = by_crease[edges[:, 0]] | by_crease[edges[:, 1]] | (cls[edges[:, 0]] != 1) | (cls[edges[:, 1]] != 1)
+    operands_at_crease = ((la >> 32) != (lb >> 32)) & near
+    cls[edges[(la != lb) & ~operands_at_crease].ravel()] = 0
+
+
+def _checked(field, local, faces, sizes, cls, level, ids, tol) -> dict:
+    """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed and checked, the components at a failure
+    dropped (by a level, then faster, after CHECK_ROUNDS to level 0) until none fails. Returns the surface that
+    passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
+    round_ = 0
+    while True:  # ends: every round drops a merged component, and the surface as extracted passes
+        cluster, position, feature = _clusters(local, level, ids, cls)
+        merged = np.bincount(cluster, minlength=len(position)) > 1
+        position = _onto_surface(field, position, ~feature & merged, tol)
+        new_faces, new_sizes = _split_bent_quads(position, feature, merged, *_collapse(faces, sizes, cluster), tol)
+        bad = _failures(len(position), new_faces, new_sizes)
+        bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tol)
+        if not bad.any() or not (level > 0).any():
+            break
+        drop = bad[cluster] & (level > 0)
+        if not drop.any():  # a failure at vertices left alone: their merged neighbours'
+            drop = _spread(bad, new_faces, new_sizes)[cluster] & (level > 0)
+        if not drop.any():  # (a failure of the surface as extracted) nothing merged
+            drop = level > 0
+        level[drop] = 0 if round_ >= CHECK_ROUNDS - 1 else np.maximum(level[drop] - (1 + round_ // 2), 0)
+        round_ += 1
+    return {"cluster": cluster, "position": position, "faces": new_faces, "sizes": new_sizes}
+
+
+def _spread(bad, faces, sizes) -> np.ndarray:
+    """``bad`` (K,) grown to every corner of the faces with a corner in it."""
+    face_of = np.repeat(np.arange(len(sizes)), sizes)
+    hit = np.zeros(len(sizes), dtype=bool)
+    hit[face_of[bad[faces]]] = True
+    out = bad.copy()
+    out[faces[hit[face_of]]] = True
+    return out
+
+
+def _renumbered(field, surface, creases, level, merged) -> dict:
+    """The checked surface in world units, unmerged vertices exactly where they were, unused vertices dropped."""
+    cluster, position, new_faces = merged["cluster"], merged["position"], merged["faces"]
+    h = float(field.voxel_size)
+    out_verts = (np.asarray(field.origin, dtype=np.float64) + h * position).astype(np.float32)
+    alone = level == 0
+    out_verts[cluster[alone]] = surface["verts"][alone]
+    crease = np.unique(np.sort(cluster[creases], axis=1), axis=0).reshape(-1, 2)
+    crease = crease[crease[:, 0] != crease[:, 1]]
+    used = np.zeros(len(out_verts), dtype=bool)
+    used[new_faces] = True
+    number = np.cumsum(used) - 1
+    return {
+        "verts": out_verts[used],
+        "faces": number[new_faces].astype(np.int32),
+        "sizes": merged["sizes"].astype(np.int32),
+        "creases": number[crease].astype(np.int32),
+    }
+
+
+def _strays(field, position, faces, sizes, merged, reach: float) -> np.ndarray:
+    """(K,) the vertices of faces whose fan triangles' centres lie more than ``reach`` voxels from the field's
+    surface (a face between two merged vertices across a curved part); only faces with a ``merged`` corner."""
+    tris = _fans(faces, sizes)
+    tris = tris[merged[tris].any(axis=1)]
+    h = float(field.voxel_size)
+    centres = np.asarray(field.origin, dtype=np.float64) + h * position[tris].mean(axis=1)
+    far = np.abs(field.sample(centres.astype(np.float32), method="linear")) > reach * h
+    bad = np.zeros(len(position), dtype=bool)
+    bad[tris[far].ravel()] = True
+    return bad
+
+
+def _onto_surface(field, position, moved, tol: float) -> np.ndarray:
+    """``position`` (K, 3 voxels) with the rows ``moved`` that lie more than half ``tol`` voxels off the field's
+    surface taken one Newton step onto it (a merged smooth vertex, its vertices' mean, lies off a curved surface by
+    the sagitta; on a flat one it stays, where the trilinear values bend near a crease)."""
+    rows = np.flatnonzero(moved)
+    if not len(rows):
+        return position
+    h = float(field.voxel_size)
+    points = np.asarray(field.origin, dtype=np.float64) + h * position[rows]
+    value, grad = field.sample(points.astype(np.float32), method="linear", return_gradient=True)
+    grad = grad.astype(np.float64)
+    step = value[:, None] * grad / np.maximum((grad * grad).sum(axis=1), 1e-12)[:, None] / h
+    step[np.abs(value) <= 0.5 * tol * h] = 0.0
+    out = position.copy()
+    out[rows] -= np.clip(step, -1.0, 1.0)  # at most a voxel a side: a mean beside a thin part stays put
+    return out
+
+
+def _fans(faces, sizes) -> np.ndarray:
+    """(T, 3) the fans of polygons."""
+    start = np.cumsum(sizes) - sizes
+    count = sizes - 2
+    poly = np.repeat(np.arange(len(sizes)), count)
+    k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    first = start[poly]
+    return np.stack([faces[first], faces[first + k + 1], faces[first + k + 2]], axis=1)
+
+
+def _labels(field, verts, regions) -> np.ndarray:
+    """(V,) int64 source region of each vertex: its operand's field id times 2^32, plus with ``regions`` the region
+    of its closest source triangle."""
+    if regions is None:
+        if len(field.field_ids) < 2:
+            return np.zeros(len(verts), np.int64)
+        return field.source_ids(verts).astype(np.int64) << np.int64(32)
+    ids, tris, _ = field.closest_sources(verts)
+    region = np.zeros(len(verts), dtype=np.int64)
+    for field_id, labels in regions.items():
+        rows = np.flatnonzero((ids == field_id) & (tris >= 0))
+        region[rows] = np.asarray(labels, dtype=np.int64)[tris[rows]]
+    return ids.astype(np.int64) * (np.int64(1) << 32) + region
+
+
+def _sums(index, values, n) -> np.ndarray:
+    """(n, W) sums of the rows of ``values`` (N, W) by ``index`` (N,): one bincount per column (np.add.at is
+    several times slower)."""
+    return np.stack([np.bincount(index, weights=values[:, k], minlength=n) for k in range(values.shape[1])], axis=1)
+
+
+def _moments(index, points, n):
+    """Per group of ``index`` (N,): count (n,), mean (n, 3) and eigenvectors (n, 3, 3) of the points' covariance,
+    ascending (``[:, :, 0]``: a fitted plane's normal, ``[:, :, 2]``: a fitted line's direction)."""
+    count = np.bincount(index, minlength=n)
+    outer = np.stack([points[:, i] * points[:, j] for i, j in _PAIRS], axis=1)
+    sums = _sums(index, np.concatenate([points, outer], axis=1), n) / np.maximum(count, 1)[:, None]
+    mean = sums[:, :3]
+    cov = np.empty((n, 3, 3))
+    for k, (i, j) in enumerate(_PAIRS):
+        cov[:, i, j] = cov[:, j, i] = sums[:, 3 + k] - mean[:, i] * mean[:, j]
+    return count, mean, np.linalg.eigh(cov)[1]
+
+
+_PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+def _classes(ranks, creases, n) -> tuple[np.ndarray, np.ndarray]:
+    """(V,) int8 what may merge with what: 1 smooth vertices, 2 vertices inside a crease line (rank 2, two crease
+    edges), 0 corners and crease ends (never merge); and the creases kept as such. A crease line of fewer than
+    MIN_CREASE vertices (a soft fold found here and there along a fillet) is no crease: its vertices are smooth."""
+    creases = np.asarray(creases, dtype=np.int64).reshape(-1, 2)
+    if len(creases):
+        root = _components(n, creases[:, 0], creases[:, 1])
+        size = np.bincount(root, minlength=n)
+        creases = creases[size[root[creases[:, 0]]] >= MIN_CREASE]
+    degree = np.bincount(creases.ravel(), minlength=n)
+    ranks = np.asarray(ranks)
+    cls = np.where(degree == 0, np.where(ranks <= 2, 1, 0), np.where((degree == 2) & (ranks == 2), 2, 0))
+    return cls.astype(np.int8), creases
+
+
+def _components(n: int, a, b) -> np.ndarray:
+    """(n,) the smallest node of each node's connected component over the edges ``a``-``b`` (hooking and pointer
+    jumping: a few rounds of whole-array steps)."""
+    parent = np.arange(n)
+    while True:
+        pa, pb = parent[a], parent[b]
+        differ = pa != pb
+        if not differ.any():
+            return parent
+        np.minimum.at(parent, np.maximum(pa, pb)[differ], np.minimum(pa, pb)[differ])
+        while True:
+            jumped = parent[parent]
+            if np.array_equal(jumped, parent):
+                break
+            parent = jumped
+
+
+def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
+    """Level by level, the components of each block's vertices that merge (see the module's step 2).
+
+    Returns:
+        ``level`` (V,) the largest level each vertex merged at (0: none) and ``ids``: per level (V,) each vertex's
+        component there (its cluster when that is its level; -1 where it did not merge at that level).
+    """
+    n = len(local)
+    level = np.zeros(n, dtype=np.int64)
+    ids = [np.arange(n)]
+    tol = tolerance(adaptivity)
+    edges = polygon_edges(faces, sizes)
+    edges = edges[edges[:, 0] < edges[:, 1]]  # each undirected edge once (closed, oriented mesh)
+    u, v = edges[:, 0], edges[:, 1]
+    along_crease = np.isin(u * np.int64(n) + v, crease_key)
+    # smooth vertices of one region; crease vertices along a crease, within one region of an operand (between two
+    # operands the crease is their seam, where each vertex's operand is either)
+    same = label[u] == label[v]
+    joinable = (cls[u] == cls[v]) & (cls[u] > 0)
+    joinable &= ((cls[u] == 1) & same) | (along_crease & (same | ((label[u] >> 32) != (label[v] >> 32))))
+    first = np.cumsum(sizes) - sizes
+    for lv in range(1, max_level(adaptivity) + 1):
+        _, block = _block_keys(cell, lv)
+        ready = (level == lv - 1) & (cls > 0)
+        prev = ids[lv - 1]  # each ready vertex's cluster at the level below
+        use = joinable & ready[u] & ready[v] & (block[u] == block[v])
+        root = _components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
+        members = np.flatnonzero(ready)
+        roots, member_comp = np.unique(root[prev[members]], return_inverse=True)
+        k = len(roots)  # the components, numbered 0 .. k - 1
+        comp = np.full(n, k)  # k: none
+        comp[members] = member_comp.ravel()
+        # a disk: V - E + F = 1 over the component's vertices, the edges and faces with every vertex in it
+        n_e = np.bincount(comp[u[comp[u] == comp[v]]], minlength=k + 1)[:k]
+        corner_comp = comp[faces]
+        same = np.minimum.reduceat(corner_comp, first) == np.maximum.reduceat(corner_comp, first)
+        n_f = np.bincount(corner_comp[first[same]], minlength=k + 1)[:k]
+        n_v, mean, axes = _moments(comp[members], local[members], k)
+        ok = (n_v - n_e + n_f == 1) & (n_v > 0)
+        # flat: every vertex within tol of the plane through the mean (a crease's: of the line)
+        off = _offsets(local[members], comp[members], cls[members] == 2, mean, axes)
+        ok[comp[members][off > tol]] = False
+        merged = np.zeros(n, dtype=bool)
+        merged[members] = ok[comp[members]]
+        level[merged] = lv
+        ids.append(np.where(merged, comp, -1))
+    return level, ids
+
+
+def _offsets(points, comp, on_line, mean, axes) -> np.ndarray:
+    """Distances of points from their component's fitted plane (``on_line``: from its fitted line)."""
+    d = points - mean[comp]
+    frame = axes[comp]
+    plane = np.abs(np.einsum("ij,ij->i", d, frame[:, :, 0]))
+    line = np.linalg.norm(d - np.einsum("ij,ij->i", d, frame[:, :, 2])[:, None] * frame[:, :, 2], axis=1)
+    return np.where(on_line, line, plane)
+
+
+def _block_keys(cell, lv):
+    """Unique blocks (K, 3) of 2^lv cells and each vertex's block index."""
+    blocks = cell >> lv
+    lo = blocks.min(axis=0)
+    span = blocks.max(axis=0) - lo + 1
+    code = ((blocks[:, 0] - lo[0]) * span[1] + (blocks[:, 1] - lo[1])) * span[2] + (blocks[:, 2] - lo[2])
+    uniq, block = np.unique(code, return_inverse=True)
+    key = np.stack([uniq // (span[1] * span[2]), (uniq // span[2]) % span[1], uniq % span[2]], axis=1) + lo
+    return key, block.ravel()
+
+
+def _clusters(local, level, ids, cls):
+    """Each vertex's cluster (its component at its level; itself at level 0), the clusters' positions (voxels: the
+    mean of their vertices) and whether each is a crease or corner vertex."""
+    n = len(local)
+    code = level * np.int64(n) + np.stack(ids)[level, np.arange(n)]
+    _, first, cluster = np.unique(code, return_index=True, return_inverse=True)
+    cluster = cluster.ravel()
+    count = np.bincount(cluster, minlength=len(first))
+    mean = _sums(cluster, local, len(first)) / count[:, None]
+    return cluster, mean, cls[first] != 1
+
+
+def _collapse(faces, sizes, cluster):
+    """Faces re-indexed to clusters, corners equal to the one before them dropped, faces left with fewer than 3
+    corners gone. Returns faces, sizes."""
+    corners = cluster[faces]
+    start = np.cumsum(sizes) - sizes
+    face_of = np.repeat(np.arange(len(sizes)), sizes)
+    within = np.arange(len(faces)) - start[face_of]
+    prev = np.where(within == 0, start[face_of] + sizes[face_of] - 1, np.arange(len(faces)) - 1)
+    keep = corners != corners[prev]
+    count = np.bincount(face_of[keep], minlength=len(sizes))
+    alive = count >= 3
+    keep &= alive[face_of]
+    return corners[keep], count[alive]
+
+
+def _failures(n_verts, faces, sizes) -> np.ndarray:
+    """Vertices at which the polygons are not a closed, oriented 2-manifold: a face repeating a corner, an edge not
+    in exactly two faces opposite ways, a vertex whose faces are no single fan."""
+    bad = np.zeros(n_verts, dtype=bool)
+    if not len(sizes):
+        return bad
+    face_of = np.repeat(np.arange(len(sizes)), sizes)
+    key = face_of * np.int64(n_verts) + faces
+    dup = np.unique(key, return_counts=True)
+    repeated = dup[0][dup[1] > 1] // n_verts
+    bad[faces[np.isin(face_of, repeated)]] = True
+    edges = polygon_edges(faces, sizes)
+    n = np.int64(n_verts)
+    forward, backward = edges[:, 0] * n + edges[:, 1], edges[:, 1] * n + edges[:, 0]
+    uniq, counts = np.unique(forward, return_counts=True)
+    twice = uniq[counts > 1]
+    single = np.isin(forward, twice) | ~np.isin(forward, backward)
+    bad[edges[single].ravel()] = True
+    undirected = np.unique(np.minimum(forward, backward))
+    ends = np.concatenate([undirected // n, undirected % n])
+    fan = np.bincount(ends, minlength=n_verts) != np.bincount(faces, minlength=n_verts)
+    return bad | fan
+
+
+def _split_bent_quads(position, feature, merged, faces, sizes, tol):
+    """Quads with a ``merged`` corner no longer planar and convex (folded by more than QUAD_ANGLE, or their
+    diagonals more than ``tol`` voxels apart) split in two: along the diagonal between two crease or corner vertices
+    where only one diagonal is (the crease stays an edge), else along the less folded one; returns faces, sizes
+    (quads first, then triangles)."""
+    start = np.cumsum(sizes) - sizes
+    is_quad = sizes == 4
+    quads = faces[start[is_quad][:, None] + np.arange(4)]
+    tris = faces[start[~is_quad][:, None] + np.arange(3)] if (~is_quad).any() else np.zeros((0, 3), np.int64)
+    p = position[quads]
+    c02 = _fold(p[:, 0], p[:, 1], p[:, 2], p[:, 3])
+    c13 = _fold(p[:, 1], p[:, 2], p[:, 3], p[:, 0])
+    flat = np.minimum(c02, c13) >= np.cos(np.radians(QUAD_ANGLE))
+    normal = np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1])
+    twist = np.abs(np.einsum("ij,ij->i", p[:, 0] + p[:, 2] - p[:, 1] - p[:, 3], normal))
+    flat &= 0.5 * twist <= tol * np.linalg.norm(normal, axis=1)
+    flat |= ~merged[quads].any(axis=1)  # a quad as extracted stays as it was
+    bent = quads[~flat]
+    crease02 = feature[bent[:, 0]] & feature[bent[:, 2]]
+    crease13 = feature[bent[:, 1]] & feature[bent[:, 3]]
+    along02 = np.where(crease02 != crease13, crease02, c02[~flat] >= c13[~flat])
+    halves = np.where(
+        along02[:, None, None],
+        np.stack([bent[:, [0, 1, 2]], bent[:, [0, 2, 3]]], axis=1),
+        np.stack([bent[:, [1, 2, 3]], bent[:, [1, 3, 0]]], axis=1),
+    ).reshape(-1, 3)
+    keep = quads[flat]
+    out_faces = np.concatenate([keep.ravel(), halves.ravel(), tris.ravel()])
+    out_sizes = np.r_[np.full(len(keep), 4), np.full(len(halves) + len(tris), 3)]
+    return out_faces, out_sizes
+
+
+def _fold(a, b, c, d) -> np.ndarray:
+    n1, n2 = np.cross(b - a, c - a), np.cross(c - a, d - a)
+    den = np.linalg.norm(n1, axis=1) * np.linalg.norm(n2, axis=1)
+    return np.where(den > 0.0, np.einsum("ij,ij->i", n1, n2) / np.maximum(den, 1e-300), -1.0)

@@ -1,0 +1,103 @@
+"""A field's surface as a mesh: the extraction (sharp dual contouring or marching cubes), then the polygons.
+
+:meth:`.field.AdaptiveField.to_mesh` runs these steps: the finest level's active cubes contoured in the field's own
+frame (:func:`.dual.contour_dual`, or marching cubes), its crease edges, the cells merged where the surface is flat
+enough for the adaptivity asked (:mod:`.adaptive`), the surface placed in the world, and its quads kept whole where
+they are planar (:mod:`.quads`) when polygons are asked for.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .adaptive import simplify
+from .dual import contour_dual
+from .extract import extract_octree_level, extract_surface, lattice_cubes, octree_level_cubes
+from .marching import empty_mesh
+from .quadric import crease_edges
+from .quads import merge_pairs, triangulate
+
+
+def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, adaptivity: float, regions=None) -> dict:
+    """The ``iso`` surface of ``field`` (see ``AdaptiveField.to_mesh``): extracted, simplified and paired into quads
+    in the field's own frame, then placed.
+
+    Returns:
+        dict: ``verts`` (V, 3) float32; ``tris`` (T, 3) int32, or with ``quads`` ``faces`` (C,) int32 and ``sizes``
+        (P,) int32 polygons (quads first); ``creases`` (E, 2) int32.
+    """
+    frame = field.in_frame()
+    scale = 1.0 if field.placement is None else field.placement.scale
+    if sharp:
+        surface = sharp_surface(frame, iso / scale)
+    else:
+        verts, tris = marching_cubes(frame, iso / scale)
+        surface = {"verts": verts, "tris": tris, "ranks": None, "whole": np.zeros(0, np.uint8)}
+    found = sharp and (creases or adaptivity > 0.0) and len(surface["tris"])
+    crease = crease_edges(surface["verts"], surface["tris"], surface["ranks"]) if found else None
+    out = {"verts": surface["verts"], "creases": np.zeros((0, 2), np.int32) if crease is None else crease}
+    if not quads and adaptivity <= 0.0:
+        out["tris"] = surface["tris"]
+        return _placed(field, out)
+    out["faces"], out["sizes"] = merge_pairs(surface["tris"], surface["whole"])
+    if adaptivity > 0.0 and sharp and len(out["sizes"]):
+        out = simplify(frame, {**out, "ranks": surface["ranks"]}, adaptivity, regions)
+    if not quads:
+        out["tris"] = triangulate(out.pop("faces"), out.pop("sizes"))
+    return _placed(field, out)
+
+
+def _placed(field, out: dict) -> dict:
+    """A surface extracted in the field's own frame, placed (``Placement.place_surface``; polygons turned over
+    about their first corner, so their fans stay the triangles turned over)."""
+    if field.placement is None:
+        return out
+    if "tris" in out:
+        out["verts"], out["tris"] = field.placement.place_surface(out["verts"], out["tris"])
+        return out
+    out["verts"] = field.placement.to_world(out["verts"]).astype(np.float32)
+    if field.placement.mirrors:
+        sizes = out["sizes"].astype(np.int64)
+        start = np.repeat(np.cumsum(sizes) - sizes, sizes)
+        within = np.arange(len(out["faces"])) - start
+        out["faces"] = out["faces"][start + (np.repeat(sizes, sizes) - within) % np.repeat(sizes, sizes)]
+    return out
+
+
+def sharp_surface(field, iso: float) -> dict:
+    """The dual contouring of an unplaced field's finest-level active cubes (:func:`.dual.contour_dual`): its dict,
+    or an empty surface."""
+    n0 = field.level_counts[0]
+    codes, values, proj = field.codes[:n0], field.values[:n0], field.proj[:n0]
+    if field.levels == 1:
+        cubes = lattice_cubes(
+            field.coords.numpy(),
+            field.values.numpy().astype(np.float64),
+            origin=field.origin,
+            spacing=field.voxel_size,
+            iso=iso,
+            device=field.device,
+        )
+        if cubes is not None and cubes["order"] is not None:
+            order = cubes["order"]
+            codes = wp.array(field.codes.numpy()[order], dtype=wp.int64, device=field.device)
+            proj = wp.array(field.proj.numpy()[order], dtype=wp.vec3h, device=field.device)
+    else:
+        cubes = octree_level_cubes(codes, values, field.tree, origin=field.origin, spacing=field.voxel_size, iso=iso)
+    if cubes is None:
+        verts, tris = empty_mesh()
+        return {"verts": verts, "tris": tris, "ranks": np.zeros(0, np.int32), "whole": np.zeros(0, np.uint8)}
+    corners, shifted = cubes["cube_corners"], cubes["shifted"]
+    return contour_dual(corners, shifted, codes, proj, origin=field.origin, spacing=field.voxel_size, iso=iso)
+
+
+def marching_cubes(field, iso: float):
+    """Marching cubes on an unplaced field's finest level: ``verts``, ``tris``."""
+    n0 = field.level_counts[0]
+    if field.levels == 1:  # the dense top level is the finest: no octets to walk
+        return extract_surface(
+            field.coords.numpy(), field.values.numpy(), origin=field.origin, spacing=field.voxel_size, iso=iso
+        )
+    codes, values = field.codes[:n0], field.values[:n0]
+    return extract_octree_level(codes, values, field.tree, origin=field.origin, spacing=field.voxel_size, iso=iso)
