@@ -5,7 +5,12 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.requirements-dev.stamp
 PYTEST_ARGS ?=
 
-.PHONY: venv test test-fast lint extension demo bench pictures clean
+# The older Blenders the manifest names (blender_version_min = 4.2): 4.2 LTS and 4.5 LTS, each in .venv-blender-<v>
+# with the pinned bpy of requirements-blender-<v>.txt and the same warp-lang as .venv (so they share .warp-cache/).
+OLDER_BLENDERS := 4.2 4.5
+OLDER_TESTS := $(OLDER_BLENDERS:%=test-blender-%)
+
+.PHONY: venv test test-main $(OLDER_TESTS) test-fast lint extension demo bench pictures clean
 
 venv: $(STAMP)
 
@@ -15,11 +20,25 @@ $(STAMP): requirements-dev.txt
 	$(PY) -m pip install -r requirements-dev.txt
 	touch $@
 
-# The whole suite: engine, Blender and packaging tests, including the slow install test; one worker per core, each
-# taking whole test files (kernels are compiled once first: tests/warm_kernels.py).
+# The same for each older Blender's venv.
+.venv-blender-%/.requirements.stamp: requirements-blender-%.txt
+	test -x .venv-blender-$*/bin/python || $(PYTHON) -m venv .venv-blender-$*
+	.venv-blender-$*/bin/python -m pip install -r $<
+	touch $@
+
+# The whole suite on Blender 5.0 (engine, Blender and packaging tests, including the slow install test), then the
+# Blender tests on 4.2 and 4.5; one worker per core, each taking whole test files (kernels are compiled once first:
+# tests/warm_kernels.py; the older Blenders find them compiled). The older Blenders leave out the tests marked
+# newest_blender: the benchmark's references (5.0's tools) and the batch script's process management (timeouts,
+# kills, reruns, Dask), whose Blender calls the other batch tests make on every version; about 1.5 minutes each.
 PARALLEL := -n auto --dist loadfile
-test: venv
+test: test-main $(OLDER_TESTS)
+
+test-main: venv
 	$(PY) -m pytest $(PARALLEL) $(PYTEST_ARGS)
+
+$(OLDER_TESTS): test-blender-%: .venv-blender-%/.requirements.stamp
+	.venv-blender-$*/bin/python -m pytest $(PARALLEL) -m "not newest_blender" tests/blender $(PYTEST_ARGS)
 
 # Everything but the slow tests (the install test builds a 150 MB zip and installs it in a bare bpy).
 test-fast: venv

@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parent
 if str(ROOT) not in sys.path:  # the batch package beside this script (worker processes find it the same way)
     sys.path.insert(0, str(ROOT))
 
-from batch import options, report, runner  # noqa: E402
+from batch import options, report, runner, shutdown  # noqa: E402
 
 
 def script_args(argv):
@@ -86,4 +86,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(shutdown.run_main(main))  # Blender 4.2 and 4.5 as a module cannot end it themselves

@@ -65,6 +65,7 @@ def boolean_to_file(addon, args) -> dict:
         BatchError, AasdfError: The input is refused or the result is empty; nothing is written.
     """
     scene.clear_scene()
+    scene.check_debug_volume(args, addon)
     if args.blend is not None:  # reading a file empties the field cache: such jobs share nothing
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
     pipeline, plan = addon.aasdf_addon.pipeline, addon.aasdf_addon.plan

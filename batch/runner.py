@@ -5,15 +5,14 @@ and write the report."""
 import sys
 
 from . import jobs as joblist
-from . import report
+from . import report, shutdown
 from . import workers as workers_module
 from .options import BatchError, job_defaults
 
 
 def inside_blender() -> bool:
     """Whether this is Blender's own executable (``blender -b -P``): its Python cannot start ``bpy`` workers."""
-    bpy = sys.modules.get("bpy")
-    return bpy is not None and not getattr(bpy.app, "module", False)
+    return "bpy" in sys.modules and shutdown.bpy_module() is None
 
 
 def worker_count(asked) -> int:

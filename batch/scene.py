@@ -96,6 +96,20 @@ def plan_of(args, count: int) -> tuple:
     return steps
 
 
+def check_debug_volume(args, addon) -> None:
+    """Refuse ``--debug-volume`` before any work where this Blender cannot write one (no OpenVDB module: 4.2).
+
+    Raises:
+        BatchError: Saying so, and that the boolean runs without it.
+    """
+    if args.debug_volume is None:
+        return
+    try:
+        importlib.import_module(f"{addon.__name__}.aasdf_addon.debug").openvdb_module()
+    except addon.aasdf_addon.runtime.engine().AasdfError as err:
+        raise BatchError(f"{err}; run it without --debug-volume") from None
+
+
 def gather_operands(args) -> list:
     """The job's operands, selected, the first active: its files imported, then its named objects (checked first:
     an unknown one fails before anything is imported)."""

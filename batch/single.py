@@ -42,6 +42,7 @@ def run(args, out, err) -> int:
     if args.blend is not None:
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
     package = scene.ensure_addon()
+    scene.check_debug_volume(args, package)
     pipeline, plan = package.aasdf_addon.pipeline, package.aasdf_addon.plan
     engine = package.aasdf_addon.runtime.engine()
     if bpy.context.mode != "OBJECT":

@@ -14,6 +14,7 @@ import time
 from collections import deque
 from multiprocessing.connection import wait
 
+from . import shutdown
 from .jobs import partial_dir
 from .options import BatchError
 
@@ -42,7 +43,8 @@ def serve(conn, quiet: bool, threads: int | None = None):
             conn.send(("started", job.number))
             conn.send(("done", job.number, execute.run_job(job)))
     except (EOFError, OSError):  # the parent is gone
-        return
+        pass
+    shutdown.end_process(0)  # Blender 4.2's and 4.5's bpy module cannot end the process itself
 
 
 def scripts_last():

@@ -208,6 +208,7 @@ class AASDF_OT_debug_volume(GeometryPoll, bpy.types.Operator):
         engine = runtime.engine()
         obj = context.active_object
         try:
+            debug.openvdb_module()  # where this Blender has none (4.2), refused before any work
             field = pipeline.object_field(context, obj, pipeline.FieldSettings.of(self))
             volume, cells = debug.add_debug_objects(context, field, obj.name)
         except engine.AasdfError as err:

@@ -52,6 +52,25 @@ def test_dev_requirements_pin_the_bundled_warp():
     assert set(fetch_wheels.RUNTIME_REQUIREMENTS) <= set(pins)
 
 
+OLDER_BLENDERS = sorted(p.stem.removeprefix("requirements-blender-") for p in ROOT.glob("requirements-blender-*.txt"))
+
+
+@pytest.mark.parametrize("version", OLDER_BLENDERS)
+def test_older_blender_requirements_pin_their_bpy_and_the_bundled_warp(version):
+    # the same warp-lang as .venv: the kernels compiled for one serve all (tests/warm_kernels.py)
+    pins = (ROOT / f"requirements-blender-{version}.txt").read_text(encoding="utf-8").split()
+    assert set(fetch_wheels.RUNTIME_REQUIREMENTS) <= set(pins)
+    (bpy,) = [pin for pin in pins if pin.startswith("bpy==")]
+    assert bpy.removeprefix("bpy==").startswith(f"{version}.")
+
+
+def test_the_oldest_blender_tested_is_the_manifest_minimum():
+    manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text(encoding="utf-8"))
+    oldest = min(OLDER_BLENDERS, key=lambda v: tuple(map(int, v.split("."))))
+    assert manifest["blender_version_min"] == f"{oldest}.0"
+    assert {"4.2", "4.5"} <= set(OLDER_BLENDERS)
+
+
 def test_narrowed_manifest_replaces_only_platforms_and_wheels():
     text = (ROOT / "blender_manifest.toml").read_text(encoding="utf-8")
     wheel = "./wheels/warp_lang-1.19.0-py3-none-manylinux_2_28_x86_64.whl"

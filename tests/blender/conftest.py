@@ -1,11 +1,27 @@
 """Blender tests run headless on the ``bpy`` module: the add-on is registered once per session, and every test starts
-from an empty home file (``read_homefile`` keeps add-ons registered; ``read_factory_settings`` would not)."""
+from an empty home file (``read_homefile`` keeps add-ons registered; ``read_factory_settings`` would not). They run
+on every Blender the manifest names (``make test``: 5.0 in ``.venv``, 4.2 and 4.5 LTS in ``.venv-blender-4.x``)."""
 
 import bpy
 import pytest
 
 import aasdf
 from aasdf.aasdf_addon.preferences import ADDON_ID
+from batch import shutdown
+
+EXIT_STATUS = pytest.StashKey[int]()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    session.config.stash[EXIT_STATUS] = int(exitstatus)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    """The bpy module of Blender 4.2 crashes when its process ends (``batch/shutdown.py``): end pytest's process here,
+    with pytest's exit status. Test workers (pytest-xdist) end as their controller tells them."""
+    if not hasattr(config, "workerinput") and EXIT_STATUS in config.stash:
+        shutdown.end_process(config.stash[EXIT_STATUS])
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -5,6 +5,10 @@ import numpy as np
 
 from aasdf.aasdf_addon import bridge
 
+# Blender ships OpenVDB's Python module from 4.4 on; on 4.2 a debug volume is refused with this sentence.
+SHIPS_OPENVDB = bpy.app.version >= (4, 4, 0)
+NO_OPENVDB = "Debug Volume needs OpenVDB's Python module, which Blender .* does not provide"
+
 
 def add_mesh_object(name, verts, tris, location=(0.0, 0.0, 0.0), materials=(), collection=None):
     """A mesh object from numpy arrays, linked to ``collection`` (default: the scene's collection)."""

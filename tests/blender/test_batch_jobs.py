@@ -1,7 +1,8 @@
 """``aasdf_batch.py --jobs``: job files run in one process, in worker processes and on a Dask ``LocalCluster``; every
 fault (a malformed line, a missing file, an input that encloses nothing, an empty result, a job past its timeout, a
 worker killed mid-job, the whole run killed) reported while the other jobs go on; outputs read back (watertight,
-volume against the exact one), the report checked, no partial file left, and a rerun doing only what was left."""
+volume against the exact one), the report checked, no partial file left, and a rerun doing only what was left. The
+tests of process management alone (timeouts, kills, reruns, Dask) run on the newest Blender only (``make test``)."""
 
 import json
 import os
@@ -169,6 +170,7 @@ def test_a_failing_job_is_reported_with_its_reason_and_writes_nothing(one_proces
     assert not (folder / "out" / key).exists()
 
 
+@pytest.mark.newest_blender  # process management: the tests above make its Blender calls on every version
 def test_a_rerun_skips_what_is_up_to_date_and_force_redoes_it(one_process, meshes, tmp_path):
     folder, _ = one_process
     made = (folder / "out" / "union.ply").stat().st_mtime_ns
@@ -215,6 +217,7 @@ def test_csv_shards_on_two_workers_cover_the_file_once(meshes, tmp_path):
         assert entry["volume"] == pytest.approx(EXACT[name.split("-")[0]], rel=0.01)
 
 
+@pytest.mark.newest_blender  # process management: the tests above make its Blender calls on every version
 def test_a_job_past_its_timeout_is_stopped_and_the_next_runs_on_a_new_worker(meshes, tmp_path):
     jobs = write_jobs(tmp_path / "jobs.jsonl", [SLOW, pair(meshes, "union", "after.ply")])
     done = run_batch(
@@ -258,6 +261,7 @@ def start_batch(*args):
     )
 
 
+@pytest.mark.newest_blender  # process management: the tests above make its Blender calls on every version
 def test_a_worker_killed_mid_job_is_replaced_and_its_job_tried_again(meshes, tmp_path):
     jobs = write_jobs(
         tmp_path / "jobs.jsonl",
@@ -278,6 +282,7 @@ def test_a_worker_killed_mid_job_is_replaced_and_its_job_tried_again(meshes, tmp
     assert leftovers(tmp_path) == []
 
 
+@pytest.mark.newest_blender  # process management: the tests above make its Blender calls on every version
 def test_a_rerun_after_the_whole_run_was_killed_does_only_what_was_left(meshes, tmp_path):
     entries = [pair(meshes, op, f"{op}.ply") for op in EXACT] + [
         SLOW,
@@ -319,6 +324,7 @@ def local_cluster():
     cluster.close()
 
 
+@pytest.mark.newest_blender  # process management: the tests above make its Blender calls on every version
 def test_run_jobs_on_a_local_cluster(local_cluster, meshes, tmp_path):
     import aasdf_batch
 
@@ -339,6 +345,7 @@ def test_run_jobs_on_a_local_cluster(local_cluster, meshes, tmp_path):
     ]
 
 
+@pytest.mark.newest_blender  # process management: the tests above make its Blender calls on every version
 def test_scheduler_option_runs_a_job_file_on_the_cluster(local_cluster, meshes, tmp_path):
     jobs = write_jobs(tmp_path / "jobs.jsonl", [pair(meshes, op, f"{op}.ply") for op in EXACT])
     done = run_batch(

@@ -149,7 +149,8 @@ def test_each_setting_has_one_name_and_one_description_everywhere():
         rna = cls.bl_rna
         if issubclass(cls, bpy.types.Operator):  # an operator's settings are on its properties' type
             rna = getattr(bpy.ops.aasdf, cls.bl_idname.split(".")[1]).get_rna_type()
-        base = next(b for b in cls.__mro__[1:] if b.__module__ in ("bpy.types", "_bpy_types"))  # Blender's own aside
+        # Blender's own base class aside (its module is ``bpy_types`` up to 4.5, ``_bpy_types`` from 5.0)
+        base = next(b for b in cls.__mro__[1:] if b.__module__ in ("bpy.types", "bpy_types", "_bpy_types"))
         inherited = {prop.identifier for prop in base.bl_rna.properties}
         for prop in rna.properties:
             if prop.identifier in inherited or prop.identifier == "rna_type":
