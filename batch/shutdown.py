@@ -20,9 +20,12 @@ def bpy_module():
     """The ``bpy`` this process imported when it is the Python module, not Blender's executable; else None.
     ``bpy.app.module`` says which where it exists (4.5 and later); 4.2's module leaves ``bpy.app.binary_path`` empty."""
     bpy = sys.modules.get("bpy")
-    if bpy is None or not getattr(bpy.app, "module", not bpy.app.binary_path):
+    if bpy is None:
         return None
-    return bpy
+    module = getattr(bpy.app, "module", None)
+    if module is None:  # Blender 4.2
+        module = not bpy.app.binary_path
+    return bpy if module else None
 
 
 def needs_hard_exit() -> bool:

@@ -221,6 +221,11 @@ def test_inside_blenders_executable_jobs_run_in_its_one_process(monkeypatch):
         runner.worker_count(2)
     monkeypatch.setitem(sys.modules, "bpy", SimpleNamespace(app=SimpleNamespace(module=True)))
     assert not runner.inside_blender() and runner.worker_count(None) >= 1
+    # Blender 4.2 has no bpy.app.module: its executable has a binary path, its module an empty one
+    monkeypatch.setitem(sys.modules, "bpy", SimpleNamespace(app=SimpleNamespace(binary_path="/opt/blender/blender")))
+    assert runner.inside_blender() and runner.worker_count(None) == 0
+    monkeypatch.setitem(sys.modules, "bpy", SimpleNamespace(app=SimpleNamespace(binary_path="")))
+    assert not runner.inside_blender() and runner.worker_count(None) >= 1
 
 
 def test_adaptivity_is_a_job_option_checked_from_0_to_1(tmp_path):
