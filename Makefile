@@ -30,7 +30,7 @@ $(STAMP): requirements-dev.txt
 # Blender tests on 4.2 and 4.5; one worker per core, each taking whole test files (kernels are compiled once first:
 # tests/warm_kernels.py; the older Blenders find them compiled). The older Blenders leave out the tests marked
 # newest_blender: the benchmark's references (5.0's tools) and the batch script's process management (timeouts,
-# kills, reruns, Dask), whose Blender calls the other batch tests make on every version; about 1.5 minutes each.
+# kills, reruns, Dask), whose Blender calls the other batch tests make on every version: about a minute each here.
 PARALLEL := -n auto --dist loadfile
 test: test-main $(OLDER_TESTS)
 
