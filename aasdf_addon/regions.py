@@ -6,6 +6,8 @@ surface's cells only within a region, so a merged polygon never spans a material
 
 import numpy as np
 
+from . import runtime
+
 
 def source_regions(operands) -> dict:
     """{operand index: (T,) int64 region of each of its triangles} (the engine's field id k is ``operands[k]``)."""
@@ -36,20 +38,4 @@ def _regions(op) -> np.ndarray:
     face_s, face_t = s // 3, t // 3
     if material is not None:
         joined &= material[face_s] == material[face_t]
-    return _components(n, face_s[joined], face_t[joined])
-
-
-def _components(n: int, a, b) -> np.ndarray:
-    """(n,) the smallest node of each node's connected component over the edges ``a``-``b``."""
-    parent = np.arange(n)
-    while True:
-        pa, pb = parent[a], parent[b]
-        differ = pa != pb
-        if not differ.any():
-            return parent
-        np.minimum.at(parent, np.maximum(pa, pb)[differ], np.minimum(pa, pb)[differ])
-        while True:
-            jumped = parent[parent]
-            if np.array_equal(jumped, parent):
-                break
-            parent = jumped
+    return runtime.engine().connected_components(n, face_s[joined], face_t[joined])

@@ -237,7 +237,7 @@ def _classes(ranks, creases, n) -> tuple[np.ndarray, np.ndarray]:
     MIN_CREASE vertices (a soft fold found here and there along a fillet) is no crease: its vertices are smooth."""
     creases = np.asarray(creases, dtype=np.int64).reshape(-1, 2)
     if len(creases):
-        root = _components(n, creases[:, 0], creases[:, 1])
+        root = connected_components(n, creases[:, 0], creases[:, 1])
         size = np.bincount(root, minlength=n)
         creases = creases[size[root[creases[:, 0]]] >= MIN_CREASE]
     degree = np.bincount(creases.ravel(), minlength=n)
@@ -246,7 +246,7 @@ def _classes(ranks, creases, n) -> tuple[np.ndarray, np.ndarray]:
     return cls.astype(np.int8), creases
 
 
-def _components(n: int, a, b) -> np.ndarray:
+def connected_components(n: int, a, b) -> np.ndarray:
     """(n,) the smallest node of each node's connected component over the edges ``a``-``b`` (hooking and pointer
     jumping: a few rounds of whole-array steps)."""
     parent = np.arange(n)
@@ -289,7 +289,7 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
         ready = (level == lv - 1) & (cls > 0)
         prev = ids[lv - 1]  # each ready vertex's cluster at the level below
         use = joinable & ready[u] & ready[v] & (block[u] == block[v])
-        root = _components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
+        root = connected_components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
         members = np.flatnonzero(ready)
         roots, member_comp = np.unique(root[prev[members]], return_inverse=True)
         k = len(roots)  # the components, numbered 0 .. k - 1
