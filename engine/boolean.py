@@ -270,12 +270,54 @@ def combine(
         TypeError, ValueError: On wrong operands or options.
         AasdfError: If the combined domain would not fit in memory.
     """
+    blend, mode, h = _options(a, b, blend, blend_mode, spacing)
+    # a sparse finest level under a dense top one, even when both operands are dense (one level)
+    levels = max(a.levels, b.levels, 2)
+    timings = {}
+    t0 = time.perf_counter()
+    origin, top_dims = _domain(a, b, h, levels, mode, blend)
+    # a placed operand is resampled from its cells, never aligned
+    aligned = [
+        f.placement is None
+        and bool(np.isclose(f.voxel_size, h, rtol=1e-6, atol=0.0))
+        and np.allclose((f.origin - origin) / h, np.rint((f.origin - origin) / h), atol=1e-3)
+        for f in (a, b)
+    ]
+    args = (a.arg(), b.arg())
+    octets = _candidate_octets((a, b), aligned, origin, h, top_dims * 2 ** (levels - 1), a.device)
+    if blend > 0.0:  # and where the blend shapes the surface, away from both operands' own octets
+        zone = blend_octets(*args, origin, h, top_dims, levels, op, blend, mode, KEEP_BAND * h)
+        octets = octree.merge_unique(octets, zone, end_bit=3 * code_bits(top_dims * 2 ** (levels - 2)))
+    timings["finest_cells"] = time.perf_counter() - t0
+    # Keep the result adaptive: drop the octets the result's surface is far from, before any interpolation.
+    t0 = time.perf_counter()
+    finest = _pruned(octets, (a, b), args, aligned, origin, h, top_dims * 2 ** (levels - 2), op, blend, mode)
+    octets = None
+    timings["finest_prune"] = time.perf_counter() - t0
+    # every node's place first, so the finest values are computed where they are kept
+    layout = level_layout(finest.pop("octets"), top_dims, levels, a.device, timings, lean=True)
+    walk = wp.vec2i(*(int(mode == 1 and f.stats.get("surface_points", False)) for f in (a, b)))
+    nodes = _node_values(layout, finest, args, aligned, origin, h, levels, (op, blend, mode, walk), timings)
+    result = type(a).from_layout(
+        layout,
+        voxel_size=h,
+        origin=origin,
+        **nodes,
+        field_ids=a.field_ids + b.field_ids,
+        timings=timings,
+        sources={**a.world_sources(), **b.world_sources()},
+        stats={"continuous": not finest["jumps"]},
+    )
+    result.expression = combined(op, blend, a, b)  # what it was made of, for the faces it keeps (:mod:`.keep`)
+    return result
+
+
+def _options(a, b, blend, blend_mode, spacing) -> tuple:
+    """(blend, mode, finest spacing) of a boolean, checked."""
     blend = _check_operands(a, b, blend)
     if blend_mode not in BLEND_MODES:
         raise ValueError(f"Expected 'blend_mode' to be one of {sorted(BLEND_MODES)}, but got {blend_mode!r}.")
     mode = BLEND_MODES[blend_mode] if blend > 0.0 else 0  # no blend: the hard min / max either way
-    # a chamfer reads an operand with closest points on its surface by them where they beat its coarse leaves' MLS
-    walk = wp.vec2i(*(int(mode == 1 and f.stats.get("surface_points", False)) for f in (a, b)))
     choices = {
         "finer": min(a.world_voxel_size, b.world_voxel_size),
         "coarser": max(a.world_voxel_size, b.world_voxel_size),
@@ -284,136 +326,100 @@ def combine(
     }
     if spacing not in choices:
         raise ValueError(f"Expected 'spacing' to be one of {sorted(choices)}, but got {spacing!r}.")
-    h = choices[spacing]
-    # a sparse finest level under a dense top one, even when both operands are dense (one level)
-    levels = max(a.levels, b.levels, 2)
-    device = a.device
-    timings = {}
-    t0 = time.perf_counter()
+    return blend, mode, choices[spacing]
+
+
+def _domain(a, b, h: float, levels: int, mode: int, blend: float) -> tuple:
+    """(origin, top dims) of the result's domain: both operands' boxes, grown by where a blend may fill outside them
+    (up to blend / 4 for a round one, blend / 2 for a chamfer's plane); refused when it would not fit."""
     (a_lo, a_hi), (b_lo, b_hi) = a.bounds, b.bounds
     lo, hi = np.minimum(a_lo, b_lo), np.maximum(a_hi, b_hi)
-    # a blend may fill outside both operands' boxes: up to blend / 4 (round) or blend / 2 (a chamfer's plane)
     reach = (0.5 if mode == 1 else 0.25) * blend
     origin, top_dims = plan_domain(lo, hi, h, levels, reach / h + 1.0 if blend > 0.0 else 0.0)
-    fine_dims = top_dims * 2 ** (levels - 1)
-    check_budget(fine_dims, int(np.prod(top_dims)), 8 * (a.level_counts[0] + b.level_counts[0]))
-    # a placed operand is resampled from its cells, never aligned
-    aligned = [
-        f.placement is None
-        and bool(np.isclose(f.voxel_size, h, rtol=1e-6, atol=0.0))
-        and np.allclose((f.origin - origin) / h, np.rint((f.origin - origin) / h), atol=1e-3)
-        for f in (a, b)
-    ]
-    oct_dims = fine_dims // 2
-    a_arg, b_arg = a.arg(), b.arg()
-    octets = _candidate_octets((a, b), aligned, origin, h, fine_dims, device)
-    if blend > 0.0:  # and where the blend shapes the surface, away from both operands' own octets
-        zone = blend_octets(a_arg, b_arg, origin, h, top_dims, levels, op, blend, mode, KEEP_BAND * h)
-        octets = octree.merge_unique(octets, zone, end_bit=3 * code_bits(oct_dims))
-    timings["finest_cells"] = time.perf_counter() - t0
+    check_budget(top_dims * 2 ** (levels - 1), int(np.prod(top_dims)), 8 * (a.level_counts[0] + b.level_counts[0]))
+    return origin, top_dims
 
+
+def _pruned(octets, fields, args, aligned, origin, h: float, oct_dims, op: int, blend: float, mode: int) -> dict:
+    """The candidate ``octets`` the result's surface may pass near (:func:`.prune.prune_octets`), with what the
+    combination needs of the operands there: ``octets``, ``a_first``/``b_first``, ``octet_flags``, ``offsets`` and
+    ``jumps``."""
     offs = [
         wp.vec3i(*(int(v) for v in (-offset_to(f, origin, h) if al else (0, 0, 0))))
-        for f, al in zip((a, b), aligned, strict=False)
+        for f, al in zip(fields, aligned, strict=False)
     ]
-    origin_v = wp.vec3(*origin)
-
-    # Keep the result adaptive: drop the octets the result's surface is far from, before any interpolation.
-    t0 = time.perf_counter()
-    octet_flags = [int(al and not (offset_to(f, origin, h) % 2).any()) for f, al in zip((a, b), aligned, strict=False)]
-    jumps = not (continuous(a) and continuous(b))
+    flags = [int(al and not (offset_to(f, origin, h) % 2).any()) for f, al in zip(fields, aligned, strict=False)]
+    jumps = not all(continuous(f) for f in fields)
     octets, a_first, b_first = prune_octets(
-        octets,
-        (a_arg, b_arg),
-        [int(al) for al in aligned],
-        octet_flags,
-        offs,
-        origin,
-        h,
-        op,
-        blend,
-        mode,
-        oct_dims,
-        jumps=jumps,
+        octets, args, [int(al) for al in aligned], flags, offs, origin, h, op, blend, mode, oct_dims, jumps=jumps
     )
-    timings["finest_prune"] = time.perf_counter() - t0
-    # every node's place first, so the finest values are computed where they are kept
-    layout = level_layout(octets, top_dims, levels, device, timings, lean=True)
+    return {"octets": octets, "a_first": a_first, "b_first": b_first, "octet_flags": flags, "offsets": offs,
+            "jumps": jumps}  # fmt: skip
 
+
+def _node_values(layout, finest: dict, args, aligned, origin, h: float, levels: int, how, timings: dict) -> dict:
+    """Every node's value, closest point, source and (finest) triangle, level by level: the finest from the operands'
+    nodes or MLS samples, the coarser levels from the operands' own nodes there or their leaves extrapolated (Eq. 8
+    per node: a result is a field like any other). ``how``: (op, blend, mode, walk). The pruning's arrays in
+    ``finest`` are let go after the finest level."""
+    op, blend, mode, walk = how
+    device = layout["codes"].device
+    offsets, offs, octet_flags = layout["offsets"], finest["offsets"], finest["octet_flags"]
+    n = int(offsets[-1])
+    out = {
+        "proj": wp.empty(n, dtype=wp.vec3h, device=device),
+        "source": wp.empty(n, dtype=wp.int32, device=device),
+        "values": wp.empty(n, dtype=wp.float32, device=device),
+        "triangles": wp.empty(int(offsets[1]), dtype=wp.int32, device=device),
+    }
     no_octets = wp.empty(0, dtype=wp.int32, device=device)
-
-    def run(codes, lo_, hi_, spacing_, proj, source, values, tri, sparse):
-        finest = spacing_ == h
-        flags = [int(aligned[0] and finest), int(aligned[1] and finest)]
+    origin_v = wp.vec3(*origin)
+    group = COMBINE_GROUP
+    for k in range(levels):
+        tk = time.perf_counter()
+        lo, hi, spacing, at_finest = int(offsets[k]), int(offsets[k + 1]), h * 2**k, k == 0
+        flags = [int(aligned[0] and at_finest), int(aligned[1] and at_finest)]
         octet_args = [
-            octet_flags[0] if finest else 0,
-            octet_flags[1] if finest else 0,
-            a_first if finest else no_octets,
-            b_first if finest else no_octets,
+            octet_flags[0] if at_finest else 0,
+            octet_flags[1] if at_finest else 0,
+            finest["a_first"] if at_finest else no_octets,
+            finest["b_first"] if at_finest else no_octets,
         ]
-        group = COMBINE_GROUP
         parallel.launch_split(
             _combine_nodes_kernel,
-            (hi_ - lo_ + group - 1) // group,
-            lambda start, n: [
-                a_arg,
-                b_arg,
+            (hi - lo + group - 1) // group,
+            lambda start, count, lo=lo, hi=hi, spacing=spacing, k=k, flags=flags, octet_args=octet_args: [
+                *args,
                 *flags,
                 offs[0],
                 offs[1],
-                codes,
-                lo_ + group * start,
-                min(hi_, lo_ + group * (start + n)),
+                layout["codes"],
+                lo + group * start,
+                min(hi, lo + group * (start + count)),
                 group,
-                int(sparse),
+                int(k < levels - 1),
                 origin_v,
-                float(spacing_),
+                float(spacing),
                 int(op),
                 blend,
                 mode,
                 walk,
-                int(finest),
-                proj,
-                source,
-                values,
-                tri,
+                int(k == 0),
+                out["proj"],
+                out["source"],
+                out["values"],
+                out["triangles"],
                 *octet_args,
-            ],
+            ],  # fmt: skip
             device,
             balance=True,  # MLS samples bunch where the operands meet
         )
-
-    # Every node, level by level: the finest from the operands' nodes or MLS samples, the coarser levels from the
-    # operands' own nodes there or their leaves extrapolated (Eq. 8 per node: a result is a field like any other).
-    offsets = layout["offsets"]
-    n = int(offsets[-1])
-    proj = wp.empty(n, dtype=wp.vec3h, device=device)
-    source = wp.empty(n, dtype=wp.int32, device=device)
-    values = wp.empty(n, dtype=wp.float32, device=device)
-    tri = wp.empty(int(offsets[1]), dtype=wp.int32, device=device)
-    for k in range(levels):
-        tk = time.perf_counter()
-        run(layout["codes"], int(offsets[k]), int(offsets[k + 1]), h * 2**k, proj, source, values, tri, k < levels - 1)
         timings["finest_values" if k == 0 else "top_level" if k == levels - 1 else f"level_{k}"] = (
             time.perf_counter() - tk
         )
-        if k == 0:
-            octets = a_first = b_first = None  # the pruning's arrays are not needed above the finest level
-    result = type(a).from_layout(
-        layout,
-        voxel_size=h,
-        origin=origin,
-        values=values,
-        proj=proj,
-        source=source,
-        field_ids=a.field_ids + b.field_ids,
-        timings=timings,
-        sources={**a.world_sources(), **b.world_sources()},
-        triangles=tri,
-        stats={"continuous": not jumps},
-    )
-    result.expression = combined(op, blend, a, b)  # what it was made of, for the faces it keeps (:mod:`.keep`)
-    return result
+        if at_finest:
+            finest["a_first"] = finest["b_first"] = None  # not needed above the finest level
+    return out
 
 
 def _candidate_octets(operands, aligned, origin, h: float, fine_dims, device) -> wp.array:
