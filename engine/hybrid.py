@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .coarsen import coarsened
 from .edges import surface_edges
 from .keep import kept_triangles
 from .zipper import (
@@ -330,4 +331,4 @@ def kept_surface(field, *, sharp: bool | None = None) -> dict:
     verts, tris = field.to_mesh(sharp=sharp)
     if field.expression is None or not len(tris):
         return voxel_surface_only(verts, tris, "not a boolean of meshes")
-    return hybrid_surface(field, verts, tris)
+    return coarsened(field, hybrid_surface(field, verts, tris))

@@ -45,6 +45,7 @@ ENGINE_MODULES = (
     "keep",
     "refine",
     "zipper",
+    "coarsen",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.

@@ -120,10 +120,13 @@ def test_kept_faces_cover_what_should_be_kept_and_new_faces_only_the_seams(case)
     assert share >= (0.9 if case["name"] == "cube - bore" else 0.99), share
     seam = _seam_length(case["exact"], case["operands"][0]) / h
     new = s["stats"]["new_faces"]
-    # measured: 13-24 new triangles a voxel of seam; the whole output 0.13-0.21x the remeshed one
-    # cube - bore: 50 (half its sliver-walled bore remeshed, see above)
+    # measured: 13-24 new triangles a voxel of seam; cube - bore: 50 (half its sliver-walled bore remeshed, see above)
     assert new <= 24 * seam * (2.5 if case["name"] == "cube - bore" else 1.25), (new, seam)
-    assert len(s["tris"]) <= 0.3 * case["remeshed"]
+    # the whole output against the remeshed one, measured: plate 0.095, cube | tilted cube 0.108, cube - bore 0.131
+    # (their new faces collapsed where flat); the rocker arm 0.20 and the hex prism & sphere 0.24, whose operands'
+    # own triangles (20,088 and 36,480) are most of it
+    low_poly = case["name"] in ("plate - 4 bores", "cube | tilted cube", "cube - bore")
+    assert len(s["tris"]) <= (0.15 if low_poly else 0.3) * case["remeshed"]
 
 
 def test_kept_faces_are_their_sources_own(case):

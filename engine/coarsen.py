@@ -1,0 +1,375 @@
+"""A kept surface's new faces made coarse where they are flat: half-edge collapses within one source triangle's plane.
+
+The voxel surface of a seam's band and the strips that join it to the kept faces are as fine as the voxels, even
+where they lie flat on a large face of an operand (a plate's face around a bore, a box's face along the seam of a
+union). Here a new vertex is removed by moving it onto a neighbour (a half-edge collapse: no vertex moves, no new
+position is made) when
+
+- every face around it is new and has one source triangle (:meth:`.field.AdaptiveField.face_sources`), so what its
+  corners read off that triangle (UVs, colours) is unchanged, and no face spans a material or UV seam;
+- the neighbour lies within ``TOLERANCE_VOXELS`` of every face's plane around it, so the faces that take its place
+  lie in the same planes (flat parts merge, a crease between two planes merges only along its line);
+- no face turns over or gets thinner than ``MIN_QUALITY`` (or than the thinnest face it replaces), its faces are one
+  fan and the edge's ends share exactly two neighbours (the link condition: the surface stays closed and 2-manifold).
+
+Collapses run in rounds, each a set of vertices at least three edges apart (so one collapse never changes what
+another's checks read), the shortest edges first. Kept faces and their vertices never change.
+
+Written by hand: the one decimator in a user's Blender is its Decimate modifier (``bpy``, which the engine never
+imports), and general decimators (quadric edge collapse) move vertices and ignore the faces' sources; the checks here
+run in Warp kernels over each vertex's fan, whose loops numpy cannot express without per-vertex Python.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .parallel import launch_split
+
+# A neighbour within this many voxels of the planes of every face around a vertex can take its place.
+TOLERANCE_VOXELS = 0.01
+# Faces' shape quality (4 sqrt(3) area / sum of squared edges; 1 for an equilateral triangle) never falls below this
+# (or below the worst of the faces replaced, where that is worse).
+MIN_QUALITY = 0.05
+# Only faces of at least this quality have planes that bound a collapse (a sliver's plane is ill-defined).
+PLANE_QUALITY = 0.2
+# Rounds of collapses at most; they stop earlier when a round removes under MIN_ROUND_SHARE of the vertices left.
+MAX_ROUNDS = 48
+MIN_ROUND_SHARE = 0.01
+
+
+@wp.func
+def _next_corner(tris: wp.array[wp.int32], corner: int, step: int) -> int:
+    face = corner // 3
+    return tris[face * 3 + (corner % 3 + step) % 3]
+
+
+@wp.func
+def _quality(a: wp.vec3, b: wp.vec3, c: wp.vec3) -> float:
+    doubled = wp.length(wp.cross(b - a, c - a))
+    edges = wp.length_sq(b - a) + wp.length_sq(c - b) + wp.length_sq(a - c)
+    if edges <= 0.0:
+        return 0.0
+    return 1.7320508 * 2.0 * doubled / edges  # 4 sqrt(3) area / sum of squared edges
+
+
+@wp.func
+def _one_fan(tris: wp.array[wp.int32], corners: wp.array[wp.int32], lo: int, hi: int) -> bool:
+    """Whether the faces at a vertex (its corners ``lo``..``hi``) form one closed fan: walked from the first face,
+    each step to the face whose previous vertex is this one's next, the walk returns after all of them."""
+    start = corners[lo]
+    at = start
+    for step in range(hi - lo):
+        target = _next_corner(tris, at, 1)
+        found = int(-1)
+        for c in range(lo, hi):
+            if _next_corner(tris, corners[c], 2) == target:
+                found = corners[c]
+        if found < 0:
+            return False
+        at = found
+        if at == start:
+            return step == hi - lo - 1
+    return False
+
+
+@wp.func
+def _collapse_ok(
+    points: wp.array[wp.vec3],
+    tris: wp.array[wp.int32],
+    corners: wp.array[wp.int32],
+    first: wp.array[wp.int32],
+    u: int,
+    v: int,
+    tol: float,
+    min_quality: float,
+) -> bool:
+    """Whether ``u`` may move onto its neighbour ``v`` (the module's checks)."""
+    lo = first[u]
+    hi = first[u + 1]
+    pu = points[u]
+    pv = points[v]
+    vanish = int(0)
+    for c in range(lo, hi):
+        a = _next_corner(tris, corners[c], 1)
+        b = _next_corner(tris, corners[c], 2)
+        pa = points[a]
+        pb = points[b]
+        n_old = wp.cross(pa - pu, pb - pu)
+        area = wp.length(n_old)
+        q_old = _quality(pu, pa, pb)
+        # a thin face's plane is ill-defined: only well-shaped faces' planes bound where ``v`` may lie
+        if q_old >= PLANE_QUALITY and wp.abs(wp.dot(n_old, pv - pu)) > tol * area:
+            return False
+        if a == v or b == v:
+            vanish += 1
+        else:
+            n_new = wp.cross(pa - pv, pb - pv)
+            if wp.dot(n_new, n_old) <= 0.5 * wp.length(n_new) * area:
+                return False
+            if _quality(pv, pa, pb) < wp.min(min_quality, q_old):
+                return False
+            # and ``u`` stays within the tolerance of the faces that take its place
+            if _quality(pv, pa, pb) >= PLANE_QUALITY and wp.abs(wp.dot(n_new, pu - pv)) > tol * wp.length(n_new):
+                return False
+    if vanish != 2:
+        return False
+    common = int(0)
+    for c in range(lo, hi):
+        x = _next_corner(tris, corners[c], 1)
+        for d in range(first[v], first[v + 1]):
+            if _next_corner(tris, corners[d], 1) == x:
+                common += 1
+    return common == 2
+
+
+@wp.kernel(enable_backward=False)
+def _candidate_kernel(
+    points: wp.array[wp.vec3],
+    tris: wp.array[wp.int32],
+    corners: wp.array[wp.int32],
+    first: wp.array[wp.int32],
+    movable: wp.array[wp.int32],
+    group: wp.array[wp.int64],
+    tol: float,
+    min_quality: float,
+    active: wp.array[wp.int32],
+    best: wp.array[wp.int32],
+    length: wp.array[wp.float32],
+):
+    """Per vertex listed in ``active``: the nearest neighbour it may move onto (-1 for none) and how far that is."""
+    i = wp.tid()
+    u = active[i]
+    best[i] = -1
+    length[i] = 3.0e38
+    lo = first[u]
+    hi = first[u + 1]
+    if movable[u] == 0 or hi - lo < 3:
+        return
+    g = group[corners[lo] // 3]
+    for c in range(lo, hi):
+        if group[corners[c] // 3] != g:
+            return
+    if not _one_fan(tris, corners, lo, hi):
+        return
+    for c in range(lo, hi):
+        v = _next_corner(tris, corners[c], 1)
+        d = wp.length(points[v] - points[u])
+        if d < length[i] and _collapse_ok(points, tris, corners, first, u, v, tol, min_quality):
+            best[i] = v
+            length[i] = d
+
+
+@wp.kernel(enable_backward=False)
+def _claim_kernel(
+    tris: wp.array[wp.int32],
+    corners: wp.array[wp.int32],
+    first: wp.array[wp.int32],
+    rows: wp.array[wp.int32],
+    keys: wp.array[wp.int32],
+    claim: wp.array[wp.int32],
+):
+    """Each candidate claims itself and its neighbours with its key (the smallest key wins each vertex)."""
+    i = wp.tid()
+    u = rows[i]
+    wp.atomic_min(claim, u, keys[i])
+    for c in range(first[u], first[u + 1]):
+        wp.atomic_min(claim, _next_corner(tris, corners[c], 1), keys[i])
+
+
+@wp.kernel(enable_backward=False)
+def _won_kernel(
+    tris: wp.array[wp.int32],
+    corners: wp.array[wp.int32],
+    first: wp.array[wp.int32],
+    rows: wp.array[wp.int32],
+    keys: wp.array[wp.int32],
+    claim: wp.array[wp.int32],
+    won: wp.array[wp.int32],
+):
+    """A candidate collapses when it won every vertex it claimed."""
+    i = wp.tid()
+    u = rows[i]
+    ok = int(1)
+    if claim[u] != keys[i]:
+        ok = 0
+    for c in range(first[u], first[u + 1]):
+        if claim[_next_corner(tris, corners[c], 1)] != keys[i]:
+            ok = 0
+    won[i] = ok
+
+
+def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, tol: float, device):
+    """Remove ``movable`` vertices of a closed, oriented triangle surface where flat (module docstring).
+
+    Args:
+        points: (V, 3) float32 vertices (none moves).
+        tris: (F, 3) int triangles.
+        movable: (V,) bool: the vertices that may be removed.
+        group: (F,) int64: a vertex is removed only where all its faces share one group.
+        tol: Distance (world units) a neighbour may lie off the planes of the faces around a removed vertex.
+    Returns:
+        ``(tris, rows)``: the triangles left (on the same vertex indices) and which input face each one was.
+    """
+    tris = np.ascontiguousarray(tris, dtype=np.int32)
+    rows = np.arange(len(tris), dtype=np.int64)
+    n = len(points)
+    if not len(tris) or not movable.any():
+        return tris, rows
+    pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
+    movable = movable.astype(np.int32)
+    best, length = np.full(n, -1, dtype=np.int32), np.zeros(n, dtype=np.float32)
+    active = np.flatnonzero(movable).astype(np.int32)
+    left = len(active)
+    for _ in range(MAX_ROUNDS):
+        won_rows, targets = _round(pts, tris, movable, group[rows], (active, best, length), float(tol), device)
+        if not len(won_rows):
+            break
+        remap = np.arange(n, dtype=np.int32)
+        remap[won_rows] = targets
+        movable[won_rows] = 0
+        best[won_rows] = -1
+        tris = remap[tris]
+        alive = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 2] != tris[:, 0])
+        tris, rows = np.ascontiguousarray(tris[alive]), rows[alive]
+        if len(won_rows) < MIN_ROUND_SHARE * left:
+            break
+        left -= len(won_rows)
+        active = _near(tris, targets, n) & (movable > 0)
+        active = np.flatnonzero(active).astype(np.int32)
+    return tris, rows
+
+
+def _near(tris: np.ndarray, targets: np.ndarray, n: int) -> np.ndarray:
+    """(V,) bool: the vertices within two edges of ``targets``: the only ones whose checks a collapse onto them
+    changes (their fans, or their neighbours' neighbours)."""
+    mark = np.zeros(n, dtype=bool)
+    mark[targets] = True
+    for _ in range(2):
+        mark[tris[mark[tris].any(axis=1)].ravel()] = True
+    return mark
+
+
+def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state, tol: float, device):
+    """One round: the ``active`` vertices' best collapses found again (``best``, ``length`` kept between rounds,
+    changed in place), then the vertices that collapse (at least three edges apart) and their targets."""
+    active, best, length = state
+    n = len(best)
+    flat = tris.ravel()
+    corners = np.argsort(flat).astype(np.int32)
+    first = np.zeros(n + 1, dtype=np.int32)
+    np.cumsum(np.bincount(flat, minlength=n), out=first[1:])
+    arrays = [
+        wp.array(a, dtype=dtype, device=device)
+        for a, dtype in ((flat, wp.int32), (corners, wp.int32), (first, wp.int32))
+    ]
+    w_tris, w_corners, w_first = arrays
+    w_movable = wp.array(movable, dtype=wp.int32, device=device)
+    w_group = wp.array(np.ascontiguousarray(group, dtype=np.int64), dtype=wp.int64, device=device)
+    w_active = wp.array(active, dtype=wp.int32, device=device)
+    w_best = wp.empty(len(active), dtype=wp.int32, device=device)
+    w_length = wp.empty(len(active), dtype=wp.float32, device=device)
+    launch_split(
+        _candidate_kernel,
+        len(active),
+        lambda lo, m: [
+            pts,
+            w_tris,
+            w_corners,
+            w_first,
+            w_movable,
+            w_group,
+            tol,
+            MIN_QUALITY,
+            w_active[lo : lo + m],
+            w_best[lo : lo + m],
+            w_length[lo : lo + m],
+        ],  # fmt: skip
+        device,
+    )
+    best[active], length[active] = w_best.numpy(), w_length.numpy()
+    rows = np.flatnonzero(best >= 0).astype(np.int32)
+    if not len(rows):
+        return rows, rows
+    keys = _keys(rows, length[rows], int(len(active)))
+    w_rows, w_keys = wp.array(rows, dtype=wp.int32, device=device), wp.array(keys, dtype=wp.int32, device=device)
+    claim = wp.full(n, len(rows), dtype=wp.int32, device=device)
+    wp.launch(_claim_kernel, dim=len(rows), inputs=[w_tris, w_corners, w_first, w_rows, w_keys, claim], device=device)
+    won = wp.empty(len(rows), dtype=wp.int32, device=device)
+    wp.launch(
+        _won_kernel, dim=len(rows), inputs=[w_tris, w_corners, w_first, w_rows, w_keys, claim, won], device=device
+    )
+    chosen = rows[won.numpy() == 1]
+    return chosen, best[chosen]
+
+
+def _keys(rows: np.ndarray, length: np.ndarray, salt: int) -> np.ndarray:
+    """Each candidate's rank: by a hash of its vertex and the round's ``salt`` (more candidates win a round than
+    ranked by length, which neighbours share; a new order each round), length breaking ties."""
+    spread = ((rows.astype(np.uint64) + np.uint64(salt)) * np.uint64(2654435761)) % np.uint64(1 << 31)
+    keys = np.empty(len(rows), dtype=np.int32)
+    keys[np.lexsort((length, spread))] = np.arange(len(rows), dtype=np.int32)
+    return keys
+
+
+def coarsened(field, surface: dict) -> dict:
+    """A kept surface (:func:`.hybrid.kept_surface`'s dict) with its new faces collapsed where flat, and the split
+    pieces of each kept source triangle collapsed at the midpoints inside them (module docstring): kept faces stay on
+    their source triangles' planes and keep every source vertex; every per-face and per-vertex array follows (a kept
+    face's corner weights are its corners' own). ``stats["coarsened"]``: how many faces went."""
+    tris, kept = surface["tris"], surface["kept"]
+    if not len(tris):
+        return surface
+    group = _groups(field, surface)
+    movable = surface["vertex_id"] < 0  # new vertices and midpoints of split sources
+    tol = TOLERANCE_VOXELS * field.voxel_size
+    out_tris, rows = collapse_flat(surface["verts"], tris, movable, group, tol, field.device)
+    used, local = np.unique(out_tris, return_inverse=True)
+    out = dict(surface)
+    out["verts"] = surface["verts"][used]
+    out["tris"] = local.reshape(-1, 3).astype(np.int32)
+    for key in ("kept", "field_id", "triangle_id"):
+        out[key] = surface[key][rows]
+    out["corner_bary"] = _moved_corners(tris, surface["corner_bary"], group, out_tris, rows)
+    for key in ("vertex_field", "vertex_id"):
+        out[key] = surface[key][used]
+    gone_kept = int(kept.sum() - out["kept"].sum())
+    stats = surface["stats"]
+    out["stats"] = {
+        **stats,
+        "kept_faces": stats["kept_faces"] - gone_kept,
+        "new_faces": stats["new_faces"] - (len(tris) - len(rows) - gone_kept),
+        "coarsened": len(tris) - len(rows),
+    }
+    return out
+
+
+def _groups(field, surface: dict) -> np.ndarray:
+    """(F,) int64 per face: its source triangle (a kept face's own, a new face's from the field), new faces apart."""
+    tris, kept = surface["tris"], surface["kept"]
+    field_ids, triangle_ids = surface["field_id"].astype(np.int64), surface["triangle_id"].astype(np.int64)
+    new = np.flatnonzero(~kept)
+    if len(new):
+        found_fields, found_triangles, _ = field.face_sources(surface["verts"], tris[new])
+        field_ids, triangle_ids = field_ids.copy(), triangle_ids.copy()
+        field_ids[new], triangle_ids[new] = found_fields, found_triangles
+    group = (field_ids << 33) + ((triangle_ids & 0xFFFFFFFF) << 1)
+    group[new] += 1
+    return group
+
+
+def _moved_corners(tris, corner_bary, group, out_tris, rows) -> np.ndarray:
+    """(F', 3, 3) the faces' corner weights after collapses: a corner now at another vertex takes that vertex's
+    weights from a face of the same source triangle it was a corner of (its ring was one source triangle's)."""
+    bary = corner_bary[rows].copy()
+    moved = np.argwhere(out_tris != tris[rows])
+    if not len(moved):
+        return bary
+    n = int(max(tris.max(), 1)) + 1
+    keys = group.repeat(3) * n + tris.ravel()  # (source triangle, vertex) of every corner before
+    order = np.argsort(keys, kind="stable")
+    wanted = group[rows[moved[:, 0]]] * n + out_tris[moved[:, 0], moved[:, 1]]
+    at = order[np.minimum(np.searchsorted(keys[order], wanted), len(keys) - 1)]
+    bary[moved[:, 0], moved[:, 1]] = corner_bary.reshape(-1, 3)[at]
+    return bary
