@@ -156,9 +156,20 @@ def _candidate_kernel(
     for c in range(lo, hi):
         v = _next_corner(tris, corners[c], 1)
         d = wp.length(points[v] - points[u])
-        if d < length[i] and _collapse_ok(points, tris, corners, first, u, v, tol, min_quality):
+        closer = d < length[i] or (d == length[i] and v < best[i])  # ties by index: any corner order gives one
+        if closer and _collapse_ok(points, tris, corners, first, u, v, tol, min_quality):
             best[i] = v
             length[i] = d
+
+
+@wp.kernel(enable_backward=False)
+def _corners_kernel(
+    flat: wp.array[wp.int32], first: wp.array[wp.int32], fill: wp.array[wp.int32], corners: wp.array[wp.int32]
+):
+    """Each corner into its vertex's list (a counting sort: the lists' order is any)."""
+    i = wp.tid()
+    v = flat[i]
+    corners[first[v] + wp.atomic_add(fill, v, 1)] = i
 
 
 @wp.kernel(enable_backward=False)
@@ -213,10 +224,15 @@ def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, gro
         ``(tris, rows)``: the triangles left (on the same vertex indices) and which input face each one was.
     """
     tris = np.ascontiguousarray(tris, dtype=np.int32)
-    rows = np.arange(len(tris), dtype=np.int64)
     n = len(points)
     if not len(tris) or not movable.any():
-        return tris, rows
+        return tris, np.arange(len(tris), dtype=np.int64)
+    # only the faces at a movable vertex or its neighbours are read (the fans of both ends of an edge)
+    near = np.zeros(n, dtype=bool)
+    near[tris[movable[tris].any(axis=1)].ravel()] = True
+    rows = np.flatnonzero(near[tris].any(axis=1))
+    rest = np.setdiff1d(np.arange(len(tris)), rows)
+    tris, rest_tris = np.ascontiguousarray(tris[rows]), tris[rest]
     pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
     movable = movable.astype(np.int32)
     best, length = np.full(n, -1, dtype=np.int32), np.zeros(n, dtype=np.float32)
@@ -238,7 +254,7 @@ def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, gro
         left -= len(won_rows)
         active = _near(tris, targets, n) & (movable > 0)
         active = np.flatnonzero(active).astype(np.int32)
-    return tris, rows
+    return np.concatenate([tris, rest_tris]), np.concatenate([rows, rest])
 
 
 def _near(tris: np.ndarray, targets: np.ndarray, n: int) -> np.ndarray:
@@ -257,14 +273,12 @@ def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state,
     active, best, length = state
     n = len(best)
     flat = tris.ravel()
-    corners = np.argsort(flat).astype(np.int32)
     first = np.zeros(n + 1, dtype=np.int32)
     np.cumsum(np.bincount(flat, minlength=n), out=first[1:])
-    arrays = [
-        wp.array(a, dtype=dtype, device=device)
-        for a, dtype in ((flat, wp.int32), (corners, wp.int32), (first, wp.int32))
-    ]
-    w_tris, w_corners, w_first = arrays
+    w_tris, w_first = wp.array(flat, dtype=wp.int32, device=device), wp.array(first, dtype=wp.int32, device=device)
+    w_corners = wp.empty(len(flat), dtype=wp.int32, device=device)
+    fill = wp.zeros(n, dtype=wp.int32, device=device)
+    wp.launch(_corners_kernel, dim=len(flat), inputs=[w_tris, w_first, fill, w_corners], device=device)
     w_movable = wp.array(movable, dtype=wp.int32, device=device)
     w_group = wp.array(np.ascontiguousarray(group, dtype=np.int64), dtype=wp.int64, device=device)
     w_active = wp.array(active, dtype=wp.int32, device=device)
