@@ -306,7 +306,8 @@ def extract(
 ) -> dict:
     """The zero surface of ``field``, computed once per result (``surface`` is the dict the cache keeps with it);
     with ``keep_faces`` the operands' own faces away from the seams (``AdaptiveField.kept_surface``, its face
-    sources kept in ``surface["kept"]``); else the remeshed surface's polygons (``adaptivity``: merged where flat)
+    sources kept in ``surface["kept"]``; ``adaptivity``: its new faces merged where flat); else the remeshed
+    surface's polygons (``adaptivity``: merged where flat)
     taken apart into triangles, its quads first (``quad_faces.fans``); merged only within the regions ``seams``
     (``regions.source_regions``: never across a material border or UV seam).
 
@@ -316,7 +317,7 @@ def extract(
         quads the first triangles pair into}``.
     """
     if "verts" not in surface and keep_faces:
-        kept = field.kept_surface(sharp=sharp)
+        kept = field.kept_surface(sharp=sharp, adaptivity=adaptivity if sharp else 0.0, regions=seams)
         surface["verts"], surface["tris"] = kept["verts"], kept["tris"]
         folds = runtime.engine().fold_edges(kept["verts"], kept["tris"]) if sharp else None
         surface["creases"] = np.zeros((0, 2), dtype=np.int32) if folds is None else folds
@@ -367,8 +368,8 @@ def whole_faces_back(result: dict, surface: dict, operands, output: Output) -> d
 
 
 def _seams(operands, output: Output):
-    """The operands' regions an adaptive remeshed surface merges within (``regions.source_regions``), else None."""
-    if output.adaptivity <= 0.0 or output.keep_faces or not output.sharp:
+    """The operands' regions an adaptive surface merges within (``regions.source_regions``), else None."""
+    if output.adaptivity <= 0.0 or not output.sharp:
         return None
     return regions.source_regions(operands)
 

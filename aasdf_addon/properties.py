@@ -193,8 +193,9 @@ def keep_faces_property(**overrides):
 def adaptivity_property(**overrides):
     options = {
         "name": "Adaptivity",
-        "description": "Merge the remeshed surface's cells where it is flat, into fewer, larger polygons (creases, "
-        "corners and the inputs' material and UV seams kept); 0: a polygon per voxel",
+        "description": "Merge the remeshed surface's cells (with Keep Original Faces, the seams' new faces) where "
+        "it is flat, into fewer, larger polygons (creases, corners and the inputs' material and UV seams kept); 0: a "
+        "polygon per voxel",
         "default": 0.0,
         "min": 0.0,
         "max": 1.0,

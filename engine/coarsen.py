@@ -25,10 +25,12 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .adaptive import tolerance
 from .parallel import launch_split
 
-# A neighbour within this many voxels of the planes of every face around a vertex can take its place.
-TOLERANCE_VOXELS = 0.01
+# A neighbour within this many voxels of the planes of every face around a vertex can take its place (at adaptivity
+# 0; an adaptivity widens it as it widens the remeshed surface's, :func:`.adaptive.tolerance`).
+TOLERANCE_VOXELS = tolerance(0.0)
 # Faces' shape quality (4 sqrt(3) area / sum of squared edges; 1 for an equilateral triangle) never falls below this
 # (or below the worst of the faces replaced, where that is worse).
 MIN_QUALITY = 0.05
@@ -327,17 +329,22 @@ def _keys(rows: np.ndarray, length: np.ndarray, salt: int) -> np.ndarray:
     return keys
 
 
-def coarsened(field, surface: dict) -> dict:
+def coarsened(field, surface: dict, adaptivity: float = 0.0, regions: dict | None = None) -> dict:
     """A kept surface (:func:`.hybrid.kept_surface`'s dict) with its new faces collapsed where flat, and the split
     pieces of each kept source triangle collapsed at the midpoints inside them (module docstring): kept faces stay on
     their source triangles' planes and keep every source vertex; every per-face and per-vertex array follows (a kept
-    face's corner weights are its corners' own). ``stats["coarsened"]``: how many faces went."""
+    face's corner weights are its corners' own). ``stats["coarsened"]``: how many faces went.
+
+    ``adaptivity`` (0 to 1) widens the tolerance as :func:`.adaptive.tolerance` (curved parts of the band merge too)
+    and lets new faces merge across source triangles within a region: ``regions`` ({field id: (T,) label per source
+    triangle}: materials, UV islands), else within an operand.
+    """
     tris, kept = surface["tris"], surface["kept"]
     if not len(tris):
         return surface
-    group = _groups(field, surface)
+    group = _groups(field, surface, adaptivity, regions)
     movable = surface["vertex_id"] < 0  # new vertices and midpoints of split sources
-    tol = TOLERANCE_VOXELS * field.voxel_size
+    tol = tolerance(adaptivity) * field.voxel_size
     out_tris, rows = collapse_flat(surface["verts"], tris, movable, group, tol, field.device)
     used, local = np.unique(out_tris, return_inverse=True)
     out = dict(surface)
@@ -359,18 +366,31 @@ def coarsened(field, surface: dict) -> dict:
     return out
 
 
-def _groups(field, surface: dict) -> np.ndarray:
-    """(F,) int64 per face: its source triangle (a kept face's own, a new face's from the field), new faces apart."""
+def _groups(field, surface: dict, adaptivity: float, regions) -> np.ndarray:
+    """(F,) int64 per face: its source triangle (a kept face's own, a new face's from the field), new faces apart; with
+    an ``adaptivity``, a new face's region of its operand (``regions``' label of its source triangle, else 0)."""
     tris, kept = surface["tris"], surface["kept"]
     field_ids, triangle_ids = surface["field_id"].astype(np.int64), surface["triangle_id"].astype(np.int64)
     new = np.flatnonzero(~kept)
     if len(new):
         found_fields, found_triangles, _ = field.face_sources(surface["verts"], tris[new])
+        found_fields, found_triangles = found_fields.astype(np.int64), found_triangles.astype(np.int64)
+        if adaptivity > 0.0:
+            found_triangles = _regions_of(found_fields, found_triangles, regions)
         field_ids, triangle_ids = field_ids.copy(), triangle_ids.copy()
         field_ids[new], triangle_ids[new] = found_fields, found_triangles
     group = (field_ids << 33) + ((triangle_ids & 0xFFFFFFFF) << 1)
     group[new] += 1
     return group
+
+
+def _regions_of(field_ids: np.ndarray, triangle_ids: np.ndarray, regions) -> np.ndarray:
+    """Each source triangle's region label (0 where ``regions`` names none for its operand)."""
+    out = np.zeros(len(triangle_ids), dtype=np.int64)
+    for field_id, labels in (regions or {}).items():
+        rows = np.flatnonzero((field_ids == field_id) & (triangle_ids >= 0))
+        out[rows] = np.asarray(labels, dtype=np.int64)[triangle_ids[rows]]
+    return out
 
 
 def _moved_corners(tris, corner_bary, group, out_tris, rows) -> np.ndarray:

@@ -472,10 +472,11 @@ class AdaptiveField:
         values = self.sample(grid).reshape(tuple(shape))
         return {"values": values, "origin": lo + 0.5 * spacing, "spacing": spacing}
 
-    def kept_surface(self, *, sharp: bool | None = None) -> dict:
+    def kept_surface(self, *, sharp: bool | None = None, adaptivity: float = 0.0, regions: dict | None = None) -> dict:
         """The zero surface keeping the operands' own faces wherever it is theirs, new (voxel) surface only along the
-        seams: see :func:`.hybrid.kept_surface` (a field that is no boolean of meshes keeps nothing)."""
-        return kept_surface(self, sharp=sharp)
+        seams, merged where flat (more with an ``adaptivity``, within ``regions``): see :func:`.hybrid.kept_surface`
+        (a field that is no boolean of meshes keeps nothing)."""
+        return kept_surface(self, sharp=sharp, adaptivity=adaptivity, regions=regions)
 
     def to_mesh(
         self,
@@ -498,7 +499,8 @@ class AdaptiveField:
                 shells), whose closest points lie on a marching-cubes surface, so there is no crease to recover.
             return_creases: Also return the crease edges the sharp extraction reconstructed.
             keep_faces: Keep the operands' own triangles wherever the surface is theirs, away from the seams
-                (:meth:`kept_surface`; ``iso`` 0 only; no crease edges are returned with them).
+                (:meth:`kept_surface`; ``iso`` 0 only; no crease edges are returned with them); an ``adaptivity``
+                merges the seams' new faces where flat within it.
             quads: Return polygons: the dual quads kept whole where they are planar and convex (:mod:`.quads`),
                 the rest triangles (sharp surfaces only; marching cubes stays triangles).
             adaptivity: 0 to 1: merge cells where the surface is flat within a bound that grows with it
@@ -521,7 +523,7 @@ class AdaptiveField:
         if keep_faces:
             if iso != 0.0:
                 raise ValueError(f"Kept faces lie on the zero surface: expected 'iso' 0 with 'keep_faces', got {iso}.")
-            surface = self.kept_surface(sharp=sharp)
+            surface = self.kept_surface(sharp=sharp, adaptivity=adaptivity, regions=regions)
             verts, tris = surface["verts"], surface["tris"]
             mesh = (verts, tris) if not quads else (verts, tris.ravel(), np.full(len(tris), 3, np.int32))
             return (*mesh, np.zeros((0, 2), dtype=np.int32)) if return_creases else mesh

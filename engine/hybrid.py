@@ -313,10 +313,11 @@ def _assemble(points, kept, k_tris, k_alive, v_tris, strips, voxel_verts, voxel_
     }
 
 
-def kept_surface(field, *, sharp: bool | None = None) -> dict:
+def kept_surface(field, *, sharp: bool | None = None, adaptivity: float = 0.0, regions: dict | None = None) -> dict:
     """The zero surface of ``field`` keeping the operands' own faces wherever it is theirs and no other surface or
-    defect of theirs is near, with new (voxel) surface only along the seams (:func:`hybrid_surface`); a field that is
-    no boolean of meshes (a built field, an offset, a shell) keeps nothing: its voxel surface.
+    defect of theirs is near, with new (voxel) surface only along the seams (:func:`hybrid_surface`), made coarse
+    where flat (:func:`.coarsen.coarsened`: ``adaptivity`` and ``regions`` as there); a field that is no boolean of
+    meshes (a built field, an offset, a shell) keeps nothing: its voxel surface.
 
     Returns:
         dict: ``verts`` (N, 3) float32, ``tris`` (M, 3) int32 (closed, counter-clockwise seen from outside), per face
@@ -325,10 +326,10 @@ def kept_surface(field, *, sharp: bool | None = None) -> dict:
         float32, ``stats``.
     """
     if field.placement is not None:  # joined in its own frame, then placed
-        surface = kept_surface(field.in_frame(), sharp=sharp)
+        surface = kept_surface(field.in_frame(), sharp=sharp, adaptivity=adaptivity, regions=regions)
         surface["verts"], surface["tris"] = field.placement.place_surface(surface["verts"], surface["tris"])
         return surface
     verts, tris = field.to_mesh(sharp=sharp)
     if field.expression is None or not len(tris):
         return voxel_surface_only(verts, tris, "not a boolean of meshes")
-    return coarsened(field, hybrid_surface(field, verts, tris))
+    return coarsened(field, hybrid_surface(field, verts, tris), adaptivity, regions)

@@ -59,9 +59,7 @@ class AASDF_PT_main(SidebarPanel, bpy.types.Panel):
         col.prop(settings, "thickness")
         col.prop(settings, "sharp_edges")
         col.prop(settings, "keep_faces")
-        sub = col.column()
-        sub.active = not settings.keep_faces  # the remeshed surface's
-        sub.prop(settings, "adaptivity")
+        col.prop(settings, "adaptivity")
         col.prop(settings, "hide_inputs")
 
 
