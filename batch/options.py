@@ -64,7 +64,8 @@ def add_job_options(parser):
         "--adaptivity",
         type=float,
         default=0.0,
-        help="0 to 1: merge the remeshed surface's cells where it is flat, into fewer, larger polygons (default 0)",
+        help="0 to 1: merge the remeshed surface's cells (with kept faces, the seams' new faces) where it is flat, "
+        "into fewer, larger polygons (default 0)",
     )
     parser.add_argument("--debug-volume", metavar="FILE", help="also write the result's field as a .vdb")
     parser.add_argument("--blend", metavar="FILE", help="open this .blend first (with the bpy module)")
