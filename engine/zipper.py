@@ -25,7 +25,7 @@ OVER_VOXELS = 1.0
 # Border loops are paired through vertices within this many voxels of each other.
 PAIR_VOXELS = 4.0
 # Rounds of giving up faces at loops that cannot be paired before the join is abandoned.
-MAX_ROUNDS = 6
+MAX_ROUNDS = 12
 # A loop failing again gives up this many rings of kept faces around it (a small kept piece: all of it).
 WIDEN_RINGS = 3
 
