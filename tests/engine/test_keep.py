@@ -115,14 +115,15 @@ def test_kept_surface_is_closed_and_close_to_the_exact_boolean(case):
 def test_kept_faces_cover_what_should_be_kept_and_new_faces_only_the_seams(case):
     s, h = case["surface"], case["h"]
     share = _kept_share(s, case["operands"], case["exact"], h)
-    # measured: 1.000 on every pair but cube - bore, 0.957: its 128-sided bore's walls are slivers under a voxel wide
-    # whose split border does not pair with the voxel surface on one side; that side's wall is remeshed
+    # measured: 1.000 on every pair but cube - bore, 0.960: its 128-sided bore's walls are slivers 1.5 voxels wide and
+    # 240 long, on which the float32 distance query reads sampled points up to 0.12 voxel off (29 % of the bore's own
+    # samples beyond this tolerance): a lower bound there
     assert share >= (0.9 if case["name"] == "cube - bore" else 0.99), share
     seam = _seam_length(case["exact"], case["operands"][0]) / h
     new = s["stats"]["new_faces"]
-    # measured: 13-24 new triangles a voxel of seam; the whole output 0.13-0.21x the remeshed one
-    # cube - bore: 50 (half its sliver-walled bore remeshed, see above)
-    assert new <= 24 * seam * (2.5 if case["name"] == "cube - bore" else 1.25), (new, seam)
+    # measured: 14-19 new triangles a voxel of seam; the whole output 0.10-0.27x the remeshed one
+    # cube - bore: 42 (its strips follow the jagged border of the bore's slivers cut across near the seam)
+    assert new <= 24 * seam * (2.0 if case["name"] == "cube - bore" else 1.25), (new, seam)
     assert len(s["tris"]) <= 0.3 * case["remeshed"]
 
 
