@@ -253,20 +253,23 @@ def _widened(tris, alive, at: np.ndarray, n: int, rings: int = WIDEN_RINGS) -> n
 
 
 def _strips(points, k_loops, v_loops, pairs, reach: float, device) -> tuple[np.ndarray, np.ndarray]:
-    """The strips between paired loops, and the kept loops whose strip has an edge longer than ``reach`` (the two
-    loops do not run side by side all along)."""
+    """The strips between paired loops, and the kept loops whose strip has a step where the two loops are farther
+    apart than ``reach`` (they do not run side by side all along)."""
     k_next, k_members, k_labels = k_loops
     v_next, v_members, v_labels = v_loops
     k_count = np.bincount(k_labels[k_members], minlength=len(points))[pairs[:, 0]]
     v_count = np.bincount(v_labels[v_members], minlength=len(points))[pairs[:, 1]]
-    strips = zip_loops(points, k_next, v_next, pairs[:, 0], pairs[:, 1], k_count, v_count, device)
+    nearest = np.full(len(points), -1, dtype=np.int64)
+    on_k = k_members[np.isin(k_labels[k_members], pairs[:, 0])]
+    on_v = v_members[np.isin(v_labels[v_members], pairs[:, 1])]
+    found = nearest_points(points[on_v], points[on_k], reach, device)
+    nearest[on_k[found >= 0]] = on_v[found[found >= 0]]
+    strips, gaps = zip_loops(points, k_next, v_next, pairs[:, 0], pairs[:, 1], k_count, v_count, nearest, device)
     if not len(strips):
         return strips, np.zeros(0, dtype=np.int64)
-    corners = points[strips]
-    longest = np.linalg.norm(corners - corners[:, [1, 2, 0]], axis=2).max(axis=1)
     counts = k_count + v_count
     first = np.r_[0, np.cumsum(counts)[:-1]]
-    return strips, pairs[np.maximum.reduceat(longest, first) > reach, 0]
+    return strips, pairs[np.maximum.reduceat(gaps, first) > reach, 0]
 
 
 def voxel_surface_only(verts, tris, why: str) -> dict:

@@ -339,7 +339,7 @@ def _judge_leaf(field, index: int, source, bvhs: list) -> dict:
         mark[todo[split]] = True
         # pieces still far larger than the split size are split again before they are judged (fewer rounds)
         for split_pass in range(SPLITS_PER_ROUND):
-            verts, tris, origin, new_ends = split_triangles(verts, tris, mark)
+            verts, tris, origin, new_ends = split_triangles(verts, tris, mark, split_edge)
             ends = np.concatenate([ends, new_ends])
             parent, flip, status = parent[origin], flip[origin], status[origin]
             # a split triangle's pieces are judged again; a neighbour's pieces keep its verdict

@@ -125,12 +125,15 @@ def per_triangle_min(values: np.ndarray, tris: np.ndarray, n_verts: int, first: 
 
 
 # ---- splitting ----
-def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray):
+def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long_edge: float = np.inf):
     """Split the longest edge of each ``split`` triangle at its midpoint, in every triangle that has that edge
-    (longest-edge bisection, Rivara's: pieces keep their shape where splitting every edge would keep a sliver's).
+    (longest-edge bisection, Rivara's: pieces keep their shape where splitting every edge would keep a sliver's). A
+    sliver's other long edges are split with it (every edge longer than ``long_edge`` and than twice its triangle's
+    shortest): it is cut across into pieces as wide as it is, where bisecting its longest edge alone makes narrower
+    slivers of it.
 
     Args:
-        verts: (V, 3) float32; tris: (T, 3) int64; split: (T,) bool.
+        verts: (V, 3) float32; tris: (T, 3) int64; split: (T,) bool; long_edge: float.
     Returns:
         ``(verts, tris, origin, ends)``: the vertices with the midpoints appended, the new triangles, (T',) int64 the
         triangle of ``tris`` each new one lies in, and (M, 2) int64 the edge each midpoint splits.
@@ -142,7 +145,9 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray):
     e = verts[t[:, [1, 2, 0]]].astype(np.float64) - verts[t].astype(np.float64)
     longest = np.argmax((e**2).sum(axis=2), axis=1)
     rows = np.flatnonzero(split)
-    marked_keys = np.unique(keys.reshape(-1, 3)[rows, longest[rows]])
+    lengths = np.sqrt((e[rows] ** 2).sum(axis=2))
+    across = (lengths > long_edge) & (lengths > 2.0 * lengths.min(axis=1, keepdims=True))
+    marked_keys = np.unique(np.r_[keys.reshape(-1, 3)[rows, longest[rows]], keys.reshape(-1, 3)[rows][across]])
     at = np.searchsorted(marked_keys, keys)
     at_ok = np.minimum(at, max(len(marked_keys) - 1, 0))
     marked = (at < len(marked_keys)) & (marked_keys[at_ok] == keys) if len(marked_keys) else np.zeros(len(keys), bool)

@@ -115,13 +115,15 @@ def test_kept_surface_is_closed_and_close_to_the_exact_boolean(case):
 def test_kept_faces_cover_what_should_be_kept_and_new_faces_only_the_seams(case):
     s, h = case["surface"], case["h"]
     share = _kept_share(s, case["operands"], case["exact"], h)
-    # measured: 1.000 on every pair but cube - bore, 0.957: its 128-sided bore's walls are slivers under a voxel wide
-    # whose split border does not pair with the voxel surface on one side; that side's wall is remeshed
+    # measured: 1.000 on every pair but cube - bore, 0.960: its 128-sided bore's walls are slivers 1.5 voxels wide and
+    # 240 long, on which the float32 distance query reads sampled points up to 0.12 voxel off (29 % of the bore's own
+    # samples beyond this tolerance): a lower bound there
     assert share >= (0.9 if case["name"] == "cube - bore" else 0.99), share
     seam = _seam_length(case["exact"], case["operands"][0]) / h
     new = s["stats"]["new_faces"]
-    # measured: 13-24 new triangles a voxel of seam; cube - bore: 50 (half its sliver-walled bore remeshed, see above)
-    assert new <= 24 * seam * (2.5 if case["name"] == "cube - bore" else 1.25), (new, seam)
+    # measured: 14-19 new triangles a voxel of seam; cube - bore: 42 (its strips follow the jagged border of the bore's
+    # slivers cut across near the seam)
+    assert new <= 24 * seam * (2.0 if case["name"] == "cube - bore" else 1.25), (new, seam)
     # the whole output against the remeshed one, measured: plate 0.095, cube | tilted cube 0.108, cube - bore 0.131
     # (their new faces collapsed where flat); the rocker arm 0.20 and the hex prism & sphere 0.24, whose operands'
     # own triangles (20,088 and 36,480) are most of it
@@ -381,3 +383,43 @@ def test_a_join_that_needs_many_rounds_still_keeps_faces():
     _check_closed(s)
     # measured: 8,529 faces kept (the cow's and the ball's)
     assert s["stats"]["kept_faces"] > 3000
+
+
+def _new_faces_off_the_seam(surface, a, b, h: float) -> int:
+    """New faces whose centre is farther than 4 voxels from one of the two operands (off the seam, where the
+    surface is one operand's own)."""
+    centres = surface["verts"][surface["tris"][~surface["kept"]]].mean(axis=1)
+    return int((np.maximum(unsigned_distance(*a, centres), unsigned_distance(*b, centres)) > 4.0 * h).sum())
+
+
+def test_a_bore_through_the_fandisk_keeps_its_sliver_wall():
+    """The cylinder's wall triangles are slivers (1.4 voxels wide, 220 long): the pieces near the seam are cut across
+    (not bisected into narrower slivers), and the strips follow their jagged border, so the bore keeps its wall."""
+    op, a, b = cad_pairs()["fandisk - cylinder"]
+    h = _voxel(a, b)
+    fa, fb = engine.build_fields([a, b], voxel_size=h, field_ids=[0, 1])
+    s = OPS[op](fa, fb).kept_surface()
+    _check_closed(s)
+    assert s["stats"]["kept_fallback"] == ""
+    # measured: 5,070 of the cylinder's faces kept (none before: its wall came back as 13,000 voxel faces)
+    assert (s["kept"] & (s["field_id"] == 1)).sum() > 1700
+    assert _new_faces_off_the_seam(s, a, b, h) <= 20  # measured 0 at /96 to /256
+    d = hausdorff(s["verts"], s["tris"], *exact_boolean(op, *a, *b), n=50_000)
+    assert d["max"] < 1.0 * h and d["p95"] < 0.05 * h, d  # measured max 0.37 voxel, p95 0.001
+
+
+@pytest.mark.parametrize("resolution", [128, 160])
+def test_a_bore_keeps_its_sliver_wall_at_coarser_voxels(resolution):
+    """At /128 and /160 the bore's wall triangles are under a voxel wide: their kept border zigzags (three times the
+    voxel loop's length), and the strip still pairs it with the voxel loop step by step."""
+    op, a, b = cad_pairs()["cube - bore"]
+    h = _voxel(a, b) * 256 / resolution
+    fa, fb = engine.build_fields([a, b], voxel_size=h, field_ids=[0, 1])
+    s = OPS[op](fa, fb).kept_surface()
+    _check_closed(s)
+    assert s["stats"]["kept_fallback"] == ""
+    # measured: the bore's faces kept 3,072 (/128) and 9,276 (/160); 304 and 272 faces kept in all before
+    assert (s["kept"] & (s["field_id"] == 1)).sum() > {128: 1000, 160: 3000}[resolution]
+    assert _new_faces_off_the_seam(s, a, b, h) <= 20  # measured 0
+    d = hausdorff(s["verts"], s["tris"], *exact_boolean(op, *a, *b), n=50_000)
+    assert d["max"] < 1.0 * h and d["p95"] < 0.05 * h, d  # measured max 0.36-0.37 voxel, p95 0.002
