@@ -236,14 +236,19 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
     return alive, v_gone
 
 
+# Kept pieces of at most this many faces are fragments: a loop of theirs failing twice gives them up whole.
+SMALL_PIECE = 256
+
+
 def _widened(tris, alive, at: np.ndarray, n: int, rings: int = WIDEN_RINGS) -> np.ndarray:
-    """``at`` (per vertex) grown over the kept pieces it touches: a piece of a tenth of the kept faces or less whole,
-    a larger one ``rings`` rings of faces deep (a scan's one large piece is not given up for a loop at its edge)."""
+    """``at`` (per vertex) grown over the kept pieces it touches: a small piece whole (a tenth of the kept faces or
+    less, and at most SMALL_PIECE faces: a fragment), a larger one ``rings`` rings of faces deep (a scan's one large
+    piece, or a messy mesh's many, is not given up for a loop at its edge)."""
     faces = tris[alive]
     pieces = vertex_components(faces, n)
     sizes = np.bincount(pieces[faces[:, 0]], minlength=n)
     touched = np.unique(pieces[at])
-    small = touched[sizes[touched] * 10 <= len(faces)]
+    small = touched[(sizes[touched] * 10 <= len(faces)) & (sizes[touched] <= SMALL_PIECE)]
     grown = at | np.isin(pieces, small)
     for _ in range(rings):
         reached = np.zeros(n, dtype=bool)

@@ -27,7 +27,7 @@ import numpy as np
 import warp as wp
 
 from .expression import evaluate_signs, leaves, widest_blend
-from .meshcheck import edge_table, problem_faces, weld_positions
+from .meshcheck import edge_table, weld_positions
 from .parallel import launch_split, run_tasks
 from .refine import merge_kept, per_triangle_min, restore_whole, split_triangles, triangle_samples
 
@@ -116,14 +116,26 @@ def _margin(field, bvh, points, band: float, reach: float, device) -> tuple[np.n
 
 
 # ---- the leaf's own defects ----
-def _own_defects(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """(T,) bool: triangles at an open, non-manifold or inconsistently oriented edge of the mesh (judged with vertices
-    at one position merged), or repeating another triangle's corners."""
+def _own_defects(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A mesh's defects (judged with vertices at one position merged): ``(repeated, points, parts)``: (T,) bool the
+    triangles repeating another triangle's corners (never kept), and the defects as triangles to measure distances
+    to: each open, non-manifold or inconsistently oriented edge as a flat triangle ``a b b``, each repeated triangle
+    as itself (``points`` (P, 3) float32, ``parts`` (D, 3) int32; empty when the mesh has none). A triangle at a
+    hole's edge keeps its parts farther than the band from that edge."""
     welded_verts, welded = weld_positions(verts, tris)
     welded = np.asarray(welded, dtype=np.int32)
-    bad = problem_faces(welded, len(welded_verts), edge_table(welded, len(welded_verts))).astype(bool)
     _, inverse, counts = np.unique(np.sort(welded, axis=1), axis=0, return_inverse=True, return_counts=True)
-    return bad | (counts[inverse.reshape(-1)] > 1)
+    repeated = counts[inverse.reshape(-1)] > 1
+    edges = edge_table(welded, len(welded_verts))
+    bad = edges["pairs"][(edges["faces"] != 2) | (edges["forward"] != 1)].astype(np.int64)
+    points = np.asarray(welded_verts, dtype=np.float32)
+    # an edge as a sliver: its ends and its midpoint a hair off the line (the BVH's point query skips flat triangles)
+    a, b = points[bad[:, 0]].astype(np.float64), points[bad[:, 1]].astype(np.float64)
+    off = np.zeros_like(a)
+    off[np.arange(len(a)), np.argmin(np.abs(b - a), axis=1)] = 1e-5 * np.linalg.norm(b - a, axis=1)
+    mids = np.arange(len(points), len(points) + len(bad))
+    parts = np.concatenate([np.stack([bad[:, 0], bad[:, 1], mids], axis=1), welded[repeated]]).astype(np.int32)
+    return repeated, np.concatenate([points, (0.5 * (a + b) + off).astype(np.float32)]), parts
 
 
 def _unit_normals(verts, tris) -> np.ndarray:
@@ -145,13 +157,14 @@ def _side_at(leaf, points, normals, offset: float) -> np.ndarray:
 
 @dataclass
 class _Own:
-    """What a leaf's own triangles give whatever the other leaves are: their defects (:func:`_own_defects`), each
-    one's side of the leaf's own field (:func:`_side_at`, half a voxel out) and the mesh of the defective ones."""
+    """What a leaf's own triangles give whatever the other leaves are: their defects (:func:`_own_defects`: the
+    repeated triangles, and a mesh of every defect to measure distances to) and each one's side of the leaf's own
+    field (:func:`_side_at`, half a voxel out)."""
 
     values: object  # the leaf field's values array it was read from (the same field: the same array)
     offset: float
     device: object
-    defects: np.ndarray  # (T,) bool
+    defects: np.ndarray  # (T,) bool: repeated triangles
     side: np.ndarray  # (T,) int8
     defect_mesh: object  # wp.Mesh or None
 
@@ -170,14 +183,13 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     if own is not None and own.values is leaf.values and own.offset == offset and own.device == device:
         return own
     verts, tris = source.verts, source.tris.astype(np.int64)
-    defects = _own_defects(verts, tris)
+    defects, points, parts = _own_defects(verts, tris)
     side = _side_at(leaf, verts[tris].mean(axis=1), _unit_normals(verts, tris), offset)
-    bad = np.flatnonzero(defects)
     defect_mesh = None
-    if len(bad) and len(bad) < len(tris):
+    if len(parts) and not defects.all():
         defect_mesh = wp.Mesh(
-            points=wp.array(verts, dtype=wp.vec3, device=device),
-            indices=wp.array(tris[bad].reshape(-1).astype(np.int32), dtype=wp.int32, device=device),
+            points=wp.array(points, dtype=wp.vec3, device=device),
+            indices=wp.array(parts.reshape(-1), dtype=wp.int32, device=device),
         )
     own = _Own(leaf.values, offset, device, defects, side, defect_mesh)
     _OWN[source] = own

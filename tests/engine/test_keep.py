@@ -372,17 +372,23 @@ def test_a_drag_keeps_the_faces_a_fresh_field_would():
         np.testing.assert_array_equal(dragged[name], afresh[name])
 
 
-def test_a_join_that_needs_many_rounds_still_keeps_faces():
-    """The cow united with a ball at /256: loops near its thin parts fail for several rounds, each giving up a few
-    kept faces, before all pair (six rounds were too few: the voxel surface alone came back)."""
-    cow = normalised(load_mesh("cow.obj"))
+# measured (own faces kept of the input's): homer 11,399 of 12,000 (none before: the join gave up whole pieces, round
+# after round, and fell back to the voxel surface), the cow 5,202 of 5,804 (none), the teapot 1,485 of 6,320 (none:
+# its triangles at open edges were never kept, now their parts a band away are), suzanne 808 of 968 (1)
+MESSY = {"homer": 9000, "cow": 4000, "teapot": 500, "suzanne": 300}
+
+
+@pytest.mark.parametrize("name", list(MESSY))
+def test_meshes_with_thin_parts_and_open_edges_keep_their_faces_with_a_ball(name):
+    """Each united with a ball at /256: loops near thin parts fail for several rounds (each giving up a few kept faces
+    rings deep, not whole pieces), and triangles at open or inconsistent edges keep their parts a band away."""
+    mesh = normalised(load_mesh(f"{name}.obj"))
     ball = normalised(uv_sphere(1.0, rings=48, segments=96), center=(0.2, 0.2, 0.2), diagonal=0.6)
-    fa, fb = engine.build_fields([cow, ball], voxel_size=_voxel(cow, ball), field_ids=[0, 1])
+    fa, fb = engine.build_fields([mesh, ball], voxel_size=_voxel(mesh, ball), field_ids=[0, 1])
     s = engine.union(fa, fb).kept_surface()
     assert s["stats"]["kept_fallback"] == "", s["stats"]
     _check_closed(s)
-    # measured: 8,529 faces kept (the cow's and the ball's)
-    assert s["stats"]["kept_faces"] > 3000
+    assert (s["kept"] & (s["field_id"] == 0)).sum() > MESSY[name]
 
 
 def _new_faces_off_the_seam(surface, a, b, h: float) -> int:
