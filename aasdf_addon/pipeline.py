@@ -318,7 +318,7 @@ def extract(
     """
     if "verts" not in surface and keep_faces:
         kept = field.kept_surface(sharp=sharp, adaptivity=adaptivity if sharp else 0.0, regions=seams)
-        surface["verts"], surface["tris"] = kept["verts"], kept["tris"]
+        surface["verts"], surface["tris"], surface["quads"] = kept["verts"], kept["tris"], kept.get("quads", 0)
         folds = runtime.engine().fold_edges(kept["verts"], kept["tris"]) if sharp else None
         surface["creases"] = np.zeros((0, 2), dtype=np.int32) if folds is None else folds
         surface["kept"] = kept

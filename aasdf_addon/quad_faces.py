@@ -33,12 +33,16 @@ def fans(faces, sizes) -> tuple[np.ndarray, int]:
 def quads_back(result: dict, quads: int) -> dict:
     """``result`` (``pipeline.extract`` with ``attributes``, its first ``2 * quads`` triangles the halves of quads)
     with each quad whose halves agree (:func:`mergeable`) written as one face: those faces first
-    (``attributes["polygons"]``), then the triangles left, each attribute in that layout."""
+    (``attributes["polygons"]``), then the triangles left, each attribute in that layout. Polygons already there
+    (``polygons.as_polygons``: an operand's faces kept whole, before the triangles) stay first."""
     attrs = result["attributes"]
-    if not quads or "polygons" in attrs:
+    if not quads:
         return result
+    sizes, corner_vert = attrs.get("polygons") or (np.zeros(0, np.int32), np.zeros(0, np.int32))
+    faces_before, corners_before = len(sizes), int(np.sum(sizes))
+    triangles = _triangles_part(attrs, faces_before, corners_before)
     tris = result["tris"]
-    first = 2 * np.flatnonzero(mergeable(attrs, quads))
+    first = 2 * np.flatnonzero(mergeable(triangles, quads))
     if not len(first):
         return result
     rest = np.ones(len(tris), dtype=bool)
@@ -46,17 +50,35 @@ def quads_back(result: dict, quads: int) -> dict:
     corners = np.stack([3 * first, 3 * first + 1, 3 * first + 2, 3 * first + 5], axis=1).ravel()  # a b c, d
     corner_rest = np.repeat(rest, 3)
     out = dict(attrs)
-    out["polygons"] = (np.full(len(first), 4, np.int32), tris.ravel()[corners].astype(np.int32))
+    out["polygons"] = (
+        np.r_[sizes, np.full(len(first), 4)].astype(np.int32),
+        np.r_[corner_vert, tris.ravel()[corners]].astype(np.int32),
+    )
+
+    def faces(values):
+        return np.r_[values[:faces_before], values[faces_before:][first], values[faces_before:][rest]]
+
+    def corner_values(values):
+        mine = values[corners_before:]
+        return np.concatenate([values[:corners_before], mine[corners], mine[corner_rest]])
+
     for name in ("material_index", "smooth", "operand"):
         if attrs.get(name) is not None:
-            out[name] = np.r_[attrs[name][first], attrs[name][rest]].astype(attrs[name].dtype)
-    out["uv_maps"] = {k: np.concatenate([v[corners], v[corner_rest]]) for k, v in attrs.get("uv_maps", {}).items()}
-    out["colors"] = {
-        k: (kind, np.concatenate([v[corners], v[corner_rest]])) for k, (kind, v) in attrs.get("colors", {}).items()
-    }
+            out[name] = faces(attrs[name]).astype(attrs[name].dtype)
+    out["uv_maps"] = {k: corner_values(v) for k, v in attrs.get("uv_maps", {}).items()}
+    out["colors"] = {k: (kind, corner_values(v)) for k, (kind, v) in attrs.get("colors", {}).items()}
     if attrs.get("custom_normals") is not None:
-        out["custom_normals"] = np.concatenate([attrs["custom_normals"][corners], attrs["custom_normals"][corner_rest]])
-    return {**result, "tris": tris[rest], "attributes": out, "edges": _polygon_edges(result["edges"], first, rest)}
+        out["custom_normals"] = corner_values(attrs["custom_normals"])
+    edges = _polygon_edges(result["edges"], first, rest) if not faces_before else {}
+    return {**result, "tris": tris[rest], "attributes": out, "edges": edges}
+
+
+def _triangles_part(attrs: dict, faces_before: int, corners_before: int) -> dict:
+    """The attributes of the triangles alone, after the polygons written before them."""
+    out = {name: attrs[name][faces_before:] for name in ("material_index", "smooth", "operand") if name in attrs}
+    out["uv_maps"] = {k: v[corners_before:] for k, v in attrs.get("uv_maps", {}).items()}
+    out["colors"] = {k: (kind, v[corners_before:]) for k, (kind, v) in attrs.get("colors", {}).items()}
+    return out
 
 
 def _polygon_edges(edges: dict, first, rest) -> dict:

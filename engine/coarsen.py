@@ -136,11 +136,13 @@ def _candidate_kernel(
     group: wp.array[wp.int64],
     tol: float,
     min_quality: float,
+    place: wp.array[wp.int32],
     active: wp.array[wp.int32],
     best: wp.array[wp.int32],
     length: wp.array[wp.float32],
 ):
-    """Per vertex listed in ``active``: the nearest neighbour it may move onto (-1 for none) and how far that is."""
+    """Per vertex listed in ``active``: the nearest neighbour it may move onto (-1 for none) and how far that is
+    (ties to the smaller ``place``, a hash of the position: the same choice however the vertices are numbered)."""
     i = wp.tid()
     u = active[i]
     best[i] = -1
@@ -158,7 +160,7 @@ def _candidate_kernel(
     for c in range(lo, hi):
         v = _next_corner(tris, corners[c], 1)
         d = wp.length(points[v] - points[u])
-        closer = d < length[i] or (d == length[i] and v < best[i])  # ties by index: any corner order gives one
+        closer = d < length[i] or (d == length[i] and place[v] < place[best[i]])
         if closer and _collapse_ok(points, tris, corners, first, u, v, tol, min_quality):
             best[i] = v
             length[i] = d
@@ -236,12 +238,14 @@ def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, gro
     rest = np.setdiff1d(np.arange(len(tris)), rows)
     tris, rest_tris = np.ascontiguousarray(tris[rows]), tris[rest]
     pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
+    place = _places(points)
     movable = movable.astype(np.int32)
     best, length = np.full(n, -1, dtype=np.int32), np.zeros(n, dtype=np.float32)
     active = np.flatnonzero(movable).astype(np.int32)
     left = len(active)
     for _ in range(MAX_ROUNDS):
-        won_rows, targets = _round(pts, tris, movable, group[rows], (active, best, length), float(tol), device)
+        state = (active, best, length, place)
+        won_rows, targets = _round(pts, tris, movable, group[rows], state, float(tol), device)
         if not len(won_rows):
             break
         remap = np.arange(n, dtype=np.int32)
@@ -272,7 +276,7 @@ def _near(tris: np.ndarray, targets: np.ndarray, n: int) -> np.ndarray:
 def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state, tol: float, device):
     """One round: the ``active`` vertices' best collapses found again (``best``, ``length`` kept between rounds,
     changed in place), then the vertices that collapse (at least three edges apart) and their targets."""
-    active, best, length = state
+    active, best, length, place = state
     n = len(best)
     flat = tris.ravel()
     first = np.zeros(n + 1, dtype=np.int32)
@@ -284,6 +288,7 @@ def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state,
     w_movable = wp.array(movable, dtype=wp.int32, device=device)
     w_group = wp.array(np.ascontiguousarray(group, dtype=np.int64), dtype=wp.int64, device=device)
     w_active = wp.array(active, dtype=wp.int32, device=device)
+    w_place = wp.array(place, dtype=wp.int32, device=device)
     w_best = wp.empty(len(active), dtype=wp.int32, device=device)
     w_length = wp.empty(len(active), dtype=wp.float32, device=device)
     launch_split(
@@ -298,6 +303,7 @@ def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state,
             w_group,
             tol,
             MIN_QUALITY,
+            w_place,
             w_active[lo : lo + m],
             w_best[lo : lo + m],
             w_length[lo : lo + m],
@@ -308,7 +314,7 @@ def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state,
     rows = np.flatnonzero(best >= 0).astype(np.int32)
     if not len(rows):
         return rows, rows
-    keys = _keys(rows, length[rows], int(len(active)))
+    keys = _keys(place[rows], length[rows], int(len(active)))
     w_rows, w_keys = wp.array(rows, dtype=wp.int32, device=device), wp.array(keys, dtype=wp.int32, device=device)
     claim = wp.full(n, len(rows), dtype=wp.int32, device=device)
     wp.launch(_claim_kernel, dim=len(rows), inputs=[w_tris, w_corners, w_first, w_rows, w_keys, claim], device=device)
@@ -320,12 +326,19 @@ def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state,
     return chosen, best[chosen]
 
 
-def _keys(rows: np.ndarray, length: np.ndarray, salt: int) -> np.ndarray:
-    """Each candidate's rank: by a hash of its vertex and the round's ``salt`` (more candidates win a round than
-    ranked by length, which neighbours share; a new order each round), length breaking ties."""
-    spread = ((rows.astype(np.uint64) + np.uint64(salt)) * np.uint64(2654435761)) % np.uint64(1 << 31)
-    keys = np.empty(len(rows), dtype=np.int32)
-    keys[np.lexsort((length, spread))] = np.arange(len(rows), dtype=np.int32)
+def _places(points: np.ndarray) -> np.ndarray:
+    """(V,) int32 a hash of each vertex's position (its float bits): orders that do not depend on numbering."""
+    bits = np.ascontiguousarray(points, dtype=np.float32).view(np.uint32).astype(np.uint64)
+    mixed = (bits[:, 0] * np.uint64(73856093)) ^ (bits[:, 1] * np.uint64(19349663)) ^ (bits[:, 2] * np.uint64(83492791))
+    return (mixed % np.uint64(1 << 31)).astype(np.int32)
+
+
+def _keys(places: np.ndarray, length: np.ndarray, salt: int) -> np.ndarray:
+    """Each candidate's rank: by a hash of its vertex's place and the round's ``salt`` (more candidates win a round
+    than ranked by length, which neighbours share; a new order each round), length breaking ties."""
+    spread = ((places.astype(np.uint64) + np.uint64(salt)) * np.uint64(2654435761)) % np.uint64(1 << 31)
+    keys = np.empty(len(places), dtype=np.int32)
+    keys[np.lexsort((length, spread))] = np.arange(len(places), dtype=np.int32)
     return keys
 
 
@@ -352,6 +365,8 @@ def coarsened(field, surface: dict, adaptivity: float = 0.0, regions: dict | Non
     out["tris"] = local.reshape(-1, 3).astype(np.int32)
     for key in ("kept", "field_id", "triangle_id"):
         out[key] = surface[key][rows]
+    # a new face whose corners moved is no voxel face any more (nor half of a quad)
+    out["voxel_face"] = np.where((out_tris == tris[rows]).all(axis=1), surface["voxel_face"][rows], -1)
     out["corner_bary"] = _moved_corners(tris, surface["corner_bary"], group, out_tris, rows)
     for key in ("vertex_field", "vertex_id"):
         out[key] = surface[key][used]

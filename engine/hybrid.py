@@ -20,6 +20,7 @@ import numpy as np
 from .coarsen import coarsened
 from .edges import surface_edges
 from .keep import kept_triangles
+from .quads import quad_halves_first, triangulate
 from .zipper import (
     MAX_ROUNDS,
     PAIR_VOXELS,
@@ -134,7 +135,8 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
         dict: ``verts`` (N, 3) float32, ``tris`` (M, 3) int32; per face ``kept`` bool, ``field_id`` and
         ``triangle_id`` int32 (the source triangle of a kept face, -1 for new faces); per vertex ``vertex_field``
         and ``vertex_id`` (the source vertex of a kept face's corner, -1 for new vertices); ``corner_bary`` (M, 3, 3)
-        float32 each kept face's corners as weights of its source triangle's corners (zeros for new faces); ``stats``.
+        float32 each kept face's corners as weights of its source triangle's corners (zeros for new faces);
+        ``voxel_face`` (M,) int64 the voxel triangle each new face is (-1 for kept faces and strips); ``stats``.
     """
     device, voxel = field.device, field.voxel_size
     kept = kept_mesh(kept_triangles(field))
@@ -170,7 +172,7 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
         )  # fmt: skip
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
-    return _assemble(points, kept, k_tris, k_alive, v_tris[v_alive], strips, voxel_verts, voxel_tris, device)
+    return _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
 
 
 def _loops_at_unpaired_edges(tris, k_loops, v_loops, pairs, n_verts: int) -> np.ndarray:
@@ -289,14 +291,16 @@ def voxel_surface_only(verts, tris, why: str) -> dict:
         "vertex_field": np.full(n_v, -1, np.int32),
         "vertex_id": np.full(n_v, -1, np.int32),
         "corner_bary": np.zeros((n_f, 3, 3), np.float32),
+        "voxel_face": np.arange(n_f, dtype=np.int64),
         "stats": {"kept_faces": 0, "new_faces": n_f, "kept_fallback": why},
     }
 
 
-def _assemble(points, kept, k_tris, k_alive, v_tris, strips, voxel_verts, voxel_tris, device) -> dict:
-    """The kept faces, the voxel faces left and the strips as one surface on the vertices they use, or the voxel
-    surface alone if that is not closed and consistently oriented."""
-    tris = np.concatenate([k_tris[k_alive], v_tris, strips.astype(np.int64)])
+def _assemble(points, kept, k_tris, k_alive, voxel, strips, voxel_verts, voxel_tris, device) -> dict:
+    """The kept faces, the voxel faces left (``voxel``: all of them and which are left) and the strips as one
+    surface on the vertices they use, or the voxel surface alone if that is not closed and consistently oriented."""
+    v_rows = np.flatnonzero(voxel[1])
+    tris = np.concatenate([k_tris[k_alive], voxel[0][v_rows], strips.astype(np.int64)])
     used, local = np.unique(tris, return_inverse=True)
     tris = local.reshape(-1, 3).astype(np.int32)
     if surface_edges(tris, len(used), device) is None:
@@ -317,6 +321,7 @@ def _assemble(points, kept, k_tris, k_alive, v_tris, strips, voxel_verts, voxel_
         "vertex_field": vertex_field,
         "vertex_id": vertex_id,
         "corner_bary": np.concatenate([kept["corner_bary"][k_alive], np.zeros((n_new, 3, 3), np.float32)]),
+        "voxel_face": np.r_[np.full(n_kept, -1), v_rows, np.full(len(strips), -1)].astype(np.int64),
         "stats": {"kept_faces": n_kept, "new_faces": n_new, "strip_faces": len(strips), "kept_fallback": ""},
     }
 
@@ -336,8 +341,13 @@ def kept_surface(field, *, sharp: bool | None = None, adaptivity: float = 0.0, r
     if field.placement is not None:  # joined in its own frame, then placed
         surface = kept_surface(field.in_frame(), sharp=sharp, adaptivity=adaptivity, regions=regions)
         surface["verts"], surface["tris"] = field.placement.place_surface(surface["verts"], surface["tris"])
-        return surface
-    verts, tris = field.to_mesh(sharp=sharp)
+        return quad_halves_first(surface)  # a reflection turned the halves over: in quad order again
+    verts, faces, sizes = field.to_mesh(sharp=sharp, quads=True)
+    tris = triangulate(faces, sizes)
     if field.expression is None or not len(tris):
-        return voxel_surface_only(verts, tris, "not a boolean of meshes")
-    return coarsened(field, hybrid_surface(field, verts, tris), adaptivity, regions)
+        surface = voxel_surface_only(verts, tris, "not a boolean of meshes")
+    else:
+        surface = coarsened(field, hybrid_surface(field, verts, tris), adaptivity, regions)
+    quads = int(np.count_nonzero(np.asarray(sizes) == 4))  # the first, rows 2q and 2q + 1 of ``tris``
+    surface["voxel_face"] = np.where(surface["voxel_face"] < 2 * quads, surface["voxel_face"], -1)
+    return quad_halves_first(surface)

@@ -66,6 +66,52 @@ def triangulate(faces, sizes) -> np.ndarray:
     return np.stack([faces[first], faces[first + k + 1], faces[first + k + 2]], axis=1).astype(np.int32)
 
 
+# A kept surface's per-face arrays (:func:`.hybrid.kept_surface`).
+KEPT_FACE_KEYS = ("tris", "kept", "field_id", "triangle_id", "corner_bary", "voxel_face")
+
+
+def quad_halves_first(surface: dict) -> dict:
+    """A kept surface with its new faces that are both halves of one quad of its voxel surface (``voxel_face`` 2q and
+    2q + 1) first, each pair as rows ``a b c``, ``a c d`` (so a writer can join them as :func:`triangulate` split
+    them); ``quads``: how many pairs."""
+    voxel_face = surface["voxel_face"]
+    rows = np.flatnonzero(voxel_face >= 0)
+    rows = rows[np.argsort(voxel_face[rows], kind="stable")]
+    quad = voxel_face[rows] // 2
+    start = np.flatnonzero(quad[1:] == quad[:-1])
+    first, second = rows[start], rows[start + 1]
+    turn_first, turn_second = _quad_turns(surface["tris"][first], surface["tris"][second])
+    whole = (turn_first >= 0) & (turn_second >= 0)
+    first, second, turn_first, turn_second = first[whole], second[whole], turn_first[whole], turn_second[whole]
+    rest = np.ones(len(surface["tris"]), dtype=bool)
+    rest[first] = rest[second] = False
+    order = np.r_[np.stack([first, second], axis=1).ravel(), np.flatnonzero(rest)]
+    turn = np.zeros(len(order), dtype=np.int64)
+    turn[: 2 * len(first)] = np.stack([turn_first, turn_second], axis=1).ravel()
+    corners = (turn[:, None] + np.arange(3)) % 3
+    out = dict(surface)
+    for key in KEPT_FACE_KEYS:
+        out[key] = surface[key][order]
+    out["tris"] = np.ascontiguousarray(np.take_along_axis(out["tris"], corners, axis=1))
+    out["corner_bary"] = np.take_along_axis(out["corner_bary"], corners[:, :, None], axis=1)
+    out["quads"] = len(first)
+    return out
+
+
+def _quad_turns(t1: np.ndarray, t2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How far to turn each pair's corners to read ``a b c`` and ``a c d`` (two triangles sharing the edge a-c, the
+    same way round); -1 where they are not such a pair."""
+    shared = (t1[:, :, None] == t2[:, None, :]).any(axis=2)  # (Q, 3) corners of t1 also in t2
+    b = np.argmin(shared, axis=1)  # the corner of t1 not in t2
+    turn1 = (b - 1) % 3
+    abc = np.take_along_axis(t1, (turn1[:, None] + np.arange(3)) % 3, axis=1)
+    at_a = t2 == abc[:, :1]
+    turn2 = np.argmax(at_a, axis=1)
+    acd = np.take_along_axis(t2, (turn2[:, None] + np.arange(3)) % 3, axis=1)
+    ok = (shared.sum(axis=1) == 2) & at_a.any(axis=1) & (acd[:, 1] == abc[:, 2])
+    return np.where(ok, turn1, -1), np.where(ok, turn2, -1)
+
+
 def polygon_edges(faces, sizes) -> np.ndarray:
     """(C, 2) int64 directed edges of polygons: each corner to the next corner of its face."""
     faces = np.asarray(faces, dtype=np.int64)

@@ -234,11 +234,11 @@ def test_rerun_with_nothing_changed_reuses_the_boolean_and_its_surface(fresh_cac
     second = bpy.context.active_object
     np.testing.assert_array_equal(world_arrays(second)[1], world_arrays(first)[1])
     # the second mesh took the edges cached from the first: the same edges, and a mesh validate() finds nothing in
-    cached = cache.last_result()["surface"]["edges"]
-    assert len(cached["corner_edge"]) == 3 * len(second.data.polygons)
+    surface = cache.last_result()["surface"]
+    assert len(surface["edges"]["corner_edge"]) == 3 * len(surface["tris"])  # the triangles' (quads joined after)
     for mesh in (first.data, second.data):
         assert not mesh.validate(verbose=False)
-        assert 2 * len(mesh.edges) == 3 * len(mesh.polygons)  # closed triangle mesh: each edge in two faces
+        assert 2 * len(mesh.edges) == len(mesh.loops)  # closed: each edge in two faces
     pairs = [np.empty(2 * len(o.data.edges), np.int32) for o in (first, second)]
     for o, out in zip((first, second), pairs, strict=True):
         o.data.attributes[".edge_verts"].data.foreach_get("value", out)
