@@ -140,10 +140,10 @@ def _renumbered(field, surface, creases, level, merged) -> dict:
     out_verts = (np.asarray(field.origin, dtype=np.float64) + h * position).astype(np.float32)
     alone = level == 0
     out_verts[cluster[alone]] = surface["verts"][alone]
-    crease = np.unique(np.sort(cluster[creases], axis=1), axis=0).reshape(-1, 2)
-    crease = crease[crease[:, 0] != crease[:, 1]]
     used = np.zeros(len(out_verts), dtype=bool)
     used[new_faces] = True
+    crease = np.unique(np.sort(cluster[creases], axis=1), axis=0).reshape(-1, 2)
+    crease = crease[(crease[:, 0] != crease[:, 1]) & used[crease].all(axis=1)]
     number = np.cumsum(used) - 1
     return {
         "verts": out_verts[used],
@@ -346,12 +346,26 @@ def _clusters(local, level, ids, cls):
 
 def _collapse(faces, sizes, cluster):
     """Faces re-indexed to clusters, corners equal to the one before them dropped, faces left with fewer than 3
-    corners gone. Returns faces, sizes."""
-    corners = cluster[faces]
-    start = np.cumsum(sizes) - sizes
+    corners gone; then the corners at a vertex left in two faces only (a fin: two faces folded onto each other, where
+    a lone vertex sits between two merged ones) dropped the same way, the vertex gone. Returns faces, sizes."""
+    faces, sizes = _dropped(cluster[faces], sizes, np.ones(len(faces), dtype=bool))
+    for _ in range(2):
+        fin = np.bincount(faces, minlength=len(cluster)) == 2
+        if not fin.any():
+            break
+        faces, sizes = _dropped(faces, sizes, ~fin[faces])
+    return faces, sizes
+
+
+def _dropped(corners, sizes, keep):
+    """Polygons (``corners`` (C,), ``sizes`` (P,)) without the corners not ``keep`` and those equal to the corner
+    before them; faces left with fewer than 3 corners gone."""
     face_of = np.repeat(np.arange(len(sizes)), sizes)
-    within = np.arange(len(faces)) - start[face_of]
-    prev = np.where(within == 0, start[face_of] + sizes[face_of] - 1, np.arange(len(faces)) - 1)
+    corners, face_of = corners[keep], face_of[keep]
+    count = np.bincount(face_of, minlength=len(sizes))
+    start = np.cumsum(count) - count
+    within = np.arange(len(corners)) - start[face_of]
+    prev = np.where(within == 0, start[face_of] + count[face_of] - 1, np.arange(len(corners)) - 1)
     keep = corners != corners[prev]
     count = np.bincount(face_of[keep], minlength=len(sizes))
     alive = count >= 3
