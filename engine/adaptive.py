@@ -283,33 +283,65 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
     same = label[u] == label[v]
     joinable = (cls[u] == cls[v]) & (cls[u] > 0)
     joinable &= ((cls[u] == 1) & same) | (along_crease & (same | ((label[u] >> 32) != (label[v] >> 32))))
-    first = np.cumsum(sizes) - sizes
+    live = cls > 0  # corners and crease ends never merge: their edges and faces never count
+    keep = live[u] & live[v]
+    u, v, joinable = u[keep], v[keep], joinable[keep]
+    corners = _padded(faces, sizes)
     for lv in range(1, max_level(adaptivity) + 1):
-        _, block = _block_keys(cell, lv)
-        ready = (level == lv - 1) & (cls > 0)
-        prev = ids[lv - 1]  # each ready vertex's cluster at the level below
-        use = joinable & ready[u] & ready[v] & (block[u] == block[v])
-        root = connected_components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
+        ready = (level == lv - 1) & live
         members = np.flatnonzero(ready)
-        roots, member_comp = np.unique(root[prev[members]], return_inverse=True)
-        k = len(roots)  # the components, numbered 0 .. k - 1
+        if not len(members):
+            break
+        keep = ready[u] & ready[v]  # what no longer merges leaves the edges and faces looked at
+        u, v, joinable = u[keep], v[keep], joinable[keep]
+        corners = corners[ready[corners].all(axis=1)]
+        prev = ids[lv - 1]  # each ready vertex's cluster at the level below
+        use = joinable & ((cell[u] >> lv) == (cell[v] >> lv)).all(axis=1)  # within one block
+        root = connected_components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
+        member_comp, k = _numbered(root[prev[members]], n)  # the components, numbered 0 .. k - 1
         comp = np.full(n, k)  # k: none
-        comp[members] = member_comp.ravel()
-        # a disk: V - E + F = 1 over the component's vertices, the edges and faces with every vertex in it
-        n_e = np.bincount(comp[u[comp[u] == comp[v]]], minlength=k + 1)[:k]
-        corner_comp = comp[faces]
-        same = np.minimum.reduceat(corner_comp, first) == np.maximum.reduceat(corner_comp, first)
-        n_f = np.bincount(corner_comp[first[same]], minlength=k + 1)[:k]
-        n_v, mean, axes = _moments(comp[members], local[members], k)
-        ok = (n_v - n_e + n_f == 1) & (n_v > 0)
-        # flat: every vertex within tol of the plane through the mean (a crease's: of the line)
-        off = _offsets(local[members], comp[members], cls[members] == 2, mean, axes)
-        ok[comp[members][off > tol]] = False
-        merged = np.zeros(n, dtype=bool)
-        merged[members] = ok[comp[members]]
-        level[merged] = lv
-        ids.append(np.where(merged, comp, -1))
+        comp[members] = member_comp
+        ids.append(np.where(_merged(local, cls, comp, members, u, v, corners, k, tol), comp, -1))
+        level[ids[-1] >= 0] = lv
     return level, ids
+
+
+def _merged(local, cls, comp, members, u, v, corners, k, tol) -> np.ndarray:
+    """(V,) the ``members`` whose component merges: a disk (V - E + F = 1 over the component's vertices, the edges
+    ``u``-``v`` and faces ``corners`` with every vertex in it), every vertex within ``tol`` of the plane through its
+    vertices (a crease's: of the line)."""
+    cu, cv = comp[u], comp[v]
+    n_e = np.bincount(cu[cu == cv], minlength=k)
+    cq = comp[corners]
+    n_f = np.bincount(cq[cq.min(axis=1) == cq.max(axis=1), 0], minlength=k)
+    mc = comp[members]
+    n_v = np.bincount(mc, minlength=k)
+    ok = n_v - n_e + n_f == 1
+    test = ok[mc] & (n_v[mc] > 1)  # a single vertex is flat
+    rows = members[test]
+    if len(rows):
+        sub, m = _numbered(mc[test], k)
+        _, mean, axes = _moments(sub, local[rows], m)
+        off = _offsets(local[rows], sub, cls[rows] == 2, mean, axes)
+        ok[mc[test][off > tol]] = False
+    merged = np.zeros(len(comp), dtype=bool)
+    merged[members] = ok[mc]
+    return merged
+
+
+def _numbered(keys, n: int):
+    """Keys (N,) in 0 .. n - 1 numbered 0 .. m - 1 in their order (as ``np.unique``'s inverse, without a sort);
+    returns the numbers and m."""
+    seen = np.zeros(n, dtype=bool)
+    seen[keys] = True
+    number = np.cumsum(seen) - 1
+    return number[keys], int(number[-1]) + 1 if n else 0
+
+
+def _padded(faces, sizes) -> np.ndarray:
+    """(P, 4) corners of triangles and quads, a triangle's last corner repeated."""
+    start = np.cumsum(sizes) - sizes
+    return faces[start[:, None] + np.minimum(np.arange(4), sizes[:, None] - 1)]
 
 
 def _offsets(points, comp, on_line, mean, axes) -> np.ndarray:
@@ -321,26 +353,16 @@ def _offsets(points, comp, on_line, mean, axes) -> np.ndarray:
     return np.where(on_line, line, plane)
 
 
-def _block_keys(cell, lv):
-    """Unique blocks (K, 3) of 2^lv cells and each vertex's block index."""
-    blocks = cell >> lv
-    lo = blocks.min(axis=0)
-    span = blocks.max(axis=0) - lo + 1
-    code = ((blocks[:, 0] - lo[0]) * span[1] + (blocks[:, 1] - lo[1])) * span[2] + (blocks[:, 2] - lo[2])
-    uniq, block = np.unique(code, return_inverse=True)
-    key = np.stack([uniq // (span[1] * span[2]), (uniq // span[2]) % span[1], uniq % span[2]], axis=1) + lo
-    return key, block.ravel()
-
-
 def _clusters(local, level, ids, cls):
     """Each vertex's cluster (its component at its level; itself at level 0), the clusters' positions (voxels: the
     mean of their vertices) and whether each is a crease or corner vertex."""
     n = len(local)
     code = level * np.int64(n) + np.stack(ids)[level, np.arange(n)]
-    _, first, cluster = np.unique(code, return_index=True, return_inverse=True)
-    cluster = cluster.ravel()
-    count = np.bincount(cluster, minlength=len(first))
-    mean = _sums(cluster, local, len(first)) / count[:, None]
+    cluster, k = _numbered(code, len(ids) * n)
+    first = np.empty(k, dtype=np.int64)
+    first[cluster] = np.arange(n)  # a vertex of each (all of one class)
+    count = np.bincount(cluster, minlength=k)
+    mean = _sums(cluster, local, k) / count[:, None]
     return cluster, mean, cls[first] != 1
 
 
