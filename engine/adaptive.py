@@ -277,7 +277,8 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
     edges = polygon_edges(faces, sizes)
     edges = edges[edges[:, 0] < edges[:, 1]]  # each undirected edge once (closed, oriented mesh)
     u, v = edges[:, 0], edges[:, 1]
-    along_crease = np.isin(u * np.int64(n) + v, crease_key)
+    along_crease = (cls[u] == 2) & (cls[v] == 2)  # both inside crease lines: is the edge one of theirs?
+    along_crease[along_crease] = np.isin(u[along_crease] * np.int64(n) + v[along_crease], crease_key)
     # smooth vertices of one region; crease vertices along a crease, within one region of an operand (between two
     # operands the crease is their seam, where each vertex's operand is either)
     same = label[u] == label[v]
