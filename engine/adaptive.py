@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .flatness import far_components
 from .quads import QUAD_ANGLE, polygon_edges
 
 # A merged surface's faces keep their centres within this many times the tolerance of the field's surface (else
@@ -81,7 +82,7 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     label = _labels(field, surface["verts"], regions)
     _hold_seams(cls, label, polygon_edges(faces, sizes))
     crease_key = np.sort(lines, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
-    level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity)
+    level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity, field.device)
     merged = _checked(field, local, faces, sizes, cls, level, ids, tolerance(adaptivity))
     return _renumbered(field, surface, creases, level, merged)
 
@@ -215,22 +216,6 @@ def _sums(index, values, n) -> np.ndarray:
     return np.stack([np.bincount(index, weights=values[:, k], minlength=n) for k in range(values.shape[1])], axis=1)
 
 
-def _moments(index, points, n):
-    """Per group of ``index`` (N,): count (n,), mean (n, 3) and eigenvectors (n, 3, 3) of the points' covariance,
-    ascending (``[:, :, 0]``: a fitted plane's normal, ``[:, :, 2]``: a fitted line's direction)."""
-    count = np.bincount(index, minlength=n)
-    outer = np.stack([points[:, i] * points[:, j] for i, j in _PAIRS], axis=1)
-    sums = _sums(index, np.concatenate([points, outer], axis=1), n) / np.maximum(count, 1)[:, None]
-    mean = sums[:, :3]
-    cov = np.empty((n, 3, 3))
-    for k, (i, j) in enumerate(_PAIRS):
-        cov[:, i, j] = cov[:, j, i] = sums[:, 3 + k] - mean[:, i] * mean[:, j]
-    return count, mean, np.linalg.eigh(cov)[1]
-
-
-_PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
-
-
 def _classes(ranks, creases, n) -> tuple[np.ndarray, np.ndarray]:
     """(V,) int8 what may merge with what: 1 smooth vertices, 2 vertices inside a crease line (rank 2, two crease
     edges), 0 corners and crease ends (never merge); and the creases kept as such. A crease line of fewer than
@@ -263,7 +248,7 @@ def connected_components(n: int, a, b) -> np.ndarray:
             parent = jumped
 
 
-def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
+def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity, device=None):
     """Level by level, the components of each block's vertices that merge (see the module's step 2).
 
     Returns:
@@ -286,7 +271,12 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
     joinable &= ((cls[u] == 1) & same) | (along_crease & (same | ((label[u] >> 32) != (label[v] >> 32))))
     live = cls > 0  # corners and crease ends never merge: their edges and faces never count
     keep = live[u] & live[v]
-    u, v, joinable = u[keep], v[keep], joinable[keep]
+    u, v = u[keep], v[keep]
+    # the level from which a joinable edge lies within one block: the highest bit its ends' cells differ in (cells
+    # of two signs never share a block)
+    differ = cell[u] ^ cell[v]
+    joins = np.frexp(np.where(differ < 0, 2.0**62, differ).max(axis=1))[1]
+    joins[~joinable[keep]] = np.iinfo(joins.dtype).max
     corners = _padded(faces, sizes)
     for lv in range(1, max_level(adaptivity) + 1):
         ready = (level == lv - 1) & live
@@ -294,20 +284,20 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
         if not len(members):
             break
         keep = ready[u] & ready[v]  # what no longer merges leaves the edges and faces looked at
-        u, v, joinable = u[keep], v[keep], joinable[keep]
+        u, v, joins = u[keep], v[keep], joins[keep]
         corners = corners[ready[corners].all(axis=1)]
         prev = ids[lv - 1]  # each ready vertex's cluster at the level below
-        use = joinable & ((cell[u] >> lv) == (cell[v] >> lv)).all(axis=1)  # within one block
+        use = joins <= lv  # joinable, within one block
         root = connected_components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
         member_comp, k = _numbered(root[prev[members]], n)  # the components, numbered 0 .. k - 1
         comp = np.full(n, k)  # k: none
         comp[members] = member_comp
-        ids.append(np.where(_merged(local, cls, comp, members, u, v, corners, k, tol), comp, -1))
+        ids.append(np.where(_merged(local, cls, comp, members, u, v, corners, k, tol, device), comp, -1))
         level[ids[-1] >= 0] = lv
     return level, ids
 
 
-def _merged(local, cls, comp, members, u, v, corners, k, tol) -> np.ndarray:
+def _merged(local, cls, comp, members, u, v, corners, k, tol, device) -> np.ndarray:
     """(V,) the ``members`` whose component merges: a disk (V - E + F = 1 over the component's vertices, the edges
     ``u``-``v`` and faces ``corners`` with every vertex in it), every vertex within ``tol`` of the plane through its
     vertices (a crease's: of the line)."""
@@ -322,9 +312,8 @@ def _merged(local, cls, comp, members, u, v, corners, k, tol) -> np.ndarray:
     rows = members[test]
     if len(rows):
         sub, m = _numbered(mc[test], k)
-        _, mean, axes = _moments(sub, local[rows], m)
-        off = _offsets(local[rows], sub, cls[rows] == 2, mean, axes)
-        ok[mc[test][off > tol]] = False
+        far = far_components(local[rows], sub, cls[rows] == 2, m, tol, device)
+        ok[mc[test][far[sub]]] = False
     merged = np.zeros(len(comp), dtype=bool)
     merged[members] = ok[mc]
     return merged
@@ -343,15 +332,6 @@ def _padded(faces, sizes) -> np.ndarray:
     """(P, 4) corners of triangles and quads, a triangle's last corner repeated."""
     start = np.cumsum(sizes) - sizes
     return faces[start[:, None] + np.minimum(np.arange(4), sizes[:, None] - 1)]
-
-
-def _offsets(points, comp, on_line, mean, axes) -> np.ndarray:
-    """Distances of points from their component's fitted plane (``on_line``: from its fitted line)."""
-    d = points - mean[comp]
-    frame = axes[comp]
-    plane = np.abs(np.einsum("ij,ij->i", d, frame[:, :, 0]))
-    line = np.linalg.norm(d - np.einsum("ij,ij->i", d, frame[:, :, 2])[:, None] * frame[:, :, 2], axis=1)
-    return np.where(on_line, line, plane)
 
 
 def _clusters(local, level, ids, cls):
