@@ -3,7 +3,7 @@ component's vertices, and whether every vertex lies within a tolerance of it.
 
 Three launches over the members and the components replace a dozen whole-array passes of numpy (the moments'
 sums, the batched eigenvectors, the distances): the moments are summed about a vertex of each component (no
-cancellation of large coordinates), the covariance's eigenvectors (``wp.eig3``) give the fitted plane's normal (the
+cancellation of large coordinates), the covariance's eigenvectors (closed form) give the fitted plane's normal (the
 smallest eigenvalue's) and a fitted line's direction (the largest's).
 """
 
@@ -32,6 +32,34 @@ def _sum_moments_kernel(
     wp.atomic_add(cross, c, wp.vec3d(d[0] * d[1], d[0] * d[2], d[1] * d[2]))
 
 
+@wp.func
+def _eigenvector(c: wp.mat33d, value: wp.float64, scale: wp.float64) -> wp.vec3d:
+    """The eigenvector of the symmetric ``c`` for its eigenvalue ``value``: the longest cross product of two rows of
+    c - value I; zero where the eigenvalue is a double one (every cross product below ``scale``)."""
+    r0 = wp.vec3d(c[0, 0] - value, c[0, 1], c[0, 2])
+    r1 = wp.vec3d(c[1, 0], c[1, 1] - value, c[1, 2])
+    r2 = wp.vec3d(c[2, 0], c[2, 1], c[2, 2] - value)
+    best = wp.cross(r0, r1)
+    v = wp.cross(r0, r2)
+    if wp.dot(v, v) > wp.dot(best, best):
+        best = v
+    v = wp.cross(r1, r2)
+    if wp.dot(v, v) > wp.dot(best, best):
+        best = v
+    if wp.length(best) <= scale:
+        return wp.vec3d(0.0, 0.0, 0.0)
+    return wp.normalize(best)
+
+
+@wp.func
+def _perpendicular(v: wp.vec3d) -> wp.vec3d:
+    """A unit vector perpendicular to the unit ``v``."""
+    other = wp.vec3d(1.0, 0.0, 0.0)
+    if wp.abs(v[0]) > 0.8:
+        other = wp.vec3d(0.0, 1.0, 0.0)
+    return wp.normalize(wp.cross(v, other))
+
+
 @wp.kernel(enable_backward=False)
 def _fit_axes_kernel(
     count: wp.array(dtype=wp.float64),
@@ -50,17 +78,26 @@ def _fit_axes_kernel(
     xz = x[1] - m[0] * m[2]
     yz = x[2] - m[1] * m[2]
     cov = wp.mat33d(s[0] - m[0] * m[0], xy, xz, xy, s[1] - m[1] * m[1], yz, xz, yz, s[2] - m[2] * m[2])
-    vectors, values = wp.eig3(cov)
-    lo = int(0)
-    hi = int(0)
-    for k in range(1, 3):
-        if values[k] < values[lo]:
-            lo = k
-        if values[k] > values[hi]:
-            hi = k
+    # the smallest and largest eigenvalues in closed form (Smith 1961)
+    one, two, three = wp.float64(1.0), wp.float64(2.0), wp.float64(3.0)
+    q = (cov[0, 0] + cov[1, 1] + cov[2, 2]) / three
+    a0, a1, a2 = cov[0, 0] - q, cov[1, 1] - q, cov[2, 2] - q
+    p = wp.sqrt((a0 * a0 + a1 * a1 + a2 * a2 + two * (xy * xy + xz * xz + yz * yz)) / wp.float64(6.0))
+    n = wp.vec3d(0.0, 0.0, 1.0)
+    d = wp.vec3d(1.0, 0.0, 0.0)
+    if p > wp.float64(0.0):
+        b = wp.mat33d(a0, xy, xz, xy, a1, yz, xz, yz, a2) / p
+        phi = wp.acos(wp.clamp(wp.determinant(b) / two, -one, one)) / three
+        scale = wp.float64(1.0e-9) * p * p
+        n = _eigenvector(cov, q + two * p * wp.cos(phi + two * wp.float64(wp.pi) / three), scale)
+        d = _eigenvector(cov, q + two * p * wp.cos(phi), scale)
+        if wp.length(n) == wp.float64(0.0):
+            n = _perpendicular(d)  # a line: any plane through it
+        if wp.length(d) == wp.float64(0.0):
+            d = _perpendicular(n)  # a disk: any line through it
     mean[c] = m
-    normal[c] = wp.normalize(wp.vec3d(vectors[0, lo], vectors[1, lo], vectors[2, lo]))
-    direction[c] = wp.normalize(wp.vec3d(vectors[0, hi], vectors[1, hi], vectors[2, hi]))
+    normal[c] = n
+    direction[c] = d
 
 
 @wp.kernel(enable_backward=False)
