@@ -278,6 +278,7 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity, devic
     joins = np.frexp(np.where(differ < 0, 2.0**62, differ).max(axis=1))[1]
     joins[~joinable[keep]] = np.iinfo(joins.dtype).max
     corners = _padded(faces, sizes)
+    inside = np.zeros((n, 2), dtype=np.int64)  # edges and faces inside each cluster of the level below, by its id
     for lv in range(1, max_level(adaptivity) + 1):
         ready = (level == lv - 1) & live
         members = np.flatnonzero(ready)
@@ -292,22 +293,40 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity, devic
         member_comp, k = _numbered(root[prev[members]], n)  # the components, numbered 0 .. k - 1
         comp = np.full(n, k)  # k: none
         comp[members] = member_comp
-        ids.append(np.where(_merged(local, cls, comp, members, u, v, corners, k, tol, device), comp, -1))
-        level[ids[-1] >= 0] = lv
+        counts = _inside(comp, members, prev, inside, u, v, corners, k)
+        merged = _merged(local, cls, comp, members, counts, k, tol, device)
+        ids.append(np.where(merged, comp, -1))
+        level[merged] = lv
+        inside[:k] = counts  # the ids at this level are the components' numbers
+        # the edges and faces inside a component are counted: they leave
+        keep = comp[u] != comp[v]
+        u, v, joins = u[keep], v[keep], joins[keep]
+        cq = comp[corners]
+        corners = corners[cq.min(axis=1) != cq.max(axis=1)]
     return level, ids
 
 
-def _merged(local, cls, comp, members, u, v, corners, k, tol, device) -> np.ndarray:
-    """(V,) the ``members`` whose component merges: a disk (V - E + F = 1 over the component's vertices, the edges
-    ``u``-``v`` and faces ``corners`` with every vertex in it), every vertex within ``tol`` of the plane through its
-    vertices (a crease's: of the line)."""
+def _inside(comp, members, prev, inside, u, v, corners, k) -> np.ndarray:
+    """(k, 2) the edges and faces with every vertex in each component: those inside its clusters of the level below
+    (``inside`` by their ids ``prev``) and those of ``u``-``v`` and ``corners`` (across them)."""
+    below = prev[members]
+    share = inside[below] / np.bincount(below)[below][:, None]  # a cluster's counts shared among its vertices
+    mc = comp[members]
+    out = np.rint(np.stack([np.bincount(mc, weights=share[:, j], minlength=k) for j in (0, 1)], axis=1))
     cu, cv = comp[u], comp[v]
-    n_e = np.bincount(cu[cu == cv], minlength=k)
+    out[:, 0] += np.bincount(cu[cu == cv], minlength=k)
     cq = comp[corners]
-    n_f = np.bincount(cq[cq.min(axis=1) == cq.max(axis=1), 0], minlength=k)
+    out[:, 1] += np.bincount(cq[cq.min(axis=1) == cq.max(axis=1), 0], minlength=k)
+    return out.astype(np.int64)
+
+
+def _merged(local, cls, comp, members, inside, k, tol, device) -> np.ndarray:
+    """(V,) the ``members`` whose component merges: a disk (V - E + F = 1 over the component's vertices, and the
+    edges and faces ``inside`` (k, 2) it), every vertex within ``tol`` of the plane through its vertices (a crease's:
+    of the line)."""
     mc = comp[members]
     n_v = np.bincount(mc, minlength=k)
-    ok = n_v - n_e + n_f == 1
+    ok = n_v - inside[:, 0] + inside[:, 1] == 1
     test = ok[mc] & (n_v[mc] > 1)  # a single vertex is flat
     rows = members[test]
     if len(rows):
@@ -351,7 +370,11 @@ def _collapse(faces, sizes, cluster):
     """Faces re-indexed to clusters, corners equal to the one before them dropped, faces left with fewer than 3
     corners gone; then the corners at a vertex left in two faces only (a fin: two faces folded onto each other, where
     a lone vertex sits between two merged ones) dropped the same way, the vertex gone. Returns faces, sizes."""
-    faces, sizes = _dropped(cluster[faces], sizes, np.ones(len(faces), dtype=bool))
+    corners = cluster[faces]
+    start = np.cumsum(sizes) - sizes
+    across = np.minimum.reduceat(corners, start) != np.maximum.reduceat(corners, start)  # the others vanish
+    corners, sizes = corners[np.repeat(across, sizes)], sizes[across]
+    faces, sizes = _dropped(corners, sizes, np.ones(len(corners), dtype=bool))
     for _ in range(2):
         fin = np.bincount(faces, minlength=len(cluster)) == 2
         if not fin.any():
