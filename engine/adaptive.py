@@ -83,7 +83,7 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     _hold_seams(cls, label, polygon_edges(faces, sizes))
     crease_key = np.sort(lines, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
     level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity, field.device)
-    merged = _checked(field, local, faces, sizes, cls, level, ids, tolerance(adaptivity))
+    merged = _checked(field, local, _padded(faces, sizes), cls, level, ids, tolerance(adaptivity))
     return _renumbered(field, surface, creases, level, merged)
 
 
@@ -100,16 +100,16 @@ def _hold_seams(cls, label, edges) -> None:
     cls[edges[(la != lb) & ~operands_at_crease].ravel()] = 0
 
 
-def _checked(field, local, faces, sizes, cls, level, ids, tol) -> dict:
-    """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed and checked, the components at a failure
-    dropped (by a level, then faster, after CHECK_ROUNDS to level 0) until none fails. Returns the surface that
-    passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
+def _checked(field, local, corners, cls, level, ids, tol) -> dict:
+    """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed (the faces ``corners`` (P, 4)) and
+    checked, the components at a failure dropped (by a level, then faster, after CHECK_ROUNDS to level 0) until none
+    fails. Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
     round_ = 0
     while True:  # ends: every round drops a merged component, and the surface as extracted passes
         cluster, position, feature = _clusters(local, level, ids, cls)
         merged = np.bincount(cluster, minlength=len(position)) > 1
         position = _onto_surface(field, position, ~feature & merged, tol)
-        new_faces, new_sizes = _split_bent_quads(position, feature, merged, *_collapse(faces, sizes, cluster), tol)
+        new_faces, new_sizes = _split_bent_quads(position, feature, merged, *_collapse(corners, cluster), tol)
         bad = _failures(len(position), new_faces, new_sizes)
         bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tol)
         if not bad.any() or not (level > 0).any():
@@ -252,8 +252,8 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity, devic
     """Level by level, the components of each block's vertices that merge (see the module's step 2).
 
     Returns:
-        ``level`` (V,) the largest level each vertex merged at (0: none) and ``ids``: per level (V,) each vertex's
-        component there (its cluster when that is its level; -1 where it did not merge at that level).
+        ``level`` (V,) the largest level each vertex merged at (0: none) and ``ids`` (L + 1, V): per level each
+        vertex's component there (its cluster when that is its level; -1 where it did not merge at that level).
     """
     n = len(local)
     level = np.zeros(n, dtype=np.int64)
@@ -305,7 +305,7 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity, devic
         keep = comp[u] != comp[v]
         u, v, joins = u[keep], v[keep], joins[keep]
         corners = corners[~_one_value(comp[corners])]
-    return level, ids
+    return level, np.stack(ids)
 
 
 def _inside(comp, members, prev, inside, u, v, corners, k) -> np.ndarray:
@@ -371,7 +371,7 @@ def _clusters(local, level, ids, cls):
     """Each vertex's cluster (its component at its level; itself at level 0), the clusters' positions (voxels: the
     mean of their vertices) and whether each is a crease or corner vertex."""
     n = len(local)
-    code = level * np.int64(n) + np.stack(ids)[level, np.arange(n)]
+    code = level * np.int64(n) + ids[level, np.arange(n)]
     cluster, k = _numbered(code, len(ids) * n)
     first = np.empty(k, dtype=np.int64)
     first[cluster] = np.arange(n)  # a vertex of each (all of one class)
@@ -380,15 +380,14 @@ def _clusters(local, level, ids, cls):
     return cluster, mean, cls[first] != 1
 
 
-def _collapse(faces, sizes, cluster):
-    """Faces re-indexed to clusters, corners equal to the one before them dropped, faces left with fewer than 3
-    corners gone; then the corners at a vertex left in two faces only (a fin: two faces folded onto each other, where
-    a lone vertex sits between two merged ones) dropped the same way, the vertex gone. Returns faces, sizes."""
-    corners = cluster[faces]
-    start = np.cumsum(sizes) - sizes
-    across = np.minimum.reduceat(corners, start) != np.maximum.reduceat(corners, start)  # the others vanish
-    corners, sizes = corners[np.repeat(across, sizes)], sizes[across]
-    faces, sizes = _dropped(corners, sizes, np.ones(len(corners), dtype=bool))
+def _collapse(corners, cluster):
+    """Faces (``corners`` (P, 4), :func:`_padded`) re-indexed to clusters, corners equal to the one before them
+    dropped, faces left with fewer than 3 corners gone; then the corners at a vertex left in two faces only (a fin:
+    two faces folded onto each other, where a lone vertex sits between two merged ones) dropped the same way, the
+    vertex gone. Returns faces, sizes."""
+    corners = cluster[corners]
+    corners = corners[~_one_value(corners)].ravel()  # the others vanish
+    faces, sizes = _dropped(corners, np.full(len(corners) // 4, 4), np.ones(len(corners), dtype=bool))
     for _ in range(2):
         fin = np.bincount(faces, minlength=len(cluster)) == 2
         if not fin.any():
