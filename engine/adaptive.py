@@ -80,10 +80,12 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     creases = np.asarray(surface["creases"], dtype=np.int64).reshape(-1, 2)
     cls, lines = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
-    _hold_seams(cls, label, polygon_edges(faces, sizes))
+    edges = polygon_edges(faces, sizes)
+    _hold_seams(cls, label, edges)
     crease_key = np.sort(lines, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
-    level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity, field.device)
-    merged = _checked(field, local, _padded(faces, sizes), cls, level, ids, tolerance(adaptivity))
+    corners = _padded(faces, sizes)
+    level, ids = _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, field.device)
+    merged = _checked(field, local, corners, cls, level, ids, tolerance(adaptivity))
     return _renumbered(field, surface, creases, level, merged)
 
 
@@ -248,7 +250,7 @@ def connected_components(n: int, a, b) -> np.ndarray:
             parent = jumped
 
 
-def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity, device=None):
+def _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, device=None):
     """Level by level, the components of each block's vertices that merge (see the module's step 2).
 
     Returns:
@@ -259,7 +261,6 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity, devic
     level = np.zeros(n, dtype=np.int64)
     ids = [np.arange(n)]
     tol = tolerance(adaptivity)
-    edges = polygon_edges(faces, sizes)
     edges = edges[edges[:, 0] < edges[:, 1]]  # each undirected edge once (closed, oriented mesh)
     u, v = edges[:, 0], edges[:, 1]
     along_crease = (cls[u] == 2) & (cls[v] == 2)  # both inside crease lines: is the edge one of theirs?
@@ -278,7 +279,6 @@ def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity, devic
     differ = np.where(differ < 0, 2.0**62, differ)
     joins = np.frexp(np.maximum(np.maximum(differ[:, 0], differ[:, 1]), differ[:, 2]))[1]
     joins[~joinable[keep]] = np.iinfo(joins.dtype).max
-    corners = _padded(faces, sizes)
     inside = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))  # the clusters merged at the level below, their edges
     # and faces inside
     for lv in range(1, max_level(adaptivity) + 1):

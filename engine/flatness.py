@@ -144,7 +144,8 @@ def far_components(points, comp, on_line, m: int, tol: float, device=None) -> np
     wp_points = wp.array(points, dtype=wp.vec3d, device=device)
     wp_comp = wp.array(comp, dtype=wp.int32, device=device)
     wp_anchor = wp.array(anchor, dtype=wp.vec3d, device=device)
-    sums = [wp.zeros(m, dtype=wp.float64, device=device)] + [wp.zeros(m, dtype=wp.vec3d, device=device) for _ in range(3)]
+    sums = [wp.zeros(m, dtype=wp.float64, device=device)]
+    sums += [wp.zeros(m, dtype=wp.vec3d, device=device) for _ in range(3)]
     wp.launch(_sum_moments_kernel, dim=len(points), inputs=[wp_points, wp_comp, wp_anchor, *sums], device=device)
     axes = [wp.empty(m, dtype=wp.vec3d, device=device) for _ in range(3)]
     wp.launch(_fit_axes_kernel, dim=m, inputs=[*sums, *axes], device=device)
