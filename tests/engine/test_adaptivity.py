@@ -129,7 +129,8 @@ def _planes(verts, tris, voxel, share=0.01):
     _, group = np.unique(key, axis=0, return_inverse=True)
     group = group.ravel()
     total = np.bincount(group, weights=area)
-    return [(normal[group == g][0], offset[group == g].mean(), total[g]) for g in np.flatnonzero(total > share * area.sum())]
+    large = np.flatnonzero(total > share * area.sum())
+    return [(normal[group == g][0], offset[group == g].mean(), total[g]) for g in large]
 
 
 def _on_plane(verts, faces, sizes, plane, voxel):
