@@ -413,24 +413,29 @@ def _dropped(corners, sizes, keep):
 
 
 def _failures(n_verts, faces, sizes) -> np.ndarray:
-    """Vertices at which the polygons are not a closed, oriented 2-manifold: a face repeating a corner, an edge not
-    in exactly two faces opposite ways, a vertex whose faces are no single fan."""
+    """Vertices at which the polygons (triangles and quads) are not a closed, oriented 2-manifold: a face repeating a
+    corner, an edge not in exactly two faces opposite ways, a vertex whose faces are no single fan."""
     bad = np.zeros(n_verts, dtype=bool)
     if not len(sizes):
         return bad
-    face_of = np.repeat(np.arange(len(sizes)), sizes)
-    key = face_of * np.int64(n_verts) + faces
-    dup = np.unique(key, return_counts=True)
-    repeated = dup[0][dup[1] > 1] // n_verts
-    bad[faces[np.isin(face_of, repeated)]] = True
+    corners = _padded(faces, sizes)
+    c0, c1, c2, c3 = corners.T
+    quad = sizes == 4
+    repeated = (c0 == c1) | (c0 == c2) | (c1 == c2) | (quad & ((c0 == c3) | (c1 == c3) | (c2 == c3)))
+    bad[corners[repeated].ravel()] = True
     edges = polygon_edges(faces, sizes)
     n = np.int64(n_verts)
     forward, backward = edges[:, 0] * n + edges[:, 1], edges[:, 1] * n + edges[:, 0]
-    uniq, counts = np.unique(forward, return_counts=True)
-    twice = uniq[counts > 1]
-    single = np.isin(forward, twice) | ~np.isin(forward, backward)
+    order = np.argsort(forward)
+    ordered = forward[order]
+    same = ordered[1:] == ordered[:-1]
+    twice = np.zeros(len(forward), dtype=bool)
+    twice[order[1:][same]] = twice[order[:-1][same]] = True
+    at = np.minimum(np.searchsorted(ordered, backward), len(ordered) - 1)
+    single = twice | (ordered[at] != backward)
     bad[edges[single].ravel()] = True
-    undirected = np.unique(np.minimum(forward, backward))
+    undirected = np.sort(np.minimum(forward, backward))
+    undirected = undirected[np.r_[True, undirected[1:] != undirected[:-1]]]
     ends = np.concatenate([undirected // n, undirected % n])
     fan = np.bincount(ends, minlength=n_verts) != np.bincount(faces, minlength=n_verts)
     return bad | fan
