@@ -300,7 +300,7 @@ def _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, dev
         ids.append(np.where(merged, comp, -1))
         level[merged] = lv
         kept = np.flatnonzero(np.bincount(comp[merged], minlength=k))  # the ids at this level: component numbers
-        inside = (kept, counts[kept])
+        inside = (kept, counts[kept, :2])
         # the edges and faces inside a component are counted: they leave
         keep = comp[u] != comp[v]
         u, v, joins = u[keep], v[keep], joins[keep]
@@ -309,14 +309,16 @@ def _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, dev
 
 
 def _inside(comp, members, prev, inside, u, v, corners, k) -> np.ndarray:
-    """(k, 2) the edges and faces with every vertex in each component: those inside its clusters of the level below
-    (``inside``: their ids in ``prev`` and counts) and those of ``u``-``v`` and ``corners`` (across them)."""
+    """(k, 3) the edges and faces with every vertex in each component: those inside its clusters of the level below
+    (``inside``: their ids in ``prev`` and counts) and those of ``u``-``v`` and ``corners`` (across them); and how
+    many clusters of the level below it joins (0 at level 1)."""
     ids, counts = inside
     comp_of = np.zeros(len(comp), dtype=np.int64)
     comp_of[prev[members]] = comp[members]  # each cluster below in one component
-    out = np.zeros((k, 2), dtype=np.int64)
+    out = np.zeros((k, 3), dtype=np.int64)
     for j in (0, 1):
         out[:, j] = np.rint(np.bincount(comp_of[ids], weights=counts[:, j], minlength=k)).astype(np.int64)
+    out[:, 2] = np.bincount(comp_of[ids], minlength=k)
     cu, cv = comp[u], comp[v]
     out[:, 0] += np.bincount(cu[cu == cv], minlength=k)
     cq = comp[corners]
@@ -336,12 +338,12 @@ def _one_value(values) -> np.ndarray:
 
 def _merged(local, cls, comp, members, inside, k, tol, device) -> np.ndarray:
     """(V,) the ``members`` whose component merges: a disk (V - E + F = 1 over the component's vertices, and the
-    edges and faces ``inside`` (k, 2) it), every vertex within ``tol`` of the plane through its vertices (a crease's:
-    of the line)."""
+    edges and faces ``inside`` (k, 3) it), every vertex within ``tol`` of the plane through its vertices (a crease's:
+    of the line; not tested again for a component that is one cluster of the level below: it passed)."""
     mc = comp[members]
     n_v = np.bincount(mc, minlength=k)
     ok = n_v - inside[:, 0] + inside[:, 1] == 1
-    test = ok[mc] & (n_v[mc] > 1)  # a single vertex is flat
+    test = ok[mc] & (n_v[mc] > 1) & (inside[mc, 2] != 1)  # a single vertex is flat
     rows = members[test]
     if len(rows):
         sub, m = _numbered(mc[test], k)
