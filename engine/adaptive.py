@@ -12,11 +12,13 @@ extracted polygons, as vertex clustering over the octree's blocks:
    at the level below are split into components: smooth vertices joined by the mesh's edges, crease vertices by the
    crease edges, never across two source regions. A component merges into one vertex when it is a disk (V - E + F
    = 1 over the faces, edges and vertices inside it) and every vertex in it lies within :func:`tolerance` of the
-   plane fitted through them (a crease component: of the line).
+   plane fitted through them (a crease component: of the line; :mod:`.flatness`, in Warp). The edges and faces
+   inside a merged component are counted once and leave: a level looks only at those across its clusters.
 3. Each merged component becomes one vertex at its vertices' mean (a smooth one taken a Newton step onto the
-   field's surface); faces are re-indexed, repeated corners dropped, a
-   face left with fewer than 3 corners vanishes. A quad left bent (not planar and convex within
-   :data:`.quads.QUAD_ANGLE`) is split along the diagonal between two crease vertices, else the less folded one.
+   field's surface); faces are re-indexed, repeated corners dropped, a face left with fewer than 3 corners
+   vanishes. A vertex left in two faces only (a fin: a lone vertex between two merged ones, its two faces folded
+   onto each other) drops out of them. A quad left bent (not planar and convex within :data:`.quads.QUAD_ANGLE`) is
+   split along the diagonal between two crease vertices, else the less folded one.
 4. The result is checked: every edge in exactly two faces, opposite ways, every vertex's faces one fan, no face
    repeating a corner. The components at any failure drop one level and the check runs again, until none fails (at
    worst every vertex is back at level 0: the surface as extracted), so the result is closed and 2-manifold always.
