@@ -263,24 +263,8 @@ def _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, dev
     level = np.zeros(n, dtype=np.int64)
     ids = [np.arange(n)]
     tol = tolerance(adaptivity)
-    edges = edges[edges[:, 0] < edges[:, 1]]  # each undirected edge once (closed, oriented mesh)
-    u, v = edges[:, 0], edges[:, 1]
-    along_crease = (cls[u] == 2) & (cls[v] == 2)  # both inside crease lines: is the edge one of theirs?
-    along_crease[along_crease] = np.isin(u[along_crease] * np.int64(n) + v[along_crease], crease_key)
-    # smooth vertices of one region; crease vertices along a crease, within one region of an operand (between two
-    # operands the crease is their seam, where each vertex's operand is either)
-    same = label[u] == label[v]
-    joinable = (cls[u] == cls[v]) & (cls[u] > 0)
-    joinable &= ((cls[u] == 1) & same) | (along_crease & (same | ((label[u] >> 32) != (label[v] >> 32))))
     live = cls > 0  # corners and crease ends never merge: their edges and faces never count
-    keep = live[u] & live[v]
-    u, v = u[keep], v[keep]
-    # the level from which a joinable edge lies within one block: the highest bit its ends' cells differ in (cells
-    # of two signs never share a block)
-    differ = cell[u] ^ cell[v]
-    differ = np.where(differ < 0, 2.0**62, differ)
-    joins = np.frexp(np.maximum(np.maximum(differ[:, 0], differ[:, 1]), differ[:, 2]))[1]
-    joins[~joinable[keep]] = np.iinfo(joins.dtype).max
+    u, v, joins = _edge_levels(edges, cell, cls, label, crease_key)
     inside = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))  # the clusters merged at the level below, their edges
     # and faces inside
     for lv in range(1, max_level(adaptivity) + 1):
@@ -308,6 +292,29 @@ def _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, dev
         u, v, joins = u[keep], v[keep], joins[keep]
         corners = corners[~_one_value(comp[corners])]
     return level, np.stack(ids)
+
+
+def _edge_levels(edges, cell, cls, label, crease_key):
+    """The undirected edges ``u``-``v`` between vertices that may merge, and the level from which each may join its
+    ends (within one block; the largest integer for an edge that never joins them)."""
+    n = len(cls)
+    edges = edges[edges[:, 0] < edges[:, 1]]  # each undirected edge once (closed, oriented mesh)
+    u, v = edges[:, 0], edges[:, 1]
+    along_crease = (cls[u] == 2) & (cls[v] == 2)  # both inside crease lines: is the edge one of theirs?
+    along_crease[along_crease] = np.isin(u[along_crease] * np.int64(n) + v[along_crease], crease_key)
+    # smooth vertices of one region; crease vertices along a crease, within one region of an operand (between two
+    # operands the crease is their seam, where each vertex's operand is either)
+    same = label[u] == label[v]
+    joinable = (cls[u] == cls[v]) & (cls[u] > 0)
+    joinable &= ((cls[u] == 1) & same) | (along_crease & (same | ((label[u] >> 32) != (label[v] >> 32))))
+    keep = (cls[u] > 0) & (cls[v] > 0)
+    u, v = u[keep], v[keep]
+    # the highest bit the ends' cells differ in (cells of two signs never share a block)
+    differ = cell[u] ^ cell[v]
+    differ = np.where(differ < 0, 2.0**62, differ)
+    joins = np.frexp(np.maximum(np.maximum(differ[:, 0], differ[:, 1]), differ[:, 2]))[1]
+    joins[~joinable[keep]] = np.iinfo(joins.dtype).max
+    return u, v, joins
 
 
 def _inside(comp, members, prev, inside, u, v, corners, k) -> np.ndarray:
