@@ -12,11 +12,13 @@ extracted polygons, as vertex clustering over the octree's blocks:
    at the level below are split into components: smooth vertices joined by the mesh's edges, crease vertices by the
    crease edges, never across two source regions. A component merges into one vertex when it is a disk (V - E + F
    = 1 over the faces, edges and vertices inside it) and every vertex in it lies within :func:`tolerance` of the
-   plane fitted through them (a crease component: of the line).
+   plane fitted through them (a crease component: of the line; :mod:`.flatness`, in Warp). The edges and faces
+   inside a merged component are counted once and leave: a level looks only at those across its clusters.
 3. Each merged component becomes one vertex at its vertices' mean (a smooth one taken a Newton step onto the
-   field's surface); faces are re-indexed, repeated corners dropped, a
-   face left with fewer than 3 corners vanishes. A quad left bent (not planar and convex within
-   :data:`.quads.QUAD_ANGLE`) is split along the diagonal between two crease vertices, else the less folded one.
+   field's surface); faces are re-indexed, repeated corners dropped, a face left with fewer than 3 corners
+   vanishes. A vertex left in two faces only (a fin: a lone vertex between two merged ones, its two faces folded
+   onto each other) drops out of them. A quad left bent (not planar and convex within :data:`.quads.QUAD_ANGLE`) is
+   split along the diagonal between two crease vertices, else the less folded one.
 4. The result is checked: every edge in exactly two faces, opposite ways, every vertex's faces one fan, no face
    repeating a corner. The components at any failure drop one level and the check runs again, until none fails (at
    worst every vertex is back at level 0: the surface as extracted), so the result is closed and 2-manifold always.
@@ -29,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .flatness import far_components
 from .quads import QUAD_ANGLE, polygon_edges
 
 # A merged surface's faces keep their centres within this many times the tolerance of the field's surface (else
@@ -45,12 +48,12 @@ CHECK_ROUNDS = 6
 
 
 def tolerance(adaptivity: float) -> float:
-    """Largest distance (voxels) of a merged block's vertices from its plane (or crease line): 0.01 voxel at
-    adaptivity 0 (only what is flat to float rounding), 0.22 at 0.5, 1 at 1 (linear, then cubic: the high
-    adaptivities trade accuracy for polygons, as Grid to Mesh's do). The faces between two merged vertices span two
-    blocks, so on a curved surface they stray farther."""
+    """Largest distance (voxels) of a merged block's vertices from its plane (or crease line): 0.01 voxel up to
+    adaptivity 0.05 (only what is flat to float rounding: the planar faces merge, losing nothing), 0.22 at 0.5, 1 at
+    1 (linear, then cubic: the high adaptivities trade accuracy for polygons, as Grid to Mesh's do). The faces
+    between two merged vertices span two blocks, so on a curved surface they stray farther."""
     a = float(adaptivity)
-    return 0.01 + 0.24 * a + 0.75 * a**3
+    return 0.01 + 0.24 * max(a - 0.05, 0.0) / 0.95 + 0.75 * a**3
 
 
 def max_level(adaptivity: float) -> int:
@@ -79,10 +82,12 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     creases = np.asarray(surface["creases"], dtype=np.int64).reshape(-1, 2)
     cls, lines = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
-    _hold_seams(cls, label, polygon_edges(faces, sizes))
+    edges = polygon_edges(faces, sizes)
+    _hold_seams(cls, label, edges)
     crease_key = np.sort(lines, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
-    level, ids = _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity)
-    merged = _checked(field, local, faces, sizes, cls, level, ids, tolerance(adaptivity))
+    corners = _padded(faces, sizes)
+    level, ids = _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, field.device)
+    merged = _checked(field, local, corners, cls, level, ids, tolerance(adaptivity))
     return _renumbered(field, surface, creases, level, merged)
 
 
@@ -99,16 +104,16 @@ def _hold_seams(cls, label, edges) -> None:
     cls[edges[(la != lb) & ~operands_at_crease].ravel()] = 0
 
 
-def _checked(field, local, faces, sizes, cls, level, ids, tol) -> dict:
-    """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed and checked, the components at a failure
-    dropped (by a level, then faster, after CHECK_ROUNDS to level 0) until none fails. Returns the surface that
-    passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
+def _checked(field, local, corners, cls, level, ids, tol) -> dict:
+    """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed (the faces ``corners`` (P, 4)) and
+    checked, the components at a failure dropped (by a level, then faster, after CHECK_ROUNDS to level 0) until none
+    fails. Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
     round_ = 0
     while True:  # ends: every round drops a merged component, and the surface as extracted passes
         cluster, position, feature = _clusters(local, level, ids, cls)
         merged = np.bincount(cluster, minlength=len(position)) > 1
         position = _onto_surface(field, position, ~feature & merged, tol)
-        new_faces, new_sizes = _split_bent_quads(position, feature, merged, *_collapse(faces, sizes, cluster), tol)
+        new_faces, new_sizes = _split_bent_quads(position, feature, merged, *_collapse(corners, cluster), tol)
         bad = _failures(len(position), new_faces, new_sizes)
         bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tol)
         if not bad.any() or not (level > 0).any():
@@ -140,10 +145,10 @@ def _renumbered(field, surface, creases, level, merged) -> dict:
     out_verts = (np.asarray(field.origin, dtype=np.float64) + h * position).astype(np.float32)
     alone = level == 0
     out_verts[cluster[alone]] = surface["verts"][alone]
-    crease = np.unique(np.sort(cluster[creases], axis=1), axis=0).reshape(-1, 2)
-    crease = crease[crease[:, 0] != crease[:, 1]]
     used = np.zeros(len(out_verts), dtype=bool)
     used[new_faces] = True
+    crease = np.unique(np.sort(cluster[creases], axis=1), axis=0).reshape(-1, 2)
+    crease = crease[(crease[:, 0] != crease[:, 1]) & used[crease].all(axis=1)]
     number = np.cumsum(used) - 1
     return {
         "verts": out_verts[used],
@@ -215,22 +220,6 @@ def _sums(index, values, n) -> np.ndarray:
     return np.stack([np.bincount(index, weights=values[:, k], minlength=n) for k in range(values.shape[1])], axis=1)
 
 
-def _moments(index, points, n):
-    """Per group of ``index`` (N,): count (n,), mean (n, 3) and eigenvectors (n, 3, 3) of the points' covariance,
-    ascending (``[:, :, 0]``: a fitted plane's normal, ``[:, :, 2]``: a fitted line's direction)."""
-    count = np.bincount(index, minlength=n)
-    outer = np.stack([points[:, i] * points[:, j] for i, j in _PAIRS], axis=1)
-    sums = _sums(index, np.concatenate([points, outer], axis=1), n) / np.maximum(count, 1)[:, None]
-    mean = sums[:, :3]
-    cov = np.empty((n, 3, 3))
-    for k, (i, j) in enumerate(_PAIRS):
-        cov[:, i, j] = cov[:, j, i] = sums[:, 3 + k] - mean[:, i] * mean[:, j]
-    return count, mean, np.linalg.eigh(cov)[1]
-
-
-_PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
-
-
 def _classes(ranks, creases, n) -> tuple[np.ndarray, np.ndarray]:
     """(V,) int8 what may merge with what: 1 smooth vertices, 2 vertices inside a crease line (rank 2, two crease
     edges), 0 corners and crease ends (never merge); and the creases kept as such. A crease line of fewer than
@@ -263,95 +252,170 @@ def connected_components(n: int, a, b) -> np.ndarray:
             parent = jumped
 
 
-def _levels(local, cell, faces, sizes, cls, label, crease_key, adaptivity):
+def _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, device=None):
     """Level by level, the components of each block's vertices that merge (see the module's step 2).
 
     Returns:
-        ``level`` (V,) the largest level each vertex merged at (0: none) and ``ids``: per level (V,) each vertex's
-        component there (its cluster when that is its level; -1 where it did not merge at that level).
+        ``level`` (V,) the largest level each vertex merged at (0: none) and ``ids`` (L + 1, V): per level each
+        vertex's component there (its cluster when that is its level; -1 where it did not merge at that level).
     """
     n = len(local)
     level = np.zeros(n, dtype=np.int64)
     ids = [np.arange(n)]
     tol = tolerance(adaptivity)
-    edges = polygon_edges(faces, sizes)
+    live = cls > 0  # corners and crease ends never merge: their edges and faces never count
+    u, v, joins = _edge_levels(edges, cell, cls, label, crease_key)
+    inside = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))  # the clusters merged at the level below, their edges
+    # and faces inside
+    for lv in range(1, max_level(adaptivity) + 1):
+        ready = (level == lv - 1) & live
+        members = np.flatnonzero(ready)
+        if not len(members):
+            break
+        keep = ready[u] & ready[v]  # what no longer merges leaves the edges and faces looked at
+        u, v, joins = u[keep], v[keep], joins[keep]
+        corners = corners[_all_columns(ready[corners])]
+        prev = ids[lv - 1]  # each ready vertex's cluster at the level below
+        use = joins <= lv  # joinable, within one block
+        root = connected_components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
+        member_comp, k = _numbered(root[prev[members]], n)  # the components, numbered 0 .. k - 1
+        comp = np.full(n, k)  # k: none
+        comp[members] = member_comp
+        counts = _inside(comp, members, prev, inside, u, v, corners, k)
+        merged = _merged(local, cls, comp, members, counts, k, tol, device)
+        ids.append(np.where(merged, comp, -1))
+        level[merged] = lv
+        kept = np.flatnonzero(np.bincount(comp[merged], minlength=k))  # the ids at this level: component numbers
+        inside = (kept, counts[kept, :2])
+        # the edges and faces inside a component are counted: they leave
+        keep = comp[u] != comp[v]
+        u, v, joins = u[keep], v[keep], joins[keep]
+        corners = corners[~_one_value(comp[corners])]
+    return level, np.stack(ids)
+
+
+def _edge_levels(edges, cell, cls, label, crease_key):
+    """The undirected edges ``u``-``v`` between vertices that may merge, and the level from which each may join its
+    ends (within one block; the largest integer for an edge that never joins them)."""
+    n = len(cls)
     edges = edges[edges[:, 0] < edges[:, 1]]  # each undirected edge once (closed, oriented mesh)
     u, v = edges[:, 0], edges[:, 1]
-    along_crease = np.isin(u * np.int64(n) + v, crease_key)
+    along_crease = (cls[u] == 2) & (cls[v] == 2)  # both inside crease lines: is the edge one of theirs?
+    along_crease[along_crease] = np.isin(u[along_crease] * np.int64(n) + v[along_crease], crease_key)
     # smooth vertices of one region; crease vertices along a crease, within one region of an operand (between two
     # operands the crease is their seam, where each vertex's operand is either)
     same = label[u] == label[v]
     joinable = (cls[u] == cls[v]) & (cls[u] > 0)
     joinable &= ((cls[u] == 1) & same) | (along_crease & (same | ((label[u] >> 32) != (label[v] >> 32))))
-    first = np.cumsum(sizes) - sizes
-    for lv in range(1, max_level(adaptivity) + 1):
-        _, block = _block_keys(cell, lv)
-        ready = (level == lv - 1) & (cls > 0)
-        prev = ids[lv - 1]  # each ready vertex's cluster at the level below
-        use = joinable & ready[u] & ready[v] & (block[u] == block[v])
-        root = connected_components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
-        members = np.flatnonzero(ready)
-        roots, member_comp = np.unique(root[prev[members]], return_inverse=True)
-        k = len(roots)  # the components, numbered 0 .. k - 1
-        comp = np.full(n, k)  # k: none
-        comp[members] = member_comp.ravel()
-        # a disk: V - E + F = 1 over the component's vertices, the edges and faces with every vertex in it
-        n_e = np.bincount(comp[u[comp[u] == comp[v]]], minlength=k + 1)[:k]
-        corner_comp = comp[faces]
-        same = np.minimum.reduceat(corner_comp, first) == np.maximum.reduceat(corner_comp, first)
-        n_f = np.bincount(corner_comp[first[same]], minlength=k + 1)[:k]
-        n_v, mean, axes = _moments(comp[members], local[members], k)
-        ok = (n_v - n_e + n_f == 1) & (n_v > 0)
-        # flat: every vertex within tol of the plane through the mean (a crease's: of the line)
-        off = _offsets(local[members], comp[members], cls[members] == 2, mean, axes)
-        ok[comp[members][off > tol]] = False
-        merged = np.zeros(n, dtype=bool)
-        merged[members] = ok[comp[members]]
-        level[merged] = lv
-        ids.append(np.where(merged, comp, -1))
-    return level, ids
+    keep = (cls[u] > 0) & (cls[v] > 0)
+    u, v = u[keep], v[keep]
+    # the highest bit the ends' cells differ in (cells of two signs never share a block)
+    differ = cell[u] ^ cell[v]
+    differ = np.where(differ < 0, 2.0**62, differ)
+    joins = np.frexp(np.maximum(np.maximum(differ[:, 0], differ[:, 1]), differ[:, 2]))[1]
+    joins[~joinable[keep]] = np.iinfo(joins.dtype).max
+    return u, v, joins
 
 
-def _offsets(points, comp, on_line, mean, axes) -> np.ndarray:
-    """Distances of points from their component's fitted plane (``on_line``: from its fitted line)."""
-    d = points - mean[comp]
-    frame = axes[comp]
-    plane = np.abs(np.einsum("ij,ij->i", d, frame[:, :, 0]))
-    line = np.linalg.norm(d - np.einsum("ij,ij->i", d, frame[:, :, 2])[:, None] * frame[:, :, 2], axis=1)
-    return np.where(on_line, line, plane)
+def _inside(comp, members, prev, inside, u, v, corners, k) -> np.ndarray:
+    """(k, 3) the edges and faces with every vertex in each component: those inside its clusters of the level below
+    (``inside``: their ids in ``prev`` and counts) and those of ``u``-``v`` and ``corners`` (across them); and how
+    many clusters of the level below it joins (0 at level 1)."""
+    ids, counts = inside
+    comp_of = np.zeros(len(comp), dtype=np.int64)
+    comp_of[prev[members]] = comp[members]  # each cluster below in one component
+    out = np.zeros((k, 3), dtype=np.int64)
+    for j in (0, 1):
+        out[:, j] = np.rint(np.bincount(comp_of[ids], weights=counts[:, j], minlength=k)).astype(np.int64)
+    out[:, 2] = np.bincount(comp_of[ids], minlength=k)
+    cu, cv = comp[u], comp[v]
+    out[:, 0] += np.bincount(cu[cu == cv], minlength=k)
+    cq = comp[corners]
+    out[:, 1] += np.bincount(cq[_one_value(cq), 0], minlength=k)
+    return out
 
 
-def _block_keys(cell, lv):
-    """Unique blocks (K, 3) of 2^lv cells and each vertex's block index."""
-    blocks = cell >> lv
-    lo = blocks.min(axis=0)
-    span = blocks.max(axis=0) - lo + 1
-    code = ((blocks[:, 0] - lo[0]) * span[1] + (blocks[:, 1] - lo[1])) * span[2] + (blocks[:, 2] - lo[2])
-    uniq, block = np.unique(code, return_inverse=True)
-    key = np.stack([uniq // (span[1] * span[2]), (uniq // span[2]) % span[1], uniq % span[2]], axis=1) + lo
-    return key, block.ravel()
+def _all_columns(flags) -> np.ndarray:
+    """(N,) each row of ``flags`` (N, 4) all set (column by column: faster than ``all(axis=1)``)."""
+    return flags[:, 0] & flags[:, 1] & flags[:, 2] & flags[:, 3]
+
+
+def _one_value(values) -> np.ndarray:
+    """(N,) each row of ``values`` (N, 4) all one value."""
+    return (values[:, 0] == values[:, 1]) & (values[:, 1] == values[:, 2]) & (values[:, 2] == values[:, 3])
+
+
+def _merged(local, cls, comp, members, inside, k, tol, device) -> np.ndarray:
+    """(V,) the ``members`` whose component merges: a disk (V - E + F = 1 over the component's vertices, and the
+    edges and faces ``inside`` (k, 3) it), every vertex within ``tol`` of the plane through its vertices (a crease's:
+    of the line; not tested again for a component that is one cluster of the level below: it passed)."""
+    mc = comp[members]
+    n_v = np.bincount(mc, minlength=k)
+    ok = n_v - inside[:, 0] + inside[:, 1] == 1
+    test = ok[mc] & (n_v[mc] > 1) & (inside[mc, 2] != 1)  # a single vertex is flat
+    rows = members[test]
+    if len(rows):
+        sub, m = _numbered(mc[test], k)
+        far = far_components(local[rows], sub, cls[rows] == 2, m, tol, device)
+        ok[mc[test][far[sub]]] = False
+    merged = np.zeros(len(comp), dtype=bool)
+    merged[members] = ok[mc]
+    return merged
+
+
+def _numbered(keys, n: int):
+    """Keys (N,) in 0 .. n - 1 numbered 0 .. m - 1 in their order (as ``np.unique``'s inverse, without a sort);
+    returns the numbers and m."""
+    seen = np.zeros(n, dtype=bool)
+    seen[keys] = True
+    number = np.cumsum(seen) - 1
+    return number[keys], int(number[-1]) + 1 if n else 0
+
+
+def _padded(faces, sizes) -> np.ndarray:
+    """(P, 4) corners of triangles and quads, a triangle's last corner repeated."""
+    start = np.cumsum(sizes) - sizes
+    return faces[start[:, None] + np.minimum(np.arange(4), sizes[:, None] - 1)]
 
 
 def _clusters(local, level, ids, cls):
     """Each vertex's cluster (its component at its level; itself at level 0), the clusters' positions (voxels: the
     mean of their vertices) and whether each is a crease or corner vertex."""
     n = len(local)
-    code = level * np.int64(n) + np.stack(ids)[level, np.arange(n)]
-    _, first, cluster = np.unique(code, return_index=True, return_inverse=True)
-    cluster = cluster.ravel()
-    count = np.bincount(cluster, minlength=len(first))
-    mean = _sums(cluster, local, len(first)) / count[:, None]
+    code = level * np.int64(n) + ids[level, np.arange(n)]
+    cluster, k = _numbered(code, len(ids) * n)
+    first = np.empty(k, dtype=np.int64)
+    first[cluster] = np.arange(n)  # a vertex of each (all of one class)
+    count = np.bincount(cluster, minlength=k)
+    mean = _sums(cluster, local, k) / count[:, None]
     return cluster, mean, cls[first] != 1
 
 
-def _collapse(faces, sizes, cluster):
-    """Faces re-indexed to clusters, corners equal to the one before them dropped, faces left with fewer than 3
-    corners gone. Returns faces, sizes."""
-    corners = cluster[faces]
-    start = np.cumsum(sizes) - sizes
+def _collapse(corners, cluster):
+    """Faces (``corners`` (P, 4), :func:`_padded`) re-indexed to clusters, corners equal to the one before them
+    dropped, faces left with fewer than 3 corners gone; then the corners at a vertex left in two faces only (a fin:
+    two faces folded onto each other, where a lone vertex sits between two merged ones) dropped the same way, the
+    vertex gone. Returns faces, sizes."""
+    corners = cluster[corners]
+    corners = corners[~_one_value(corners)].ravel()  # the others vanish
+    faces, sizes = _dropped(corners, np.full(len(corners) // 4, 4), np.ones(len(corners), dtype=bool))
+    for _ in range(2):
+        fin = np.bincount(faces, minlength=len(cluster)) == 2
+        if not fin.any():
+            break
+        faces, sizes = _dropped(faces, sizes, ~fin[faces])
+    return faces, sizes
+
+
+def _dropped(corners, sizes, keep):
+    """Polygons (``corners`` (C,), ``sizes`` (P,)) without the corners not ``keep`` and those equal to the corner
+    before them; faces left with fewer than 3 corners gone."""
     face_of = np.repeat(np.arange(len(sizes)), sizes)
-    within = np.arange(len(faces)) - start[face_of]
-    prev = np.where(within == 0, start[face_of] + sizes[face_of] - 1, np.arange(len(faces)) - 1)
+    corners, face_of = corners[keep], face_of[keep]
+    count = np.bincount(face_of, minlength=len(sizes))
+    start = np.cumsum(count) - count
+    within = np.arange(len(corners)) - start[face_of]
+    prev = np.where(within == 0, start[face_of] + count[face_of] - 1, np.arange(len(corners)) - 1)
     keep = corners != corners[prev]
     count = np.bincount(face_of[keep], minlength=len(sizes))
     alive = count >= 3
@@ -360,24 +424,29 @@ def _collapse(faces, sizes, cluster):
 
 
 def _failures(n_verts, faces, sizes) -> np.ndarray:
-    """Vertices at which the polygons are not a closed, oriented 2-manifold: a face repeating a corner, an edge not
-    in exactly two faces opposite ways, a vertex whose faces are no single fan."""
+    """Vertices at which the polygons (triangles and quads) are not a closed, oriented 2-manifold: a face repeating a
+    corner, an edge not in exactly two faces opposite ways, a vertex whose faces are no single fan."""
     bad = np.zeros(n_verts, dtype=bool)
     if not len(sizes):
         return bad
-    face_of = np.repeat(np.arange(len(sizes)), sizes)
-    key = face_of * np.int64(n_verts) + faces
-    dup = np.unique(key, return_counts=True)
-    repeated = dup[0][dup[1] > 1] // n_verts
-    bad[faces[np.isin(face_of, repeated)]] = True
+    corners = _padded(faces, sizes)
+    c0, c1, c2, c3 = corners.T
+    quad = sizes == 4
+    repeated = (c0 == c1) | (c0 == c2) | (c1 == c2) | (quad & ((c0 == c3) | (c1 == c3) | (c2 == c3)))
+    bad[corners[repeated].ravel()] = True
     edges = polygon_edges(faces, sizes)
     n = np.int64(n_verts)
     forward, backward = edges[:, 0] * n + edges[:, 1], edges[:, 1] * n + edges[:, 0]
-    uniq, counts = np.unique(forward, return_counts=True)
-    twice = uniq[counts > 1]
-    single = np.isin(forward, twice) | ~np.isin(forward, backward)
+    order = np.argsort(forward)
+    ordered = forward[order]
+    same = ordered[1:] == ordered[:-1]
+    twice = np.zeros(len(forward), dtype=bool)
+    twice[order[1:][same]] = twice[order[:-1][same]] = True
+    at = np.minimum(np.searchsorted(ordered, backward), len(ordered) - 1)
+    single = twice | (ordered[at] != backward)
     bad[edges[single].ravel()] = True
-    undirected = np.unique(np.minimum(forward, backward))
+    undirected = np.sort(np.minimum(forward, backward))
+    undirected = undirected[np.r_[True, undirected[1:] != undirected[:-1]]]
     ends = np.concatenate([undirected // n, undirected % n])
     fan = np.bincount(ends, minlength=n_verts) != np.bincount(faces, minlength=n_verts)
     return bad | fan

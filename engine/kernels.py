@@ -38,6 +38,7 @@ ENGINE_MODULES = (
     "extract",
     "sources",
     "dual",
+    "flatness",
     "edges",
     "sweeping",
     "redistancing",

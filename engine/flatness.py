@@ -1,0 +1,160 @@
+"""Flatness of vertex components (:mod:`.adaptive`'s step 2) in Warp: the plane (or line) fitted through each
+component's vertices, and whether every vertex lies within a tolerance of it.
+
+Three launches over the members and the components replace a dozen whole-array passes of numpy (the moments'
+sums, the batched eigenvectors, the distances): the moments are summed about a vertex of each component (no
+cancellation of large coordinates), the covariance's eigenvectors (closed form) give the fitted plane's normal (the
+smallest eigenvalue's) and a fitted line's direction (the largest's).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+
+@wp.kernel(enable_backward=False)
+def _sum_moments_kernel(
+    points: wp.array(dtype=wp.vec3d),
+    comp: wp.array(dtype=wp.int32),
+    anchor: wp.array(dtype=wp.vec3d),
+    count: wp.array(dtype=wp.float64),
+    first: wp.array(dtype=wp.vec3d),
+    square: wp.array(dtype=wp.vec3d),
+    cross: wp.array(dtype=wp.vec3d),
+):
+    i = wp.tid()
+    c = comp[i]
+    d = points[i] - anchor[c]
+    wp.atomic_add(count, c, wp.float64(1.0))
+    wp.atomic_add(first, c, d)
+    wp.atomic_add(square, c, wp.cw_mul(d, d))
+    wp.atomic_add(cross, c, wp.vec3d(d[0] * d[1], d[0] * d[2], d[1] * d[2]))
+
+
+@wp.func
+def _eigenvector(c: wp.mat33d, value: wp.float64, scale: wp.float64) -> wp.vec3d:
+    """The eigenvector of the symmetric ``c`` for its eigenvalue ``value``: the longest cross product of two rows of
+    c - value I; zero where the eigenvalue is a double one (every cross product below ``scale``)."""
+    r0 = wp.vec3d(c[0, 0] - value, c[0, 1], c[0, 2])
+    r1 = wp.vec3d(c[1, 0], c[1, 1] - value, c[1, 2])
+    r2 = wp.vec3d(c[2, 0], c[2, 1], c[2, 2] - value)
+    best = wp.cross(r0, r1)
+    v = wp.cross(r0, r2)
+    if wp.dot(v, v) > wp.dot(best, best):
+        best = v
+    v = wp.cross(r1, r2)
+    if wp.dot(v, v) > wp.dot(best, best):
+        best = v
+    if wp.length(best) <= scale:
+        return wp.vec3d(0.0, 0.0, 0.0)
+    return wp.normalize(best)
+
+
+@wp.func
+def _perpendicular(v: wp.vec3d) -> wp.vec3d:
+    """A unit vector perpendicular to the unit ``v``."""
+    other = wp.vec3d(1.0, 0.0, 0.0)
+    if wp.abs(v[0]) > 0.8:
+        other = wp.vec3d(0.0, 1.0, 0.0)
+    return wp.normalize(wp.cross(v, other))
+
+
+@wp.kernel(enable_backward=False)
+def _fit_axes_kernel(
+    count: wp.array(dtype=wp.float64),
+    first: wp.array(dtype=wp.vec3d),
+    square: wp.array(dtype=wp.vec3d),
+    cross: wp.array(dtype=wp.vec3d),
+    mean: wp.array(dtype=wp.vec3d),
+    normal: wp.array(dtype=wp.vec3d),
+    direction: wp.array(dtype=wp.vec3d),
+):
+    c = wp.tid()
+    m = first[c] / count[c]
+    s = square[c] / count[c]
+    x = cross[c] / count[c]
+    xy = x[0] - m[0] * m[1]
+    xz = x[1] - m[0] * m[2]
+    yz = x[2] - m[1] * m[2]
+    cov = wp.mat33d(s[0] - m[0] * m[0], xy, xz, xy, s[1] - m[1] * m[1], yz, xz, yz, s[2] - m[2] * m[2])
+    # the smallest and largest eigenvalues in closed form (Smith 1961)
+    one, two, three = wp.float64(1.0), wp.float64(2.0), wp.float64(3.0)
+    q = (cov[0, 0] + cov[1, 1] + cov[2, 2]) / three
+    a0, a1, a2 = cov[0, 0] - q, cov[1, 1] - q, cov[2, 2] - q
+    p = wp.sqrt((a0 * a0 + a1 * a1 + a2 * a2 + two * (xy * xy + xz * xz + yz * yz)) / wp.float64(6.0))
+    n = wp.vec3d(0.0, 0.0, 1.0)
+    d = wp.vec3d(1.0, 0.0, 0.0)
+    if p > wp.float64(0.0):
+        b = wp.mat33d(a0, xy, xz, xy, a1, yz, xz, yz, a2) / p
+        phi = wp.acos(wp.clamp(wp.determinant(b) / two, -one, one)) / three
+        scale = wp.float64(1.0e-9) * p * p
+        n = _eigenvector(cov, q + two * p * wp.cos(phi + two * wp.float64(wp.pi) / three), scale)
+        d = _eigenvector(cov, q + two * p * wp.cos(phi), scale)
+        if wp.length(n) == wp.float64(0.0):
+            n = _perpendicular(d)  # a line: any plane through it
+        if wp.length(d) == wp.float64(0.0):
+            d = _perpendicular(n)  # a disk: any line through it
+    mean[c] = m
+    normal[c] = n
+    direction[c] = d
+
+
+@wp.kernel(enable_backward=False)
+def _flag_far_kernel(
+    points: wp.array(dtype=wp.vec3d),
+    comp: wp.array(dtype=wp.int32),
+    on_line: wp.array(dtype=wp.int8),
+    anchor: wp.array(dtype=wp.vec3d),
+    mean: wp.array(dtype=wp.vec3d),
+    normal: wp.array(dtype=wp.vec3d),
+    direction: wp.array(dtype=wp.vec3d),
+    tol: wp.float64,
+    far: wp.array(dtype=wp.int8),
+):
+    i = wp.tid()
+    c = comp[i]
+    d = points[i] - anchor[c] - mean[c]
+    dist = wp.abs(wp.dot(d, normal[c]))
+    if on_line[i] != wp.int8(0):
+        dist = wp.length(d - wp.dot(d, direction[c]) * direction[c])
+    if dist > tol:
+        far[c] = wp.int8(1)
+
+
+def far_components(points, comp, on_line, m: int, tol: float, device=None) -> np.ndarray:
+    """(m,) bool: the components with a vertex farther than ``tol`` from the plane fitted through their vertices
+    (least squares), or with ``on_line`` from the line.
+
+    Args:
+        points: (N, 3) float64 vertex positions.
+        comp: (N,) int component of each, in 0 .. m - 1 (each component has a vertex).
+        on_line: (N,) bool: the vertex's component is measured against its fitted line (a crease's).
+        m: Number of components.
+        tol: Largest distance allowed.
+        device: Warp device (default: the current one).
+    """
+    if not len(points):
+        return np.zeros(m, dtype=bool)
+    device = wp.get_device(device)
+    comp = np.ascontiguousarray(comp, dtype=np.int32)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    anchor = np.empty((m, 3))
+    anchor[comp] = points  # a vertex of each component
+    wp_points = wp.array(points, dtype=wp.vec3d, device=device)
+    wp_comp = wp.array(comp, dtype=wp.int32, device=device)
+    wp_anchor = wp.array(anchor, dtype=wp.vec3d, device=device)
+    sums = [wp.zeros(m, dtype=wp.float64, device=device)]
+    sums += [wp.zeros(m, dtype=wp.vec3d, device=device) for _ in range(3)]
+    wp.launch(_sum_moments_kernel, dim=len(points), inputs=[wp_points, wp_comp, wp_anchor, *sums], device=device)
+    axes = [wp.empty(m, dtype=wp.vec3d, device=device) for _ in range(3)]
+    wp.launch(_fit_axes_kernel, dim=m, inputs=[*sums, *axes], device=device)
+    far = wp.zeros(m, dtype=wp.int8, device=device)
+    line = wp.array(np.asarray(on_line, dtype=np.int8), dtype=wp.int8, device=device)
+    wp.launch(
+        _flag_far_kernel,
+        dim=len(points),
+        inputs=[wp_points, wp_comp, line, wp_anchor, *axes, wp.float64(tol), far],
+        device=device,
+    )
+    return far.numpy().astype(bool)
