@@ -4,13 +4,16 @@ The kept triangles (:mod:`.keep`) and the voxel surface of the whole result over
 voxel surface gives up every face with a corner *over* the kept faces (within a voxel of them, its closest point on
 them not on their border), so that it ends just beyond their border; the gap between the two borders, a voxel or
 less wide, is closed by a strip of triangles between each border loop of the kept faces and the loop of the voxel
-surface that faces it (the greedy shorter-diagonal advance of mesh zippering, Turk and Levoy 1994), whose corners are
-the two loops' own vertices: no new vertex, no T-junction. A loop that cannot be paired (a hole of one kept triangle
-that the voxel surface does not reach, an island of the voxel surface left over the kept faces) gives up the kept
-faces or voxel faces at it, and the pairing runs again.
+surface that faces it (the shorter-diagonal advance of mesh zippering, Turk and Levoy 1994, steered by where along
+the voxel loop the kept loop's next vertex lies: a kept border that zigzags across slivers, three times the voxel
+loop's length, or runs a long straight edge, stays in step), whose corners are the two loops' own vertices: no new
+vertex, no T-junction. A loop that cannot be paired (a hole of one kept triangle that the voxel surface does not
+reach, an island of the voxel surface left over the kept faces), or whose strip stretches where the two loops part
+(a kept finger narrower than a voxel, which the voxel surface does not follow), gives up the kept faces or voxel
+faces at it, and the pairing runs again.
 
 Written by hand: no library joins a triangle soup to a surface along borders it has to find first; the loops are
-walked in a kernel, a thread per loop, the rest is numpy and Warp's BVH and hash-grid queries.
+walked in a kernel, a thread per loop pair, the rest is numpy and Warp's BVH and hash-grid queries.
 """
 
 from __future__ import annotations
