@@ -15,7 +15,8 @@ built from a mesh is *kept* when, everywhere on it (at samples about a voxel apa
 A triangle that is only partly so and larger than ``SPLIT_VOXELS`` is split (:func:`.refine.split_triangles`) and its
 pieces judged again, so that large faces crossed by a seam keep their far parts; a sliver (a fine cylinder's wall
 triangle, a voxel wide and hundreds long) is cut across into pieces about as wide as it is, so that the kept border
-near a seam is made of short pieces rather than ever narrower needles. Nothing here intersects meshes: the
+near a seam is made of short pieces rather than ever narrower needles, and the kept border's vertices on a straight run
+of it go (:func:`.refine.straighten_borders`). Nothing here intersects meshes: the
 fields decide inside and outside; distances come from the leaves' meshes (exact, through their BVHs) or fields. The
 band is ``BAND_VOXELS`` of the result's voxels, widened by the widest blend.
 """
