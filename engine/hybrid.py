@@ -8,7 +8,7 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
 1. :func:`.keep.kept_triangles`: which triangles of which operand are the surface, facing which way;
 2. the voxel surface less its faces with a corner over the kept ones (:func:`.zipper.vertices_over`);
 3. the border loops of both, paired, and the loops that cannot be paired given up (kept faces or voxel faces at
-   them), until all pair;
+   them; where a strip stretches, first only the kept faces there), until all pair;
 4. a strip between each pair (:func:`.zipper.zip_loops`), and the three parts as one surface, checked closed and
    consistently oriented; where the join cannot be made, the voxel surface alone (``stats["kept_fallback"]``).
 """
@@ -22,6 +22,7 @@ from .edges import surface_edges
 from .keep import kept_triangles
 from .quads import quad_halves_first, triangulate
 from .zipper import (
+    LOCAL_ROUNDS,
     MAX_ROUNDS,
     PAIR_VOXELS,
     WIDEN_RINGS,
@@ -158,17 +159,21 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
         k_loops = _loops(k_border, n, reverse=False)
         v_loops = _loops(border_halves(v_tris[v_alive], n), n, reverse=True)
         paired = _pair_loops(points, k_loops, v_loops, PAIR_VOXELS * voxel, device)
-        strips, stretched = _strips(points, k_loops, v_loops, paired["pairs"], PAIR_VOXELS * voxel, device)
-        kept_failed = np.r_[paired["kept_unpaired"], stretched]
+        strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], PAIR_VOXELS * voxel, n_k, device)
+        # a stretched strip gives up the kept faces where it stretches (a kept finger narrower than a voxel, which the
+        # voxel surface does not follow), and the kept faces along its whole loop only after LOCAL_ROUNDS
+        local = rounds < LOCAL_ROUNDS
+        kept_failed = np.r_[paired["kept_unpaired"], stretched[:0] if local else stretched]
+        far = far if local else far[:0]
         whole = rounds > 0  # a loop failing again gives up the kept piece it bounds
-        if not len(kept_failed) and not len(paired["voxel_unpaired"]):
+        if not len(kept_failed) and not len(far) and not len(paired["voxel_unpaired"]):
             joined = np.concatenate([k_tris[k_alive], v_tris[v_alive], strips.astype(np.int64)])
             kept_failed, whole = _loops_at_unpaired_edges(joined, k_loops, v_loops, paired["pairs"], n), False
             if not len(kept_failed):
                 break
         k_alive, v_gone = _give_up(
             points, (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone), kept_failed,
-            paired["voxel_unpaired"], whole, PAIR_VOXELS * voxel, device,
+            paired["voxel_unpaired"], whole, PAIR_VOXELS * voxel, device, far,
         )  # fmt: skip
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
@@ -209,11 +214,12 @@ def unpaired_edge_vertices(tris: np.ndarray, n_verts: int) -> np.ndarray:
     return np.unique(np.concatenate([a[bad], b[bad]]))
 
 
-def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach: float, device):
+def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach: float, device, far):
     """After a round with loops left unpaired: the kept faces and voxel faces given up for the next one.
 
     A kept loop that failed gives up the kept faces at it (``whole``: a small kept piece it bounds whole, a large one
-    a few rings of faces deep, see :func:`_widened`). A voxel loop that
+    a few rings of faces deep, see :func:`_widened`), and the kept vertices ``far`` where a strip stretched the faces
+    at them. A voxel loop that
     failed gives up its piece of the voxel surface when that is an island (a tenth of the voxel faces or less, left
     over kept faces), else the kept faces near it. Returns the kept faces' and the given-up voxel faces' masks."""
     (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone) = kept, voxel
@@ -232,6 +238,7 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
         at_failed[members[near[near >= 0]]] = True
     if whole:
         at_failed = _widened(k_tris, k_alive, at_failed, n)
+    at_failed[far] = True
     alive = _drop_pinched(k_tris, k_alive & ~at_failed[k_tris].any(axis=1), n)
     if (alive != k_alive).any():  # the voxel faces over the kept ones given up come back: judged afresh
         v_gone = np.zeros_like(v_gone)
@@ -259,24 +266,21 @@ def _widened(tris, alive, at: np.ndarray, n: int, rings: int = WIDEN_RINGS) -> n
     return grown
 
 
-def _strips(points, k_loops, v_loops, pairs, reach: float, device) -> tuple[np.ndarray, np.ndarray]:
-    """The strips between paired loops, and the kept loops whose strip has a step where the two loops are farther
-    apart than ``reach`` (they do not run side by side all along)."""
+def _strips(points, k_loops, v_loops, pairs, reach: float, n_kept: int, device):
+    """The strips between paired loops, the kept loops whose strip has a step where the two loops are farther apart
+    than ``reach`` (they do not run side by side all along), and the kept vertices (below ``n_kept``) at those
+    steps."""
     k_next, k_members, k_labels = k_loops
     v_next, v_members, v_labels = v_loops
     k_count = np.bincount(k_labels[k_members], minlength=len(points))[pairs[:, 0]]
     v_count = np.bincount(v_labels[v_members], minlength=len(points))[pairs[:, 1]]
-    nearest = np.full(len(points), -1, dtype=np.int64)
-    on_k = k_members[np.isin(k_labels[k_members], pairs[:, 0])]
-    on_v = v_members[np.isin(v_labels[v_members], pairs[:, 1])]
-    found = nearest_points(points[on_v], points[on_k], reach, device)
-    nearest[on_k[found >= 0]] = on_v[found[found >= 0]]
-    strips, gaps = zip_loops(points, k_next, v_next, pairs[:, 0], pairs[:, 1], k_count, v_count, nearest, device)
+    strips, gaps = zip_loops(points, k_next, v_next, pairs[:, 0], pairs[:, 1], k_count, v_count, device)
     if not len(strips):
-        return strips, np.zeros(0, dtype=np.int64)
+        return strips, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     counts = k_count + v_count
     first = np.r_[0, np.cumsum(counts)[:-1]]
-    return strips, pairs[np.maximum.reduceat(gaps, first) > reach, 0]
+    far = np.unique(strips[gaps > reach])
+    return strips, pairs[np.maximum.reduceat(gaps, first) > reach, 0], far[far < n_kept].astype(np.int64)
 
 
 def voxel_surface_only(verts, tris, why: str) -> dict:

@@ -13,7 +13,10 @@ built from a mesh is *kept* when, everywhere on it (at samples about a voxel apa
   outward for an inside-out shell).
 
 A triangle that is only partly so and larger than ``SPLIT_VOXELS`` is split (:func:`.refine.split_triangles`) and its
-pieces judged again, so that large faces crossed by a seam keep their far parts. Nothing here intersects meshes: the
+pieces judged again, so that large faces crossed by a seam keep their far parts; a sliver (a fine cylinder's wall
+triangle, a voxel wide and hundreds long) is cut across into pieces about as wide as it is, so that the kept border
+near a seam is made of short pieces rather than ever narrower needles, and the kept border's vertices on a straight run
+of it go (:func:`.refine.straighten_borders`). Nothing here intersects meshes: the
 fields decide inside and outside; distances come from the leaves' meshes (exact, through their BVHs) or fields. The
 band is ``BAND_VOXELS`` of the result's voxels, widened by the widest blend.
 """
@@ -29,7 +32,14 @@ import warp as wp
 from .expression import evaluate_signs, leaves, widest_blend
 from .meshcheck import edge_table, weld_positions
 from .parallel import launch_split, run_tasks
-from .refine import merge_kept, per_triangle_min, restore_whole, split_triangles, triangle_samples
+from .refine import (
+    merge_kept,
+    per_triangle_min,
+    restore_whole,
+    split_triangles,
+    straighten_borders,
+    triangle_samples,
+)
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
 # the seams is joined to them there (the join takes about a voxel of it).
@@ -42,6 +52,8 @@ SPLIT_VOXELS = 1.5
 MAX_SPLIT_ROUNDS = 24
 # Bisections a partly keepable triangle takes per round while it is over four times the split size.
 SPLITS_PER_ROUND = 1
+# A kept border vertex this many voxels or less off the line through its neighbours on the border is collapsed.
+STRAIGHT_VOXELS = 1e-4
 # A triangle's own field is read this many voxels in front of and behind it (its sign must change there).
 SIDE_VOXELS = 0.5
 
@@ -370,4 +382,6 @@ def _judge_leaf(field, index: int, source, bvhs: list) -> dict:
     flip_of[parent[kept]] = flip[kept]
     ends = np.concatenate([ends, np.full((len(verts) - len(ends), 2), -1, dtype=np.int64)])
     verts, tris, parent, kept = restore_whole(verts, tris, parent, kept, ends, source.tris.astype(np.int64))
+    tris, rows = straighten_borders(verts, tris, kept, parent, len(source.verts), STRAIGHT_VOXELS * field.voxel_size)
+    parent, kept = parent[rows], kept[rows]
     return {"verts": verts, "tris": tris, "parent": parent, "kept": kept, "flip": flip_of[parent] & kept}

@@ -350,3 +350,100 @@ def restore_whole(verts, tris, parent, keep, ends, source_tris):
         np.concatenate(out_parent).astype(np.int64),
         np.r_[keep[split_faces], np.ones(restored, dtype=bool)],
     )
+
+
+def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: float):
+    """Collapse the kept region's border vertices that lie on a straight run of it inside one source triangle into
+    the border vertex before them: a border that follows a line of pieces cut across a sliver keeps that line's two
+    ends rather than every piece's corner on it (the strips along it get as many vertices fewer). Kept triangles only;
+    a source vertex stays, and so does a vertex whose collapse would turn a triangle over or join two edges.
+
+    Args:
+        verts: (V, 3) float32; tris: (T, 3) int64 pieces; keep: (T,) bool; parent: (T,) int64 their source
+            triangles; n_source: the source's vertex count (vertices below it stay); tolerance: how far off the
+            line through its border neighbours a vertex may lie.
+    Returns:
+        ``(tris, rows)``: the triangles left and (T',) int64 the row of ``tris`` each stands in.
+    """
+    tris = np.array(tris, dtype=np.int64)
+    rows = np.arange(len(tris), dtype=np.int64)
+    keep = np.asarray(keep, dtype=bool)
+    v64 = verts.astype(np.float64)
+    for _ in range(64):
+        kept_rows = np.flatnonzero(keep)
+        moves = _border_collapses(v64, tris[kept_rows], parent[rows[kept_rows]], n_source, tolerance)
+        if moves is None:
+            break
+        face, target, drop = moves
+        face = kept_rows[face]
+        tris[face] = target
+        alive = np.ones(len(tris), dtype=bool)
+        alive[face[drop]] = False
+        tris, rows, keep = tris[alive], rows[alive], keep[alive]
+    return tris, rows
+
+
+def _border_collapses(v64, tris, parent, n_source: int, tolerance: float):
+    """One round of :func:`straighten_borders` over the kept triangles: ``(faces, their new corners, dropped)``, or
+    None when no vertex can go."""
+    n = len(v64)
+    a, b = tris.ravel(), tris[:, [1, 2, 0]].ravel()
+    keys = a * n + b
+    sorted_keys = np.sort(keys)
+    at = np.minimum(np.searchsorted(sorted_keys, b * n + a), len(keys) - 1)
+    border = sorted_keys[at] != b * n + a
+    out_count, in_count = np.bincount(a[border], minlength=n), np.bincount(b[border], minlength=n)
+    prev = np.full(n, -1, dtype=np.int64)
+    nxt = np.full(n, -1, dtype=np.int64)
+    prev[b[border]], nxt[a[border]] = a[border], b[border]
+    owner = np.repeat(parent, 3)
+    low, high = np.full(n, np.iinfo(np.int64).max), np.full(n, -1)
+    np.minimum.at(low, tris.ravel(), owner)
+    np.maximum.at(high, tris.ravel(), owner)
+    one_run = (out_count == 1) & (in_count == 1) & (low == high) & (np.arange(n) >= n_source)
+    v = np.flatnonzero(one_run)
+    u, w = prev[v], nxt[v]
+    d0, d1 = v64[v] - v64[u], v64[w] - v64[v]
+    cross = np.linalg.norm(np.cross(d0, d1), axis=1)
+    straight = (cross <= tolerance * np.linalg.norm(d0 + d1, axis=1)) & (np.einsum("ij,ij->i", d0, d1) > 0)
+    go = np.zeros(n, dtype=bool)
+    go[v[straight]] = True
+    into = np.full(n, -1, dtype=np.int64)
+    into[v[straight]] = u[straight]
+    at_v = np.flatnonzero(go[tris.ravel()])
+    if not len(at_v):
+        return None
+    face, vert = at_v // 3, tris.ravel()[at_v]
+    target = np.where(tris[face] == vert[:, None], into[vert][:, None], tris[face])
+    drop = (tris[face] == into[vert][:, None]).any(axis=1)
+    old_n = np.cross(v64[tris[face, 1]] - v64[tris[face, 0]], v64[tris[face, 2]] - v64[tris[face, 0]])
+    new_n = np.cross(v64[target[:, 1]] - v64[target[:, 0]], v64[target[:, 2]] - v64[target[:, 0]])
+    area = np.linalg.norm(old_n, axis=1)
+    bad = ~drop & (np.einsum("ij,ij->i", old_n, new_n) <= 1e-6 * area * area)
+    # the link condition: a moved face's other corners must not be joined to the target already (but through the
+    # dropped face)
+    edge_keys = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
+    for k in range(3):
+        other = target[:, k]
+        key = np.minimum(other, into[vert]) * n + np.maximum(other, into[vert])
+        found = edge_keys[np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)] == key
+        in_dropped = _in_dropped_face(tris, face, drop, vert, other, n)
+        bad |= ~drop & found & (other != into[vert]) & ~in_dropped
+    ok = np.bincount(vert[drop], minlength=n) == 1  # one face dropped: the border edge's own
+    ok[vert[bad]] = False
+    claim = np.full(len(tris), np.iinfo(np.int64).max, dtype=np.int64)
+    use = ok[vert]
+    np.minimum.at(claim, face[use], vert[use])
+    lost = np.zeros(n, dtype=bool)
+    lost[vert[use & (claim[face] != vert)]] = True
+    win = use & ~lost[vert]
+    if not win.any():
+        return None
+    return face[win], target[win], drop[win]
+
+
+def _in_dropped_face(tris, face, drop, vert, other, n: int) -> np.ndarray:
+    """Per moved face: whether ``other`` is a corner of the face its vertex drops (joined to the target through it)."""
+    dropped_corners = np.full((n, 3), -1, dtype=np.int64)
+    dropped_corners[vert[drop]] = tris[face[drop]]
+    return (dropped_corners[vert] == other[:, None]).any(axis=1)

@@ -4,13 +4,16 @@ The kept triangles (:mod:`.keep`) and the voxel surface of the whole result over
 voxel surface gives up every face with a corner *over* the kept faces (within a voxel of them, its closest point on
 them not on their border), so that it ends just beyond their border; the gap between the two borders, a voxel or
 less wide, is closed by a strip of triangles between each border loop of the kept faces and the loop of the voxel
-surface that faces it (the greedy shorter-diagonal advance of mesh zippering, Turk and Levoy 1994), whose corners are
-the two loops' own vertices: no new vertex, no T-junction. A loop that cannot be paired (a hole of one kept triangle
-that the voxel surface does not reach, an island of the voxel surface left over the kept faces) gives up the kept
-faces or voxel faces at it, and the pairing runs again.
+surface that faces it (the shorter-diagonal advance of mesh zippering, Turk and Levoy 1994, steered by where along
+the voxel loop the kept loop's next vertex lies: a kept border that zigzags across slivers, three times the voxel
+loop's length, or runs a long straight edge, stays in step), whose corners are the two loops' own vertices: no new
+vertex, no T-junction. A loop that cannot be paired (a hole of one kept triangle that the voxel surface does not
+reach, an island of the voxel surface left over the kept faces), or whose strip stretches where the two loops part
+(a kept finger narrower than a voxel, which the voxel surface does not follow), gives up the kept faces or voxel
+faces at it, and the pairing runs again.
 
 Written by hand: no library joins a triangle soup to a surface along borders it has to find first; the loops are
-walked in a kernel, a thread per loop, the rest is numpy and Warp's BVH and hash-grid queries.
+walked in a kernel, a thread per loop pair, the rest is numpy and Warp's BVH and hash-grid queries.
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ OVER_VOXELS = 1.0
 PAIR_VOXELS = 4.0
 # Rounds of giving up faces at loops that cannot be paired before the join is abandoned.
 MAX_ROUNDS = 12
+# Rounds in which a stretched strip gives up only the kept faces where it stretches, before its whole loop's.
+LOCAL_ROUNDS = 1
 # A loop failing again gives up this many rings of kept faces around it (a small kept piece: all of it).
 WIDEN_RINGS = 3
 
@@ -194,15 +199,10 @@ def nearest_points(cloud: np.ndarray, points: np.ndarray, radius: float, device)
 
 
 # ---- the strip ----
-@wp.func
-def _unwrapped(step: int, m: int) -> int:
-    """A step along a loop of ``m`` vertices, the short way round: in (-m/2, m/2]."""
-    d = step
-    if 2 * d > m:
-        d -= m
-    if 2 * d <= -m:
-        d += m
-    return d
+# Q is searched this many vertices ahead for the vertex nearest P's next one (a kept border's longest straight run
+# is a few tens of voxels, the voxel loop's edges about one), and no farther than this many past the nearest so far.
+AHEAD = 128
+PAST = 4
 
 
 @wp.func
@@ -213,22 +213,46 @@ def _gap(points: wp.array[wp.vec3], p: int, pn: int, q: int, qn: int) -> float:
     return wp.min(a, b)
 
 
+@wp.func
+def _steps_ahead(points: wp.array[wp.vec3], q_next: wp.array[wp.int32], q: int, left: int, target: wp.vec3) -> int:
+    """How many vertices ahead of ``q`` along Q (at most ``left``) the one nearest ``target`` is: the first minimum
+    of the distance, walking on until ``PAST`` vertices have not come nearer."""
+    best = wp.length(points[q] - target)
+    best_t = int(0)
+    walk = q
+    for t in range(1, wp.min(left, AHEAD) + 1):
+        walk = q_next[walk]
+        d = wp.length(points[walk] - target)
+        if d < best:
+            best = d
+            best_t = t
+        if t - best_t >= PAST:
+            break
+    return best_t
+
+
 @wp.kernel(enable_backward=False)
-def _rank_kernel(
+def _zip_kernel(
     points: wp.array[wp.vec3],
+    p_next: wp.array[wp.int32],
     q_next: wp.array[wp.int32],
     p_start: wp.array[wp.int32],
     q_any: wp.array[wp.int32],
+    p_count: wp.array[wp.int32],
     q_count: wp.array[wp.int32],
-    q_start: wp.array[wp.int32],
-    rank: wp.array[wp.int32],
-    owner: wp.array[wp.int32],
+    first: wp.array[wp.int32],
+    tris: wp.array[wp.vec3i],
+    gaps: wp.array[wp.float32],
 ):
-    """Each pair's Q start (its vertex nearest P's start), and every Q vertex's rank along its loop from there and
-    its pair (``owner``)."""
+    """One strip per loop pair: P walks a kept border loop as its faces list it, Q the voxel surface's loop against
+    its faces' direction, from the Q vertex nearest P's start. Each step advances P while its next vertex is nearest
+    Q's current one (:func:`_steps_ahead` 0: a zigzag of P, or a long straight edge's end, does not drag Q along or
+    get left behind), Q while the vertex nearest P's next one lies two or more ahead, else the shorter diagonal."""
     k = wp.tid()
     p = p_start[k]
+    n = p_count[k]
     m = q_count[k]
+    # Q's start: its vertex nearest P's
     q = q_any[k]
     best = wp.length(points[q] - points[p])
     walk = q_next[q]
@@ -238,69 +262,22 @@ def _rank_kernel(
             best = d
             q = walk
         walk = q_next[walk]
-    q_start[k] = q
-    walk = q
-    for j in range(m):
-        rank[walk] = j
-        owner[walk] = k
-        walk = q_next[walk]
-
-
-@wp.kernel(enable_backward=False)
-def _zip_kernel(
-    points: wp.array[wp.vec3],
-    p_next: wp.array[wp.int32],
-    q_next: wp.array[wp.int32],
-    p_start: wp.array[wp.int32],
-    q_start: wp.array[wp.int32],
-    p_count: wp.array[wp.int32],
-    q_count: wp.array[wp.int32],
-    first: wp.array[wp.int32],
-    nearest: wp.array[wp.int32],
-    rank: wp.array[wp.int32],
-    owner: wp.array[wp.int32],
-    tris: wp.array[wp.vec3i],
-    gaps: wp.array[wp.float32],
-):
-    """One strip per loop pair: P walks a kept border loop as its faces list it, Q the voxel surface's loop against
-    its faces' direction, from the Q vertex nearest P's start. P's vertices are placed along Q by their nearest Q
-    vertex (its rank, unwrapped and never going back: a zigzag of P moves on with Q); each step advances the loop
-    whose next vertex comes first, the shorter diagonal where they come together."""
-    k = wp.tid()
-    p = p_start[k]
-    q = q_start[k]
-    n = p_count[k]
-    m = q_count[k]
-    raw = int(0)  # the rank of P's vertex last placed, its unwrapped rank and P's place (their running maximum)
-    unwrapped = int(0)
-    place = int(0)
     i = int(0)
     j = int(0)
     out = first[k]
     for _ in range(n + m):
         pn = p_next[p]
         qn = q_next[q]
-        raw_n = raw
-        unwrapped_n = unwrapped
-        r = nearest[pn]
-        if r >= 0:
-            if owner[r] == k:
-                raw_n = rank[r]
-                unwrapped_n = unwrapped + _unwrapped(raw_n - raw, m)
-        place_n = wp.max(place, unwrapped_n)
         advance_p = j == m
         if i < n and j < m:
-            if place_n <= j:
-                advance_p = True
-            elif place_n == j + 1:
+            ahead = _steps_ahead(points, q_next, q, m - j, points[pn])
+            advance_p = ahead == 0
+            if ahead == 1:
                 advance_p = wp.length(points[pn] - points[q]) < wp.length(points[p] - points[qn])
         gaps[out] = _gap(points, p, pn, q, qn)
         if advance_p:
             tris[out] = wp.vec3i(pn, p, q)
             p = pn
-            raw = raw_n
-            unwrapped = unwrapped_n
-            place = place_n
             i += 1
         else:
             tris[out] = wp.vec3i(q, qn, p)
@@ -309,37 +286,29 @@ def _zip_kernel(
         out += 1
 
 
-def zip_loops(points, p_next, q_next, p_start, q_any, p_count, q_count, nearest, device):
+def zip_loops(points, p_next, q_next, p_start, q_any, p_count, q_count, device):
     """The strips between paired loops (see :func:`_zip_kernel`): ``(tris, gaps)``, (sum of the loops' lengths, 3)
-    int32 and per triangle float32 how far apart the two loops run there (:func:`_gap`). ``points``, the ``*_next``
-    permutations and ``nearest`` (each P vertex's nearest Q vertex, -1: none) index one vertex array."""
+    int32 and per triangle float32 how far apart the two loops run there (:func:`_gap`). ``points`` and the
+    ``*_next`` permutations index one vertex array."""
     counts = np.asarray(p_count, dtype=np.int64) + np.asarray(q_count, dtype=np.int64)
     first = np.zeros(len(counts), dtype=np.int32)
     np.cumsum(counts[:-1], out=first[1:])
-    total = int(counts.sum())
-    out = wp.empty(total, dtype=wp.vec3i, device=device)
-    gaps = wp.empty(total, dtype=wp.float32, device=device)
+    out = wp.empty(int(counts.sum()), dtype=wp.vec3i, device=device)
+    gaps = wp.empty(int(counts.sum()), dtype=wp.float32, device=device)
     if len(counts):
 
         def arr(values):
             return wp.array(np.ascontiguousarray(values, dtype=np.int32), dtype=wp.int32, device=device)
 
-        pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
-        q_next_wp, p_start_wp, q_count_wp = arr(q_next), arr(p_start), arr(q_count)
-        q_start = wp.empty(len(counts), dtype=wp.int32, device=device)
-        rank = wp.full(len(points), -1, dtype=wp.int32, device=device)
-        owner = wp.full(len(points), -1, dtype=wp.int32, device=device)
-        wp.launch(
-            _rank_kernel,
-            len(counts),
-            inputs=[pts, q_next_wp, p_start_wp, arr(q_any), q_count_wp, q_start, rank, owner],
-            device=device,
-        )
         wp.launch(
             _zip_kernel,
             len(counts),
-            inputs=[pts, arr(p_next), q_next_wp, p_start_wp, q_start, arr(p_count), q_count_wp, arr(first)]
-            + [arr(nearest), rank, owner, out, gaps],
+            inputs=[
+                wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device),
+                *(arr(x) for x in (p_next, q_next, p_start, q_any, p_count, q_count, first)),
+                out,
+                gaps,
+            ],
             device=device,
         )
     return out.numpy().reshape(-1, 3).astype(np.int32), gaps.numpy()
