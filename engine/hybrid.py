@@ -165,7 +165,7 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
         local = rounds < LOCAL_ROUNDS
         kept_failed = np.r_[paired["kept_unpaired"], stretched[:0] if local else stretched]
         far = far if local else far[:0]
-        whole = rounds > 0  # a loop failing again gives up the kept piece it bounds
+        whole = rounds > LOCAL_ROUNDS  # a loop failing again gives up the kept piece it bounds
         if not len(kept_failed) and not len(far) and not len(paired["voxel_unpaired"]):
             joined = np.concatenate([k_tris[k_alive], v_tris[v_alive], strips.astype(np.int64)])
             kept_failed, whole = _loops_at_unpaired_edges(joined, k_loops, v_loops, paired["pairs"], n), False
