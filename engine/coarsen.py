@@ -183,34 +183,22 @@ def _claim_kernel(
     first: wp.array[wp.int32],
     rows: wp.array[wp.int32],
     keys: wp.array[wp.int32],
-    claim: wp.array[wp.int32],
-):
-    """Each candidate claims itself and its neighbours with its key (the smallest key wins each vertex)."""
-    i = wp.tid()
-    u = rows[i]
-    wp.atomic_min(claim, u, keys[i])
-    for c in range(first[u], first[u + 1]):
-        wp.atomic_min(claim, _next_corner(tris, corners[c], 1), keys[i])
-
-
-@wp.kernel(enable_backward=False)
-def _won_kernel(
-    tris: wp.array[wp.int32],
-    corners: wp.array[wp.int32],
-    first: wp.array[wp.int32],
-    rows: wp.array[wp.int32],
-    keys: wp.array[wp.int32],
+    check: int,
     claim: wp.array[wp.int32],
     won: wp.array[wp.int32],
 ):
-    """A candidate collapses when it won every vertex it claimed."""
+    """Each candidate claims itself and its neighbours with its key (the smallest key wins each vertex); with
+    ``check``, a second launch, whether it won every vertex it claimed (then it collapses)."""
     i = wp.tid()
     u = rows[i]
     ok = int(1)
-    if claim[u] != keys[i]:
-        ok = 0
-    for c in range(first[u], first[u + 1]):
-        if claim[_next_corner(tris, corners[c], 1)] != keys[i]:
+    for c in range(first[u] - 1, first[u + 1]):
+        w = u
+        if c >= first[u]:
+            w = _next_corner(tris, corners[c], 1)
+        if check == 0:
+            wp.atomic_min(claim, w, keys[i])
+        elif claim[w] != keys[i]:
             ok = 0
     won[i] = ok
 
@@ -317,11 +305,10 @@ def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state,
     keys = _keys(place[rows], length[rows], int(len(active)))
     w_rows, w_keys = wp.array(rows, dtype=wp.int32, device=device), wp.array(keys, dtype=wp.int32, device=device)
     claim = wp.full(n, len(rows), dtype=wp.int32, device=device)
-    wp.launch(_claim_kernel, dim=len(rows), inputs=[w_tris, w_corners, w_first, w_rows, w_keys, claim], device=device)
     won = wp.empty(len(rows), dtype=wp.int32, device=device)
-    wp.launch(
-        _won_kernel, dim=len(rows), inputs=[w_tris, w_corners, w_first, w_rows, w_keys, claim, won], device=device
-    )
+    for check in (0, 1):
+        inputs = [w_tris, w_corners, w_first, w_rows, w_keys, check, claim, won]
+        wp.launch(_claim_kernel, dim=len(rows), inputs=inputs, device=device)
     chosen = rows[won.numpy() == 1]
     return chosen, best[chosen]
 
