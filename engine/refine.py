@@ -140,14 +140,7 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long
     """
     t = np.asarray(tris, dtype=np.int64)
     n = len(verts)
-    a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
-    keys = np.minimum(a, b) * n + np.maximum(a, b)
-    e = verts[t[:, [1, 2, 0]]].astype(np.float64) - verts[t].astype(np.float64)
-    longest = np.argmax((e**2).sum(axis=2), axis=1)
-    rows = np.flatnonzero(split)
-    lengths = np.sqrt((e[rows] ** 2).sum(axis=2))
-    across = (lengths > long_edge) & (lengths > 2.0 * lengths.min(axis=1, keepdims=True))
-    marked_keys = np.unique(np.r_[keys.reshape(-1, 3)[rows, longest[rows]], keys.reshape(-1, 3)[rows][across]])
+    keys, marked_keys = _edges_to_split(verts, t, split, long_edge)
     at = np.searchsorted(marked_keys, keys)
     at_ok = np.minimum(at, max(len(marked_keys) - 1, 0))
     marked = (at < len(marked_keys)) & (marked_keys[at_ok] == keys) if len(marked_keys) else np.zeros(len(keys), bool)
@@ -192,6 +185,20 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long
             ],
         )
     return np.concatenate([verts, new_verts]), np.concatenate(parts), np.concatenate(origin), np.stack([lo, hi], 1)
+
+
+def _edges_to_split(verts, t: np.ndarray, split: np.ndarray, long_edge: float):
+    """``(keys, marked)``: every corner's edge as a key (low * V + high) and the sorted keys of the edges to split:
+    each ``split`` triangle's longest, and a sliver's other long edges (:func:`split_triangles`)."""
+    n = len(verts)
+    a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
+    keys = np.minimum(a, b) * n + np.maximum(a, b)
+    e = verts[t[:, [1, 2, 0]]].astype(np.float64) - verts[t].astype(np.float64)
+    longest = np.argmax((e**2).sum(axis=2), axis=1)
+    rows = np.flatnonzero(split)
+    lengths = np.sqrt((e[rows] ** 2).sum(axis=2))
+    across = (lengths > long_edge) & (lengths > 2.0 * lengths.min(axis=1, keepdims=True))
+    return keys, np.unique(np.r_[keys.reshape(-1, 3)[rows, longest[rows]], keys.reshape(-1, 3)[rows][across]])
 
 
 def _turned(rows: np.ndarray, k: np.ndarray) -> np.ndarray:
