@@ -217,5 +217,5 @@ def test_an_adaptivity_merges_the_seams_new_faces_and_the_result_stays_exact(fre
         assert d["max"] < 1.0 * voxel and d["p95"] < 0.05 * voxel, d
         for obj in (box, cutter, result):
             bpy.data.objects.remove(obj)
-    # measured: 2,068 faces at 0, 1,744 at 1
-    assert counts[1] < 0.95 * counts[0], counts
+    # measured: 1,282 faces at 0, 855 at 1
+    assert counts[1] < 0.9 * counts[0], counts
