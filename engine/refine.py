@@ -373,21 +373,29 @@ def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: floa
         ``(tris, rows)``: the triangles left and (T',) int64 the row of ``tris`` each stands in.
     """
     tris = np.array(tris, dtype=np.int64)
-    rows = np.arange(len(tris), dtype=np.int64)
     keep = np.asarray(keep, dtype=bool)
+    # only kept triangles at a vertex of a piece with a midpoint are read (the edges at a midpoint, and the edges a
+    # collapse could join to): the others are set aside, unchanged
+    near = np.zeros(len(verts), dtype=bool)
+    near[tris[keep & (tris >= n_source).any(axis=1)].ravel()] = True
+    read = np.flatnonzero(keep & near[tris].any(axis=1))
+    rest = np.setdiff1d(np.arange(len(tris)), read)
+    if not len(read):
+        return tris, np.arange(len(tris), dtype=np.int64)
+    tris, rest_tris, rows, keep, parent = tris[read], tris[rest], read, keep[read], parent[read]
     v64 = verts.astype(np.float64)
     for _ in range(64):
-        kept_rows = np.flatnonzero(keep)
-        moves = _border_collapses(v64, tris[kept_rows], parent[rows[kept_rows]], n_source, tolerance)
+        moves = _border_collapses(v64, tris, parent, n_source, tolerance)
         if moves is None:
             break
         face, target, drop = moves
-        face = kept_rows[face]
         tris[face] = target
         alive = np.ones(len(tris), dtype=bool)
         alive[face[drop]] = False
-        tris, rows, keep = tris[alive], rows[alive], keep[alive]
-    return tris, rows
+        tris, rows, parent = tris[alive], rows[alive], parent[alive]
+    rows, tris = np.concatenate([rows, rest]), np.concatenate([tris, rest_tris])
+    order = np.argsort(rows, kind="stable")  # in the order they came
+    return tris[order], rows[order]
 
 
 def _border_collapses(v64, tris, parent, n_source: int, tolerance: float):
