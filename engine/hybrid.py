@@ -340,12 +340,15 @@ def kept_surface(field, *, sharp: bool | None = None, adaptivity: float = 0.0, r
         dict: ``verts`` (N, 3) float32, ``tris`` (M, 3) int32 (closed, counter-clockwise seen from outside), per face
         ``kept`` bool, ``field_id`` and ``triangle_id`` int32 (its source triangle, -1 for new faces), per vertex
         ``vertex_field`` and ``vertex_id`` int32 (a kept corner's source vertex, else -1), ``corner_bary`` (M, 3, 3)
-        float32, ``stats``.
+        float32, ``voxel_face`` (M,) int64 (the voxel quad half a new face is, else -1), ``quads`` (the first
+        ``2 * quads`` faces are the halves of whole quads, ``a b c`` and ``a c d``: :func:`.quads.quad_halves_first`),
+        ``stats``.
     """
     if field.placement is not None:  # joined in its own frame, then placed
         surface = kept_surface(field.in_frame(), sharp=sharp, adaptivity=adaptivity, regions=regions)
         surface["verts"], surface["tris"] = field.placement.place_surface(surface["verts"], surface["tris"])
-        return quad_halves_first(surface)  # a reflection turned the halves over: in quad order again
+        # a reflection turned every face over: the quads' halves read in quad order again
+        return quad_halves_first(surface) if field.placement.mirrors else surface
     verts, faces, sizes = field.to_mesh(sharp=sharp, quads=True)
     tris = triangulate(faces, sizes)
     if field.expression is None or not len(tris):
