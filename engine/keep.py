@@ -228,13 +228,14 @@ class _Judge:
         self.side_offset = self.band if self.crossing else own.offset
         self.side = own.side  # each source triangle's, at ``side_offset`` when the shell nowhere crosses itself
 
-    def judge(self, verts, tris, parent):
+    def judge(self, verts, tris, parent, longest):
         """Per triangle (pieces of original triangles ``parent``): kept, partly keepable, and flipped. A triangle is
         sampled about ``SAMPLE_VOXELS`` apart, or an eighth of its longest edge when that is more (a large triangle
-        near a seam is split anyway), its samples' spacing the slack of its checks."""
+        near a seam is split anyway), its samples' spacing the slack of its checks (``longest``: (T,) each one's
+        longest edge)."""
         used, local = np.unique(tris, return_inverse=True)
         local = local.reshape(-1, 3)
-        spacing = np.maximum(_longest_edges(verts, tris) / 8.0, self.spacing)
+        spacing = np.maximum(longest / 8.0, self.spacing)
         slack = spacing * (SLACK_VOXELS / SAMPLE_VOXELS)
         points, first = triangle_samples(verts[used], local, spacing, self.device)
         reach = self.band + float(slack.max()) + self.spacing
@@ -247,33 +248,28 @@ class _Judge:
                 continue
             near, sign = _margin(other, self.bvhs[j], points, self.band, reach, self.device)
             margin = np.minimum(margin, near)
-            low = per_triangle_min(sign, local, len(used), first)
-            same &= low == -per_triangle_min(-sign, local, len(used), first)
+            low, minus_high = per_triangle_min(np.stack([sign, -sign], axis=1), local, len(used), first).T
+            same &= low == -minus_high
             signs.append(sign)
         if self.defect_mesh is not None:
             margin = np.minimum(margin, mesh_distances(self.defect_mesh, points, reach, self.device))
         crosses, flips = self._crossing(signs)
-        least = per_triangle_min(np.where(crosses, margin, -1.0), local, len(used), first)
-        most = -per_triangle_min(np.where(crosses, -margin, 1.0), local, len(used), first)
-        whole = (tris == self.tris[parent]).all(axis=1)  # source triangles as they are, not split pieces
-        side, crossed, partly_crossed = self._own_sides(verts[used], local, points, first, np.where(whole, parent, -1))
+        bounds = np.stack([np.where(crosses, margin, -1.0), np.where(crosses, -margin, 1.0)], axis=1)
+        least, most = per_triangle_min(bounds, local, len(used), first).T * np.array([[1.0], [-1.0]])
+        side, crossed, partly_crossed = self._own_sides(verts[used], local, points, first, parent)
         kept = same & crossed & (least > self.band + slack)
         partly = partly_crossed & (most + slack > self.band + self.slack) & ~self.defects[parent]
         return kept, partly, flips[local[:, 0]] ^ (side < 0)
 
-    def _own_sides(self, verts, tris, points, first, source_rows):
+    def _own_sides(self, verts, tris, points, first, parent):
         """How the leaf's own field crosses each triangle: (T,) its side at the centre (:func:`_side_at`), whether
         every sample (corners, rows) has that side, not 0, and whether any has one. Parts of a triangle that its own
-        field does not cross (a self-intersecting or overlapping shell's internal faces) are not kept. A triangle that
-        is a whole source triangle (``source_rows`` >= 0, else -1) has its side at the centre found already."""
-        normals = _unit_normals(verts, tris)
+        field does not cross (a self-intersecting or overlapping shell's internal faces) are not kept. On a shell that
+        nowhere crosses itself a piece has its source triangle's (``parent``) side, found already."""
         if not self.crossing:  # a shell that nowhere crosses itself: its side at the centre holds all over
-            centre = self.side[np.maximum(source_rows, 0)]
-            pieces = np.flatnonzero(source_rows < 0)
-            if len(pieces):
-                at = verts[tris[pieces]].mean(axis=1)
-                centre[pieces] = _side_at(self.leaves[self.index], at, normals[pieces], self.side_offset)
+            centre = self.side[parent]
             return centre, centre != 0, centre != 0
+        normals = _unit_normals(verts, tris)
         owner = np.repeat(np.arange(len(tris)), np.diff(first))
         centres = verts[tris].mean(axis=1)
         whose = np.concatenate([np.repeat(np.arange(len(tris)), 3), owner])
@@ -354,8 +350,9 @@ def _judge_leaf(field, index: int, source, bvhs: list) -> dict:
         todo = np.flatnonzero(status == UNKNOWN)
         if not len(todo):
             break
-        kept, partly, flip[todo] = judge.judge(verts, tris[todo], parent[todo])
-        split = partly & ~kept & (_longest_edges(verts, tris[todo]) > split_edge)
+        longest = _longest_edges(verts, tris[todo])
+        kept, partly, flip[todo] = judge.judge(verts, tris[todo], parent[todo], longest)
+        split = partly & ~kept & (longest > split_edge)
         status[todo] = np.where(kept, KEPT, np.where(split, UNKNOWN, DROPPED))
         if not split.any():
             break

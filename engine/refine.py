@@ -115,11 +115,12 @@ def triangle_samples(verts: np.ndarray, tris: np.ndarray, spacing: np.ndarray, d
 
 
 def per_triangle_min(values: np.ndarray, tris: np.ndarray, n_verts: int, first: np.ndarray) -> np.ndarray:
-    """(T,) the least of ``values`` (one per sample of :func:`triangle_samples`) over each triangle's samples."""
+    """(T,) the least of ``values`` (one per sample of :func:`triangle_samples`) over each triangle's samples; (T, K)
+    for (N, K) values, per column."""
     least = values[:n_verts][tris].min(axis=1)
     own = np.flatnonzero(first[1:] > first[:-1])
     if len(own):
-        lows = np.minimum.reduceat(values[n_verts:], first[own])
+        lows = np.minimum.reduceat(values[n_verts:], first[own], axis=0)
         least[own] = np.minimum(least[own], lows)
     return least
 
@@ -226,8 +227,15 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
         verdict).
     """
     tris = np.array(tris, dtype=np.int64)
-    rows = np.arange(len(tris), dtype=np.int64)
     keep = np.asarray(keep, dtype=bool)
+    # only kept triangles and those sharing a corner with one are read (a midpoint's valence counts them): the rest,
+    # unchanged, are set aside
+    near = np.zeros(len(ends), dtype=bool)
+    near[tris[keep].ravel()] = True
+    read = near[tris].any(axis=1)
+    rest = np.flatnonzero(~read)
+    rows = np.flatnonzero(read)
+    tris, rest_tris, keep = tris[rows], tris[rest], keep[rows]
     v64 = verts.astype(np.float64)
     for _ in range(256):
         merged = False
@@ -265,7 +273,9 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
             tris, rows, keep = tris[alive], rows[alive], keep[alive]
         if not merged:
             break
-    return tris, rows
+    rows, tris = np.concatenate([rows, rest]), np.concatenate([tris, rest_tris])
+    order = np.argsort(rows, kind="stable")  # in the order they came
+    return tris[order], rows[order]
 
 
 def _edge_of_vertices(ends: np.ndarray, n_source: int) -> np.ndarray:
