@@ -20,6 +20,7 @@ import numpy as np
 from .coarsen import coarsened
 from .edges import surface_edges
 from .keep import kept_triangles
+from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .zipper import (
     LOCAL_ROUNDS,
@@ -126,12 +127,13 @@ def _pair_loops(points, k_loops, v_loops, reach: float, device) -> dict:
     }
 
 
-def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> dict:
+def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judged: list | None = None) -> dict:
     """The result's surface with its operands' faces kept (see the module docstring).
 
     Args:
         field: An unplaced boolean result (:class:`.field.AdaptiveField` with an ``expression``).
         voxel_verts, voxel_tris: Its voxel surface ((V, 3) float32, (F, 3) int32), closed and oriented.
+        judged: Its operands' triangles judged (:func:`.keep.kept_triangles`), when found already.
     Returns:
         dict: ``verts`` (N, 3) float32, ``tris`` (M, 3) int32; per face ``kept`` bool, ``field_id`` and
         ``triangle_id`` int32 (the source triangle of a kept face, -1 for new faces); per vertex ``vertex_field``
@@ -140,7 +142,7 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray) -> di
         ``voxel_face`` (M,) int64 the voxel triangle each new face is (-1 for kept faces and strips); ``stats``.
     """
     device, voxel = field.device, field.voxel_size
-    kept = kept_mesh(kept_triangles(field))
+    kept = kept_mesh(kept_triangles(field) if judged is None else judged)
     n_k = len(kept["verts"])
     points = np.concatenate([kept["verts"], voxel_verts]).astype(np.float32)
     k_tris, v_tris = kept["tris"], np.asarray(voxel_tris, dtype=np.int64) + n_k
@@ -349,12 +351,18 @@ def kept_surface(field, *, sharp: bool | None = None, adaptivity: float = 0.0, r
         surface["verts"], surface["tris"] = field.placement.place_surface(surface["verts"], surface["tris"])
         # a reflection turned every face over: the quads' halves read in quad order again
         return quad_halves_first(surface) if field.placement.mirrors else surface
-    verts, faces, sizes = field.to_mesh(sharp=sharp, quads=True)
+    found = {}  # the voxel surface and the operands' triangles judged, side by side (independent work)
+    run_tasks(
+        [lambda: found.update(mesh=field.to_mesh(sharp=sharp, quads=True))]
+        + ([lambda: found.update(judged=kept_triangles(field))] if field.expression is not None else []),
+        field.device,
+    )
+    verts, faces, sizes = found["mesh"]
     tris = triangulate(faces, sizes)
     if field.expression is None or not len(tris):
         surface = voxel_surface_only(verts, tris, "not a boolean of meshes")
     else:
-        surface = coarsened(field, hybrid_surface(field, verts, tris), adaptivity, regions)
+        surface = coarsened(field, hybrid_surface(field, verts, tris, found["judged"]), adaptivity, regions)
     quads = int(np.count_nonzero(np.asarray(sizes) == 4))  # the first, rows 2q and 2q + 1 of ``tris``
     surface["voxel_face"] = np.where(surface["voxel_face"] < 2 * quads, surface["voxel_face"], -1)
     return quad_halves_first(surface)
