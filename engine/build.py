@@ -303,36 +303,66 @@ def _build_thick(plan: dict, *, device, field_id: int) -> AdaptiveField:
 
 
 def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
-    """:func:`build_field` of a checked :func:`plan_field`."""
-    if plan.get("thickness") is not None:
-        return _build_thick(plan, device=_device(device), field_id=field_id)
-    verts, tris, origin, top_dims = plan["vertices"], plan["triangles"], plan["origin"], plan["top_dims"]
-    fine_dims, top_count = plan["fine_dims"], plan["top_count"]
-    voxel_size, levels, padding = plan["voxel_size"], plan["levels"], plan["padding"]
-    octet = 2.0 * voxel_size
+    """:func:`build_field` of a checked :func:`plan_field`: the steps of the module docstring."""
     device = _device(device)
-
+    if plan.get("thickness") is not None:
+        return _build_thick(plan, device=device, field_id=field_id)
     timings = {}
     t0 = time.perf_counter()
-    # the BVH builds while the mesh checks and the cell enumeration run: on the CPU on a thread of its own (Warp's
-    # native build releases the GIL)
-    made = {}
+    bvh = _MeshBuild(plan["vertices"], plan["triangles"], device)  # on a thread of its own while the checks run
+    facts = _mesh_facts(plan, device)
+    timings["mesh_checks"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    base_octets = _finest_octets(plan, device)
+    timings["finest_cells"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    mesh = bvh.result()
+    timings["mesh_bvh"] = time.perf_counter() - t0  # what is left of the BVH build once the cells are found
+    search_mesh = _search_mesh(plan, facts["frame"], mesh, device, timings)
+    winding = winding_arg(mesh, facts["boundary"], device, encloses=facts["encloses"])
+    base_octets = _with_cap_sheets(plan, facts["caps"], winding, base_octets, device, timings)
+    levels = _Levels(plan, facts, mesh, search_mesh, winding, device, field_id, timings)
+    field = levels.build(base_octets)
+    field = _refined_across_holes(levels, field, base_octets, plan, facts, winding)
+    return _finished(field, plan, facts, mesh, field_id)
 
-    def make_mesh():
+
+class _MeshBuild:
+    """The mesh's BVH (with winding-number data), built on a thread of its own on the CPU (Warp's native build
+    releases the GIL) while the mesh checks and the cell enumeration run; :meth:`result` waits for it."""
+
+    def __init__(self, verts, tris, device):
+        self.verts, self.tris, self.device, self.made = verts, tris, device, {}
+        self.thread = threading.Thread(target=self.make) if device.is_cpu else None
+        if self.thread is not None:
+            self.thread.start()
+        else:
+            self.make()
+
+    def make(self):
         try:
-            made["mesh"] = wp.Mesh(
-                points=wp.array(verts, dtype=wp.vec3, device=device),
-                indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
+            self.made["mesh"] = wp.Mesh(
+                points=wp.array(self.verts, dtype=wp.vec3, device=self.device),
+                indices=wp.array(self.tris.reshape(-1), dtype=wp.int32, device=self.device),
                 support_winding_number=True,
             )
         except Exception as err:  # noqa: BLE001 (re-raised in the caller's thread)
-            made["error"] = err
+            self.made["error"] = err
 
-    builder = threading.Thread(target=make_mesh) if device.is_cpu else None
-    if builder is not None:
-        builder.start()
-    else:
-        make_mesh()
+    def result(self) -> wp.Mesh:
+        if self.thread is not None:
+            self.thread.join()
+        if "error" in self.made:
+            raise self.made["error"]
+        return self.made["mesh"]
+
+
+def _mesh_facts(plan: dict, device) -> dict:
+    """What the build needs to know of the mesh: ``clean`` (closed, consistently oriented, manifold), ``problem``
+    (T,) its problem faces, ``boundary`` (its holes, None when clean), ``encloses`` (False for a flat sheet),
+    ``caps`` (the surfaces across its holes, or None), ``diag``, ``mean_area``, and how the octets search it
+    (``box_search``, ``frame``, ``thin``: :mod:`.search`)."""
+    verts, tris, voxel_size = plan["vertices"], plan["triangles"], plan["voxel_size"]
     edges = edge_table(tris, len(verts))
     problem = problem_faces(tris, len(verts), edges)
     clean = not bool(problem.any())
@@ -351,99 +381,132 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
         boundary = None if clean else hole_boundary(seam_verts, seam_tris, edges)
         # a flat sheet (a plane, a triangle) encloses nothing: no winding number needed, no surface across its holes
         encloses = not encloses_nothing(seam_verts, boundary)
-    caps = None if boundary is None or not encloses else boundary["caps"]
-    diag = float(np.linalg.norm(fine_dims * voxel_size))
     # candidate triangles per octet grow as cell area / triangle area: search boxes only where that stays small
     mean_area = float(plan["areas"].mean())
     box_search = mean_area >= OCTET_SEARCH_MIN_AREA * voxel_size**2
-    # the octets search a turned copy of a mesh whose slanted parts have loose bounding boxes (a turned cylinder)
-    frame = search.search_frame(verts, tris, octet, device) if box_search and levels > 1 else None
-    # the triangles the octets' capsule test is for
-    thin = search.slivers(verts, tris, voxel_size, device) if box_search else None
-    timings["mesh_checks"] = time.perf_counter() - t0
+    octet = 2.0 * voxel_size
+    return {
+        "clean": clean,
+        "problem": problem,
+        "boundary": boundary,
+        "encloses": encloses,
+        "caps": None if boundary is None or not encloses else boundary["caps"],
+        "diag": float(np.linalg.norm(plan["fine_dims"] * voxel_size)),
+        "mean_area": mean_area,
+        "box_search": box_search,
+        # the octets search a turned copy of a mesh whose slanted parts have loose bounding boxes (a turned cylinder)
+        "frame": search.search_frame(verts, tris, octet, device) if box_search and plan["levels"] > 1 else None,
+        # the triangles the octets' capsule test is for
+        "thin": search.slivers(verts, tris, voxel_size, device) if box_search else None,
+    }
 
-    t0 = time.perf_counter()
-    if levels == 1:
-        base_octets = None  # the dense top level is the finest
-    else:
-        oct_dims = wp.vec3i(*(int(d) for d in fine_dims // 2))
-        verts_wp = wp.array(verts, dtype=wp.vec3, device=device)
-        tris_wp = wp.array(tris, dtype=wp.int32, device=device)
-        args = [verts_wp, tris_wp, wp.vec3(*origin), octet, padding * voxel_size, oct_dims]
-        end_bit = 3 * code_bits(fine_dims // 2)
-        if byte_grid_fits(fine_dims // 2):
-            base_octets = octree.mark_then_compact(
-                _octets_per_triangle_kernel,
-                len(tris),
-                args,
-                fine_dims // 2,
-                device,
-                end_bit=end_bit,
-                check=lambda total: check_budget(fine_dims, top_count, 8 * total),
-            )
-        else:
-            octet_codes = octree.count_then_emit(
-                _octets_per_triangle_kernel,
-                len(tris),
-                [*args, wp.empty(0, dtype=wp.uint8, device=device)],  # no mask
-                device,
-                check=lambda total: check_budget(fine_dims, top_count, min(8 * total, plan["fine_nodes"]), pairs=total),
-            )
-            base_octets = octree.sort_unique(octet_codes, end_bit=end_bit)
-    timings["finest_cells"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    if builder is not None:
-        builder.join()
-    timings["mesh_bvh"] = time.perf_counter() - t0  # what is left of the BVH build once the cells are found
-    if "error" in made:
-        raise made["error"]
-    mesh = made["mesh"]
-    search_mesh = mesh
-    if frame is not None:
-        t0 = time.perf_counter()
-        search_mesh = wp.Mesh(
-            points=wp.array((verts @ frame.T).astype(np.float32), dtype=wp.vec3, device=device),
-            indices=wp.array(tris.reshape(-1), dtype=wp.int32, device=device),
+def _finest_octets(plan: dict, device):
+    """The sorted Morton codes of the finest level's octets (None for a single dense level: it is the finest), by
+    :func:`_octets_per_triangle_kernel`: marked in a byte grid where one fits, else listed and sorted."""
+    if plan["levels"] == 1:
+        return None
+    verts, tris, fine_dims, top_count = plan["vertices"], plan["triangles"], plan["fine_dims"], plan["top_count"]
+    voxel_size = plan["voxel_size"]
+    oct_dims = wp.vec3i(*(int(d) for d in fine_dims // 2))
+    verts_wp = wp.array(verts, dtype=wp.vec3, device=device)
+    tris_wp = wp.array(tris, dtype=wp.int32, device=device)
+    args = [verts_wp, tris_wp, wp.vec3(*plan["origin"]), 2.0 * voxel_size, plan["padding"] * voxel_size, oct_dims]
+    end_bit = 3 * code_bits(fine_dims // 2)
+    if byte_grid_fits(fine_dims // 2):
+        return octree.mark_then_compact(
+            _octets_per_triangle_kernel,
+            len(tris),
+            args,
+            fine_dims // 2,
+            device,
+            end_bit=end_bit,
+            check=lambda total: check_budget(fine_dims, top_count, 8 * total),
         )
-        timings["search_frame"] = time.perf_counter() - t0
-    winding = winding_arg(mesh, boundary, device, encloses=encloses)
-    lattices = None
-    if caps is not None and levels > 1:
-        # the surface across the holes, found before the first build instead of by a refinement round after it
-        t0 = time.perf_counter()
-        lattices = cap_lattices(winding, caps, origin, fine_dims // 2, octet, base_octets.shape[0], device)
-        if lattices is not None:
-            band = base_octets.numpy()
-            sheet = lattices["sheet"][~in_sorted(band, lattices["sheet"])]  # where the band does not hold it already
-            if len(sheet):
-                check_budget(fine_dims, top_count, 8 * len(band) + 8 * 27 * len(sheet))
-                base_octets = add_octets(base_octets, sheet, fine_dims // 2, end_bit=3 * code_bits(fine_dims // 2))
-        timings["cap_lattices"] = time.perf_counter() - t0
+    octet_codes = octree.count_then_emit(
+        _octets_per_triangle_kernel,
+        len(tris),
+        [*args, wp.empty(0, dtype=wp.uint8, device=device)],  # no mask
+        device,
+        check=lambda total: check_budget(fine_dims, top_count, min(8 * total, plan["fine_nodes"]), pairs=total),
+    )
+    return octree.sort_unique(octet_codes, end_bit=end_bit)
 
-    known = {}  # the signs' expansions of the latest build, which a refinement round keeps
 
-    def build(octets, query_radius, previous=None):
+def _search_mesh(plan: dict, frame, mesh, device, timings: dict):
+    """The mesh the octets search: ``mesh`` itself, or its copy turned by ``frame``."""
+    if frame is None:
+        return mesh
+    t0 = time.perf_counter()
+    turned = wp.Mesh(
+        points=wp.array((plan["vertices"] @ frame.T).astype(np.float32), dtype=wp.vec3, device=device),
+        indices=wp.array(plan["triangles"].reshape(-1), dtype=wp.int32, device=device),
+    )
+    timings["search_frame"] = time.perf_counter() - t0
+    return turned
+
+
+def _with_cap_sheets(plan: dict, caps, winding, base_octets, device, timings: dict):
+    """``base_octets`` with the octets of the surface across an open mesh's holes (``caps``), found before the first
+    build instead of by a refinement round after it."""
+    if caps is None or plan["levels"] == 1:
+        return base_octets
+    t0 = time.perf_counter()
+    fine_dims = plan["fine_dims"]
+    octet = 2.0 * plan["voxel_size"]
+    lattices = cap_lattices(winding, caps, plan["origin"], fine_dims // 2, octet, base_octets.shape[0], device)
+    if lattices is not None:
+        band = base_octets.numpy()
+        sheet = lattices["sheet"][~in_sorted(band, lattices["sheet"])]  # where the band does not hold it already
+        if len(sheet):
+            check_budget(fine_dims, plan["top_count"], 8 * len(band) + 8 * 27 * len(sheet))
+            base_octets = add_octets(base_octets, sheet, fine_dims // 2, end_bit=3 * code_bits(fine_dims // 2))
+    timings["cap_lattices"] = time.perf_counter() - t0
+    return base_octets
+
+
+class _Levels:
+    """Builds the field on a set of finest octets: its levels placed, distances (finest exactly, coarser solved
+    bottom-up), signs top-down; a refinement round's build keeps what the latest one found (``previous``)."""
+
+    def __init__(self, plan, facts, mesh, search_mesh, winding, device, field_id, timings):
+        self.plan, self.facts, self.mesh, self.search_mesh = plan, facts, mesh, search_mesh
+        self.winding, self.device, self.field_id, self.timings = winding, device, field_id, timings
+        self.expansions = None  # the signs' expansions of the latest build, which a refinement round keeps
+        voxel_size, padding = plan["voxel_size"], plan["padding"]
+        # a band node lies within (padding + 1) cells (L-inf) of a triangle; misses fall back to the domain diagonal
+        self.query_radius = facts["diag"] if plan["levels"] == 1 else (padding + 2) * voxel_size * 1.75
+
+    def build(self, octets, previous=None) -> AdaptiveField:
+        plan, facts, timings, device = self.plan, self.facts, self.timings, self.device
+        origin, voxel_size = plan["origin"], plan["voxel_size"]
         # every node's place first, so each level's values are computed where they are kept
-        layout = level_layout(octets, top_dims, levels, device, timings)
+        layout = level_layout(octets, plan["top_dims"], plan["levels"], device, timings)
         t0 = time.perf_counter()
         # each node's index in the earlier build (-1: new), shared by distances and signs
         prev_index = None if previous is None else match_levels(layout["codes"], layout["offsets"], previous)
         octets_search = search.OctetSearch(
-            mesh.id, query_radius, diag, box_search, search_mesh.id, frame, thin, mean_area=mean_area
+            self.mesh.id,
+            self.query_radius,
+            facts["diag"],
+            facts["box_search"],
+            self.search_mesh.id,
+            facts["frame"],
+            facts["thin"],
+            mean_area=facts["mean_area"],
         )
         dist, proj, source, tri, octet_points = distance.finest_distances(
             octets_search,
             layout,
             origin=origin,
             voxel_size=voxel_size,
-            field_id=field_id,
+            field_id=self.field_id,
             previous=previous,
             prev_index=prev_index,
         )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
         neighbours, sweeps = fim.solve_levels(
-            mesh.id,
+            self.mesh.id,
             layout,
             dist,
             proj,
@@ -463,17 +526,17 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
                 octets_search, layout, k, dist, proj, known_nodes, below, origin=origin, voxel_size=voxel_size
             ),
         )
-        values, sign_stats, known["expansions"] = signs.sign_levels(
-            winding,
+        values, sign_stats, self.expansions = signs.sign_levels(
+            self.winding,
             layout,
             dist,
             neighbours,
             origin=origin,
             voxel_size=voxel_size,
-            hole_caps=caps,
+            hole_caps=facts["caps"],
             previous=previous,
             prev_index=prev_index,
-            known=known.get("expansions"),
+            known=self.expansions,
             timings=timings,
         )
         return AdaptiveField.from_layout(
@@ -484,22 +547,23 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
             proj=proj,
             source=source,
             triangles=tri,
-            field_ids=(field_id,),
+            field_ids=(self.field_id,),
             timings=timings,
             stats={"fim_sweeps": sweeps, **sign_stats},
         )
 
-    # a band node lies within (padding + 1) cells (L-inf) of a triangle; misses fall back to the domain diagonal
-    near_radius = diag if levels == 1 else (padding + 2) * voxel_size * 1.75
-    field = build(base_octets, near_radius)
-    # Across a hole of an open mesh the inside/outside boundary (winding number 0.5) runs away from any triangle,
-    # through coarse leaves. Refine those leaves to the finest level so the surface there can be extracted too. A
-    # closed, consistently oriented mesh (even a self-intersecting one) changes its winding number only across its
-    # triangles, which the finest level covers: nothing to check.
+
+def _refined_across_holes(levels: _Levels, field, base_octets, plan: dict, facts: dict, winding) -> AdaptiveField:
+    """Across a hole of an open mesh the inside/outside boundary (winding number 0.5) runs away from any triangle,
+    through coarse leaves: those leaves are refined to the finest level, in rounds, so the surface there can be
+    extracted too. A closed, consistently oriented mesh (even a self-intersecting one) changes its winding number
+    only across its triangles, which the finest level covers: nothing to check."""
+    fine_dims, top_dims = plan["fine_dims"], plan["top_dims"]
+    caps = facts["caps"]
     rounds = 0
     refine_seconds = 0.0
     region = None
-    while levels > 1 and not clean and encloses and rounds < MAX_SIGN_REFINEMENTS:
+    while plan["levels"] > 1 and not facts["clean"] and facts["encloses"] and rounds < MAX_SIGN_REFINEMENTS:
         t_refine = time.perf_counter()
         # off the caps over the holes the winding number stays near an integer (see hole_caps): the zero set can
         # only leave the band near them (no caps: the edges cancel, it never does)
@@ -508,23 +572,29 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
         if len(extra) == 0:
             break
         rounds += 1
-        region = changed_top_cells(extra, top_dims, levels)
-        check_budget(fine_dims, top_count, field.level_counts[0] + 8 * 27 * len(extra))
+        region = changed_top_cells(extra, top_dims, plan["levels"])
+        check_budget(fine_dims, plan["top_count"], field.level_counts[0] + 8 * 27 * len(extra))
         t0 = time.perf_counter()
         base_octets = add_octets(base_octets, extra, fine_dims // 2, end_bit=3 * code_bits(fine_dims // 2))
-        timings["finest_cells"] += time.perf_counter() - t0
+        levels.timings["finest_cells"] += time.perf_counter() - t0
         queries = field.stats["sign_queries"]
-        field = build(base_octets, near_radius, previous=field)
+        field = levels.build(base_octets, previous=field)
         field.stats["sign_queries"] = {k: v + queries.get(k, 0) for k, v in field.stats["sign_queries"].items()}
     field.stats["sign_refinements"] = rounds
     field.timings["sign_check"] = refine_seconds
+    return field
+
+
+def _finished(field, plan: dict, facts: dict, mesh, field_id: int) -> AdaptiveField:
+    """``field`` with what its build found about its mesh (``stats``) and its source mesh."""
+    clean, encloses, tris = facts["clean"], facts["encloses"], plan["triangles"]
     field.stats["clean_mesh"] = clean
     field.stats["flat"] = not encloses
     # a closed mesh's closest points lie on the field's surface (an open mesh's surface runs across its holes too,
     # away from any closest point)
     field.stats["surface_points"] = clean
-    field.stats["problem_faces"] = int(problem.sum())
-    source = SourceMesh(verts, tris, plan["triangle_ids"])
+    field.stats["problem_faces"] = int(facts["problem"].sum())
+    source = SourceMesh(plan["vertices"], tris, plan["triangle_ids"])
     # a closed mesh's field is its signed distance everywhere: booleans read it from the mesh itself where they sample
     # it (its BVH kept, where that costs no more than the field)
     field.stats["mesh_distance"] = clean and encloses and len(tris) * KEEP_BVH_NODES_PER_TRIANGLE <= field.node_count
