@@ -430,7 +430,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
     Raises:
         AasdfError: Bad input or too fine for memory, the object named; nothing is written.
     """
-    engine = runtime.engine()
+    runtime.engine()  # imported first (Warp configured before anything loads it)
     inputs = [item if isinstance(item, plan.Input) else plan.Input(item) for item in inputs]
     objects = [item.obj for item in inputs]
     timer = Timer()
@@ -445,24 +445,15 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             keyed = result_key(context, read, inputs, steps, settings, voxel_size, output)
             current = keyed is not None and unchanged.is_current(output.target, keyed)
         if current:  # the result object shows this result as it was written: nothing to build, extract or write
-            if output.hide_inputs:
-                for operand in objects:
-                    operand.hide_set(True)
+            _hide_inputs(objects, output)
             return _record(timer, output.target, voxel_size, source, operation, len(objects))
         with timer.stage("fields"):
             fields = operand_fields(
                 context, read, settings, voxel_size, progress, thickness=[item.thickness for item in inputs]
             )
         with timer.stage("booleans"):
-            fingerprint = tuple((id(f.codes), f.field_ids, _matrix_bytes(f)) for f in fields)
             seams = _seams(read, output)
-            key = (steps, fingerprint, output.sharp, output.keep_faces, output.adaptivity, _seams_key(seams))
-            found = cache.find_result(key)
-            if found is None:
-                field = plan.evaluate(steps, fields, progress)
-                surface = cache.store_result(key, fields, field)
-            else:
-                field, surface = found
+            field, surface = combined(steps, fields, output, seams, progress)
         with timer.stage("surface"):
             progress.step("extracting the surface")
             result = extract(
@@ -485,18 +476,9 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             if keyed is not None:
                 unchanged.remember(obj, keyed)
             if output.debug_volume:
-                from . import debug
-
                 progress.step("writing the debug volume")
-                try:
-                    debug.add_debug_objects(context, field, obj.name)
-                except engine.AasdfError as err:  # too large for memory: the result stays
-                    warnings.append(f"No debug volume: {err}")
-                if output.select:
-                    context.view_layer.objects.active = obj
-            if output.hide_inputs:
-                for operand in objects:
-                    operand.hide_set(True)
+                warnings += debug_volume(context, field, obj, output)
+            _hide_inputs(objects, output)
     finally:
         progress.end()
         # the engine's freed arrays stay resident for the next run's (a drag's moves), within the cache's limit
@@ -515,6 +497,39 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
         counts=(len(result["verts"]), triangles, faces),
         cache_delta=(hits, builds),
     )
+
+
+def combined(steps, fields, output: Output, seams, progress):
+    """``(field, surface)``: the plan ``steps`` evaluated over ``fields``, or the result cache's entry of the same
+    steps over the same fields (placements included) with the same surface settings."""
+    fingerprint = tuple((id(f.codes), f.field_ids, _matrix_bytes(f)) for f in fields)
+    key = (steps, fingerprint, output.sharp, output.keep_faces, output.adaptivity, _seams_key(seams))
+    found = cache.find_result(key)
+    if found is not None:
+        return found
+    field = plan.evaluate(steps, fields, progress)
+    return field, cache.store_result(key, fields, field)
+
+
+def debug_volume(context, field, obj, output: Output) -> list:
+    """Add ``field``'s debug volume beside the result ``obj``: the warnings (a volume too large for memory is left
+    out; the result stays)."""
+    from . import debug
+
+    warnings = []
+    try:
+        debug.add_debug_objects(context, field, obj.name)
+    except runtime.engine().AasdfError as err:
+        warnings.append(f"No debug volume: {err}")
+    if output.select:
+        context.view_layer.objects.active = obj
+    return warnings
+
+
+def _hide_inputs(objects, output: Output) -> None:
+    if output.hide_inputs:
+        for operand in objects:
+            operand.hide_set(True)
 
 
 def result_key(context, read, inputs, steps, settings: FieldSettings, voxel_size: float, output: Output):
