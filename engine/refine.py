@@ -232,10 +232,8 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
     # unchanged, are set aside
     near = np.zeros(len(ends), dtype=bool)
     near[tris[keep].ravel()] = True
-    read = near[tris].any(axis=1)
-    rest = np.flatnonzero(~read)
-    rows = np.flatnonzero(read)
-    tris, rest_tris, keep = tris[rows], tris[rest], keep[rows]
+    rows = np.flatnonzero(near[tris].any(axis=1))
+    tris, keep, aside = tris[rows], keep[rows], set_aside(tris, rows)
     v64 = verts.astype(np.float64)
     for _ in range(256):
         merged = False
@@ -273,8 +271,20 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
             tris, rows, keep = tris[alive], rows[alive], keep[alive]
         if not merged:
             break
+    return put_back(tris, rows, aside)
+
+
+def set_aside(tris: np.ndarray, read: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``tris`` not in ``read`` (sorted row numbers) and their triangles, for :func:`put_back`."""
+    rest = np.setdiff1d(np.arange(len(tris)), read, assume_unique=True)
+    return rest, tris[rest]
+
+
+def put_back(tris: np.ndarray, rows: np.ndarray, aside) -> tuple[np.ndarray, np.ndarray]:
+    """``(tris, rows)``: the triangles read (standing in ``rows``) and those set aside, in the order they came."""
+    rest, rest_tris = aside
     rows, tris = np.concatenate([rows, rest]), np.concatenate([tris, rest_tris])
-    order = np.argsort(rows, kind="stable")  # in the order they came
+    order = np.argsort(rows, kind="stable")
     return tris[order], rows[order]
 
 
@@ -389,10 +399,10 @@ def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: floa
     near = np.zeros(len(verts), dtype=bool)
     near[tris[keep & (tris >= n_source).any(axis=1)].ravel()] = True
     read = np.flatnonzero(keep & near[tris].any(axis=1))
-    rest = np.setdiff1d(np.arange(len(tris)), read)
     if not len(read):
         return tris, np.arange(len(tris), dtype=np.int64)
-    tris, rest_tris, rows, keep, parent = tris[read], tris[rest], read, keep[read], parent[read]
+    aside = set_aside(tris, read)
+    tris, rows, keep, parent = tris[read], read, keep[read], parent[read]
     v64 = verts.astype(np.float64)
     for _ in range(64):
         moves = _border_collapses(v64, tris, parent, n_source, tolerance)
@@ -403,9 +413,7 @@ def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: floa
         alive = np.ones(len(tris), dtype=bool)
         alive[face[drop]] = False
         tris, rows, parent = tris[alive], rows[alive], parent[alive]
-    rows, tris = np.concatenate([rows, rest]), np.concatenate([tris, rest_tris])
-    order = np.argsort(rows, kind="stable")  # in the order they came
-    return tris[order], rows[order]
+    return put_back(tris, rows, aside)
 
 
 def _border_collapses(v64, tris, parent, n_source: int, tolerance: float):
