@@ -27,6 +27,7 @@ import warp as wp
 
 from .adaptive import tolerance
 from .parallel import launch_split
+from .refine import position_hash
 
 # A neighbour within this many voxels of the planes of every face around a vertex can take its place (at adaptivity
 # 0; an adaptivity widens it as it widens the remeshed surface's, :func:`.adaptive.tolerance`).
@@ -226,7 +227,7 @@ def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, gro
     rest = np.setdiff1d(np.arange(len(tris)), rows)
     tris, rest_tris = np.ascontiguousarray(tris[rows]), tris[rest]
     pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
-    place = _places(points)
+    place = position_hash(points)
     movable = movable.astype(np.int32)
     best, length = np.full(n, -1, dtype=np.int32), np.zeros(n, dtype=np.float32)
     active = np.flatnonzero(movable).astype(np.int32)
@@ -311,13 +312,6 @@ def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state,
         wp.launch(_claim_kernel, dim=len(rows), inputs=inputs, device=device)
     chosen = rows[won.numpy() == 1]
     return chosen, best[chosen]
-
-
-def _places(points: np.ndarray) -> np.ndarray:
-    """(V,) int32 a hash of each vertex's position (its float bits): orders that do not depend on numbering."""
-    bits = np.ascontiguousarray(points, dtype=np.float32).view(np.uint32).astype(np.uint64)
-    mixed = (bits[:, 0] * np.uint64(73856093)) ^ (bits[:, 1] * np.uint64(19349663)) ^ (bits[:, 2] * np.uint64(83492791))
-    return (mixed % np.uint64(1 << 31)).astype(np.int32)
 
 
 def _keys(places: np.ndarray, length: np.ndarray, salt: int) -> np.ndarray:

@@ -235,6 +235,7 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
     rows = np.flatnonzero(near[tris].any(axis=1))
     tris, keep, aside = tris[rows], keep[rows], set_aside(tris, rows)
     v64 = verts.astype(np.float64)
+    ranks = position_ranks(verts)
     for _ in range(256):
         merged = False
         for side in (0, 1):
@@ -257,11 +258,7 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
             bad[mid[turns]] = True
             two_drops = np.bincount(mid[drop], minlength=len(ends)) == 2
             ok = ~bad[mid] & two_drops[mid]
-            claim = np.full(len(tris), np.iinfo(np.int64).max, dtype=np.int64)
-            np.minimum.at(claim, face[ok], mid[ok])
-            lost = np.zeros(len(ends), dtype=bool)
-            lost[mid[ok & (claim[face] != mid)]] = True
-            win = ok & ~lost[mid]
+            win = claims_won(face, mid, ok, len(tris), ranks)
             if not win.any():
                 continue
             merged = True
@@ -272,6 +269,31 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
         if not merged:
             break
     return put_back(tris, rows, aside)
+
+
+def position_hash(points: np.ndarray) -> np.ndarray:
+    """(V,) int32 a hash of each vertex's position (its float bits): orders that do not depend on numbering."""
+    bits = np.ascontiguousarray(points, dtype=np.float32).view(np.uint32).astype(np.uint64)
+    mixed = (bits[:, 0] * np.uint64(73856093)) ^ (bits[:, 1] * np.uint64(19349663)) ^ (bits[:, 2] * np.uint64(83492791))
+    return (mixed % np.uint64(1 << 31)).astype(np.int32)
+
+
+def position_ranks(points: np.ndarray) -> np.ndarray:
+    """(V,) int64 distinct ranks of the vertices, by :func:`position_hash` (ties by index)."""
+    return (position_hash(points).astype(np.int64) << 32) | np.arange(len(points), dtype=np.int64)
+
+
+def claims_won(face: np.ndarray, vert: np.ndarray, use: np.ndarray, n_faces: int, ranks: np.ndarray) -> np.ndarray:
+    """Per row (a vertex ``vert`` that would change face ``face``; ``use``: it may): whether its vertex holds every face
+    it would change, each face going to the lowest-ranked of its vertices (``ranks``). Ranks from a hash of positions
+    let about a third of a run's vertices win each round, where ranks by index (a run's midpoints numbered in a row)
+    let only its first."""
+    rank = ranks[vert]
+    claim = np.full(n_faces, np.iinfo(np.int64).max, dtype=np.int64)
+    np.minimum.at(claim, face[use], rank[use])
+    lost = np.zeros(len(ranks), dtype=bool)
+    lost[vert[use & (claim[face] != rank)]] = True
+    return use & ~lost[vert]
 
 
 def set_aside(tris: np.ndarray, read: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -404,8 +426,9 @@ def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: floa
     aside = set_aside(tris, read)
     tris, rows, keep, parent = tris[read], read, keep[read], parent[read]
     v64 = verts.astype(np.float64)
+    ranks = position_ranks(verts)
     for _ in range(64):
-        moves = _border_collapses(v64, tris, parent, n_source, tolerance)
+        moves = _border_collapses(v64, tris, parent, n_source, tolerance, ranks)
         if moves is None:
             break
         face, target, drop = moves
@@ -416,7 +439,7 @@ def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: floa
     return put_back(tris, rows, aside)
 
 
-def _border_collapses(v64, tris, parent, n_source: int, tolerance: float):
+def _border_collapses(v64, tris, parent, n_source: int, tolerance: float, ranks: np.ndarray):
     """One round of :func:`straighten_borders` over the kept triangles: ``(faces, their new corners, dropped)``, or
     None when no vertex can go."""
     n = len(v64)
@@ -464,12 +487,7 @@ def _border_collapses(v64, tris, parent, n_source: int, tolerance: float):
         bad |= ~drop & found & (other != into[vert]) & ~in_dropped
     ok = np.bincount(vert[drop], minlength=n) == 1  # one face dropped: the border edge's own
     ok[vert[bad]] = False
-    claim = np.full(len(tris), np.iinfo(np.int64).max, dtype=np.int64)
-    use = ok[vert]
-    np.minimum.at(claim, face[use], vert[use])
-    lost = np.zeros(n, dtype=bool)
-    lost[vert[use & (claim[face] != vert)]] = True
-    win = use & ~lost[vert]
+    win = claims_won(face, vert, ok[vert], len(tris), ranks)
     if not win.any():
         return None
     return face[win], target[win], drop[win]
