@@ -40,6 +40,8 @@ PLANE_QUALITY = 0.2
 # Rounds of collapses at most; they stop earlier when a round removes under MIN_ROUND_SHARE of the vertices left.
 MAX_ROUNDS = 48
 MIN_ROUND_SHARE = 0.01
+# Passes of claims a round makes (:func:`_claimed`).
+CLAIM_PASSES = 3
 
 
 @wp.func
@@ -189,10 +191,18 @@ def _claim_kernel(
     won: wp.array[wp.int32],
 ):
     """Each candidate claims itself and its neighbours with its key (the smallest key wins each vertex); with
-    ``check``, a second launch, whether it won every vertex it claimed (then it collapses)."""
+    ``check``, a second launch, whether it won every vertex it claimed (then it collapses). A candidate with a vertex
+    held already (-1: an earlier pass's winner's) claims nothing and loses."""
     i = wp.tid()
     u = rows[i]
     ok = int(1)
+    for c in range(first[u] - 1, first[u + 1]):
+        w = u
+        if c >= first[u]:
+            w = _next_corner(tris, corners[c], 1)
+        if claim[w] == -1:
+            won[i] = 0
+            return
     for c in range(first[u] - 1, first[u + 1]):
         w = u
         if c >= first[u]:
@@ -304,14 +314,36 @@ def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state,
     if not len(rows):
         return rows, rows
     keys = _keys(place[rows], length[rows], int(len(active)))
-    w_rows, w_keys = wp.array(rows, dtype=wp.int32, device=device), wp.array(keys, dtype=wp.int32, device=device)
-    claim = wp.full(n, len(rows), dtype=wp.int32, device=device)
-    won = wp.empty(len(rows), dtype=wp.int32, device=device)
-    for check in (0, 1):
-        inputs = [w_tris, w_corners, w_first, w_rows, w_keys, check, claim, won]
-        wp.launch(_claim_kernel, dim=len(rows), inputs=inputs, device=device)
-    chosen = rows[won.numpy() == 1]
+    won = _claimed((w_tris, w_corners, w_first), rows, keys, n, device)
+    chosen = rows[won]
     return chosen, best[chosen]
+
+
+def _claimed(mesh, rows: np.ndarray, keys: np.ndarray, n: int, device) -> np.ndarray:
+    """(R,) bool: the candidates ``rows`` that collapse, their closed 1-rings disjoint (:func:`_claim_kernel`). A
+    pass's winners hold their rings; the candidates left that touch none of those claim again, up to
+    ``CLAIM_PASSES`` passes (one pass lets about a tenth of a flat region's candidates go)."""
+    won = np.zeros(len(rows), dtype=bool)
+    claim_np = np.full(n, len(rows), dtype=np.int32)
+    left = np.arange(len(rows))
+    for _ in range(CLAIM_PASSES):
+        claim = wp.array(claim_np, dtype=wp.int32, device=device)
+        out = wp.empty(len(left), dtype=wp.int32, device=device)
+        w_rows = wp.array(rows[left], dtype=wp.int32, device=device)
+        w_keys = wp.array(keys[left], dtype=wp.int32, device=device)
+        for check in (0, 1):
+            wp.launch(_claim_kernel, dim=len(left), inputs=[*mesh, w_rows, w_keys, check, claim, out], device=device)
+        now = out.numpy() == 1
+        if not now.any():
+            break
+        won[left[now]] = True
+        # every pass's winners' rings are held (-1: no key takes them), the other vertices free again
+        held = claim.numpy()
+        claim_np = np.where((held == -1) | np.isin(held, keys[left[now]]), -1, len(rows)).astype(np.int32)
+        left = left[~now]
+        if not len(left):
+            break
+    return won
 
 
 def _keys(places: np.ndarray, length: np.ndarray, salt: int) -> np.ndarray:
