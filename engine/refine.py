@@ -141,11 +141,19 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long
     """
     t = np.asarray(tris, dtype=np.int64)
     n = len(verts)
-    keys, marked_keys = _edges_to_split(verts, t, split, long_edge)
+    rows = np.flatnonzero(split)
+    marked_keys = _edges_to_split(verts, t[rows], long_edge)
+    # only a triangle with two corners of split triangles can have a split edge
+    corner = np.zeros(n, dtype=bool)
+    corner[t[rows].ravel()] = True
+    near = np.flatnonzero(corner[t].sum(axis=1) >= 2)
+    a, b = t[near].ravel(), t[near][:, [1, 2, 0]].ravel()
+    keys = np.minimum(a, b) * n + np.maximum(a, b)
     at = np.searchsorted(marked_keys, keys)
     at_ok = np.minimum(at, max(len(marked_keys) - 1, 0))
     marked = (at < len(marked_keys)) & (marked_keys[at_ok] == keys) if len(marked_keys) else np.zeros(len(keys), bool)
-    mids = np.where(marked, n + at_ok, -1).reshape(-1, 3)  # the midpoint of each triangle's edge k (corner k -> k+1)
+    mids = np.full((len(t), 3), -1, dtype=np.int64)  # the midpoint of each triangle's edge k (corner k -> k+1)
+    mids[near] = np.where(marked, n + at_ok, -1).reshape(-1, 3)
     lo, hi = marked_keys // n, marked_keys % n
     new_verts = (0.5 * (verts[lo].astype(np.float64) + verts[hi].astype(np.float64))).astype(np.float32)
     pattern = (mids >= 0).sum(axis=1)
@@ -188,18 +196,17 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long
     return np.concatenate([verts, new_verts]), np.concatenate(parts), np.concatenate(origin), np.stack([lo, hi], 1)
 
 
-def _edges_to_split(verts, t: np.ndarray, split: np.ndarray, long_edge: float):
-    """``(keys, marked)``: every corner's edge as a key (low * V + high) and the sorted keys of the edges to split:
-    each ``split`` triangle's longest, and a sliver's other long edges (:func:`split_triangles`)."""
+def _edges_to_split(verts, t: np.ndarray, long_edge: float) -> np.ndarray:
+    """The sorted keys (low * V + high) of the edges to split of the triangles ``t`` to split: each one's longest,
+    and a sliver's other long edges (:func:`split_triangles`)."""
     n = len(verts)
     a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
-    keys = np.minimum(a, b) * n + np.maximum(a, b)
+    keys = (np.minimum(a, b) * n + np.maximum(a, b)).reshape(-1, 3)
     e = verts[t[:, [1, 2, 0]]].astype(np.float64) - verts[t].astype(np.float64)
-    longest = np.argmax((e**2).sum(axis=2), axis=1)
-    rows = np.flatnonzero(split)
-    lengths = np.sqrt((e[rows] ** 2).sum(axis=2))
+    lengths = np.sqrt((e**2).sum(axis=2))
+    longest = np.argmax(lengths, axis=1)
     across = (lengths > long_edge) & (lengths > 2.0 * lengths.min(axis=1, keepdims=True))
-    return keys, np.unique(np.r_[keys.reshape(-1, 3)[rows, longest[rows]], keys.reshape(-1, 3)[rows][across]])
+    return np.unique(np.r_[keys[np.arange(len(t)), longest], keys[across]])
 
 
 def _turned(rows: np.ndarray, k: np.ndarray) -> np.ndarray:
