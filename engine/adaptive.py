@@ -82,17 +82,24 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     creases = np.asarray(surface["creases"], dtype=np.int64).reshape(-1, 2)
     cls, lines = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
-    edges = polygon_edges(faces, sizes)
-    _hold_seams(cls, label, edges)
-    crease_key = np.sort(lines, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
     corners = _padded(faces, sizes)
-    level, ids = _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, field.device)
+    edges = _undirected(corners)
+    _hold_seams(cls, label, edges)
+    level, ids = _levels(local, cell, edges, corners, cls, label, lines, adaptivity, field.device)
     merged = _checked(field, local, corners, cls, level, ids, tolerance(adaptivity))
     return _renumbered(field, surface, creases, level, merged)
 
 
+def _undirected(corners) -> np.ndarray:
+    """(E, 2) the undirected edges of the faces ``corners`` (P, 4) (:func:`_padded`), each once: a closed, oriented
+    surface has each edge once each way, kept where its first end is the smaller (in the faces' order)."""
+    ends = np.stack([corners.ravel(), corners[:, [1, 2, 3, 0]].ravel()], axis=1)
+    return ends[ends[:, 0] < ends[:, 1]]
+
+
 def _hold_seams(cls, label, edges) -> None:
-    """Mark (``cls`` 0, in place) the vertices along a seam between two source regions: they stay, as a crease's.
+    """Mark (``cls`` 0, in place) the vertices along a seam between two source regions (``edges`` (E, 2)
+    undirected): they stay, as a crease's.
     Where two operands meet at a crease (next to crease vertices: an edge across it joins two smooth vertices) the
     crease keeps the seam."""
     by_crease = np.zeros(len(cls), dtype=bool)
@@ -237,14 +244,16 @@ def _classes(ranks, creases, n) -> tuple[np.ndarray, np.ndarray]:
 
 def connected_components(n: int, a, b) -> np.ndarray:
     """(n,) the smallest node of each node's connected component over the edges ``a``-``b`` (hooking and pointer
-    jumping: a few rounds of whole-array steps)."""
+    jumping: a few rounds of whole-array steps; a root hooks under any smaller root it meets, the smallest node of a
+    component never hooks, so the roots end as the smallest nodes)."""
     parent = np.arange(n)
     while True:
         pa, pb = parent[a], parent[b]
         differ = pa != pb
         if not differ.any():
             return parent
-        np.minimum.at(parent, np.maximum(pa, pb)[differ], np.minimum(pa, pb)[differ])
+        pa, pb = pa[differ], pb[differ]
+        parent[np.maximum(pa, pb)] = np.minimum(pa, pb)
         while True:
             jumped = parent[parent]
             if np.array_equal(jumped, parent):
@@ -252,7 +261,7 @@ def connected_components(n: int, a, b) -> np.ndarray:
             parent = jumped
 
 
-def _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, device=None):
+def _levels(local, cell, edges, corners, cls, label, lines, adaptivity, device=None):
     """Level by level, the components of each block's vertices that merge (see the module's step 2).
 
     Returns:
@@ -264,57 +273,79 @@ def _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, dev
     ids = [np.arange(n)]
     tol = tolerance(adaptivity)
     live = cls > 0  # corners and crease ends never merge: their edges and faces never count
-    u, v, joins = _edge_levels(edges, cell, cls, label, crease_key)
+    points = _flatness_points(local, cls, device)
+    u, v, joins = _edge_levels(edges, cell, cls, label, lines)
+    corners = corners[_all_columns(live[corners])]
     inside = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))  # the clusters merged at the level below, their edges
     # and faces inside
     for lv in range(1, max_level(adaptivity) + 1):
-        ready = (level == lv - 1) & live
-        members = np.flatnonzero(ready)
+        prev = ids[lv - 1]  # each ready vertex's cluster at the level below (-1: not ready)
+        members = np.flatnonzero(live if lv == 1 else prev >= 0)
         if not len(members):
             break
-        keep = ready[u] & ready[v]  # what no longer merges leaves the edges and faces looked at
-        u, v, joins = u[keep], v[keep], joins[keep]
-        corners = corners[_all_columns(ready[corners])]
-        prev = ids[lv - 1]  # each ready vertex's cluster at the level below
         use = joins <= lv  # joinable, within one block
         root = connected_components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
         member_comp, k = _numbered(root[prev[members]], n)  # the components, numbered 0 .. k - 1
         comp = np.full(n, k)  # k: none
         comp[members] = member_comp
         counts = _inside(comp, members, prev, inside, u, v, corners, k)
-        merged = _merged(local, cls, comp, members, counts, k, tol, device)
-        ids.append(np.where(merged, comp, -1))
+        merged = _merged(points, comp, members, counts, k, tol, device)
+        at = np.where(merged, comp, -1)
+        ids.append(at)
         level[merged] = lv
         kept = np.flatnonzero(np.bincount(comp[merged], minlength=k))  # the ids at this level: component numbers
         inside = (kept, counts[kept, :2])
-        # the edges and faces inside a component are counted: they leave
-        keep = comp[u] != comp[v]
+        # the edges and faces inside a component are counted: they leave, as do those at a vertex not merged
+        au, av = at[u], at[v]
+        keep = (au >= 0) & (av >= 0) & (au != av)
         u, v, joins = u[keep], v[keep], joins[keep]
-        corners = corners[~_one_value(comp[corners])]
+        cq = at[corners]
+        corners = corners[_all_columns(cq >= 0) & ~_one_value(cq)]
     return level, np.stack(ids)
 
 
-def _edge_levels(edges, cell, cls, label, crease_key):
+def _flatness_points(local, cls, device):
+    """The vertices (voxels) and whether each is measured against a line (a crease's), as :func:`.far_components`
+    takes them (converted once for every level)."""
+    import warp as wp
+
+    device = wp.get_device(device)
+    points = wp.array(np.ascontiguousarray(local, dtype=np.float64), dtype=wp.vec3d, device=device)
+    return points, wp.array((cls == 2).astype(np.int8), dtype=wp.int8, device=device)
+
+
+def _edge_levels(edges, cell, cls, label, lines):
     """The undirected edges ``u``-``v`` between vertices that may merge, and the level from which each may join its
     ends (within one block; the largest integer for an edge that never joins them)."""
-    n = len(cls)
-    edges = edges[edges[:, 0] < edges[:, 1]]  # each undirected edge once (closed, oriented mesh)
-    u, v = edges[:, 0], edges[:, 1]
-    along_crease = (cls[u] == 2) & (cls[v] == 2)  # both inside crease lines: is the edge one of theirs?
-    along_crease[along_crease] = np.isin(u[along_crease] * np.int64(n) + v[along_crease], crease_key)
+    keep = (cls[edges[:, 0]] > 0) & (cls[edges[:, 1]] > 0)
+    u, v = edges[keep, 0], edges[keep, 1]
+    cu, cv, lu, lv = cls[u], cls[v], label[u], label[v]
+    along_crease = (cu == 2) & (cv == 2)  # both inside crease lines: is the edge one of theirs?
+    nb = _crease_neighbours(lines, len(cls))
+    a, b = u[along_crease], v[along_crease]
+    along_crease[along_crease] = (nb[a, 0] == b) | (nb[a, 1] == b)
     # smooth vertices of one region; crease vertices along a crease, within one region of an operand (between two
     # operands the crease is their seam, where each vertex's operand is either)
-    same = label[u] == label[v]
-    joinable = (cls[u] == cls[v]) & (cls[u] > 0)
-    joinable &= ((cls[u] == 1) & same) | (along_crease & (same | ((label[u] >> 32) != (label[v] >> 32))))
-    keep = (cls[u] > 0) & (cls[v] > 0)
-    u, v = u[keep], v[keep]
-    # the highest bit the ends' cells differ in (cells of two signs never share a block)
-    differ = cell[u] ^ cell[v]
-    differ = np.where(differ < 0, 2.0**62, differ)
-    joins = np.frexp(np.maximum(np.maximum(differ[:, 0], differ[:, 1]), differ[:, 2]))[1]
-    joins[~joinable[keep]] = np.iinfo(joins.dtype).max
+    same = lu == lv
+    joinable = (cu == cv) & (((cu == 1) & same) | (along_crease & (same | ((lu >> 32) != (lv >> 32)))))
+    # the highest bit the ends' cells differ in (cells of two signs never share a block): that of the axes' bits
+    differ = (cell[u, 0] ^ cell[v, 0]) | (cell[u, 1] ^ cell[v, 1]) | (cell[u, 2] ^ cell[v, 2])
+    joins = np.frexp(np.where(differ < 0, 2.0**62, differ))[1]
+    joins[~joinable] = np.iinfo(joins.dtype).max
     return u, v, joins
+
+
+def _crease_neighbours(lines, n: int) -> np.ndarray:
+    """(n, 2) the two ends of the crease edges ``lines`` (E, 2) at each vertex inside a crease line (-1 where none;
+    at a vertex of other degrees any two)."""
+    ends = np.concatenate([lines[:, 0], lines[:, 1]])
+    order = np.argsort(ends, kind="stable")
+    ends, other = ends[order], np.concatenate([lines[:, 1], lines[:, 0]])[order]
+    first = np.r_[True, ends[1:] != ends[:-1]]
+    nb = np.full((n, 2), -1, dtype=np.int64)
+    nb[ends[first], 0] = other[first]
+    nb[ends[~first], 1] = other[~first]
+    return nb
 
 
 def _inside(comp, members, prev, inside, u, v, corners, k) -> np.ndarray:
@@ -345,19 +376,18 @@ def _one_value(values) -> np.ndarray:
     return (values[:, 0] == values[:, 1]) & (values[:, 1] == values[:, 2]) & (values[:, 2] == values[:, 3])
 
 
-def _merged(local, cls, comp, members, inside, k, tol, device) -> np.ndarray:
+def _merged(points, comp, members, inside, k, tol, device) -> np.ndarray:
     """(V,) the ``members`` whose component merges: a disk (V - E + F = 1 over the component's vertices, and the
     edges and faces ``inside`` (k, 3) it), every vertex within ``tol`` of the plane through its vertices (a crease's:
-    of the line; not tested again for a component that is one cluster of the level below: it passed)."""
+    of the line; ``points`` as :func:`_flatness_points`; not tested again for a component that is one cluster of
+    the level below: it passed)."""
     mc = comp[members]
     n_v = np.bincount(mc, minlength=k)
     ok = n_v - inside[:, 0] + inside[:, 1] == 1
-    test = ok[mc] & (n_v[mc] > 1) & (inside[mc, 2] != 1)  # a single vertex is flat
-    rows = members[test]
-    if len(rows):
-        sub, m = _numbered(mc[test], k)
-        far = far_components(local[rows], sub, cls[rows] == 2, m, tol, device)
-        ok[mc[test][far[sub]]] = False
+    tested = ok & (n_v > 1) & (inside[:, 2] != 1)  # a single vertex is flat
+    if tested.any():
+        vertices, on_line = points
+        ok &= ~far_components(vertices, members, np.where(tested[mc], mc, -1), on_line, k, tol, device)
     merged = np.zeros(len(comp), dtype=bool)
     merged[members] = ok[mc]
     return merged
