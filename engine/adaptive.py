@@ -85,7 +85,7 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     corners = _padded(faces, sizes)
     edges = _undirected(corners)
     _hold_seams(cls, label, edges)
-    level, ids = _levels(local, cell, edges, corners, cls, label, lines, adaptivity, field.device)
+    level, *ids = _levels(local, cell, edges, corners, cls, label, lines, adaptivity, field.device)
     merged = _checked(field, local, corners, cls, level, ids, tolerance(adaptivity))
     return _renumbered(field, surface, creases, level, merged)
 
@@ -93,7 +93,11 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
 def _undirected(corners) -> np.ndarray:
     """(E, 2) the undirected edges of the faces ``corners`` (P, 4) (:func:`_padded`), each once: a closed, oriented
     surface has each edge once each way, kept where its first end is the smaller (in the faces' order)."""
-    ends = np.stack([corners.ravel(), corners[:, [1, 2, 3, 0]].ravel()], axis=1)
+    ends = np.empty((len(corners), 4, 2), dtype=corners.dtype)
+    ends[:, :, 0] = corners
+    ends[:, :3, 1] = corners[:, 1:]
+    ends[:, 3, 1] = corners[:, 0]
+    ends = ends.reshape(-1, 2)
     return ends[ends[:, 0] < ends[:, 1]]
 
 
@@ -266,11 +270,12 @@ def _levels(local, cell, edges, corners, cls, label, lines, adaptivity, device=N
 
     Returns:
         ``level`` (V,) the largest level each vertex merged at (0: none) and ``ids`` (L + 1, V): per level each
-        vertex's component there (its cluster when that is its level; -1 where it did not merge at that level).
+        vertex's component there (its cluster when that is its level; -1 where it did not merge at that level), and
+        ``numbers`` (L + 1,) how many components each level numbers (V at level 0).
     """
     n = len(local)
     level = np.zeros(n, dtype=np.int64)
-    ids = [np.arange(n)]
+    ids, numbers = [np.arange(n)], [n]
     tol = tolerance(adaptivity)
     live = cls > 0  # corners and crease ends never merge: their edges and faces never count
     points = _flatness_points(local, cls, device)
@@ -284,14 +289,16 @@ def _levels(local, cell, edges, corners, cls, label, lines, adaptivity, device=N
         if not len(members):
             break
         use = joins <= lv  # joinable, within one block
-        root = connected_components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
-        member_comp, k = _numbered(root[prev[members]], n)  # the components, numbered 0 .. k - 1
+        below = numbers[lv - 1]  # the clusters below, by their ids
+        root = connected_components(below, prev[u[use]], prev[v[use]])
+        member_comp, k = _numbered(root[prev[members]], below)  # the components, numbered 0 .. k - 1
         comp = np.full(n, k)  # k: none
         comp[members] = member_comp
         counts = _inside(comp, members, prev, inside, u, v, corners, k)
         merged = _merged(points, comp, members, counts, k, tol, device)
         at = np.where(merged, comp, -1)
         ids.append(at)
+        numbers.append(k)
         level[merged] = lv
         kept = np.flatnonzero(np.bincount(comp[merged], minlength=k))  # the ids at this level: component numbers
         inside = (kept, counts[kept, :2])
@@ -301,7 +308,7 @@ def _levels(local, cell, edges, corners, cls, label, lines, adaptivity, device=N
         u, v, joins = u[keep], v[keep], joins[keep]
         cq = at[corners]
         corners = corners[_all_columns(cq >= 0) & ~_one_value(cq)]
-    return level, np.stack(ids)
+    return level, np.stack(ids), np.array(numbers)
 
 
 def _flatness_points(local, cls, device):
@@ -409,11 +416,14 @@ def _padded(faces, sizes) -> np.ndarray:
 
 
 def _clusters(local, level, ids, cls):
-    """Each vertex's cluster (its component at its level; itself at level 0), the clusters' positions (voxels: the
-    mean of their vertices) and whether each is a crease or corner vertex."""
+    """Each vertex's cluster (its component at its level, ``ids`` as :func:`_levels`' ids and numbers; itself at
+    level 0), the clusters' positions (voxels: the mean of their vertices) and whether each is a crease or corner
+    vertex."""
     n = len(local)
-    code = level * np.int64(n) + ids[level, np.arange(n)]
-    cluster, k = _numbered(code, len(ids) * n)
+    ids, numbers = ids
+    offset = np.cumsum(numbers) - numbers  # the levels' ids one after the other
+    code = offset[level] + ids[level, np.arange(n)]
+    cluster, k = _numbered(code, int(numbers.sum()))
     first = np.empty(k, dtype=np.int64)
     first[cluster] = np.arange(n)  # a vertex of each (all of one class)
     count = np.bincount(cluster, minlength=k)
