@@ -266,7 +266,9 @@ def connected_components(n: int, a, b) -> np.ndarray:
 
 
 def _levels(local, cell, edges, corners, cls, label, lines, adaptivity, device=None):
-    """Level by level, the components of each block's vertices that merge (see the module's step 2).
+    """Level by level, the components of each block's vertices that merge (see the module's step 2). The edges and
+    faces looked at are kept by the ids of their ends' clusters at the level below, and the clusters' counts of
+    vertices, edges and faces inside carried up: a level's steps are over its clusters (but the flatness test).
 
     Returns:
         ``level`` (V,) the largest level each vertex merged at (0: none) and ``ids`` (L + 1, V): per level each
@@ -281,33 +283,32 @@ def _levels(local, cell, edges, corners, cls, label, lines, adaptivity, device=N
     points = _flatness_points(local, cls, device)
     u, v, joins = _edge_levels(edges, cell, cls, label, lines)
     corners = corners[_all_columns(live[corners])]
-    inside = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))  # the clusters merged at the level below, their edges
-    # and faces inside
+    below = np.where(live, np.arange(n, dtype=np.int32), np.int32(-1))  # each vertex's cluster below (-1: none)
+    clusters = np.flatnonzero(live)  # the clusters below
+    held = np.zeros((n, 3), dtype=np.int64)  # vertices, edges and faces inside each cluster below
+    held[:, 0] = 1
     for lv in range(1, max_level(adaptivity) + 1):
-        prev = ids[lv - 1]  # each ready vertex's cluster at the level below (-1: not ready)
-        members = np.flatnonzero(live if lv == 1 else prev >= 0)
-        if not len(members):
+        if not len(clusters):
             break
         use = joins <= lv  # joinable, within one block
-        below = numbers[lv - 1]  # the clusters below, by their ids
-        root = connected_components(below, prev[u[use]], prev[v[use]])
-        member_comp, k = _numbered(root[prev[members]], below)  # the components, numbered 0 .. k - 1
-        comp = np.full(n, k)  # k: none
-        comp[members] = member_comp
-        counts = _inside(comp, members, prev, inside, u, v, corners, k)
-        merged = _merged(points, comp, members, counts, k, tol, device)
-        at = np.where(merged, comp, -1)
-        ids.append(at)
+        root = connected_components(numbers[-1], u[use], v[use])
+        number, k = _numbered(root[clusters], numbers[-1])  # the components, numbered 0 .. k - 1
+        comp_of = np.zeros(numbers[-1], dtype=np.int64)  # each cluster below in one component
+        comp_of[clusters] = number
+        u, v, corners = comp_of[u], comp_of[v], comp_of[corners]
+        counts = _inside(number, held[clusters], u, v, corners, k)
+        ok = _merged(points, below, clusters, number, counts, k, tol, device)
+        at = np.full(numbers[-1], -1, dtype=np.int32)
+        at[clusters] = np.where(ok[number], number, -1)
+        below = np.where(below >= 0, at[below], np.int32(-1))
+        ids.append(below)
         numbers.append(k)
-        level[merged] = lv
-        kept = np.flatnonzero(np.bincount(comp[merged], minlength=k))  # the ids at this level: component numbers
-        inside = (kept, counts[kept, :2])
-        # the edges and faces inside a component are counted: they leave, as do those at a vertex not merged
-        au, av = at[u], at[v]
-        keep = (au >= 0) & (av >= 0) & (au != av)
+        level[below >= 0] = lv
+        clusters, held = np.flatnonzero(ok), counts
+        # the edges and faces inside a component are counted: they leave, as do those at a component not merged
+        keep = ok[u] & ok[v] & (u != v)
         u, v, joins = u[keep], v[keep], joins[keep]
-        cq = at[corners]
-        corners = corners[_all_columns(cq >= 0) & ~_one_value(cq)]
+        corners = corners[_all_columns(ok[corners]) & ~_one_value(corners)]
     return level, np.stack(ids), np.array(numbers)
 
 
@@ -355,21 +356,16 @@ def _crease_neighbours(lines, n: int) -> np.ndarray:
     return nb
 
 
-def _inside(comp, members, prev, inside, u, v, corners, k) -> np.ndarray:
-    """(k, 3) the edges and faces with every vertex in each component: those inside its clusters of the level below
-    (``inside``: their ids in ``prev`` and counts) and those of ``u``-``v`` and ``corners`` (across them); and how
-    many clusters of the level below it joins (0 at level 1)."""
-    ids, counts = inside
-    comp_of = np.zeros(len(comp), dtype=np.int64)
-    comp_of[prev[members]] = comp[members]  # each cluster below in one component
-    out = np.zeros((k, 3), dtype=np.int64)
-    for j in (0, 1):
-        out[:, j] = np.rint(np.bincount(comp_of[ids], weights=counts[:, j], minlength=k)).astype(np.int64)
-    out[:, 2] = np.bincount(comp_of[ids], minlength=k)
-    cu, cv = comp[u], comp[v]
-    out[:, 0] += np.bincount(cu[cu == cv], minlength=k)
-    cq = comp[corners]
-    out[:, 1] += np.bincount(cq[_one_value(cq), 0], minlength=k)
+def _inside(number, held, u, v, corners, k) -> np.ndarray:
+    """(k, 4) the vertices, edges and faces inside each component: those ``held`` (N, 3) inside its clusters of the
+    level below (``number`` (N,) their components), and the edges ``u``-``v`` and faces ``corners`` (P, 4) across
+    them (by their ends' components); and how many clusters of the level below it joins."""
+    out = np.empty((k, 4), dtype=np.int64)
+    for j in range(3):
+        out[:, j] = np.rint(np.bincount(number, weights=held[:, j], minlength=k)).astype(np.int64)
+    out[:, 3] = np.bincount(number, minlength=k)
+    out[:, 1] += np.bincount(u[u == v], minlength=k)
+    out[:, 2] += np.bincount(corners[_one_value(corners), 0], minlength=k)
     return out
 
 
@@ -383,21 +379,20 @@ def _one_value(values) -> np.ndarray:
     return (values[:, 0] == values[:, 1]) & (values[:, 1] == values[:, 2]) & (values[:, 2] == values[:, 3])
 
 
-def _merged(points, comp, members, inside, k, tol, device) -> np.ndarray:
-    """(V,) the ``members`` whose component merges: a disk (V - E + F = 1 over the component's vertices, and the
-    edges and faces ``inside`` (k, 3) it), every vertex within ``tol`` of the plane through its vertices (a crease's:
-    of the line; ``points`` as :func:`_flatness_points`; not tested again for a component that is one cluster of
-    the level below: it passed)."""
-    mc = comp[members]
-    n_v = np.bincount(mc, minlength=k)
-    ok = n_v - inside[:, 0] + inside[:, 1] == 1
-    tested = ok & (n_v > 1) & (inside[:, 2] != 1)  # a single vertex is flat
+def _merged(points, below, clusters, number, inside, k, tol, device) -> np.ndarray:
+    """(k,) the components that merge: a disk (V - E + F = 1 over the vertices, edges and faces ``inside`` (k, 4)
+    it, :func:`_inside`), every vertex within ``tol`` of the plane through its vertices (a crease's: of the line;
+    ``points`` as :func:`_flatness_points`, ``below`` (V,) each vertex's cluster of the ``clusters`` (N,), in the
+    components ``number`` (N,); not tested again for a component that is one cluster of the level below: it
+    passed)."""
+    ok = inside[:, 0] - inside[:, 1] + inside[:, 2] == 1
+    tested = ok & (inside[:, 0] > 1) & (inside[:, 3] != 1)  # a single vertex is flat
     if tested.any():
         vertices, on_line = points
-        ok &= ~far_components(vertices, members, np.where(tested[mc], mc, -1), on_line, k, tol, device)
-    merged = np.zeros(len(comp), dtype=bool)
-    merged[members] = ok[mc]
-    return merged
+        comp = np.full(int(clusters[-1]) + 1, -1, dtype=np.int32)  # each cluster's component tested (-1: none)
+        comp[clusters] = np.where(tested[number], number, -1)
+        ok &= ~far_components(vertices, below, comp, on_line, k, tol, device)
+    return ok
 
 
 def _numbered(keys, n: int):

@@ -13,10 +13,21 @@ import numpy as np
 import warp as wp
 
 
+@wp.func
+def _component(cluster: wp.array(dtype=wp.int32), comp: wp.array(dtype=wp.int32), i: int) -> int:
+    """The component vertex ``i`` is tested in (its cluster's), -1 for none."""
+    k = cluster[i]
+    if k < 0:
+        return -1
+    return comp[k]
+
+
 @wp.kernel(enable_backward=False)
-def _last_member_kernel(comp: wp.array(dtype=wp.int32), last: wp.array(dtype=wp.int32)):
+def _last_member_kernel(
+    cluster: wp.array(dtype=wp.int32), comp: wp.array(dtype=wp.int32), last: wp.array(dtype=wp.int32)
+):
     i = wp.tid()
-    c = comp[i]
+    c = _component(cluster, comp, i)
     if c >= 0:
         wp.atomic_max(last, c, i)
 
@@ -24,7 +35,7 @@ def _last_member_kernel(comp: wp.array(dtype=wp.int32), last: wp.array(dtype=wp.
 @wp.kernel(enable_backward=False)
 def _sum_moments_kernel(
     points: wp.array(dtype=wp.vec3d),
-    members: wp.array(dtype=wp.int32),
+    cluster: wp.array(dtype=wp.int32),
     comp: wp.array(dtype=wp.int32),
     last: wp.array(dtype=wp.int32),
     count: wp.array(dtype=wp.float64),
@@ -33,10 +44,10 @@ def _sum_moments_kernel(
     cross: wp.array(dtype=wp.vec3d),
 ):
     i = wp.tid()
-    c = comp[i]
+    c = _component(cluster, comp, i)
     if c < 0:
         return
-    d = points[members[i]] - points[members[last[c]]]
+    d = points[i] - points[last[c]]
     wp.atomic_add(count, c, wp.float64(1.0))
     wp.atomic_add(first, c, d)
     wp.atomic_add(square, c, wp.cw_mul(d, d))
@@ -116,7 +127,7 @@ def _fit_axes_kernel(
 @wp.kernel(enable_backward=False)
 def _flag_far_kernel(
     points: wp.array(dtype=wp.vec3d),
-    members: wp.array(dtype=wp.int32),
+    cluster: wp.array(dtype=wp.int32),
     comp: wp.array(dtype=wp.int32),
     on_line: wp.array(dtype=wp.int8),
     last: wp.array(dtype=wp.int32),
@@ -127,54 +138,48 @@ def _flag_far_kernel(
     far: wp.array(dtype=wp.int8),
 ):
     i = wp.tid()
-    c = comp[i]
+    c = _component(cluster, comp, i)
     if c < 0:
         return
-    v = members[i]
-    d = points[v] - points[members[last[c]]] - mean[c]
+    d = points[i] - points[last[c]] - mean[c]
     dist = wp.abs(wp.dot(d, normal[c]))
-    if on_line[v] != wp.int8(0):
+    if on_line[i] != wp.int8(0):
         dist = wp.length(d - wp.dot(d, direction[c]) * direction[c])
     if dist > tol:
         far[c] = wp.int8(1)
 
 
-def far_components(points, members, comp, on_line, m: int, tol: float, device=None) -> np.ndarray:
+def far_components(points, cluster, comp, on_line, m: int, tol: float, device=None) -> np.ndarray:
     """(m,) bool: the components with a vertex farther than ``tol`` from the plane fitted through their vertices
-    (least squares, the moments summed about the component's last member), or with ``on_line`` from the line.
+    (least squares, the moments summed about the component's last vertex), or with ``on_line`` from the line.
 
     Args:
         points: (V, 3) float64 vertex positions (or a Warp vec3d array of them).
-        members: (N,) int vertices, each in the component ``comp``.
-        comp: (N,) int component of each member, in 0 .. m - 1, or -1 for a member not tested (a component's
-            members are all tested or none).
+        cluster: (V,) int the cluster of each vertex, -1 for none.
+        comp: (K,) int the component each cluster is tested in, in 0 .. m - 1, or -1 for none.
         on_line: (V,) bool: the vertex's component is measured against its fitted line (a crease's).
         m: Number of components.
         tol: Largest distance allowed.
         device: Warp device (default: the current one).
     """
-    if not len(members):
-        return np.zeros(m, dtype=bool)
     device = wp.get_device(device)
     if not isinstance(points, wp.array):
         points = wp.array(np.ascontiguousarray(points, dtype=np.float64), dtype=wp.vec3d, device=device)
     if not isinstance(on_line, wp.array):
         on_line = wp.array(np.asarray(on_line, dtype=np.int8), dtype=wp.int8, device=device)
-    wp_members = wp.array(np.asarray(members, dtype=np.int32), dtype=wp.int32, device=device)
+    n = len(points)
+    if not n or not m:
+        return np.zeros(m, dtype=bool)
+    wp_cluster = wp.array(np.asarray(cluster, dtype=np.int32), dtype=wp.int32, device=device)
     wp_comp = wp.array(np.asarray(comp, dtype=np.int32), dtype=wp.int32, device=device)
     last = wp.full(m, -1, dtype=wp.int32, device=device)
-    wp.launch(_last_member_kernel, dim=len(members), inputs=[wp_comp, last], device=device)
+    wp.launch(_last_member_kernel, dim=n, inputs=[wp_cluster, wp_comp, last], device=device)
     sums = [wp.zeros(m, dtype=wp.float64, device=device)]
     sums += [wp.zeros(m, dtype=wp.vec3d, device=device) for _ in range(3)]
-    shared = [points, wp_members, wp_comp]
-    wp.launch(_sum_moments_kernel, dim=len(members), inputs=[*shared, last, *sums], device=device)
+    shared = [points, wp_cluster, wp_comp]
+    wp.launch(_sum_moments_kernel, dim=n, inputs=[*shared, last, *sums], device=device)
     axes = [wp.zeros(m, dtype=wp.vec3d, device=device) for _ in range(3)]
     wp.launch(_fit_axes_kernel, dim=m, inputs=[*sums, *axes], device=device)
     far = wp.zeros(m, dtype=wp.int8, device=device)
-    wp.launch(
-        _flag_far_kernel,
-        dim=len(members),
-        inputs=[*shared, on_line, last, *axes, wp.float64(tol), far],
-        device=device,
-    )
+    wp.launch(_flag_far_kernel, dim=n, inputs=[*shared, on_line, last, *axes, wp.float64(tol), far], device=device)
     return far.numpy().astype(bool)
