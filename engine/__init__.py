@@ -6,7 +6,7 @@ passed as ``device`` (CPU here, CUDA wherever an NVIDIA GPU is present). Negativ
 """
 
 from . import kernels
-from .adaptive import connected_components
+from .components import connected_components
 from .boolean import difference, intersection, union
 from .build import build_field, build_fields
 from .edges import fold_edges, surface_edges

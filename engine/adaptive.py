@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .components import connected_components
 from .flatness import far_components
 from .quads import QUAD_ANGLE, polygon_edges
 
@@ -246,25 +247,6 @@ def _classes(ranks, creases, n) -> tuple[np.ndarray, np.ndarray]:
     return cls.astype(np.int8), creases
 
 
-def connected_components(n: int, a, b) -> np.ndarray:
-    """(n,) the smallest node of each node's connected component over the edges ``a``-``b`` (hooking and pointer
-    jumping: a few rounds of whole-array steps; a root hooks under any smaller root it meets, the smallest node of a
-    component never hooks, so the roots end as the smallest nodes)."""
-    parent = np.arange(n)
-    while True:
-        pa, pb = parent[a], parent[b]
-        differ = pa != pb
-        if not differ.any():
-            return parent
-        pa, pb = pa[differ], pb[differ]
-        parent[np.maximum(pa, pb)] = np.minimum(pa, pb)
-        while True:
-            jumped = parent[parent]
-            if np.array_equal(jumped, parent):
-                break
-            parent = jumped
-
-
 def _levels(local, cell, edges, corners, cls, label, lines, adaptivity, device=None):
     """Level by level, the components of each block's vertices that merge (see the module's step 2). The edges and
     faces looked at are kept by the ids of their ends' clusters at the level below, and the clusters' counts of
@@ -291,7 +273,7 @@ def _levels(local, cell, edges, corners, cls, label, lines, adaptivity, device=N
         if not len(clusters):
             break
         use = joins <= lv  # joinable, within one block
-        root = connected_components(numbers[-1], u[use], v[use])
+        root = connected_components(numbers[-1], u[use], v[use], device)
         number, k = _numbered(root[clusters], numbers[-1])  # the components, numbered 0 .. k - 1
         comp_of = np.zeros(numbers[-1], dtype=np.int64)  # each cluster below in one component
         comp_of[clusters] = number

@@ -39,6 +39,7 @@ ENGINE_MODULES = (
     "sources",
     "dual",
     "flatness",
+    "components",
     "edges",
     "sweeping",
     "redistancing",
