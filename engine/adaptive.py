@@ -331,7 +331,8 @@ def _crease_neighbours(lines, n: int) -> np.ndarray:
     ends = np.concatenate([lines[:, 0], lines[:, 1]])
     order = np.argsort(ends, kind="stable")
     ends, other = ends[order], np.concatenate([lines[:, 1], lines[:, 0]])[order]
-    first = np.r_[True, ends[1:] != ends[:-1]]
+    first = np.ones(len(ends), dtype=bool)
+    first[1:] = ends[1:] != ends[:-1]
     nb = np.full((n, 2), -1, dtype=np.int64)
     nb[ends[first], 0] = other[first]
     nb[ends[~first], 1] = other[~first]
