@@ -389,6 +389,10 @@ def _numbered(keys, n: int):
 
 def _padded(faces, sizes) -> np.ndarray:
     """(P, 4) corners of triangles and quads, a triangle's last corner repeated."""
+    quads = np.count_nonzero(sizes == 4)
+    if quads == len(sizes) or (quads and sizes[quads - 1] == 4 and (sizes[quads:] == 3).all()):  # quads first
+        tris = faces[4 * quads :].reshape(-1, 3)
+        return np.concatenate([faces[: 4 * quads].reshape(-1, 4), tris[:, [0, 1, 2, 2]]])
     start = np.cumsum(sizes) - sizes
     return faces[start[:, None] + np.minimum(np.arange(4), sizes[:, None] - 1)]
 
@@ -415,8 +419,11 @@ def _collapse(corners, cluster):
     two faces folded onto each other, where a lone vertex sits between two merged ones) dropped the same way, the
     vertex gone. Returns faces, sizes."""
     corners = cluster[corners]
-    corners = corners[~_one_value(corners)].ravel()  # the others vanish
-    faces, sizes = _dropped(corners, np.full(len(corners) // 4, 4), np.ones(len(corners), dtype=bool))
+    corners = corners[~_one_value(corners)]  # the others vanish
+    repeats = corners == corners[:, [3, 0, 1, 2]]  # a corner equal to the one before it
+    sizes = 4 - repeats.sum(axis=1)
+    alive = sizes >= 3
+    faces, sizes = corners[alive][~repeats[alive]], sizes[alive]
     for _ in range(2):
         fin = np.bincount(faces, minlength=len(cluster)) == 2
         if not fin.any():
@@ -452,19 +459,19 @@ def _failures(n_verts, faces, sizes) -> np.ndarray:
     quad = sizes == 4
     repeated = (c0 == c1) | (c0 == c2) | (c1 == c2) | (quad & ((c0 == c3) | (c1 == c3) | (c2 == c3)))
     bad[corners[repeated].ravel()] = True
+    # each undirected edge (with the bit of its direction) exactly twice, once each way: sorted, two in a row
     edges = polygon_edges(faces, sizes)
     n = np.int64(n_verts)
-    forward, backward = edges[:, 0] * n + edges[:, 1], edges[:, 1] * n + edges[:, 0]
-    order = np.argsort(forward)
-    ordered = forward[order]
-    same = ordered[1:] == ordered[:-1]
-    twice = np.zeros(len(forward), dtype=bool)
-    twice[order[1:][same]] = twice[order[:-1][same]] = True
-    at = np.minimum(np.searchsorted(ordered, backward), len(ordered) - 1)
-    single = twice | (ordered[at] != backward)
-    bad[edges[single].ravel()] = True
-    undirected = np.sort(np.minimum(forward, backward))
-    undirected = undirected[np.r_[True, undirected[1:] != undirected[:-1]]]
+    low, high = np.minimum(edges[:, 0], edges[:, 1]), np.maximum(edges[:, 0], edges[:, 1])
+    keys = np.sort(2 * (low * n + high) + (edges[:, 0] > edges[:, 1]))
+    undirected = keys >> 1
+    start = np.flatnonzero(np.r_[True, undirected[1:] != undirected[:-1]])
+    paired = np.diff(np.r_[start, len(keys)]) == 2
+    paired[paired] = keys[start[paired]] != keys[start[paired] + 1]  # one each way
+    undirected = undirected[start]
+    wrong = undirected[~paired]
+    bad[wrong // n] = True
+    bad[wrong % n] = True
     ends = np.concatenate([undirected // n, undirected % n])
     fan = np.bincount(ends, minlength=n_verts) != np.bincount(faces, minlength=n_verts)
     return bad | fan
