@@ -84,36 +84,39 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     cls, lines = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
     corners = _padded(faces, sizes)
-    edges = _undirected(corners)
-    _hold_seams(cls, label, edges)
-    level, *ids = _levels(local, cell, edges, corners, cls, label, lines, adaptivity, field.device)
+    edges = _undirected(corners, label)
+    _hold_seams(cls, *edges)
+    level, *ids = _levels(local, cell, edges, corners, cls, lines, adaptivity, field.device)
     merged = _checked(field, local, corners, cls, level, ids, tolerance(adaptivity))
     return _renumbered(field, surface, creases, level, merged)
 
 
-def _undirected(corners) -> np.ndarray:
-    """(E, 2) the undirected edges of the faces ``corners`` (P, 4) (:func:`_padded`), each once: a closed, oriented
-    surface has each edge once each way, kept where its first end is the smaller (in the faces' order)."""
-    ends = np.empty((len(corners), 4, 2), dtype=corners.dtype)
-    ends[:, :, 0] = corners
-    ends[:, :3, 1] = corners[:, 1:]
-    ends[:, 3, 1] = corners[:, 0]
-    ends = ends.reshape(-1, 2)
-    return ends[ends[:, 0] < ends[:, 1]]
+def _undirected(corners, label):
+    """The undirected edges ``u``-``v`` of the faces ``corners`` (P, 4) (:func:`_padded`), each once (a closed,
+    oriented surface has each edge once each way, kept where its first end is the smaller, in the faces' order), and
+    the source regions ``label`` of their ends."""
+    u = corners.ravel()
+    v = corners[:, [1, 2, 3, 0]].ravel()
+    once = u < v
+    u, v = u[once], v[once]
+    return u, v, label[u], label[v]
 
 
-def _hold_seams(cls, label, edges) -> None:
-    """Mark (``cls`` 0, in place) the vertices along a seam between two source regions (``edges`` (E, 2)
-    undirected): they stay, as a crease's.
+def _hold_seams(cls, u, v, la, lb) -> None:
+    """Mark (``cls`` 0, in place) the vertices along a seam between two source regions (the edges ``u``-``v``, their
+    ends' regions ``la``, ``lb``): they stay, as a crease's.
     Where two operands meet at a crease (next to crease vertices: an edge across it joins two smooth vertices) the
     crease keeps the seam."""
+    seam = np.flatnonzero(la != lb)
+    if not len(seam):
+        return
+    # by a crease: a vertex with a crease or corner neighbour, or one itself
     by_crease = np.zeros(len(cls), dtype=bool)
-    for a, b in ((edges[:, 0], edges[:, 1]), (edges[:, 1], edges[:, 0])):
-        by_crease[a[cls[b] != 1]] = True
-    la, lb = label[edges[:, 0]], label[edges[:, 1]]
-    near = by_crease[edges[:, 0]] | by_crease[edges[:, 1]] | (cls[edges[:, 0]] != 1) | (cls[edges[:, 1]] != 1)
-    operands_at_crease = ((la >> 32) != (lb >> 32)) & near
-    cls[edges[(la != lb) & ~operands_at_crease].ravel()] = 0
+    rough = (cls[u] != 1) | (cls[v] != 1)
+    by_crease[u[rough]] = by_crease[v[rough]] = True
+    su, sv = u[seam], v[seam]
+    operands_at_crease = ((la[seam] >> 32) != (lb[seam] >> 32)) & (by_crease[su] | by_crease[sv])
+    cls[su[~operands_at_crease]] = cls[sv[~operands_at_crease]] = 0
 
 
 def _checked(field, local, corners, cls, level, ids, tol) -> dict:
@@ -247,7 +250,7 @@ def _classes(ranks, creases, n) -> tuple[np.ndarray, np.ndarray]:
     return cls.astype(np.int8), creases
 
 
-def _levels(local, cell, edges, corners, cls, label, lines, adaptivity, device=None):
+def _levels(local, cell, edges, corners, cls, lines, adaptivity, device=None):
     """Level by level, the components of each block's vertices that merge (see the module's step 2). The edges and
     faces looked at are kept by the ids of their ends' clusters at the level below, and the clusters' counts of
     vertices, edges and faces inside carried up: a level's steps are over its clusters (but the flatness test).
@@ -263,7 +266,7 @@ def _levels(local, cell, edges, corners, cls, label, lines, adaptivity, device=N
     tol = tolerance(adaptivity)
     live = cls > 0  # corners and crease ends never merge: their edges and faces never count
     points = _flatness_points(local, cls, device)
-    u, v, joins = _edge_levels(edges, cell, cls, label, lines)
+    u, v, joins = _edge_levels(edges, cell, cls, lines)
     corners = corners[_all_columns(live[corners])]
     below = np.where(live, np.arange(n, dtype=np.int32), np.int32(-1))  # each vertex's cluster below (-1: none)
     clusters = np.flatnonzero(live)  # the clusters below
@@ -304,12 +307,14 @@ def _flatness_points(local, cls, device):
     return points, wp.array((cls == 2).astype(np.int8), dtype=wp.int8, device=device)
 
 
-def _edge_levels(edges, cell, cls, label, lines):
-    """The undirected edges ``u``-``v`` between vertices that may merge, and the level from which each may join its
-    ends (within one block; the largest integer for an edge that never joins them)."""
-    keep = (cls[edges[:, 0]] > 0) & (cls[edges[:, 1]] > 0)
-    u, v = edges[keep, 0], edges[keep, 1]
-    cu, cv, lu, lv = cls[u], cls[v], label[u], label[v]
+def _edge_levels(edges, cell, cls, lines):
+    """The undirected edges ``u``-``v`` between vertices that may merge (of ``edges``: :func:`_undirected`), and the
+    level from which each may join its ends (within one block; the largest integer for an edge that never joins
+    them)."""
+    u, v, lu, lv = edges
+    keep = np.flatnonzero((cls[u] > 0) & (cls[v] > 0))
+    u, v, lu, lv = u[keep], v[keep], lu[keep], lv[keep]
+    cu, cv = cls[u], cls[v]
     along_crease = (cu == 2) & (cv == 2)  # both inside crease lines: is the edge one of theirs?
     nb = _crease_neighbours(lines, len(cls))
     a, b = u[along_crease], v[along_crease]
@@ -318,11 +323,20 @@ def _edge_levels(edges, cell, cls, label, lines):
     # operands the crease is their seam, where each vertex's operand is either)
     same = lu == lv
     joinable = (cu == cv) & (((cu == 1) & same) | (along_crease & (same | ((lu >> 32) != (lv >> 32)))))
-    # the highest bit the ends' cells differ in (cells of two signs never share a block): that of the axes' bits
-    differ = (cell[u, 0] ^ cell[v, 0]) | (cell[u, 1] ^ cell[v, 1]) | (cell[u, 2] ^ cell[v, 2])
-    joins = np.frexp(np.where(differ < 0, 2.0**62, differ))[1]
+    joins = np.frexp(_differ(cell, u, v))[1]
     joins[~joinable] = np.iinfo(joins.dtype).max
     return u, v, joins
+
+
+def _differ(cell, u, v) -> np.ndarray:
+    """(E,) float the bits in which the cells ``cell`` (V, 3) of ``u`` and ``v`` differ on any axis (their highest:
+    the level of the smallest block holding both); 2^62 where cells of two signs never share a block."""
+    if len(cell) and cell.min() >= 0 and cell.max() < 1 << 21:  # the axes packed in one integer: two gathers
+        key = (cell[:, 0] << 42) | (cell[:, 1] << 21) | cell[:, 2]
+        d = key[u] ^ key[v]
+        return ((d >> 42) | ((d >> 21) & 0x1FFFFF) | (d & 0x1FFFFF)).astype(np.float64)
+    differ = (cell[u, 0] ^ cell[v, 0]) | (cell[u, 1] ^ cell[v, 1]) | (cell[u, 2] ^ cell[v, 2])
+    return np.where(differ < 0, 2.0**62, differ)
 
 
 def _crease_neighbours(lines, n: int) -> np.ndarray:
