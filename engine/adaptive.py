@@ -86,8 +86,8 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     corners = _padded(faces, sizes)
     edges = _undirected(corners, label)
     _hold_seams(cls, *edges)
-    level, *ids = _levels(local, cell, edges, corners, cls, lines, adaptivity, field.device)
-    merged = _checked(field, local, corners, cls, level, ids, tolerance(adaptivity))
+    level, ids, inner = _levels(local, cell, edges, corners, cls, lines, adaptivity, field.device)
+    merged = _checked(field, local, (corners, inner), cls, level, ids, tolerance(adaptivity))
     return _renumbered(field, surface, creases, level, merged)
 
 
@@ -119,16 +119,16 @@ def _hold_seams(cls, u, v, la, lb) -> None:
     cls[su[~operands_at_crease]] = cls[sv[~operands_at_crease]] = 0
 
 
-def _checked(field, local, corners, cls, level, ids, tol) -> dict:
-    """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed (the faces ``corners`` (P, 4)) and
-    checked, the components at a failure dropped (by a level, then faster, after CHECK_ROUNDS to level 0) until none
+def _checked(field, local, faces, cls, level, ids, tol) -> dict:
+    """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed (``faces``: corners (P, 4) and the level
+    each is inside one component, :func:`_levels`) and checked, the components at a failure dropped (by a level, then faster, after CHECK_ROUNDS to level 0) until none
     fails. Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
     round_ = 0
     while True:  # ends: every round drops a merged component, and the surface as extracted passes
-        cluster, position, feature = _clusters(local, level, ids, cls)
-        merged = np.bincount(cluster, minlength=len(position)) > 1
+        cluster, position, feature, merged = _clusters(local, level, ids, cls)
         position = _onto_surface(field, position, ~feature & merged, tol)
-        new_faces, new_sizes = _split_bent_quads(position, feature, merged, *_collapse(corners, cluster), tol)
+        collapsed = _collapse(*faces, cluster, level)
+        new_faces, new_sizes = _split_bent_quads(position, feature, merged, *collapsed, tol)
         bad = _failures(len(position), new_faces, new_sizes)
         bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tol)
         if not bad.any() or not (level > 0).any():
@@ -256,9 +256,11 @@ def _levels(local, cell, edges, corners, cls, lines, adaptivity, device=None):
     vertices, edges and faces inside carried up: a level's steps are over its clusters (but the flatness test).
 
     Returns:
-        ``level`` (V,) the largest level each vertex merged at (0: none) and ``ids`` (L + 1, V): per level each
-        vertex's component there (its cluster when that is its level; -1 where it did not merge at that level), and
-        ``numbers`` (L + 1,) how many components each level numbers (V at level 0).
+        ``level`` (V,) the largest level each vertex merged at (0: none); ``ids`` (L + 1, V): per level each vertex's
+        component there (its cluster when that is its level; -1 where it did not merge at that level), with
+        ``numbers`` (L + 1,) how many components each level numbers (V at level 0); and ``inner`` (P,) the level at
+        which each face is inside a component that merged (the largest integer for none): gone once its vertices
+        reach it (a cluster's vertices are all at one level, the clusters of a level unions of those below).
     """
     n = len(local)
     level = np.zeros(n, dtype=np.int64)
@@ -267,7 +269,9 @@ def _levels(local, cell, edges, corners, cls, lines, adaptivity, device=None):
     live = cls > 0  # corners and crease ends never merge: their edges and faces never count
     points = _flatness_points(local, cls, device)
     u, v, joins = _edge_levels(edges, cell, cls, lines)
-    corners = corners[_all_columns(live[corners])]
+    inner = np.full(len(corners), np.iinfo(np.int64).max)  # the level each face is inside one component
+    face = np.flatnonzero(_all_columns(live[corners]))  # the faces looked at, and their corners' clusters below
+    corners = corners[face]
     below = np.where(live, np.arange(n, dtype=np.int32), np.int32(-1))  # each vertex's cluster below (-1: none)
     clusters = np.flatnonzero(live)  # the clusters below
     held = np.zeros((n, 3), dtype=np.int64)  # vertices, edges and faces inside each cluster below
@@ -281,7 +285,8 @@ def _levels(local, cell, edges, corners, cls, lines, adaptivity, device=None):
         comp_of = np.zeros(numbers[-1], dtype=np.int64)  # each cluster below in one component
         comp_of[clusters] = number
         u, v, corners = comp_of[u], comp_of[v], comp_of[corners]
-        counts = _inside(number, held[clusters], u, v, corners, k)
+        one = _one_value(corners)
+        counts = _inside(number, held[clusters], u, v, corners[one, 0], k)
         ok = _merged(points, below, clusters, number, counts, k, tol, device)
         at = np.full(numbers[-1], -1, dtype=np.int32)
         at[clusters] = np.where(ok[number], number, -1)
@@ -293,8 +298,10 @@ def _levels(local, cell, edges, corners, cls, lines, adaptivity, device=None):
         # the edges and faces inside a component are counted: they leave, as do those at a component not merged
         keep = ok[u] & ok[v] & (u != v)
         u, v, joins = u[keep], v[keep], joins[keep]
-        corners = corners[_all_columns(ok[corners]) & ~_one_value(corners)]
-    return level, np.stack(ids), np.array(numbers)
+        inner[face[one & ok[corners[:, 0]]]] = lv
+        keep = _all_columns(ok[corners]) & ~one
+        corners, face = corners[keep], face[keep]
+    return level, (np.stack(ids), np.array(numbers)), inner
 
 
 def _flatness_points(local, cls, device):
@@ -353,16 +360,17 @@ def _crease_neighbours(lines, n: int) -> np.ndarray:
     return nb
 
 
-def _inside(number, held, u, v, corners, k) -> np.ndarray:
+def _inside(number, held, u, v, within, k) -> np.ndarray:
     """(k, 4) the vertices, edges and faces inside each component: those ``held`` (N, 3) inside its clusters of the
-    level below (``number`` (N,) their components), and the edges ``u``-``v`` and faces ``corners`` (P, 4) across
-    them (by their ends' components); and how many clusters of the level below it joins."""
+    level below (``number`` (N,) their components), and the edges ``u``-``v`` across them (by their ends'
+    components) and the faces ``within`` one (their component each); and how many clusters of the level below it
+    joins."""
     out = np.empty((k, 4), dtype=np.int64)
     for j in range(3):
         out[:, j] = np.rint(np.bincount(number, weights=held[:, j], minlength=k)).astype(np.int64)
     out[:, 3] = np.bincount(number, minlength=k)
     out[:, 1] += np.bincount(u[u == v], minlength=k)
-    out[:, 2] += np.bincount(corners[_one_value(corners), 0], minlength=k)
+    out[:, 2] += np.bincount(within, minlength=k)
     return out
 
 
@@ -413,8 +421,8 @@ def _padded(faces, sizes) -> np.ndarray:
 
 def _clusters(local, level, ids, cls):
     """Each vertex's cluster (its component at its level, ``ids`` as :func:`_levels`' ids and numbers; itself at
-    level 0), the clusters' positions (voxels: the mean of their vertices) and whether each is a crease or corner
-    vertex."""
+    level 0), the clusters' positions (voxels: the mean of their vertices), whether each is a crease or corner vertex
+    and whether it merged vertices."""
     n = len(local)
     ids, numbers = ids
     offset = np.cumsum(numbers) - numbers  # the levels' ids one after the other
@@ -424,16 +432,16 @@ def _clusters(local, level, ids, cls):
     first[cluster] = np.arange(n)  # a vertex of each (all of one class)
     count = np.bincount(cluster, minlength=k)
     mean = _sums(cluster, local, k) / count[:, None]
-    return cluster, mean, cls[first] != 1
+    return cluster, mean, cls[first] != 1, count > 1
 
 
-def _collapse(corners, cluster):
+def _collapse(corners, inner, cluster, level):
     """Faces (``corners`` (P, 4), :func:`_padded`) re-indexed to clusters, corners equal to the one before them
-    dropped, faces left with fewer than 3 corners gone; then the corners at a vertex left in two faces only (a fin:
+    dropped, faces left with fewer than 3 corners gone (those ``inner`` a component at a level their vertices reach
+    first: all their corners one cluster); then the corners at a vertex left in two faces only (a fin:
     two faces folded onto each other, where a lone vertex sits between two merged ones) dropped the same way, the
     vertex gone. Returns faces, sizes."""
-    corners = cluster[corners]
-    corners = corners[~_one_value(corners)]  # the others vanish
+    corners = cluster[corners[level[corners[:, 0]] < inner]]  # the others vanish
     repeats = corners == corners[:, [3, 0, 1, 2]]  # a corner equal to the one before it
     sizes = 4 - repeats.sum(axis=1)
     alive = sizes >= 3
