@@ -274,19 +274,18 @@ def _levels(local, cell, edges, corners, cls, lines, adaptivity, device=None):
     corners = corners[face]
     below = np.where(live, np.arange(n, dtype=np.int32), np.int32(-1))  # each vertex's cluster below (-1: none)
     clusters = np.flatnonzero(live)  # the clusters below
-    held = np.zeros((n, 3), dtype=np.int64)  # vertices, edges and faces inside each cluster below
-    held[:, 0] = 1
+    held = None  # vertices, edges and faces inside each cluster below (at level 1: one vertex each)
     for lv in range(1, max_level(adaptivity) + 1):
         if not len(clusters):
             break
-        use = joins <= lv  # joinable, within one block
-        root = connected_components(numbers[-1], u[use], v[use], device)
+        # joinable within one block: the edges ranked up to the level
+        root = connected_components(numbers[-1], u, v, device, rank=joins, up_to=lv)
         number, k = _numbered(root[clusters], numbers[-1])  # the components, numbered 0 .. k - 1
-        comp_of = np.zeros(numbers[-1], dtype=np.int64)  # each cluster below in one component
+        comp_of = np.zeros(numbers[-1], dtype=np.int32)  # each cluster below in one component
         comp_of[clusters] = number
         u, v, corners = comp_of[u], comp_of[v], comp_of[corners]
         one = _one_value(corners)
-        counts = _inside(number, held[clusters], u, v, corners[one, 0], k)
+        counts = _inside(number, None if lv == 1 else held[clusters], u, v, corners[one, 0], k)
         ok = _merged(points, below, clusters, number, counts, k, tol, device)
         at = np.full(numbers[-1], -1, dtype=np.int32)
         at[clusters] = np.where(ok[number], number, -1)
@@ -332,7 +331,7 @@ def _edge_levels(edges, cell, cls, lines):
     joinable = (cu == cv) & (((cu == 1) & same) | (along_crease & (same | ((lu >> 32) != (lv >> 32)))))
     joins = np.frexp(_differ(cell, u, v))[1]
     joins[~joinable] = np.iinfo(joins.dtype).max
-    return u, v, joins
+    return u.astype(np.int32), v.astype(np.int32), joins
 
 
 def _differ(cell, u, v) -> np.ndarray:
@@ -362,13 +361,16 @@ def _crease_neighbours(lines, n: int) -> np.ndarray:
 
 def _inside(number, held, u, v, within, k) -> np.ndarray:
     """(k, 4) the vertices, edges and faces inside each component: those ``held`` (N, 3) inside its clusters of the
-    level below (``number`` (N,) their components), and the edges ``u``-``v`` across them (by their ends'
+    level below (``number`` (N,) their components; None: single vertices), and the edges ``u``-``v`` across them (by their ends'
     components) and the faces ``within`` one (their component each); and how many clusters of the level below it
     joins."""
-    out = np.empty((k, 4), dtype=np.int64)
-    for j in range(3):
-        out[:, j] = np.rint(np.bincount(number, weights=held[:, j], minlength=k)).astype(np.int64)
+    out = np.zeros((k, 4), dtype=np.int64)
     out[:, 3] = np.bincount(number, minlength=k)
+    if held is None:  # single vertices
+        out[:, 0] = out[:, 3]
+    else:
+        for j in range(3):
+            out[:, j] = np.rint(np.bincount(number, weights=held[:, j], minlength=k)).astype(np.int64)
     out[:, 1] += np.bincount(u[u == v], minlength=k)
     out[:, 2] += np.bincount(within, minlength=k)
     return out

@@ -24,8 +24,17 @@ def _root(parent: wp.array(dtype=wp.int32), node: wp.int32) -> wp.int32:
 
 
 @wp.kernel(enable_backward=False)
-def _hook_edges_kernel(a: wp.array(dtype=wp.int32), b: wp.array(dtype=wp.int32), parent: wp.array(dtype=wp.int32)):
+def _hook_edges_kernel(
+    a: wp.array(dtype=wp.int32),
+    b: wp.array(dtype=wp.int32),
+    rank: wp.array(dtype=wp.int32),
+    up_to: wp.int32,
+    parent: wp.array(dtype=wp.int32),
+):
     i = wp.tid()
+    if rank.shape[0] > 0:
+        if rank[i] > up_to:
+            return
     ra = _root(parent, a[i])
     rb = _root(parent, b[i])
     while ra != rb:
@@ -43,19 +52,25 @@ def _point_at_roots_kernel(parent: wp.array(dtype=wp.int32)):
     parent[i] = _root(parent, wp.int32(i))
 
 
-def connected_components(n: int, a, b, device=None) -> np.ndarray:
+def connected_components(n: int, a, b, device=None, *, rank=None, up_to: int = 0) -> np.ndarray:
     """(n,) int64 the smallest node of each node's connected component over the edges ``a``-``b``.
 
     Args:
         n: Number of nodes.
         a, b: (E,) int nodes in 0 .. n - 1, the ends of each edge.
         device: Warp device (default: the current one).
+        rank: Optional (E,) int: only the edges whose rank is at most ``up_to`` join their ends.
     """
     if not len(a):
         return np.arange(n)
     device = wp.get_device(device)
     parent = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=device)
-    ends = [wp.array(np.asarray(x, dtype=np.int32), dtype=wp.int32, device=device) for x in (a, b)]
-    wp.launch(_hook_edges_kernel, dim=len(ends[0]), inputs=[*ends, parent], device=device)
+    ends = [_int32(x, device) for x in (a, b, np.zeros(0) if rank is None else rank)]
+    wp.launch(_hook_edges_kernel, dim=len(ends[0]), inputs=[*ends, int(up_to), parent], device=device)
     wp.launch(_point_at_roots_kernel, dim=n, inputs=[parent], device=device)
     return parent.numpy().astype(np.int64)
+
+
+def _int32(values, device) -> wp.array:
+    """``values`` as a Warp int32 array (on the CPU the int32 numpy array's own memory, not a copy)."""
+    return wp.array(np.ascontiguousarray(values, dtype=np.int32), dtype=wp.int32, device=device, copy=False)
