@@ -381,6 +381,11 @@ def _all_columns(flags) -> np.ndarray:
     return flags[:, 0] & flags[:, 1] & flags[:, 2] & flags[:, 3]
 
 
+def _any_column(flags) -> np.ndarray:
+    """(N,) any of each row of ``flags`` (N, 4) set."""
+    return flags[:, 0] | flags[:, 1] | flags[:, 2] | flags[:, 3]
+
+
 def _one_value(values) -> np.ndarray:
     """(N,) each row of ``values`` (N, 4) all one value."""
     return (values[:, 0] == values[:, 1]) & (values[:, 1] == values[:, 2]) & (values[:, 2] == values[:, 3])
@@ -445,7 +450,7 @@ def _collapse(corners, inner, cluster, level):
     vertex gone. Returns faces, sizes."""
     corners = cluster[corners[level[corners[:, 0]] < inner]]  # the others vanish
     repeats = corners == corners[:, [3, 0, 1, 2]]  # a corner equal to the one before it
-    sizes = 4 - repeats.sum(axis=1)
+    sizes = 4 - repeats.view(np.int8) @ np.ones(4, dtype=np.int8)
     alive = sizes >= 3
     faces, sizes = corners[alive][~repeats[alive]], sizes[alive]
     for _ in range(2):
@@ -510,18 +515,20 @@ def _split_bent_quads(position, feature, merged, faces, sizes, tol):
     is_quad = sizes == 4
     quads = faces[start[is_quad][:, None] + np.arange(4)]
     tris = faces[start[~is_quad][:, None] + np.arange(3)] if (~is_quad).any() else np.zeros((0, 3), np.int64)
-    p = position[quads]
+    moved = np.flatnonzero(_any_column(merged[quads]))  # a quad as extracted stays as it was
+    p = position[quads[moved]]
     c02 = _fold(p[:, 0], p[:, 1], p[:, 2], p[:, 3])
     c13 = _fold(p[:, 1], p[:, 2], p[:, 3], p[:, 0])
-    flat = np.minimum(c02, c13) >= np.cos(np.radians(QUAD_ANGLE))
+    straight = np.minimum(c02, c13) >= np.cos(np.radians(QUAD_ANGLE))
     normal = np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1])
     twist = np.abs(np.einsum("ij,ij->i", p[:, 0] + p[:, 2] - p[:, 1] - p[:, 3], normal))
-    flat &= 0.5 * twist <= tol * np.linalg.norm(normal, axis=1)
-    flat |= ~merged[quads].any(axis=1)  # a quad as extracted stays as it was
-    bent = quads[~flat]
+    straight &= 0.5 * twist <= tol * np.linalg.norm(normal, axis=1)
+    flat = np.ones(len(quads), dtype=bool)
+    flat[moved[~straight]] = False
+    bent = quads[moved[~straight]]
     crease02 = feature[bent[:, 0]] & feature[bent[:, 2]]
     crease13 = feature[bent[:, 1]] & feature[bent[:, 3]]
-    along02 = np.where(crease02 != crease13, crease02, c02[~flat] >= c13[~flat])
+    along02 = np.where(crease02 != crease13, crease02, c02[~straight] >= c13[~straight])
     halves = np.where(
         along02[:, None, None],
         np.stack([bent[:, [0, 1, 2]], bent[:, [0, 2, 3]]], axis=1),
