@@ -121,16 +121,19 @@ def _hold_seams(cls, u, v, la, lb) -> None:
 
 def _checked(field, local, faces, cls, level, ids, tol) -> dict:
     """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed (``faces``: corners (P, 4) and the level
-    each is inside one component, :func:`_levels`) and checked, the components at a failure dropped (by a level, then faster, after CHECK_ROUNDS to level 0) until none
-    fails. Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
+    each is inside one component, :func:`_levels`) and checked, the components at a failure dropped (by a level, then
+    faster, after CHECK_ROUNDS to level 0) until none fails. What a round finds of a cluster's position on the
+    surface and of a triangle's distance from it is kept for the next (by the clusters' keys: their level and id).
+    Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
+    known = {"position": np.full((int(ids[1].sum()), 3), np.nan), "tris": np.zeros(0, np.int64), "far": np.zeros(0)}
     round_ = 0
     while True:  # ends: every round drops a merged component, and the surface as extracted passes
-        cluster, position, feature, merged = _clusters(local, level, ids, cls)
-        position = _onto_surface(field, position, ~feature & merged, tol)
+        cluster, position, feature, merged, key = _clusters(local, level, ids, cls)
+        position = _onto_surface(field, position, ~feature & merged, tol, key, known["position"])
         collapsed = _collapse(*faces, cluster, level)
         new_faces, new_sizes = _split_bent_quads(position, feature, merged, *collapsed, tol)
         bad = _failures(len(position), new_faces, new_sizes)
-        bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tol)
+        bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tol, key, known)
         if not bad.any() or not (level > 0).any():
             break
         drop = bad[cluster] & (level > 0)
@@ -173,34 +176,52 @@ def _renumbered(field, surface, creases, level, merged) -> dict:
     }
 
 
-def _strays(field, position, faces, sizes, merged, reach: float) -> np.ndarray:
+def _strays(field, position, faces, sizes, merged, reach: float, key, known: dict) -> np.ndarray:
     """(K,) the vertices of faces whose fan triangles' centres lie more than ``reach`` voxels from the field's
-    surface (a face between two merged vertices across a curved part); only faces with a ``merged`` corner."""
+    surface (a face between two merged vertices across a curved part); only faces with a ``merged`` corner. The
+    triangles' results are ``known`` (``tris``: sorted keys of their corners' clusters, ``far``) for the next round,
+    and taken from there."""
     tris = _fans(faces, sizes)
     tris = tris[merged[tris].any(axis=1)]
+    far = np.zeros(len(tris), dtype=bool)
+    if len(key) and int(key.max()) < 1 << 21:  # a triangle's clusters' keys in one integer
+        tri_key = (key[tris[:, 0]] << 42) | (key[tris[:, 1]] << 21) | key[tris[:, 2]]
+        at = np.minimum(np.searchsorted(known["tris"], tri_key), max(len(known["tris"]) - 1, 0))
+        seen = known["tris"][at] == tri_key if len(known["tris"]) else np.zeros(len(tris), dtype=bool)
+        far[seen] = known["far"][at[seen]]
+    else:
+        tri_key, seen = None, np.zeros(len(tris), dtype=bool)
+    new = np.flatnonzero(~seen)
     h = float(field.voxel_size)
-    centres = np.asarray(field.origin, dtype=np.float64) + h * position[tris].mean(axis=1)
-    far = np.abs(field.sample(centres.astype(np.float32), method="linear")) > reach * h
+    centres = np.asarray(field.origin, dtype=np.float64) + h * position[tris[new]].mean(axis=1)
+    far[new] = np.abs(field.sample(centres.astype(np.float32), method="linear")) > reach * h
+    if tri_key is not None:
+        order = np.argsort(np.concatenate([known["tris"], tri_key[new]]))
+        known["tris"] = np.concatenate([known["tris"], tri_key[new]])[order]
+        known["far"] = np.concatenate([known["far"], far[new]])[order]
     bad = np.zeros(len(position), dtype=bool)
     bad[tris[far].ravel()] = True
     return bad
 
 
-def _onto_surface(field, position, moved, tol: float) -> np.ndarray:
+def _onto_surface(field, position, moved, tol: float, key, known) -> np.ndarray:
     """``position`` (K, 3 voxels) with the rows ``moved`` that lie more than half ``tol`` voxels off the field's
     surface taken one Newton step onto it (a merged smooth vertex, its vertices' mean, lies off a curved surface by
-    the sagitta; on a flat one it stays, where the trilinear values bend near a crease)."""
-    rows = np.flatnonzero(moved)
-    if not len(rows):
-        return position
-    h = float(field.voxel_size)
-    points = np.asarray(field.origin, dtype=np.float64) + h * position[rows]
-    value, grad = field.sample(points.astype(np.float32), method="linear", return_gradient=True)
-    grad = grad.astype(np.float64)
-    step = value[:, None] * grad / np.maximum((grad * grad).sum(axis=1), 1e-12)[:, None] / h
-    step[np.abs(value) <= 0.5 * tol * h] = 0.0
+    the sagitta; on a flat one it stays, where the trilinear values bend near a crease). The rows' results are
+    ``known`` (by the clusters' ``key``, NaN where not yet) for the next round, and taken from there."""
+    rows = np.flatnonzero(moved & np.isnan(known[key, 0]))
+    if len(rows):
+        h = float(field.voxel_size)
+        points = np.asarray(field.origin, dtype=np.float64) + h * position[rows]
+        value, grad = field.sample(points.astype(np.float32), method="linear", return_gradient=True)
+        grad = grad.astype(np.float64)
+        step = value[:, None] * grad / np.maximum((grad * grad).sum(axis=1), 1e-12)[:, None] / h
+        step[np.abs(value) <= 0.5 * tol * h] = 0.0
+        known[key[rows]] = position[rows] - np.clip(step, -1.0, 1.0)  # at most a voxel a side: a mean beside a
+        # thin part stays put
     out = position.copy()
-    out[rows] -= np.clip(step, -1.0, 1.0)  # at most a voxel a side: a mean beside a thin part stays put
+    rows = np.flatnonzero(moved)
+    out[rows] = known[key[rows]]
     return out
 
 
@@ -428,8 +449,9 @@ def _padded(faces, sizes) -> np.ndarray:
 
 def _clusters(local, level, ids, cls):
     """Each vertex's cluster (its component at its level, ``ids`` as :func:`_levels`' ids and numbers; itself at
-    level 0), the clusters' positions (voxels: the mean of their vertices), whether each is a crease or corner vertex
-    and whether it merged vertices."""
+    level 0), the clusters' positions (voxels: the mean of their vertices), whether each is a crease or corner
+    vertex, whether it merged vertices, and its key (its level and id: the same cluster has the same key in every
+    round)."""
     n = len(local)
     ids, numbers = ids
     offset = np.cumsum(numbers) - numbers  # the levels' ids one after the other
@@ -439,7 +461,7 @@ def _clusters(local, level, ids, cls):
     first[cluster] = np.arange(n)  # a vertex of each (all of one class)
     count = np.bincount(cluster, minlength=k)
     mean = _sums(cluster, local, k) / count[:, None]
-    return cluster, mean, cls[first] != 1, count > 1
+    return cluster, mean, cls[first] != 1, count > 1, code[first]
 
 
 def _collapse(corners, inner, cluster, level):
