@@ -382,9 +382,9 @@ def _crease_neighbours(lines, n: int) -> np.ndarray:
 
 def _inside(number, held, u, v, within, k) -> np.ndarray:
     """(k, 4) the vertices, edges and faces inside each component: those ``held`` (N, 3) inside its clusters of the
-    level below (``number`` (N,) their components; None: single vertices), and the edges ``u``-``v`` across them (by their ends'
-    components) and the faces ``within`` one (their component each); and how many clusters of the level below it
-    joins."""
+    level below (``number`` (N,) their components; None: single vertices), and the edges ``u``-``v`` across them
+    (by their ends' components) and the faces ``within`` one (their component each); and how many clusters of the
+    level below it joins."""
     out = np.zeros((k, 4), dtype=np.int64)
     out[:, 3] = np.bincount(number, minlength=k)
     if held is None:  # single vertices
