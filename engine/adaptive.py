@@ -125,10 +125,12 @@ def _checked(field, local, faces, cls, level, ids, tol) -> dict:
     faster, after CHECK_ROUNDS to level 0) until none fails. What a round finds of a cluster's position on the
     surface and of a triangle's distance from it is kept for the next (by the clusters' keys: their level and id).
     Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
-    known = {"position": np.full((int(ids[1].sum()), 3), np.nan), "tris": np.zeros(0, np.int64), "far": np.zeros(0)}
+    keys = int(ids[1].sum())
+    known = {"position": np.full((keys, 3), np.nan), "mean": np.full((keys, 3), np.nan)}
+    known.update(tris=np.zeros(0, np.int64), far=np.zeros(0, dtype=bool))
     round_ = 0
     while True:  # ends: every round drops a merged component, and the surface as extracted passes
-        cluster, position, feature, merged, key = _clusters(local, level, ids, cls)
+        cluster, position, feature, merged, key = _clusters(local, level, ids, cls, known["mean"])
         position = _onto_surface(field, position, ~feature & merged, tol, key, known["position"])
         collapsed = _collapse(*faces, cluster, level)
         new_faces, new_sizes = _split_bent_quads(position, feature, merged, *collapsed, tol)
@@ -447,11 +449,11 @@ def _padded(faces, sizes) -> np.ndarray:
     return faces[start[:, None] + np.minimum(np.arange(4), sizes[:, None] - 1)]
 
 
-def _clusters(local, level, ids, cls):
+def _clusters(local, level, ids, cls, known):
     """Each vertex's cluster (its component at its level, ``ids`` as :func:`_levels`' ids and numbers; itself at
     level 0), the clusters' positions (voxels: the mean of their vertices), whether each is a crease or corner
     vertex, whether it merged vertices, and its key (its level and id: the same cluster has the same key in every
-    round)."""
+    round; the means ``known`` by key, NaN where not yet, are taken from there and added to)."""
     n = len(local)
     ids, numbers = ids
     offset = np.cumsum(numbers) - numbers  # the levels' ids one after the other
@@ -460,8 +462,11 @@ def _clusters(local, level, ids, cls):
     first = np.empty(k, dtype=np.int64)
     first[cluster] = np.arange(n)  # a vertex of each (all of one class)
     count = np.bincount(cluster, minlength=k)
-    mean = _sums(cluster, local, k) / count[:, None]
-    return cluster, mean, cls[first] != 1, count > 1, code[first]
+    key = code[first]
+    new = np.isnan(known[key, 0])
+    rows = np.flatnonzero(new[cluster])  # the vertices of clusters new in this round
+    known[key[new]] = _sums(cluster[rows], local[rows], k)[new] / count[new, None]
+    return cluster, known[key], cls[first] != 1, count > 1, key
 
 
 def _collapse(corners, inner, cluster, level):
