@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .blockedges import edge_levels
 from .components import connected_components
 from .flatness import far_components
 from .quads import QUAD_ANGLE, polygon_edges
@@ -84,39 +85,10 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
     cls, lines = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
     corners = _padded(faces, sizes)
-    edges = _undirected(corners, label)
-    _hold_seams(cls, *edges)
-    level, ids, inner = _levels(local, cell, edges, corners, cls, lines, adaptivity, field.device)
+    edges = edge_levels(corners, cls, label, lines, cell, field.device)  # seams held (cls 0)
+    level, ids, inner = _levels(local, edges, corners, cls, adaptivity, field.device)
     merged = _checked(field, local, (corners, inner), cls, level, ids, tolerance(adaptivity))
     return _renumbered(field, surface, creases, level, merged)
-
-
-def _undirected(corners, label):
-    """The undirected edges ``u``-``v`` of the faces ``corners`` (P, 4) (:func:`_padded`), each once (a closed,
-    oriented surface has each edge once each way, kept where its first end is the smaller, in the faces' order), and
-    the source regions ``label`` of their ends."""
-    u = corners.ravel()
-    v = corners[:, [1, 2, 3, 0]].ravel()
-    once = u < v
-    u, v = u[once], v[once]
-    return u, v, label[u], label[v]
-
-
-def _hold_seams(cls, u, v, la, lb) -> None:
-    """Mark (``cls`` 0, in place) the vertices along a seam between two source regions (the edges ``u``-``v``, their
-    ends' regions ``la``, ``lb``): they stay, as a crease's.
-    Where two operands meet at a crease (next to crease vertices: an edge across it joins two smooth vertices) the
-    crease keeps the seam."""
-    seam = np.flatnonzero(la != lb)
-    if not len(seam):
-        return
-    # by a crease: a vertex with a crease or corner neighbour, or one itself
-    by_crease = np.zeros(len(cls), dtype=bool)
-    rough = (cls[u] != 1) | (cls[v] != 1)
-    by_crease[u[rough]] = by_crease[v[rough]] = True
-    su, sv = u[seam], v[seam]
-    operands_at_crease = ((la[seam] >> 32) != (lb[seam] >> 32)) & (by_crease[su] | by_crease[sv])
-    cls[su[~operands_at_crease]] = cls[sv[~operands_at_crease]] = 0
 
 
 def _checked(field, local, faces, cls, level, ids, tol) -> dict:
@@ -273,7 +245,7 @@ def _classes(ranks, creases, n) -> tuple[np.ndarray, np.ndarray]:
     return cls.astype(np.int8), creases
 
 
-def _levels(local, cell, edges, corners, cls, lines, adaptivity, device=None):
+def _levels(local, edges, corners, cls, adaptivity, device=None):
     """Level by level, the components of each block's vertices that merge (see the module's step 2). The edges and
     faces looked at are kept by the ids of their ends' clusters at the level below, and the clusters' counts of
     vertices, edges and faces inside carried up: a level's steps are over its clusters (but the flatness test).
@@ -291,7 +263,7 @@ def _levels(local, cell, edges, corners, cls, lines, adaptivity, device=None):
     tol = tolerance(adaptivity)
     live = cls > 0  # corners and crease ends never merge: their edges and faces never count
     points = _flatness_points(local, cls, device)
-    u, v, joins = _edge_levels(edges, cell, cls, lines)
+    u, v, joins = edges  # (:func:`.blockedges.edge_levels`)
     inner = np.full(len(corners), np.iinfo(np.int64).max)  # the level each face is inside one component
     face = np.flatnonzero(_all_columns(live[corners]))  # the faces looked at, and their corners' clusters below
     corners = corners[face]
@@ -334,52 +306,6 @@ def _flatness_points(local, cls, device):
     device = wp.get_device(device)
     points = wp.array(np.ascontiguousarray(local, dtype=np.float64), dtype=wp.vec3d, device=device)
     return points, wp.array((cls == 2).astype(np.int8), dtype=wp.int8, device=device)
-
-
-def _edge_levels(edges, cell, cls, lines):
-    """The undirected edges ``u``-``v`` between vertices that may merge (of ``edges``: :func:`_undirected`), and the
-    level from which each may join its ends (within one block; the largest integer for an edge that never joins
-    them)."""
-    u, v, lu, lv = edges
-    keep = np.flatnonzero((cls[u] > 0) & (cls[v] > 0))
-    u, v, lu, lv = u[keep], v[keep], lu[keep], lv[keep]
-    cu, cv = cls[u], cls[v]
-    along_crease = (cu == 2) & (cv == 2)  # both inside crease lines: is the edge one of theirs?
-    nb = _crease_neighbours(lines, len(cls))
-    a, b = u[along_crease], v[along_crease]
-    along_crease[along_crease] = (nb[a, 0] == b) | (nb[a, 1] == b)
-    # smooth vertices of one region; crease vertices along a crease, within one region of an operand (between two
-    # operands the crease is their seam, where each vertex's operand is either)
-    same = lu == lv
-    joinable = (cu == cv) & (((cu == 1) & same) | (along_crease & (same | ((lu >> 32) != (lv >> 32)))))
-    joins = np.frexp(_differ(cell, u, v))[1]
-    joins[~joinable] = np.iinfo(joins.dtype).max
-    return u.astype(np.int32), v.astype(np.int32), joins
-
-
-def _differ(cell, u, v) -> np.ndarray:
-    """(E,) float the bits in which the cells ``cell`` (V, 3) of ``u`` and ``v`` differ on any axis (their highest:
-    the level of the smallest block holding both); 2^62 where cells of two signs never share a block."""
-    if len(cell) and cell.min() >= 0 and cell.max() < 1 << 21:  # the axes packed in one integer: two gathers
-        key = (cell[:, 0] << 42) | (cell[:, 1] << 21) | cell[:, 2]
-        d = key[u] ^ key[v]
-        return ((d >> 42) | ((d >> 21) & 0x1FFFFF) | (d & 0x1FFFFF)).astype(np.float64)
-    differ = (cell[u, 0] ^ cell[v, 0]) | (cell[u, 1] ^ cell[v, 1]) | (cell[u, 2] ^ cell[v, 2])
-    return np.where(differ < 0, 2.0**62, differ)
-
-
-def _crease_neighbours(lines, n: int) -> np.ndarray:
-    """(n, 2) the two ends of the crease edges ``lines`` (E, 2) at each vertex inside a crease line (-1 where none;
-    at a vertex of other degrees any two)."""
-    ends = np.concatenate([lines[:, 0], lines[:, 1]])
-    order = np.argsort(ends, kind="stable")
-    ends, other = ends[order], np.concatenate([lines[:, 1], lines[:, 0]])[order]
-    first = np.ones(len(ends), dtype=bool)
-    first[1:] = ends[1:] != ends[:-1]
-    nb = np.full((n, 2), -1, dtype=np.int64)
-    nb[ends[first], 0] = other[first]
-    nb[ends[~first], 1] = other[~first]
-    return nb
 
 
 def _inside(number, held, u, v, within, k) -> np.ndarray:

@@ -40,6 +40,7 @@ ENGINE_MODULES = (
     "dual",
     "flatness",
     "components",
+    "blockedges",
     "edges",
     "sweeping",
     "redistancing",
