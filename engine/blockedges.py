@@ -153,13 +153,9 @@ def edge_levels(corners, cls, label, lines, cell, device=None):
         cls[hold.numpy().astype(bool)] = 0
         wp_cls = wp.array(cls, dtype=wp.int8, device=device)
     out = [wp.empty((p, 4), dtype=wp.int32, device=device) for _ in range(3)]
-    inputs = [
-        wp_corners,
-        wp_cls,
-        wp_label,
-        wp.array(_crease_neighbours(lines, len(cls)), dtype=wp.int32, device=device),
-    ]
-    inputs.append(wp.array(np.ascontiguousarray(cell, dtype=np.int64), dtype=wp.int64, device=device))
+    neighbours = wp.array(_crease_neighbours(lines, len(cls)), dtype=wp.int32, device=device)
+    wp_cell = wp.array(np.ascontiguousarray(cell, dtype=np.int64), dtype=wp.int64, device=device)
+    inputs = [wp_corners, wp_cls, wp_label, neighbours, wp_cell]
     wp.launch(_edge_levels_kernel, dim=(p, 4), inputs=[*inputs, *out], device=device)
     u, v, joins = (x.numpy().ravel() for x in out)
     kept = np.flatnonzero(joins >= 0)
