@@ -37,13 +37,13 @@ def _ends(corners: wp.array2d(dtype=wp.int32), f: int, j: int) -> wp.vec2i:
 def _mark_by_crease_kernel(
     corners: wp.array2d(dtype=wp.int32), cls: wp.array(dtype=wp.int8), by_crease: wp.array(dtype=wp.int8)
 ):
-    f, j = wp.tid()
-    e = _ends(corners, f, j)
-    if e[0] < 0:
-        return
-    if cls[e[0]] != wp.int8(1) or cls[e[1]] != wp.int8(1):
-        by_crease[e[0]] = wp.int8(1)
-        by_crease[e[1]] = wp.int8(1)
+    f = wp.tid()
+    for j in range(4):
+        e = _ends(corners, f, j)
+        if e[0] >= 0:
+            if cls[e[0]] != wp.int8(1) or cls[e[1]] != wp.int8(1):
+                by_crease[e[0]] = wp.int8(1)
+                by_crease[e[1]] = wp.int8(1)
 
 
 @wp.kernel(enable_backward=False)
@@ -53,19 +53,18 @@ def _hold_seams_kernel(
     by_crease: wp.array(dtype=wp.int8),
     hold: wp.array(dtype=wp.int8),
 ):
-    f, j = wp.tid()
-    e = _ends(corners, f, j)
-    if e[0] < 0:
-        return
-    la = label[e[0]]
-    lb = label[e[1]]
-    if la == lb:
-        return
-    operands = (la >> wp.int64(32)) != (lb >> wp.int64(32))
-    near = by_crease[e[0]] != wp.int8(0) or by_crease[e[1]] != wp.int8(0)
-    if not (operands and near):
-        hold[e[0]] = wp.int8(1)
-        hold[e[1]] = wp.int8(1)
+    f = wp.tid()
+    for j in range(4):
+        e = _ends(corners, f, j)
+        if e[0] >= 0:
+            la = label[e[0]]
+            lb = label[e[1]]
+            if la != lb:
+                operands = (la >> wp.int64(32)) != (lb >> wp.int64(32))
+                near = by_crease[e[0]] != wp.int8(0) or by_crease[e[1]] != wp.int8(0)
+                if not (operands and near):
+                    hold[e[0]] = wp.int8(1)
+                    hold[e[1]] = wp.int8(1)
 
 
 @wp.func
@@ -79,28 +78,29 @@ def _bit_length(d: wp.int64) -> wp.int32:
     return n
 
 
-@wp.kernel(enable_backward=False)
-def _edge_levels_kernel(
+@wp.func
+def _edge_level(
     corners: wp.array2d(dtype=wp.int32),
     cls: wp.array(dtype=wp.int8),
     label: wp.array(dtype=wp.int64),
     neighbours: wp.array2d(dtype=wp.int32),
     cell: wp.array2d(dtype=wp.int64),
+    f: int,
+    j: int,
     u: wp.array2d(dtype=wp.int32),
     v: wp.array2d(dtype=wp.int32),
-    joins: wp.array2d(dtype=wp.int32),
-):
-    f, j = wp.tid()
-    joins[f, j] = wp.int32(-1)  # no edge here
+) -> wp.int32:
+    """The level from which the edge at corner ``j`` of face ``f`` joins its ends (its ends written to ``u``,
+    ``v``); -1 for no edge here."""
     e = _ends(corners, f, j)
     if e[0] < 0:
-        return
+        return wp.int32(-1)
     a = e[0]
     b = e[1]
     ca = cls[a]
     cb = cls[b]
     if ca <= wp.int8(0) or cb <= wp.int8(0):
-        return
+        return wp.int32(-1)
     u[f, j] = a
     v[f, j] = b
     la = label[a]
@@ -115,14 +115,28 @@ def _edge_levels_kernel(
     if ca == cb:
         joinable = (ca == wp.int8(1) and same) or (along and (same or (la >> wp.int64(32)) != (lb >> wp.int64(32))))
     if not joinable:
-        joins[f, j] = NEVER
-        return
+        return NEVER
     # the highest bit the ends' cells differ in on any axis (cells of two signs never share a block)
     d = (cell[a, 0] ^ cell[b, 0]) | (cell[a, 1] ^ cell[b, 1]) | (cell[a, 2] ^ cell[b, 2])
     if d < wp.int64(0):
-        joins[f, j] = wp.int32(63)
-    else:
-        joins[f, j] = _bit_length(d)
+        return wp.int32(63)
+    return _bit_length(d)
+
+
+@wp.kernel(enable_backward=False)
+def _edge_levels_kernel(
+    corners: wp.array2d(dtype=wp.int32),
+    cls: wp.array(dtype=wp.int8),
+    label: wp.array(dtype=wp.int64),
+    neighbours: wp.array2d(dtype=wp.int32),
+    cell: wp.array2d(dtype=wp.int64),
+    u: wp.array2d(dtype=wp.int32),
+    v: wp.array2d(dtype=wp.int32),
+    joins: wp.array2d(dtype=wp.int32),
+):
+    f = wp.tid()
+    for j in range(4):
+        joins[f, j] = _edge_level(corners, cls, label, neighbours, cell, f, j, u, v)
 
 
 def edge_levels(corners, cls, label, lines, cell, device=None):
@@ -147,16 +161,16 @@ def edge_levels(corners, cls, label, lines, cell, device=None):
     wp_cls = wp.array(cls, dtype=wp.int8, device=device)
     if p and label.min() != label.max():  # a seam somewhere
         by_crease = wp.zeros(len(cls), dtype=wp.int8, device=device)
-        wp.launch(_mark_by_crease_kernel, dim=(p, 4), inputs=[wp_corners, wp_cls, by_crease], device=device)
+        wp.launch(_mark_by_crease_kernel, dim=p, inputs=[wp_corners, wp_cls, by_crease], device=device)
         hold = wp.zeros(len(cls), dtype=wp.int8, device=device)
-        wp.launch(_hold_seams_kernel, dim=(p, 4), inputs=[wp_corners, wp_label, by_crease, hold], device=device)
+        wp.launch(_hold_seams_kernel, dim=p, inputs=[wp_corners, wp_label, by_crease, hold], device=device)
         cls[hold.numpy().astype(bool)] = 0
         wp_cls = wp.array(cls, dtype=wp.int8, device=device)
     out = [wp.empty((p, 4), dtype=wp.int32, device=device) for _ in range(3)]
     neighbours = wp.array(_crease_neighbours(lines, len(cls)), dtype=wp.int32, device=device)
     wp_cell = wp.array(np.ascontiguousarray(cell, dtype=np.int64), dtype=wp.int64, device=device)
     inputs = [wp_corners, wp_cls, wp_label, neighbours, wp_cell]
-    wp.launch(_edge_levels_kernel, dim=(p, 4), inputs=[*inputs, *out], device=device)
+    wp.launch(_edge_levels_kernel, dim=p, inputs=[*inputs, *out], device=device)
     u, v, joins = (x.numpy().ravel() for x in out)
     kept = np.flatnonzero(joins >= 0)
     return u[kept], v[kept], joins[kept]
