@@ -77,7 +77,7 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
         dict as ``surface`` (``verts``, ``faces``, ``sizes``, ``creases`` renumbered), unused vertices dropped.
     """
     verts = np.asarray(surface["verts"], dtype=np.float64)
-    faces, sizes = np.asarray(surface["faces"], dtype=np.int64), np.asarray(surface["sizes"], dtype=np.int64)
+    faces, sizes = np.asarray(surface["faces"], dtype=np.int32), np.asarray(surface["sizes"], dtype=np.int64)
     h = float(field.voxel_size)
     local = (verts - np.asarray(field.origin, dtype=np.float64)) / h  # voxels
     cell = np.floor(local - 0.5).astype(np.int64)
@@ -292,8 +292,9 @@ def _levels(local, edges, corners, cls, adaptivity, device=None):
         # the edges and faces inside a component are counted: they leave, as do those at a component not merged
         keep = ok[u] & ok[v] & (u != v)
         u, v, joins = u[keep], v[keep], joins[keep]
-        inner[face[one & ok[corners[:, 0]]]] = lv
-        keep = _all_columns(ok[corners]) & ~one
+        merged = ok[corners]
+        inner[face[one & merged[:, 0]]] = lv
+        keep = _all_columns(merged) & ~one
         corners, face = corners[keep], face[keep]
     return level, (np.stack(ids), np.array(numbers)), inner
 
