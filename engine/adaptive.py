@@ -258,8 +258,8 @@ def _levels(local, edges, corners, cls, adaptivity, device=None):
         reach it (a cluster's vertices are all at one level, the clusters of a level unions of those below).
     """
     n = len(local)
-    level = np.zeros(n, dtype=np.int64)
-    ids, numbers = [np.arange(n)], [n]
+    level = np.zeros(n, dtype=np.int8)
+    ids, numbers = [np.arange(n, dtype=np.int32)], [n]
     tol = tolerance(adaptivity)
     live = cls > 0  # corners and crease ends never merge: their edges and faces never count
     points = _flatness_points(local, cls, device)
