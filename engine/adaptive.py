@@ -7,13 +7,16 @@ extracted polygons, as vertex clustering over the octree's blocks:
 
 1. Vertices are sorted into classes: smooth ones, ones inside a reconstructed crease line (rank 2, two crease
    edges) and corners, crease ends and vertices along a seam between two source regions (operands, or the regions
-   the caller names: materials, UV islands), which never merge, so creases, corners and seams stay where they are.
+   the caller names: materials, UV islands), which never merge, so creases, corners and seams stay where they are;
+   each edge gets the level from which it may join its ends (:mod:`.blockedges`, in Warp).
 2. Level by level (blocks of 2, 4, 8... cells a side, up to :func:`max_level`), the vertices of a block that merged
    at the level below are split into components: smooth vertices joined by the mesh's edges, crease vertices by the
    crease edges, never across two source regions. A component merges into one vertex when it is a disk (V - E + F
    = 1 over the faces, edges and vertices inside it) and every vertex in it lies within :func:`tolerance` of the
-   plane fitted through them (a crease component: of the line; :mod:`.flatness`, in Warp). The edges and faces
-   inside a merged component are counted once and leave: a level looks only at those across its clusters.
+   plane fitted through them (a crease component: of the line; :mod:`.flatness`, in Warp). The components are found
+   over the clusters of the level below (:mod:`.components`, union-find in Warp), the edges and faces kept by their
+   ends' cluster ids; those inside a merged component are counted once and leave: a level looks only at those
+   across its clusters, and only the flatness test looks at the vertices.
 3. Each merged component becomes one vertex at its vertices' mean (a smooth one taken a Newton step onto the
    field's surface); faces are re-indexed, repeated corners dropped, a face left with fewer than 3 corners
    vanishes. A vertex left in two faces only (a fin: a lone vertex between two merged ones, its two faces folded
@@ -22,6 +25,7 @@ extracted polygons, as vertex clustering over the octree's blocks:
 4. The result is checked: every edge in exactly two faces, opposite ways, every vertex's faces one fan, no face
    repeating a corner. The components at any failure drop one level and the check runs again, until none fails (at
    worst every vertex is back at level 0: the surface as extracted), so the result is closed and 2-manifold always.
+   A round samples the field only where the one before did not (clusters and triangles by their levels and ids).
 
 Self-intersection is not checked: a merged vertex lies within about the tolerance of its vertices' plane and the
 faces' centres within FACE_REACH tolerances of the surface.
