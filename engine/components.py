@@ -1,10 +1,10 @@
 """Connected components of a graph given by its edges, in Warp: union-find with lock-free hooking.
 
-Each edge finds its ends' roots and hooks the larger under the smaller with a compare-and-swap (retrying from the
-new roots when another edge hooked one first), then each node points at its root. A root only ever hooks under a
-smaller one, so every component's root is its smallest node, whatever the order the edges run in (on the CPU one
-after the other, on CUDA side by side). Two launches replace numpy's rounds of hooking and pointer jumping, each a
-few passes over every node and edge.
+Each edge finds its ends' roots (halving the paths it walks) and hooks the larger under the smaller with a
+compare-and-swap (retrying from the new roots when another edge hooked one first), then each node points at its
+root. A root only ever hooks under a smaller one, so every component's root is its smallest node, whatever the order
+the edges run in (on the CPU one after the other, on CUDA side by side). Two launches replace numpy's rounds of
+hooking and pointer jumping, each a few passes over every node and edge.
 """
 
 from __future__ import annotations
@@ -15,10 +15,15 @@ import warp as wp
 
 @wp.func
 def _root(parent: wp.array(dtype=wp.int32), node: wp.int32) -> wp.int32:
+    """The root above ``node``, the path there halved on the way (each node passed set to its grandparent: only
+    ever an ancestor, never a root changed, so other threads' walks and hooks stay valid)."""
     x = node
     up = parent[x]
     while up != x:
-        x = up
+        grand = parent[up]
+        if grand != up:
+            parent[x] = grand
+        x = grand
         up = parent[x]
     return x
 
