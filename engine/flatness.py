@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from . import parallel
+
 
 @wp.func
 def _component(cluster: wp.array(dtype=wp.int32), comp: wp.array(dtype=wp.int32), i: int) -> int:
@@ -179,7 +181,8 @@ def far_components(points, cluster, comp, on_line, m: int, tol: float, device=No
     shared = [points, wp_cluster, wp_comp]
     wp.launch(_sum_moments_kernel, dim=n, inputs=[*shared, last, *sums], device=device)
     axes = [wp.zeros(m, dtype=wp.vec3d, device=device) for _ in range(3)]
-    wp.launch(_fit_axes_kernel, dim=m, inputs=[*sums, *axes], device=device)
+    fitted = [*sums, *axes]  # each component's own: split over the CPU's cores
+    parallel.launch_split(_fit_axes_kernel, m, lambda lo, k: [x[lo : lo + k] for x in fitted], device)
     far = wp.zeros(m, dtype=wp.int8, device=device)
     wp.launch(_flag_far_kernel, dim=n, inputs=[*shared, on_line, last, *axes, wp.float64(tol), far], device=device)
     return far.numpy().astype(bool)
