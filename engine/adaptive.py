@@ -293,11 +293,13 @@ def _levels(local, edges, corners, cls, adaptivity, device=None):
         numbers.append(k)
         level[below >= 0] = lv
         clusters, held = np.flatnonzero(ok), counts
+        merged = ok[corners]
+        inner[face[one & merged[:, 0]]] = lv
+        if lv == max_level(adaptivity):
+            break
         # the edges and faces inside a component are counted: they leave, as do those at a component not merged
         keep = ok[u] & ok[v] & (u != v)
         u, v, joins = u[keep], v[keep], joins[keep]
-        merged = ok[corners]
-        inner[face[one & merged[:, 0]]] = lv
         keep = _all_columns(merged) & ~one
         corners, face = corners[keep], face[keep]
     return level, (np.stack(ids), np.array(numbers)), inner
