@@ -104,9 +104,10 @@ def _checked(field, local, faces, cls, level, ids, tol) -> dict:
     keys = int(ids[1].sum())
     known = {"position": np.full((keys, 3), np.nan), "mean": np.full((keys, 3), np.nan)}
     known.update(tris=np.zeros(0, np.int64), far=np.zeros(0, dtype=bool))
+    code = _keys(level, ids, np.arange(len(level)))  # each vertex's cluster's key
     round_ = 0
     while True:  # ends: every round drops a merged component, and the surface as extracted passes
-        cluster, position, feature, merged, key = _clusters(local, level, ids, cls, known["mean"])
+        cluster, position, feature, merged, key = _clusters(local, code, keys, cls, known["mean"])
         position = _onto_surface(field, position, ~feature & merged, tol, key, known["position"])
         collapsed = _collapse(*faces, cluster, level)
         new_faces, new_sizes = _split_bent_quads(position, feature, merged, *collapsed, tol)
@@ -120,6 +121,8 @@ def _checked(field, local, faces, cls, level, ids, tol) -> dict:
         if not drop.any():  # (a failure of the surface as extracted) nothing merged
             drop = level > 0
         level[drop] = 0 if round_ >= CHECK_ROUNDS - 1 else np.maximum(level[drop] - (1 + round_ // 2), 0)
+        drop = np.flatnonzero(drop)
+        code[drop] = _keys(level, ids, drop)
         round_ += 1
     return {"cluster": cluster, "position": position, "faces": new_faces, "sizes": new_sizes}
 
@@ -382,16 +385,22 @@ def _padded(faces, sizes) -> np.ndarray:
     return faces[start[:, None] + np.minimum(np.arange(4), sizes[:, None] - 1)]
 
 
-def _clusters(local, level, ids, cls, known):
-    """Each vertex's cluster (its component at its level, ``ids`` as :func:`_levels`' ids and numbers; itself at
-    level 0), the clusters' positions (voxels: the mean of their vertices), whether each is a crease or corner
-    vertex, whether it merged vertices, and its key (its level and id: the same cluster has the same key in every
-    round; the means ``known`` by key, NaN where not yet, are taken from there and added to)."""
-    n = len(local)
+def _keys(level, ids, rows) -> np.ndarray:
+    """(R,) the key of the cluster of each vertex of ``rows``: its component at its ``level`` (``ids`` as
+    :func:`_levels`' ids and numbers; itself at level 0), the levels' ids one after the other (the same cluster has
+    the same key in every round of the check)."""
     ids, numbers = ids
-    offset = np.cumsum(numbers) - numbers  # the levels' ids one after the other
-    code = offset[level] + ids[level, np.arange(n)]
-    cluster, k = _numbered(code, int(numbers.sum()))
+    offset = np.cumsum(numbers) - numbers
+    at = level[rows]
+    return offset[at] + ids[at, rows]
+
+
+def _clusters(local, code, keys: int, cls, known):
+    """Each vertex's cluster (by its key ``code``, :func:`_keys`, of ``keys``), the clusters' positions (voxels: the
+    mean of their vertices), whether each is a crease or corner vertex, whether it merged vertices, and its key (the
+    means ``known`` by key, NaN where not yet, are taken from there and added to)."""
+    n = len(local)
+    cluster, k = _numbered(code, keys)
     first = np.empty(k, dtype=np.int64)
     first[cluster] = np.arange(n)  # a vertex of each (all of one class)
     count = np.bincount(cluster, minlength=k)
