@@ -6,9 +6,9 @@ passed as ``device`` (CPU here, CUDA wherever an NVIDIA GPU is present). Negativ
 """
 
 from . import kernels
-from .adaptive import connected_components
 from .boolean import difference, intersection, union
 from .build import build_field, build_fields
+from .components import connected_components
 from .edges import fold_edges, surface_edges
 from .errors import AasdfError
 from .field import AdaptiveField

@@ -7,13 +7,16 @@ extracted polygons, as vertex clustering over the octree's blocks:
 
 1. Vertices are sorted into classes: smooth ones, ones inside a reconstructed crease line (rank 2, two crease
    edges) and corners, crease ends and vertices along a seam between two source regions (operands, or the regions
-   the caller names: materials, UV islands), which never merge, so creases, corners and seams stay where they are.
+   the caller names: materials, UV islands), which never merge, so creases, corners and seams stay where they are;
+   each edge gets the level from which it may join its ends (:mod:`.blockedges`, in Warp).
 2. Level by level (blocks of 2, 4, 8... cells a side, up to :func:`max_level`), the vertices of a block that merged
    at the level below are split into components: smooth vertices joined by the mesh's edges, crease vertices by the
    crease edges, never across two source regions. A component merges into one vertex when it is a disk (V - E + F
    = 1 over the faces, edges and vertices inside it) and every vertex in it lies within :func:`tolerance` of the
-   plane fitted through them (a crease component: of the line; :mod:`.flatness`, in Warp). The edges and faces
-   inside a merged component are counted once and leave: a level looks only at those across its clusters.
+   plane fitted through them (a crease component: of the line; :mod:`.flatness`, in Warp). The components are found
+   over the clusters of the level below (:mod:`.components`, union-find in Warp), the edges and faces kept by their
+   ends' cluster ids; those inside a merged component are counted once and leave: a level looks only at those
+   across its clusters, and only the flatness test looks at the vertices.
 3. Each merged component becomes one vertex at its vertices' mean (a smooth one taken a Newton step onto the
    field's surface); faces are re-indexed, repeated corners dropped, a face left with fewer than 3 corners
    vanishes. A vertex left in two faces only (a fin: a lone vertex between two merged ones, its two faces folded
@@ -22,6 +25,7 @@ extracted polygons, as vertex clustering over the octree's blocks:
 4. The result is checked: every edge in exactly two faces, opposite ways, every vertex's faces one fan, no face
    repeating a corner. The components at any failure drop one level and the check runs again, until none fails (at
    worst every vertex is back at level 0: the surface as extracted), so the result is closed and 2-manifold always.
+   A round samples the field only where the one before did not (clusters and triangles by their levels and ids).
 
 Self-intersection is not checked: a merged vertex lies within about the tolerance of its vertices' plane and the
 faces' centres within FACE_REACH tolerances of the surface.
@@ -31,6 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .blockedges import edge_levels
+from .components import connected_components
 from .flatness import far_components
 from .quads import QUAD_ANGLE, polygon_edges
 
@@ -75,47 +81,38 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
         dict as ``surface`` (``verts``, ``faces``, ``sizes``, ``creases`` renumbered), unused vertices dropped.
     """
     verts = np.asarray(surface["verts"], dtype=np.float64)
-    faces, sizes = np.asarray(surface["faces"], dtype=np.int64), np.asarray(surface["sizes"], dtype=np.int64)
+    faces, sizes = np.asarray(surface["faces"], dtype=np.int32), np.asarray(surface["sizes"], dtype=np.int64)
     h = float(field.voxel_size)
     local = (verts - np.asarray(field.origin, dtype=np.float64)) / h  # voxels
     cell = np.floor(local - 0.5).astype(np.int64)
     creases = np.asarray(surface["creases"], dtype=np.int64).reshape(-1, 2)
     cls, lines = _classes(surface["ranks"], creases, len(verts))
     label = _labels(field, surface["verts"], regions)
-    edges = polygon_edges(faces, sizes)
-    _hold_seams(cls, label, edges)
-    crease_key = np.sort(lines, axis=1) @ np.array([len(verts), 1], dtype=np.int64)
     corners = _padded(faces, sizes)
-    level, ids = _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, field.device)
-    merged = _checked(field, local, corners, cls, level, ids, tolerance(adaptivity))
+    edges = edge_levels(corners, cls, label, lines, cell, field.device)  # seams held (cls 0)
+    level, ids, inner = _levels(local, edges, corners, cls, adaptivity, field.device)
+    merged = _checked(field, local, (corners, inner), cls, level, ids, tolerance(adaptivity))
     return _renumbered(field, surface, creases, level, merged)
 
 
-def _hold_seams(cls, label, edges) -> None:
-    """Mark (``cls`` 0, in place) the vertices along a seam between two source regions: they stay, as a crease's.
-    Where two operands meet at a crease (next to crease vertices: an edge across it joins two smooth vertices) the
-    crease keeps the seam."""
-    by_crease = np.zeros(len(cls), dtype=bool)
-    for a, b in ((edges[:, 0], edges[:, 1]), (edges[:, 1], edges[:, 0])):
-        by_crease[a[cls[b] != 1]] = True
-    la, lb = label[edges[:, 0]], label[edges[:, 1]]
-    near = by_crease[edges[:, 0]] | by_crease[edges[:, 1]] | (cls[edges[:, 0]] != 1) | (cls[edges[:, 1]] != 1)
-    operands_at_crease = ((la >> 32) != (lb >> 32)) & near
-    cls[edges[(la != lb) & ~operands_at_crease].ravel()] = 0
-
-
-def _checked(field, local, corners, cls, level, ids, tol) -> dict:
-    """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed (the faces ``corners`` (P, 4)) and
-    checked, the components at a failure dropped (by a level, then faster, after CHECK_ROUNDS to level 0) until none
-    fails. Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
+def _checked(field, local, faces, cls, level, ids, tol) -> dict:
+    """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed (``faces``: corners (P, 4) and the level
+    each is inside one component, :func:`_levels`) and checked, the components at a failure dropped (by a level, then
+    faster, after CHECK_ROUNDS to level 0) until none fails. What a round finds of a cluster's position on the
+    surface and of a triangle's distance from it is kept for the next (by the clusters' keys: their level and id).
+    Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
+    keys = int(ids[1].sum())
+    known = {"position": np.full((keys, 3), np.nan), "mean": np.full((keys, 3), np.nan)}
+    known.update(tris=np.zeros(0, np.int64), far=np.zeros(0, dtype=bool))
+    code = _keys(level, ids, np.arange(len(level)))  # each vertex's cluster's key
     round_ = 0
     while True:  # ends: every round drops a merged component, and the surface as extracted passes
-        cluster, position, feature = _clusters(local, level, ids, cls)
-        merged = np.bincount(cluster, minlength=len(position)) > 1
-        position = _onto_surface(field, position, ~feature & merged, tol)
-        new_faces, new_sizes = _split_bent_quads(position, feature, merged, *_collapse(corners, cluster), tol)
+        cluster, position, feature, merged, key = _clusters(local, code, keys, cls, known["mean"])
+        position = _onto_surface(field, position, ~feature & merged, tol, key, known["position"])
+        collapsed = _collapse(*faces, cluster, level)
+        new_faces, new_sizes = _split_bent_quads(position, feature, merged, *collapsed, tol)
         bad = _failures(len(position), new_faces, new_sizes)
-        bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tol)
+        bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tol, key, known)
         if not bad.any() or not (level > 0).any():
             break
         drop = bad[cluster] & (level > 0)
@@ -124,6 +121,8 @@ def _checked(field, local, corners, cls, level, ids, tol) -> dict:
         if not drop.any():  # (a failure of the surface as extracted) nothing merged
             drop = level > 0
         level[drop] = 0 if round_ >= CHECK_ROUNDS - 1 else np.maximum(level[drop] - (1 + round_ // 2), 0)
+        drop = np.flatnonzero(drop)
+        code[drop] = _keys(level, ids, drop)
         round_ += 1
     return {"cluster": cluster, "position": position, "faces": new_faces, "sizes": new_sizes}
 
@@ -158,34 +157,52 @@ def _renumbered(field, surface, creases, level, merged) -> dict:
     }
 
 
-def _strays(field, position, faces, sizes, merged, reach: float) -> np.ndarray:
+def _strays(field, position, faces, sizes, merged, reach: float, key, known: dict) -> np.ndarray:
     """(K,) the vertices of faces whose fan triangles' centres lie more than ``reach`` voxels from the field's
-    surface (a face between two merged vertices across a curved part); only faces with a ``merged`` corner."""
+    surface (a face between two merged vertices across a curved part); only faces with a ``merged`` corner. The
+    triangles' results are ``known`` (``tris``: sorted keys of their corners' clusters, ``far``) for the next round,
+    and taken from there."""
     tris = _fans(faces, sizes)
     tris = tris[merged[tris].any(axis=1)]
+    far = np.zeros(len(tris), dtype=bool)
+    if len(key) and int(key.max()) < 1 << 21:  # a triangle's clusters' keys in one integer
+        tri_key = (key[tris[:, 0]] << 42) | (key[tris[:, 1]] << 21) | key[tris[:, 2]]
+        at = np.minimum(np.searchsorted(known["tris"], tri_key), max(len(known["tris"]) - 1, 0))
+        seen = known["tris"][at] == tri_key if len(known["tris"]) else np.zeros(len(tris), dtype=bool)
+        far[seen] = known["far"][at[seen]]
+    else:
+        tri_key, seen = None, np.zeros(len(tris), dtype=bool)
+    new = np.flatnonzero(~seen)
     h = float(field.voxel_size)
-    centres = np.asarray(field.origin, dtype=np.float64) + h * position[tris].mean(axis=1)
-    far = np.abs(field.sample(centres.astype(np.float32), method="linear")) > reach * h
+    centres = np.asarray(field.origin, dtype=np.float64) + h * position[tris[new]].mean(axis=1)
+    far[new] = np.abs(field.sample(centres.astype(np.float32), method="linear")) > reach * h
+    if tri_key is not None:
+        order = np.argsort(np.concatenate([known["tris"], tri_key[new]]))
+        known["tris"] = np.concatenate([known["tris"], tri_key[new]])[order]
+        known["far"] = np.concatenate([known["far"], far[new]])[order]
     bad = np.zeros(len(position), dtype=bool)
     bad[tris[far].ravel()] = True
     return bad
 
 
-def _onto_surface(field, position, moved, tol: float) -> np.ndarray:
+def _onto_surface(field, position, moved, tol: float, key, known) -> np.ndarray:
     """``position`` (K, 3 voxels) with the rows ``moved`` that lie more than half ``tol`` voxels off the field's
     surface taken one Newton step onto it (a merged smooth vertex, its vertices' mean, lies off a curved surface by
-    the sagitta; on a flat one it stays, where the trilinear values bend near a crease)."""
-    rows = np.flatnonzero(moved)
-    if not len(rows):
-        return position
-    h = float(field.voxel_size)
-    points = np.asarray(field.origin, dtype=np.float64) + h * position[rows]
-    value, grad = field.sample(points.astype(np.float32), method="linear", return_gradient=True)
-    grad = grad.astype(np.float64)
-    step = value[:, None] * grad / np.maximum((grad * grad).sum(axis=1), 1e-12)[:, None] / h
-    step[np.abs(value) <= 0.5 * tol * h] = 0.0
+    the sagitta; on a flat one it stays, where the trilinear values bend near a crease). The rows' results are
+    ``known`` (by the clusters' ``key``, NaN where not yet) for the next round, and taken from there."""
+    rows = np.flatnonzero(moved & np.isnan(known[key, 0]))
+    if len(rows):
+        h = float(field.voxel_size)
+        points = np.asarray(field.origin, dtype=np.float64) + h * position[rows]
+        value, grad = field.sample(points.astype(np.float32), method="linear", return_gradient=True)
+        grad = grad.astype(np.float64)
+        step = value[:, None] * grad / np.maximum((grad * grad).sum(axis=1), 1e-12)[:, None] / h
+        step[np.abs(value) <= 0.5 * tol * h] = 0.0
+        known[key[rows]] = position[rows] - np.clip(step, -1.0, 1.0)  # at most a voxel a side: a mean beside a
+        # thin part stays put
     out = position.copy()
-    out[rows] -= np.clip(step, -1.0, 1.0)  # at most a voxel a side: a mean beside a thin part stays put
+    rows = np.flatnonzero(moved)
+    out[rows] = known[key[rows]]
     return out
 
 
@@ -235,103 +252,86 @@ def _classes(ranks, creases, n) -> tuple[np.ndarray, np.ndarray]:
     return cls.astype(np.int8), creases
 
 
-def connected_components(n: int, a, b) -> np.ndarray:
-    """(n,) the smallest node of each node's connected component over the edges ``a``-``b`` (hooking and pointer
-    jumping: a few rounds of whole-array steps)."""
-    parent = np.arange(n)
-    while True:
-        pa, pb = parent[a], parent[b]
-        differ = pa != pb
-        if not differ.any():
-            return parent
-        np.minimum.at(parent, np.maximum(pa, pb)[differ], np.minimum(pa, pb)[differ])
-        while True:
-            jumped = parent[parent]
-            if np.array_equal(jumped, parent):
-                break
-            parent = jumped
-
-
-def _levels(local, cell, edges, corners, cls, label, crease_key, adaptivity, device=None):
-    """Level by level, the components of each block's vertices that merge (see the module's step 2).
+def _levels(local, edges, corners, cls, adaptivity, device=None):
+    """Level by level, the components of each block's vertices that merge (see the module's step 2). The edges and
+    faces looked at are kept by the ids of their ends' clusters at the level below, and the clusters' counts of
+    vertices, edges and faces inside carried up: a level's steps are over its clusters (but the flatness test).
 
     Returns:
-        ``level`` (V,) the largest level each vertex merged at (0: none) and ``ids`` (L + 1, V): per level each
-        vertex's component there (its cluster when that is its level; -1 where it did not merge at that level).
+        ``level`` (V,) the largest level each vertex merged at (0: none); ``ids`` (L + 1, V): per level each vertex's
+        component there (its cluster when that is its level; -1 where it did not merge at that level), with
+        ``numbers`` (L + 1,) how many components each level numbers (V at level 0); and ``inner`` (P,) the level at
+        which each face is inside a component that merged (the largest integer for none): gone once its vertices
+        reach it (a cluster's vertices are all at one level, the clusters of a level unions of those below).
     """
     n = len(local)
-    level = np.zeros(n, dtype=np.int64)
-    ids = [np.arange(n)]
+    level = np.zeros(n, dtype=np.int8)
+    ids, numbers = [np.arange(n, dtype=np.int32)], [n]
     tol = tolerance(adaptivity)
     live = cls > 0  # corners and crease ends never merge: their edges and faces never count
-    u, v, joins = _edge_levels(edges, cell, cls, label, crease_key)
-    inside = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))  # the clusters merged at the level below, their edges
-    # and faces inside
+    points = _flatness_points(local, cls, device)
+    u, v, joins = edges  # (:func:`.blockedges.edge_levels`)
+    inner = np.full(len(corners), np.iinfo(np.int64).max)  # the level each face is inside one component
+    face = np.flatnonzero(_all_columns(live[corners]))  # the faces looked at, and their corners' clusters below
+    corners = corners[face]
+    below = np.where(live, np.arange(n, dtype=np.int32), np.int32(-1))  # each vertex's cluster below (-1: none)
+    clusters = np.flatnonzero(live)  # the clusters below
+    held = None  # vertices, edges and faces inside each cluster below (at level 1: one vertex each)
     for lv in range(1, max_level(adaptivity) + 1):
-        ready = (level == lv - 1) & live
-        members = np.flatnonzero(ready)
-        if not len(members):
+        if not len(clusters):
             break
-        keep = ready[u] & ready[v]  # what no longer merges leaves the edges and faces looked at
+        # joinable within one block: the edges ranked up to the level
+        root = connected_components(numbers[-1], u, v, device, rank=joins, up_to=lv)
+        number, k = _numbered(root[clusters], numbers[-1])  # the components, numbered 0 .. k - 1
+        comp_of = np.zeros(numbers[-1], dtype=np.int32)  # each cluster below in one component
+        comp_of[clusters] = number
+        u, v, corners = comp_of[u], comp_of[v], comp_of[corners]
+        one = _one_value(corners)
+        counts = _inside(number, None if lv == 1 else held[clusters], u, v, corners[one, 0], k)
+        ok = _merged(points, below, clusters, number, counts, k, tol, device)
+        at = np.full(numbers[-1], -1, dtype=np.int32)
+        at[clusters] = np.where(ok[number], number, -1)
+        below = np.where(below >= 0, at[below], np.int32(-1))
+        ids.append(below)
+        numbers.append(k)
+        level[below >= 0] = lv
+        clusters, held = np.flatnonzero(ok), counts
+        merged = ok[corners]
+        inner[face[one & merged[:, 0]]] = lv
+        if lv == max_level(adaptivity):
+            break
+        # the edges and faces inside a component are counted: they leave, as do those at a component not merged
+        keep = ok[u] & ok[v] & (u != v)
         u, v, joins = u[keep], v[keep], joins[keep]
-        corners = corners[_all_columns(ready[corners])]
-        prev = ids[lv - 1]  # each ready vertex's cluster at the level below
-        use = joins <= lv  # joinable, within one block
-        root = connected_components(n, prev[u[use]], prev[v[use]])  # over the clusters below, by their ids (< n)
-        member_comp, k = _numbered(root[prev[members]], n)  # the components, numbered 0 .. k - 1
-        comp = np.full(n, k)  # k: none
-        comp[members] = member_comp
-        counts = _inside(comp, members, prev, inside, u, v, corners, k)
-        merged = _merged(local, cls, comp, members, counts, k, tol, device)
-        ids.append(np.where(merged, comp, -1))
-        level[merged] = lv
-        kept = np.flatnonzero(np.bincount(comp[merged], minlength=k))  # the ids at this level: component numbers
-        inside = (kept, counts[kept, :2])
-        # the edges and faces inside a component are counted: they leave
-        keep = comp[u] != comp[v]
-        u, v, joins = u[keep], v[keep], joins[keep]
-        corners = corners[~_one_value(comp[corners])]
-    return level, np.stack(ids)
+        keep = _all_columns(merged) & ~one
+        corners, face = corners[keep], face[keep]
+    return level, (np.stack(ids), np.array(numbers)), inner
 
 
-def _edge_levels(edges, cell, cls, label, crease_key):
-    """The undirected edges ``u``-``v`` between vertices that may merge, and the level from which each may join its
-    ends (within one block; the largest integer for an edge that never joins them)."""
-    n = len(cls)
-    edges = edges[edges[:, 0] < edges[:, 1]]  # each undirected edge once (closed, oriented mesh)
-    u, v = edges[:, 0], edges[:, 1]
-    along_crease = (cls[u] == 2) & (cls[v] == 2)  # both inside crease lines: is the edge one of theirs?
-    along_crease[along_crease] = np.isin(u[along_crease] * np.int64(n) + v[along_crease], crease_key)
-    # smooth vertices of one region; crease vertices along a crease, within one region of an operand (between two
-    # operands the crease is their seam, where each vertex's operand is either)
-    same = label[u] == label[v]
-    joinable = (cls[u] == cls[v]) & (cls[u] > 0)
-    joinable &= ((cls[u] == 1) & same) | (along_crease & (same | ((label[u] >> 32) != (label[v] >> 32))))
-    keep = (cls[u] > 0) & (cls[v] > 0)
-    u, v = u[keep], v[keep]
-    # the highest bit the ends' cells differ in (cells of two signs never share a block)
-    differ = cell[u] ^ cell[v]
-    differ = np.where(differ < 0, 2.0**62, differ)
-    joins = np.frexp(np.maximum(np.maximum(differ[:, 0], differ[:, 1]), differ[:, 2]))[1]
-    joins[~joinable[keep]] = np.iinfo(joins.dtype).max
-    return u, v, joins
+def _flatness_points(local, cls, device):
+    """The vertices (voxels) and whether each is measured against a line (a crease's), as :func:`.far_components`
+    takes them (converted once for every level)."""
+    import warp as wp
+
+    device = wp.get_device(device)
+    points = wp.array(np.ascontiguousarray(local, dtype=np.float64), dtype=wp.vec3d, device=device)
+    return points, wp.array((cls == 2).astype(np.int8), dtype=wp.int8, device=device)
 
 
-def _inside(comp, members, prev, inside, u, v, corners, k) -> np.ndarray:
-    """(k, 3) the edges and faces with every vertex in each component: those inside its clusters of the level below
-    (``inside``: their ids in ``prev`` and counts) and those of ``u``-``v`` and ``corners`` (across them); and how
-    many clusters of the level below it joins (0 at level 1)."""
-    ids, counts = inside
-    comp_of = np.zeros(len(comp), dtype=np.int64)
-    comp_of[prev[members]] = comp[members]  # each cluster below in one component
-    out = np.zeros((k, 3), dtype=np.int64)
-    for j in (0, 1):
-        out[:, j] = np.rint(np.bincount(comp_of[ids], weights=counts[:, j], minlength=k)).astype(np.int64)
-    out[:, 2] = np.bincount(comp_of[ids], minlength=k)
-    cu, cv = comp[u], comp[v]
-    out[:, 0] += np.bincount(cu[cu == cv], minlength=k)
-    cq = comp[corners]
-    out[:, 1] += np.bincount(cq[_one_value(cq), 0], minlength=k)
+def _inside(number, held, u, v, within, k) -> np.ndarray:
+    """(k, 4) the vertices, edges and faces inside each component: those ``held`` (N, 3) inside its clusters of the
+    level below (``number`` (N,) their components; None: single vertices), and the edges ``u``-``v`` across them
+    (by their ends' components) and the faces ``within`` one (their component each); and how many clusters of the
+    level below it joins."""
+    out = np.zeros((k, 4), dtype=np.int64)
+    out[:, 3] = np.bincount(number, minlength=k)
+    if held is None:  # single vertices
+        out[:, 0] = out[:, 3]
+    else:
+        for j in range(3):
+            out[:, j] = np.rint(np.bincount(number, weights=held[:, j], minlength=k)).astype(np.int64)
+    out[:, 1] += np.bincount(u[u == v], minlength=k)
+    out[:, 2] += np.bincount(within, minlength=k)
     return out
 
 
@@ -340,27 +340,30 @@ def _all_columns(flags) -> np.ndarray:
     return flags[:, 0] & flags[:, 1] & flags[:, 2] & flags[:, 3]
 
 
+def _any_column(flags) -> np.ndarray:
+    """(N,) any of each row of ``flags`` (N, 4) set."""
+    return flags[:, 0] | flags[:, 1] | flags[:, 2] | flags[:, 3]
+
+
 def _one_value(values) -> np.ndarray:
     """(N,) each row of ``values`` (N, 4) all one value."""
     return (values[:, 0] == values[:, 1]) & (values[:, 1] == values[:, 2]) & (values[:, 2] == values[:, 3])
 
 
-def _merged(local, cls, comp, members, inside, k, tol, device) -> np.ndarray:
-    """(V,) the ``members`` whose component merges: a disk (V - E + F = 1 over the component's vertices, and the
-    edges and faces ``inside`` (k, 3) it), every vertex within ``tol`` of the plane through its vertices (a crease's:
-    of the line; not tested again for a component that is one cluster of the level below: it passed)."""
-    mc = comp[members]
-    n_v = np.bincount(mc, minlength=k)
-    ok = n_v - inside[:, 0] + inside[:, 1] == 1
-    test = ok[mc] & (n_v[mc] > 1) & (inside[mc, 2] != 1)  # a single vertex is flat
-    rows = members[test]
-    if len(rows):
-        sub, m = _numbered(mc[test], k)
-        far = far_components(local[rows], sub, cls[rows] == 2, m, tol, device)
-        ok[mc[test][far[sub]]] = False
-    merged = np.zeros(len(comp), dtype=bool)
-    merged[members] = ok[mc]
-    return merged
+def _merged(points, below, clusters, number, inside, k, tol, device) -> np.ndarray:
+    """(k,) the components that merge: a disk (V - E + F = 1 over the vertices, edges and faces ``inside`` (k, 4)
+    it, :func:`_inside`), every vertex within ``tol`` of the plane through its vertices (a crease's: of the line;
+    ``points`` as :func:`_flatness_points`, ``below`` (V,) each vertex's cluster of the ``clusters`` (N,), in the
+    components ``number`` (N,); not tested again for a component that is one cluster of the level below: it
+    passed)."""
+    ok = inside[:, 0] - inside[:, 1] + inside[:, 2] == 1
+    tested = ok & (inside[:, 0] > 1) & (inside[:, 3] != 1)  # a single vertex is flat
+    if tested.any():
+        vertices, on_line = points
+        comp = np.full(int(clusters[-1]) + 1, -1, dtype=np.int32)  # each cluster's component tested (-1: none)
+        comp[clusters] = np.where(tested[number], number, -1)
+        ok &= ~far_components(vertices, below, comp, on_line, k, tol, device)
+    return ok
 
 
 def _numbered(keys, n: int):
@@ -374,31 +377,51 @@ def _numbered(keys, n: int):
 
 def _padded(faces, sizes) -> np.ndarray:
     """(P, 4) corners of triangles and quads, a triangle's last corner repeated."""
+    quads = np.count_nonzero(sizes == 4)
+    if quads == len(sizes) or (quads and sizes[quads - 1] == 4 and (sizes[quads:] == 3).all()):  # quads first
+        tris = faces[4 * quads :].reshape(-1, 3)
+        return np.concatenate([faces[: 4 * quads].reshape(-1, 4), tris[:, [0, 1, 2, 2]]])
     start = np.cumsum(sizes) - sizes
     return faces[start[:, None] + np.minimum(np.arange(4), sizes[:, None] - 1)]
 
 
-def _clusters(local, level, ids, cls):
-    """Each vertex's cluster (its component at its level; itself at level 0), the clusters' positions (voxels: the
-    mean of their vertices) and whether each is a crease or corner vertex."""
+def _keys(level, ids, rows) -> np.ndarray:
+    """(R,) the key of the cluster of each vertex of ``rows``: its component at its ``level`` (``ids`` as
+    :func:`_levels`' ids and numbers; itself at level 0), the levels' ids one after the other (the same cluster has
+    the same key in every round of the check)."""
+    ids, numbers = ids
+    offset = np.cumsum(numbers) - numbers
+    at = level[rows]
+    return offset[at] + ids[at, rows]
+
+
+def _clusters(local, code, keys: int, cls, known):
+    """Each vertex's cluster (by its key ``code``, :func:`_keys`, of ``keys``), the clusters' positions (voxels: the
+    mean of their vertices), whether each is a crease or corner vertex, whether it merged vertices, and its key (the
+    means ``known`` by key, NaN where not yet, are taken from there and added to)."""
     n = len(local)
-    code = level * np.int64(n) + ids[level, np.arange(n)]
-    cluster, k = _numbered(code, len(ids) * n)
+    cluster, k = _numbered(code, keys)
     first = np.empty(k, dtype=np.int64)
     first[cluster] = np.arange(n)  # a vertex of each (all of one class)
     count = np.bincount(cluster, minlength=k)
-    mean = _sums(cluster, local, k) / count[:, None]
-    return cluster, mean, cls[first] != 1
+    key = code[first]
+    new = np.isnan(known[key, 0])
+    rows = np.flatnonzero(new[cluster])  # the vertices of clusters new in this round
+    known[key[new]] = _sums(cluster[rows], local[rows], k)[new] / count[new, None]
+    return cluster, known[key], cls[first] != 1, count > 1, key
 
 
-def _collapse(corners, cluster):
+def _collapse(corners, inner, cluster, level):
     """Faces (``corners`` (P, 4), :func:`_padded`) re-indexed to clusters, corners equal to the one before them
-    dropped, faces left with fewer than 3 corners gone; then the corners at a vertex left in two faces only (a fin:
+    dropped, faces left with fewer than 3 corners gone (those ``inner`` a component at a level their vertices reach
+    first: all their corners one cluster); then the corners at a vertex left in two faces only (a fin:
     two faces folded onto each other, where a lone vertex sits between two merged ones) dropped the same way, the
     vertex gone. Returns faces, sizes."""
-    corners = cluster[corners]
-    corners = corners[~_one_value(corners)].ravel()  # the others vanish
-    faces, sizes = _dropped(corners, np.full(len(corners) // 4, 4), np.ones(len(corners), dtype=bool))
+    corners = cluster[corners[level[corners[:, 0]] < inner]]  # the others vanish
+    repeats = corners == corners[:, [3, 0, 1, 2]]  # a corner equal to the one before it
+    sizes = 4 - repeats.view(np.int8) @ np.ones(4, dtype=np.int8)
+    alive = sizes >= 3
+    faces, sizes = corners[alive][~repeats[alive]], sizes[alive]
     for _ in range(2):
         fin = np.bincount(faces, minlength=len(cluster)) == 2
         if not fin.any():
@@ -434,19 +457,19 @@ def _failures(n_verts, faces, sizes) -> np.ndarray:
     quad = sizes == 4
     repeated = (c0 == c1) | (c0 == c2) | (c1 == c2) | (quad & ((c0 == c3) | (c1 == c3) | (c2 == c3)))
     bad[corners[repeated].ravel()] = True
+    # each undirected edge (with the bit of its direction) exactly twice, once each way: sorted, two in a row
     edges = polygon_edges(faces, sizes)
     n = np.int64(n_verts)
-    forward, backward = edges[:, 0] * n + edges[:, 1], edges[:, 1] * n + edges[:, 0]
-    order = np.argsort(forward)
-    ordered = forward[order]
-    same = ordered[1:] == ordered[:-1]
-    twice = np.zeros(len(forward), dtype=bool)
-    twice[order[1:][same]] = twice[order[:-1][same]] = True
-    at = np.minimum(np.searchsorted(ordered, backward), len(ordered) - 1)
-    single = twice | (ordered[at] != backward)
-    bad[edges[single].ravel()] = True
-    undirected = np.sort(np.minimum(forward, backward))
-    undirected = undirected[np.r_[True, undirected[1:] != undirected[:-1]]]
+    low, high = np.minimum(edges[:, 0], edges[:, 1]), np.maximum(edges[:, 0], edges[:, 1])
+    keys = np.sort(2 * (low * n + high) + (edges[:, 0] > edges[:, 1]))
+    undirected = keys >> 1
+    start = np.flatnonzero(np.r_[True, undirected[1:] != undirected[:-1]])
+    paired = np.diff(np.r_[start, len(keys)]) == 2
+    paired[paired] = keys[start[paired]] != keys[start[paired] + 1]  # one each way
+    undirected = undirected[start]
+    wrong = undirected[~paired]
+    bad[wrong // n] = True
+    bad[wrong % n] = True
     ends = np.concatenate([undirected // n, undirected % n])
     fan = np.bincount(ends, minlength=n_verts) != np.bincount(faces, minlength=n_verts)
     return bad | fan
@@ -461,18 +484,20 @@ def _split_bent_quads(position, feature, merged, faces, sizes, tol):
     is_quad = sizes == 4
     quads = faces[start[is_quad][:, None] + np.arange(4)]
     tris = faces[start[~is_quad][:, None] + np.arange(3)] if (~is_quad).any() else np.zeros((0, 3), np.int64)
-    p = position[quads]
+    moved = np.flatnonzero(_any_column(merged[quads]))  # a quad as extracted stays as it was
+    p = position[quads[moved]]
     c02 = _fold(p[:, 0], p[:, 1], p[:, 2], p[:, 3])
     c13 = _fold(p[:, 1], p[:, 2], p[:, 3], p[:, 0])
-    flat = np.minimum(c02, c13) >= np.cos(np.radians(QUAD_ANGLE))
+    straight = np.minimum(c02, c13) >= np.cos(np.radians(QUAD_ANGLE))
     normal = np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1])
     twist = np.abs(np.einsum("ij,ij->i", p[:, 0] + p[:, 2] - p[:, 1] - p[:, 3], normal))
-    flat &= 0.5 * twist <= tol * np.linalg.norm(normal, axis=1)
-    flat |= ~merged[quads].any(axis=1)  # a quad as extracted stays as it was
-    bent = quads[~flat]
+    straight &= 0.5 * twist <= tol * np.linalg.norm(normal, axis=1)
+    flat = np.ones(len(quads), dtype=bool)
+    flat[moved[~straight]] = False
+    bent = quads[moved[~straight]]
     crease02 = feature[bent[:, 0]] & feature[bent[:, 2]]
     crease13 = feature[bent[:, 1]] & feature[bent[:, 3]]
-    along02 = np.where(crease02 != crease13, crease02, c02[~flat] >= c13[~flat])
+    along02 = np.where(crease02 != crease13, crease02, c02[~straight] >= c13[~straight])
     halves = np.where(
         along02[:, None, None],
         np.stack([bent[:, [0, 1, 2]], bent[:, [0, 2, 3]]], axis=1),

@@ -1,7 +1,7 @@
 """Flatness of vertex components (:mod:`.adaptive`'s step 2) in Warp: the plane (or line) fitted through each
 component's vertices, and whether every vertex lies within a tolerance of it.
 
-Three launches over the members and the components replace a dozen whole-array passes of numpy (the moments'
+Four launches over the members and the components replace a dozen whole-array passes of numpy (the moments'
 sums, the batched eigenvectors, the distances): the moments are summed about a vertex of each component (no
 cancellation of large coordinates), the covariance's eigenvectors (closed form) give the fitted plane's normal (the
 smallest eigenvalue's) and a fitted line's direction (the largest's).
@@ -12,20 +12,44 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from . import parallel
+
+
+@wp.func
+def _component(cluster: wp.array(dtype=wp.int32), comp: wp.array(dtype=wp.int32), i: int) -> int:
+    """The component vertex ``i`` is tested in (its cluster's), -1 for none."""
+    k = cluster[i]
+    if k < 0:
+        return -1
+    return comp[k]
+
+
+@wp.kernel(enable_backward=False)
+def _last_member_kernel(
+    cluster: wp.array(dtype=wp.int32), comp: wp.array(dtype=wp.int32), last: wp.array(dtype=wp.int32)
+):
+    i = wp.tid()
+    c = _component(cluster, comp, i)
+    if c >= 0:
+        wp.atomic_max(last, c, i)
+
 
 @wp.kernel(enable_backward=False)
 def _sum_moments_kernel(
     points: wp.array(dtype=wp.vec3d),
+    cluster: wp.array(dtype=wp.int32),
     comp: wp.array(dtype=wp.int32),
-    anchor: wp.array(dtype=wp.vec3d),
+    last: wp.array(dtype=wp.int32),
     count: wp.array(dtype=wp.float64),
     first: wp.array(dtype=wp.vec3d),
     square: wp.array(dtype=wp.vec3d),
     cross: wp.array(dtype=wp.vec3d),
 ):
     i = wp.tid()
-    c = comp[i]
-    d = points[i] - anchor[c]
+    c = _component(cluster, comp, i)
+    if c < 0:
+        return
+    d = points[i] - points[last[c]]
     wp.atomic_add(count, c, wp.float64(1.0))
     wp.atomic_add(first, c, d)
     wp.atomic_add(square, c, wp.cw_mul(d, d))
@@ -71,6 +95,8 @@ def _fit_axes_kernel(
     direction: wp.array(dtype=wp.vec3d),
 ):
     c = wp.tid()
+    if count[c] == wp.float64(0.0):
+        return  # a component not tested
     m = first[c] / count[c]
     s = square[c] / count[c]
     x = cross[c] / count[c]
@@ -103,9 +129,10 @@ def _fit_axes_kernel(
 @wp.kernel(enable_backward=False)
 def _flag_far_kernel(
     points: wp.array(dtype=wp.vec3d),
+    cluster: wp.array(dtype=wp.int32),
     comp: wp.array(dtype=wp.int32),
     on_line: wp.array(dtype=wp.int8),
-    anchor: wp.array(dtype=wp.vec3d),
+    last: wp.array(dtype=wp.int32),
     mean: wp.array(dtype=wp.vec3d),
     normal: wp.array(dtype=wp.vec3d),
     direction: wp.array(dtype=wp.vec3d),
@@ -113,8 +140,10 @@ def _flag_far_kernel(
     far: wp.array(dtype=wp.int8),
 ):
     i = wp.tid()
-    c = comp[i]
-    d = points[i] - anchor[c] - mean[c]
+    c = _component(cluster, comp, i)
+    if c < 0:
+        return
+    d = points[i] - points[last[c]] - mean[c]
     dist = wp.abs(wp.dot(d, normal[c]))
     if on_line[i] != wp.int8(0):
         dist = wp.length(d - wp.dot(d, direction[c]) * direction[c])
@@ -122,39 +151,38 @@ def _flag_far_kernel(
         far[c] = wp.int8(1)
 
 
-def far_components(points, comp, on_line, m: int, tol: float, device=None) -> np.ndarray:
+def far_components(points, cluster, comp, on_line, m: int, tol: float, device=None) -> np.ndarray:
     """(m,) bool: the components with a vertex farther than ``tol`` from the plane fitted through their vertices
-    (least squares), or with ``on_line`` from the line.
+    (least squares, the moments summed about the component's last vertex), or with ``on_line`` from the line.
 
     Args:
-        points: (N, 3) float64 vertex positions.
-        comp: (N,) int component of each, in 0 .. m - 1 (each component has a vertex).
-        on_line: (N,) bool: the vertex's component is measured against its fitted line (a crease's).
+        points: (V, 3) float64 vertex positions (or a Warp vec3d array of them).
+        cluster: (V,) int the cluster of each vertex, -1 for none.
+        comp: (K,) int the component each cluster is tested in, in 0 .. m - 1, or -1 for none.
+        on_line: (V,) bool: the vertex's component is measured against its fitted line (a crease's).
         m: Number of components.
         tol: Largest distance allowed.
         device: Warp device (default: the current one).
     """
-    if not len(points):
-        return np.zeros(m, dtype=bool)
     device = wp.get_device(device)
-    comp = np.ascontiguousarray(comp, dtype=np.int32)
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    anchor = np.empty((m, 3))
-    anchor[comp] = points  # a vertex of each component
-    wp_points = wp.array(points, dtype=wp.vec3d, device=device)
-    wp_comp = wp.array(comp, dtype=wp.int32, device=device)
-    wp_anchor = wp.array(anchor, dtype=wp.vec3d, device=device)
+    if not isinstance(points, wp.array):
+        points = wp.array(np.ascontiguousarray(points, dtype=np.float64), dtype=wp.vec3d, device=device)
+    if not isinstance(on_line, wp.array):
+        on_line = wp.array(np.asarray(on_line, dtype=np.int8), dtype=wp.int8, device=device)
+    n = len(points)
+    if not n or not m:
+        return np.zeros(m, dtype=bool)
+    wp_cluster = wp.array(np.asarray(cluster, dtype=np.int32), dtype=wp.int32, device=device)
+    wp_comp = wp.array(np.asarray(comp, dtype=np.int32), dtype=wp.int32, device=device)
+    last = wp.full(m, -1, dtype=wp.int32, device=device)
+    wp.launch(_last_member_kernel, dim=n, inputs=[wp_cluster, wp_comp, last], device=device)
     sums = [wp.zeros(m, dtype=wp.float64, device=device)]
     sums += [wp.zeros(m, dtype=wp.vec3d, device=device) for _ in range(3)]
-    wp.launch(_sum_moments_kernel, dim=len(points), inputs=[wp_points, wp_comp, wp_anchor, *sums], device=device)
-    axes = [wp.empty(m, dtype=wp.vec3d, device=device) for _ in range(3)]
-    wp.launch(_fit_axes_kernel, dim=m, inputs=[*sums, *axes], device=device)
+    shared = [points, wp_cluster, wp_comp]
+    wp.launch(_sum_moments_kernel, dim=n, inputs=[*shared, last, *sums], device=device)
+    axes = [wp.zeros(m, dtype=wp.vec3d, device=device) for _ in range(3)]
+    fitted = [*sums, *axes]  # each component's own: split over the CPU's cores
+    parallel.launch_split(_fit_axes_kernel, m, lambda lo, k: [x[lo : lo + k] for x in fitted], device)
     far = wp.zeros(m, dtype=wp.int8, device=device)
-    line = wp.array(np.asarray(on_line, dtype=np.int8), dtype=wp.int8, device=device)
-    wp.launch(
-        _flag_far_kernel,
-        dim=len(points),
-        inputs=[wp_points, wp_comp, line, wp_anchor, *axes, wp.float64(tol), far],
-        device=device,
-    )
+    wp.launch(_flag_far_kernel, dim=n, inputs=[*shared, on_line, last, *axes, wp.float64(tol), far], device=device)
     return far.numpy().astype(bool)

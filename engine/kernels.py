@@ -39,6 +39,8 @@ ENGINE_MODULES = (
     "sources",
     "dual",
     "flatness",
+    "components",
+    "blockedges",
     "edges",
     "sweeping",
     "redistancing",
