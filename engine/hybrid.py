@@ -22,9 +22,11 @@ from .edges import surface_edges
 from .keep import kept_triangles
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
+from .slits import fill_slits
 from .zipper import (
     LOCAL_ROUNDS,
     MAX_ROUNDS,
+    NEAR_VOXELS,
     PAIR_VOXELS,
     WIDEN_RINGS,
     border_halves,
@@ -48,20 +50,33 @@ def kept_mesh(kept: list[dict]) -> dict:
         source, rows = leaf["source"], np.flatnonzero(leaf["kept"])
         tris = leaf["tris"][rows].astype(np.int64)
         tris[leaf["flip"][rows]] = tris[leaf["flip"][rows]][:, [0, 2, 1]]
-        used, local = np.unique(tris, return_inverse=True)
+        parts["corner_bary"].append(_corner_barycentrics(leaf["verts"], tris, source.tris[leaf["parent"][rows]]))
+        used, local = _welded(leaf["verts"], tris)
         parts["verts"].append(leaf["verts"][used])
-        parts["tris"].append(local.reshape(-1, 3) + base)
+        parts["tris"].append(local + base)
         parts["field_id"].append(np.full(len(rows), leaf["field_id"], dtype=np.int32))
         parts["triangle_id"].append(source.triangle_ids[leaf["parent"][rows]])
         parts["vertex_field"].append(np.full(len(used), leaf["field_id"], dtype=np.int32))
         parts["vertex_id"].append(np.where(used < len(source.verts), used, -1).astype(np.int32))
-        parts["corner_bary"].append(_corner_barycentrics(leaf["verts"], tris, source.tris[leaf["parent"][rows]]))
         base += len(used)
     if not parts["verts"]:
         empty = {"verts": np.zeros((0, 3), np.float32), "tris": np.zeros((0, 3), np.int64)}
         empty["corner_bary"] = np.zeros((0, 3, 3), np.float32)
         return {**empty, **{k: np.zeros(0, np.int32) for k in ("field_id", "triangle_id", "vertex_field", "vertex_id")}}
     return {k: np.concatenate(v) for k, v in parts.items()}
+
+
+def _welded(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(used, local)``: the vertices the triangles use, one per position (the least index of those at it: a source
+    vertex before a split's midpoint), in the order of their indices, and the triangles on them ((T, 3) int64). Pieces
+    of a mesh made of patches whose borders repeat each other's vertices (a teapot's) are one piece here, not two
+    kept loops side by side that no voxel surface lies between."""
+    used, local = np.unique(tris, return_inverse=True)
+    _, first, at = np.unique(verts[used], axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[order] = np.arange(len(first))
+    return used[first[order]], rank[at.reshape(-1)][local.reshape(-1)].reshape(-1, 3)
 
 
 def _corner_barycentrics(verts, tris, source_tris) -> np.ndarray:
@@ -160,8 +175,9 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
         v_alive = _drop_pinched(v_tris, v_alive, n)
         k_loops = _loops(k_border, n, reverse=False)
         v_loops = _loops(border_halves(v_tris[v_alive], n), n, reverse=True)
-        paired = _pair_loops(points, k_loops, v_loops, PAIR_VOXELS * voxel, device)
-        strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], PAIR_VOXELS * voxel, n_k, device)
+        k_loops, paired, strips, stretched, far = _paired_strips(
+            points, (k_tris[k_alive], k_border), k_loops, v_loops, n_k, voxel, device
+        )
         # a stretched strip gives up the kept faces where it stretches (a kept finger narrower than a voxel, which the
         # voxel surface does not follow), and the kept faces along its whole loop only after LOCAL_ROUNDS
         local = rounds < LOCAL_ROUNDS
@@ -180,6 +196,25 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
     return _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
+
+
+def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, voxel: float, device):
+    """The loops paired (:func:`_pair_loops`) and their strips (:func:`_strips`), with the kept loops that fail and
+    are slits closed by themselves (:func:`.slits.fill_slits`) and left out of the pairing, which runs again without
+    them. Returns ``(k_loops, paired, strips, stretched, far)``: the kept loops left to pair, and as there."""
+    reach = PAIR_VOXELS * voxel
+    paired = _pair_loops(points, k_loops, v_loops, reach, device)
+    strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
+    failed = np.r_[paired["kept_unpaired"], stretched]
+    if not len(failed):
+        return k_loops, paired, strips, stretched, far
+    fills, filled = fill_slits(points, k_loops, failed, kept[0], kept[1], voxel, device)
+    if not len(filled):
+        return k_loops, paired, strips, stretched, far
+    k_loops = (k_loops[0], k_loops[1][~np.isin(k_loops[2][k_loops[1]], filled)], k_loops[2])
+    paired = _pair_loops(points, k_loops, v_loops, reach, device)
+    strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
+    return k_loops, paired, np.concatenate([strips, fills]), stretched, far
 
 
 def _loops_at_unpaired_edges(tris, k_loops, v_loops, pairs, n_verts: int) -> np.ndarray:
@@ -276,7 +311,8 @@ def _strips(points, k_loops, v_loops, pairs, reach: float, n_kept: int, device):
     v_next, v_members, v_labels = v_loops
     k_count = np.bincount(k_labels[k_members], minlength=len(points))[pairs[:, 0]]
     v_count = np.bincount(v_labels[v_members], minlength=len(points))[pairs[:, 1]]
-    strips, gaps = zip_loops(points, k_next, v_next, pairs[:, 0], pairs[:, 1], k_count, v_count, device)
+    near = NEAR_VOXELS * reach / PAIR_VOXELS
+    strips, gaps = zip_loops(points, k_next, v_next, pairs[:, 0], pairs[:, 1], k_count, v_count, device, near)
     if not len(strips):
         return strips, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     counts = k_count + v_count

@@ -46,6 +46,7 @@ ENGINE_MODULES = (
     "keep",
     "refine",
     "zipper",
+    "slits",
     "coarsen",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
