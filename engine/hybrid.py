@@ -28,6 +28,7 @@ from .zipper import (
     MAX_ROUNDS,
     NEAR_VOXELS,
     PAIR_VOXELS,
+    STRETCH_VOXELS,
     WIDEN_RINGS,
     border_halves,
     loop_labels,
@@ -181,8 +182,9 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
         # a stretched strip gives up the kept faces where it stretches (a kept finger narrower than a voxel, which the
         # voxel surface does not follow), and the kept faces along its whole loop only after LOCAL_ROUNDS
         local = rounds < LOCAL_ROUNDS
+        if not local:  # a long loop stretched at a few steps gives up the kept faces there, a ring more each round
+            stretched, far = _mostly_side_by_side(k_tris[k_alive], k_loops, stretched, far, rounds, n)
         kept_failed = np.r_[paired["kept_unpaired"], stretched[:0] if local else stretched]
-        far = far if local else far[:0]
         whole = rounds > LOCAL_ROUNDS  # a loop failing again gives up the kept piece it bounds
         if not len(kept_failed) and not len(far) and not len(paired["voxel_unpaired"]):
             joined = np.concatenate([k_tris[k_alive], v_tris[v_alive], strips.astype(np.int64)])
@@ -215,6 +217,26 @@ def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, voxel: float, de
     paired = _pair_loops(points, k_loops, v_loops, reach, device)
     strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
     return k_loops, paired, np.concatenate([strips, fills]), stretched, far
+
+
+def _mostly_side_by_side(faces, k_loops, stretched, far, rings: int, n_verts: int):
+    """Of the ``stretched`` kept loops, those with at most ``SIDE_BY_SIDE`` of their vertices ``far`` (at a step of
+    their strip where it stretches) give up only the kept faces within ``rings`` rings of those vertices; the rest
+    give up faces all along. Returns ``(stretched, far)``: the loops that give up faces all along, and the vertices
+    the others give up faces at."""
+    labels = k_loops[2]
+    length = np.bincount(labels[k_loops[1]], minlength=n_verts)[stretched]
+    at_far = np.bincount(labels[far], minlength=n_verts)[stretched]
+    some = stretched[at_far <= SIDE_BY_SIDE * length]
+    grown = np.zeros(n_verts, dtype=bool)
+    grown[far[np.isin(labels[far], some)]] = True
+    for _ in range(rings):
+        grown[faces[grown[faces].any(axis=1)].ravel()] = True
+    return np.setdiff1d(stretched, some), np.flatnonzero(grown)
+
+
+# A stretched loop with at most this share of its vertices where it stretches gives up kept faces only there.
+SIDE_BY_SIDE = 0.25
 
 
 def _loops_at_unpaired_edges(tris, k_loops, v_loops, pairs, n_verts: int) -> np.ndarray:
@@ -262,6 +284,8 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
     (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone) = kept, voxel
     n = len(points)
     at_failed = np.isin(k_loops[2], kept_failed)
+    if whole:
+        at_failed = _widened(k_tris, k_alive, at_failed, n)
     if len(voxel_failed):
         at_loop = np.isin(v_loops[2], voxel_failed)
         pieces = vertex_components(v_tris[v_alive], n)
@@ -273,8 +297,6 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
         members = k_loops[1]
         near = nearest_points(points[members], points[open_loop], reach, device)
         at_failed[members[near[near >= 0]]] = True
-    if whole:
-        at_failed = _widened(k_tris, k_alive, at_failed, n)
     at_failed[far] = True
     alive = _drop_pinched(k_tris, k_alive & ~at_failed[k_tris].any(axis=1), n)
     if (alive != k_alive).any():  # the voxel faces over the kept ones given up come back: judged afresh
@@ -317,6 +339,7 @@ def _strips(points, k_loops, v_loops, pairs, reach: float, n_kept: int, device):
         return strips, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     counts = k_count + v_count
     first = np.r_[0, np.cumsum(counts)[:-1]]
+    reach = STRETCH_VOXELS * reach / PAIR_VOXELS
     far = np.unique(strips[gaps > reach])
     return strips, pairs[np.maximum.reduceat(gaps, first) > reach, 0], far[far < n_kept].astype(np.int64)
 

@@ -27,6 +27,8 @@ from .parallel import launch_split
 OVER_VOXELS = 1.0
 # Border loops are paired through vertices within this many voxels of each other.
 PAIR_VOXELS = 4.0
+# A strip stretches where the loops run farther apart than this many voxels.
+STRETCH_VOXELS = 4.0
 # Rounds of giving up faces at loops that cannot be paired before the join is abandoned.
 MAX_ROUNDS = 12
 # Rounds in which a stretched strip gives up only the kept faces where it stretches, before its whole loop's.
