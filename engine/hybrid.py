@@ -183,7 +183,7 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
         # voxel surface does not follow), and the kept faces along its whole loop only after LOCAL_ROUNDS
         local = rounds < LOCAL_ROUNDS
         if not local:  # a long loop stretched at a few steps gives up the kept faces there, a ring more each round
-            stretched, far = _mostly_side_by_side(k_tris[k_alive], k_loops, stretched, far, rounds, n)
+            stretched, far = _mostly_side_by_side(k_tris[k_alive], k_loops, stretched, far, rounds - LOCAL_ROUNDS, n)
         kept_failed = np.r_[paired["kept_unpaired"], stretched[:0] if local else stretched]
         whole = rounds > LOCAL_ROUNDS  # a loop failing again gives up the kept piece it bounds
         if not len(kept_failed) and not len(far) and not len(paired["voxel_unpaired"]):
