@@ -177,13 +177,13 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
         k_loops = _loops(k_border, n, reverse=False)
         v_loops = _loops(border_halves(v_tris[v_alive], n), n, reverse=True)
         k_loops, paired, strips, stretched, far = _paired_strips(
-            points, (k_tris[k_alive], k_border), k_loops, v_loops, n_k, voxel, device
+            points, (k_tris[k_alive], k_border), k_loops, v_loops, n_k, field
         )
         # a stretched strip gives up the kept faces where it stretches (a kept finger narrower than a voxel, which the
         # voxel surface does not follow), and the kept faces along its whole loop only after LOCAL_ROUNDS
         local = rounds < LOCAL_ROUNDS
-        if not local:  # a long loop stretched at a few steps gives up the kept faces there, a ring more each round
-            stretched, far = _mostly_side_by_side(k_tris[k_alive], k_loops, stretched, far, rounds - LOCAL_ROUNDS, n)
+        if not local:  # a loop stretched at a few steps gives up the kept faces there, round after round
+            stretched, far = _mostly_side_by_side(k_loops, stretched, far, n)
         kept_failed = np.r_[paired["kept_unpaired"], stretched[:0] if local else stretched]
         whole = rounds > LOCAL_ROUNDS  # a loop failing again gives up the kept piece it bounds
         if not len(kept_failed) and not len(far) and not len(paired["voxel_unpaired"]):
@@ -200,17 +200,18 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
     return _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
 
 
-def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, voxel: float, device):
+def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, field):
     """The loops paired (:func:`_pair_loops`) and their strips (:func:`_strips`), with the kept loops that fail and
     are slits closed by themselves (:func:`.slits.fill_slits`) and left out of the pairing, which runs again without
     them. Returns ``(k_loops, paired, strips, stretched, far)``: the kept loops left to pair, and as there."""
+    voxel, device = field.voxel_size, field.device
     reach = PAIR_VOXELS * voxel
     paired = _pair_loops(points, k_loops, v_loops, reach, device)
     strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
     failed = np.r_[paired["kept_unpaired"], stretched]
     if not len(failed):
         return k_loops, paired, strips, stretched, far
-    fills, filled = fill_slits(points, k_loops, failed, kept[0], kept[1], voxel, device)
+    fills, filled = fill_slits(points, k_loops, failed, kept[0], kept[1], voxel, device, field)
     if not len(filled):
         return k_loops, paired, strips, stretched, far
     k_loops = (k_loops[0], k_loops[1][~np.isin(k_loops[2][k_loops[1]], filled)], k_loops[2])
@@ -219,20 +220,16 @@ def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, voxel: float, de
     return k_loops, paired, np.concatenate([strips, fills]), stretched, far
 
 
-def _mostly_side_by_side(faces, k_loops, stretched, far, rings: int, n_verts: int):
+def _mostly_side_by_side(k_loops, stretched, far, n_verts: int):
     """Of the ``stretched`` kept loops, those with at most ``SIDE_BY_SIDE`` of their vertices ``far`` (at a step of
-    their strip where it stretches) give up only the kept faces within ``rings`` rings of those vertices; the rest
-    give up faces all along. Returns ``(stretched, far)``: the loops that give up faces all along, and the vertices
-    the others give up faces at."""
+    their strip where it stretches) give up only the kept faces at those vertices; the rest give up faces all
+    along. Returns ``(stretched, far)``: the loops that give up faces all along, and the vertices the others give up
+    faces at."""
     labels = k_loops[2]
     length = np.bincount(labels[k_loops[1]], minlength=n_verts)[stretched]
     at_far = np.bincount(labels[far], minlength=n_verts)[stretched]
     some = stretched[at_far <= SIDE_BY_SIDE * length]
-    grown = np.zeros(n_verts, dtype=bool)
-    grown[far[np.isin(labels[far], some)]] = True
-    for _ in range(rings):
-        grown[faces[grown[faces].any(axis=1)].ravel()] = True
-    return np.setdiff1d(stretched, some), np.flatnonzero(grown)
+    return np.setdiff1d(stretched, some), far[np.isin(labels[far], some)]
 
 
 # A stretched loop with at most this share of its vertices where it stretches gives up kept faces only there.

@@ -17,8 +17,11 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-# A slit's strip has diagonals at most this many voxels long.
+# A slit's strip has diagonals at most this many voxels long; a wider hole's, at most WIDE_VOXELS, where it lies
+# within ON_VOXELS of the result's zero level all over.
 FILL_VOXELS = 2.0
+WIDE_VOXELS = 6.0
+ON_VOXELS = 0.5
 
 
 @wp.kernel(enable_backward=False)
@@ -85,9 +88,11 @@ def _facing(points, tris, loop_of, kept_tris, halves, halves_loop, n_loops: int)
     return (strip * around).sum(axis=1)
 
 
-def fill_slits(points, k_loops, candidates, kept_tris, halves, voxel: float, device):
+def fill_slits(points, k_loops, candidates, kept_tris, halves, voxel: float, device, field=None):
     """Close the kept loops ``candidates`` (labels of ``k_loops`` = ``(next, members, labels)``, the border of
-    ``kept_tris`` whose directed edges are ``halves``) that are slits (module docstring).
+    ``kept_tris`` whose directed edges are ``halves``) that are slits (module docstring); a strip whose diagonals are
+    longer than ``FILL_VOXELS`` but at most ``WIDE_VOXELS`` is taken where ``field`` (the result's, if given) is
+    within ``ON_VOXELS`` of zero at its triangles' centres and edges' midpoints (it lies on the surface).
 
     Returns:
         ``(tris, filled)``: (F, 3) int32 the strips of the loops closed, and their labels.
@@ -125,5 +130,15 @@ def fill_slits(points, k_loops, candidates, kept_tris, halves, voxel: float, dev
     on_loop = np.isin(labels[halves[:, 0]], loops)
     halves_loop = np.searchsorted(loops, labels[halves[on_loop, 0]])
     facing = _facing(points, tris, loop_of, kept_tris, halves[on_loop], halves_loop, len(loops))
-    ok = (longest.numpy() <= FILL_VOXELS * voxel) & (facing > 0.0)
+    longest = longest.numpy()
+    ok = (longest <= FILL_VOXELS * voxel) & (facing > 0.0)
+    wide = np.flatnonzero(~ok & (longest <= WIDE_VOXELS * voxel) & (facing > 0.0))
+    if field is not None and len(wide):
+        rows = np.flatnonzero(np.isin(loop_of, wide))
+        corners = points[tris[rows]].astype(np.float64)
+        at = np.concatenate([corners.mean(axis=1), 0.5 * (corners + corners[:, [1, 2, 0]]).reshape(-1, 3)])
+        off = np.abs(field.sample(at.astype(np.float32), method="linear"))
+        worst = np.zeros(len(loops))
+        np.maximum.at(worst, np.r_[loop_of[rows], np.repeat(loop_of[rows], 3)], off)
+        ok[wide] = worst[wide] <= ON_VOXELS * voxel
     return tris[ok[loop_of]], loops[ok]
