@@ -23,6 +23,7 @@ from .keep import kept_triangles
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .slits import fill_slits
+from .twins import zip_twins
 from .zipper import (
     LOCAL_ROUNDS,
     MAX_ROUNDS,
@@ -203,7 +204,8 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
 def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, field):
     """The loops paired (:func:`_pair_loops`) and their strips (:func:`_strips`), with the kept loops that fail and
     are slits closed by themselves (:func:`.slits.fill_slits`) and left out of the pairing, which runs again without
-    them. Returns ``(k_loops, paired, strips, stretched, far)``: the kept loops left to pair, and as there."""
+    them, and the kept loops left unpaired that face each other zipped to each other (:func:`.twins.zip_twins`).
+    Returns ``(k_loops, paired, strips, stretched, far)``: the kept loops left to pair, and as there."""
     voxel, device = field.voxel_size, field.device
     reach = PAIR_VOXELS * voxel
     paired = _pair_loops(points, k_loops, v_loops, reach, device)
@@ -212,12 +214,17 @@ def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, field):
     if not len(failed):
         return k_loops, paired, strips, stretched, far
     fills, filled = fill_slits(points, k_loops, failed, kept[0], kept[1], voxel, device, field)
-    if not len(filled):
-        return k_loops, paired, strips, stretched, far
-    k_loops = (k_loops[0], k_loops[1][~np.isin(k_loops[2][k_loops[1]], filled)], k_loops[2])
-    paired = _pair_loops(points, k_loops, v_loops, reach, device)
-    strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
-    return k_loops, paired, np.concatenate([strips, fills]), stretched, far
+    if len(filled):
+        k_loops = (k_loops[0], k_loops[1][~np.isin(k_loops[2][k_loops[1]], filled)], k_loops[2])
+        paired = _pair_loops(points, k_loops, v_loops, reach, device)
+        strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
+    # kept loops left unpaired that face each other are zipped to each other
+    near = NEAR_VOXELS * voxel
+    twins, twinned = zip_twins(points, k_loops, paired["kept_unpaired"], reach, near, device)
+    if len(twinned):
+        k_loops = (k_loops[0], k_loops[1][~np.isin(k_loops[2][k_loops[1]], twinned)], k_loops[2])
+        paired = {**paired, "kept_unpaired": np.setdiff1d(paired["kept_unpaired"], twinned)}
+    return k_loops, paired, np.concatenate([strips, fills, twins]), stretched, far
 
 
 def _mostly_side_by_side(k_loops, stretched, far, n_verts: int):

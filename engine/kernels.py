@@ -47,6 +47,7 @@ ENGINE_MODULES = (
     "refine",
     "zipper",
     "slits",
+    "twins",
     "coarsen",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
