@@ -33,8 +33,9 @@ STRETCH_VOXELS = 4.0
 MAX_ROUNDS = 12
 # Rounds in which a stretched strip gives up only the kept faces where it stretches, before its whole loop's.
 LOCAL_ROUNDS = 1
-# A loop failing again gives up this many rings of kept faces around it (a small kept piece: all of it).
-WIDEN_RINGS = 3
+# A loop failing again gives up this many rings of kept faces around it (a small kept piece: all of it): one (a
+# low-polygon mesh's three rings are a third of its area).
+WIDEN_RINGS = 1
 
 
 # ---- the voxel surface over the kept faces ----
