@@ -187,6 +187,9 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
             stretched, far = _mostly_side_by_side(k_loops, stretched, far, n)
         kept_failed = np.r_[paired["kept_unpaired"], stretched[:0] if local else stretched]
         whole = rounds > LOCAL_ROUNDS  # a loop failing again gives up the kept piece it bounds
+        if local:  # an unpaired loop crowding another one gives up first only the kept faces where it does
+            crowded, kept_failed = _crowding(points, k_loops, kept_failed, PAIR_VOXELS * voxel, device)
+            far = np.r_[far, crowded]
         if not len(kept_failed) and not len(far) and not len(paired["voxel_unpaired"]):
             joined = np.concatenate([k_tris[k_alive], v_tris[v_alive], strips.astype(np.int64)])
             kept_failed, whole = _loops_at_unpaired_edges(joined, k_loops, v_loops, paired["pairs"], n), False
@@ -241,6 +244,18 @@ def _mostly_side_by_side(k_loops, stretched, far, n_verts: int):
 
 # A stretched loop with at most this share of its vertices where it stretches gives up kept faces only there.
 SIDE_BY_SIDE = 0.25
+
+
+def _crowding(points, k_loops, unpaired, reach: float, device):
+    """The vertices of the ``unpaired`` kept loops within ``reach`` of another kept loop's vertex (the kept faces
+    between the two are too narrow for the voxel surface: it spans the holes on either side of a narrow kept bridge
+    as one, or goes round a kept island a voxel off a larger piece's border with it), and the unpaired loops without
+    such vertices."""
+    members, labels = k_loops[1], k_loops[2]
+    mine = np.isin(labels[members], unpaired)
+    near = nearest_points(points[members[~mine]], points[members[mine]], reach, device)
+    crowded = members[mine][near >= 0]
+    return crowded, np.setdiff1d(unpaired, labels[crowded])
 
 
 def _loops_at_unpaired_edges(tris, k_loops, v_loops, pairs, n_verts: int) -> np.ndarray:
