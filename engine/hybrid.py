@@ -7,8 +7,11 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
 
 1. :func:`.keep.kept_triangles`: which triangles of which operand are the surface, facing which way;
 2. the voxel surface less its faces with a corner over the kept ones (:func:`.zipper.vertices_over`);
-3. the border loops of both, paired, and the loops that cannot be paired given up (kept faces or voxel faces at
-   them; where a strip stretches, first only the kept faces there), until all pair;
+3. the border loops of both (kept vertices at one position welded), paired; a failing kept loop that is a slit
+   closed by itself (:func:`.slits.fill_slits`), unpaired kept loops facing each other zipped to each other
+   (:func:`.twins.zip_twins`), and the loops that still cannot be paired given up (kept faces or voxel faces at
+   them; where a strip stretches at a few steps, or a loop crowds another, first only the kept faces there), until
+   all pair;
 4. a strip between each pair (:func:`.zipper.zip_loops`), and the three parts as one surface, checked closed and
    consistently oriented; where the join cannot be made, the voxel surface alone (``stats["kept_fallback"]``).
 """
