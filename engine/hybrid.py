@@ -7,8 +7,11 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
 
 1. :func:`.keep.kept_triangles`: which triangles of which operand are the surface, facing which way;
 2. the voxel surface less its faces with a corner over the kept ones (:func:`.zipper.vertices_over`);
-3. the border loops of both, paired, and the loops that cannot be paired given up (kept faces or voxel faces at
-   them; where a strip stretches, first only the kept faces there), until all pair;
+3. the border loops of both (kept vertices at one position welded), paired; a failing kept loop that is a slit
+   closed by itself (:func:`.slits.fill_slits`), unpaired kept loops facing each other zipped to each other
+   (:func:`.twins.zip_twins`), and the loops that still cannot be paired given up (kept faces or voxel faces at
+   them; where a strip stretches at a few steps, or a loop crowds another, first only the kept faces there), until
+   all pair;
 4. a strip between each pair (:func:`.zipper.zip_loops`), and the three parts as one surface, checked closed and
    consistently oriented; where the join cannot be made, the voxel surface alone (``stats["kept_fallback"]``).
 """
@@ -22,10 +25,14 @@ from .edges import surface_edges
 from .keep import kept_triangles
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
+from .slits import fill_slits
+from .twins import zip_twins
 from .zipper import (
     LOCAL_ROUNDS,
     MAX_ROUNDS,
+    NEAR_VOXELS,
     PAIR_VOXELS,
+    STRETCH_VOXELS,
     WIDEN_RINGS,
     border_halves,
     loop_labels,
@@ -48,20 +55,33 @@ def kept_mesh(kept: list[dict]) -> dict:
         source, rows = leaf["source"], np.flatnonzero(leaf["kept"])
         tris = leaf["tris"][rows].astype(np.int64)
         tris[leaf["flip"][rows]] = tris[leaf["flip"][rows]][:, [0, 2, 1]]
-        used, local = np.unique(tris, return_inverse=True)
+        parts["corner_bary"].append(_corner_barycentrics(leaf["verts"], tris, source.tris[leaf["parent"][rows]]))
+        used, local = _welded(leaf["verts"], tris)
         parts["verts"].append(leaf["verts"][used])
-        parts["tris"].append(local.reshape(-1, 3) + base)
+        parts["tris"].append(local + base)
         parts["field_id"].append(np.full(len(rows), leaf["field_id"], dtype=np.int32))
         parts["triangle_id"].append(source.triangle_ids[leaf["parent"][rows]])
         parts["vertex_field"].append(np.full(len(used), leaf["field_id"], dtype=np.int32))
         parts["vertex_id"].append(np.where(used < len(source.verts), used, -1).astype(np.int32))
-        parts["corner_bary"].append(_corner_barycentrics(leaf["verts"], tris, source.tris[leaf["parent"][rows]]))
         base += len(used)
     if not parts["verts"]:
         empty = {"verts": np.zeros((0, 3), np.float32), "tris": np.zeros((0, 3), np.int64)}
         empty["corner_bary"] = np.zeros((0, 3, 3), np.float32)
         return {**empty, **{k: np.zeros(0, np.int32) for k in ("field_id", "triangle_id", "vertex_field", "vertex_id")}}
     return {k: np.concatenate(v) for k, v in parts.items()}
+
+
+def _welded(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(used, local)``: the vertices the triangles use, one per position (the least index of those at it: a source
+    vertex before a split's midpoint), in the order of their indices, and the triangles on them ((T, 3) int64). Pieces
+    of a mesh made of patches whose borders repeat each other's vertices (a teapot's) are one piece here, not two
+    kept loops side by side that no voxel surface lies between."""
+    used, local = np.unique(tris, return_inverse=True)
+    _, first, at = np.unique(verts[used], axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[order] = np.arange(len(first))
+    return used[first[order]], rank[at.reshape(-1)][local.reshape(-1)].reshape(-1, 3)
 
 
 def _corner_barycentrics(verts, tris, source_tris) -> np.ndarray:
@@ -160,14 +180,19 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
         v_alive = _drop_pinched(v_tris, v_alive, n)
         k_loops = _loops(k_border, n, reverse=False)
         v_loops = _loops(border_halves(v_tris[v_alive], n), n, reverse=True)
-        paired = _pair_loops(points, k_loops, v_loops, PAIR_VOXELS * voxel, device)
-        strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], PAIR_VOXELS * voxel, n_k, device)
+        k_loops, paired, strips, stretched, far = _paired_strips(
+            points, (k_tris[k_alive], k_border), k_loops, v_loops, n_k, field
+        )
         # a stretched strip gives up the kept faces where it stretches (a kept finger narrower than a voxel, which the
         # voxel surface does not follow), and the kept faces along its whole loop only after LOCAL_ROUNDS
         local = rounds < LOCAL_ROUNDS
+        if not local:  # a loop stretched at a few steps gives up the kept faces there, round after round
+            stretched, far = _mostly_side_by_side(k_loops, stretched, far, n)
         kept_failed = np.r_[paired["kept_unpaired"], stretched[:0] if local else stretched]
-        far = far if local else far[:0]
         whole = rounds > LOCAL_ROUNDS  # a loop failing again gives up the kept piece it bounds
+        if local:  # an unpaired loop crowding another one gives up first only the kept faces where it does
+            crowded, kept_failed = _crowding(points, k_loops, kept_failed, PAIR_VOXELS * voxel, device)
+            far = np.r_[far, crowded]
         if not len(kept_failed) and not len(far) and not len(paired["voxel_unpaired"]):
             joined = np.concatenate([k_tris[k_alive], v_tris[v_alive], strips.astype(np.int64)])
             kept_failed, whole = _loops_at_unpaired_edges(joined, k_loops, v_loops, paired["pairs"], n), False
@@ -180,6 +205,60 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
     return _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
+
+
+def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, field):
+    """The loops paired (:func:`_pair_loops`) and their strips (:func:`_strips`), with the kept loops that fail and
+    are slits closed by themselves (:func:`.slits.fill_slits`) and left out of the pairing, which runs again without
+    them, and the kept loops left unpaired that face each other zipped to each other (:func:`.twins.zip_twins`).
+    Returns ``(k_loops, paired, strips, stretched, far)``: the kept loops left to pair, and as there."""
+    voxel, device = field.voxel_size, field.device
+    reach = PAIR_VOXELS * voxel
+    paired = _pair_loops(points, k_loops, v_loops, reach, device)
+    strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
+    failed = np.r_[paired["kept_unpaired"], stretched]
+    if not len(failed):
+        return k_loops, paired, strips, stretched, far
+    fills, filled = fill_slits(points, k_loops, failed, kept[0], kept[1], voxel, device, field)
+    if len(filled):
+        k_loops = (k_loops[0], k_loops[1][~np.isin(k_loops[2][k_loops[1]], filled)], k_loops[2])
+        paired = _pair_loops(points, k_loops, v_loops, reach, device)
+        strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
+    # kept loops left unpaired that face each other are zipped to each other
+    near = NEAR_VOXELS * voxel
+    twins, twinned = zip_twins(points, k_loops, paired["kept_unpaired"], reach, near, device)
+    if len(twinned):
+        k_loops = (k_loops[0], k_loops[1][~np.isin(k_loops[2][k_loops[1]], twinned)], k_loops[2])
+        paired = {**paired, "kept_unpaired": np.setdiff1d(paired["kept_unpaired"], twinned)}
+    return k_loops, paired, np.concatenate([strips, fills, twins]), stretched, far
+
+
+def _mostly_side_by_side(k_loops, stretched, far, n_verts: int):
+    """Of the ``stretched`` kept loops, those with at most ``SIDE_BY_SIDE`` of their vertices ``far`` (at a step of
+    their strip where it stretches) give up only the kept faces at those vertices; the rest give up faces all
+    along. Returns ``(stretched, far)``: the loops that give up faces all along, and the vertices the others give up
+    faces at."""
+    labels = k_loops[2]
+    length = np.bincount(labels[k_loops[1]], minlength=n_verts)[stretched]
+    at_far = np.bincount(labels[far], minlength=n_verts)[stretched]
+    some = stretched[at_far <= SIDE_BY_SIDE * length]
+    return np.setdiff1d(stretched, some), far[np.isin(labels[far], some)]
+
+
+# A stretched loop with at most this share of its vertices where it stretches gives up kept faces only there.
+SIDE_BY_SIDE = 0.25
+
+
+def _crowding(points, k_loops, unpaired, reach: float, device):
+    """The vertices of the ``unpaired`` kept loops within ``reach`` of another kept loop's vertex (the kept faces
+    between the two are too narrow for the voxel surface: it spans the holes on either side of a narrow kept bridge
+    as one, or goes round a kept island a voxel off a larger piece's border with it), and the unpaired loops without
+    such vertices."""
+    members, labels = k_loops[1], k_loops[2]
+    mine = np.isin(labels[members], unpaired)
+    near = nearest_points(points[members[~mine]], points[members[mine]], reach, device)
+    crowded = members[mine][near >= 0]
+    return crowded, np.setdiff1d(unpaired, labels[crowded])
 
 
 def _loops_at_unpaired_edges(tris, k_loops, v_loops, pairs, n_verts: int) -> np.ndarray:
@@ -227,6 +306,8 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
     (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone) = kept, voxel
     n = len(points)
     at_failed = np.isin(k_loops[2], kept_failed)
+    if whole:
+        at_failed = _widened(k_tris, k_alive, at_failed, n)
     if len(voxel_failed):
         at_loop = np.isin(v_loops[2], voxel_failed)
         pieces = vertex_components(v_tris[v_alive], n)
@@ -238,8 +319,6 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
         members = k_loops[1]
         near = nearest_points(points[members], points[open_loop], reach, device)
         at_failed[members[near[near >= 0]]] = True
-    if whole:
-        at_failed = _widened(k_tris, k_alive, at_failed, n)
     at_failed[far] = True
     alive = _drop_pinched(k_tris, k_alive & ~at_failed[k_tris].any(axis=1), n)
     if (alive != k_alive).any():  # the voxel faces over the kept ones given up come back: judged afresh
@@ -276,11 +355,13 @@ def _strips(points, k_loops, v_loops, pairs, reach: float, n_kept: int, device):
     v_next, v_members, v_labels = v_loops
     k_count = np.bincount(k_labels[k_members], minlength=len(points))[pairs[:, 0]]
     v_count = np.bincount(v_labels[v_members], minlength=len(points))[pairs[:, 1]]
-    strips, gaps = zip_loops(points, k_next, v_next, pairs[:, 0], pairs[:, 1], k_count, v_count, device)
+    near = NEAR_VOXELS * reach / PAIR_VOXELS
+    strips, gaps = zip_loops(points, k_next, v_next, pairs[:, 0], pairs[:, 1], k_count, v_count, device, near)
     if not len(strips):
         return strips, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     counts = k_count + v_count
     first = np.r_[0, np.cumsum(counts)[:-1]]
+    reach = STRETCH_VOXELS * reach / PAIR_VOXELS
     far = np.unique(strips[gaps > reach])
     return strips, pairs[np.maximum.reduceat(gaps, first) > reach, 0], far[far < n_kept].astype(np.int64)
 

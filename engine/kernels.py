@@ -48,6 +48,8 @@ ENGINE_MODULES = (
     "keep",
     "refine",
     "zipper",
+    "slits",
+    "twins",
     "coarsen",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)

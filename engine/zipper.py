@@ -27,12 +27,15 @@ from .parallel import launch_split
 OVER_VOXELS = 1.0
 # Border loops are paired through vertices within this many voxels of each other.
 PAIR_VOXELS = 4.0
+# A strip stretches where the loops run farther apart than this many voxels.
+STRETCH_VOXELS = 4.0
 # Rounds of giving up faces at loops that cannot be paired before the join is abandoned.
 MAX_ROUNDS = 12
 # Rounds in which a stretched strip gives up only the kept faces where it stretches, before its whole loop's.
 LOCAL_ROUNDS = 1
-# A loop failing again gives up this many rings of kept faces around it (a small kept piece: all of it).
-WIDEN_RINGS = 3
+# A loop failing again gives up this many rings of kept faces around it (a small kept piece: all of it): one (a
+# low-polygon mesh's three rings are a third of its area).
+WIDEN_RINGS = 1
 
 
 # ---- the voxel surface over the kept faces ----
@@ -203,6 +206,8 @@ def nearest_points(cloud: np.ndarray, points: np.ndarray, radius: float, device)
 # is a few tens of voxels, the voxel loop's edges about one), and no farther than this many past the nearest so far.
 AHEAD = 128
 PAST = 4
+# A vertex of Q nearer than this many voxels to P's next one is where Q's walk ahead may stop.
+NEAR_VOXELS = 2.0
 
 
 @wp.func
@@ -214,9 +219,12 @@ def _gap(points: wp.array[wp.vec3], p: int, pn: int, q: int, qn: int) -> float:
 
 
 @wp.func
-def _steps_ahead(points: wp.array[wp.vec3], q_next: wp.array[wp.int32], q: int, left: int, target: wp.vec3) -> int:
+def _steps_ahead(
+    points: wp.array[wp.vec3], q_next: wp.array[wp.int32], q: int, left: int, target: wp.vec3, near: float
+) -> int:
     """How many vertices ahead of ``q`` along Q (at most ``left``) the one nearest ``target`` is: the first minimum
-    of the distance, walking on until ``PAST`` vertices have not come nearer."""
+    of the distance within ``near`` of it, walking on until ``PAST`` vertices have not come nearer (a minimum
+    farther than ``near`` is a wiggle of Q, or Q's detour around a kept island it passes first: the walk goes on)."""
     best = wp.length(points[q] - target)
     best_t = int(0)
     walk = q
@@ -226,7 +234,7 @@ def _steps_ahead(points: wp.array[wp.vec3], q_next: wp.array[wp.int32], q: int, 
         if d < best:
             best = d
             best_t = t
-        if t - best_t >= PAST:
+        if t - best_t >= PAST and best <= near:
             break
     return best_t
 
@@ -241,6 +249,7 @@ def _zip_kernel(
     p_count: wp.array[wp.int32],
     q_count: wp.array[wp.int32],
     first: wp.array[wp.int32],
+    near: float,
     tris: wp.array[wp.vec3i],
     gaps: wp.array[wp.float32],
 ):
@@ -270,7 +279,7 @@ def _zip_kernel(
         qn = q_next[q]
         advance_p = j == m
         if i < n and j < m:
-            ahead = _steps_ahead(points, q_next, q, m - j, points[pn])
+            ahead = _steps_ahead(points, q_next, q, m - j, points[pn], near)
             advance_p = ahead == 0
             if ahead == 1:
                 advance_p = wp.length(points[pn] - points[q]) < wp.length(points[p] - points[qn])
@@ -286,10 +295,10 @@ def _zip_kernel(
         out += 1
 
 
-def zip_loops(points, p_next, q_next, p_start, q_any, p_count, q_count, device):
+def zip_loops(points, p_next, q_next, p_start, q_any, p_count, q_count, device, near: float = np.inf):
     """The strips between paired loops (see :func:`_zip_kernel`): ``(tris, gaps)``, (sum of the loops' lengths, 3)
     int32 and per triangle float32 how far apart the two loops run there (:func:`_gap`). ``points`` and the
-    ``*_next`` permutations index one vertex array."""
+    ``*_next`` permutations index one vertex array; ``near``: see :func:`_steps_ahead`."""
     counts = np.asarray(p_count, dtype=np.int64) + np.asarray(q_count, dtype=np.int64)
     first = np.zeros(len(counts), dtype=np.int32)
     np.cumsum(counts[:-1], out=first[1:])
@@ -306,6 +315,7 @@ def zip_loops(points, p_next, q_next, p_start, q_any, p_count, q_count, device):
             inputs=[
                 wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device),
                 *(arr(x) for x in (p_next, q_next, p_start, q_any, p_count, q_count, first)),
+                float(min(near, 1e30)),
                 out,
                 gaps,
             ],
