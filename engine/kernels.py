@@ -49,7 +49,6 @@ ENGINE_MODULES = (
     "refine",
     "zipper",
     "slits",
-    "twins",
     "coarsen",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)

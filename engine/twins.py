@@ -12,44 +12,8 @@ loop and a voxel loop (:func:`.zipper.zip_loops`, the second loop walked against
 from __future__ import annotations
 
 import numpy as np
-import warp as wp
 
-from .zipper import zip_loops
-
-
-@wp.kernel(enable_backward=False)
-def _nearest_other_kernel(
-    grid: wp.uint64,
-    cloud: wp.array[wp.vec3],
-    cloud_label: wp.array[wp.int64],
-    radius: float,
-    nearest: wp.array[wp.int32],
-):
-    """The nearest point of ``cloud`` to each of its points with another label, within ``radius`` (-1: none)."""
-    i = wp.tid()
-    p = cloud[i]
-    best = radius
-    found = int(-1)
-    query = wp.hash_grid_query(grid, p, radius)
-    j = int(0)
-    while wp.hash_grid_query_next(query, j):
-        if cloud_label[j] != cloud_label[i]:
-            d = wp.length(cloud[j] - p)
-            if d < best:
-                best = d
-                found = j
-    nearest[i] = found
-
-
-def _nearest_other(points: np.ndarray, labels: np.ndarray, radius: float, device) -> np.ndarray:
-    """(N,) int32: for each of ``points``, the nearest one with another label within ``radius`` (-1: none)."""
-    grid = wp.HashGrid(128, 128, 128, device=device)
-    cloud = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
-    grid.build(cloud, radius)
-    out = wp.empty(len(points), dtype=wp.int32, device=device)
-    label = wp.array(np.ascontiguousarray(labels, dtype=np.int64), dtype=wp.int64, device=device)
-    wp.launch(_nearest_other_kernel, len(points), inputs=[grid.id, cloud, label, float(radius), out], device=device)
-    return out.numpy()
+from .zipper import nearest_points, zip_loops
 
 
 def _mutual_pairs(votes: np.ndarray) -> np.ndarray:
@@ -58,8 +22,8 @@ def _mutual_pairs(votes: np.ndarray) -> np.ndarray:
     order = np.lexsort((-counts, pairs[:, 0]))
     pairs = pairs[order]
     best = pairs[np.r_[True, pairs[1:, 0] != pairs[:-1, 0]]]  # each label's most voted other
-    of = dict(zip(best[:, 0].tolist(), best[:, 1].tolist(), strict=True))
-    back = np.array([of.get(b, -1) for b in best[:, 1].tolist()], dtype=np.int64)
+    at = np.minimum(np.searchsorted(best[:, 0], best[:, 1]), len(best) - 1)  # b's row (rows sorted by label)
+    back = np.where(best[at, 0] == best[:, 1], best[at, 1], -1)
     return best[(back == best[:, 0]) & (best[:, 0] < best[:, 1])]
 
 
@@ -71,7 +35,8 @@ def zip_twins(points, k_loops, unpaired, reach: float, near: float, device):
     none = np.zeros((0, 3), dtype=np.int32), np.zeros(0, dtype=np.int64)
     if len(np.unique(labels[members])) < 2:
         return none
-    near_other = _nearest_other(points[members], labels[members], reach, device)
+    at = points[members]
+    near_other = nearest_points(at, at, reach, device, labels=(labels[members], labels[members]))
     has = near_other >= 0
     if not has.any():
         return none

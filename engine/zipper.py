@@ -169,11 +169,13 @@ def vertex_components(tris: np.ndarray, n_verts: int) -> np.ndarray:
 def _nearest_kernel(
     grid: wp.uint64,
     cloud: wp.array[wp.vec3],
+    cloud_label: wp.array[wp.int64],
     points: wp.array[wp.vec3],
+    point_label: wp.array[wp.int64],
     radius: float,
     nearest: wp.array[wp.int32],
 ):
-    """The nearest point of ``cloud`` to each point, within ``radius`` (-1: none)."""
+    """The nearest point of ``cloud`` to each point whose label is not the point's, within ``radius`` (-1: none)."""
     i = wp.tid()
     p = points[i]
     best = radius
@@ -181,23 +183,29 @@ def _nearest_kernel(
     query = wp.hash_grid_query(grid, p, radius)
     j = int(0)
     while wp.hash_grid_query_next(query, j):
-        d = wp.length(cloud[j] - p)
-        if d < best:
-            best = d
-            found = j
+        if cloud_label[j] != point_label[i]:
+            d = wp.length(cloud[j] - p)
+            if d < best:
+                best = d
+                found = j
     nearest[i] = found
 
 
-def nearest_points(cloud: np.ndarray, points: np.ndarray, radius: float, device) -> np.ndarray:
-    """(N,) int32 index of the nearest of ``cloud`` (M, 3) to each point within ``radius`` (-1: none)."""
+def nearest_points(cloud: np.ndarray, points: np.ndarray, radius: float, device, labels=None) -> np.ndarray:
+    """(N,) int32 index of the nearest of ``cloud`` (M, 3) to each point within ``radius`` (-1: none); with
+    ``labels`` = (the cloud's (M,), the points' (N,)), the nearest with another label than the point's."""
     if not len(cloud) or not len(points):
         return np.full(len(points), -1, dtype=np.int32)
+    if labels is None:  # no point's label is any of the cloud's
+        labels = (np.zeros(len(cloud), dtype=np.int64), np.full(len(points), -1, dtype=np.int64))
     grid = wp.HashGrid(128, 128, 128, device=device)
     cloud_wp = wp.array(np.ascontiguousarray(cloud, dtype=np.float32), dtype=wp.vec3, device=device)
     grid.build(cloud_wp, radius)
     pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
+    cloud_label, point_label = (wp.array(np.ascontiguousarray(x, dtype=np.int64), device=device) for x in labels)
     out = wp.empty(len(points), dtype=wp.int32, device=device)
-    wp.launch(_nearest_kernel, len(points), inputs=[grid.id, cloud_wp, pts, float(radius), out], device=device)
+    inputs = [grid.id, cloud_wp, cloud_label, pts, point_label, float(radius), out]
+    wp.launch(_nearest_kernel, len(points), inputs=inputs, device=device)
     return out.numpy()
 
 
