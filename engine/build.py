@@ -478,13 +478,43 @@ class _Levels:
         self.query_radius = facts["diag"] if plan["levels"] == 1 else (padding + 2) * voxel_size * 1.75
 
     def build(self, octets, previous=None) -> AdaptiveField:
-        plan, facts, timings, device = self.plan, self.facts, self.timings, self.device
-        origin, voxel_size = plan["origin"], plan["voxel_size"]
+        plan, timings = self.plan, self.timings
         # every node's place first, so each level's values are computed where they are kept
-        layout = level_layout(octets, plan["top_dims"], plan["levels"], device, timings)
-        t0 = time.perf_counter()
+        layout = level_layout(octets, plan["top_dims"], plan["levels"], self.device, timings)
         # each node's index in the earlier build (-1: new), shared by distances and signs
         prev_index = None if previous is None else match_levels(layout["codes"], layout["offsets"], previous)
+        dist, proj, source, tri, neighbours, sweeps = self.distances(layout, previous, prev_index)
+        values, sign_stats, self.expansions = signs.sign_levels(
+            self.winding,
+            layout,
+            dist,
+            neighbours,
+            origin=plan["origin"],
+            voxel_size=plan["voxel_size"],
+            hole_caps=self.facts["caps"],
+            previous=previous,
+            prev_index=prev_index,
+            known=self.expansions,
+            timings=timings,
+        )
+        return AdaptiveField.from_layout(
+            layout,
+            voxel_size=plan["voxel_size"],
+            origin=plan["origin"],
+            values=values,
+            proj=proj,
+            source=source,
+            triangles=tri,
+            field_ids=(self.field_id,),
+            timings=timings,
+            stats={"fim_sweeps": sweeps, **sign_stats},
+        )
+
+    def distances(self, layout, previous, prev_index):
+        """The nodes' distances: the finest exactly (octet by octet), the coarser levels solved bottom-up."""
+        plan, facts, timings = self.plan, self.facts, self.timings
+        origin, voxel_size = plan["origin"], plan["voxel_size"]
+        t0 = time.perf_counter()
         octets_search = search.OctetSearch(
             self.mesh.id,
             self.query_radius,
@@ -526,31 +556,7 @@ class _Levels:
                 octets_search, layout, k, dist, proj, known_nodes, below, origin=origin, voxel_size=voxel_size
             ),
         )
-        values, sign_stats, self.expansions = signs.sign_levels(
-            self.winding,
-            layout,
-            dist,
-            neighbours,
-            origin=origin,
-            voxel_size=voxel_size,
-            hole_caps=facts["caps"],
-            previous=previous,
-            prev_index=prev_index,
-            known=self.expansions,
-            timings=timings,
-        )
-        return AdaptiveField.from_layout(
-            layout,
-            voxel_size=voxel_size,
-            origin=origin,
-            values=values,
-            proj=proj,
-            source=source,
-            triangles=tri,
-            field_ids=(self.field_id,),
-            timings=timings,
-            stats={"fim_sweeps": sweeps, **sign_stats},
-        )
+        return dist, proj, source, tri, neighbours, sweeps
 
 
 def _refined_across_holes(levels: _Levels, field, base_octets, plan: dict, facts: dict, winding) -> AdaptiveField:

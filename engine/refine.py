@@ -143,17 +143,7 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long
     n = len(verts)
     rows = np.flatnonzero(split)
     marked_keys = _edges_to_split(verts, t[rows], long_edge)
-    # only a triangle with two corners of split triangles can have a split edge
-    corner = np.zeros(n, dtype=bool)
-    corner[t[rows].ravel()] = True
-    near = np.flatnonzero(corner[t].sum(axis=1) >= 2)
-    a, b = t[near].ravel(), t[near][:, [1, 2, 0]].ravel()
-    keys = np.minimum(a, b) * n + np.maximum(a, b)
-    at = np.searchsorted(marked_keys, keys)
-    at_ok = np.minimum(at, max(len(marked_keys) - 1, 0))
-    marked = (at < len(marked_keys)) & (marked_keys[at_ok] == keys) if len(marked_keys) else np.zeros(len(keys), bool)
-    mids = np.full((len(t), 3), -1, dtype=np.int64)  # the midpoint of each triangle's edge k (corner k -> k+1)
-    mids[near] = np.where(marked, n + at_ok, -1).reshape(-1, 3)
+    mids = _midpoints(t, rows, marked_keys, n)
     lo, hi = marked_keys // n, marked_keys % n
     new_verts = (0.5 * (verts[lo].astype(np.float64) + verts[hi].astype(np.float64))).astype(np.float32)
     pattern = (mids >= 0).sum(axis=1)
@@ -194,6 +184,23 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long
             ],
         )
     return np.concatenate([verts, new_verts]), np.concatenate(parts), np.concatenate(origin), np.stack([lo, hi], 1)
+
+
+def _midpoints(t: np.ndarray, rows: np.ndarray, marked_keys: np.ndarray, n: int) -> np.ndarray:
+    """(T, 3) int64 the midpoint (``n`` + its row in ``marked_keys``) of each triangle's edge k (corner k -> k + 1),
+    -1 where that edge is not split. Only a triangle with two corners of the split ones (``rows``) can have a split
+    edge: only those are read."""
+    corner = np.zeros(n, dtype=bool)
+    corner[t[rows].ravel()] = True
+    near = np.flatnonzero(corner[t].sum(axis=1) >= 2)
+    a, b = t[near].ravel(), t[near][:, [1, 2, 0]].ravel()
+    keys = np.minimum(a, b) * n + np.maximum(a, b)
+    at = np.searchsorted(marked_keys, keys)
+    at_ok = np.minimum(at, max(len(marked_keys) - 1, 0))
+    marked = (at < len(marked_keys)) & (marked_keys[at_ok] == keys) if len(marked_keys) else np.zeros(len(keys), bool)
+    mids = np.full((len(t), 3), -1, dtype=np.int64)
+    mids[near] = np.where(marked, n + at_ok, -1).reshape(-1, 3)
+    return mids
 
 
 def _edges_to_split(verts, t: np.ndarray, long_edge: float) -> np.ndarray:
