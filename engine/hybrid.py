@@ -307,10 +307,10 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
     n = len(points)
     at_failed = np.isin(k_loops[2], kept_failed)
     if whole:
-        at_failed = _widened(k_tris, k_alive, at_failed, n)
+        at_failed = _widened(k_tris, k_alive, at_failed, n, device)
     if len(voxel_failed):
         at_loop = np.isin(v_loops[2], voxel_failed)
-        pieces = vertex_components(v_tris[v_alive], n)
+        pieces = vertex_components(v_tris[v_alive], n, device)
         sizes = np.bincount(pieces[v_tris[v_alive][:, 0]], minlength=n)
         failed = np.unique(pieces[at_loop])
         islands = failed[sizes[failed] * 10 <= int(v_alive.sum())]
@@ -330,12 +330,12 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
 SMALL_PIECE = 256
 
 
-def _widened(tris, alive, at: np.ndarray, n: int, rings: int = WIDEN_RINGS) -> np.ndarray:
+def _widened(tris, alive, at: np.ndarray, n: int, device, rings: int = WIDEN_RINGS) -> np.ndarray:
     """``at`` (per vertex) grown over the kept pieces it touches: a small piece whole (a tenth of the kept faces or
     less, and at most SMALL_PIECE faces: a fragment), a larger one ``rings`` rings of faces deep (a scan's one large
     piece, or a messy mesh's many, is not given up for a loop at its edge)."""
     faces = tris[alive]
-    pieces = vertex_components(faces, n)
+    pieces = vertex_components(faces, n, device)
     sizes = np.bincount(pieces[faces[:, 0]], minlength=n)
     touched = np.unique(pieces[at])
     small = touched[(sizes[touched] * 10 <= len(faces)) & (sizes[touched] <= SMALL_PIECE)]

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .components import connected_components
 from .parallel import launch_split
 
 # A voxel-surface vertex is over the kept faces within this many voxels of them.
@@ -142,27 +143,11 @@ def loop_labels(nxt: np.ndarray, members: np.ndarray) -> np.ndarray:
     return label
 
 
-def vertex_components(tris: np.ndarray, n_verts: int) -> np.ndarray:
+def vertex_components(tris: np.ndarray, n_verts: int, device=None) -> np.ndarray:
     """(n_verts,) int64 the connected piece of each vertex through the triangles' edges (its least vertex; an unused
-    vertex is a piece of its own), by hooking and pointer jumping: a few rounds of numpy over the edges."""
-    label = np.arange(n_verts, dtype=np.int64)
-    if not len(tris):
-        return label
-    t = np.asarray(tris, dtype=np.int64)
-    a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
-    for _ in range(64):
-        la, lb = label[a], label[b]
-        low, high = np.minimum(la, lb), np.maximum(la, lb)
-        moved = low != high
-        if not moved.any():
-            break
-        np.minimum.at(label, high[moved], low[moved])
-        for _ in range(64):  # compress: every vertex to its root
-            up = label[label]
-            if np.array_equal(up, label):
-                break
-            label = up
-    return label
+    vertex is a piece of its own): :func:`.components.connected_components` over the edges."""
+    t = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+    return connected_components(n_verts, t.ravel(), t[:, [1, 2, 0]].ravel(), device)
 
 
 @wp.kernel(enable_backward=False)
