@@ -231,7 +231,7 @@ def _labels(field, verts, regions) -> np.ndarray:
     return ids.astype(np.int64) * (np.int64(1) << 32) + region
 
 
-def _sums(index, values, n) -> np.ndarray:
+def row_sums(index, values, n) -> np.ndarray:
     """(n, W) sums of the rows of ``values`` (N, W) by ``index`` (N,): one bincount per column (np.add.at is
     several times slower)."""
     return np.stack([np.bincount(index, weights=values[:, k], minlength=n) for k in range(values.shape[1])], axis=1)
@@ -407,7 +407,7 @@ def _clusters(local, code, keys: int, cls, known):
     key = code[first]
     new = np.isnan(known[key, 0])
     rows = np.flatnonzero(new[cluster])  # the vertices of clusters new in this round
-    known[key[new]] = _sums(cluster[rows], local[rows], k)[new] / count[new, None]
+    known[key[new]] = row_sums(cluster[rows], local[rows], k)[new] / count[new, None]
     return cluster, known[key], cls[first] != 1, count > 1, key
 
 

@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .adaptive import row_sums
+
 # A slit's strip has diagonals at most this many voxels long; a wider hole's, at most WIDE_VOXELS, where it lies
 # within ON_VOXELS of the result's zero level all over.
 FILL_VOXELS = 2.0
@@ -63,7 +65,7 @@ def _starts(points, members, labels, loops) -> np.ndarray:
     """Per loop (sorted labels ``loops``): its member farthest from the loop's centre (a slit's tip)."""
     rank = np.searchsorted(loops, labels)
     counts = np.bincount(rank, minlength=len(loops)).astype(np.float64)[:, None]
-    centre = np.stack([np.bincount(rank, weights=points[members, k], minlength=len(loops)) for k in range(3)], 1)
+    centre = row_sums(rank, points[members], len(loops))
     far = np.linalg.norm(points[members] - (centre / counts)[rank], axis=1)
     order = np.lexsort((-far, rank))
     return members[order[np.r_[True, rank[order][1:] != rank[order][:-1]]]]
@@ -76,7 +78,7 @@ def _facing(points, tris, loop_of, kept_tris, halves, halves_loop, n_loops: int)
         p = points[t].astype(np.float64)
         return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
 
-    strip = np.stack([np.bincount(loop_of, weights=area_vectors(tris)[:, k], minlength=n_loops) for k in range(3)], 1)
+    strip = row_sums(loop_of, area_vectors(tris), n_loops)
     # the kept face of each border half: the one listing that directed edge
     t = np.asarray(kept_tris, dtype=np.int64)
     n = len(points)
@@ -84,7 +86,7 @@ def _facing(points, tris, loop_of, kept_tris, halves, halves_loop, n_loops: int)
     order = np.argsort(keys)
     at = order[np.searchsorted(keys[order], halves[:, 0] * n + halves[:, 1])] // 3
     kept = area_vectors(t[at])
-    around = np.stack([np.bincount(halves_loop, weights=kept[:, k], minlength=n_loops) for k in range(3)], 1)
+    around = row_sums(halves_loop, kept, n_loops)
     return (strip * around).sum(axis=1)
 
 
