@@ -30,16 +30,10 @@ import numpy as np
 import warp as wp
 
 from .expression import evaluate_signs, leaves, widest_blend
+from .judging import MAX_TABLE_LEAVES, FusedJudge, edge_turns, per_triangle_min, sign_patterns, triangle_samples
 from .meshcheck import edge_table, weld_positions
 from .parallel import launch_split, run_tasks
-from .refine import (
-    merge_kept,
-    per_triangle_min,
-    restore_whole,
-    split_triangles,
-    straighten_borders,
-    triangle_samples,
-)
+from .refine import merge_kept, restore_whole, split_triangles, straighten_borders
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
 # the seams is joined to them there (the join takes about a voxel of it).
@@ -211,7 +205,7 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
 class _Judge:
     """The checks of one leaf's triangles against the rest of the expression (see the module docstring)."""
 
-    def __init__(self, field, index: int, source, bvhs: list):
+    def __init__(self, field, index: int, source, bvhs: list, fused: bool = True):
         self.expression = field.expression
         self.leaves = leaves(self.expression)
         self.index, self.device, voxel = index, field.device, field.voxel_size
@@ -227,12 +221,48 @@ class _Judge:
         self.crossing = bool((own.side == 0).any())
         self.side_offset = self.band if self.crossing else own.offset
         self.side = own.side  # each source triangle's, at ``side_offset`` when the shell nowhere crosses itself
+        self.fused = self._fused() if fused else None
 
-    def judge(self, verts, tris, parent, longest):
+    def _fused(self) -> FusedJudge | None:
+        """The fused path of this judge (:mod:`.judging`), where it applies: every other leaf continuous (no axis
+        probes), the shell nowhere crossing itself (each piece has its source triangle's side), and few enough other
+        leaves for a table of their sign patterns."""
+        others = [j for j in range(len(self.leaves)) if j != self.index]
+        continuous = all(
+            self.leaves[j].stats.get("continuous", self.leaves[j].stats.get("clean_mesh", False)) for j in others
+        )
+        if self.crossing or not continuous or len(others) > MAX_TABLE_LEAVES:
+            return None
+        patterns = sign_patterns(len(others))
+        signs = [np.zeros(len(patterns), np.int8)] * len(self.leaves)
+        for k, j in enumerate(others):
+            signs[j] = patterns[:, k]
+        crosses, flips = self._crossing(signs)
+        return FusedJudge(
+            others=[(self.leaves[j], self.bvhs[j]) for j in others],
+            table=crosses.astype(np.int8) | (flips.astype(np.int8) << 1),
+            defect_mesh=self.defect_mesh,
+            band=self.band,
+            spacing=self.spacing,
+            slack=self.slack,
+            slack_share=SLACK_VOXELS / SAMPLE_VOXELS,
+            defects=self.defects,
+            side=self.side,
+            device=self.device,
+        )
+
+    def judge(self, verts, tris, parent, longest, turn):
         """Per triangle (pieces of original triangles ``parent``): kept, partly keepable, and flipped. A triangle is
         sampled about ``SAMPLE_VOXELS`` apart, or an eighth of its longest edge when that is more (a large triangle
-        near a seam is split anyway), its samples' spacing the slack of its checks (``longest``: (T,) each one's
-        longest edge)."""
+        near a seam is split anyway), its samples' spacing the slack of its checks (``longest``, ``turn``: (T,) each
+        one's longest edge and the corner it starts at, :func:`.judging.edge_turns`). In two launches where the fused
+        path applies (:meth:`_fused`), else sample by sample."""
+        if self.fused is not None:
+            return self.fused(verts, tris, parent, longest, turn)
+        return self._judge_samples(verts, tris, parent, longest)
+
+    def _judge_samples(self, verts, tris, parent, longest):
+        """:meth:`judge` with every sample placed, each other leaf read at all of them, reduced per triangle."""
         used, local = np.unique(tris, return_inverse=True)
         local = local.reshape(-1, 3)
         spacing = np.maximum(longest / 8.0, self.spacing)
@@ -301,16 +331,13 @@ class _Judge:
         return crosses, crosses & (outside < 0)
 
 
-def _longest_edges(verts, tris) -> np.ndarray:
-    e = verts[tris[:, [1, 2, 0]]].astype(np.float64) - verts[tris].astype(np.float64)
-    return np.sqrt((e**2).sum(axis=2).max(axis=1))
-
-
-def kept_triangles(field) -> list[dict]:
+def kept_triangles(field, *, fused: bool = True) -> list[dict]:
     """The triangles of each mesh leaf of a boolean's expression that are its surface (see the module docstring).
 
     Args:
         field: An unplaced :class:`.field.AdaptiveField` with an ``expression`` (a boolean result).
+        fused: Judge in two launches a round where that applies (:mod:`.judging`); False: always sample by sample
+            (the same verdicts, slower).
     Returns:
         One dict per mesh leaf: ``field_id``, ``source`` (the placed :class:`.sources.SourceMesh`); the leaf's mesh
         after splitting: ``verts`` (V', 3) float32 (the source's V first, midpoints after), ``tris`` (T', 3) int64,
@@ -331,16 +358,16 @@ def kept_triangles(field) -> list[dict]:
 
     def task(k):
         i, field_id, source = judged[k]
-        out[k] = {"field_id": field_id, "source": source, **_judge_leaf(field, i, source, bvhs)}
+        out[k] = {"field_id": field_id, "source": source, **_judge_leaf(field, i, source, bvhs, fused)}
 
     run_tasks([lambda k=k: task(k) for k in range(len(judged))], field.device)
     return out
 
 
-def _judge_leaf(field, index: int, source, bvhs: list) -> dict:
+def _judge_leaf(field, index: int, source, bvhs: list, fused: bool) -> dict:
     """Judge a leaf's triangles, splitting the partly keepable ones until they are small (module docstring)."""
     verts, tris = source.verts, source.tris.astype(np.int64)
-    judge = _Judge(field, index, source, bvhs)
+    judge = _Judge(field, index, source, bvhs, fused)
     parent = np.arange(len(tris), dtype=np.int64)
     status = np.zeros(len(tris), dtype=np.int8)
     flip = np.zeros(len(tris), dtype=bool)
@@ -350,8 +377,8 @@ def _judge_leaf(field, index: int, source, bvhs: list) -> dict:
         todo = np.flatnonzero(status == UNKNOWN)
         if not len(todo):
             break
-        longest = _longest_edges(verts, tris[todo])
-        kept, partly, flip[todo] = judge.judge(verts, tris[todo], parent[todo], longest)
+        longest, turn = edge_turns(verts, tris[todo])
+        kept, partly, flip[todo] = judge.judge(verts, tris[todo], parent[todo], longest, turn)
         split = partly & ~kept & (longest > split_edge)
         status[todo] = np.where(kept, KEPT, np.where(split, UNKNOWN, DROPPED))
         if not split.any():
@@ -369,7 +396,7 @@ def _judge_leaf(field, index: int, source, bvhs: list) -> dict:
                 break
             mark = mark[origin]
             rows = np.flatnonzero(mark)
-            mark[rows] = _longest_edges(verts, tris[rows]) > 4.0 * split_edge
+            mark[rows] = edge_turns(verts, tris[rows])[0] > 4.0 * split_edge
             if not mark.any():
                 break
     status[status == UNKNOWN] = DROPPED

@@ -47,6 +47,7 @@ ENGINE_MODULES = (
     "fieldops",
     "keep",
     "refine",
+    "judging",
     "zipper",
     "slits",
     "coarsen",

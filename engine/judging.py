@@ -1,0 +1,406 @@
+"""Samples on an operand's triangles, and the judge's verdicts on them in two kernel launches a round.
+
+:mod:`.keep` judges a leaf's triangles (and the pieces of the partly keepable ones) at samples about a voxel apart:
+the corners, and rows of points parallel to the longest edge (:func:`triangle_samples`). Its general path places
+every sample, reads the other leaves there with one launch per leaf and query, and reduces per triangle in numpy.
+
+The fused path (:func:`judge_pieces`) writes no sample: one launch reads the pieces' corners (shared by the pieces:
+each vertex read once), and a second, one thread per piece, walks the piece's rows of samples (placed exactly as
+:func:`_row_samples_kernel` places them), reads them, and folds corners and rows into the piece's verdict. A sample's
+reading is every other leaf's sign (its field, linear, as ``field.sample`` reads it) and how far the nearest of their
+surfaces and of the leaf's own defects is (their BVHs, or the field where a leaf has none). What the expression makes
+of the other leaves' signs (whether it crosses with the leaf, and which way) is a table over their sign patterns,
+three signs a leaf (-, 0, +), found once per judge by the general path's own evaluation. The verdicts are the
+general path's: the same samples, the same float32 readings, the same comparisons in float64. One thing differs and
+cannot change them: a row sample's distances are read up to its own piece's reach (its band, slack and a voxel)
+rather than the round's largest; every comparison with a distance beyond that comes out the same.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .parallel import host_view, launch_split
+from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_proj, sample_linear
+
+# The fused path takes expressions of at most this many leaves besides the judged one (a table of 3^n patterns).
+MAX_TABLE_LEAVES = 10
+# Verdict bits of :func:`judge_pieces`.
+KEPT_BIT, PARTLY_BIT, FLIP_BIT = 1, 2, 4
+
+# ---- samples ----
+
+
+@wp.func
+def _row_grid(a: wp.vec3, b: wp.vec3, c: wp.vec3, spacing: float) -> wp.vec2:
+    """(the edge from a to b's length, how many rows parallel to it cover the triangle ``spacing`` apart)."""
+    base = wp.length(b - a)
+    height = wp.length(wp.cross(b - a, c - a)) / wp.max(base, 1.0e-30)
+    return wp.vec2(base, float(wp.max(int(wp.ceil(height / spacing)), 1)))
+
+
+@wp.func
+def _row_steps(s: float, base: float, spacing: float) -> int:
+    """How many steps of at most ``spacing`` the row ``s`` of the way from edge a-b to corner c takes."""
+    return wp.max(int(wp.ceil((1.0 - s) * base / spacing)), 1)
+
+
+@wp.func
+def _row_point(a: wp.vec3, b: wp.vec3, c: wp.vec3, s: float, k: int, steps: int) -> wp.vec3:
+    """Sample ``k`` of ``steps`` along the row ``s`` of the way from edge a-b to corner c."""
+    start = a + s * (c - a)
+    end = b + s * (c - b)
+    return start + (float(k) / float(steps)) * (end - start)
+
+
+@wp.kernel(enable_backward=False)
+def _row_counts_kernel(
+    verts: wp.array[wp.vec3],
+    tris: wp.array2d[wp.int32],
+    spacings: wp.array[wp.float32],
+    counts: wp.array[wp.int32],
+):
+    """How many samples :func:`_row_samples_kernel` puts on each triangle besides its corners."""
+    t = wp.tid()
+    spacing = spacings[t]
+    grid = _row_grid(verts[tris[t, 0]], verts[tris[t, 1]], verts[tris[t, 2]], spacing)
+    rows = int(grid[1])
+    n = int(0)
+    for r in range(rows):
+        n += _row_steps(float(r) / float(rows), grid[0], spacing) + 1
+    counts[t] = n - 2  # rows 0..rows-1, less corners a and b (c, row ``rows``, is not among them)
+
+
+@wp.kernel(enable_backward=False)
+def _row_samples_kernel(
+    verts: wp.array[wp.vec3],
+    tris: wp.array2d[wp.int32],
+    spacings: wp.array[wp.float32],
+    first: wp.array[wp.int32],
+    points: wp.array[wp.vec3],
+):
+    """Rows parallel to the edge from corner 0 to corner 1 (the longest), no farther apart than ``spacing``, each
+    sampled no farther apart than ``spacing``; the corners left out."""
+    t = wp.tid()
+    spacing = spacings[t]
+    a = verts[tris[t, 0]]
+    b = verts[tris[t, 1]]
+    c = verts[tris[t, 2]]
+    grid = _row_grid(a, b, c, spacing)
+    rows = int(grid[1])
+    out = first[t]
+    for r in range(rows):
+        s = float(r) / float(rows)
+        steps = _row_steps(s, grid[0], spacing)
+        for k in range(steps + 1):
+            if r > 0 or (k > 0 and k < steps):
+                points[out] = _row_point(a, b, c, s, k, steps)
+                out += 1
+
+
+def edge_turns(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(T,) float64 each triangle's longest edge, and (T,) int64 the corner it starts at (edge k: corner k to k+1)."""
+    e = verts[tris[:, [1, 2, 0]]].astype(np.float64) - verts[tris].astype(np.float64)
+    squared = (e**2).sum(axis=2)
+    turn = np.argmax(squared, axis=1)
+    return np.sqrt(np.take_along_axis(squared, turn[:, None], axis=1)[:, 0]), turn
+
+
+def longest_first(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """``tris`` with each triangle's corners turned (order kept) so that its longest edge runs from corner 0 to 1."""
+    cols = (np.arange(3)[None, :] + edge_turns(verts, tris)[1][:, None]) % 3
+    return np.take_along_axis(tris, cols, axis=1)
+
+
+def triangle_samples(verts: np.ndarray, tris: np.ndarray, spacing: np.ndarray, device):
+    """Points on every triangle no farther than about its ``spacing`` from any of its points: the vertices, and on
+    larger triangles rows of points (:func:`_row_samples_kernel`).
+
+    Args:
+        verts: (V, 3) float32; tris: (T, 3) int; spacing: (T,) float, each triangle's.
+    Returns:
+        ``(points, first)``: (V + G, 3) float32, the V vertices first, then each triangle's own samples, the (T + 1,)
+        int64 offsets of the triangles' own among the G after the vertices.
+    """
+    turned = np.ascontiguousarray(longest_first(verts, tris), dtype=np.int32)
+    v_wp = wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device)
+    t_wp = wp.array(turned, dtype=wp.int32, device=device)
+    s_wp = wp.array(np.ascontiguousarray(spacing, dtype=np.float32), dtype=wp.float32, device=device)
+    counts = wp.empty(len(tris), dtype=wp.int32, device=device)
+    if len(tris):
+        wp.launch(_row_counts_kernel, len(tris), inputs=[v_wp, t_wp, s_wp, counts], device=device)
+    first = np.zeros(len(tris) + 1, dtype=np.int64)
+    np.cumsum(counts.numpy(), out=first[1:])
+    out = wp.empty(int(first[-1]), dtype=wp.vec3, device=device)
+    if first[-1]:
+        first_wp = wp.array(first[:-1].astype(np.int32), dtype=wp.int32, device=device)
+        wp.launch(_row_samples_kernel, len(tris), inputs=[v_wp, t_wp, s_wp, first_wp, out], device=device)
+    points = np.concatenate([np.asarray(verts, dtype=np.float32), out.numpy().reshape(-1, 3)])
+    return points, first
+
+
+def per_triangle_min(values: np.ndarray, tris: np.ndarray, n_verts: int, first: np.ndarray) -> np.ndarray:
+    """(T,) the least of ``values`` (one per sample of :func:`triangle_samples`) over each triangle's samples; (T, K)
+    for (N, K) values, per column."""
+    least = values[:n_verts][tris].min(axis=1)
+    own = np.flatnonzero(first[1:] > first[:-1])
+    if len(own):
+        lows = np.minimum.reduceat(values[n_verts:], first[own], axis=0)
+        least[own] = np.minimum(least[own], lows)
+    return least
+
+
+# ---- readings ----
+
+
+@wp.struct
+class LeafArg:
+    """One of the other leaves as the fused judge reads it."""
+
+    field: FieldArg
+    mesh: wp.uint64  # the BVH of its clean closed mesh (world), 0: its distances are its field's
+    placed: int  # 1: world points are taken to the field's frame as ``Placement.to_local`` takes them
+    rotation: wp.mat33d
+    translation: wp.vec3d
+    scale: wp.float64
+    value_scale: float  # its values times this (the placement's scale), as ``field.sample`` gives them
+    weight: int  # its sign's place in a sign pattern: 3^(its rank among the other leaves)
+
+
+@wp.struct
+class JudgeArg:
+    """What the fused judge needs besides the pieces (lengths in world units, float64 as the general path's)."""
+
+    leaves: wp.array[LeafArg]
+    defect_mesh: wp.uint64  # the leaf's own defects' mesh, 0: none
+    table: wp.array[wp.int8]  # per sign pattern: 1 the expression crosses with the leaf, 2 and it flips
+    band: wp.float64
+    spacing: wp.float64  # the least spacing of samples
+    slack_share: wp.float64  # a piece's slack per unit of its samples' spacing
+    partly_at: wp.float64  # band + the least slack: a piece is partly keepable with a margin (+ its slack) above
+
+
+@wp.func
+def _field_value(leaf: LeafArg, x: wp.vec3) -> float:
+    """The leaf's field at world point ``x``, linear, as ``field.sample(x, method="linear")`` reads it."""
+    p = x
+    if leaf.placed != 0:
+        d = wp.vec3d(wp.float64(x[0]), wp.float64(x[1]), wp.float64(x[2])) - leaf.translation
+        q = (wp.transpose(leaf.rotation) @ d) / leaf.scale
+        p = wp.vec3(wp.float32(q[0]), wp.float32(q[1]), wp.float32(q[2]))
+    f = leaf.field
+    xc = clamp_to_domain(f, p)
+    out = wp.length(p - xc)
+    phi = sample_linear(f, xc)
+    if out > 0.0:
+        through = wp.max(phi, 0.0) + out
+        at = locate_leaf(f, xc)
+        direct = wp.length(p - node_proj(f, at[0], at[1]))
+        phi = wp.max(wp.min(through, direct), out)
+    if leaf.placed != 0:
+        phi = phi * leaf.value_scale
+    return phi
+
+
+@wp.func
+def _mesh_distance(mesh: wp.uint64, x: wp.vec3, reach: float) -> float:
+    """Unsigned distance from ``x`` to the mesh, ``reach`` where it is farther."""
+    d = reach
+    q = wp.mesh_query_point_no_sign(mesh, x, reach)
+    if q.result:
+        d = wp.length(x - wp.mesh_eval_position(mesh, q.face, q.u, q.v))
+    return d
+
+
+@wp.func
+def _reading(judge: JudgeArg, x: wp.vec3, reach: float) -> wp.vec2:
+    """(the other leaves' sign pattern, the nearest of their surfaces and the leaf's defects up to ``reach``) at
+    ``x``. A sign is 0 where the value is 0: on a leaf with a BVH, where its surface passes through ``x``."""
+    code = int(0)
+    margin = reach
+    for j in range(judge.leaves.shape[0]):
+        leaf = judge.leaves[j]
+        value = _field_value(leaf, x)
+        near = reach
+        sign = int(1)
+        if leaf.mesh != wp.uint64(0):
+            near = _mesh_distance(leaf.mesh, x, reach)
+            sign = wp.where(near == 0.0, 1, wp.where(value < 0.0, 0, 2))
+        else:
+            near = wp.abs(wp.clamp(value, -reach, reach))
+            sign = wp.where(value < 0.0, 0, wp.where(value > 0.0, 2, 1))
+        margin = wp.min(margin, near)
+        code += sign * leaf.weight
+    if judge.defect_mesh != wp.uint64(0):
+        margin = wp.min(margin, _mesh_distance(judge.defect_mesh, x, reach))
+    return wp.vec2(float(code), margin)
+
+
+@wp.kernel(enable_backward=False)
+def _read_vertices_kernel(
+    judge: JudgeArg,
+    verts: wp.array[wp.vec3],
+    used: wp.array[wp.int64],
+    reach: float,
+    offset: int,
+    codes: wp.array[wp.int32],
+    margins: wp.array[wp.float32],
+):
+    """The reading (:func:`_reading`) at each used vertex, stored at the vertex."""
+    v = used[wp.tid() + offset]
+    r = _reading(judge, verts[v], reach)
+    codes[v] = int(r[0])
+    margins[v] = r[1]
+
+
+@wp.func
+def _fold(judge: JudgeArg, code: int, margin: float, bounds: wp.vec2) -> wp.vec2:
+    """(least, most) over a piece's samples so far with one more: its margin where the expression crosses, else -1."""
+    m = wp.where((int(judge.table[code]) & 1) != 0, margin, -1.0)
+    return wp.vec2(wp.min(bounds[0], m), wp.max(bounds[1], m))
+
+
+@wp.kernel(enable_backward=False)
+def _judge_pieces_kernel(
+    judge: JudgeArg,
+    verts: wp.array[wp.vec3],
+    tris: wp.array2d[wp.int64],
+    turn: wp.array[wp.int64],
+    longest: wp.array[wp.float64],
+    parent: wp.array[wp.int64],
+    codes: wp.array[wp.int32],
+    margins: wp.array[wp.float32],
+    defects: wp.array[wp.int8],
+    side: wp.array[wp.int8],
+    offset: int,
+    verdicts: wp.array[wp.int8],
+):
+    """A piece's verdict bits (:func:`judge_pieces`) from its corners' readings and its rows' (read here)."""
+    t = wp.tid() + offset
+    spacing = wp.max(longest[t] / wp.float64(8.0), judge.spacing)
+    slack = spacing * judge.slack_share
+    reach = wp.float32(judge.band + slack + judge.spacing)
+    first = codes[tris[t, 0]]
+    same = defects[parent[t]] == wp.int8(0)
+    bounds = wp.vec2(1.0e30, -1.0e30)
+    for corner in range(3):
+        v = tris[t, corner]
+        same = same and codes[v] == first
+        bounds = _fold(judge, codes[v], margins[v], bounds)
+    k = int(turn[t])
+    a = verts[tris[t, k]]
+    b = verts[tris[t, (k + 1) % 3]]
+    c = verts[tris[t, (k + 2) % 3]]
+    step = wp.float32(spacing)
+    grid = _row_grid(a, b, c, step)
+    rows = int(grid[1])
+    for r in range(rows):
+        s = float(r) / float(rows)
+        steps = _row_steps(s, grid[0], step)
+        for i in range(steps + 1):
+            if r > 0 or (i > 0 and i < steps):
+                reading = _reading(judge, _row_point(a, b, c, s, i, steps), reach)
+                same = same and int(reading[0]) == first
+                bounds = _fold(judge, int(reading[0]), reading[1], bounds)
+    centre = side[parent[t]]
+    bits = int(0)
+    if same and centre != wp.int8(0) and wp.float64(bounds[0]) > judge.band + slack:
+        bits = KEPT_BIT
+    if centre != wp.int8(0) and wp.float64(bounds[1]) + slack > judge.partly_at and defects[parent[t]] == wp.int8(0):
+        bits = bits | PARTLY_BIT
+    if ((int(judge.table[first]) & 2) != 0) != (centre < wp.int8(0)):
+        bits = bits | FLIP_BIT
+    verdicts[t] = wp.int8(bits)
+
+
+# ---- the fused judge ----
+def leaf_arg(field, bvh, rank: int) -> LeafArg:
+    """A :class:`LeafArg` of an other leaf ``field`` (its ``bvh`` or None), the ``rank``-th of the other leaves."""
+    arg = LeafArg()
+    arg.field = field.arg()
+    arg.mesh = wp.uint64(bvh.id if bvh is not None else 0)
+    placed = field.placement
+    arg.placed = int(placed is not None)
+    arg.rotation = wp.mat33d(*(placed.rotation.ravel() if placed is not None else np.eye(3).ravel()))
+    arg.translation = wp.vec3d(*(placed.translation if placed is not None else np.zeros(3)))
+    arg.scale = wp.float64(placed.scale if placed is not None else 1.0)
+    arg.value_scale = float(np.float32(placed.scale)) if placed is not None else 1.0
+    arg.weight = 3**rank
+    return arg
+
+
+def sign_patterns(n: int) -> np.ndarray:
+    """(3^n, n) int8 every pattern of ``n`` signs (-1, 0, 1), pattern ``sum((sign + 1) * 3^k)`` at that row."""
+    return ((np.arange(3**n)[:, None] // 3 ** np.arange(n)[None, :]) % 3 - 1).astype(np.int8)
+
+
+@dataclass
+class FusedJudge:
+    """The fused path of a leaf's judge (module docstring): the other leaves (``(field, bvh)`` pairs), the table of
+    what the expression makes of their signs (:func:`sign_patterns`' rows: 1 it crosses with the leaf, 2 and the
+    result's inside is on the leaf's outside), the leaf's own defects' mesh (or None), the band, the least spacing
+    of samples, its slack and the slack per unit of spacing, and per source triangle whether it is a defect and its
+    side."""
+
+    others: list
+    table: np.ndarray
+    defect_mesh: object
+    band: float
+    spacing: float
+    slack: float
+    slack_share: float
+    defects: np.ndarray  # (T,) bool
+    side: np.ndarray  # (T,) int8
+    device: object
+
+    def __post_init__(self):
+        self.leaf_args = [leaf_arg(field, bvh, k) for k, (field, bvh) in enumerate(self.others)]  # kept alive
+        arg = JudgeArg()
+        arg.leaves = wp.array(self.leaf_args, dtype=LeafArg, device=self.device)
+        arg.defect_mesh = wp.uint64(self.defect_mesh.id if self.defect_mesh is not None else 0)
+        arg.table = wp.array(self.table.astype(np.int8), dtype=wp.int8, device=self.device)
+        arg.band, arg.spacing, arg.slack_share = self.band, self.spacing, self.slack_share
+        arg.partly_at = self.band + self.slack
+        self.arg = arg
+        self.defects_wp = wp.array(self.defects.astype(np.int8), dtype=wp.int8, device=self.device)
+        self.side_wp = wp.array(self.side.astype(np.int8), dtype=wp.int8, device=self.device)
+
+    def __call__(self, verts, tris, parent, longest, turn) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per piece (``tris`` (T, 3) int64 of ``verts`` (V, 3) float32, in source triangles ``parent``, ``longest``
+        and ``turn`` their :func:`edge_turns`): kept, partly keepable and flipped, as keep's general path finds."""
+        device = self.device
+        used = np.zeros(len(verts), dtype=bool)
+        used[tris] = True
+        used = np.flatnonzero(used)
+        reach = self.band + float((np.maximum(longest / 8.0, self.spacing) * self.slack_share).max()) + self.spacing
+        verts_wp = host_view(np.ascontiguousarray(verts, dtype=np.float32), wp.vec3, device)
+        used_wp = host_view(used, wp.int64, device)
+        codes = wp.empty(len(verts), dtype=wp.int32, device=device)
+        margins = wp.empty(len(verts), dtype=wp.float32, device=device)
+        launch_split(
+            _read_vertices_kernel,
+            len(used),
+            lambda lo, _n: [self.arg, verts_wp, used_wp, float(reach), lo, codes, margins],
+            device,
+        )
+        pieces = [
+            host_view(np.ascontiguousarray(a, dtype=dtype), wp_dtype, device)
+            for a, dtype, wp_dtype in (
+                (tris, np.int64, wp.int64),
+                (turn, np.int64, wp.int64),
+                (longest, np.float64, wp.float64),
+                (parent, np.int64, wp.int64),
+            )
+        ]
+        verdicts = wp.empty(len(tris), dtype=wp.int8, device=device)
+        launch_split(
+            _judge_pieces_kernel,
+            len(tris),
+            lambda lo, _n: [self.arg, verts_wp, *pieces, codes, margins, self.defects_wp, self.side_wp, lo, verdicts],
+            device,
+        )
+        bits = verdicts.numpy()
+        return (bits & KEPT_BIT) != 0, (bits & PARTLY_BIT) != 0, (bits & FLIP_BIT) != 0
