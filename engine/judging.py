@@ -263,6 +263,14 @@ def _fold(judge: JudgeArg, code: int, margin: float, bounds: wp.vec2) -> wp.vec2
     return wp.vec2(wp.min(bounds[0], m), wp.max(bounds[1], m))
 
 
+@wp.func
+def _open(judge: JudgeArg, same: bool, bounds: wp.vec2, slack: wp.float64) -> bool:
+    """Whether more samples can change a piece's verdict: it may still be kept (every sample so far with the same
+    signs, and a margin above its band where the expression crosses), or it is not partly keepable yet."""
+    may_keep = same and wp.float64(bounds[0]) > judge.band + slack
+    return may_keep or not (wp.float64(bounds[1]) + slack > judge.partly_at)
+
+
 @wp.kernel(enable_backward=False)
 def _judge_pieces_kernel(
     judge: JudgeArg,
@@ -294,18 +302,25 @@ def _judge_pieces_kernel(
     a = verts[tris[t, k]]
     b = verts[tris[t, (k + 1) % 3]]
     c = verts[tris[t, (k + 2) % 3]]
+    centre = side[parent[t]]
+    # the rows are read while they can change the verdict (kept only ever turns false, partly only true)
+    live = centre != wp.int8(0) and defects[parent[t]] == wp.int8(0) and _open(judge, same, bounds, slack)
     step = wp.float32(spacing)
     grid = _row_grid(a, b, c, step)
     rows = int(grid[1])
-    for r in range(rows):
+    r = int(0)
+    while live and r < rows:
         s = float(r) / float(rows)
         steps = _row_steps(s, grid[0], step)
-        for i in range(steps + 1):
+        i = int(0)
+        while live and i <= steps:
             if r > 0 or (i > 0 and i < steps):
                 reading = _reading(judge, _row_point(a, b, c, s, i, steps), reach)
                 same = same and int(reading[0]) == first
                 bounds = _fold(judge, int(reading[0]), reading[1], bounds)
-    centre = side[parent[t]]
+                live = _open(judge, same, bounds, slack)
+            i += 1
+        r += 1
     bits = int(0)
     if same and centre != wp.int8(0) and wp.float64(bounds[0]) > judge.band + slack:
         bits = KEPT_BIT
