@@ -167,6 +167,7 @@ class LeafArg:
     translation: wp.vec3d
     scale: wp.float64
     value_scale: float  # its values times this (the placement's scale), as ``field.sample`` gives them
+    jumps: int  # 1: a field that jumps (an open mesh's, across its holes): read a band away along the axes too
     weight: int  # its sign's place in a sign pattern: 3^(its rank among the other leaves)
 
 
@@ -178,6 +179,7 @@ class JudgeArg:
     defect_mesh: wp.uint64  # the leaf's own defects' mesh, 0: none
     table: wp.array[wp.int8]  # per sign pattern: 1 the expression crosses with the leaf, 2 and it flips
     band: wp.float64
+    probe: float  # the band, float32: how far along the axes a field that jumps is read
     spacing: wp.float64  # the least spacing of samples
     slack_share: wp.float64  # a piece's slack per unit of its samples' spacing
     partly_at: wp.float64  # band + the least slack: a piece is partly keepable with a margin (+ its slack) above
@@ -216,6 +218,24 @@ def _mesh_distance(mesh: wp.uint64, x: wp.vec3, reach: float) -> float:
 
 
 @wp.func
+def _sign_digit(value: float) -> int:
+    """0, 1, 2 for a negative, zero, positive value."""
+    return wp.where(value < 0.0, 0, wp.where(value > 0.0, 2, 1))
+
+
+@wp.func
+def _jumps_near(judge: JudgeArg, leaf: LeafArg, x: wp.vec3, sign: int) -> bool:
+    """Whether the leaf's sign a band away from ``x`` along any axis differs from ``sign`` (its digit at ``x``): a
+    field that jumps (across an open mesh's holes) counts as near there."""
+    jumped = False
+    for axis in range(6):
+        step = wp.vec3(0.0)
+        step[axis // 2] = wp.where(axis % 2 == 0, judge.probe, -judge.probe)
+        jumped = jumped or _sign_digit(_field_value(leaf, x + step)) != sign
+    return jumped
+
+
+@wp.func
 def _reading(judge: JudgeArg, x: wp.vec3, reach: float) -> wp.vec2:
     """(the other leaves' sign pattern, the nearest of their surfaces and the leaf's defects up to ``reach``) at
     ``x``. A sign is 0 where the value is 0: on a leaf with a BVH, where its surface passes through ``x``."""
@@ -231,7 +251,9 @@ def _reading(judge: JudgeArg, x: wp.vec3, reach: float) -> wp.vec2:
             sign = wp.where(near == 0.0, 1, wp.where(value < 0.0, 0, 2))
         else:
             near = wp.abs(wp.clamp(value, -reach, reach))
-            sign = wp.where(value < 0.0, 0, wp.where(value > 0.0, 2, 1))
+            sign = _sign_digit(value)
+        if leaf.jumps != 0 and near > judge.probe and _jumps_near(judge, leaf, x, sign):
+            near = 0.0
         margin = wp.min(margin, near)
         code += sign * leaf.weight
     if judge.defect_mesh != wp.uint64(0):
@@ -343,6 +365,7 @@ def leaf_arg(field, bvh, rank: int) -> LeafArg:
     arg.translation = wp.vec3d(*(placed.translation if placed is not None else np.zeros(3)))
     arg.scale = wp.float64(placed.scale if placed is not None else 1.0)
     arg.value_scale = float(np.float32(placed.scale)) if placed is not None else 1.0
+    arg.jumps = int(not field.stats.get("continuous", field.stats.get("clean_mesh", False)))
     arg.weight = 3**rank
     return arg
 
@@ -377,7 +400,7 @@ class FusedJudge:
         arg.leaves = wp.array(self.leaf_args, dtype=LeafArg, device=self.device)
         arg.defect_mesh = wp.uint64(self.defect_mesh.id if self.defect_mesh is not None else 0)
         arg.table = wp.array(self.table.astype(np.int8), dtype=wp.int8, device=self.device)
-        arg.band, arg.spacing, arg.slack_share = self.band, self.spacing, self.slack_share
+        arg.band, arg.probe, arg.spacing, arg.slack_share = self.band, self.band, self.spacing, self.slack_share
         arg.partly_at = self.band + self.slack
         self.arg = arg
         self.defects_wp = wp.array(self.defects.astype(np.int8), dtype=wp.int8, device=self.device)

@@ -224,14 +224,11 @@ class _Judge:
         self.fused = self._fused() if fused else None
 
     def _fused(self) -> FusedJudge | None:
-        """The fused path of this judge (:mod:`.judging`), where it applies: every other leaf continuous (no axis
-        probes), the shell nowhere crossing itself (each piece has its source triangle's side), and few enough other
-        leaves for a table of their sign patterns."""
+        """The fused path of this judge (:mod:`.judging`), where there are few enough other leaves for a table of
+        their sign patterns. On a shell that crosses itself it takes every piece as crossed by its own field, which
+        :meth:`judge` then reads."""
         others = [j for j in range(len(self.leaves)) if j != self.index]
-        continuous = all(
-            self.leaves[j].stats.get("continuous", self.leaves[j].stats.get("clean_mesh", False)) for j in others
-        )
-        if self.crossing or not continuous or len(others) > MAX_TABLE_LEAVES:
+        if len(others) > MAX_TABLE_LEAVES:
             return None
         patterns = sign_patterns(len(others))
         signs = [np.zeros(len(patterns), np.int8)] * len(self.leaves)
@@ -247,7 +244,7 @@ class _Judge:
             slack=self.slack,
             slack_share=SLACK_VOXELS / SAMPLE_VOXELS,
             defects=self.defects,
-            side=self.side,
+            side=np.ones_like(self.side) if self.crossing else self.side,
             device=self.device,
         )
 
@@ -257,17 +254,27 @@ class _Judge:
         near a seam is split anyway), its samples' spacing the slack of its checks (``longest``, ``turn``: (T,) each
         one's longest edge and the corner it starts at, :func:`.judging.edge_turns`). In two launches where the fused
         path applies (:meth:`_fused`), else sample by sample."""
-        if self.fused is not None:
-            return self.fused(verts, tris, parent, longest, turn)
-        return self._judge_samples(verts, tris, parent, longest)
+        if self.fused is None:
+            return self._judge_samples(verts, tris, parent, longest)
+        kept, partly, flip = self.fused(verts, tris, parent, longest, turn)
+        if not self.crossing:
+            return kept, partly, flip
+        used, local, points, first = self._samples(verts, tris, longest)
+        side, crossed, partly_crossed = self._own_sides(verts[used], local, points, first, parent)
+        return kept & crossed, partly & partly_crossed, flip ^ (side < 0)
+
+    def _samples(self, verts, tris, longest):
+        """``(used, local, points, first)``: the vertices the triangles use, the triangles on them, and their samples
+        (:func:`.judging.triangle_samples`)."""
+        used, local = np.unique(tris, return_inverse=True)
+        local = local.reshape(-1, 3)
+        points, first = triangle_samples(verts[used], local, np.maximum(longest / 8.0, self.spacing), self.device)
+        return used, local, points, first
 
     def _judge_samples(self, verts, tris, parent, longest):
         """:meth:`judge` with every sample placed, each other leaf read at all of them, reduced per triangle."""
-        used, local = np.unique(tris, return_inverse=True)
-        local = local.reshape(-1, 3)
-        spacing = np.maximum(longest / 8.0, self.spacing)
-        slack = spacing * (SLACK_VOXELS / SAMPLE_VOXELS)
-        points, first = triangle_samples(verts[used], local, spacing, self.device)
+        used, local, points, first = self._samples(verts, tris, longest)
+        slack = np.maximum(longest / 8.0, self.spacing) * (SLACK_VOXELS / SAMPLE_VOXELS)
         reach = self.band + float(slack.max()) + self.spacing
         margin = np.full(len(points), reach, dtype=np.float32)
         same = ~self.defects[parent]
