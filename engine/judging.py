@@ -28,6 +28,8 @@ from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_proj, sample_
 
 # The fused path takes expressions of at most this many leaves besides the judged one (a table of 3^n patterns).
 MAX_TABLE_LEAVES = 10
+# A reach exceeds the distance it must tell apart by this many least spacings of samples (float32 rounds far less).
+READ_PAD = 0.01
 # Verdict bits of :func:`judge_pieces`.
 KEPT_BIT, PARTLY_BIT, FLIP_BIT = 1, 2, 4
 
@@ -180,9 +182,12 @@ class JudgeArg:
     table: wp.array[wp.int8]  # per sign pattern: 1 the expression crosses with the leaf, 2 and it flips
     band: wp.float64
     probe: float  # the band, float32: how far along the axes a field that jumps is read
+    probe_reach: float  # a little over the band: how far a field that jumps is read at least (to know it is farther)
     spacing: wp.float64  # the least spacing of samples
     slack_share: wp.float64  # a piece's slack per unit of its samples' spacing
     partly_at: wp.float64  # band + the least slack: a piece is partly keepable with a margin (+ its slack) above
+    pad: wp.float64  # a reach exceeds the distance it must tell apart by this much (float32 rounding is far less)
+    corner_reach: float  # how far corners are read: a piece of the least slack's reach (a larger piece reads on)
 
 
 @wp.func
@@ -237,20 +242,22 @@ def _jumps_near(judge: JudgeArg, leaf: LeafArg, x: wp.vec3, sign: int) -> bool:
 
 @wp.func
 def _reading(judge: JudgeArg, x: wp.vec3, reach: float) -> wp.vec2:
-    """(the other leaves' sign pattern, the nearest of their surfaces and the leaf's defects up to ``reach``) at
-    ``x``. A sign is 0 where the value is 0: on a leaf with a BVH, where its surface passes through ``x``."""
+    """(the other leaves' sign pattern, the nearest of their surfaces and the leaf's defects, up to ``reach``) at
+    ``x``. A sign is 0 where the value is 0: on a leaf with a BVH, where its surface passes through ``x``. The signs
+    do not depend on ``reach``: a field that jumps is read at least a little over the band (its axis probes)."""
     code = int(0)
     margin = reach
     for j in range(judge.leaves.shape[0]):
         leaf = judge.leaves[j]
         value = _field_value(leaf, x)
-        near = reach
+        far = wp.where(leaf.jumps != 0, wp.max(reach, judge.probe_reach), reach)
+        near = far
         sign = int(1)
         if leaf.mesh != wp.uint64(0):
-            near = _mesh_distance(leaf.mesh, x, reach)
+            near = _mesh_distance(leaf.mesh, x, far)
             sign = wp.where(near == 0.0, 1, wp.where(value < 0.0, 0, 2))
         else:
-            near = wp.abs(wp.clamp(value, -reach, reach))
+            near = wp.abs(wp.clamp(value, -far, far))
             sign = _sign_digit(value)
         if leaf.jumps != 0 and near > judge.probe and _jumps_near(judge, leaf, x, sign):
             near = 0.0
@@ -266,16 +273,19 @@ def _read_vertices_kernel(
     judge: JudgeArg,
     verts: wp.array[wp.vec3],
     used: wp.array[wp.int64],
-    reach: float,
     offset: int,
+    read: wp.array[wp.int8],
     codes: wp.array[wp.int32],
     margins: wp.array[wp.float32],
 ):
-    """The reading (:func:`_reading`) at each used vertex, stored at the vertex."""
+    """The reading (:func:`_reading`, up to ``corner_reach``) at each used vertex not read in an earlier round."""
     v = used[wp.tid() + offset]
-    r = _reading(judge, verts[v], reach)
+    if read[v] != wp.int8(0):
+        return
+    r = _reading(judge, verts[v], judge.corner_reach)
     codes[v] = int(r[0])
     margins[v] = r[1]
+    read[v] = wp.int8(1)
 
 
 @wp.func
@@ -286,11 +296,16 @@ def _fold(judge: JudgeArg, code: int, margin: float, bounds: wp.vec2) -> wp.vec2
 
 
 @wp.func
-def _open(judge: JudgeArg, same: bool, bounds: wp.vec2, slack: wp.float64) -> bool:
-    """Whether more samples can change a piece's verdict: it may still be kept (every sample so far with the same
-    signs, and a margin above its band where the expression crosses), or it is not partly keepable yet."""
-    may_keep = same and wp.float64(bounds[0]) > judge.band + slack
-    return may_keep or not (wp.float64(bounds[1]) + slack > judge.partly_at)
+def _may_keep(judge: JudgeArg, same: bool, bounds: wp.vec2, slack: wp.float64) -> bool:
+    """Whether a piece may still be kept: every sample so far with the same signs, and a margin above its band
+    where the expression crosses (it only ever turns false)."""
+    return same and wp.float64(bounds[0]) > judge.band + slack
+
+
+@wp.func
+def _partly(judge: JudgeArg, bounds: wp.vec2, slack: wp.float64) -> bool:
+    """Whether a piece is partly keepable by its margins (it only ever turns true)."""
+    return wp.float64(bounds[1]) + slack > judge.partly_at
 
 
 @wp.kernel(enable_backward=False)
@@ -308,25 +323,32 @@ def _judge_pieces_kernel(
     offset: int,
     verdicts: wp.array[wp.int8],
 ):
-    """A piece's verdict bits (:func:`judge_pieces`) from its corners' readings and its rows' (read here)."""
+    """A piece's verdict bits (:func:`judge_pieces`) from its corners' readings and its rows' (read here, while they
+    can change the verdict). A sample is read as far as the piece's checks look: a margin beyond them passes them
+    whatever it is (a piece that may be kept: over its band and slack, one that may not: over the partly keepable
+    margin)."""
     t = wp.tid() + offset
     spacing = wp.max(longest[t] / wp.float64(8.0), judge.spacing)
     slack = spacing * judge.slack_share
-    reach = wp.float32(judge.band + slack + judge.spacing)
+    keep_reach = wp.float32(judge.band + slack + judge.pad)
+    partly_reach = wp.float32(wp.max(judge.partly_at - slack, wp.float64(0.0)) + judge.pad)
     first = codes[tris[t, 0]]
     same = defects[parent[t]] == wp.int8(0)
     bounds = wp.vec2(1.0e30, -1.0e30)
     for corner in range(3):
         v = tris[t, corner]
+        margin = margins[v]
+        if margin >= judge.corner_reach and keep_reach > judge.corner_reach:  # a large piece's corner: read on
+            margin = _reading(judge, verts[v], keep_reach)[1]
         same = same and codes[v] == first
-        bounds = _fold(judge, codes[v], margins[v], bounds)
+        bounds = _fold(judge, codes[v], margin, bounds)
+    centre = side[parent[t]]
+    may_keep = _may_keep(judge, same, bounds, slack)
+    live = centre != wp.int8(0) and defects[parent[t]] == wp.int8(0) and (may_keep or not _partly(judge, bounds, slack))
     k = int(turn[t])
     a = verts[tris[t, k]]
     b = verts[tris[t, (k + 1) % 3]]
     c = verts[tris[t, (k + 2) % 3]]
-    centre = side[parent[t]]
-    # the rows are read while they can change the verdict (kept only ever turns false, partly only true)
-    live = centre != wp.int8(0) and defects[parent[t]] == wp.int8(0) and _open(judge, same, bounds, slack)
     step = wp.float32(spacing)
     grid = _row_grid(a, b, c, step)
     rows = int(grid[1])
@@ -337,16 +359,18 @@ def _judge_pieces_kernel(
         i = int(0)
         while live and i <= steps:
             if r > 0 or (i > 0 and i < steps):
-                reading = _reading(judge, _row_point(a, b, c, s, i, steps), reach)
+                x = _row_point(a, b, c, s, i, steps)
+                reading = _reading(judge, x, wp.where(may_keep, keep_reach, partly_reach))
                 same = same and int(reading[0]) == first
                 bounds = _fold(judge, int(reading[0]), reading[1], bounds)
-                live = _open(judge, same, bounds, slack)
+                may_keep = _may_keep(judge, same, bounds, slack)
+                live = may_keep or not _partly(judge, bounds, slack)
             i += 1
         r += 1
     bits = int(0)
-    if same and centre != wp.int8(0) and wp.float64(bounds[0]) > judge.band + slack:
+    if centre != wp.int8(0) and may_keep:
         bits = KEPT_BIT
-    if centre != wp.int8(0) and wp.float64(bounds[1]) + slack > judge.partly_at and defects[parent[t]] == wp.int8(0):
+    if centre != wp.int8(0) and _partly(judge, bounds, slack) and defects[parent[t]] == wp.int8(0):
         bits = bits | PARTLY_BIT
     if ((int(judge.table[first]) & 2) != 0) != (centre < wp.int8(0)):
         bits = bits | FLIP_BIT
@@ -400,30 +424,24 @@ class FusedJudge:
         arg.leaves = wp.array(self.leaf_args, dtype=LeafArg, device=self.device)
         arg.defect_mesh = wp.uint64(self.defect_mesh.id if self.defect_mesh is not None else 0)
         arg.table = wp.array(self.table.astype(np.int8), dtype=wp.int8, device=self.device)
-        arg.band, arg.probe, arg.spacing, arg.slack_share = self.band, self.band, self.spacing, self.slack_share
-        arg.partly_at = self.band + self.slack
+        arg.band, arg.spacing, arg.slack_share = self.band, self.spacing, self.slack_share
+        arg.partly_at, arg.pad = self.band + self.slack, READ_PAD * self.spacing
+        arg.probe, arg.probe_reach = self.band, self.band + arg.pad
+        arg.corner_reach = self.band + self.slack + arg.pad
         self.arg = arg
         self.defects_wp = wp.array(self.defects.astype(np.int8), dtype=wp.int8, device=self.device)
         self.side_wp = wp.array(self.side.astype(np.int8), dtype=wp.int8, device=self.device)
+        self.read = wp.zeros(0, dtype=wp.int8, device=self.device)
+        self.codes = wp.zeros(0, dtype=wp.int32, device=self.device)
+        self.margins = wp.zeros(0, dtype=wp.float32, device=self.device)
 
     def __call__(self, verts, tris, parent, longest, turn) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per piece (``tris`` (T, 3) int64 of ``verts`` (V, 3) float32, in source triangles ``parent``, ``longest``
-        and ``turn`` their :func:`edge_turns`): kept, partly keepable and flipped, as keep's general path finds."""
+        and ``turn`` their :func:`edge_turns`): kept, partly keepable and flipped, as keep's general path finds.
+        Successive calls pass the vertices of one mesh that only grows (vertices appended): a vertex is read once."""
         device = self.device
-        used = np.zeros(len(verts), dtype=bool)
-        used[tris] = True
-        used = np.flatnonzero(used)
-        reach = self.band + float((np.maximum(longest / 8.0, self.spacing) * self.slack_share).max()) + self.spacing
         verts_wp = host_view(np.ascontiguousarray(verts, dtype=np.float32), wp.vec3, device)
-        used_wp = host_view(used, wp.int64, device)
-        codes = wp.empty(len(verts), dtype=wp.int32, device=device)
-        margins = wp.empty(len(verts), dtype=wp.float32, device=device)
-        launch_split(
-            _read_vertices_kernel,
-            len(used),
-            lambda lo, _n: [self.arg, verts_wp, used_wp, float(reach), lo, codes, margins],
-            device,
-        )
+        self._read_corners(verts_wp, tris)
         pieces = [
             host_view(np.ascontiguousarray(a, dtype=dtype), wp_dtype, device)
             for a, dtype, wp_dtype in (
@@ -437,8 +455,37 @@ class FusedJudge:
         launch_split(
             _judge_pieces_kernel,
             len(tris),
-            lambda lo, _n: [self.arg, verts_wp, *pieces, codes, margins, self.defects_wp, self.side_wp, lo, verdicts],
+            lambda lo, _n: [
+                self.arg,
+                verts_wp,
+                *pieces,
+                self.codes,
+                self.margins,
+                self.defects_wp,
+                self.side_wp,
+                lo,
+                verdicts,
+            ],
             device,
         )
         bits = verdicts.numpy()
         return (bits & KEPT_BIT) != 0, (bits & PARTLY_BIT) != 0, (bits & FLIP_BIT) != 0
+
+    def _read_corners(self, verts_wp, tris) -> None:
+        """Read the vertices ``tris`` use that no earlier call read (the per-vertex arrays grown to ``verts_wp``)."""
+        n = verts_wp.shape[0]
+        if n > self.read.shape[0]:
+            size = max(n, 2 * self.read.shape[0])
+            for name, dtype in (("read", wp.int8), ("codes", wp.int32), ("margins", wp.float32)):
+                old, grown = getattr(self, name), wp.zeros(size, dtype=dtype, device=self.device)
+                wp.copy(grown, old, count=old.shape[0])
+                setattr(self, name, grown)
+        used = np.zeros(n, dtype=bool)
+        used[tris] = True
+        used_wp = host_view(np.flatnonzero(used), wp.int64, self.device)
+        launch_split(
+            _read_vertices_kernel,
+            used_wp.shape[0],
+            lambda lo, _n: [self.arg, verts_wp, used_wp, lo, self.read, self.codes, self.margins],
+            self.device,
+        )
