@@ -2,18 +2,22 @@
 
 :mod:`.keep` judges a leaf's triangles (and the pieces of the partly keepable ones) at samples about a voxel apart:
 the corners, and rows of points parallel to the longest edge (:func:`triangle_samples`). Its general path places
-every sample, reads the other leaves there with one launch per leaf and query, and reduces per triangle in numpy.
+every sample, reads the other leaves there with a launch per leaf and query, and reduces per triangle in numpy.
 
-The fused path (:func:`judge_pieces`) writes no sample: one launch reads the pieces' corners (shared by the pieces:
-each vertex read once), and a second, one thread per piece, walks the piece's rows of samples (placed exactly as
+The fused path (:class:`FusedJudge`) writes no sample: one launch reads the pieces' corners (each vertex once per
+judge, whatever the round), and a second, one thread a piece, walks the piece's rows of samples (placed as
 :func:`_row_samples_kernel` places them), reads them, and folds corners and rows into the piece's verdict. A sample's
-reading is every other leaf's sign (its field, linear, as ``field.sample`` reads it) and how far the nearest of their
-surfaces and of the leaf's own defects is (their BVHs, or the field where a leaf has none). What the expression makes
-of the other leaves' signs (whether it crosses with the leaf, and which way) is a table over their sign patterns,
-three signs a leaf (-, 0, +), found once per judge by the general path's own evaluation. The verdicts are the
-general path's: the same samples, the same float32 readings, the same comparisons in float64. One thing differs and
-cannot change them: a row sample's distances are read up to its own piece's reach (its band, slack and a voxel)
-rather than the round's largest; every comparison with a distance beyond that comes out the same.
+reading is every other leaf's sign (its field, linear, as ``field.sample`` reads it; a field that jumps also a band
+away along the axes) and how far the nearest of their surfaces and of the leaf's own defects is (their BVHs, or the
+field where a leaf has none); on a shell that crosses itself, also the leaf's own side across the piece there. What
+the expression makes of the other leaves' signs (whether it crosses with the leaf, and which way) is a table over
+their sign patterns, three signs a leaf (-, 0, +), found once per judge by the general path's own evaluation.
+
+The verdicts are the general path's: the same samples and float32 readings, the same comparisons in float64. Three
+things differ and cannot change them: a piece's rows are read only while they can change its verdict (kept only ever
+turns false, partly keepable only true); a sample's distances are read only as far as its piece's checks look (a
+margin beyond passes them whatever it is), not as far as the round's largest piece needs; a corner's reading is kept
+from the round that first read it.
 """
 
 from __future__ import annotations
@@ -188,6 +192,14 @@ class JudgeArg:
     partly_at: wp.float64  # band + the least slack: a piece is partly keepable with a margin (+ its slack) above
     pad: wp.float64  # a reach exceeds the distance it must tell apart by this much (float32 rounding is far less)
     corner_reach: float  # how far corners are read: a piece of the least slack's reach (a larger piece reads on)
+    # a shell that crosses itself (``crossing`` 1): its own field is read at every sample, pulled ``pull`` towards the
+    # piece's centre, ``side_offset`` in front of and behind it (keep's ``_own_sides``); else each piece has its source
+    # triangle's side
+    crossing: int
+    own: LeafArg
+    pull: float
+    side_offset: float
+    side_clear: float  # a quarter of side_offset: both sides clearly on one side of the surface: an internal face
 
 
 @wp.func
@@ -296,16 +308,65 @@ def _fold(judge: JudgeArg, code: int, margin: float, bounds: wp.vec2) -> wp.vec2
 
 
 @wp.func
-def _may_keep(judge: JudgeArg, same: bool, bounds: wp.vec2, slack: wp.float64) -> bool:
-    """Whether a piece may still be kept: every sample so far with the same signs, and a margin above its band
-    where the expression crosses (it only ever turns false)."""
-    return same and wp.float64(bounds[0]) > judge.band + slack
+def _norm(v: wp.vec3) -> float:
+    """The length of ``v`` as numpy's ``linalg.norm`` finds it (squares added in turn)."""
+    x = v[0] * v[0]
+    y = v[1] * v[1]
+    z = v[2] * v[2]
+    return wp.sqrt((x + y) + z)
 
 
 @wp.func
-def _partly(judge: JudgeArg, bounds: wp.vec2, slack: wp.float64) -> bool:
-    """Whether a piece is partly keepable by its margins (it only ever turns true)."""
-    return wp.float64(bounds[1]) + slack > judge.partly_at
+def _unit_normal(p0: wp.vec3, p1: wp.vec3, p2: wp.vec3) -> wp.vec3:
+    """The triangle's unit normal as keep's ``_unit_normals`` finds it (float32 cross, float64 normalised)."""
+    e = p1 - p0
+    f = p2 - p0
+    n = wp.vec3d(
+        wp.float64(e[1] * f[2] - e[2] * f[1]),
+        wp.float64(e[2] * f[0] - e[0] * f[2]),
+        wp.float64(e[0] * f[1] - e[1] * f[0]),
+    )
+    x = n[0] * n[0]
+    y = n[1] * n[1]
+    z = n[2] * n[2]
+    size = wp.max(wp.sqrt((x + y) + z), wp.float64(1.0e-30))
+    return wp.vec3(wp.float32(n[0] / size), wp.float32(n[1] / size), wp.float32(n[2] / size))
+
+
+@wp.func
+def _side_of(judge: JudgeArg, x: wp.vec3, n: wp.vec3) -> int:
+    """The leaf's own side across ``x`` along ``n`` (keep's ``_side_at``): 1 growing, -1 falling, 0 internal."""
+    step = judge.side_offset * n
+    front = _field_value(judge.own, x + step)
+    back = _field_value(judge.own, x - step)
+    internal = wp.max(front, back) < -judge.side_clear or wp.min(front, back) > judge.side_clear
+    return wp.where(internal, 0, wp.where(front >= back, 1, -1))
+
+
+@wp.func
+def _fold_side(judge: JudgeArg, sides: int, x: wp.vec3, centre: wp.vec3, n: wp.vec3, side: int) -> int:
+    """``sides`` (1: some sample's side differs from the centre's ``side``, 2: some sample's is not 0) with the
+    sample at ``x``, read pulled a voxel towards the centre (not read within a voxel of it)."""
+    towards = centre - x
+    length = _norm(towards)
+    if length <= judge.pull:
+        return sides
+    at = _side_of(judge, x + towards * (judge.pull / length), n)
+    return sides | wp.where(at != side, 1, 0) | wp.where(at != 0, 2, 0)
+
+
+@wp.func
+def _keeps(judge: JudgeArg, same: bool, bounds: wp.vec2, slack: wp.float64, side: int, sides: int) -> bool:
+    """Whether a piece may still be kept: the same signs at every sample so far, a margin above its band where the
+    expression crosses, its own field crossing it (its centre's side, not 0, everywhere). Only ever turns false."""
+    return same and wp.float64(bounds[0]) > judge.band + slack and side != 0 and (sides & 1) == 0
+
+
+@wp.func
+def _partly(judge: JudgeArg, bounds: wp.vec2, slack: wp.float64, side: int, sides: int) -> bool:
+    """Whether a piece is partly keepable (a margin above the partly keepable one, its own field crossing it
+    somewhere): only ever turns true."""
+    return wp.float64(bounds[1]) + slack > judge.partly_at and (side != 0 or (sides & 2) != 0)
 
 
 @wp.kernel(enable_backward=False)
@@ -323,7 +384,7 @@ def _judge_pieces_kernel(
     offset: int,
     verdicts: wp.array[wp.int8],
 ):
-    """A piece's verdict bits (:func:`judge_pieces`) from its corners' readings and its rows' (read here, while they
+    """A piece's verdict bits (:class:`FusedJudge`) from its corners' readings and its rows' (read here, while they
     can change the verdict). A sample is read as far as the piece's checks look: a margin beyond them passes them
     whatever it is (a piece that may be kept: over its band and slack, one that may not: over the partly keepable
     margin)."""
@@ -333,8 +394,17 @@ def _judge_pieces_kernel(
     keep_reach = wp.float32(judge.band + slack + judge.pad)
     partly_reach = wp.float32(wp.max(judge.partly_at - slack, wp.float64(0.0)) + judge.pad)
     first = codes[tris[t, 0]]
-    same = defects[parent[t]] == wp.int8(0)
+    same = True
     bounds = wp.vec2(1.0e30, -1.0e30)
+    p0 = verts[tris[t, 0]]
+    p1 = verts[tris[t, 1]]
+    p2 = verts[tris[t, 2]]
+    n = _unit_normal(p0, p1, p2)
+    centre = ((p0 + p1) + p2) / 3.0
+    own = int(side[parent[t]])
+    if judge.crossing != 0:
+        own = _side_of(judge, centre, n)
+    sides = int(0)
     for corner in range(3):
         v = tris[t, corner]
         margin = margins[v]
@@ -342,9 +412,12 @@ def _judge_pieces_kernel(
             margin = _reading(judge, verts[v], keep_reach)[1]
         same = same and codes[v] == first
         bounds = _fold(judge, codes[v], margin, bounds)
-    centre = side[parent[t]]
-    may_keep = _may_keep(judge, same, bounds, slack)
-    live = centre != wp.int8(0) and defects[parent[t]] == wp.int8(0) and (may_keep or not _partly(judge, bounds, slack))
+        if judge.crossing != 0:
+            sides = _fold_side(judge, sides, verts[v], centre, n, own)
+    keeps = _keeps(judge, same, bounds, slack, own, sides)
+    # a shell that crosses itself may be crossed by its own field at a later sample
+    may_cross = own != 0 or judge.crossing != 0
+    live = defects[parent[t]] == wp.int8(0) and (keeps or (may_cross and not _partly(judge, bounds, slack, own, sides)))
     k = int(turn[t])
     a = verts[tris[t, k]]
     b = verts[tris[t, (k + 1) % 3]]
@@ -360,19 +433,21 @@ def _judge_pieces_kernel(
         while live and i <= steps:
             if r > 0 or (i > 0 and i < steps):
                 x = _row_point(a, b, c, s, i, steps)
-                reading = _reading(judge, x, wp.where(may_keep, keep_reach, partly_reach))
+                reading = _reading(judge, x, wp.where(keeps, keep_reach, partly_reach))
                 same = same and int(reading[0]) == first
                 bounds = _fold(judge, int(reading[0]), reading[1], bounds)
-                may_keep = _may_keep(judge, same, bounds, slack)
-                live = may_keep or not _partly(judge, bounds, slack)
+                if judge.crossing != 0:
+                    sides = _fold_side(judge, sides, x, centre, n, own)
+                keeps = _keeps(judge, same, bounds, slack, own, sides)
+                live = keeps or not _partly(judge, bounds, slack, own, sides)
             i += 1
         r += 1
     bits = int(0)
-    if centre != wp.int8(0) and may_keep:
+    if keeps and defects[parent[t]] == wp.int8(0):
         bits = KEPT_BIT
-    if centre != wp.int8(0) and _partly(judge, bounds, slack) and defects[parent[t]] == wp.int8(0):
+    if _partly(judge, bounds, slack, own, sides) and defects[parent[t]] == wp.int8(0):
         bits = bits | PARTLY_BIT
-    if ((int(judge.table[first]) & 2) != 0) != (centre < wp.int8(0)):
+    if ((int(judge.table[first]) & 2) != 0) != (own < 0):
         bits = bits | FLIP_BIT
     verdicts[t] = wp.int8(bits)
 
@@ -416,6 +491,9 @@ class FusedJudge:
     slack_share: float
     defects: np.ndarray  # (T,) bool
     side: np.ndarray  # (T,) int8
+    own: object  # the judged leaf's field
+    crossing: bool  # its shell crosses itself: its side read at every sample, ``side_offset`` off
+    side_offset: float
     device: object
 
     def __post_init__(self):
@@ -428,6 +506,8 @@ class FusedJudge:
         arg.partly_at, arg.pad = self.band + self.slack, READ_PAD * self.spacing
         arg.probe, arg.probe_reach = self.band, self.band + arg.pad
         arg.corner_reach = self.band + self.slack + arg.pad
+        arg.crossing, arg.own = int(self.crossing), leaf_arg(self.own, None, 0)
+        arg.pull, arg.side_offset, arg.side_clear = self.spacing, self.side_offset, 0.25 * self.side_offset
         self.arg = arg
         self.defects_wp = wp.array(self.defects.astype(np.int8), dtype=wp.int8, device=self.device)
         self.side_wp = wp.array(self.side.astype(np.int8), dtype=wp.int8, device=self.device)

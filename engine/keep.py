@@ -18,7 +18,8 @@ triangle, a voxel wide and hundreds long) is cut across into pieces about as wid
 near a seam is made of short pieces rather than ever narrower needles, and the kept border's vertices on a straight run
 of it go (:func:`.refine.straighten_borders`). Nothing here intersects meshes: the
 fields decide inside and outside; distances come from the leaves' meshes (exact, through their BVHs) or fields. The
-band is ``BAND_VOXELS`` of the result's voxels, widened by the widest blend.
+band is ``BAND_VOXELS`` of the result's voxels, widened by the widest blend. A round's checks run in two kernel
+launches (:mod:`.judging`), sample by sample (here) for expressions of very many leaves.
 """
 
 from __future__ import annotations
@@ -225,8 +226,7 @@ class _Judge:
 
     def _fused(self) -> FusedJudge | None:
         """The fused path of this judge (:mod:`.judging`), where there are few enough other leaves for a table of
-        their sign patterns. On a shell that crosses itself it takes every piece as crossed by its own field, which
-        :meth:`judge` then reads."""
+        their sign patterns."""
         others = [j for j in range(len(self.leaves)) if j != self.index]
         if len(others) > MAX_TABLE_LEAVES:
             return None
@@ -244,7 +244,10 @@ class _Judge:
             slack=self.slack,
             slack_share=SLACK_VOXELS / SAMPLE_VOXELS,
             defects=self.defects,
-            side=np.ones_like(self.side) if self.crossing else self.side,
+            side=self.side,
+            own=self.leaves[self.index],
+            crossing=self.crossing,
+            side_offset=self.side_offset,
             device=self.device,
         )
 
@@ -256,12 +259,7 @@ class _Judge:
         path applies (:meth:`_fused`), else sample by sample."""
         if self.fused is None:
             return self._judge_samples(verts, tris, parent, longest)
-        kept, partly, flip = self.fused(verts, tris, parent, longest, turn)
-        if not self.crossing:
-            return kept, partly, flip
-        used, local, points, first = self._samples(verts, tris, longest)
-        side, crossed, partly_crossed = self._own_sides(verts[used], local, points, first, parent)
-        return kept & crossed, partly & partly_crossed, flip ^ (side < 0)
+        return self.fused(verts, tris, parent, longest, turn)
 
     def _samples(self, verts, tris, longest):
         """``(used, local, points, first)``: the vertices the triangles use, the triangles on them, and their samples
