@@ -46,7 +46,6 @@ ENGINE_MODULES = (
     "redistancing",
     "fieldops",
     "keep",
-    "refine",
     "judging",
     "zipper",
     "slits",
