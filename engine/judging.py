@@ -164,7 +164,7 @@ def per_triangle_min(values: np.ndarray, tris: np.ndarray, n_verts: int, first: 
 
 @wp.struct
 class LeafArg:
-    """One of the other leaves as the fused judge reads it."""
+    """A leaf as the fused judge reads it: one of the other leaves, or the judged one (for its own side)."""
 
     field: FieldArg
     mesh: wp.uint64  # the BVH of its clean closed mesh (world), 0: its distances are its field's
@@ -246,9 +246,10 @@ def _jumps_near(judge: JudgeArg, leaf: LeafArg, x: wp.vec3, sign: int) -> bool:
     field that jumps (across an open mesh's holes) counts as near there."""
     jumped = False
     for axis in range(6):
-        step = wp.vec3(0.0)
-        step[axis // 2] = wp.where(axis % 2 == 0, judge.probe, -judge.probe)
-        jumped = jumped or _sign_digit(_field_value(leaf, x + step)) != sign
+        if not jumped:
+            step = wp.vec3(0.0)
+            step[axis // 2] = wp.where(axis % 2 == 0, judge.probe, -judge.probe)
+            jumped = _sign_digit(_field_value(leaf, x + step)) != sign
     return jumped
 
 

@@ -261,18 +261,13 @@ class _Judge:
             return self._judge_samples(verts, tris, parent, longest)
         return self.fused(verts, tris, parent, longest, turn)
 
-    def _samples(self, verts, tris, longest):
-        """``(used, local, points, first)``: the vertices the triangles use, the triangles on them, and their samples
-        (:func:`.judging.triangle_samples`)."""
-        used, local = np.unique(tris, return_inverse=True)
-        local = local.reshape(-1, 3)
-        points, first = triangle_samples(verts[used], local, np.maximum(longest / 8.0, self.spacing), self.device)
-        return used, local, points, first
-
     def _judge_samples(self, verts, tris, parent, longest):
         """:meth:`judge` with every sample placed, each other leaf read at all of them, reduced per triangle."""
-        used, local, points, first = self._samples(verts, tris, longest)
-        slack = np.maximum(longest / 8.0, self.spacing) * (SLACK_VOXELS / SAMPLE_VOXELS)
+        used, local = np.unique(tris, return_inverse=True)
+        local = local.reshape(-1, 3)
+        spacing = np.maximum(longest / 8.0, self.spacing)
+        points, first = triangle_samples(verts[used], local, spacing, self.device)
+        slack = spacing * (SLACK_VOXELS / SAMPLE_VOXELS)
         reach = self.band + float(slack.max()) + self.spacing
         margin = np.full(len(points), reach, dtype=np.float32)
         same = ~self.defects[parent]
