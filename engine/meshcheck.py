@@ -85,6 +85,17 @@ def weld_positions(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndar
     return rows[first], index[np.asarray(triangles, dtype=np.int64)]
 
 
+def compacted(tris: np.ndarray, n_verts: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(used, local)``: the vertices (of ``n_verts``) the triangles use, in order, and the triangles on them ((T, 3)
+    int64): ``np.unique(tris, return_inverse=True)`` by a mark and a running count instead of a sort."""
+    t = np.asarray(tris, dtype=np.int64)
+    mark = np.zeros(n_verts, dtype=bool)
+    mark[t.ravel()] = True
+    used = np.flatnonzero(mark)
+    rank = np.cumsum(mark) - 1
+    return used, rank[t].reshape(-1, 3)
+
+
 def edge_table(tris: np.ndarray, n_verts: int) -> dict:
     """The undirected edges of a triangle list, for the mesh checks below.
 
