@@ -24,7 +24,7 @@ from .coarsen import coarsened
 from .edgehash import KeyCounts, directed_edges
 from .edges import surface_edges
 from .keep import kept_triangles
-from .meshcheck import compacted
+from .meshcheck import compacted, position_groups
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .slits import fill_slits
@@ -79,7 +79,7 @@ def _welded(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray
     of a mesh made of patches whose borders repeat each other's vertices (a teapot's) are one piece here, not two
     kept loops side by side that no voxel surface lies between."""
     used, local = compacted(tris, len(verts))
-    _, first, at = np.unique(verts[used], axis=0, return_index=True, return_inverse=True)
+    first, at = position_groups(verts[used])
     order = np.argsort(first)
     rank = np.empty(len(first), dtype=np.int64)
     rank[order] = np.arange(len(first))

@@ -1,10 +1,11 @@
-"""Counting keys through a hash table (engine/edgehash.py) against numpy's sorting, and the twin lookups built on it
-(a surface's border edges, doubled faces) on meshes with open, doubled and flipped edges."""
+"""Counting keys through a hash table (engine/edgehash.py) against numpy's sorting, the twin lookups built on it
+(a surface's border edges, doubled faces) on meshes with open, doubled and flipped edges, and the weld's grouping of
+vertices by position (engine/meshcheck.py) against numpy's unique rows."""
 
 import numpy as np
 
 from engine.edgehash import KeyCounts, directed_edges
-from engine.meshcheck import compacted
+from engine.meshcheck import compacted, position_groups
 from engine.zipper import border_halves
 from tests.support import box_mesh, uv_sphere
 
@@ -46,3 +47,13 @@ def test_compacted_is_unique_with_inverse():
     used, local = compacted(tris, 20)
     expected_used, inverse = np.unique(tris, return_inverse=True)
     assert np.array_equal(used, expected_used) and np.array_equal(local, inverse.reshape(-1, 3))
+
+
+def test_position_groups_match_numpy_unique_rows():
+    rng = np.random.default_rng(5)
+    points = rng.integers(-3, 3, size=(3000, 3)).astype(np.float32) * np.float32(0.5)  # many repeats, signed zeros
+    points[::7] *= -1.0
+    first, inverse = position_groups(points)
+    _, np_first, np_inverse = np.unique(points, axis=0, return_index=True, return_inverse=True)
+    assert np.array_equal(np.sort(first), np.sort(np_first))  # the same groups, each by its least index
+    assert np.array_equal(first[inverse], np_first[np_inverse.reshape(-1)])
