@@ -89,19 +89,24 @@ def _welded(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def _corner_barycentrics(verts, tris, source_tris) -> np.ndarray:
     """(F, 3, 3) float32: each corner of each face as weights of its source triangle's corners (projected onto its
     plane); a corner that is one of those corners gets exactly 1 there, so what it reads off them (UVs, colours) is
-    the source's own value, bit for bit."""
-    a, b, c = (verts[source_tris[:, k]].astype(np.float64) for k in range(3))
+    the source's own value, bit for bit. Only faces with a corner that is none of their source's (pieces of split
+    triangles) are projected."""
+    exact = tris[:, :, None] == source_tris[:, None, :]  # (F, corner, source corner)
+    bary = exact.astype(np.float32)
+    rows = np.flatnonzero(~exact.any(axis=2).all(axis=1))
+    if not len(rows):
+        return bary
+    a, b, c = (verts[source_tris[rows, k]].astype(np.float64) for k in range(3))
     e0, e1 = b - a, c - a
     d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
     den = np.maximum(d00 * d11 - d01 * d01, 1e-300)[:, None]
-    d = verts[tris].astype(np.float64) - a[:, None, :]  # (F, 3 corners, 3)
+    d = verts[tris[rows]].astype(np.float64) - a[:, None, :]  # (R, 3 corners, 3)
     v = d11[:, None] * np.einsum("fkj,fj->fk", d, e0) - d01[:, None] * np.einsum("fkj,fj->fk", d, e1)
     w = d00[:, None] * np.einsum("fkj,fj->fk", d, e1) - d01[:, None] * np.einsum("fkj,fj->fk", d, e0)
     v, w = v / den, w / den
-    bary = np.stack([1.0 - v - w, v, w], axis=2)
-    exact = tris[:, :, None] == source_tris[:, None, :]  # (F, corner, source corner)
-    bary = np.where(exact.any(axis=2, keepdims=True), exact.astype(np.float64), bary)
-    return bary.astype(np.float32)
+    projected = np.stack([1.0 - v - w, v, w], axis=2)
+    bary[rows] = np.where(exact[rows].any(axis=2, keepdims=True), bary[rows], projected).astype(np.float32)
+    return bary
 
 
 def _drop_pinched(tris: np.ndarray, alive: np.ndarray, n_verts: int, rounds: int = 8) -> np.ndarray:
