@@ -37,10 +37,10 @@ from .refine import (
     merge_kept,
     per_triangle_min,
     restore_whole,
-    split_triangles,
     straighten_borders,
     triangle_samples,
 )
+from .slivers import Splitter
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
 # the seams is joined to them there (the join takes about a voxel of it).
@@ -51,8 +51,6 @@ SLACK_VOXELS = 0.75
 # A triangle partly keepable is split while its longest edge is above this many voxels.
 SPLIT_VOXELS = 1.5
 MAX_SPLIT_ROUNDS = 24
-# Bisections a partly keepable triangle takes per round while it is over four times the split size.
-SPLITS_PER_ROUND = 1
 # A kept border vertex this many voxels or less off the line through its neighbours on the border is collapsed.
 STRAIGHT_VOXELS = 1e-4
 # A triangle's own field is read this many voxels in front of and behind it (its sign must change there).
@@ -359,14 +357,17 @@ def _judge_leaf(field, index: int, source, bvhs: list) -> dict:
     status, flip = _first_round(field, index, judge, verts, tris)
     ends = np.full((len(verts), 2), -1, dtype=np.int64)
     split_edge = SPLIT_VOXELS * field.voxel_size
+    splitter = Splitter(verts, tris, split_edge)
     for _ in range(MAX_SPLIT_ROUNDS - 1):
         mark = status == UNKNOWN  # partly keepable and larger than the split size: split, the pieces judged
         if not mark.any():
             break
-        verts, tris, parent, flip, status, ends = _split_marked(
-            verts, tris, mark, split_edge, parent, flip, status, ends
+        verts, tris, parent, flip, status, ends = splitter.split(
+            verts, tris, mark, parent, flip, status, ends, UNKNOWN, DROPPED
         )
         todo = np.flatnonzero(status == UNKNOWN)
+        if not len(todo):
+            break
         longest = _longest_edges(verts, tris[todo])
         kept, partly, flip[todo] = judge.judge(verts, tris[todo], parent[todo], longest)
         split = partly & ~kept & (longest > split_edge)
@@ -410,21 +411,3 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     record[todo[dropped_by_distance]] = UNKNOWN
     verdicts.remember(unplaced, *setting, record, flip, margin)
     return status, flip
-
-
-def _split_marked(verts, tris, mark, split_edge: float, parent, flip, status, ends):
-    """Split the ``mark``ed triangles (``SPLITS_PER_ROUND`` passes: pieces still far larger than the split size are
-    split again before they are judged); their pieces are judged again, a neighbour's pieces keep its verdict."""
-    for split_pass in range(SPLITS_PER_ROUND):
-        verts, tris, origin, new_ends = split_triangles(verts, tris, mark, split_edge)
-        ends = np.concatenate([ends, new_ends])
-        parent, flip, status = parent[origin], flip[origin], status[origin]
-        status[mark[origin]] = UNKNOWN
-        if split_pass + 1 == SPLITS_PER_ROUND:  # the last pass needs no next marks
-            break
-        mark = mark[origin]
-        rows = np.flatnonzero(mark)
-        mark[rows] = _longest_edges(verts, tris[rows]) > 4.0 * split_edge
-        if not mark.any():
-            break
-    return verts, tris, parent, flip, status, ends
