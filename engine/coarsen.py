@@ -26,6 +26,7 @@ import numpy as np
 import warp as wp
 
 from .adaptive import tolerance
+from .meshcheck import compacted
 from .parallel import launch_split
 from .refine import position_hash
 
@@ -372,7 +373,7 @@ def coarsened(field, surface: dict, adaptivity: float = 0.0, regions: dict | Non
     movable = surface["vertex_id"] < 0  # new vertices and midpoints of split sources
     tol = tolerance(adaptivity) * field.voxel_size
     out_tris, rows = collapse_flat(surface["verts"], tris, movable, group, tol, field.device)
-    used, local = np.unique(out_tris, return_inverse=True)
+    used, local = compacted(out_tris, len(surface["verts"]))
     out = dict(surface)
     out["verts"] = surface["verts"][used]
     out["tris"] = local.reshape(-1, 3).astype(np.int32)

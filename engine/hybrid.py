@@ -21,8 +21,10 @@ from __future__ import annotations
 import numpy as np
 
 from .coarsen import coarsened
+from .edgehash import KeyCounts, directed_edges
 from .edges import surface_edges
 from .keep import kept_triangles
+from .meshcheck import compacted, position_groups
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .slits import fill_slits
@@ -76,8 +78,8 @@ def _welded(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray
     vertex before a split's midpoint), in the order of their indices, and the triangles on them ((T, 3) int64). Pieces
     of a mesh made of patches whose borders repeat each other's vertices (a teapot's) are one piece here, not two
     kept loops side by side that no voxel surface lies between."""
-    used, local = np.unique(tris, return_inverse=True)
-    _, first, at = np.unique(verts[used], axis=0, return_index=True, return_inverse=True)
+    used, local = compacted(tris, len(verts))
+    first, at = position_groups(verts[used])
     order = np.argsort(first)
     rank = np.empty(len(first), dtype=np.int64)
     rank[order] = np.arange(len(first))
@@ -87,19 +89,24 @@ def _welded(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def _corner_barycentrics(verts, tris, source_tris) -> np.ndarray:
     """(F, 3, 3) float32: each corner of each face as weights of its source triangle's corners (projected onto its
     plane); a corner that is one of those corners gets exactly 1 there, so what it reads off them (UVs, colours) is
-    the source's own value, bit for bit."""
-    a, b, c = (verts[source_tris[:, k]].astype(np.float64) for k in range(3))
+    the source's own value, bit for bit. Only faces with a corner that is none of their source's (pieces of split
+    triangles) are projected."""
+    exact = tris[:, :, None] == source_tris[:, None, :]  # (F, corner, source corner)
+    bary = exact.astype(np.float32)
+    rows = np.flatnonzero(~exact.any(axis=2).all(axis=1))
+    if not len(rows):
+        return bary
+    a, b, c = (verts[source_tris[rows, k]].astype(np.float64) for k in range(3))
     e0, e1 = b - a, c - a
     d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
     den = np.maximum(d00 * d11 - d01 * d01, 1e-300)[:, None]
-    d = verts[tris].astype(np.float64) - a[:, None, :]  # (F, 3 corners, 3)
+    d = verts[tris[rows]].astype(np.float64) - a[:, None, :]  # (R, 3 corners, 3)
     v = d11[:, None] * np.einsum("fkj,fj->fk", d, e0) - d01[:, None] * np.einsum("fkj,fj->fk", d, e1)
     w = d00[:, None] * np.einsum("fkj,fj->fk", d, e1) - d01[:, None] * np.einsum("fkj,fj->fk", d, e0)
     v, w = v / den, w / den
-    bary = np.stack([1.0 - v - w, v, w], axis=2)
-    exact = tris[:, :, None] == source_tris[:, None, :]  # (F, corner, source corner)
-    bary = np.where(exact.any(axis=2, keepdims=True), exact.astype(np.float64), bary)
-    return bary.astype(np.float32)
+    projected = np.stack([1.0 - v - w, v, w], axis=2)
+    bary[rows] = np.where(exact[rows].any(axis=2, keepdims=True), bary[rows], projected).astype(np.float32)
+    return bary
 
 
 def _drop_pinched(tris: np.ndarray, alive: np.ndarray, n_verts: int, rounds: int = 8) -> np.ndarray:
@@ -272,26 +279,16 @@ def _loops_at_unpaired_edges(tris, k_loops, v_loops, pairs, n_verts: int) -> np.
 
 def _doubled_faces(tris: np.ndarray, n_verts: int) -> np.ndarray:
     """(T,) bool: the faces with a directed edge some other face lists too."""
-    t = np.asarray(tris, dtype=np.int64)
-    keys = t.ravel() * n_verts + t[:, [1, 2, 0]].ravel()
-    _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-    return (counts[inverse.reshape(-1)] > 1).reshape(-1, 3).any(axis=1)
+    _, _, keys, _ = directed_edges(tris, n_verts)
+    return (KeyCounts(keys).of(keys) > 1).reshape(-1, 3).any(axis=1)
 
 
 def unpaired_edge_vertices(tris: np.ndarray, n_verts: int) -> np.ndarray:
     """The vertices of the directed edges that are not used once each way (a surface's open, doubled or flipped
     edges): empty for a closed, consistently oriented surface."""
-    t = np.asarray(tris, dtype=np.int64)
-    a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
-    keys = a * n_verts + b
-    order = np.argsort(keys, kind="stable")
-    sorted_keys = keys[order]
-    repeated = np.zeros(len(keys), dtype=bool)
-    dup = sorted_keys[1:] == sorted_keys[:-1]
-    repeated[order[1:][dup]] = repeated[order[:-1][dup]] = True
-    twins = b * n_verts + a
-    at = np.minimum(np.searchsorted(sorted_keys, twins), len(keys) - 1)
-    bad = repeated | (sorted_keys[at] != twins)
+    a, b, keys, reverses = directed_edges(tris, n_verts)
+    table = KeyCounts(keys)
+    bad = (table.of(keys) > 1) | (table.of(reverses) == 0)
     return np.unique(np.concatenate([a[bad], b[bad]]))
 
 
@@ -388,8 +385,8 @@ def _assemble(points, kept, k_tris, k_alive, voxel, strips, voxel_verts, voxel_t
     surface on the vertices they use, or the voxel surface alone if that is not closed and consistently oriented."""
     v_rows = np.flatnonzero(voxel[1])
     tris = np.concatenate([k_tris[k_alive], voxel[0][v_rows], strips.astype(np.int64)])
-    used, local = np.unique(tris, return_inverse=True)
-    tris = local.reshape(-1, 3).astype(np.int32)
+    used, local = compacted(tris, len(points))
+    tris = local.astype(np.int32)
     if surface_edges(tris, len(used), device) is None:
         return voxel_surface_only(voxel_verts, voxel_tris, "the join is not a closed oriented surface")
     n_k, n_kept = len(kept["verts"]), int(k_alive.sum())

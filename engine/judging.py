@@ -36,6 +36,9 @@ MAX_TABLE_LEAVES = 10
 READ_PAD = 0.01
 # Verdict bits of :func:`judge_pieces`.
 KEPT_BIT, PARTLY_BIT, FLIP_BIT = 1, 2, 4
+# and, where distances are recorded: no sample where the expression crosses; a defect, or its own field crossing it
+# nowhere
+SIGNS_ONLY_BIT, OWN_ONLY_BIT = 8, 16
 
 # ---- samples ----
 
@@ -189,6 +192,7 @@ class JudgeArg:
     probe_reach: float  # a little over the band: how far a field that jumps is read at least (to know it is farther)
     spacing: wp.float64  # the least spacing of samples
     slack_share: wp.float64  # a piece's slack per unit of its samples' spacing
+    sample_share: wp.float64  # and its samples' spacing per unit of its slack
     partly_at: wp.float64  # band + the least slack: a piece is partly keepable with a margin (+ its slack) above
     pad: wp.float64  # a reach exceeds the distance it must tell apart by this much (float32 rounding is far less)
     corner_reach: float  # how far corners are read: a piece of the least slack's reach (a larger piece reads on)
@@ -286,16 +290,19 @@ def _read_vertices_kernel(
     judge: JudgeArg,
     verts: wp.array[wp.vec3],
     used: wp.array[wp.int64],
+    reach: float,
+    again: int,
     offset: int,
     read: wp.array[wp.int8],
     codes: wp.array[wp.int32],
     margins: wp.array[wp.float32],
 ):
-    """The reading (:func:`_reading`, up to ``corner_reach``) at each used vertex not read in an earlier round."""
+    """The reading (:func:`_reading`, up to ``reach``) at each used vertex not read in an earlier round (``again``
+    1: at every one)."""
     v = used[wp.tid() + offset]
-    if read[v] != wp.int8(0):
+    if read[v] != wp.int8(0) and again == 0:
         return
-    r = _reading(judge, verts[v], judge.corner_reach)
+    r = _reading(judge, verts[v], reach)
     codes[v] = int(r[0])
     margins[v] = r[1]
     read[v] = wp.int8(1)
@@ -382,18 +389,25 @@ def _judge_pieces_kernel(
     margins: wp.array[wp.float32],
     defects: wp.array[wp.int8],
     side: wp.array[wp.int8],
+    full_reach: float,
     offset: int,
     verdicts: wp.array[wp.int8],
+    nearest: wp.array[wp.float32],
 ):
     """A piece's verdict bits (:class:`FusedJudge`) from its corners' readings and its rows' (read here, while they
     can change the verdict). A sample is read as far as the piece's checks look: a margin beyond them passes them
     whatever it is (a piece that may be kept: over its band and slack, one that may not: over the partly keepable
-    margin)."""
+    margin). With a ``full_reach`` (above 0), every sample is read that far (distances recorded: ``nearest``, and the
+    bits SIGNS_ONLY_BIT, OWN_ONLY_BIT)."""
     t = wp.tid() + offset
-    spacing = wp.max(longest[t] / wp.float64(8.0), judge.spacing)
-    slack = spacing * judge.slack_share
+    slack = wp.max(longest[t] / wp.float64(8.0), judge.spacing) * judge.slack_share
     keep_reach = wp.float32(judge.band + slack + judge.pad)
     partly_reach = wp.float32(wp.max(judge.partly_at - slack, wp.float64(0.0)) + judge.pad)
+    full = full_reach > 0.0
+    if full:
+        keep_reach = full_reach
+        partly_reach = full_reach
+    least = float(1.0e30)  # the least margin of any sample
     first = codes[tris[t, 0]]
     same = True
     bounds = wp.vec2(1.0e30, -1.0e30)
@@ -409,8 +423,9 @@ def _judge_pieces_kernel(
     for corner in range(3):
         v = tris[t, corner]
         margin = margins[v]
-        if margin >= judge.corner_reach and keep_reach > judge.corner_reach:  # a large piece's corner: read on
+        if not full and margin >= judge.corner_reach and keep_reach > judge.corner_reach:  # a large piece's: read on
             margin = _reading(judge, verts[v], keep_reach)[1]
+        least = wp.min(least, margin)
         same = same and codes[v] == first
         bounds = _fold(judge, codes[v], margin, bounds)
         if judge.crossing != 0:
@@ -419,11 +434,12 @@ def _judge_pieces_kernel(
     # a shell that crosses itself may be crossed by its own field at a later sample
     may_cross = own != 0 or judge.crossing != 0
     live = defects[parent[t]] == wp.int8(0) and (keeps or (may_cross and not _partly(judge, bounds, slack, own, sides)))
+    live = live or full
     k = int(turn[t])
     a = verts[tris[t, k]]
     b = verts[tris[t, (k + 1) % 3]]
     c = verts[tris[t, (k + 2) % 3]]
-    step = wp.float32(spacing)
+    step = wp.float32(slack * judge.sample_share)
     grid = _row_grid(a, b, c, step)
     rows = int(grid[1])
     r = int(0)
@@ -437,10 +453,11 @@ def _judge_pieces_kernel(
                 reading = _reading(judge, x, wp.where(keeps, keep_reach, partly_reach))
                 same = same and int(reading[0]) == first
                 bounds = _fold(judge, int(reading[0]), reading[1], bounds)
+                least = wp.min(least, reading[1])
                 if judge.crossing != 0:
                     sides = _fold_side(judge, sides, x, centre, n, own)
                 keeps = _keeps(judge, same, bounds, slack, own, sides)
-                live = keeps or not _partly(judge, bounds, slack, own, sides)
+                live = full or keeps or not _partly(judge, bounds, slack, own, sides)
             i += 1
         r += 1
     bits = int(0)
@@ -450,7 +467,12 @@ def _judge_pieces_kernel(
         bits = bits | PARTLY_BIT
     if ((int(judge.table[first]) & 2) != 0) != (own < 0):
         bits = bits | FLIP_BIT
+    if bounds[1] < 0.0:
+        bits = bits | SIGNS_ONLY_BIT
+    if defects[parent[t]] != wp.int8(0) or not (own != 0 or (sides & 2) != 0):
+        bits = bits | OWN_ONLY_BIT
     verdicts[t] = wp.int8(bits)
+    nearest[t] = least
 
 
 # ---- the fused judge ----
@@ -490,6 +512,7 @@ class FusedJudge:
     spacing: float
     slack: float
     slack_share: float
+    sample_share: float
     defects: np.ndarray  # (T,) bool
     side: np.ndarray  # (T,) int8
     own: object  # the judged leaf's field
@@ -504,6 +527,7 @@ class FusedJudge:
         arg.defect_mesh = wp.uint64(self.defect_mesh.id if self.defect_mesh is not None else 0)
         arg.table = wp.array(self.table.astype(np.int8), dtype=wp.int8, device=self.device)
         arg.band, arg.spacing, arg.slack_share = self.band, self.spacing, self.slack_share
+        arg.sample_share = self.sample_share
         arg.partly_at, arg.pad = self.band + self.slack, READ_PAD * self.spacing
         arg.probe, arg.probe_reach = self.band, self.band + arg.pad
         arg.corner_reach = self.band + self.slack + arg.pad
@@ -516,13 +540,23 @@ class FusedJudge:
         self.codes = wp.zeros(0, dtype=wp.int32, device=self.device)
         self.margins = wp.zeros(0, dtype=wp.float32, device=self.device)
 
-    def __call__(self, verts, tris, parent, longest, turn) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def __call__(self, verts, tris, parent, longest, turn, beyond: float | None = None):
         """Per piece (``tris`` (T, 3) int64 of ``verts`` (V, 3) float32, in source triangles ``parent``, ``longest``
-        and ``turn`` their :func:`edge_turns`): kept, partly keepable and flipped, as keep's general path finds.
-        Successive calls pass the vertices of one mesh that only grows (vertices appended): a vertex is read once."""
+        and ``turn`` their :func:`edge_turns`): ``(kept, partly, flip, found)``, as keep's general path finds them.
+        With ``beyond``, every sample is read, up to ``beyond`` farther than the round's largest piece needs, and
+        ``found`` is what keep's general path records (``margin``, ``signs_only``, ``own_only``; else None).
+        Successive calls pass the vertices of one mesh that only grows (vertices appended): a vertex is read once
+        (again where distances are recorded)."""
         device = self.device
+        if not len(tris):
+            empty = np.zeros(0, dtype=bool)
+            return empty, empty, empty, self._found(np.zeros(0, np.int8), np.zeros(0, np.float32), beyond)
+        full_reach = 0.0
+        if beyond is not None:
+            slack = np.maximum(longest / 8.0, self.spacing) * self.slack_share
+            full_reach = self.band + float(slack.max()) + self.spacing + beyond
         verts_wp = host_view(np.ascontiguousarray(verts, dtype=np.float32), wp.vec3, device)
-        self._read_corners(verts_wp, tris)
+        self._read_corners(verts_wp, tris, full_reach)
         pieces = [
             host_view(np.ascontiguousarray(a, dtype=dtype), wp_dtype, device)
             for a, dtype, wp_dtype in (
@@ -533,27 +567,31 @@ class FusedJudge:
             )
         ]
         verdicts = wp.empty(len(tris), dtype=wp.int8, device=device)
+        nearest = wp.empty(len(tris), dtype=wp.float32, device=device)
+        arrays = [self.codes, self.margins, self.defects_wp, self.side_wp]
         launch_split(
             _judge_pieces_kernel,
             len(tris),
-            lambda lo, _n: [
-                self.arg,
-                verts_wp,
-                *pieces,
-                self.codes,
-                self.margins,
-                self.defects_wp,
-                self.side_wp,
-                lo,
-                verdicts,
-            ],
+            lambda lo, _n: [self.arg, verts_wp, *pieces, *arrays, full_reach, lo, verdicts, nearest],
             device,
         )
         bits = verdicts.numpy()
-        return (bits & KEPT_BIT) != 0, (bits & PARTLY_BIT) != 0, (bits & FLIP_BIT) != 0
+        found = self._found(bits, nearest.numpy(), beyond)
+        return (bits & KEPT_BIT) != 0, (bits & PARTLY_BIT) != 0, (bits & FLIP_BIT) != 0, found
 
-    def _read_corners(self, verts_wp, tris) -> None:
-        """Read the vertices ``tris`` use that no earlier call read (the per-vertex arrays grown to ``verts_wp``)."""
+    @staticmethod
+    def _found(bits, nearest, beyond) -> dict | None:
+        if beyond is None:
+            return None
+        return {
+            "margin": nearest.astype(np.float64),
+            "signs_only": (bits & SIGNS_ONLY_BIT) != 0,
+            "own_only": (bits & OWN_ONLY_BIT) != 0,
+        }
+
+    def _read_corners(self, verts_wp, tris, full_reach: float) -> None:
+        """Read the vertices ``tris`` use that no earlier call read (the per-vertex arrays grown to ``verts_wp``); with
+        a ``full_reach`` (above 0) every one, that far."""
         n = verts_wp.shape[0]
         if n > self.read.shape[0]:
             size = max(n, 2 * self.read.shape[0])
@@ -564,9 +602,10 @@ class FusedJudge:
         used = np.zeros(n, dtype=bool)
         used[tris] = True
         used_wp = host_view(np.flatnonzero(used), wp.int64, self.device)
+        reach, again = (full_reach, 1) if full_reach > 0.0 else (self.arg.corner_reach, 0)
         launch_split(
             _read_vertices_kernel,
             used_wp.shape[0],
-            lambda lo, _n: [self.arg, verts_wp, used_wp, lo, self.read, self.codes, self.margins],
+            lambda lo, _n: [self.arg, verts_wp, used_wp, reach, again, lo, self.read, self.codes, self.margins],
             self.device,
         )

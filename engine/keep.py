@@ -30,11 +30,13 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from . import verdicts
 from .expression import evaluate_signs, leaves, widest_blend
 from .judging import MAX_TABLE_LEAVES, FusedJudge, edge_turns, per_triangle_min, sign_patterns, triangle_samples
 from .meshcheck import edge_table, weld_positions
 from .parallel import launch_split, run_tasks
-from .refine import merge_kept, restore_whole, split_triangles, straighten_borders
+from .refine import merge_kept, restore_whole, straighten_borders
+from .slivers import Splitter
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
 # the seams is joined to them there (the join takes about a voxel of it).
@@ -45,8 +47,6 @@ SLACK_VOXELS = 0.75
 # A triangle partly keepable is split while its longest edge is above this many voxels.
 SPLIT_VOXELS = 1.5
 MAX_SPLIT_ROUNDS = 24
-# Bisections a partly keepable triangle takes per round while it is over four times the split size.
-SPLITS_PER_ROUND = 1
 # A kept border vertex this many voxels or less off the line through its neighbours on the border is collapsed.
 STRAIGHT_VOXELS = 1e-4
 # A triangle's own field is read this many voxels in front of and behind it (its sign must change there).
@@ -243,6 +243,7 @@ class _Judge:
             spacing=self.spacing,
             slack=self.slack,
             slack_share=SLACK_VOXELS / SAMPLE_VOXELS,
+            sample_share=SAMPLE_VOXELS / SLACK_VOXELS,
             defects=self.defects,
             side=self.side,
             own=self.leaves[self.index],
@@ -251,24 +252,35 @@ class _Judge:
             device=self.device,
         )
 
-    def judge(self, verts, tris, parent, longest, turn):
+    def slack_of(self, longest) -> np.ndarray:
+        """(T,) the slack of each triangle's checks: its samples' spacing (``SAMPLE_VOXELS`` apart, or an eighth of its
+        longest edge when that is more) times ``SLACK_VOXELS / SAMPLE_VOXELS``."""
+        return np.maximum(longest / 8.0, self.spacing) * (SLACK_VOXELS / SAMPLE_VOXELS)
+
+    def judge(self, verts, tris, parent, longest, turn, beyond: float | None = None):
         """Per triangle (pieces of original triangles ``parent``): kept, partly keepable, and flipped. A triangle is
         sampled about ``SAMPLE_VOXELS`` apart, or an eighth of its longest edge when that is more (a large triangle
         near a seam is split anyway), its samples' spacing the slack of its checks (``longest``, ``turn``: (T,) each
-        one's longest edge and the corner it starts at, :func:`.judging.edge_turns`). In two launches where the fused
-        path applies (:meth:`_fused`), else sample by sample."""
+        one's longest edge and the corner it starts at, :func:`.judging.edge_turns`). With ``beyond``, every sample
+        is read, its distances up to ``beyond`` farther than the checks need; ``self.found`` keeps, per triangle, the
+        least of them (``margin``) and whether its verdict is the others' signs' alone (``signs_only``: no sample
+        where the expression crosses) or its own mesh's (``own_only``: a defect, or its field crossing it nowhere),
+        for :mod:`.verdicts`. In two launches where the fused path applies (:meth:`_fused`), else sample by sample."""
         if self.fused is None:
-            return self._judge_samples(verts, tris, parent, longest)
-        return self.fused(verts, tris, parent, longest, turn)
+            return self._judge_samples(verts, tris, parent, longest, 0.0 if beyond is None else beyond)
+        kept, partly, flip, found = self.fused(verts, tris, parent, longest, turn, beyond)
+        if found is not None:
+            self.found = found
+        return kept, partly, flip
 
-    def _judge_samples(self, verts, tris, parent, longest):
+    def _judge_samples(self, verts, tris, parent, longest, beyond: float):
         """:meth:`judge` with every sample placed, each other leaf read at all of them, reduced per triangle."""
         used, local = np.unique(tris, return_inverse=True)
         local = local.reshape(-1, 3)
-        spacing = np.maximum(longest / 8.0, self.spacing)
+        slack = self.slack_of(longest)
+        spacing = slack * (SAMPLE_VOXELS / SLACK_VOXELS)
         points, first = triangle_samples(verts[used], local, spacing, self.device)
-        slack = spacing * (SLACK_VOXELS / SAMPLE_VOXELS)
-        reach = self.band + float(slack.max()) + self.spacing
+        reach = self.band + float(slack.max()) + self.spacing + beyond
         margin = np.full(len(points), reach, dtype=np.float32)
         same = ~self.defects[parent]
         signs = []
@@ -284,11 +296,16 @@ class _Judge:
         if self.defect_mesh is not None:
             margin = np.minimum(margin, mesh_distances(self.defect_mesh, points, reach, self.device))
         crosses, flips = self._crossing(signs)
-        bounds = np.stack([np.where(crosses, margin, -1.0), np.where(crosses, -margin, 1.0)], axis=1)
-        least, most = per_triangle_min(bounds, local, len(used), first).T * np.array([[1.0], [-1.0]])
+        bounds = np.stack([np.where(crosses, margin, -1.0), np.where(crosses, -margin, 1.0), margin], axis=1)
+        least, most, nearest = per_triangle_min(bounds, local, len(used), first).T * np.array([[1.0], [-1.0], [1.0]])
         side, crossed, partly_crossed = self._own_sides(verts[used], local, points, first, parent)
         kept = same & crossed & (least > self.band + slack)
         partly = partly_crossed & (most + slack > self.band + self.slack) & ~self.defects[parent]
+        self.found = {
+            "margin": nearest,
+            "signs_only": most < 0.0,
+            "own_only": self.defects[parent] | ~partly_crossed,
+        }
         return kept, partly, flips[local[:, 0]] ^ (side < 0)
 
     def _own_sides(self, verts, tris, points, first, parent):
@@ -369,11 +386,17 @@ def _judge_leaf(field, index: int, source, bvhs: list, fused: bool) -> dict:
     verts, tris = source.verts, source.tris.astype(np.int64)
     judge = _Judge(field, index, source, bvhs, fused)
     parent = np.arange(len(tris), dtype=np.int64)
-    status = np.zeros(len(tris), dtype=np.int8)
-    flip = np.zeros(len(tris), dtype=bool)
+    status, flip = _first_round(field, index, judge, verts, tris)
     ends = np.full((len(verts), 2), -1, dtype=np.int64)
     split_edge = SPLIT_VOXELS * field.voxel_size
-    for _ in range(MAX_SPLIT_ROUNDS):
+    splitter = Splitter(verts, tris, split_edge)
+    for _ in range(MAX_SPLIT_ROUNDS - 1):
+        mark = status == UNKNOWN  # partly keepable and larger than the split size: split, the pieces judged
+        if not mark.any():
+            break
+        verts, tris, parent, flip, status, ends = splitter.split(
+            verts, tris, mark, parent, flip, status, ends, UNKNOWN, DROPPED
+        )
         todo = np.flatnonzero(status == UNKNOWN)
         if not len(todo):
             break
@@ -381,24 +404,6 @@ def _judge_leaf(field, index: int, source, bvhs: list, fused: bool) -> dict:
         kept, partly, flip[todo] = judge.judge(verts, tris[todo], parent[todo], longest, turn)
         split = partly & ~kept & (longest > split_edge)
         status[todo] = np.where(kept, KEPT, np.where(split, UNKNOWN, DROPPED))
-        if not split.any():
-            break
-        mark = np.zeros(len(tris), dtype=bool)
-        mark[todo[split]] = True
-        # pieces still far larger than the split size are split again before they are judged (fewer rounds)
-        for split_pass in range(SPLITS_PER_ROUND):
-            verts, tris, origin, new_ends = split_triangles(verts, tris, mark, split_edge)
-            ends = np.concatenate([ends, new_ends])
-            parent, flip, status = parent[origin], flip[origin], status[origin]
-            # a split triangle's pieces are judged again; a neighbour's pieces keep its verdict
-            status[mark[origin]] = UNKNOWN
-            if split_pass + 1 == SPLITS_PER_ROUND:  # the last pass needs no next marks
-                break
-            mark = mark[origin]
-            rows = np.flatnonzero(mark)
-            mark[rows] = edge_turns(verts, tris[rows])[0] > 4.0 * split_edge
-            if not mark.any():
-                break
     status[status == UNKNOWN] = DROPPED
     tris, rows = merge_kept(verts, tris, status == KEPT, ends)
     parent, kept, flip = parent[rows], status[rows] == KEPT, flip[rows]
@@ -409,3 +414,32 @@ def _judge_leaf(field, index: int, source, bvhs: list, fused: bool) -> dict:
     tris, rows = straighten_borders(verts, tris, kept, parent, len(source.verts), STRAIGHT_VOXELS * field.voxel_size)
     parent, kept = parent[rows], kept[rows]
     return {"verts": verts, "tris": tris, "parent": parent, "kept": kept, "flip": flip_of[parent] & kept}
+
+
+def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndarray, np.ndarray]:
+    """Each source triangle's status after the first round (KEPT, DROPPED, or UNKNOWN: to be split and judged again)
+    and flip: the verdicts the last boolean over the same fields found, where its distances bound them
+    (:mod:`.verdicts`), the rest judged whole, with distances read far enough for the next boolean to reuse."""
+    unplaced = next(iter(leaves(field.expression)[index].sources.values()))
+    longest, turn = edge_turns(verts, tris)
+    slack = judge.slack_of(longest)
+    exact = [bvh is not None for bvh in judge.bvhs]
+    setting = (field.expression, index, field.voxel_size, judge.band)
+    found = verdicts.reused(unplaced, *setting, slack, exact)
+    status, flip, margin = (
+        found if found is not None else (np.zeros(len(tris), np.int8), np.zeros(len(tris), bool), np.zeros(len(tris)))
+    )
+    status, flip, margin = status.copy(), flip.copy(), margin.astype(np.float32)
+    todo = np.flatnonzero(status == UNKNOWN)
+    kept, partly, flip[todo] = judge.judge(
+        verts, tris[todo], todo, longest[todo], turn[todo], verdicts.REUSE_VOXELS * field.voxel_size
+    )
+    split = partly & ~kept & (longest[todo] > SPLIT_VOXELS * field.voxel_size)
+    status[todo] = np.where(kept, KEPT, np.where(split, UNKNOWN, DROPPED))
+    # what the next boolean may reuse: kept whole, or dropped by signs alone or by the mesh itself
+    margin[todo] = np.where(judge.found["own_only"], np.inf, judge.found["margin"])
+    record = status.copy()
+    dropped_by_distance = (status[todo] == DROPPED) & ~judge.found["signs_only"] & ~judge.found["own_only"]
+    record[todo[dropped_by_distance]] = UNKNOWN
+    verdicts.remember(unplaced, *setting, record, flip, margin)
+    return status, flip

@@ -50,6 +50,7 @@ ENGINE_MODULES = (
     "zipper",
     "slits",
     "coarsen",
+    "edgehash",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.

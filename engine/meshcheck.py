@@ -85,6 +85,32 @@ def weld_positions(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndar
     return rows[first], index[np.asarray(triangles, dtype=np.int64)]
 
 
+def position_groups(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, inverse)``: the least index of each distinct position among ``points`` ((N, 3) float32) and each
+    point's group, as ``np.unique(points, axis=0, return_index=True, return_inverse=True)`` gives them but for the
+    groups' order (here by the positions' bits): one lexicographic sort of the float bits (-0 taken as 0), about a
+    quarter of the time of a sort of rows."""
+    bits = (np.ascontiguousarray(points, dtype=np.float32) + np.float32(0.0)).view(np.uint32).astype(np.uint64)
+    high = (bits[:, 0] << np.uint64(32)) | bits[:, 1]
+    order = np.lexsort((bits[:, 2], high))  # stable: each group's least index first
+    high, low = high[order], bits[order, 2]
+    start = np.r_[True, (high[1:] != high[:-1]) | (low[1:] != low[:-1])] if len(order) else np.zeros(0, bool)
+    inverse = np.empty(len(order), dtype=np.int64)
+    inverse[order] = np.cumsum(start) - 1
+    return order[start], inverse
+
+
+def compacted(tris: np.ndarray, n_verts: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(used, local)``: the vertices (of ``n_verts``) the triangles use, in order, and the triangles on them ((T, 3)
+    int64): ``np.unique(tris, return_inverse=True)`` by a mark and a running count instead of a sort."""
+    t = np.asarray(tris, dtype=np.int64)
+    mark = np.zeros(n_verts, dtype=bool)
+    mark[t.ravel()] = True
+    used = np.flatnonzero(mark)
+    rank = np.cumsum(mark) - 1
+    return used, rank[t].reshape(-1, 3)
+
+
 def edge_table(tris: np.ndarray, n_verts: int) -> dict:
     """The undirected edges of a triangle list, for the mesh checks below.
 

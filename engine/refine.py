@@ -15,7 +15,7 @@ import numpy as np
 
 
 # ---- splitting ----
-def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long_edge: float = np.inf):
+def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long_edge: float = np.inf, also=None):
     """Split the longest edge of each ``split`` triangle at its midpoint, in every triangle that has that edge
     (longest-edge bisection, Rivara's: pieces keep their shape where splitting every edge would keep a sliver's). A
     sliver's other long edges are split with it (every edge longer than ``long_edge`` and than twice its triangle's
@@ -23,7 +23,8 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long
     slivers of it.
 
     Args:
-        verts: (V, 3) float32; tris: (T, 3) int64; split: (T,) bool; long_edge: float.
+        verts: (V, 3) float32; tris: (T, 3) int64; split: (T,) bool; long_edge: float; also: optional ``(keys,
+            rows)``: more edges to split (sorted keys low * V + high) and triangles that hold them.
     Returns:
         ``(verts, tris, origin, ends)``: the vertices with the midpoints appended, the new triangles, (T',) int64 the
         triangle of ``tris`` each new one lies in, and (M, 2) int64 the edge each midpoint splits.
@@ -32,6 +33,8 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long
     n = len(verts)
     rows = np.flatnonzero(split)
     marked_keys = _edges_to_split(verts, t[rows], long_edge)
+    if also is not None and len(also[0]):
+        marked_keys, rows = np.union1d(marked_keys, also[0]), np.union1d(rows, also[1])
     mids = _midpoints(t, rows, marked_keys, n)
     lo, hi = marked_keys // n, marked_keys % n
     new_verts = (0.5 * (verts[lo].astype(np.float64) + verts[hi].astype(np.float64))).astype(np.float32)

@@ -22,6 +22,7 @@ import numpy as np
 import warp as wp
 
 from .components import connected_components
+from .edgehash import KeyCounts, directed_edges
 from .parallel import launch_split
 
 # A voxel-surface vertex is over the kept faces within this many voxels of them.
@@ -78,14 +79,10 @@ def _over_kernel(
 
 def border_halves(tris: np.ndarray, n_verts: int) -> np.ndarray:
     """(B, 2) int64 the directed edges (as the faces list them) whose reverse no face lists: a surface's border."""
-    t = np.asarray(tris, dtype=np.int64)
-    if not len(t):
+    if not len(tris):
         return np.zeros((0, 2), dtype=np.int64)
-    a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
-    keys = np.sort(a * n_verts + b)
-    twins = b * n_verts + a
-    at = np.minimum(np.searchsorted(keys, twins), len(keys) - 1)
-    open_ = keys[at] != twins
+    a, b, keys, reverses = directed_edges(tris, n_verts)
+    open_ = KeyCounts(keys).of(reverses) == 0
     return np.stack([a[open_], b[open_]], axis=1)
 
 

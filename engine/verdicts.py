@@ -1,0 +1,159 @@
+"""A leaf's first verdicts kept from one boolean to the next, so that moving an operand re-judges only near the seams.
+
+The first round of :func:`.keep.kept_triangles` judges every triangle of a leaf whole: a scan's 70 k triangles, most
+of them far from any other operand. When the next boolean has the same expression over the same fields and only
+placements changed (an operand dragged, turned, or the leaf itself placed elsewhere), a triangle's verdict cannot
+change where every other leaf's surface stays farther than the move from it. The bound is Lipschitz's: the other
+leaf's surface, seen from this leaf's frame, moved by at most ``shift`` (the largest displacement of its box's corners
+under the change of relative placement, in world units), so its distance to every point of the triangle changed by
+at most ``shift`` and its sign not at all where the distance was larger. A triangle kept whole stays kept while its
+least distance less the shifts is above the band and its slack; a triangle dropped whole stays dropped when the
+expression did not cross anywhere on it (buried in another operand: signs only) or its own mesh ruled it out (a
+defect). Partly kept triangles, and any triangle the bound cannot settle, are judged again from scratch.
+
+Only leaves whose distances are exact where they are read can move (clean closed meshes, read through their BVH): a
+moved field read through its interpolant (an open mesh, an offset) gives no bound, and nothing is reused. The distances
+are kept to ``REUSE_VOXELS`` beyond the band so that moves of a few voxels (a drag's steps) still find them.
+
+Written by hand: a record per leaf of three arrays over its triangles and the placements they were found at.
+"""
+
+from __future__ import annotations
+
+import threading
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from .expression import Operation, leaves
+
+# Distances are found up to this many voxels beyond the band in a first round, so that a verdict survives moves of
+# this much less what it used (a drag's steps are a few voxels at the working resolution).
+REUSE_VOXELS = 8.0
+UNKNOWN, KEPT, DROPPED = 0, 1, 2
+
+
+@dataclass
+class Record:
+    """What a leaf's first round found, and where everything was: ``key`` (:func:`_setting`), ``fields`` weak
+    references to the leaves' values arrays (an identity that cannot pass to a field built later), ``frames`` the
+    leaves' placements (4, 4), per source triangle ``status`` (KEPT, DROPPED, or UNKNOWN: split or not to be reused),
+    ``flip`` and ``margin`` (the least distance of another leaf's surface over the triangle, a lower bound)."""
+
+    key: tuple
+    fields: list
+    frames: list
+    status: np.ndarray
+    flip: np.ndarray
+    margin: np.ndarray
+
+
+# unplaced source mesh -> {leaf index: Record}; entries go with their sources (a field dropped from the cache)
+_RECORDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_LOCK = threading.Lock()
+
+
+def _structure(expression):
+    """The tree's operations with its leaves as their values arrays' identities (the same fields, placed anywhere)."""
+    if isinstance(expression, Operation):
+        return (expression.op, expression.blend, _structure(expression.a), _structure(expression.b))
+    return id(expression.values)
+
+
+def _setting(expression, index: int, voxel: float, band: float) -> tuple:
+    return (_structure(expression), index, float(voxel), float(band))
+
+
+def _frame(leaf) -> np.ndarray:
+    return np.eye(4) if leaf.placement is None else leaf.placement.matrix
+
+
+def _corners(leaf) -> np.ndarray:
+    """(8, 4) homogeneous corners of a box around the leaf's surface in its own frame."""
+    sources = list(leaf.sources.values())
+    if len(sources) == 1 and len(sources[0].verts):
+        lo, hi = sources[0].verts.min(axis=0), sources[0].verts.max(axis=0)
+    else:
+        lo, hi = leaf.frame_bounds
+    pick = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], dtype=bool)
+    return np.c_[np.where(pick, hi, lo), np.ones(8)]
+
+
+def _shift(own_then, own_now, then, now, corners) -> float:
+    """World units the other leaf's surface moved as seen from this leaf (both placements changed to ``*_now``)."""
+    seen_then = corners @ (np.linalg.inv(own_then) @ then).T
+    seen_now = corners @ (np.linalg.inv(own_now) @ now).T
+    scale = float(np.cbrt(abs(np.linalg.det(own_now[:3, :3]))))
+    return scale * float(np.linalg.norm((seen_now - seen_then)[:, :3], axis=1).max())
+
+
+def _shifts(record: Record, every: list, index: int, exact: list) -> float | None:
+    """The largest move of another leaf seen from leaf ``index`` since the record, None when one that moved is not
+    read exactly or this leaf's scale changed."""
+    own_then, own_now = record.frames[index], _frame(every[index])
+    if not np.isclose(abs(np.linalg.det(own_then[:3, :3])), abs(np.linalg.det(own_now[:3, :3])), rtol=1e-9):
+        return None
+    largest = 0.0
+    for j, leaf in enumerate(every):
+        if j == index:
+            continue
+        moved = _shift(own_then, own_now, record.frames[j], _frame(leaf), _corners(leaf))
+        if moved > 0.0 and not exact[j]:
+            return None
+        largest = max(largest, moved)
+    return largest
+
+
+def reused(source, expression, index: int, voxel: float, band: float, slack: np.ndarray, exact: list):
+    """Verdicts of leaf ``index``'s source triangles that hold as the last boolean over the same fields found them.
+
+    Args:
+        source: The leaf's unplaced source mesh (the record's key).
+        expression: The boolean's expression; ``index`` the leaf's place among its leaves.
+        voxel, band: The result's voxel size and the judge's band.
+        slack: (T,) each triangle's slack in its first round.
+        exact: Per leaf, whether its distances are read exactly (a BVH).
+    Returns:
+        ``(status, flip, margin)``: (T,) int8 KEPT or DROPPED where reused, UNKNOWN elsewhere; (T,) bool; (T,) float32
+        the lower bound of the other leaves' distance now (for the next record), or None when nothing is reusable.
+    """
+    with _LOCK:
+        record = _RECORDS.get(source, {}).get(index)
+    every = leaves(expression)
+    if (
+        record is None
+        or record.key != _setting(expression, index, voxel, band)
+        or any(ref() is not leaf.values for ref, leaf in zip(record.fields, every, strict=True))
+        or len(record.status) != len(slack)
+    ):
+        return None
+    shift = _shifts(record, every, index, exact)
+    if shift is None:
+        return None
+    margin = record.margin - np.float32(shift)
+    holds_kept = (record.status == KEPT) & (margin > band + slack)
+    holds_dropped = (record.status == DROPPED) & (margin > 0.0)
+    status = np.where(holds_kept, KEPT, np.where(holds_dropped, DROPPED, UNKNOWN)).astype(np.int8)
+    return status, record.flip, margin
+
+
+def remember(source, expression, index: int, voxel: float, band: float, status, flip, margin) -> None:
+    """Keep a leaf's first-round verdicts (``status`` UNKNOWN where split or not to be reused) with its source."""
+    every = leaves(expression)
+    record = Record(
+        _setting(expression, index, voxel, band),
+        [weakref.ref(leaf.values) for leaf in every],
+        [_frame(leaf) for leaf in every],
+        np.asarray(status, dtype=np.int8),
+        np.asarray(flip, dtype=bool),
+        np.asarray(margin, dtype=np.float32),
+    )
+    with _LOCK:
+        _RECORDS.setdefault(source, {})[index] = record
+
+
+def forget() -> None:
+    """Drop every record (the next boolean of each leaf judges all its triangles)."""
+    with _LOCK:
+        _RECORDS.clear()
