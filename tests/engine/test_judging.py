@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import engine
+from engine import verdicts
 from engine.judging import sign_patterns, triangle_samples
 from engine.keep import kept_triangles
 from tests.support import box_mesh, cad_pairs, load_mesh, normalised, rotation, uv_sphere
@@ -18,8 +19,12 @@ def _fields(*meshes, resolution: int = 128):
 
 
 def _same_both_ways(field) -> list[dict]:
-    """``kept_triangles`` fused and sample by sample, every array equal; the fused result."""
-    fused, general = kept_triangles(field, fused=True), kept_triangles(field, fused=False)
+    """``kept_triangles`` fused and sample by sample, every array equal, each judging from scratch (no verdicts
+    reused); the fused result."""
+    verdicts.forget()
+    fused = kept_triangles(field, fused=True)
+    verdicts.forget()
+    general = kept_triangles(field, fused=False)
     assert len(fused) == len(general) > 0
     for f, g in zip(fused, general, strict=True):
         for key in ("verts", "tris", "parent", "kept", "flip"):
