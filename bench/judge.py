@@ -2,7 +2,8 @@
 ``engine/judging.py``) against the sample-by-sample one, on the CAD pairs, the plate with four bores and bunny ∪ spot
 at voxel = the pair's bounding-box diagonal / 256. Alternating rounds (``bench/paired.py``): median seconds of the
 whole ``kept_triangles`` and of the judge's calls alone (wall, summed over the leaves' threads), process CPU seconds,
-the median per-round ratio with its range, and whether both paths give the same arrays.
+the median per-round ratio with its range, and whether both paths give the same arrays. Every run judges from scratch
+(``verdicts.forget``): a first boolean, not a drag's step.
 
     .venv/bin/python bench/judge.py [--repeat 5] [--cases plate ...]
     AASDF_THREADS=1 .venv/bin/python bench/judge.py   # one thread: the CPU time is the judge's work alone
@@ -22,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 
 import engine  # noqa: E402
 from bench.paired import paired  # noqa: E402
-from engine import keep  # noqa: E402
+from engine import keep, verdicts  # noqa: E402
 from tests.support import cad_pairs, load_mesh, normalised, plate_and_bores  # noqa: E402
 
 OPS = {"UNION": engine.union, "INTERSECT": engine.intersection, "DIFFERENCE": engine.difference}
@@ -53,6 +54,8 @@ class JudgeClock:
 
 
 def run(field, fused: bool, clock: JudgeClock) -> dict:
+    """``kept_triangles`` from scratch (no first-round verdicts of an earlier run reused)."""
+    verdicts.forget()
     clock.seconds = 0.0
     wall, cpu = time.perf_counter(), time.process_time()
     judged = keep.kept_triangles(field, fused=fused)
