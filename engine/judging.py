@@ -118,12 +118,6 @@ def edge_turns(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndar
     return np.sqrt(np.take_along_axis(squared, turn[:, None], axis=1)[:, 0]), turn
 
 
-def longest_first(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """``tris`` with each triangle's corners turned (order kept) so that its longest edge runs from corner 0 to 1."""
-    cols = (np.arange(3)[None, :] + edge_turns(verts, tris)[1][:, None]) % 3
-    return np.take_along_axis(tris, cols, axis=1)
-
-
 def triangle_samples(verts: np.ndarray, tris: np.ndarray, spacing: np.ndarray, device):
     """Points on every triangle no farther than about its ``spacing`` from any of its points: the vertices, and on
     larger triangles rows of points (:func:`_row_samples_kernel`).
@@ -134,7 +128,8 @@ def triangle_samples(verts: np.ndarray, tris: np.ndarray, spacing: np.ndarray, d
         ``(points, first)``: (V + G, 3) float32, the V vertices first, then each triangle's own samples, the (T + 1,)
         int64 offsets of the triangles' own among the G after the vertices.
     """
-    turned = np.ascontiguousarray(longest_first(verts, tris), dtype=np.int32)
+    cols = (np.arange(3)[None, :] + edge_turns(verts, tris)[1][:, None]) % 3  # the longest edge from corner 0 to 1
+    turned = np.ascontiguousarray(np.take_along_axis(tris, cols, axis=1), dtype=np.int32)
     v_wp = wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device)
     t_wp = wp.array(turned, dtype=wp.int32, device=device)
     s_wp = wp.array(np.ascontiguousarray(spacing, dtype=np.float32), dtype=wp.float32, device=device)
@@ -557,15 +552,9 @@ class FusedJudge:
             full_reach = self.band + float(slack.max()) + self.spacing + beyond
         verts_wp = host_view(np.ascontiguousarray(verts, dtype=np.float32), wp.vec3, device)
         self._read_corners(verts_wp, tris, full_reach)
-        pieces = [
-            host_view(np.ascontiguousarray(a, dtype=dtype), wp_dtype, device)
-            for a, dtype, wp_dtype in (
-                (tris, np.int64, wp.int64),
-                (turn, np.int64, wp.int64),
-                (longest, np.float64, wp.float64),
-                (parent, np.int64, wp.int64),
-            )
-        ]
+        pieces = [host_view(np.ascontiguousarray(a, dtype=np.int64), wp.int64, device) for a in (tris, turn)]
+        pieces += [host_view(np.ascontiguousarray(longest, dtype=np.float64), wp.float64, device)]
+        pieces += [host_view(np.ascontiguousarray(parent, dtype=np.int64), wp.int64, device)]
         verdicts = wp.empty(len(tris), dtype=wp.int8, device=device)
         nearest = wp.empty(len(tris), dtype=wp.float32, device=device)
         arrays = [self.codes, self.margins, self.defects_wp, self.side_wp]
