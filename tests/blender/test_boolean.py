@@ -702,6 +702,9 @@ def test_unregister_removes_the_handlers(addon):
     assert addon_handlers() == expected  # once each, not twice
 
 
+# the engine's blend at a fine voxel: its operator path (blend, blend_mode) runs on every Blender in
+# tests/blender/test_field_operations.py::test_a_chamfer_blend_bevels_the_seam
+@pytest.mark.newest_blender
 def test_two_boxes_blended_by_a_quarter_of_their_size_at_voxel_1_256(fresh_cache):
     # "needs about 12.4 GiB (83,226,528 finest nodes)" before: every operand octet grown by the blend's reach; now
     # the blend's zone alone (bench/blends.py: nodes 1.23x the hard union's, peak 1.04x)
