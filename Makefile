@@ -29,8 +29,12 @@ $(STAMP): requirements-dev.txt
 # The whole suite on Blender 5.0 (engine, Blender and packaging tests, including the slow install test), then the
 # Blender tests on 4.2 and 4.5; one worker per core, each taking whole test files (kernels are compiled once first:
 # tests/warm_kernels.py; the older Blenders find them compiled). The older Blenders leave out the tests marked
-# newest_blender: the benchmark's references (5.0's tools) and the batch script's process management (timeouts,
-# kills, reruns, Dask), whose Blender calls the other batch tests make on every version: about a minute each here.
+# newest_blender: the benchmark's references (5.0's tools); the batch script's process management (timeouts, kills,
+# reruns, Dask) and options that only reach the add-on's pipeline (thickness, offset, shell, --keep-faces, objects
+# checked by name), whose Blender calls the other batch tests make on every version; and engine or cache work that
+# only goes through the add-on again (a blend at voxel 1/256, two of the three operations on real meshes, fields placed
+# for moved or duplicated operands, the page pool's limit), whose operator calls other tests make on every version.
+# Every bpy call the add-on and the batch script make is still made on each Blender: about a minute each here.
 PARALLEL := -n auto --dist loadfile
 test: test-main $(OLDER_TESTS)
 

@@ -34,7 +34,16 @@ def spot_pair():
 # ---- results ----
 
 
-@pytest.mark.parametrize("operation", ["UNION", "INTERSECT", "DIFFERENCE"])
+# the other two operations are the engine's alone on an older Blender: the operator takes them in
+# test_difference_is_active_minus_all_others_and_union_is_n_ary and test_operands_are_evaluated_with_their_modifiers
+@pytest.mark.parametrize(
+    "operation",
+    [
+        "UNION",
+        pytest.param("INTERSECT", marks=pytest.mark.newest_blender),
+        pytest.param("DIFFERENCE", marks=pytest.mark.newest_blender),
+    ],
+)
 def test_operation_on_real_meshes_matches_exact_boolean(operation, fresh_cache):
     a, b = spot_pair()
     before = {obj.name: (local_vertices(obj).copy(), np.array(obj.matrix_world)) for obj in (a, b)}
@@ -250,6 +259,10 @@ def test_rerun_with_nothing_changed_reuses_the_boolean_and_its_surface(fresh_cac
     assert cache.last_result() == {}
 
 
+# the cache's placement of fields (keys from the world matrix, resampled operands): the Blender calls (a moved, turned
+# or scaled object's matrix, a moved input building nothing) run on every Blender in
+# test_mirrored_operand_keeps_its_inside, tests/blender/test_operands.py and tests/blender/test_node_tree.py
+@pytest.mark.newest_blender
 def test_moving_turning_or_scaling_an_operand_builds_no_field(fresh_cache):
     a, b = spot_pair()
     select(a, b)
@@ -349,6 +362,10 @@ def test_cache_off_keeps_no_field(fresh_cache):
         prefs.cache_limit_mb = 1024
 
 
+# the engine's page pool against the cache's limit: the pooled bytes are shown and freed on every Blender in
+# tests/blender/test_panel.py::test_sidebar_shows_the_memory_kept_for_the_next_run, the limit set in
+# test_cache_off_keeps_no_field
+@pytest.mark.newest_blender
 def test_pooled_memory_stays_within_what_the_cache_limit_leaves(fresh_cache):
     """The engine keeps freed arrays' pages for the next run only within the cache's memory limit."""
     prefs = preferences.get()
@@ -702,6 +719,9 @@ def test_unregister_removes_the_handlers(addon):
     assert addon_handlers() == expected  # once each, not twice
 
 
+# the engine's blend at a fine voxel: its operator path (blend, blend_mode) runs on every Blender in
+# tests/blender/test_field_operations.py::test_a_chamfer_blend_bevels_the_seam
+@pytest.mark.newest_blender
 def test_two_boxes_blended_by_a_quarter_of_their_size_at_voxel_1_256(fresh_cache):
     # "needs about 12.4 GiB (83,226,528 finest nodes)" before: every operand octet grown by the blend's reach; now
     # the blend's zone alone (bench/blends.py: nodes 1.23x the hard union's, peak 1.04x)

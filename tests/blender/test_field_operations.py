@@ -177,6 +177,9 @@ def rounded_box(r, size=2.0):
     return size**3 + 6 * size**2 * r + 3 * np.pi * size * r**2 + 4 / 3 * np.pi * r**3
 
 
+# the batch script's options over the add-on's pipeline: its Blender calls (.obj read, .ply written, exit status 1)
+# run on every Blender in tests/blender/test_batch.py, thickness, offset and shell through the operators above
+@pytest.mark.newest_blender
 def test_batch_refuses_a_plane_and_offsets_or_shells_one_operand(tmp_path):
     block, sheet = tmp_path / "block.obj", tmp_path / "sheet.obj"
     write_obj(block, *box_mesh(half=(1.0, 1.0, 1.0)))

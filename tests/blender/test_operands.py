@@ -328,6 +328,10 @@ def read_ply(path):
     return merge_vertices(*world_arrays(bpy.context.selected_objects[0]))
 
 
+# the batch script's options over the add-on's operands: its Blender calls run on every Blender in
+# tests/blender/test_batch.py (a .blend's objects, a .ply written) and test_batch_jobs.py (an operand refused),
+# texts and flat objects through the operator in the tests above
+@pytest.mark.newest_blender
 def test_the_batch_script_takes_a_text_and_refuses_a_flat_object_until_it_has_a_thickness(tmp_path):
     block = add_mesh_object("Block", *box_mesh(half=(1.0, 1.0, 1.0)))
     flat_cutter("Flat")
@@ -381,6 +385,9 @@ def exact_ring(cube, balls):
     return exact_boolean("DIFFERENCE", *world_arrays(cube), *cutters)
 
 
+# the cache's keys for duplicates at other scales: the Blender calls (linked duplicates, their scale and matrices)
+# run on every Blender in tests/blender/test_boolean.py::test_duplicates_of_one_geometry_share_one_field
+@pytest.mark.newest_blender
 def test_duplicates_at_one_scale_share_a_field_wherever_a_field_of_the_mesh_was_built(fresh_cache):
     cube, balls = ring_of_duplicates([1.5] * 10)
     balls[0].scale = (1.0, 1.0, 1.0)  # first used at scale 1: its field is cached at that scale
@@ -405,6 +412,7 @@ def test_duplicates_at_one_scale_share_a_field_wherever_a_field_of_the_mesh_was_
     assert pipeline.last_run["fields_built"] == 2
 
 
+@pytest.mark.newest_blender  # as the test above
 def test_duplicates_at_ten_scales_build_a_field_per_ladder_step(fresh_cache):
     scales = [1.05 + 0.05 * k for k in range(10)]  # 1.05 to 1.5: ladder steps 0 to 2 (2^(1/4) apart)
     cube, balls = ring_of_duplicates(scales)

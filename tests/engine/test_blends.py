@@ -16,9 +16,15 @@ H = 1 / 256
 SHIFT = np.array([0.4, 0.3, 0.2])
 
 
-def _box_sdf(p, centre, half):
-    q = np.abs(p - centre) - half
-    return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(-1), 0.0)
+def _box_sdf_slice(xs, ys, z, centre, half: float):
+    """(X, Y) float32 exact distances to the box of ``centre`` and half-size ``half`` on the lattice of ``xs`` by ``ys``
+    at height ``z``: q = |p - centre| - half, |max(q, 0)| + min(max of q, 0), taken axis by axis."""
+    qx, qy, qz = (
+        np.abs(np.asarray(v, np.float32) - np.float32(c)) - np.float32(half)
+        for v, c in zip((xs, ys, z), centre, strict=True)
+    )
+    out = np.maximum(qx, 0.0)[:, None] ** 2 + np.maximum(qy, 0.0)[None, :] ** 2 + np.maximum(qz, 0.0) ** 2
+    return np.sqrt(out) + np.minimum(np.maximum(np.maximum(qx[:, None], qy[None, :]), qz), 0.0)
 
 
 def _blend(a, b, k: float, mode: str):
@@ -31,16 +37,21 @@ def _blend(a, b, k: float, mode: str):
 def _exact_added_volumes(cases, s: float = 1 / 240) -> dict:
     """Per (blend, mode), the volume a blend adds to the two boxes' union, from their exact distances: summed slice by
     slice, the occupancy clamp(1/2 - phi / s) of each cell (exact for planes through a cell; the blend's curvature
-    error is second order) of the blended union less the hard one's."""
+    error is second order) of the blended union less the hard one's. Summed over the cells where a blend can change the
+    occupancy alone: where the hard union's is not 1 (min(a, b) > -s/2), where a blend can bring it above 0 (min(a, b)
+    below k/2 + s: the round blend stays within k/4 below the hard union, the chamfer's (a + b - k)/sqrt(2) is at least
+    (2 min(a, b) - k)/sqrt(2)) and where it departs from min(a, b) at all (|a - b| < k + s); elsewhere both occupancies
+    are the same."""
     reach = max(k for k, _ in cases)
     lo, hi = np.array([-0.4, -0.4, -0.4]) - reach, np.array([0.8, 0.7, 0.6]) + reach
     xs = [np.arange(a + s / 2, b, s, dtype=np.float32) for a, b in zip(lo, hi, strict=True)]
-    x, y = np.meshgrid(xs[0], xs[1], indexing="ij")
     added = dict.fromkeys(cases, 0.0)
     for z in xs[2]:
-        p = np.stack([x, y, np.full_like(x, z)], -1)
-        a, b = _box_sdf(p, 0.0, 0.4), _box_sdf(p, SHIFT.astype(np.float32), 0.4)
-        hard = np.clip(0.5 - np.minimum(a, b) / s, 0.0, 1.0).sum()
+        a, b = (_box_sdf_slice(xs[0], xs[1], z, centre, 0.4) for centre in (np.zeros(3), SHIFT))
+        m = np.minimum(a, b)
+        zone = (m > -s / 2) & (m < reach / 2 + s) & (np.abs(a - b) < reach + s)
+        a, b, m = a[zone], b[zone], m[zone]
+        hard = np.clip(0.5 - m / s, 0.0, 1.0).sum()
         for k, mode in cases:
             added[k, mode] += np.clip(0.5 - _blend(a, b, k, mode) / s, 0.0, 1.0).sum() - hard
     return {case: v * s**3 for case, v in added.items()}

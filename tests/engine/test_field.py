@@ -1,5 +1,6 @@
 """Construction of the adaptive field: accuracy against analytic and exact SDFs, structure, sparsity, validation."""
 
+import functools
 import os
 import threading
 
@@ -19,6 +20,14 @@ RES = 256
 
 def _voxel(verts, res=RES):
     return float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0)) / res)
+
+
+@functools.cache
+def _mesh_field(name: str):
+    """A test mesh and its field at /256 with the default settings, built once for the tests of this file that only
+    read it."""
+    verts, tris = load_mesh(name)
+    return verts, tris, engine.build_field(verts, tris, voxel_size=_voxel(verts))
 
 
 def _points(field, verts, tris, n_uniform=40_000, n_near=20_000, seed=0):
@@ -129,8 +138,7 @@ def test_real_meshes_match_winding_number_sdf(name):
     # point-triangle pairs allow, 576 on the bunny, 19,484 on the beetle). The beetle (holes as large as the car: w
     # within 0.05 of 1/2 at a third of its nodes) measured sign agreement 99.6 % (96.7 % before), far p95 3.3 % (16 %)
     # and near p99 0.47 voxel (1.17).
-    verts, tris = load_mesh(name)
-    field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
+    verts, tris, field = _mesh_field(name)
     pts = sample_points(verts, tris, field.voxel_size, min(20_000, int(4e7 / len(tris))))
     inside = np.abs(winding_numbers(verts, tris, pts)) >= 0.5
     exact = np.where(inside, -1.0, 1.0) * unsigned_distance(verts, tris, pts)
@@ -142,8 +150,7 @@ def test_real_meshes_match_winding_number_sdf(name):
 
 @pytest.mark.parametrize("name", ["stanford-bunny.obj", "teapot.obj", "suzanne.obj"])
 def test_open_meshes_pay_the_winding_number_on_few_nodes(name):
-    verts, tris = load_mesh(name)
-    field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
+    verts, tris, field = _mesh_field(name)
     assert not field.stats["clean_mesh"]
     queries = sum(field.stats["sign_queries"].values())
     assert queries <= 0.2 * field.node_count, (queries, field.node_count)
@@ -167,8 +174,11 @@ def test_closed_meshes_sign_the_finest_level_without_winding_numbers(case):
     # number of a closed mesh changes only across triangles): exact even where shells intersect (winding number 2
     # in the overlap) or nest, and almost no node is left for the winding number.
     shapes = {"overlapping shells": _overlapping_shells, "nested shells": _nested_shells}
-    verts, tris = shapes[case]() if case in shapes else load_mesh(case)
-    field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
+    if case in shapes:
+        verts, tris = shapes[case]()
+        field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
+    else:
+        verts, tris, field = _mesh_field(case)
     assert field.stats["clean_mesh"]
     n0 = field.level_counts[0]
     assert field.stats["sign_queries"][0] <= 0.001 * n0, field.stats["sign_queries"]
@@ -235,8 +245,7 @@ def test_hole_caps_keep_the_winding_number_near_an_integer_outside_them():
 def test_open_meshes_coarse_node_signs_agree_with_the_winding_number(name):
     # coarse signs spread between neighbours only away from the holes' caps, where that is exact; checked against the
     # float64 exact winding numbers (not the fast one the build uses) on a sample of the nodes clear of the surface
-    verts, tris = load_mesh(name)
-    field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
+    verts, tris, field = _mesh_field(name)
     coarse = slice(field.level_counts[0], field.node_count)
     centres = field.node_centers()[coarse].astype(np.float32)
     values = field.values.numpy()[coarse]
@@ -750,8 +759,7 @@ def test_aasdf_threads_caps_the_threads_work_is_split_over(monkeypatch):
 
 @pytest.mark.parametrize("name", ["stanford-bunny.obj", "spot.obj"])
 def test_node_count_is_at_least_8x_below_the_uniform_grid(name):
-    verts, tris = load_mesh(name)
-    field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
+    verts, tris, field = _mesh_field(name)
     uniform = int(np.prod(field.fine_dims))
     assert uniform / field.node_count >= 8.0, (uniform, field.node_count)
 
@@ -995,8 +1003,7 @@ def test_open_meshes_find_the_surface_across_their_holes_before_the_first_build(
     from engine.holes import sign_change_octets
     from tests.support import is_watertight
 
-    verts, tris = load_mesh(name)
-    field = engine.build_field(verts, tris, voxel_size=_voxel(verts))
+    verts, tris, field = _mesh_field(name)
     assert field.stats["sign_refinements"] == 0
     assert len(sign_change_octets(field)) == 0
     values = field.values.numpy()
