@@ -36,7 +36,7 @@ from .judging import MAX_TABLE_LEAVES, FusedJudge, edge_turns, per_triangle_min,
 from .meshcheck import edge_table, weld_positions
 from .parallel import launch_split, run_tasks
 from .refine import merge_kept, restore_whole, straighten_borders
-from .slivers import Splitter
+from .slivers import Splitter, strip_parents
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
 # the seams is joined to them there (the join takes about a voxel of it).
@@ -165,8 +165,8 @@ def _side_at(leaf, points, normals, offset: float) -> np.ndarray:
 @dataclass
 class _Own:
     """What a leaf's own triangles give whatever the other leaves are: their defects (:func:`_own_defects`: the
-    repeated triangles, and a mesh of every defect to measure distances to) and each one's side of the leaf's own
-    field (:func:`_side_at`, half a voxel out)."""
+    repeated triangles, and a mesh of every defect to measure distances to), each one's side of the leaf's own field
+    (:func:`_side_at`, half a voxel out), and which are slivers to split as strips (:func:`.slivers.strip_parents`)."""
 
     values: object  # the leaf field's values array it was read from (the same field: the same array)
     offset: float
@@ -174,6 +174,7 @@ class _Own:
     defects: np.ndarray  # (T,) bool: repeated triangles
     side: np.ndarray  # (T,) int8
     defect_mesh: object  # wp.Mesh or None
+    strips: tuple  # (strip, apex) per triangle
 
 
 # A leaf's own part, kept with its source mesh: an unplaced leaf's source is the same object at every boolean its
@@ -198,7 +199,8 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
             points=wp.array(points, dtype=wp.vec3, device=device),
             indices=wp.array(parts.reshape(-1), dtype=wp.int32, device=device),
         )
-    own = _Own(leaf.values, offset, device, defects, side, defect_mesh)
+    strips = strip_parents(verts, tris, SPLIT_VOXELS * voxel)
+    own = _Own(leaf.values, offset, device, defects, side, defect_mesh, strips)
     _OWN[source] = own
     return own
 
@@ -222,6 +224,7 @@ class _Judge:
         self.crossing = bool((own.side == 0).any())
         self.side_offset = self.band if self.crossing else own.offset
         self.side = own.side  # each source triangle's, at ``side_offset`` when the shell nowhere crosses itself
+        self.strips = own.strips
         self.fused = self._fused() if fused else None
 
     def _fused(self) -> FusedJudge | None:
@@ -389,7 +392,7 @@ def _judge_leaf(field, index: int, source, bvhs: list, fused: bool) -> dict:
     status, flip = _first_round(field, index, judge, verts, tris)
     ends = np.full((len(verts), 2), -1, dtype=np.int64)
     split_edge = SPLIT_VOXELS * field.voxel_size
-    splitter = Splitter(verts, tris, split_edge)
+    splitter = Splitter(verts, tris, split_edge, judge.strips)
     for _ in range(MAX_SPLIT_ROUNDS - 1):
         mark = status == UNKNOWN  # partly keepable and larger than the split size: split, the pieces judged
         if not mark.any():

@@ -212,12 +212,14 @@ def _fanned(tris, parent, base_p, base_v, base_t, source_tris, apex):
 
 class Splitter:
     """A leaf's pieces split round after round (:func:`.refine.split_triangles`), its strip parents' pieces zipped
-    (module docstring). Holds the source triangles' strip flags and apexes and each vertex's source edge (``on``)."""
+    (module docstring). Holds the source triangles' strip flags and apexes (``strips``, when found already: the
+    :func:`strip_parents` of ``source_tris``) and each vertex's source edge (``on``)."""
 
-    def __init__(self, verts: np.ndarray, source_tris: np.ndarray, split_edge: float):
+    def __init__(self, verts: np.ndarray, source_tris: np.ndarray, split_edge: float, strips=None):
         self.source_tris = np.asarray(source_tris, dtype=np.int64)
         self.split_edge = float(split_edge)
-        self.strip, self.apex = strip_parents(verts, self.source_tris, self.split_edge)
+        found = strips if strips is not None else strip_parents(verts, self.source_tris, self.split_edge)
+        self.strip, self.apex = found
         self.on = np.repeat(np.arange(len(verts), dtype=np.int64)[:, None], 2, axis=1)
 
     def split(self, verts, tris, mark, parent, flip, status, ends, unknown: int, dropped: int):
