@@ -36,7 +36,31 @@ def strip_parents(verts: np.ndarray, tris: np.ndarray, split_edge: float) -> tup
     longest = lengths.max(axis=1)
     width = np.linalg.norm(np.cross(e[:, 0], -e[:, 2]), axis=1) / np.maximum(longest, 1e-300)
     strip = (width <= split_edge) & (longest > split_edge) & (longest >= SLIVER_ASPECT * width)
-    return strip, (np.argmin(lengths, axis=1) + 2) % 3
+    apex = (np.argmin(lengths, axis=1) + 2) % 3
+    return _among_strips(tris, strip, apex, len(verts)), apex
+
+
+def _among_strips(tris: np.ndarray, strip: np.ndarray, apex: np.ndarray, n: int) -> np.ndarray:
+    """``strip`` less the slivers whose long edges another triangle shares that is no strip (a sliver alone among a
+    scan's triangles, where the cuts its neighbours take are better as bisection's), until every strip's long edges
+    are shared with strips only (a cylinder's wall, a cap's fan)."""
+    t = np.asarray(tris, dtype=np.int64)
+    a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
+    keys = np.minimum(a, b) * n + np.maximum(a, b)
+    order = np.argsort(keys, kind="stable")
+    starts = np.flatnonzero(np.r_[True, keys[order][1:] != keys[order][:-1]])
+    group = np.empty(len(keys), dtype=np.int64)
+    group[order] = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, len(keys)]))
+    rows = np.arange(len(t))
+    long_edges = np.stack([group.reshape(-1, 3)[rows, apex], group.reshape(-1, 3)[rows, (apex + 2) % 3]], axis=1)
+    face_of = np.repeat(rows, 3)
+    for _ in range(len(t)):
+        all_strip = np.minimum.reduceat(strip[face_of[order]], starts)
+        keep = strip & all_strip[long_edges].all(axis=1)
+        if (keep == strip).all():
+            return keep
+        strip = keep
+    return strip
 
 
 def edge_of_new(on: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

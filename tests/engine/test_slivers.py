@@ -16,12 +16,16 @@ def _area(verts, tris) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
 
 
-def test_slivers_are_thin_long_triangles_with_their_apex_opposite_the_shortest_edge():
-    verts = np.array([[0, 0, 0], [10, 0, 0], [10, 1, 0], [0, 10, 0]], dtype=np.float32)
-    tris = np.array([[0, 1, 2], [0, 1, 3]])
-    strip, apex = strip_parents(verts, tris, split_edge=1.5)
-    assert strip.tolist() == [True, False]  # 1 wide and 10 long; a right triangle 10 by 10
+def test_slivers_are_thin_long_triangles_among_slivers_with_their_apex_opposite_the_shortest_edge():
+    verts = np.array([[0, 0, 0], [10, 0, 0], [10, 1, 0], [0, 10, 0], [20, 0, 0], [20, 1, 0]], dtype=np.float32)
+    alone = np.array([[0, 1, 2], [0, 4, 3]])  # 1 wide and 10 long; a right triangle 20 by 10, no edge shared
+    strip, apex = strip_parents(verts, alone, split_edge=1.5)
+    assert strip.tolist() == [True, False]
     assert apex[0] == 0  # the shortest edge runs from corner 1 to corner 2
+    beside_a_fat_one = np.array([[0, 1, 2], [0, 3, 1]])  # the sliver's long edge 0-1 shared with a fat triangle
+    assert strip_parents(verts, beside_a_fat_one, split_edge=1.5)[0].tolist() == [False, False]
+    side_by_side = np.array([[0, 1, 2], [0, 2, 5]])  # two slivers sharing their long edge 0-2
+    assert strip_parents(verts, side_by_side, split_edge=1.5)[0].tolist() == [True, True]
 
 
 def test_splitting_a_wall_near_a_plane_keeps_a_closed_surface_of_strips():
