@@ -33,17 +33,14 @@ def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long
     n = len(verts)
     rows = np.flatnonzero(split)
     marked_keys = _edges_to_split(verts, t[rows], long_edge)
-    if also is not None and len(also[0]):
+    if also is not None:  # more edges, and triangles that hold them
         marked_keys, rows = np.union1d(marked_keys, also[0]), np.union1d(rows, also[1])
     mids = _midpoints(t, rows, marked_keys, n)
     lo, hi = marked_keys // n, marked_keys % n
     new_verts = (0.5 * (verts[lo].astype(np.float64) + verts[hi].astype(np.float64))).astype(np.float32)
     pattern = (mids >= 0).sum(axis=1)
-    parts, origin = [], []
-
     none = np.flatnonzero(pattern == 0)
-    parts.append(t[none])
-    origin.append(none)
+    parts, origin = [t[none]], [none]
     # one split edge: turned to be edge 0
     one = np.flatnonzero(pattern == 1)
     if len(one):
