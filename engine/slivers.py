@@ -184,13 +184,11 @@ def _zip(p, v, side, t, source_tris, apex):
     last_one, last_two = (_latest_before(side == s, group_start) for s in (FIRST, SECOND))
     e = np.flatnonzero((idx != one) & (idx != two))
     before_one, before_two = np.maximum(last_one[e], one[e]), np.maximum(last_two[e], two[e])
-    is_one = side[e] == FIRST
     # a point of the first edge: (its predecessor, it, the second edge's latest); of the second: (the first edge's
     # latest, it, its predecessor)
     steps = np.stack([v[before_one], v[e], v[before_two]], axis=1)
     apex_of = source_tris[p[start], apex[p[start]]]
     firsts = np.stack([apex_of, v[one[start]], v[two[start]]], axis=1)
-    del is_one
     return np.concatenate([firsts, steps]), np.concatenate([p[start], p[e]])
 
 
