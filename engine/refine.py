@@ -213,10 +213,19 @@ def put_back(tris: np.ndarray, rows: np.ndarray, aside) -> tuple[np.ndarray, np.
     return tris[order], rows[order]
 
 
+def edge_of_new(on: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(M, 2) int64 the source edge (low, high source vertex) each new midpoint of a segment ``lo``-``hi`` lies on, -1
+    inside a source triangle (``on``: the older vertices' own; (v, v) for a source vertex)."""
+    vals = np.sort(np.concatenate([on[lo], on[hi]], axis=1), axis=1)
+    distinct = 1 + (vals[:, 1:] != vals[:, :-1]).sum(axis=1)
+    edge = (vals[:, 0] >= 0) & (distinct == 2)
+    return np.where(edge[:, None], vals[:, [0, 3]], -1)
+
+
 def _edge_of_vertices(ends: np.ndarray, n_source: int) -> np.ndarray:
     """(V, 2) int64 the source edge (low, high source vertex) each vertex lies on: (v, v) for a source vertex, -1
-    for one inside a source triangle. Midpoints follow their edges' ends, resolved in as many passes as splits
-    nested."""
+    for one inside a source triangle. Midpoints follow their edges' ends (:func:`edge_of_new`), resolved in as many
+    passes as splits nested."""
     on = np.full((len(ends), 2), -2, dtype=np.int64)
     on[:n_source] = np.arange(n_source)[:, None]
     mids = np.arange(n_source, len(ends))
@@ -224,13 +233,9 @@ def _edge_of_vertices(ends: np.ndarray, n_source: int) -> np.ndarray:
         todo = mids[on[mids, 0] == -2]
         if not len(todo):
             break
-        a, b = on[ends[todo, 0]], on[ends[todo, 1]]
-        ready = (a[:, 0] != -2) & (b[:, 0] != -2)
-        todo, a, b = todo[ready], a[ready], b[ready]
-        vals = np.sort(np.concatenate([a, b], axis=1), axis=1)
-        distinct = 1 + (vals[:, 1:] != vals[:, :-1]).sum(axis=1)
-        edge = (vals[:, 0] >= 0) & (distinct == 2)
-        on[todo] = np.where(edge[:, None], vals[:, [0, 3]], -1)
+        ready = (on[ends[todo, 0], 0] != -2) & (on[ends[todo, 1], 0] != -2)
+        todo = todo[ready]
+        on[todo] = edge_of_new(on, ends[todo, 0], ends[todo, 1])
     return on
 
 

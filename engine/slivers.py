@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .refine import split_triangles
+from .refine import edge_of_new, split_triangles
 
 # A source triangle is cut as a strip when no wider than the split size and at least this many times as long.
 SLIVER_ASPECT = 3.0
@@ -61,15 +61,6 @@ def _among_strips(tris: np.ndarray, strip: np.ndarray, apex: np.ndarray, n: int)
             return keep
         strip = keep
     return strip
-
-
-def edge_of_new(on: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """(M, 2) int64 the source edge (low, high source vertex) each new midpoint of a segment ``lo``-``hi`` lies on, -1
-    inside a source triangle (``on``: the older vertices' own; (v, v) for a source vertex)."""
-    vals = np.sort(np.concatenate([on[lo], on[hi]], axis=1), axis=1)
-    distinct = 1 + (vals[:, 1:] != vals[:, :-1]).sum(axis=1)
-    edge = (vals[:, 0] >= 0) & (distinct == 2)
-    return np.where(edge[:, None], vals[:, [0, 3]], -1)
 
 
 def _places(verts, tris, parent, on, source_tris, apex) -> tuple[np.ndarray, np.ndarray]:
