@@ -27,6 +27,7 @@ from .keep import kept_triangles
 from .meshcheck import compacted, position_groups
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
+from .rejoin import joined_again
 from .slits import fill_slits
 from .twins import zip_twins
 from .zipper import (
@@ -109,15 +110,28 @@ def _corner_barycentrics(verts, tris, source_tris) -> np.ndarray:
     return bary
 
 
-def _drop_pinched(tris: np.ndarray, alive: np.ndarray, n_verts: int, rounds: int = 8) -> np.ndarray:
-    """``alive`` less the faces at vertices where two border loops touch, until none does."""
+def _drop_pinched(tris: np.ndarray, alive: np.ndarray, n_verts: int, was=None, rounds: int = 8) -> tuple:
+    """``alive`` less the faces at vertices where two border loops touch, until none does, and the border halves of
+    what is left. ``was``: ``(mask, halves)`` a superset of ``alive`` and its border, known already (a closed surface:
+    every face, no border); then, as after each round, only the faces at its border's and at the dropped faces'
+    vertices are read (a border edge's ends are such vertices, and any face listing its reverse touches them)."""
+    halves = border_halves(tris[alive], n_verts) if was is None else _border_after(tris, alive, n_verts, *was)
     for _ in range(rounds):
-        halves = border_halves(tris[alive], n_verts)
         bad = pinched(halves, n_verts)
         if not bad.any():
             break
-        alive = alive & ~bad[tris].any(axis=1)
-    return alive
+        before, alive = alive, alive & ~bad[tris].any(axis=1)
+        halves = _border_after(tris, alive, n_verts, before, halves)
+    return alive, halves
+
+
+def _border_after(tris, alive, n_verts: int, before, halves) -> np.ndarray:
+    """The border halves of ``tris[alive]``, those of a superset ``before`` of it being ``halves``."""
+    hot = np.zeros(n_verts, dtype=bool)
+    hot[halves.ravel()] = True
+    hot[tris[before & ~alive].ravel()] = True
+    near = border_halves(tris[alive & hot[tris].any(axis=1)], n_verts)
+    return near[hot[near].all(axis=1)]
 
 
 def _loops(halves: np.ndarray, n: int, reverse: bool):
@@ -175,18 +189,18 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
     k_tris, v_tris = kept["tris"], np.asarray(voxel_tris, dtype=np.int64) + n_k
     n = len(points)
     # kept faces that list an edge another kept face lists the same way (pieces that overlap) are given up
-    k_alive = _drop_pinched(k_tris, ~_doubled_faces(k_tris, n), n)
-    v_gone = np.zeros(len(v_tris), dtype=bool)
-    candidates = np.arange(n_k, n)
+    k_alive, k_border = _drop_pinched(k_tris, ~_doubled_faces(k_tris, n), n)
+    judged_alive = k_alive
+    v_gone, closed = np.zeros(len(v_tris), dtype=bool), np.ones(len(v_tris), dtype=bool)
+    candidates, trouble = np.arange(n_k, n), []
     for rounds in range(MAX_ROUNDS):
-        k_border = border_halves(k_tris[k_alive], n)
         # kept faces are only given up: a vertex not over them stays so
         over = vertices_over(points, k_tris[k_alive], k_border, candidates, voxel, device)
         candidates = np.flatnonzero(over)
         v_alive = ~v_gone & ~over[v_tris].any(axis=1)
-        v_alive = _drop_pinched(v_tris, v_alive, n)
+        v_alive, v_border = _drop_pinched(v_tris, v_alive, n, (closed, np.zeros((0, 2), np.int64)))
         k_loops = _loops(k_border, n, reverse=False)
-        v_loops = _loops(border_halves(v_tris[v_alive], n), n, reverse=True)
+        v_loops = _loops(v_border, n, reverse=True)
         k_loops, paired, strips, stretched, far = _paired_strips(
             points, (k_tris[k_alive], k_border), k_loops, v_loops, n_k, field
         )
@@ -205,13 +219,31 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
             kept_failed, whole = _loops_at_unpaired_edges(joined, k_loops, v_loops, paired["pairs"], n), False
             if not len(kept_failed):
                 break
-        k_alive, v_gone = _give_up(
-            points, (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone), kept_failed,
+        k_alive, k_border, v_gone, at = _give_up(
+            points, (k_tris, k_alive, k_border, k_loops), (v_tris, v_alive, v_loops, v_gone), kept_failed,
             paired["voxel_unpaired"], whole, PAIR_VOXELS * voxel, device, far,
         )  # fmt: skip
+        trouble.append(at)
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
-    return _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
+    surface = _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
+    return {**surface, "trouble": _trouble(points, k_tris[judged_alive & ~k_alive], trouble, voxel)}
+
+
+# A join's failures worth a second judge are at kept faces given up with an edge longer than this many voxels (the
+# second keeps a few voxels about them clear, :mod:`.rejoin`: smaller faces lose no more in the first).
+LARGE_FACE_VOXELS = 3.0
+
+
+def _trouble(points, given_up, at: list, voxel: float) -> dict:
+    """The vertices kept faces were given up ``at`` (per round) that are corners of a large face given up: ``points``
+    (P, 3), and the large faces' ``area``."""
+    corners = points[given_up].astype(np.float64)
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    large = longest > LARGE_FACE_VOXELS * voxel
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    at = np.intersect1d(np.concatenate([np.zeros(0, np.int64), *at]), given_up[large])
+    return {"points": points[at], "area": float(area[large].sum())}
 
 
 def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, field):
@@ -299,10 +331,12 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
     a few rings of faces deep, see :func:`_widened`), and the kept vertices ``far`` where a strip stretched the faces
     at them. A voxel loop that
     failed gives up its piece of the voxel surface when that is an island (a tenth of the voxel faces or less, left
-    over kept faces), else the kept faces near it. Returns the kept faces' and the given-up voxel faces' masks."""
-    (k_tris, k_alive, k_loops), (v_tris, v_alive, v_loops, v_gone) = kept, voxel
+    over kept faces), else the kept faces near it. Returns the kept faces' mask and border halves, the given-up voxel
+    faces' mask, and the kept vertices the faces were given up at (before the widening)."""
+    (k_tris, k_alive, k_border, k_loops), (v_tris, v_alive, v_loops, v_gone) = kept, voxel
     n = len(points)
     at_failed = np.isin(k_loops[2], kept_failed)
+    failed_at = at_failed.copy()
     if whole:
         at_failed = _widened(k_tris, k_alive, at_failed, n, device)
     if len(voxel_failed):
@@ -315,12 +349,12 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
         open_loop = np.flatnonzero(at_loop & ~np.isin(pieces, islands))
         members = k_loops[1]
         near = nearest_points(points[members], points[open_loop], reach, device)
-        at_failed[members[near[near >= 0]]] = True
-    at_failed[far] = True
-    alive = _drop_pinched(k_tris, k_alive & ~at_failed[k_tris].any(axis=1), n)
+        at_failed[members[near[near >= 0]]] = failed_at[members[near[near >= 0]]] = True
+    at_failed[far] = failed_at[far] = True
+    alive, border = _drop_pinched(k_tris, k_alive & ~at_failed[k_tris].any(axis=1), n, (k_alive, k_border))
     if (alive != k_alive).any():  # the voxel faces over the kept ones given up come back: judged afresh
         v_gone = np.zeros_like(v_gone)
-    return alive, v_gone
+    return alive, border, v_gone, np.flatnonzero(failed_at)
 
 
 # Kept pieces of at most this many faces are fragments: a loop of theirs failing twice gives them up whole.
@@ -440,7 +474,9 @@ def kept_surface(field, *, sharp: bool | None = None, adaptivity: float = 0.0, r
     if field.expression is None or not len(tris):
         surface = voxel_surface_only(verts, tris, "not a boolean of meshes")
     else:
-        surface = coarsened(field, hybrid_surface(field, verts, tris, found["judged"]), adaptivity, regions)
+        surface = hybrid_surface(field, verts, tris, found["judged"])
+        surface = joined_again(field, surface, lambda judged: hybrid_surface(field, verts, tris, judged))
+        surface = coarsened(field, surface, adaptivity, regions)
     quads = int(np.count_nonzero(np.asarray(sizes) == 4))  # the first, rows 2q and 2q + 1 of ``tris``
     surface["voxel_face"] = np.where(surface["voxel_face"] < 2 * quads, surface["voxel_face"], -1)
     return quad_halves_first(surface)

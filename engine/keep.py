@@ -51,6 +51,8 @@ MAX_SPLIT_ROUNDS = 24
 STRAIGHT_VOXELS = 1e-4
 # A triangle's own field is read this many voxels in front of and behind it (its sign must change there).
 SIDE_VOXELS = 0.5
+# Points to keep clear of (where a join gave kept faces up) count as defects this many voxels across (octahedra).
+AVOID_VOXELS = 1.0
 
 AXES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float32)
 UNKNOWN, KEPT, DROPPED = 0, 1, 2
@@ -205,10 +207,31 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     return own
 
 
-class _Judge:
-    """The checks of one leaf's triangles against the rest of the expression (see the module docstring)."""
+def _octahedra(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """An octahedron of ``radius`` about each point, as ``(verts, tris)``: a point kept clear of by a BVH's
+    distances (they skip flat triangles), farther by at most ``radius`` than the point itself."""
+    corners = (points[:, None, :] + radius * AXES[None]).reshape(-1, 3).astype(np.float32)
+    faces = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+    return corners, (faces[None] + 6 * np.arange(len(points))[:, None, None]).reshape(-1, 3).astype(np.int32)
 
-    def __init__(self, field, index: int, source, bvhs: list, fused: bool = True):
+
+def _defects_and(defect_mesh, avoid, radius: float, device):
+    """A mesh of a leaf's defects (``defect_mesh``, or None) and of octahedra about the ``avoid`` points."""
+    points, parts = _octahedra(np.asarray(avoid, dtype=np.float32).reshape(-1, 3), radius)
+    if defect_mesh is not None:
+        own_points, own_parts = defect_mesh.points.numpy(), defect_mesh.indices.numpy().reshape(-1, 3)
+        points, parts = np.concatenate([own_points, points]), np.concatenate([own_parts, parts + len(own_points)])
+    return wp.Mesh(
+        points=wp.array(points, dtype=wp.vec3, device=device),
+        indices=wp.array(parts.reshape(-1).astype(np.int32), dtype=wp.int32, device=device),
+    )
+
+
+class _Judge:
+    """The checks of one leaf's triangles against the rest of the expression (see the module docstring); ``avoid``
+    (P, 3) points count as its own defects (``AVOID_VOXELS`` across)."""
+
+    def __init__(self, field, index: int, source, bvhs: list, fused: bool = True, avoid=None):
         self.expression = field.expression
         self.leaves = leaves(self.expression)
         self.index, self.device, voxel = index, field.device, field.voxel_size
@@ -218,6 +241,9 @@ class _Judge:
         self.bvhs = bvhs  # per leaf, :func:`leaf_bvh`
         own = _own_part(self.leaves[index], source, voxel, self.device)
         self.tris, self.defects, self.defect_mesh = source.tris.astype(np.int64), own.defects, own.defect_mesh
+        self.avoiding = avoid is not None and len(avoid) > 0
+        if self.avoiding:
+            self.defect_mesh = _defects_and(own.defect_mesh, avoid, 0.5 * AVOID_VOXELS * voxel, self.device)
         # a shell with internal faces (overlapping or self-intersecting) is read a band away on both sides, so that
         # kept faces stay a band from where it crosses itself; a clean one half a voxel away (a band would reach
         # across its own concave creases)
@@ -351,13 +377,15 @@ class _Judge:
         return crosses, crosses & (outside < 0)
 
 
-def kept_triangles(field, *, fused: bool = True) -> list[dict]:
+def kept_triangles(field, *, fused: bool = True, avoid=None) -> list[dict]:
     """The triangles of each mesh leaf of a boolean's expression that are its surface (see the module docstring).
 
     Args:
         field: An unplaced :class:`.field.AdaptiveField` with an ``expression`` (a boolean result).
         fused: Judge in two launches a round where that applies (:mod:`.judging`); False: always sample by sample
             (the same verdicts, slower).
+        avoid: Optional (P, 3) points (the field's frame) every leaf keeps clear of as of a defect of its own (where
+            a join gave kept faces up: their far parts are kept as pieces); no verdict is reused or kept for reuse.
     Returns:
         One dict per mesh leaf: ``field_id``, ``source`` (the placed :class:`.sources.SourceMesh`); the leaf's mesh
         after splitting: ``verts`` (V', 3) float32 (the source's V first, midpoints after), ``tris`` (T', 3) int64,
@@ -378,16 +406,16 @@ def kept_triangles(field, *, fused: bool = True) -> list[dict]:
 
     def task(k):
         i, field_id, source = judged[k]
-        out[k] = {"field_id": field_id, "source": source, **_judge_leaf(field, i, source, bvhs, fused)}
+        out[k] = {"field_id": field_id, "source": source, **_judge_leaf(field, i, source, bvhs, fused, avoid)}
 
     run_tasks([lambda k=k: task(k) for k in range(len(judged))], field.device)
     return out
 
 
-def _judge_leaf(field, index: int, source, bvhs: list, fused: bool) -> dict:
+def _judge_leaf(field, index: int, source, bvhs: list, fused: bool, avoid) -> dict:
     """Judge a leaf's triangles, splitting the partly keepable ones until they are small (module docstring)."""
     verts, tris = source.verts, source.tris.astype(np.int64)
-    judge = _Judge(field, index, source, bvhs, fused)
+    judge = _Judge(field, index, source, bvhs, fused, avoid)
     parent = np.arange(len(tris), dtype=np.int64)
     status, flip = _first_round(field, index, judge, verts, tris)
     ends = np.full((len(verts), 2), -1, dtype=np.int64)
@@ -428,7 +456,7 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     slack = judge.slack_of(longest)
     exact = [bvh is not None for bvh in judge.bvhs]
     setting = (field.expression, index, field.voxel_size, judge.band)
-    found = verdicts.reused(unplaced, *setting, slack, exact)
+    found = None if judge.avoiding else verdicts.reused(unplaced, *setting, slack, exact)
     status, flip, margin = (
         found if found is not None else (np.zeros(len(tris), np.int8), np.zeros(len(tris), bool), np.zeros(len(tris)))
     )
@@ -444,5 +472,6 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     record = status.copy()
     dropped_by_distance = (status[todo] == DROPPED) & ~judge.found["signs_only"] & ~judge.found["own_only"]
     record[todo[dropped_by_distance]] = UNKNOWN
-    verdicts.remember(unplaced, *setting, record, flip, margin)
+    if not judge.avoiding:
+        verdicts.remember(unplaced, *setting, record, flip, margin)
     return status, flip

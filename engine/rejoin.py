@@ -1,0 +1,55 @@
+"""A second join where the first gave kept faces up: the operands' triangles judged again, kept clear of the places
+where it failed, so that only a band about each is new surface.
+
+The join (:func:`.hybrid.hybrid_surface`) gives up whole kept faces where it cannot pair a border loop: every kept
+face at the loop, or near a voxel loop that has no kept loop to pair with (a hole a voxel across in the voxel surface
+where a thin part or a crossing of a shell with itself leaves the two surfaces a voxel apart). On a scan the faces are
+smaller than a voxel and little is lost; on a low-polygon mesh one face can be tens of voxels across (Suzanne's are
+about five voxels wide), and giving a handful up takes a tenth of its surface. Here the vertices the faces were given
+up at become defects of every operand for a second judge (:func:`.keep.kept_triangles`' ``avoid``): the faces there
+are split like faces at a seam, their far parts kept, and the new surface about those places is a band wide, as along
+a seam; the second join is kept when it keeps more area than the first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .keep import kept_triangles
+
+
+def kept_area(surface: dict) -> float:
+    """The area of a joined surface's kept faces."""
+    verts = np.asarray(surface["verts"], dtype=np.float64)
+    tris = np.asarray(surface["tris"])[surface["kept"]]
+    a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
+    return 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+
+
+def joined_again(field, surface: dict, join) -> dict:
+    """``surface`` (a :func:`.hybrid.hybrid_surface` of ``field``, with its ``trouble``), or, where its join gave up
+    large kept faces of ``REJOIN_SHARE`` of its kept area or more, the surface ``join(judged)`` makes of the triangles
+    judged again clear of the points they were given up at (and of the next join's, while each keeps more area than
+    the last, up to ``REJOINS`` times) that keeps the most area (``stats["rejoined"]``: how many points its judge
+    kept clear of, 0 for the first surface)."""
+    best_area = kept_area(surface)
+    trouble = surface.pop("trouble")
+    best, avoid = surface, np.zeros((0, 3), np.float32)
+    best["stats"]["rejoined"] = 0
+    for _ in range(REJOINS):
+        if trouble["area"] < REJOIN_SHARE * best_area:
+            break
+        avoid = np.concatenate([avoid, trouble["points"]])
+        surface = join(kept_triangles(field, avoid=avoid))
+        trouble = surface.pop("trouble")
+        if surface["stats"]["kept_fallback"] or kept_area(surface) <= best_area:
+            break
+        best, best_area = surface, kept_area(surface)
+        best["stats"]["rejoined"] = len(avoid)
+    return best
+
+
+# Joins after the first, each judging the triangles clear of every earlier one's trouble.
+REJOINS = 3
+# A join is tried again where the large kept faces it gave up are at least this share of the area it kept.
+REJOIN_SHARE = 0.003
