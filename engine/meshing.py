@@ -12,11 +12,12 @@ import numpy as np
 import warp as wp
 
 from .adaptive import simplify
-from .dual import contour_dual
+from .dual import CELL_MARGIN, contour_dual
 from .extract import extract_octree_level, extract_surface, lattice_cubes, octree_level_cubes
 from .marching import empty_mesh
 from .quadric import crease_edges
 from .quads import merge_pairs, triangulate
+from .reached import pulled_back
 
 
 def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, adaptivity: float, regions=None) -> dict:
@@ -89,7 +90,10 @@ def sharp_surface(field, iso: float) -> dict:
         verts, tris = empty_mesh()
         return {"verts": verts, "tris": tris, "ranks": np.zeros(0, np.int32), "whole": np.zeros(0, np.uint8)}
     corners, shifted = cubes["cube_corners"], cubes["shifted"]
-    return contour_dual(corners, shifted, codes, proj, origin=field.origin, spacing=field.voxel_size, iso=iso)
+    surface = contour_dual(corners, shifted, codes, proj, origin=field.origin, spacing=field.voxel_size, iso=iso)
+    if iso != 0.0:  # (an offset's vertices lie off every operand's surface)
+        return surface
+    return pulled_back(field, surface, corners.numpy(), codes.numpy(), CELL_MARGIN)
 
 
 def marching_cubes(field, iso: float):
