@@ -33,15 +33,15 @@ def joined_again(field, surface: dict, join) -> dict:
     the last, up to ``REJOINS`` times) that keeps the most area (``stats["rejoined"]``: how many points its judge
     kept clear of, 0 for the first surface)."""
     best_area = kept_area(surface)
-    trouble = surface.pop("trouble")
+    trouble = surface.pop("trouble", NO_TROUBLE)
     best, avoid = surface, np.zeros((0, 3), np.float32)
     best["stats"]["rejoined"] = 0
     for _ in range(REJOINS):
-        if trouble["area"] < REJOIN_SHARE * best_area:
+        if not len(trouble["points"]) or trouble["area"] < REJOIN_SHARE * best_area:
             break
         avoid = np.concatenate([avoid, trouble["points"]])
         surface = join(kept_triangles(field, avoid=avoid))
-        trouble = surface.pop("trouble")
+        trouble = surface.pop("trouble", NO_TROUBLE)
         if surface["stats"]["kept_fallback"] or kept_area(surface) <= best_area:
             break
         best, best_area = surface, kept_area(surface)
@@ -49,6 +49,8 @@ def joined_again(field, surface: dict, join) -> dict:
     return best
 
 
+# What a join that fell back to the voxel surface alone reports.
+NO_TROUBLE = {"points": np.zeros((0, 3), np.float32), "area": 0.0}
 # Joins after the first, each judging the triangles clear of every earlier one's trouble.
 REJOINS = 3
 # A join is tried again where the large kept faces it gave up are at least this share of the area it kept.

@@ -54,3 +54,18 @@ def test_a_low_polygon_mesh_keeps_the_large_faces_its_first_join_gave_up(monkeyp
     monkeypatch.setattr(rejoin, "REJOINS", 0)
     first, _ = _kept_share("suzanne")
     assert share - first >= 0.035, (first, share)
+
+
+def test_a_join_that_falls_back_is_not_tried_again(monkeypatch):
+    # a join that cannot pair its loops gives the voxel surface alone, with no trouble to keep clear of
+    from engine import hybrid
+
+    monkeypatch.setattr(hybrid, "MAX_ROUNDS", 0)
+    cube = box_mesh(half=(0.3, 0.3, 0.3))
+    ball = normalised(uv_sphere(1.0, rings=12, segments=24), center=(0.3, 0.3, 0.3), diagonal=0.3)
+    v = np.concatenate([cube[0], ball[0]])
+    h = float(np.linalg.norm(v.max(0) - v.min(0))) / 128.0
+    fa, fb = engine.build_fields([cube, ball], voxel_size=h, field_ids=[0, 1])
+    s = engine.union(fa, fb).kept_surface()
+    assert s["stats"]["kept_fallback"] == "loops left unpaired" and s["stats"]["rejoined"] == 0
+    assert not s["kept"].any() and engine.surface_edges(s["tris"], len(s["verts"])) is not None
