@@ -41,9 +41,9 @@ def _kept_share(name: str) -> tuple[float, dict]:
     return float((unsigned_distance(s["verts"], kept, points[should]) < 1e-5).mean()), s
 
 
-# measured at /256, share: teapot 0.991 (a mesh of patches repeating their border vertices), beetle 0.948 (296 open
+# measured at /256, share: teapot 0.988 (a mesh of patches repeating their border vertices), beetle 0.936 (296 open
 # and 47 non-manifold edges); bounds three times the shortfall below (Suzanne: tests/engine/test_rejoin.py)
-@pytest.mark.parametrize(("name", "least"), [("teapot", 0.973), ("beetle", 0.844)])
+@pytest.mark.parametrize(("name", "least"), [("teapot", 0.964), ("beetle", 0.808)])
 def test_messy_meshes_keep_most_of_what_should_be_kept(name, least):
     share, s = _kept_share(name)
     assert share >= least, share
