@@ -26,7 +26,7 @@ import numpy as np
 import warp as wp
 
 from .adaptive import tolerance
-from .meshcheck import compacted
+from .meshcheck import any_corner, compacted
 from .parallel import launch_split
 from .refine import position_hash
 
@@ -233,8 +233,8 @@ def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, gro
         return tris, np.arange(len(tris), dtype=np.int64)
     # only the faces at a movable vertex or its neighbours are read (the fans of both ends of an edge)
     near = np.zeros(n, dtype=bool)
-    near[tris[movable[tris].any(axis=1)].ravel()] = True
-    rows = np.flatnonzero(near[tris].any(axis=1))
+    near[tris[any_corner(movable, tris)].ravel()] = True
+    rows = np.flatnonzero(any_corner(near, tris))
     rest = np.setdiff1d(np.arange(len(tris)), rows)
     tris, rest_tris = np.ascontiguousarray(tris[rows]), tris[rest]
     pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
@@ -269,7 +269,7 @@ def _near(tris: np.ndarray, targets: np.ndarray, n: int) -> np.ndarray:
     mark = np.zeros(n, dtype=bool)
     mark[targets] = True
     for _ in range(2):
-        mark[tris[mark[tris].any(axis=1)].ravel()] = True
+        mark[tris[any_corner(mark, tris)].ravel()] = True
     return mark
 
 

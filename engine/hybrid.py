@@ -24,7 +24,7 @@ from .coarsen import coarsened
 from .edgehash import KeyCounts, directed_edges
 from .edges import surface_edges
 from .keep import kept_triangles
-from .meshcheck import compacted, position_groups
+from .meshcheck import all_corners, any_corner, compacted, position_groups
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .rejoin import joined_again
@@ -120,7 +120,7 @@ def _drop_pinched(tris: np.ndarray, alive: np.ndarray, n_verts: int, was=None, r
         bad = pinched(halves, n_verts)
         if not bad.any():
             break
-        before, alive = alive, alive & ~bad[tris].any(axis=1)
+        before, alive = alive, alive & ~any_corner(bad, tris)
         halves = _border_after(tris, alive, n_verts, before, halves)
     return alive, halves
 
@@ -130,8 +130,8 @@ def _border_after(tris, alive, n_verts: int, before, halves) -> np.ndarray:
     hot = np.zeros(n_verts, dtype=bool)
     hot[halves.ravel()] = True
     hot[tris[before & ~alive].ravel()] = True
-    near = border_halves(tris[alive & hot[tris].any(axis=1)], n_verts)
-    return near[hot[near].all(axis=1)]
+    near = border_halves(tris[alive & any_corner(hot, tris)], n_verts)
+    return near[all_corners(hot, near)]
 
 
 def _loops(halves: np.ndarray, n: int, reverse: bool):
@@ -197,7 +197,7 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
         # kept faces are only given up: a vertex not over them stays so
         over = vertices_over(points, k_tris[k_alive], k_border, candidates, voxel, device)
         candidates = np.flatnonzero(over)
-        v_alive = ~v_gone & ~over[v_tris].any(axis=1)
+        v_alive = ~v_gone & ~any_corner(over, v_tris)
         v_alive, v_border = _drop_pinched(v_tris, v_alive, n, (closed, np.zeros((0, 2), np.int64)))
         k_loops = _loops(k_border, n, reverse=False)
         v_loops = _loops(v_border, n, reverse=True)
@@ -345,13 +345,13 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
         sizes = np.bincount(pieces[v_tris[v_alive][:, 0]], minlength=n)
         failed = np.unique(pieces[at_loop])
         islands = failed[sizes[failed] * 10 <= int(v_alive.sum())]
-        v_gone = v_gone | (np.isin(pieces, islands)[v_tris].any(axis=1) & v_alive)
+        v_gone = v_gone | (any_corner(np.isin(pieces, islands), v_tris) & v_alive)
         open_loop = np.flatnonzero(at_loop & ~np.isin(pieces, islands))
         members = k_loops[1]
         near = nearest_points(points[members], points[open_loop], reach, device)
         at_failed[members[near[near >= 0]]] = failed_at[members[near[near >= 0]]] = True
     at_failed[far] = failed_at[far] = True
-    alive, border = _drop_pinched(k_tris, k_alive & ~at_failed[k_tris].any(axis=1), n, (k_alive, k_border))
+    alive, border = _drop_pinched(k_tris, k_alive & ~any_corner(at_failed, k_tris), n, (k_alive, k_border))
     if (alive != k_alive).any():  # the voxel faces over the kept ones given up come back: judged afresh
         v_gone = np.zeros_like(v_gone)
     return alive, border, v_gone, np.flatnonzero(failed_at)
@@ -373,7 +373,7 @@ def _widened(tris, alive, at: np.ndarray, n: int, device, rings: int = WIDEN_RIN
     grown = at | np.isin(pieces, small)
     for _ in range(rings):
         reached = np.zeros(n, dtype=bool)
-        reached[faces[grown[faces].any(axis=1)].ravel()] = True
+        reached[faces[any_corner(grown, faces)].ravel()] = True
         grown |= reached
     return grown
 

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .meshcheck import any_corner
+
 
 # ---- splitting ----
 def split_triangles(verts: np.ndarray, tris: np.ndarray, split: np.ndarray, long_edge: float = np.inf, also=None):
@@ -135,7 +137,7 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
     # unchanged, are set aside
     near = np.zeros(len(ends), dtype=bool)
     near[tris[keep].ravel()] = True
-    rows = np.flatnonzero(near[tris].any(axis=1))
+    rows = np.flatnonzero(any_corner(near, tris))
     tris, keep, aside = tris[rows], keep[rows], set_aside(tris, rows)
     v64 = verts.astype(np.float64)
     ranks = position_ranks(verts)
@@ -328,7 +330,7 @@ def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: floa
     # collapse could join to): the others are set aside, unchanged
     near = np.zeros(len(verts), dtype=bool)
     near[tris[keep & (tris >= n_source).any(axis=1)].ravel()] = True
-    read = np.flatnonzero(keep & near[tris].any(axis=1))
+    read = np.flatnonzero(keep & any_corner(near, tris))
     if not len(read):
         return tris, np.arange(len(tris), dtype=np.int64)
     aside = set_aside(tris, read)
