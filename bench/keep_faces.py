@@ -32,12 +32,14 @@ RESOLUTION = 256
 
 
 def cases() -> dict:
-    """name -> (operation, a, b, closed): CAD pairs, a pair of scans, and open scans with a ball."""
+    """name -> (operation, a, b, closed): CAD pairs, a pair of scans, open scans with a ball, and a low-polygon mesh
+    that passes through itself with a ball."""
     cad = cad_pairs()
     ball = normalised(uv_sphere(1.0), center=(0.2, 0.2, 0.2), diagonal=0.6)
     spot = normalised(load_mesh("spot.obj"))
     bunny = normalised(load_mesh("stanford-bunny.obj"), center=(0.25, 0.0, 0.0), diagonal=0.8)
     beetle = normalised(load_mesh("beetle.obj"))
+    suzanne = normalised(load_mesh("suzanne.obj"))
     return {
         "plate - 4 bores": ("DIFFERENCE", *plate_and_bores(), True),
         "cube - bore": (*cad["cube - bore"], True),
@@ -46,6 +48,7 @@ def cases() -> dict:
         "hex prism & sphere": (*cad["hex prism & sphere"], True),
         "bunny ∪ spot (open scan)": ("UNION", bunny, spot, False),
         "beetle ∪ ball (open scan)": ("UNION", beetle, ball, False),
+        "Suzanne ∪ ball (crosses itself)": ("UNION", suzanne, ball, False),
     }
 
 
