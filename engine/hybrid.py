@@ -475,7 +475,8 @@ def kept_surface(field, *, sharp: bool | None = None, adaptivity: float = 0.0, r
         surface = voxel_surface_only(verts, tris, "not a boolean of meshes")
     else:
         surface = hybrid_surface(field, verts, tris, found["judged"])
-        surface = joined_again(field, surface, lambda judged: hybrid_surface(field, verts, tris, judged))
+        join = lambda judged: hybrid_surface(field, verts, tris, judged)  # noqa: E731
+        surface = joined_again(field, surface, join, found["judged"])
         surface = coarsened(field, surface, adaptivity, regions)
     quads = int(np.count_nonzero(np.asarray(sizes) == 4))  # the first, rows 2q and 2q + 1 of ``tris``
     surface["voxel_face"] = np.where(surface["voxel_face"] < 2 * quads, surface["voxel_face"], -1)

@@ -377,7 +377,7 @@ class _Judge:
         return crosses, crosses & (outside < 0)
 
 
-def kept_triangles(field, *, fused: bool = True, avoid=None) -> list[dict]:
+def kept_triangles(field, *, fused: bool = True, avoid=None, previous: list | None = None) -> list[dict]:
     """The triangles of each mesh leaf of a boolean's expression that are its surface (see the module docstring).
 
     Args:
@@ -386,6 +386,8 @@ def kept_triangles(field, *, fused: bool = True, avoid=None) -> list[dict]:
             (the same verdicts, slower).
         avoid: Optional (P, 3) points (the field's frame) every leaf keeps clear of as of a defect of its own (where
             a join gave kept faces up: their far parts are kept as pieces); no verdict is reused or kept for reuse.
+        previous: This function's answer for the same field with fewer ``avoid`` points: a leaf none of the points
+            comes near enough to change a verdict of is taken from it, not judged again.
     Returns:
         One dict per mesh leaf: ``field_id``, ``source`` (the placed :class:`.sources.SourceMesh`); the leaf's mesh
         after splitting: ``verts`` (V', 3) float32 (the source's V first, midpoints after), ``tris`` (T', 3) int64,
@@ -406,10 +408,27 @@ def kept_triangles(field, *, fused: bool = True, avoid=None) -> list[dict]:
 
     def task(k):
         i, field_id, source = judged[k]
+        if previous is not None and not _avoid_reaches(field, source, avoid):
+            out[k] = next(leaf for leaf in previous if leaf["field_id"] == field_id)
+            return
         out[k] = {"field_id": field_id, "source": source, **_judge_leaf(field, i, source, bvhs, fused, avoid)}
 
     run_tasks([lambda k=k: task(k) for k in range(len(judged))], field.device)
     return out
+
+
+def _avoid_reaches(field, source, avoid) -> bool:
+    """Whether a point of ``avoid`` lies near enough to the (world) ``source`` triangles to change a verdict: within
+    the band, the slack of its largest triangle and an avoided point's radius (``AVOID_VOXELS``)."""
+    if avoid is None or not len(avoid):
+        return False
+    voxel = field.voxel_size
+    corners = source.verts[source.tris].astype(np.float64)
+    longest = float(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max())
+    slack = max(longest / 8.0, SAMPLE_VOXELS * voxel) * (SLACK_VOXELS / SAMPLE_VOXELS)
+    reach = BAND_VOXELS * voxel + widest_blend(field.expression) + slack + (0.5 * AVOID_VOXELS + 1.0) * voxel
+    near = mesh_distances(source.bvh(field.device), np.asarray(avoid, dtype=np.float32), reach, field.device)
+    return bool((near < reach).any())
 
 
 def _judge_leaf(field, index: int, source, bvhs: list, fused: bool, avoid) -> dict:

@@ -27,12 +27,12 @@ def kept_area(surface: dict) -> float:
     return 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
 
 
-def joined_again(field, surface: dict, join) -> dict:
-    """``surface`` (a :func:`.hybrid.hybrid_surface` of ``field``, with its ``trouble``), or, where its join gave up
-    large kept faces of ``REJOIN_SHARE`` of its kept area or more, the surface ``join(judged)`` makes of the triangles
-    judged again clear of the points they were given up at (and of the next join's, while each keeps more area than
-    the last and gives up ``AGAIN_SHARE``, up to ``REJOINS`` times) that keeps the most area (``stats["rejoined"]``:
-    how many points its judge kept clear of, 0 for the first surface)."""
+def joined_again(field, surface: dict, join, judged: list) -> dict:
+    """``surface`` (a :func:`.hybrid.hybrid_surface` of ``field``'s ``judged`` triangles, with its ``trouble``), or,
+    where its join gave up large kept faces of ``REJOIN_SHARE`` of its kept area or more, the surface ``join(judged)``
+    makes of the triangles judged again clear of the points they were given up at (and of the next join's, while
+    each keeps more area than the last and gives up ``AGAIN_SHARE``, up to ``REJOINS`` times) that keeps the most area
+    (``stats["rejoined"]``: how many points its judge kept clear of, 0 for the first surface)."""
     best_area = kept_area(surface)
     trouble = surface.pop("trouble", NO_TROUBLE)
     best, avoid = surface, np.zeros((0, 3), np.float32)
@@ -41,7 +41,8 @@ def joined_again(field, surface: dict, join) -> dict:
         if not len(trouble["points"]) or trouble["area"] < (AGAIN_SHARE if k else REJOIN_SHARE) * best_area:
             break
         avoid = np.concatenate([avoid, trouble["points"]])
-        surface = join(kept_triangles(field, avoid=avoid))
+        judged = kept_triangles(field, avoid=avoid, previous=judged)  # a leaf far from them as it was
+        surface = join(judged)
         trouble = surface.pop("trouble", NO_TROUBLE)
         if surface["stats"]["kept_fallback"] or kept_area(surface) <= best_area:
             break

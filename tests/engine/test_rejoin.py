@@ -29,17 +29,24 @@ def test_a_point_to_avoid_costs_a_large_face_only_a_disc_about_it():
     h = float(np.linalg.norm(v.max(0) - v.min(0))) / 256.0
     fa, fb = engine.build_fields([cube, ball], voxel_size=h, field_ids=[0, 1])
     result = engine.union(fa, fb)
-    whole = _kept_faces(kept_triangles(result), 0)
+    first = kept_triangles(result)
+    whole = _kept_faces(first, 0)
     assert abs(mesh_area(*whole) - mesh_area(*cube)) < 1e-6
 
     point = np.array([[0.05, -0.04, 0.3]], dtype=np.float32)
-    verts, tris = _kept_faces(kept_triangles(result, avoid=point), 0)
+    avoided = kept_triangles(result, avoid=point)
+    verts, tris = _kept_faces(avoided, 0)
     nearest = float(unsigned_distance(verts, tris, point)[0]) / h
     top = verts[tris].mean(axis=1)[:, 2] > 0.3 - 1e-6
     lost = 1.0 - mesh_area(verts, tris[top]) / 0.36
     assert 1.0 < nearest < 6.7, nearest  # clear of it by the band at least, and not much more
     assert 0.0 < lost < 0.0054, lost
     assert abs(mesh_area(verts, tris[~top]) - 5 * 0.36) < 1e-6  # the other five faces stay whole
+    # judged again from the first answer: the ball, far from the point, is taken from it; the cube as judged afresh
+    again = kept_triangles(result, avoid=point, previous=first)
+    assert again[1] is first[1] and again[0] is not first[0]
+    for key in ("verts", "tris", "parent", "kept", "flip"):
+        np.testing.assert_array_equal(again[0][key], avoided[0][key])
 
 
 def test_a_low_polygon_mesh_keeps_the_large_faces_its_first_join_gave_up(monkeypatch):
