@@ -314,11 +314,16 @@ def extract(
     Returns:
         ``{"verts": (V,3) float32, "tris": (F,3) int32, "creases": (E,2) int32 vertex pairs of the edges
         reconstructed as creases, "edges": the surface's edge cache (see ``bridge.result_mesh``), "quads": how many
-        quads the first triangles pair into}``.
+        quads the first triangles pair into, "warnings": what the user is told (kept faces that could not be
+        joined)}``.
     """
     if "verts" not in surface and keep_faces:
         kept = field.kept_surface(sharp=sharp, adaptivity=adaptivity if sharp else 0.0, regions=seams)
         surface["verts"], surface["tris"], surface["quads"] = kept["verts"], kept["tris"], kept.get("quads", 0)
+        if kept["stats"].get("join_failed"):
+            why = kept["stats"]["kept_fallback"]
+            surface["warnings"] = [f"Keep Original Faces: the seams could not be joined to the kept faces ({why}); "
+                                   "the whole result is remeshed"]  # fmt: skip
         folds = runtime.engine().fold_edges(kept["verts"], kept["tris"]) if sharp else None
         surface["creases"] = np.zeros((0, 2), dtype=np.int32) if folds is None else folds
         surface["kept"] = kept
@@ -337,7 +342,7 @@ def extract(
         if found is not None:
             edges["edge_verts"], edges["corner_edge"] = found[0].ravel(), found[1]
     result = {"verts": surface["verts"], "tris": surface["tris"], "creases": surface["creases"], "edges": edges}
-    return {**result, "quads": surface.get("quads", 0)}
+    return {**result, "quads": surface.get("quads", 0), "warnings": list(surface.get("warnings", []))}
 
 
 def carry_over(field, surface: dict, operands) -> dict:
@@ -435,7 +440,6 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
     objects = [item.obj for item in inputs]
     timer = Timer()
     progress = Progress(context, len(objects) + 5)
-    warnings = []
     try:
         with timer.stage("read"):
             progress.step(f"reading {len(objects)} objects")
@@ -471,13 +475,8 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             triangles = len(result["tris"])  # as many as Blender's triangulation of what is written
             result = quads_back(whole_faces_back(result, surface, read, output), output)
         with timer.stage("write"):
-            progress.step("writing the result")
-            obj = write(context, result, output)
-            if keyed is not None:
-                unchanged.remember(obj, keyed)
-            if output.debug_volume:
-                progress.step("writing the debug volume")
-                warnings += debug_volume(context, field, obj, output)
+            obj = _written(context, result, output, keyed, field, progress)
+            warnings = result["warnings"] + (debug_volume(context, field, obj, output) if output.debug_volume else [])
             _hide_inputs(objects, output)
     finally:
         progress.end()
@@ -543,6 +542,17 @@ def result_key(context, read, inputs, steps, settings: FieldSettings, voxel_size
     return unchanged.inputs_key(
         read, thickness, steps, options, sharp=output.sharp, keep_faces=output.keep_faces, adaptivity=output.adaptivity
     )
+
+
+def _written(context, result: dict, output: Output, keyed, field, progress):
+    """The result object written (remembered as showing ``keyed`` inputs), with the debug volume's step told."""
+    progress.step("writing the result")
+    obj = write(context, result, output)
+    if keyed is not None:
+        unchanged.remember(obj, keyed)
+    if output.debug_volume:
+        progress.step("writing the debug volume")
+    return obj
 
 
 def _record(

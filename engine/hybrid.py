@@ -397,8 +397,9 @@ def _strips(points, k_loops, v_loops, pairs, reach: float, n_kept: int, device):
     return strips, pairs[np.maximum.reduceat(gaps, first) > reach, 0], far[far < n_kept].astype(np.int64)
 
 
-def voxel_surface_only(verts, tris, why: str) -> dict:
-    """A voxel surface as :func:`hybrid_surface` returns one, nothing kept (``why`` in its stats)."""
+def voxel_surface_only(verts, tris, why: str, failed: bool = True) -> dict:
+    """A voxel surface as :func:`hybrid_surface` returns one, nothing kept (``why`` in its stats, and whether a join
+    ``failed``: ``stats["join_failed"]``, False where there was nothing to keep)."""
     n_f, n_v = len(tris), len(verts)
     return {
         "verts": np.asarray(verts, dtype=np.float32),
@@ -410,7 +411,7 @@ def voxel_surface_only(verts, tris, why: str) -> dict:
         "vertex_id": np.full(n_v, -1, np.int32),
         "corner_bary": np.zeros((n_f, 3, 3), np.float32),
         "voxel_face": np.arange(n_f, dtype=np.int64),
-        "stats": {"kept_faces": 0, "new_faces": n_f, "kept_fallback": why},
+        "stats": {"kept_faces": 0, "new_faces": n_f, "kept_fallback": why, "join_failed": failed},
     }
 
 
@@ -440,7 +441,8 @@ def _assemble(points, kept, k_tris, k_alive, voxel, strips, voxel_verts, voxel_t
         "vertex_id": vertex_id,
         "corner_bary": np.concatenate([kept["corner_bary"][k_alive], np.zeros((n_new, 3, 3), np.float32)]),
         "voxel_face": np.r_[np.full(n_kept, -1), v_rows, np.full(len(strips), -1)].astype(np.int64),
-        "stats": {"kept_faces": n_kept, "new_faces": n_new, "strip_faces": len(strips), "kept_fallback": ""},
+        "stats": {"kept_faces": n_kept, "new_faces": n_new, "strip_faces": len(strips)}
+        | {"kept_fallback": "", "join_failed": False},
     }
 
 
@@ -472,7 +474,7 @@ def kept_surface(field, *, sharp: bool | None = None, adaptivity: float = 0.0, r
     verts, faces, sizes = found["mesh"]
     tris = triangulate(faces, sizes)
     if field.expression is None or not len(tris):
-        surface = voxel_surface_only(verts, tris, "not a boolean of meshes")
+        surface = voxel_surface_only(verts, tris, "not a boolean of meshes", failed=False)
     else:
         surface = hybrid_surface(field, verts, tris, found["judged"])
         join = lambda judged: hybrid_surface(field, verts, tris, judged)  # noqa: E731

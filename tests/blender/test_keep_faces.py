@@ -2,6 +2,8 @@
 cut leaves alone come back as the box's own quads, every attribute equal to the input's; the result is closed and
 matches the exact boolean; switched off, the result is remeshed everywhere."""
 
+import importlib
+
 import bpy
 import numpy as np
 import pytest
@@ -125,6 +127,21 @@ def test_keep_faces_off_remeshes(fresh_cache):
     assert set(np.unique(totals)) == {3, 4} and np.mean(totals == 4) > 0.8
     assert np.sum(totals - 2) > 20_000
     assert bpy.context.scene.aasdf.keep_faces  # on by default
+
+
+def test_kept_faces_that_cannot_be_joined_are_reported_and_the_result_remeshed(fresh_cache, monkeypatch):
+    # a join allowed no rounds cannot pair its loops: the user is told, and gets the closed remeshed surface
+    from aasdf.aasdf_addon import runtime
+    from aasdf.operators import boolean as boolean_op
+
+    monkeypatch.setattr(importlib.import_module(runtime.engine().__name__ + ".hybrid"), "MAX_ROUNDS", 0)
+    box, cutter = scene()
+    select(box, cutter)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=RESOLUTION, hide_inputs=False) == {"FINISHED"}
+    (warning,) = boolean_op.last_run["warnings"]
+    assert warning.startswith("Keep Original Faces: the seams could not be joined") and "remeshed" in warning
+    mesh = bpy.context.active_object.data
+    assert len(mesh.polygons) > 3000 and is_watertight(world_arrays(bpy.context.active_object)[1])
 
 
 def test_kept_edges_keep_their_seams_sharpness_and_creases(fresh_cache):
