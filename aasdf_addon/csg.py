@@ -223,5 +223,7 @@ def evaluate_tree(context, tree) -> list[dict]:
             raise engine.AasdfError(f"{out.name}: {err}") from err
         if numbers.get("empty"):
             out.message = "The result is empty: the previous result is kept"
+        elif numbers.get("warnings"):
+            out.message = "; ".join(numbers["warnings"])
         runs.append(numbers)
     return runs

@@ -308,6 +308,27 @@ def test_empty_result_is_a_warning_and_keeps_the_previous_result(evaluated):
     assert len(bpy.data.objects["Result"].data.vertices) == vertices
 
 
+def test_kept_faces_that_cannot_be_joined_are_told_on_the_output(evaluated, monkeypatch):
+    # a join allowed no rounds: the output's message says so, its object is the remeshed result; fixed, it clears
+    import importlib
+
+    from aasdf.aasdf_addon import runtime
+
+    tree, result, (a, *_) = evaluated
+    hybrid = importlib.import_module(runtime.engine().__name__ + ".hybrid")
+    monkeypatch.setattr(hybrid, "MAX_ROUNDS", 0)
+    a.location.x += 0.05
+    bpy.context.view_layer.update()
+    assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
+    assert tree.nodes["Output"].message.startswith("Keep Original Faces: the seams could not be joined")
+    assert is_watertight(world_arrays(bpy.data.objects["Result"])[1])
+    monkeypatch.undo()
+    a.location.x -= 0.05
+    bpy.context.view_layer.update()
+    assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
+    assert tree.nodes["Output"].message == ""
+
+
 def test_evaluate_tree_reports_unknown_trees_and_polls_for_one():
     with pytest.raises(RuntimeError, match="Create an AASDF CSG tree first"):
         bpy.ops.aasdf.evaluate_tree(tree="Nope")
