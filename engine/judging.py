@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .jumps import JumpSpheres, near_sphere
 from .parallel import host_view, launch_split
 from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_proj, sample_linear
 
@@ -171,7 +172,11 @@ class LeafArg:
     translation: wp.vec3d
     scale: wp.float64
     value_scale: float  # its values times this (the placement's scale), as ``field.sample`` gives them
-    jumps: int  # 1: a field that jumps (an open mesh's, across its holes): read a band away along the axes too
+    jumps: int  # 1: a field that jumps (an open mesh's, across its holes): read a band away along the axes too,
+    # where its value is below two bands or near the spheres about its defects (:mod:`.jumps`; ``jumps_anywhere``)
+    jump_bvh: wp.uint64
+    jump_spheres: wp.array[wp.vec4]
+    jumps_anywhere: int
     weight: int  # its sign's place in a sign pattern: 3^(its rank among the other leaves)
 
 
@@ -253,6 +258,14 @@ def _jumps_near(judge: JudgeArg, leaf: LeafArg, x: wp.vec3, sign: int) -> bool:
 
 
 @wp.func
+def _may_jump(judge: JudgeArg, leaf: LeafArg, x: wp.vec3, near: float) -> bool:
+    """Whether the leaf's sign may change within a band of ``x`` (``near`` away from its surface) other than across
+    its surface: below two bands (a value overstates a distance by a fraction of a voxel), or near its defects."""
+    reach = 2.0 * judge.probe
+    return near < reach or leaf.jumps_anywhere != 0 or near_sphere(leaf.jump_bvh, leaf.jump_spheres, x, reach)
+
+
+@wp.func
 def _reading(judge: JudgeArg, x: wp.vec3, reach: float) -> wp.vec2:
     """(the other leaves' sign pattern, the nearest of their surfaces and the leaf's defects, up to ``reach``) at
     ``x``. A sign is 0 where the value is 0: on a leaf with a BVH, where its surface passes through ``x``. The signs
@@ -271,8 +284,9 @@ def _reading(judge: JudgeArg, x: wp.vec3, reach: float) -> wp.vec2:
         else:
             near = wp.abs(wp.clamp(value, -far, far))
             sign = _sign_digit(value)
-        if leaf.jumps != 0 and near > judge.probe and _jumps_near(judge, leaf, x, sign):
-            near = 0.0
+        if leaf.jumps != 0 and near > judge.probe and _may_jump(judge, leaf, x, near):
+            if _jumps_near(judge, leaf, x, sign):
+                near = 0.0
         margin = wp.min(margin, near)
         code += sign * leaf.weight
     if judge.defect_mesh != wp.uint64(0):
@@ -471,8 +485,9 @@ def _judge_pieces_kernel(
 
 
 # ---- the fused judge ----
-def leaf_arg(field, bvh, rank: int) -> LeafArg:
-    """A :class:`LeafArg` of an other leaf ``field`` (its ``bvh`` or None), the ``rank``-th of the other leaves."""
+def leaf_arg(field, bvh, rank: int, jumps=None) -> LeafArg:
+    """A :class:`LeafArg` of an other leaf ``field`` (its ``bvh`` or None, where its field jumps: ``jumps``, a
+    :class:`.jumps.JumpSpheres` or None), the ``rank``-th of the other leaves."""
     arg = LeafArg()
     arg.field = field.arg()
     arg.mesh = wp.uint64(bvh.id if bvh is not None else 0)
@@ -482,7 +497,9 @@ def leaf_arg(field, bvh, rank: int) -> LeafArg:
     arg.translation = wp.vec3d(*(placed.translation if placed is not None else np.zeros(3)))
     arg.scale = wp.float64(placed.scale if placed is not None else 1.0)
     arg.value_scale = float(np.float32(placed.scale)) if placed is not None else 1.0
-    arg.jumps = int(not field.stats.get("continuous", field.stats.get("clean_mesh", False)))
+    arg.jumps = int(jumps is not None)
+    spheres = jumps if jumps is not None else JumpSpheres(np.zeros((0, 4), np.float32), field.device)
+    arg.jump_bvh, arg.jump_spheres, arg.jumps_anywhere = spheres.bvh_id, spheres.spheres, int(spheres.anywhere)
     arg.weight = 3**rank
     return arg
 
@@ -494,7 +511,7 @@ def sign_patterns(n: int) -> np.ndarray:
 
 @dataclass
 class FusedJudge:
-    """The fused path of a leaf's judge (module docstring): the other leaves (``(field, bvh)`` pairs), the table of
+    """The fused path of a leaf's judge (module docstring): the other leaves (``(field, bvh, jumps)``), the table of
     what the expression makes of their signs (:func:`sign_patterns`' rows: 1 it crosses with the leaf, 2 and the
     result's inside is on the leaf's outside), the leaf's own defects' mesh (or None), the band, the least spacing
     of samples, its slack and the slack per unit of spacing, and per source triangle whether it is a defect and its
@@ -516,7 +533,7 @@ class FusedJudge:
     device: object
 
     def __post_init__(self):
-        self.leaf_args = [leaf_arg(field, bvh, k) for k, (field, bvh) in enumerate(self.others)]  # kept alive
+        self.leaf_args = [leaf_arg(*other[:2], k, other[2]) for k, other in enumerate(self.others)]  # kept alive
         arg = JudgeArg()
         arg.leaves = wp.array(self.leaf_args, dtype=LeafArg, device=self.device)
         arg.defect_mesh = wp.uint64(self.defect_mesh.id if self.defect_mesh is not None else 0)

@@ -33,6 +33,7 @@ import warp as wp
 from . import verdicts
 from .expression import evaluate_signs, leaves, widest_blend
 from .judging import MAX_TABLE_LEAVES, FusedJudge, edge_turns, per_triangle_min, sign_patterns, triangle_samples
+from .jumps import JumpSpheres, jump_spheres
 from .meshcheck import edge_table, weld_positions
 from .parallel import launch_split, run_tasks
 from .refine import merge_kept, restore_whole, straighten_borders
@@ -111,13 +112,25 @@ def _leaf_values(field, bvh, points: np.ndarray, reach: float, device) -> np.nda
     return np.copysign(mesh_distances(bvh, points, reach, device), values).astype(np.float32)
 
 
-def _margin(field, bvh, points, band: float, reach: float, device) -> tuple[np.ndarray, np.ndarray]:
+def leaf_jumps(field, device):
+    """Where a leaf's field may jump (:mod:`.jumps`): None for a field that does not (a clean mesh's, a continuous
+    one), else the spheres about its mesh's defect edges (a leaf without a mesh: anywhere)."""
+    if field.stats.get("continuous", field.stats.get("clean_mesh", False)):
+        return None
+    if not mesh_leaf(field):
+        return JumpSpheres(None, device)
+    return JumpSpheres(jump_spheres(next(iter(field.world_sources().values()))), device)
+
+
+def _margin(field, bvh, jumps, points, band: float, reach: float, device) -> tuple[np.ndarray, np.ndarray]:
     """Per sample: how far the leaf's surface is (up to ``reach``), and the leaf's sign there. A field with jumps (an
-    open mesh's, across its holes) counts as near (0) wherever its sign changes a band away along an axis."""
+    open mesh's, across its holes; :func:`leaf_jumps`) counts as near (0) wherever its sign changes a band away along
+    an axis, read where its value is below two bands or near its defects."""
     values = _leaf_values(field, bvh, points, reach, device)
     margin = np.abs(values)
-    if not field.stats.get("continuous", field.stats.get("clean_mesh", False)):
+    if jumps is not None:
         rows = np.flatnonzero(margin > band)
+        rows = rows[(margin[rows] < 2.0 * band) | jumps.near(points[rows], 2.0 * band)]
         around = (points[rows][:, None, :] + band * AXES[None]).reshape(-1, 3)
         signs = np.sign(field.sample(around, method="linear")).reshape(-1, 6)
         margin[rows[~(signs == np.sign(values[rows])[:, None]).all(axis=1)]] = 0.0
@@ -231,14 +244,14 @@ class _Judge:
     """The checks of one leaf's triangles against the rest of the expression (see the module docstring); ``avoid``
     (P, 3) points count as its own defects (``AVOID_VOXELS`` across)."""
 
-    def __init__(self, field, index: int, source, bvhs: list, fused: bool = True, avoid=None):
+    def __init__(self, field, index: int, source, reads: tuple, fused: bool = True, avoid=None):
         self.expression = field.expression
         self.leaves = leaves(self.expression)
         self.index, self.device, voxel = index, field.device, field.voxel_size
         self.band = BAND_VOXELS * voxel + widest_blend(self.expression)
         self.spacing, self.slack = SAMPLE_VOXELS * voxel, SLACK_VOXELS * voxel
         self.tiny = 1e-3 * voxel
-        self.bvhs = bvhs  # per leaf, :func:`leaf_bvh`
+        self.bvhs, self.jumps = reads  # per leaf, :func:`leaf_bvh` and :func:`leaf_jumps`
         own = _own_part(self.leaves[index], source, voxel, self.device)
         self.tris, self.defects, self.defect_mesh = source.tris.astype(np.int64), own.defects, own.defect_mesh
         self.avoiding = avoid is not None and len(avoid) > 0
@@ -265,7 +278,7 @@ class _Judge:
             signs[j] = patterns[:, k]
         crosses, flips = self._crossing(signs)
         return FusedJudge(
-            others=[(self.leaves[j], self.bvhs[j]) for j in others],
+            others=[(self.leaves[j], self.bvhs[j], self.jumps[j]) for j in others],
             table=crosses.astype(np.int8) | (flips.astype(np.int8) << 1),
             defect_mesh=self.defect_mesh,
             band=self.band,
@@ -317,7 +330,7 @@ class _Judge:
             if j == self.index:
                 signs.append(np.full(len(points), -1, np.int8))
                 continue
-            near, sign = _margin(other, self.bvhs[j], points, self.band, reach, self.device)
+            near, sign = _margin(other, self.bvhs[j], self.jumps[j], points, self.band, reach, self.device)
             margin = np.minimum(margin, near)
             low, minus_high = per_triangle_min(np.stack([sign, -sign], axis=1), local, len(used), first).T
             same &= low == -minus_high
@@ -398,7 +411,8 @@ def kept_triangles(field, *, fused: bool = True, avoid=None, previous: list | No
     if expression is None:
         return []
     every = leaves(expression)
-    bvhs = [leaf_bvh(leaf, field.device) for leaf in every]  # built once, before the leaves are judged side by side
+    # built once, before the leaves are judged side by side
+    reads = ([leaf_bvh(leaf, field.device) for leaf in every], [leaf_jumps(leaf, field.device) for leaf in every])
     judged = [
         (i, *next(iter(leaf.world_sources().items())))
         for i, leaf in enumerate(every)
@@ -411,7 +425,7 @@ def kept_triangles(field, *, fused: bool = True, avoid=None, previous: list | No
         if previous is not None and not _avoid_reaches(field, source, avoid):
             out[k] = next(leaf for leaf in previous if leaf["field_id"] == field_id)
             return
-        out[k] = {"field_id": field_id, "source": source, **_judge_leaf(field, i, source, bvhs, fused, avoid)}
+        out[k] = {"field_id": field_id, "source": source, **_judge_leaf(field, i, source, reads, fused, avoid)}
 
     run_tasks([lambda k=k: task(k) for k in range(len(judged))], field.device)
     return out
@@ -431,10 +445,10 @@ def _avoid_reaches(field, source, avoid) -> bool:
     return bool((near < reach).any())
 
 
-def _judge_leaf(field, index: int, source, bvhs: list, fused: bool, avoid) -> dict:
+def _judge_leaf(field, index: int, source, reads: tuple, fused: bool, avoid) -> dict:
     """Judge a leaf's triangles, splitting the partly keepable ones until they are small (module docstring)."""
     verts, tris = source.verts, source.tris.astype(np.int64)
-    judge = _Judge(field, index, source, bvhs, fused, avoid)
+    judge = _Judge(field, index, source, reads, fused, avoid)
     parent = np.arange(len(tris), dtype=np.int64)
     status, flip = _first_round(field, index, judge, verts, tris)
     ends = np.full((len(verts), 2), -1, dtype=np.int64)

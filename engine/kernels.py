@@ -51,6 +51,7 @@ ENGINE_MODULES = (
     "slits",
     "coarsen",
     "edgehash",
+    "jumps",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.

@@ -1,0 +1,105 @@
+"""Where the field of a messy mesh may change sign away from its surface: about its open, non-manifold and
+misoriented edges.
+
+A mesh field's sign is its generalised winding number's (inside where |w| >= 1/2). Across a closed surface w changes
+by one; off the surface it is harmonic, so it crosses 1/2 in free space only where the surface is not a closed chain:
+over the mesh's holes and about edges where it is non-manifold or turns its orientation (:mod:`.holes` caps the holes
+there). A boolean's judge (:mod:`.keep`, :mod:`.judging`) reads such a field's sign a band away along the axes at
+every sample to find those jumps, which costs six more readings a sample; it needs them only where a jump can be:
+within the field's reach of the surface's own crossing (where the value is below two bands: the value overstates a
+distance by a fraction of a voxel), or near the defect edges. Here the defect edges (vertices at one position taken
+as one) are grouped into their connected pieces, each bounded by a sphere about its vertices' mean, widened by half
+its radius (the cap a hole's loop spans bulges little past it); the judge probes a sample farther than two bands
+from every sphere only where its value is below two bands.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import numpy as np
+import warp as wp
+
+from .components import connected_components
+from .meshcheck import edge_table, weld_positions
+
+# A piece's sphere is its vertices' farthest distance from their mean, times this.
+WIDEN = 1.5
+
+_SPHERES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # source -> spheres
+
+
+def jump_spheres(source) -> np.ndarray:
+    """(H, 4) float32 ``(centre, radius)`` of spheres holding every defect edge of ``source`` (a :class:`.sources.
+    SourceMesh`, world) and the caps they may bound; empty for a mesh whose every edge has two faces listing it once
+    each way. Kept with the source."""
+    found = _SPHERES.get(source)
+    if found is not None:
+        return found
+    verts, tris = weld_positions(source.verts, source.tris)
+    edges = edge_table(np.asarray(tris, dtype=np.int32), len(verts))
+    bad = edges["pairs"][(edges["faces"] != 2) | (edges["forward"] != 1)].astype(np.int64)
+    spheres = np.zeros((0, 4), np.float32)
+    if len(bad):
+        piece = connected_components(len(verts), bad[:, 0], bad[:, 1])
+        used = np.unique(bad.ravel())
+        labels, at = np.unique(piece[used], return_inverse=True)
+        points = np.asarray(verts, dtype=np.float64)[used]
+        centre = np.zeros((len(labels), 3))
+        np.add.at(centre, at, points)
+        centre /= np.bincount(at, minlength=len(labels))[:, None]
+        radius = np.zeros(len(labels))
+        np.maximum.at(radius, at, np.linalg.norm(points - centre[at], axis=1))
+        spheres = np.c_[centre, WIDEN * radius].astype(np.float32)
+    _SPHERES[source] = spheres
+    return spheres
+
+
+class JumpSpheres:
+    """:func:`jump_spheres` of a mesh on a device, with a BVH of their boxes (``bvh_id`` 0: none); ``spheres`` None:
+    a field that may jump anywhere (no mesh to bound where: ``anywhere``)."""
+
+    def __init__(self, spheres: np.ndarray | None, device):
+        self.anywhere = spheres is None
+        spheres = np.zeros((0, 4), np.float32) if spheres is None else spheres
+        self.spheres = wp.array(np.asarray(spheres, np.float32).reshape(-1, 4), dtype=wp.vec4, device=device)
+        self.bvh, self.bvh_id = None, wp.uint64(0)
+        if len(spheres):
+            centre, radius = spheres[:, :3], spheres[:, 3:]
+            lowers = wp.array(centre - radius, dtype=wp.vec3, device=device)
+            uppers = wp.array(centre + radius, dtype=wp.vec3, device=device)
+            self.bvh = wp.Bvh(lowers, uppers)
+            self.bvh_id = wp.uint64(self.bvh.id)
+
+    def near(self, points: np.ndarray, reach: float) -> np.ndarray:
+        """(N,) bool: the points within ``reach`` of a sphere (all of them: ``anywhere``)."""
+        if self.anywhere:
+            return np.ones(len(points), dtype=bool)
+        out = wp.zeros(len(points), dtype=wp.uint8, device=self.spheres.device)
+        if len(points) and int(self.bvh_id) != 0:
+            pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=self.spheres.device)
+            wp.launch(_near_kernel, len(points), inputs=[self.bvh_id, self.spheres, pts, float(reach), out],
+                      device=self.spheres.device)  # fmt: skip
+        return out.numpy().astype(bool)
+
+
+@wp.func
+def near_sphere(bvh: wp.uint64, spheres: wp.array[wp.vec4], x: wp.vec3, reach: float) -> bool:
+    """Whether ``x`` lies within ``reach`` of one of the spheres (``bvh`` of their boxes, 0: there are none)."""
+    near = bool(False)
+    if bvh != wp.uint64(0):
+        query = wp.bvh_query_aabb(bvh, x - wp.vec3(reach), x + wp.vec3(reach))
+        k = int(0)
+        while wp.bvh_query_next(query, k):
+            s = spheres[k]
+            if wp.length(x - wp.vec3(s[0], s[1], s[2])) < s[3] + reach:
+                near = True
+    return near
+
+
+@wp.kernel(enable_backward=False)
+def _near_kernel(
+    bvh: wp.uint64, spheres: wp.array[wp.vec4], points: wp.array[wp.vec3], reach: float, out: wp.array[wp.uint8]
+):
+    i = wp.tid()
+    out[i] = wp.where(near_sphere(bvh, spheres, points[i], reach), wp.uint8(1), wp.uint8(0))
