@@ -19,11 +19,12 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
 from __future__ import annotations
 
 import numpy as np
+import warp as wp
 
 from .coarsen import coarsened
 from .edgehash import KeyCounts, directed_edges
 from .edges import surface_edges
-from .keep import kept_triangles
+from .keep import kept_triangles, mesh_distances
 from .meshcheck import all_corners, any_corner, compacted, position_groups
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
@@ -34,6 +35,7 @@ from .zipper import (
     LOCAL_ROUNDS,
     MAX_ROUNDS,
     NEAR_VOXELS,
+    OVER_VOXELS,
     PAIR_VOXELS,
     STRETCH_VOXELS,
     WIDEN_RINGS,
@@ -192,11 +194,8 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
     k_alive, k_border = _drop_pinched(k_tris, ~_doubled_faces(k_tris, n), n)
     judged_alive = k_alive
     v_gone, closed = np.zeros(len(v_tris), dtype=bool), np.ones(len(v_tris), dtype=bool)
-    candidates, trouble = np.arange(n_k, n), []
+    over, trouble = vertices_over(points, k_tris[k_alive], k_border, np.arange(n_k, n), voxel, device), []
     for rounds in range(MAX_ROUNDS):
-        # kept faces are only given up: a vertex not over them stays so
-        over = vertices_over(points, k_tris[k_alive], k_border, candidates, voxel, device)
-        candidates = np.flatnonzero(over)
         v_alive = ~v_gone & ~any_corner(over, v_tris)
         v_alive, v_border = _drop_pinched(v_tris, v_alive, n, (closed, np.zeros((0, 2), np.int64)))
         k_loops = _loops(k_border, n, reverse=False)
@@ -204,26 +203,18 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
         k_loops, paired, strips, stretched, far = _paired_strips(
             points, (k_tris[k_alive], k_border), k_loops, v_loops, n_k, field
         )
-        # a stretched strip gives up the kept faces where it stretches (a kept finger narrower than a voxel, which the
-        # voxel surface does not follow), and the kept faces along its whole loop only after LOCAL_ROUNDS
-        local = rounds < LOCAL_ROUNDS
-        if not local:  # a loop stretched at a few steps gives up the kept faces there, round after round
-            stretched, far = _mostly_side_by_side(k_loops, stretched, far, n)
-        kept_failed = np.r_[paired["kept_unpaired"], stretched[:0] if local else stretched]
-        whole = rounds > LOCAL_ROUNDS  # a loop failing again gives up the kept piece it bounds
-        if local:  # an unpaired loop crowding another one gives up first only the kept faces where it does
-            crowded, kept_failed = _crowding(points, k_loops, kept_failed, PAIR_VOXELS * voxel, device)
-            far = np.r_[far, crowded]
+        kept_failed, far, whole = _failing(points, k_loops, paired, stretched, far, rounds, voxel, device)
         if not len(kept_failed) and not len(far) and not len(paired["voxel_unpaired"]):
             joined = np.concatenate([k_tris[k_alive], v_tris[v_alive], strips.astype(np.int64)])
             kept_failed, whole = _loops_at_unpaired_edges(joined, k_loops, v_loops, paired["pairs"], n), False
             if not len(kept_failed):
                 break
+        before = k_alive
         k_alive, k_border, v_gone, at = _give_up(
             points, (k_tris, k_alive, k_border, k_loops), (v_tris, v_alive, v_loops, v_gone), kept_failed,
             paired["voxel_unpaired"], whole, PAIR_VOXELS * voxel, device, far,
         )  # fmt: skip
-        trouble.append(at)
+        over, trouble = _still_over(points, (k_tris, k_alive, k_border), before, over, voxel, device), trouble + [at]
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
     surface = _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
@@ -233,6 +224,27 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
 # A join's failures worth a second judge are at kept faces given up with an edge longer than this many voxels (the
 # second keeps a few voxels about them clear, :mod:`.rejoin`: smaller faces lose no more in the first).
 LARGE_FACE_VOXELS = 3.0
+
+
+def _still_over(points, kept, before: np.ndarray, over: np.ndarray, voxel: float, device) -> np.ndarray:
+    """:func:`.zipper.vertices_over` after the kept faces alive ``before`` were given up down to ``kept`` (tris,
+    alive, border): kept faces are only given up, so a vertex not over them stays so, and one farther than the
+    reach (and margin) from every face given up keeps its closest kept point and sees no new border within it:
+    only the vertices over them within that of the faces given up are read again."""
+    tris, alive, border = kept
+    gone = tris[before & ~alive]
+    if not len(gone):
+        return over
+    reach = (OVER_VOXELS + 0.01) * voxel
+    mesh = wp.Mesh(
+        points=wp.array(points, dtype=wp.vec3, device=device),
+        indices=wp.array(np.ascontiguousarray(gone, dtype=np.int32).reshape(-1), dtype=wp.int32, device=device),
+    )
+    rows = np.flatnonzero(over)
+    again = rows[mesh_distances(mesh, points[rows], reach, device) < reach]
+    out = over.copy()
+    out[again] = vertices_over(points, tris[alive], border, again, voxel, device)[again]
+    return out
 
 
 def _trouble(points, given_up, at: list, voxel: float) -> dict:
@@ -270,6 +282,23 @@ def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, field):
         k_loops = (k_loops[0], k_loops[1][~np.isin(k_loops[2][k_loops[1]], twinned)], k_loops[2])
         paired = {**paired, "kept_unpaired": np.setdiff1d(paired["kept_unpaired"], twinned)}
     return k_loops, paired, np.concatenate([strips, fills, twins]), stretched, far
+
+
+def _failing(points, k_loops, paired, stretched, far, rounds: int, voxel: float, device):
+    """What a round's loops that failed give up: ``(kept_failed, far, whole)``, the kept loops that give up the kept
+    faces at them, the kept vertices that give up the faces at them, and whether a loop gives up the piece it bounds.
+    A stretched strip gives up the kept faces where it stretches (a kept finger narrower than a voxel, which the
+    voxel surface does not follow), and the kept faces along its whole loop only after LOCAL_ROUNDS; an unpaired loop
+    crowding another one gives up first only the kept faces where it does; a loop failing again gives up the kept
+    piece it bounds."""
+    local = rounds < LOCAL_ROUNDS
+    if not local:  # a loop stretched at a few steps gives up the kept faces there, round after round
+        stretched, far = _mostly_side_by_side(k_loops, stretched, far, len(points))
+    kept_failed = np.r_[paired["kept_unpaired"], stretched[:0] if local else stretched]
+    if local:
+        crowded, kept_failed = _crowding(points, k_loops, kept_failed, PAIR_VOXELS * voxel, device)
+        far = np.r_[far, crowded]
+    return kept_failed, far, rounds > LOCAL_ROUNDS
 
 
 def _mostly_side_by_side(k_loops, stretched, far, n_verts: int):
