@@ -34,10 +34,12 @@ def pulled_back(field, surface: dict, cube_corners: np.ndarray, codes: np.ndarra
     if cells is None or not len(verts) or not field.sources:
         return surface
     h = float(field.voxel_size)
-    low = np.asarray(field.origin) + (morton_decode_np(codes[cube_corners[cells, 0]]) + 0.5) * h
-    local = (verts - low) / h
+    creases = np.flatnonzero(surface["ranks"] == 2)  # only a crease vertex leaves its cube
+    low = np.asarray(field.origin) + (morton_decode_np(codes[cube_corners[cells[creases], 0]]) + 0.5) * h
+    local = (verts[creases] - low) / h
     past = np.maximum(-local, local - 1.0).max(axis=1)
-    rows = np.flatnonzero(past > PAST_VOXELS)
+    at = np.flatnonzero(past > PAST_VOXELS)
+    rows, low, local = creases[at], low[at], local[at]
     if not len(rows):
         return surface
     points = verts[rows]
@@ -50,11 +52,12 @@ def pulled_back(field, surface: dict, cube_corners: np.ndarray, codes: np.ndarra
         corners = source.verts[source.tris[np.searchsorted(source.triangle_ids, tris[found])]].astype(np.float64)
         on = np.einsum("nk,nkd->nd", bary[found].astype(np.float64), corners)
         nearest[found] = np.minimum(nearest[found], np.linalg.norm(points[found] - on, axis=1))
-    off = rows[nearest > OFF_VOXELS * h]
+    far = nearest > OFF_VOXELS * h
+    off = rows[far]
     if not len(off):
         return surface
     verts = verts.copy()
-    verts[off] = (low[off] + np.clip(local[off], margin, 1.0 - margin) * h).astype(np.float32)
+    verts[off] = (low[far] + np.clip(local[far], margin, 1.0 - margin) * h).astype(np.float32)
     moved = np.zeros(len(verts), dtype=bool)
     moved[off] = True
     whole = surface["whole"].copy()
