@@ -13,7 +13,9 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
    them; where a strip stretches at a few steps, or a loop crowds another, first only the kept faces there), until
    all pair;
 4. a strip between each pair (:func:`.zipper.zip_loops`), and the three parts as one surface, checked closed and
-   consistently oriented; where the join cannot be made, the voxel surface alone (``stats["kept_fallback"]``).
+   consistently oriented; where the join cannot be made, the voxel surface alone (``stats["kept_fallback"]``);
+5. where the join gave up large kept faces (a low-polygon mesh's), the triangles judged again clear of the places it
+   failed and joined again (:mod:`.rejoin`).
 """
 
 from __future__ import annotations
