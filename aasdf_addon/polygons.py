@@ -35,12 +35,13 @@ def whole_faces(kept: dict, tris: np.ndarray, operands) -> dict | None:
     source_tris = np.concatenate([op.tris for op in operands]).astype(np.int64)
     faces = np.concatenate([op.faces.astype(np.int64) + face_first[k] for k, op in enumerate(operands)])
     stacked = tri_first[field_id[rows]] + tri_id[rows]
-    corners = vertex_id[tris[rows]]
+    corners, source = vertex_id[tris[rows]], source_tris[stacked]
     same = np.zeros(len(rows), dtype=bool)
     turned = np.zeros(len(rows), dtype=bool)
-    for k in range(3):  # the source triangle's corners, in its turn or reversed
-        same |= (np.roll(corners, k, axis=1) == source_tris[stacked]).all(axis=1)
-        turned |= (np.roll(corners[:, ::-1], k, axis=1) == source_tris[stacked]).all(axis=1)
+    for k in range(3):  # the source triangle's corners, in its turn or reversed (column by column: no copies)
+        first = corners[:, k] == source[:, 0]
+        same |= first & (corners[:, (k + 1) % 3] == source[:, 1]) & (corners[:, (k + 2) % 3] == source[:, 2])
+        turned |= first & (corners[:, (k + 2) % 3] == source[:, 1]) & (corners[:, (k + 1) % 3] == source[:, 2])
     rows, stacked = rows[same | turned], stacked[same | turned]
     flip_of_row = turned[same | turned] & ~same[same | turned]
     face = faces[stacked]
@@ -86,13 +87,14 @@ def whole_faces(kept: dict, tris: np.ndarray, operands) -> dict | None:
 
 
 def _result_vertices(vertex_field, vertex_id, operand, source_vertex) -> np.ndarray:
-    """The result vertex that is each (operand, source vertex)."""
+    """The result vertex that is each (operand, source vertex): the first of the result's vertices that is it, through
+    a table over (operand, source vertex)."""
     width = int(max(vertex_id.max(initial=0), source_vertex.max(initial=0))) + 1
-    keys = np.where(vertex_id >= 0, vertex_field * width + vertex_id, -1)
-    order = np.argsort(keys, kind="stable")
-    wanted = operand * width + source_vertex
-    at = np.searchsorted(keys[order], wanted)
-    return order[np.minimum(at, len(order) - 1)].astype(np.int32)
+    kept = np.flatnonzero(vertex_id >= 0)
+    operands = int(max(vertex_field[kept].max(initial=0), operand.max(initial=0))) + 1
+    table = np.full(operands * width, len(vertex_id) - 1, dtype=np.int64)
+    np.minimum.at(table, vertex_field[kept] * width + vertex_id[kept], kept)
+    return table[operand * width + source_vertex].astype(np.int32)
 
 
 def as_polygons(result: dict, whole: dict, operands) -> dict:
