@@ -18,6 +18,7 @@ import numpy as np
 import warp as wp
 
 from .adaptive import row_sums
+from .meshcheck import any_corner
 
 # A slit's strip has diagonals at most this many voxels long; a wider hole's, at most WIDE_VOXELS, where it lies
 # within ON_VOXELS of the result's zero level all over.
@@ -79,9 +80,12 @@ def _facing(points, tris, loop_of, kept_tris, halves, halves_loop, n_loops: int)
         return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
 
     strip = row_sums(loop_of, area_vectors(tris), n_loops)
-    # the kept face of each border half: the one listing that directed edge
-    t = np.asarray(kept_tris, dtype=np.int64)
+    # the kept face of each border half: the one listing that directed edge (among the faces at the halves' starts)
     n = len(points)
+    start = np.zeros(n, dtype=bool)
+    start[halves[:, 0]] = True
+    t = np.asarray(kept_tris, dtype=np.int64)
+    t = t[any_corner(start, t)]
     keys = t.ravel() * n + t[:, [1, 2, 0]].ravel()
     order = np.argsort(keys)
     at = order[np.searchsorted(keys[order], halves[:, 0] * n + halves[:, 1])] // 3
