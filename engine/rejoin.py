@@ -33,10 +33,12 @@ def joined_again(field, surface: dict, join, judged: list) -> dict:
     makes of the triangles judged again clear of the points they were given up at (and of the next join's, while
     each keeps more area than the last and gives up ``AGAIN_SHARE``, up to ``REJOINS`` times) that keeps the most area
     (``stats["rejoined"]``: how many points its judge kept clear of, 0 for the first surface)."""
-    best_area = kept_area(surface)
     trouble = surface.pop("trouble", NO_TROUBLE)
     best, avoid = surface, np.zeros((0, 3), np.float32)
     best["stats"]["rejoined"] = 0
+    if not len(trouble["points"]):  # (most joins: nothing given up, nothing to measure)
+        return best
+    best_area = kept_area(surface)
     for k in range(REJOINS):
         if not len(trouble["points"]) or trouble["area"] < (AGAIN_SHARE if k else REJOIN_SHARE) * best_area:
             break
