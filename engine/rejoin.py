@@ -29,16 +29,20 @@ def kept_area(surface: dict) -> float:
 
 def joined_again(field, surface: dict, join, judged: list) -> dict:
     """``surface`` (a :func:`.hybrid.hybrid_surface` of ``field``'s ``judged`` triangles, with its ``trouble``), or,
-    where its join gave up large kept faces of ``REJOIN_SHARE`` of its kept area or more, the surface ``join(judged)``
-    makes of the triangles judged again clear of the points they were given up at (and of the next join's, while
-    each keeps more area than the last and gives up ``AGAIN_SHARE``, up to ``REJOINS`` times) that keeps the most area
-    (``stats["rejoined"]``: how many points its judge kept clear of, 0 for the first surface)."""
+    where its join gave up large kept faces of ``REJOIN_SHARE`` of its kept area or more (``PER_POINT_VOXELS`` a point
+    they were given up at), the surface ``join(judged)`` makes of the triangles judged again clear of those points
+    (and of the next join's, while each keeps more area than the last and gives up ``AGAIN_SHARE``, up to ``REJOINS``
+    times) that keeps the most area (``stats["rejoined"]``: how many points its judge kept clear of, 0 for the first
+    surface)."""
     trouble = surface.pop("trouble", NO_TROUBLE)
     best, avoid = surface, np.zeros((0, 3), np.float32)
     best["stats"]["rejoined"] = 0
     if not len(trouble["points"]):  # (most joins: nothing given up, nothing to measure)
         return best
     best_area = kept_area(surface)
+    per_point = trouble["area"] / len(trouble["points"]) / field.voxel_size**2
+    if per_point < PER_POINT_VOXELS:  # faces hardly larger than what a second judge clears about each point
+        return best
     for k in range(REJOINS):
         if not len(trouble["points"]) or trouble["area"] < (AGAIN_SHARE if k else REJOIN_SHARE) * best_area:
             break
@@ -57,8 +61,10 @@ def joined_again(field, surface: dict, join, judged: list) -> dict:
 NO_TROUBLE = {"points": np.zeros((0, 3), np.float32), "area": 0.0}
 # Joins after the first, each judging the triangles clear of every earlier one's trouble.
 REJOINS = 3
-# A join is tried again where the large kept faces it gave up are at least this share of the area it kept (a
-# low-polygon mesh: Suzanne's first join gives up 11 %; a scan's faces near its holes, the beetle's 5 %, gain about
-# one point for 1.3 s more, and are left), and again while the last join gave up at least AGAIN_SHARE.
-REJOIN_SHARE = 0.08
+# A join is tried again where the large kept faces it gave up are at least this share of the area it kept, and
+# PER_POINT_VOXELS square voxels or more a point they were given up at (a second judge clears a disc of about 16 about
+# each): a low-polygon mesh's (Suzanne with a ball at six places: 2-11 %, 17-47), not a scan's faces near its holes
+# (the beetle's 3-9 %, 8-14: a point or two for twice the time), and again while the last join gave up AGAIN_SHARE.
+REJOIN_SHARE = 0.03
+PER_POINT_VOXELS = 20.0
 AGAIN_SHARE = 0.003
