@@ -112,11 +112,14 @@ def _row_samples_kernel(
 
 
 def edge_turns(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(T,) float64 each triangle's longest edge, and (T,) int64 the corner it starts at (edge k: corner k to k+1)."""
-    e = verts[tris[:, [1, 2, 0]]].astype(np.float64) - verts[tris].astype(np.float64)
-    squared = (e**2).sum(axis=2)
+    """(T,) float64 each triangle's longest edge, (T,) int64 the corner it starts at (edge k: corner k to k + 1)."""
+    corners = [verts[tris[:, k]].astype(np.float64) for k in range(3)]
+    squared = np.empty((len(tris), 3))
+    for k in range(3):
+        d = corners[(k + 1) % 3] - corners[k]
+        squared[:, k] = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2]
     turn = np.argmax(squared, axis=1)
-    return np.sqrt(np.take_along_axis(squared, turn[:, None], axis=1)[:, 0]), turn
+    return np.sqrt(squared[np.arange(len(tris)), turn]), turn
 
 
 def triangle_samples(verts: np.ndarray, tris: np.ndarray, spacing: np.ndarray, device):
