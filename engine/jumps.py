@@ -21,7 +21,7 @@ import numpy as np
 import warp as wp
 
 from .components import connected_components
-from .meshcheck import edge_table, weld_positions
+from .meshcheck import defect_edges
 
 # A piece's sphere is its vertices' farthest distance from their mean, times this.
 WIDEN = 1.5
@@ -36,9 +36,7 @@ def jump_spheres(source) -> np.ndarray:
     found = _SPHERES.get(source)
     if found is not None:
         return found
-    verts, tris = weld_positions(source.verts, source.tris)
-    edges = edge_table(np.asarray(tris, dtype=np.int32), len(verts))
-    bad = edges["pairs"][(edges["faces"] != 2) | (edges["forward"] != 1)].astype(np.int64)
+    verts, _, bad = defect_edges(source.verts, source.tris)
     spheres = np.zeros((0, 4), np.float32)
     if len(bad):
         piece = connected_components(len(verts), bad[:, 0], bad[:, 1])

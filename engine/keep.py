@@ -34,7 +34,7 @@ from . import verdicts
 from .expression import evaluate_signs, leaves, widest_blend
 from .judging import MAX_TABLE_LEAVES, FusedJudge, edge_turns, per_triangle_min, sign_patterns, triangle_samples
 from .jumps import JumpSpheres, jump_spheres
-from .meshcheck import edge_table, weld_positions
+from .meshcheck import defect_edges
 from .parallel import launch_split, run_tasks
 from .refine import merge_kept, restore_whole, straighten_borders
 from .slivers import Splitter, strip_parents
@@ -157,11 +157,8 @@ def _own_defects(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.nd
     to: each open, non-manifold or inconsistently oriented edge as a flat triangle ``a b b``, each repeated triangle
     as itself (``points`` (P, 3) float32, ``parts`` (D, 3) int32; empty when the mesh has none). A triangle at a
     hole's edge keeps its parts farther than the band from that edge."""
-    welded_verts, welded = weld_positions(verts, tris)
-    welded = np.asarray(welded, dtype=np.int32)
+    welded_verts, welded, bad = defect_edges(verts, tris)
     repeated = _repeated(welded, len(welded_verts))
-    edges = edge_table(welded, len(welded_verts))
-    bad = edges["pairs"][(edges["faces"] != 2) | (edges["forward"] != 1)].astype(np.int64)
     points = np.asarray(welded_verts, dtype=np.float32)
     # an edge as a sliver: its ends and its midpoint a hair off the line (the BVH's point query skips flat triangles)
     a, b = points[bad[:, 0]].astype(np.float64), points[bad[:, 1]].astype(np.float64)

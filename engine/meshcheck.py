@@ -90,6 +90,15 @@ def all_corners(marked: np.ndarray, rows: np.ndarray) -> np.ndarray:
     return out
 
 
+def defect_edges(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A mesh with vertices at one position taken as one (:func:`weld_positions`) and its edges that are open,
+    non-manifold or inconsistently oriented: ``(positions, triangles (T, 3) int32, edges (E, 2) int64)``."""
+    verts, tris = weld_positions(vertices, triangles)
+    tris = np.asarray(tris, dtype=np.int32)
+    edges = edge_table(tris, len(verts))
+    return verts, tris, edges["pairs"][(edges["faces"] != 2) | (edges["forward"] != 1)].astype(np.int64)
+
+
 def weld_positions(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The same triangles over one vertex per distinct position: (P, 3) positions, sorted as ``np.unique(axis=0)``
     sorts them, and (T, 3) int64 indices (the geometry, and so every distance and winding number, is unchanged)."""
