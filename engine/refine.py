@@ -133,10 +133,12 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
     """
     tris = np.array(tris, dtype=np.int64)
     keep = np.asarray(keep, dtype=bool)
-    # only kept triangles and those sharing a corner with one are read (a midpoint's valence counts them): the rest,
-    # unchanged, are set aside
+    # only the triangles at a midpoint of a kept triangle are read: a collapse takes a midpoint all of whose triangles
+    # are kept and changes only triangles at it (its valence counts them), into one of its edge's ends, a midpoint
+    # again or a source vertex; the rest, unchanged, are set aside
     near = np.zeros(len(ends), dtype=bool)
     near[tris[keep].ravel()] = True
+    near &= ends[:, 0] >= 0
     rows = np.flatnonzero(any_corner(near, tris))
     tris, keep, aside = tris[rows], keep[rows], set_aside(tris, rows)
     v64 = verts.astype(np.float64)
