@@ -267,8 +267,8 @@ def restore_whole(verts, tris, parent, keep, ends, source_tris):
     # every (source triangle, vertex) of the whole ones' pieces that lies on one of its edges and is needed there
     rows = np.repeat(np.flatnonzero(~split_faces), 3)
     p, v = parent[rows], tris[~split_faces].ravel()
-    pv = np.unique(np.stack([p, v], axis=1), axis=0)
-    p, v = pv[:, 0], pv[:, 1]
+    pv = np.unique(p * len(verts) + v)  # (p, v) pairs in the order of p, then v
+    p, v = pv // len(verts), pv % len(verts)
     corners = source_tris[p]
     corner_at = (corners == v[:, None]).argmax(axis=1)
     is_corner = (corners == v[:, None]).any(axis=1)
