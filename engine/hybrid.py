@@ -130,10 +130,14 @@ def _drop_pinched(tris: np.ndarray, alive: np.ndarray, n_verts: int, was=None, r
 
 
 def _border_after(tris, alive, n_verts: int, before, halves) -> np.ndarray:
-    """The border halves of ``tris[alive]``, those of a superset ``before`` of it being ``halves``."""
+    """The border halves of ``tris[alive]``, those of a superset ``before`` of it being ``halves``: read off the faces
+    left where they are fewer than those gone (the voxel surface less the part over the kept faces)."""
+    gone = before & ~alive
+    if np.count_nonzero(alive) <= np.count_nonzero(gone):
+        return border_halves(tris[alive], n_verts)
     hot = np.zeros(n_verts, dtype=bool)
     hot[halves.ravel()] = True
-    hot[tris[before & ~alive].ravel()] = True
+    hot[tris[gone].ravel()] = True
     near = border_halves(tris[alive & any_corner(hot, tris)], n_verts)
     return near[all_corners(hot, near)]
 
