@@ -339,8 +339,10 @@ def _claimed(mesh, rows: np.ndarray, keys: np.ndarray, n: int, device) -> np.nda
             break
         won[left[now]] = True
         # every pass's winners' rings are held (-1: no key takes them), the other vertices free again
-        held = claim.numpy()
-        claim_np = np.where((held == -1) | np.isin(held, keys[left[now]]), -1, len(rows)).astype(np.int32)
+        held = claim.numpy()  # -1, a key (0 to R - 1) or R (free)
+        taken = np.zeros(len(rows) + 1, dtype=bool)
+        taken[keys[left[now]]] = True
+        claim_np = np.where((held == -1) | taken[held], -1, len(rows)).astype(np.int32)
         left = left[~now]
         if not len(left):
             break
