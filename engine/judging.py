@@ -113,13 +113,11 @@ def _row_samples_kernel(
 
 def edge_turns(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(T,) float64 each triangle's longest edge, (T,) int64 the corner it starts at (edge k: corner k to k + 1)."""
-    corners = [verts[tris[:, k]].astype(np.float64) for k in range(3)]
-    squared = np.empty((len(tris), 3))
-    for k in range(3):
-        d = corners[(k + 1) % 3] - corners[k]
-        squared[:, k] = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2]
-    turn = np.argmax(squared, axis=1)
-    return np.sqrt(squared[np.arange(len(tris)), turn]), turn
+    at = [[verts[tris[:, k], j].astype(np.float64) for j in range(3)] for k in range(3)]
+    d = [[at[(k + 1) % 3][j] - at[k][j] for j in range(3)] for k in range(3)]
+    s = [(x * x + y * y) + z * z for x, y, z in d]  # as numpy adds a 3-long axis, which it reduces slowly
+    turn = np.where((s[0] >= s[1]) & (s[0] >= s[2]), 0, np.where(s[1] >= s[2], 1, 2))  # argmax's first largest
+    return np.sqrt(np.choose(turn, s)), turn
 
 
 def triangle_samples(verts: np.ndarray, tris: np.ndarray, spacing: np.ndarray, device):
