@@ -215,7 +215,9 @@ def claims_won(face: np.ndarray, vert: np.ndarray, use: np.ndarray, n_faces: int
 
 def set_aside(tris: np.ndarray, read: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The rows of ``tris`` not in ``read`` (sorted row numbers) and their triangles, for :func:`put_back`."""
-    rest = np.setdiff1d(np.arange(len(tris)), read, assume_unique=True)
+    unread = np.ones(len(tris), dtype=bool)
+    unread[read] = False
+    rest = np.flatnonzero(unread)
     return rest, tris[rest]
 
 
@@ -223,7 +225,11 @@ def put_back(tris: np.ndarray, rows: np.ndarray, aside) -> tuple[np.ndarray, np.
     """``(tris, rows)``: the triangles read (standing in ``rows``) and those set aside, in the order they came."""
     rest, rest_tris = aside
     rows, tris = np.concatenate([rows, rest]), np.concatenate([tris, rest_tris])
-    order = np.argsort(rows, kind="stable")
+    at = np.full(int(rows.max(initial=-1)) + 1, -1, dtype=np.int64)
+    at[rows] = np.arange(len(rows))
+    placed = at[at >= 0]
+    # each row once (collapses only take triangles away): row order is where each row is, no sort needed
+    order = placed if len(placed) == len(rows) else np.argsort(rows, kind="stable")
     return tris[order], rows[order]
 
 
