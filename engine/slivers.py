@@ -74,7 +74,7 @@ def _places(verts, tris, parent, on, source_tris, apex) -> tuple[np.ndarray, np.
     k = apex[parent]
     rows = np.arange(len(s))
     b, x, y = (s[rows, (k + j) % 3][:, None] for j in range(3))
-    low, high = on[tris][..., 0], on[tris][..., 1]
+    low, high = on[tris, 0], on[tris, 1]
 
     def along(e0, e1):
         return (low == np.minimum(e0, e1)) & (high == np.maximum(e0, e1))
@@ -150,7 +150,8 @@ def _segments(verts, tris, rows, parent, side, t) -> dict:
         out["group"].append(parent[r] * 2 + chain - 1)
         out["lo"].append(np.minimum(ta[r, k], tb[r, k]))
         out["hi"].append(np.maximum(ta[r, k], tb[r, k]))
-        out["length"].append(np.linalg.norm(verts[u].astype(np.float64) - verts[w], axis=1))
+        d = [verts[u, j].astype(np.float64) - verts[w, j] for j in range(3)]
+        out["length"].append(np.sqrt((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]))  # as norm adds a 3-long axis
     out = {k: np.concatenate(v) for k, v in out.items()}
     order = np.lexsort((out["lo"], out["group"]))
     return {k: v[order] for k, v in out.items()}
