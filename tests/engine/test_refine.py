@@ -1,8 +1,9 @@
-"""The collapses of split pieces (engine/refine.py): which of the candidates collapse in a round."""
+"""The collapses of split pieces (engine/refine.py): which of the candidates collapse in a round, which faces a
+collapse turns over, and the rows set aside and put back around them."""
 
 import numpy as np
 
-from engine.refine import claims_won, position_ranks
+from engine.refine import claims_won, position_ranks, put_back, set_aside, turned_over
 
 
 def _strip(n: int):
@@ -33,3 +34,36 @@ def test_claims_ranked_by_position_let_many_of_a_run_go_at_once_and_no_two_share
     assert len(np.unique(faces_of_winners)) == len(faces_of_winners)
     # and every face a winning vertex changes is its
     assert won[np.isin(vert, winners)].all()
+
+
+def test_turned_over_is_the_cross_product_test_bit_for_bit():
+    rng = np.random.default_rng(3)
+    points = rng.random((500, 3))
+    before = rng.integers(0, 500, (4000, 3))
+    after = before.copy()
+    after[:, 0] = rng.integers(0, 500, 4000)  # a corner moved
+    after[:10] = before[:10, [0, 2, 1]]  # turned over for sure
+    old = np.cross(points[before[:, 1]] - points[before[:, 0]], points[before[:, 2]] - points[before[:, 0]])
+    new = np.cross(points[after[:, 1]] - points[after[:, 0]], points[after[:, 2]] - points[after[:, 0]])
+    area = np.linalg.norm(old, axis=1)
+    expected = np.einsum("ij,ij->i", old, new) <= 1e-6 * area * area
+    got = turned_over(points, before, after)
+    assert np.array_equal(got, expected)
+    assert got[:10].all() and 0 < got.sum() < len(got)
+
+
+def test_rows_set_aside_come_back_in_row_order_with_or_without_repeats():
+    tris = np.arange(30).reshape(10, 3)
+    read = np.array([1, 4, 5, 8])
+    aside = set_aside(tris, read)
+    assert np.array_equal(aside[0], [0, 2, 3, 6, 7, 9])
+    # the rows read, one taken away (a collapse), back among the others in row order
+    kept = np.array([0, 2, 3])
+    back, rows = put_back(tris[read][kept], read[kept], aside)
+    assert np.array_equal(rows, [0, 1, 2, 3, 5, 6, 7, 8, 9])
+    assert np.array_equal(back, tris[rows])
+    # a row standing in twice keeps its order (a stable sort)
+    twice = np.array([[100, 101, 102], [103, 104, 105]])
+    back, rows = put_back(twice, np.array([4, 4]), aside)
+    assert np.array_equal(rows, [0, 2, 3, 4, 4, 6, 7, 9])
+    assert np.array_equal(back[3:5], twice)
