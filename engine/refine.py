@@ -282,13 +282,32 @@ def restore_whole(verts, tris, parent, keep, ends, source_tris):
     whole = (pieces > 1) & (kept_pieces == pieces)
     if not whole.any():
         return verts, tris, parent, keep
-    on = _edge_of_vertices(ends, n_source)
     split_faces = ~whole[parent]
     needed = np.zeros(len(verts), dtype=bool)
     needed[tris[split_faces].ravel()] = True
-    # every (source triangle, vertex) of the whole ones' pieces that lies on one of its edges and is needed there
-    rows = np.repeat(np.flatnonzero(~split_faces), 3)
-    p, v = parent[rows], tris[~split_faces].ravel()
+    on = _edge_of_vertices(ends, n_source)
+    p, v = _rings(verts, tris[~split_faces], parent[~split_faces], needed, on, source_tris)
+    counts = np.bincount(p, minlength=len(source_tris))
+    plain = whole & (counts == 3)
+    fan = whole & (counts > 3)
+    new_verts, fans, fan_parent = _fans(verts, source_tris, fan, p, v)
+    out_tris = [tris[split_faces], source_tris[plain], fans]
+    out_parent = [parent[split_faces], np.flatnonzero(plain), fan_parent]
+    restored = len(out_parent[1]) + len(fan_parent)
+    return (
+        new_verts,
+        np.concatenate(out_tris).astype(np.int64),
+        np.concatenate(out_parent).astype(np.int64),
+        np.r_[keep[split_faces], np.ones(restored, dtype=bool)],
+    )
+
+
+def _rings(verts, tris, parent, needed, on, source_tris) -> tuple[np.ndarray, np.ndarray]:
+    """``(p, v)``: every (source triangle, vertex) of the pieces ``tris`` of whole source triangles (``parent``) that
+    is one of its corners or lies on one of its edges and is ``needed`` there (by a neighbour that stays split), each
+    triangle's in order round it from its first corner (``on``: each vertex's source edge)."""
+    rows = np.repeat(np.arange(len(tris)), 3)
+    p, v = parent[rows], tris.ravel()
     pv = np.unique(p * len(verts) + v)  # (p, v) pairs in the order of p, then v
     p, v = pv // len(verts), pv % len(verts)
     corners = source_tris[p]
@@ -305,34 +324,25 @@ def restore_whole(verts, tris, parent, keep, ends, source_tris):
     end = verts[corners[np.arange(len(k)), (k + 1) % 3]].astype(np.float64)
     t = np.where(is_corner, 0.0, np.linalg.norm(verts[v] - start, axis=1) / np.linalg.norm(end - start, axis=1))
     order = np.lexsort((t, k, p))
-    p, v = p[order], v[order]
-    counts = np.bincount(p, minlength=len(source_tris))
-    plain = whole & (counts == 3)
-    fan = whole & (counts > 3)
-    out_tris = [tris[split_faces], source_tris[plain]]
-    out_parent = [parent[split_faces], np.flatnonzero(plain)]
-    new_verts = verts
-    if fan.any():
-        at_fan = fan[p]
-        fp, fv = p[at_fan], v[at_fan]
-        centre_of = np.full(len(source_tris), -1, dtype=np.int64)
-        fan_rows = np.flatnonzero(fan)
-        centre_of[fan_rows] = len(verts) + np.arange(len(fan_rows))
-        centres = verts[source_tris[fan_rows]].astype(np.float64).mean(axis=1).astype(np.float32)
-        new_verts = np.concatenate([verts, centres])
-        first = np.r_[True, fp[1:] != fp[:-1]]
-        group_start = np.maximum.accumulate(np.where(first, np.arange(len(fp)), 0))
-        last = np.r_[fp[1:] != fp[:-1], True]
-        nxt = np.where(last, group_start, np.arange(len(fp)) + 1)
-        out_tris.append(np.stack([centre_of[fp], fv, fv[nxt]], axis=1))
-        out_parent.append(fp)
-    restored = sum(len(x) for x in out_tris[1:])
-    return (
-        new_verts,
-        np.concatenate(out_tris).astype(np.int64),
-        np.concatenate(out_parent).astype(np.int64),
-        np.r_[keep[split_faces], np.ones(restored, dtype=bool)],
-    )
+    return p[order], v[order]
+
+
+def _fans(verts, source_tris, fan, p, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(verts, tris, parent)``: the ``fan`` source triangles as fans from a new centre vertex each (appended to
+    ``verts``) over their rings ``p``, ``v`` (:func:`_rings`)."""
+    if not fan.any():
+        return verts, np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    at_fan = fan[p]
+    fp, fv = p[at_fan], v[at_fan]
+    centre_of = np.full(len(source_tris), -1, dtype=np.int64)
+    fan_rows = np.flatnonzero(fan)
+    centre_of[fan_rows] = len(verts) + np.arange(len(fan_rows))
+    centres = verts[source_tris[fan_rows]].astype(np.float64).mean(axis=1).astype(np.float32)
+    first = np.r_[True, fp[1:] != fp[:-1]]
+    group_start = np.maximum.accumulate(np.where(first, np.arange(len(fp)), 0))
+    last = np.r_[fp[1:] != fp[:-1], True]
+    nxt = np.where(last, group_start, np.arange(len(fp)) + 1)
+    return np.concatenate([verts, centres]), np.stack([centre_of[fp], fv, fv[nxt]], axis=1), fp
 
 
 def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: float):
