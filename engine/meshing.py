@@ -36,14 +36,16 @@ def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, ad
         verts, tris = marching_cubes(frame, iso / scale)
         surface = {"verts": verts, "tris": tris, "ranks": None, "whole": np.zeros(0, np.uint8)}
     found = sharp and (creases or adaptivity > 0.0) and len(surface["tris"])
-    crease = crease_edges(surface["verts"], surface["tris"], surface["ranks"]) if found else None
+    crease, fold = (
+        crease_edges(surface["verts"], surface["tris"], surface["ranks"], folds=True) if found else (None, None)
+    )
     out = {"verts": surface["verts"], "creases": np.zeros((0, 2), np.int32) if crease is None else crease}
     if not quads and adaptivity <= 0.0:
         out["tris"] = surface["tris"]
         return _placed(field, out)
     out["faces"], out["sizes"] = merge_pairs(surface["tris"], surface["whole"])
     if adaptivity > 0.0 and sharp and len(out["sizes"]):
-        out = simplify(frame, {**out, "ranks": surface["ranks"]}, adaptivity, regions)
+        out = simplify(frame, {**out, "ranks": surface["ranks"], "folds": fold}, adaptivity, regions)
     if not quads:
         out["tris"] = triangulate(out.pop("faces"), out.pop("sizes"))
     return _placed(field, out)

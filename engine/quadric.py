@@ -369,7 +369,7 @@ def _normals(verts, tris) -> np.ndarray:
     )
 
 
-def crease_edges(verts, tris, ranks, angle: float = CREASE_ANGLE) -> np.ndarray:
+def crease_edges(verts, tris, ranks, angle: float = CREASE_ANGLE, *, folds: bool = False):
     """The edges of a closed mesh along which it folds at a reconstructed crease.
 
     Args:
@@ -377,14 +377,17 @@ def crease_edges(verts, tris, ranks, angle: float = CREASE_ANGLE) -> np.ndarray:
         tris: (T, 3) int triangles of a closed, consistently oriented mesh.
         ranks: (V,) int quadric ranks from :func:`contour_dual` (2 or more: on a crease or corner).
         angle: Smallest angle (degrees) between the two triangles' normals.
+        folds: Also return each edge's angle.
     Returns:
         (E, 2) int32 vertex index pairs (smaller index first), each an edge of ``tris`` between two crease or corner
-        vertices whose triangles' normals differ by more than ``angle``.
+        vertices whose triangles' normals differ by more than ``angle``; with ``folds`` also (E,) float64 that angle
+        (degrees).
     """
     tris = np.asarray(tris)
     feature = np.asarray(ranks) >= 2
+    none = np.zeros((0, 2), dtype=np.int32)
     if len(tris) == 0 or not feature.any():
-        return np.zeros((0, 2), dtype=np.int32)
+        return (none, np.zeros(0)) if folds else none
     # the triangle sides between two feature vertices, each undirected edge seen from both of its triangles (only the
     # triangles with two feature corners are looked at, a few percent of them)
     on = feature.view(np.uint8)[tris]
@@ -399,9 +402,11 @@ def crease_edges(verts, tris, ranks, angle: float = CREASE_ANGLE) -> np.ndarray:
     order = np.argsort(code)
     twin = np.flatnonzero(code[order][1:] == code[order][:-1])  # an edge's two sides, next to each other sorted
     if len(twin) == 0:
-        return np.zeros((0, 2), dtype=np.int32)
+        return (none, np.zeros(0)) if folds else none
     first, second = order[twin], order[twin + 1]
     na, nb = _normals(verts, tris[face[first]]), _normals(verts, tris[face[second]])
     cos = np.einsum("ij,ij->i", na, nb) / np.maximum(np.linalg.norm(na, axis=1) * np.linalg.norm(nb, axis=1), 1e-300)
-    fold = first[cos < np.cos(np.radians(angle))]
-    return np.stack([low[fold], high[fold]], axis=1).astype(np.int32)
+    at = cos < np.cos(np.radians(angle))
+    fold = first[at]
+    edges = np.stack([low[fold], high[fold]], axis=1).astype(np.int32)
+    return (edges, np.degrees(np.arccos(np.clip(cos[at], -1.0, 1.0)))) if folds else edges
