@@ -89,7 +89,7 @@ def max_level(adaptivity: float) -> int:
     return max(1, int(np.ceil(6.0 * float(adaptivity))))
 
 
-def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
+def simplify(field, surface: dict, adaptivity: float, regions=None, *, coarser: int = 0) -> dict:
     """Merge the polygons of an unplaced field's dual surface where it is flat (see the module's steps).
 
     Args:
@@ -99,30 +99,35 @@ def simplify(field, surface: dict, adaptivity: float, regions=None) -> dict:
         adaptivity: In (0, 1].
         regions: Optional {field id: (T,) int label per source triangle}: vertices whose closest triangles have
             different labels never merge.
+        coarser: The surface was contoured this many levels above the finest (cells of 2^coarser voxels,
+            :mod:`.coarse`): its blocks are that lattice's, the tolerance and the largest block (in voxels) as on the
+            finest; the field is still sampled at its finest.
     Returns:
         dict as ``surface`` (``verts``, ``faces``, ``sizes``, ``creases`` renumbered), unused vertices dropped.
     """
     verts = np.asarray(surface["verts"], dtype=np.float64)
     faces, sizes = np.asarray(surface["faces"], dtype=np.int32), np.asarray(surface["sizes"], dtype=np.int64)
-    h = float(field.voxel_size)
-    local = (verts - np.asarray(field.origin, dtype=np.float64)) / h  # voxels
+    h = float(field.voxel_size) * 2**coarser
+    local = (verts - np.asarray(field.origin, dtype=np.float64)) / h  # cells
     cell = np.floor(local - 0.5).astype(np.int64)
     creases = np.asarray(surface["creases"], dtype=np.int64).reshape(-1, 2)
     cls, lines = _classes(surface["ranks"], creases, surface.get("folds"), adaptivity, len(verts))
     label = _labels(field, surface["verts"], regions)
     corners = _padded(faces, sizes)
     edges = edge_levels(corners, cls, label, lines, cell, field.device)  # seams held (cls 0)
-    level, ids, inner = _levels(local, edges, corners, cls, adaptivity, field.device)
-    merged = _checked(field, local, (corners, inner), cls, level, ids, tolerance(adaptivity))
-    return _renumbered(field, surface, creases, level, merged)
+    tol, top = tolerance(adaptivity) / 2**coarser, max(max_level(adaptivity) - coarser, 1)
+    level, ids, inner = _levels(local, edges, corners, cls, (tol, top), field.device)
+    merged = _checked((field, h), local, (corners, inner), cls, level, ids, tol)
+    return _renumbered((field, h), surface, creases, level, merged)
 
 
-def _checked(field, local, faces, cls, level, ids, tol) -> dict:
+def _checked(lattice, local, faces, cls, level, ids, tol) -> dict:
     """Step 3 and 4: the clusters of ``level`` (changed in place) collapsed (``faces``: corners (P, 4) and the level
     each is inside one component, :func:`_levels`) and checked, the components at a failure dropped (by a level, then
     faster, after CHECK_ROUNDS to level 0) until none fails. What a round finds of a cluster's position on the
     surface and of a triangle's distance from it is kept for the next (by the clusters' keys: their level and id).
-    Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) voxels, ``faces``, ``sizes``."""
+    ``lattice``: (the field sampled, the cell size); ``local`` and ``tol`` in cells.
+    Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) cells, ``faces``, ``sizes``."""
     keys = int(ids[1].sum())
     known = {"position": np.full((keys, 3), np.nan), "mean": np.full((keys, 3), np.nan)}
     known.update(tris=np.zeros(0, np.int64), far=np.zeros(0, dtype=bool))
@@ -130,11 +135,11 @@ def _checked(field, local, faces, cls, level, ids, tol) -> dict:
     round_ = 0
     while True:  # ends: every round drops a merged component, and the surface as extracted passes
         cluster, position, feature, merged, key = _clusters(local, code, keys, cls, known["mean"])
-        position = _onto_surface(field, position, ~feature & merged, tol, key, known["position"])
+        position = _onto_surface(lattice, position, ~feature & merged, tol, key, known["position"])
         collapsed = _collapse(*faces, cluster, level)
         new_faces, new_sizes = _split_bent_quads(position, feature, merged, *collapsed, tol)
         bad = _failures(len(position), new_faces, new_sizes)
-        bad |= _strays(field, position, new_faces, new_sizes, merged, FACE_REACH * tol, key, known)
+        bad |= _strays(lattice, position, new_faces, new_sizes, merged, FACE_REACH * tol, key, known)
         if not bad.any() or not (level > 0).any():
             break
         drop = bad[cluster] & (level > 0)
@@ -159,10 +164,10 @@ def _spread(bad, faces, sizes) -> np.ndarray:
     return out
 
 
-def _renumbered(field, surface, creases, level, merged) -> dict:
+def _renumbered(lattice, surface, creases, level, merged) -> dict:
     """The checked surface in world units, unmerged vertices exactly where they were, unused vertices dropped."""
     cluster, position, new_faces = merged["cluster"], merged["position"], merged["faces"]
-    h = float(field.voxel_size)
+    field, h = lattice
     out_verts = (np.asarray(field.origin, dtype=np.float64) + h * position).astype(np.float32)
     alone = level == 0
     out_verts[cluster[alone]] = surface["verts"][alone]
@@ -179,7 +184,7 @@ def _renumbered(field, surface, creases, level, merged) -> dict:
     }
 
 
-def _strays(field, position, faces, sizes, merged, reach: float, key, known: dict) -> np.ndarray:
+def _strays(lattice, position, faces, sizes, merged, reach: float, key, known: dict) -> np.ndarray:
     """(K,) the vertices of faces whose fan triangles' centres lie more than ``reach`` voxels from the field's
     surface (a face between two merged vertices across a curved part); only faces with a ``merged`` corner. The
     triangles' results are ``known`` (``tris``: sorted keys of their corners' clusters, ``far``) for the next round,
@@ -195,7 +200,7 @@ def _strays(field, position, faces, sizes, merged, reach: float, key, known: dic
     else:
         tri_key, seen = None, np.zeros(len(tris), dtype=bool)
     new = np.flatnonzero(~seen)
-    h = float(field.voxel_size)
+    field, h = lattice
     centres = np.asarray(field.origin, dtype=np.float64) + h * position[tris[new]].mean(axis=1)
     far[new] = np.abs(field.sample(centres.astype(np.float32), method="linear")) > reach * h
     if tri_key is not None:
@@ -207,14 +212,14 @@ def _strays(field, position, faces, sizes, merged, reach: float, key, known: dic
     return bad
 
 
-def _onto_surface(field, position, moved, tol: float, key, known) -> np.ndarray:
+def _onto_surface(lattice, position, moved, tol: float, key, known) -> np.ndarray:
     """``position`` (K, 3 voxels) with the rows ``moved`` that lie more than half ``tol`` voxels off the field's
     surface taken one Newton step onto it (a merged smooth vertex, its vertices' mean, lies off a curved surface by
     the sagitta; on a flat one it stays, where the trilinear values bend near a crease). The rows' results are
     ``known`` (by the clusters' ``key``, NaN where not yet) for the next round, and taken from there."""
     rows = np.flatnonzero(moved & np.isnan(known[key, 0]))
     if len(rows):
-        h = float(field.voxel_size)
+        field, h = lattice
         points = np.asarray(field.origin, dtype=np.float64) + h * position[rows]
         value, grad = field.sample(points.astype(np.float32), method="linear", return_gradient=True)
         grad = grad.astype(np.float64)
@@ -280,10 +285,11 @@ def _classes(ranks, creases, folds, adaptivity, n) -> tuple[np.ndarray, np.ndarr
     return cls.astype(np.int8), creases
 
 
-def _levels(local, edges, corners, cls, adaptivity, device=None):
+def _levels(local, edges, corners, cls, bounds, device=None):
     """Level by level, the components of each block's vertices that merge (see the module's step 2). The edges and
     faces looked at are kept by the ids of their ends' clusters at the level below, and the clusters' counts of
     vertices, edges and faces inside carried up: a level's steps are over its clusters (but the flatness test).
+    ``bounds``: (tolerance in cells, the largest level).
 
     Returns:
         ``level`` (V,) the largest level each vertex merged at (0: none); ``ids`` (L + 1, V): per level each vertex's
@@ -295,7 +301,7 @@ def _levels(local, edges, corners, cls, adaptivity, device=None):
     n = len(local)
     level = np.zeros(n, dtype=np.int8)
     ids, numbers = [np.arange(n, dtype=np.int32)], [n]
-    tol = tolerance(adaptivity)
+    tol, top = bounds
     live = cls > 0  # corners and crease ends never merge: their edges and faces never count
     points = _flatness_points(local, cls, device)
     u, v, joins = edges  # (:func:`.blockedges.edge_levels`)
@@ -305,7 +311,7 @@ def _levels(local, edges, corners, cls, adaptivity, device=None):
     below = np.where(live, np.arange(n, dtype=np.int32), np.int32(-1))  # each vertex's cluster below (-1: none)
     clusters = np.flatnonzero(live)  # the clusters below
     held = None  # vertices, edges and faces inside each cluster below (at level 1: one vertex each)
-    for lv in range(1, max_level(adaptivity) + 1):
+    for lv in range(1, top + 1):
         if not len(clusters):
             break
         # joinable within one block: the edges ranked up to the level
@@ -326,7 +332,7 @@ def _levels(local, edges, corners, cls, adaptivity, device=None):
         clusters, held = np.flatnonzero(ok), counts
         merged = ok[corners]
         inner[face[one & merged[:, 0]]] = lv
-        if lv == max_level(adaptivity):
+        if lv == top:
             break
         # the edges and faces inside a component are counted: they leave, as do those at a component not merged
         keep = ok[u] & ok[v] & (u != v)

@@ -1,9 +1,10 @@
 """A field's surface as a mesh: the extraction (sharp dual contouring or marching cubes), then the polygons.
 
-:meth:`.field.AdaptiveField.to_mesh` runs these steps: the finest level's active cubes contoured in the field's own
-frame (:func:`.dual.contour_dual`, or marching cubes), its crease edges, the cells merged where the surface is flat
-enough for the adaptivity asked (:mod:`.adaptive`), the surface placed in the world, and its quads kept whole where
-they are planar (:mod:`.quads`) when polygons are asked for.
+:meth:`.field.AdaptiveField.to_mesh` runs these steps: the finest level's active cubes (from an adaptivity of 0.5, those
+of the level above where that loses nothing finer: :mod:`.coarse`) contoured in the field's own frame
+(:func:`.dual.contour_dual`, or marching cubes), its crease edges, the cells merged where the surface is flat enough
+for the adaptivity asked (:mod:`.adaptive`), the surface placed in the world, and its quads kept whole where they are
+planar (:mod:`.quads`) when polygons are asked for.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import numpy as np
 import warp as wp
 
 from .adaptive import simplify
+from .coarse import COARSE_FROM, coarse_surface
 from .dual import CELL_MARGIN, contour_dual
 from .extract import extract_octree_level, extract_surface, lattice_cubes, octree_level_cubes
 from .marching import empty_mesh
@@ -30,7 +32,10 @@ def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, ad
     """
     frame = field.in_frame()
     scale = 1.0 if field.placement is None else field.placement.scale
-    if sharp:
+    coarse = coarse_surface(frame, iso / scale, sharp_surface) if sharp and adaptivity >= COARSE_FROM else None
+    if coarse is not None:  # (:mod:`.coarse`)
+        surface = coarse
+    elif sharp:
         surface = sharp_surface(frame, iso / scale)
     else:
         verts, tris = marching_cubes(frame, iso / scale)
@@ -45,7 +50,8 @@ def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, ad
         return _placed(field, out)
     out["faces"], out["sizes"] = merge_pairs(surface["tris"], surface["whole"])
     if adaptivity > 0.0 and sharp and len(out["sizes"]):
-        out = simplify(frame, {**out, "ranks": surface["ranks"], "folds": fold}, adaptivity, regions)
+        coarser = int(coarse is not None)
+        out = simplify(frame, {**out, "ranks": surface["ranks"], "folds": fold}, adaptivity, regions, coarser=coarser)
     if not quads:
         out["tris"] = triangulate(out.pop("faces"), out.pop("sizes"))
     return _placed(field, out)
@@ -69,8 +75,8 @@ def _placed(field, out: dict) -> dict:
 
 
 def sharp_surface(field, iso: float) -> dict:
-    """The dual contouring of an unplaced field's finest-level active cubes (:func:`.dual.contour_dual`): its dict,
-    or an empty surface."""
+    """The dual contouring of an unplaced field's finest-level active cubes (:func:`.dual.contour_dual`): its dict
+    with the cubes' (M, 8) ``cube_corners`` node indices, or an empty surface."""
     n0 = field.level_counts[0]
     codes, values, proj = field.codes[:n0], field.values[:n0], field.proj[:n0]
     if field.levels == 1:
@@ -90,12 +96,14 @@ def sharp_surface(field, iso: float) -> dict:
         cubes = octree_level_cubes(codes, values, field.tree, origin=field.origin, spacing=field.voxel_size, iso=iso)
     if cubes is None:
         verts, tris = empty_mesh()
-        return {"verts": verts, "tris": tris, "ranks": np.zeros(0, np.int32), "whole": np.zeros(0, np.uint8)}
+        empty = {"ranks": np.zeros(0, np.int32), "whole": np.zeros(0, np.uint8), "cube_corners": np.zeros((0, 8))}
+        return {"verts": verts, "tris": tris, **empty}
     corners, shifted = cubes["cube_corners"], cubes["shifted"]
     surface = contour_dual(corners, shifted, codes, proj, origin=field.origin, spacing=field.voxel_size, iso=iso)
+    surface["cube_corners"] = corners.numpy()
     if iso != 0.0:  # (an offset's vertices lie off every operand's surface)
         return surface
-    return pulled_back(field, surface, corners.numpy(), codes.numpy(), CELL_MARGIN)
+    return pulled_back(field, surface, surface["cube_corners"], codes.numpy(), CELL_MARGIN)
 
 
 def marching_cubes(field, iso: float):
