@@ -1,7 +1,7 @@
 """A field's surface as a mesh: the extraction (sharp dual contouring or marching cubes), then the polygons.
 
-:meth:`.field.AdaptiveField.to_mesh` runs these steps: the finest level's active cubes (from an adaptivity of 0.5, those
-of the level above where that loses nothing finer: :mod:`.coarse`) contoured in the field's own frame
+:meth:`.field.AdaptiveField.to_mesh` runs these steps: the finest level's active cubes (from an adaptivity of 0.25,
+those of the level above where that loses nothing finer: :mod:`.coarse`) contoured in the field's own frame
 (:func:`.dual.contour_dual`, or marching cubes), its crease edges, the cells merged where the surface is flat enough
 for the adaptivity asked (:mod:`.adaptive`), the surface placed in the world, and its quads kept whole where they are
 planar (:mod:`.quads`) when polygons are asked for.
