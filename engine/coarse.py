@@ -9,11 +9,12 @@ finest (a quarter of the cubes, creases from the same exact tangent planes, meas
 on the CAD pairs at /256 against 0.009-0.010 at the finest), and :func:`.adaptive.simplify` merges that surface's
 cells (a level fewer: the same blocks in voxels).
 
-The coarse surface is taken only where it is as good: closed and 2-manifold (level 1 is a band of octets built around
-the finest one, and may leave a cube incomplete where the finest band is thin), and crossing every finest octet the
-finest surface crosses (an octet whose eight nodes change sign, and no active coarse cube has it as a corner: a fin,
-a bump or a hole thinner than the coarse cells, gone). Otherwise :func:`coarse_surface` returns None and the finest
-level is contoured as at lower adaptivities.
+The coarse surface is taken only where it is as good: closed (level 1 is a band of octets built around the finest
+one, and a boolean prunes those farther than 2.5 voxels from its surface: a level-1 cube near a seam may miss a
+corner, and the surface is open there until the nodes missing about it are added from the operands' closest points,
+:func:`_with_missing_nodes`), and crossing every finest octet the finest surface crosses (an octet whose eight nodes
+change sign, and no active coarse cube has it as a corner: a fin, a bump or a hole thinner than the coarse cells,
+gone). Otherwise :func:`coarse_surface` returns None and the finest level is contoured as at lower adaptivities.
 """
 
 from __future__ import annotations
@@ -21,7 +22,13 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .contouring import lattice_surface, sharp_surface
 from .meshcheck import edge_table
+from .octree import in_sorted, morton_decode_np, morton_encode_np
+from .sources import closest_points
+
+# Rounds of nodes added where level 1's surface is open before it is given up (one closed every case measured).
+PATCH_ROUNDS = 2
 
 # Adaptivities from this one on are contoured on level 1: the tolerance is 0.072 voxel there (0.22 at 0.5), 2.5-4
 # times the coarse surface's Hausdorff p95, and its merged surface is nearer the exact one with fewer polygons than the
@@ -58,30 +65,76 @@ def level_one(field):
     )
 
 
-def coarse_surface(field, iso: float, contour) -> dict | None:
-    """The sharp ``iso`` surface of the unplaced ``field``'s level 1 (``contour``: :func:`.meshing.sharp_surface`,
-    given the coarse field and ``iso``; it returns the active cubes' ``cube_corners`` among its keys), or None where
-    it is not closed and 2-manifold or misses a finest octet the surface crosses (see the module)."""
+def coarse_surface(field, iso: float) -> dict | None:
+    """The sharp ``iso`` surface of the unplaced ``field``'s level 1 (:func:`.contouring.sharp_surface`; its open
+    places patched, :func:`_with_missing_nodes`, PATCH_ROUNDS times at most), or None where it stays open or misses a
+    finest octet the surface crosses (see the module)."""
     coarse = level_one(field)
     if coarse is None:
         return None
-    surface = contour(coarse, iso)
-    if not len(surface["tris"]) or not _closed(surface["tris"], len(surface["verts"])):
-        return None
+    surface, samples = sharp_surface(coarse, iso), None
+    for patch in range(PATCH_ROUNDS + 1):
+        if not len(surface["tris"]):
+            return None
+        open_at = _open_vertices(surface["tris"], len(surface["verts"]))
+        if not len(open_at):
+            break
+        if patch == PATCH_ROUNDS:
+            return None
+        samples = _with_missing_nodes(field, coarse, samples, surface["verts"][open_at])
+        surface = lattice_surface(coarse, *samples, iso)
     if _missed_octets(field, surface["cube_corners"], iso):
         return None
     return {**surface, "field": coarse}
 
 
-def _closed(tris, n: int) -> bool:
-    """Every edge of ``tris`` in two triangles, opposite ways."""
+def _open_vertices(tris, n: int) -> np.ndarray:
+    """The vertices of the edges of ``tris`` that are not in two triangles, opposite ways."""
     table = edge_table(tris, n)
-    return bool((table["faces"] == 2).all() and (table["forward"] == 1).all())
+    return np.unique(table["pairs"][(table["faces"] != 2) | (table["forward"] != 1)])
+
+
+def _with_missing_nodes(field, coarse, samples, points) -> tuple:
+    """``samples`` (coords, values, codes, proj of the ``coarse`` level's nodes and of nodes added before; None: the
+    level's own) with the nodes missing around the cubes of ``points`` added: the 4 x 4 x 4 nodes about each cube.
+    A boolean prunes its finest octets farther than 2.5 voxels from its surface, so a level-1 cube near a seam can
+    miss a corner (measured 3.3-3.8 voxels off the surface); its value is the distance to the closest point of the
+    operand deciding there (:func:`.sources.closest_points`), signed as the field's (the field sampled)."""
+    if samples is None:
+        n1 = coarse.level_counts[0]
+        codes = coarse.codes[:n1].numpy()
+        samples = (morton_decode_np(codes), coarse.values[:n1].numpy(), codes, coarse.proj[:n1].numpy())
+    coords, values, codes, proj = samples
+    spacing = coarse.voxel_size
+    cube = np.floor((np.asarray(points, dtype=np.float64) - coarse.origin) / spacing - 0.5).astype(np.int64)
+    block = np.stack(np.meshgrid(*[np.arange(-1, 3)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    near = np.unique((cube[:, None, :] + block[None]).reshape(-1, 3), axis=0)
+    near = near[(near >= 0).all(axis=1) & (near < coarse.fine_dims).all(axis=1)]
+    near_codes = morton_encode_np(near)
+    new = ~in_sorted(np.sort(codes), near_codes)
+    near, near_codes = near[new], near_codes[new]
+    centres = coarse.origin + (near + 0.5) * spacing
+    value, grad = field.sample(centres.astype(np.float32), return_gradient=True)
+    on = centres - value[:, None] * grad / np.maximum((grad.astype(np.float64) ** 2).sum(axis=1), 1e-12)[:, None]
+    ids = field.source_ids(centres.astype(np.float32))
+    for field_id, source in field.sources.items():
+        rows = np.flatnonzero(ids == field_id)
+        if source is not None and len(source.tris) and len(rows):
+            exact = closest_points(source, centres[rows], field.device)
+            found = ~np.isnan(exact[:, 0])
+            on[rows[found]] = exact[found]
+    distance = np.linalg.norm(centres - on, axis=1)
+    value = np.where(value < 0.0, -distance, distance).astype(np.float32)
+    offsets = ((on - centres) / spacing).astype(np.float16)
+    return (
+        np.concatenate([coords, near]), np.concatenate([values, value]), np.concatenate([codes, near_codes]),
+        np.concatenate([proj, offsets]),
+    )  # fmt: skip
 
 
 def _missed_octets(field, cube_corners, iso: float) -> int:
     """How many finest octets change sign across their eight nodes without being a corner of an active coarse cube
-    (``cube_corners``: (M, 8) level-1 node indices)."""
+    (``cube_corners``: (M, 8) level-1 node indices, and the nodes added past them)."""
     n0, n1 = int(field.level_offsets[1]), int(field.level_offsets[2] - field.level_offsets[1])
     values = field.values[:n0].numpy().reshape(-1, 8)
     inside = values < np.float32(iso)
@@ -91,5 +144,6 @@ def _missed_octets(field, cube_corners, iso: float) -> int:
     crossing = np.zeros(n1, dtype=bool)
     crossing[octet_node] = crossed[first[octet_node] // 8]
     touched = np.zeros(n1, dtype=bool)
-    touched[np.asarray(cube_corners).ravel()] = True
+    corners = np.asarray(cube_corners).ravel()
+    touched[corners[corners < n1]] = True
     return int(np.count_nonzero(crossing & ~touched))

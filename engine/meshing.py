@@ -10,16 +10,13 @@ planar (:mod:`.quads`) when polygons are asked for.
 from __future__ import annotations
 
 import numpy as np
-import warp as wp
 
 from .adaptive import simplify
 from .coarse import COARSE_FROM, coarse_surface
-from .dual import CELL_MARGIN, contour_dual
-from .extract import extract_octree_level, extract_surface, lattice_cubes, octree_level_cubes
-from .marching import empty_mesh
+from .contouring import sharp_surface
+from .extract import extract_octree_level, extract_surface
 from .quadric import crease_edges
 from .quads import merge_pairs, triangulate
-from .reached import pulled_back
 
 
 def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, adaptivity: float, regions=None) -> dict:
@@ -32,7 +29,7 @@ def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, ad
     """
     frame = field.in_frame()
     scale = 1.0 if field.placement is None else field.placement.scale
-    coarse = coarse_surface(frame, iso / scale, sharp_surface) if sharp and adaptivity >= COARSE_FROM else None
+    coarse = coarse_surface(frame, iso / scale) if sharp and adaptivity >= COARSE_FROM else None
     if coarse is not None:  # (:mod:`.coarse`)
         surface = coarse
     elif sharp:
@@ -72,38 +69,6 @@ def _placed(field, out: dict) -> dict:
         within = np.arange(len(out["faces"])) - start
         out["faces"] = out["faces"][start + (np.repeat(sizes, sizes) - within) % np.repeat(sizes, sizes)]
     return out
-
-
-def sharp_surface(field, iso: float) -> dict:
-    """The dual contouring of an unplaced field's finest-level active cubes (:func:`.dual.contour_dual`): its dict
-    with the cubes' (M, 8) ``cube_corners`` node indices, or an empty surface."""
-    n0 = field.level_counts[0]
-    codes, values, proj = field.codes[:n0], field.values[:n0], field.proj[:n0]
-    if field.levels == 1:
-        cubes = lattice_cubes(
-            field.coords.numpy(),
-            field.values.numpy().astype(np.float64),
-            origin=field.origin,
-            spacing=field.voxel_size,
-            iso=iso,
-            device=field.device,
-        )
-        if cubes is not None and cubes["order"] is not None:
-            order = cubes["order"]
-            codes = wp.array(field.codes.numpy()[order], dtype=wp.int64, device=field.device)
-            proj = wp.array(field.proj.numpy()[order], dtype=wp.vec3h, device=field.device)
-    else:
-        cubes = octree_level_cubes(codes, values, field.tree, origin=field.origin, spacing=field.voxel_size, iso=iso)
-    if cubes is None:
-        verts, tris = empty_mesh()
-        empty = {"ranks": np.zeros(0, np.int32), "whole": np.zeros(0, np.uint8), "cube_corners": np.zeros((0, 8))}
-        return {"verts": verts, "tris": tris, **empty}
-    corners, shifted = cubes["cube_corners"], cubes["shifted"]
-    surface = contour_dual(corners, shifted, codes, proj, origin=field.origin, spacing=field.voxel_size, iso=iso)
-    surface["cube_corners"] = corners.numpy()
-    if iso != 0.0:  # (an offset's vertices lie off every operand's surface)
-        return surface
-    return pulled_back(field, surface, surface["cube_corners"], codes.numpy(), CELL_MARGIN)
 
 
 def marching_cubes(field, iso: float):

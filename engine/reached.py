@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .octree import morton_decode_np
-from .sources import closest_triangles
+from .sources import closest_points
 
 # Vertices this many voxels or less past their cube are not checked (they cannot be far off: a voxel's crossing).
 PAST_VOXELS = 0.25
@@ -47,11 +47,9 @@ def pulled_back(field, surface: dict, cube_corners: np.ndarray, codes: np.ndarra
     for source in field.sources.values():
         if source is None or not len(source.tris):
             continue
-        tris, bary = closest_triangles(source, points, field.device)
-        found = np.flatnonzero(tris >= 0)
-        corners = source.verts[source.tris[np.searchsorted(source.triangle_ids, tris[found])]].astype(np.float64)
-        on = np.einsum("nk,nkd->nd", bary[found].astype(np.float64), corners)
-        nearest[found] = np.minimum(nearest[found], np.linalg.norm(points[found] - on, axis=1))
+        on = closest_points(source, points, field.device)
+        found = np.flatnonzero(~np.isnan(on[:, 0]))
+        nearest[found] = np.minimum(nearest[found], np.linalg.norm(points[found] - on[found], axis=1))
     far = nearest > OFF_VOXELS * h
     off = rows[far]
     if not len(off):

@@ -265,6 +265,17 @@ def closest_triangles(source: SourceMesh, points, device) -> tuple[np.ndarray, n
     return tri_ids, bary.numpy()
 
 
+def closest_points(source: SourceMesh, points, device) -> np.ndarray:
+    """(N, 3) float64 the closest point of ``source``'s triangles to each of ``points`` (:func:`closest_triangles`;
+    NaN where none was found)."""
+    tris, bary = closest_triangles(source, points, device)
+    found = np.flatnonzero(tris >= 0)
+    out = np.full((len(tris), 3), np.nan)
+    corners = source.verts[source.tris[np.searchsorted(source.triangle_ids, tris[found])]].astype(np.float64)
+    out[found] = np.einsum("nk,nkd->nd", bary[found].astype(np.float64), corners)
+    return out
+
+
 @wp.kernel(enable_backward=False)
 def _interpolate_kernel(
     first: int,
