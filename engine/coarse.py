@@ -23,7 +23,7 @@ import numpy as np
 import warp as wp
 
 from .contouring import lattice_surface, sharp_surface
-from .meshcheck import edge_table
+from .meshcheck import open_vertices
 from .octree import in_sorted, morton_decode_np, morton_encode_np
 from .sources import closest_points
 
@@ -76,7 +76,7 @@ def coarse_surface(field, iso: float) -> dict | None:
     for patch in range(PATCH_ROUNDS + 1):
         if not len(surface["tris"]):
             return None
-        open_at = _open_vertices(surface["tris"], len(surface["verts"]))
+        open_at = [] if surface["closed"] else open_vertices(surface["tris"], len(surface["verts"]))
         if not len(open_at):
             break
         if patch == PATCH_ROUNDS:
@@ -86,12 +86,6 @@ def coarse_surface(field, iso: float) -> dict | None:
     if _missed_octets(field, surface["cube_corners"], iso):
         return None
     return {**surface, "field": coarse}
-
-
-def _open_vertices(tris, n: int) -> np.ndarray:
-    """The vertices of the edges of ``tris`` that are not in two triangles, opposite ways."""
-    table = edge_table(tris, n)
-    return np.unique(table["pairs"][(table["faces"] != 2) | (table["forward"] != 1)])
 
 
 def _with_missing_nodes(field, coarse, samples, points) -> tuple:

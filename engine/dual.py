@@ -140,13 +140,20 @@ def _count_patches_kernel(
     quad_counts: wp.array[wp.int32],
     cube_of_node: wp.array[wp.int32],
     below: wp.array[wp.uint8],
+    crossed: wp.array[wp.uint8],
 ):
     """Patches of cube ``first + tid``, and the crossed edges whose quads it writes (see ``_quads_kernel``); the
     cube's index at its minimum corner's node, and at the nodes that are the minimum corners of its face neighbours
-    towards +x, +y, +z a flag that the neighbour below them along that axis is active (``below`` (N, 3), zeroed)."""
+    towards +x, +y, +z a flag that the neighbour below them along that axis is active (``below`` (N, 3), zeroed);
+    how many of its edges it crosses in ``crossed`` (per cube: CPU launches of parallel parts add unguarded)."""
     cube = first + wp.tid()
     case = _case(cube_corners, values, cube)
     counts[cube] = patch_count[case]
+    edges = int(0)
+    for e in range(12):
+        ca, cb = edge_ends(e)
+        edges += wp.where(((case >> ca) & 1) != ((case >> cb) & 1), 1, 0)
+    crossed[cube] = wp.uint8(edges)
     cube_of_node[cube_corners[cube, 0]] = cube
     quads = int(0)
     for a in range(3):
@@ -497,7 +504,8 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         ``cells`` (V,) int32 (the active cube each vertex belongs to, a row of ``cube_corners``), ``tunnels``: how
         many of the vertices were added between two cubes meeting along two dual edges (``meshcheck.open_tunnels``),
         ``whole`` (Q,) uint8: per pair of rows 2q, 2q + 1 (first in ``tris``; a tunnel's fans follow them),
-        whether their quad is planar and convex enough to stay one polygon, and its split (:func:`.quads.merge_pairs`).
+        whether their quad is planar and convex enough to stay one polygon, and its split (:func:`.quads.merge_pairs`),
+        ``closed``: whether every crossed lattice edge of an active cube has its quad (no hole at a missing cube).
     """
     device = cube_corners.device
     tables = _tables(device)
@@ -506,10 +514,11 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
     quad_counts = wp.empty(m, dtype=wp.int32, device=device)
     cube_of_node = wp.full(n, -1, dtype=wp.int32, device=device)
     below = wp.zeros(3 * n, dtype=wp.uint8, device=device)
+    crossed = wp.empty(m, dtype=wp.uint8, device=device)
     launch_split(
         _count_patches_kernel,
         m,
-        lambda s, c: [s, cube_corners, values, tables["count"], counts, quad_counts, cube_of_node, below],
+        lambda s, c: [s, cube_corners, values, tables["count"], counts, quad_counts, cube_of_node, below, crossed],
         device,
     )
     vertex_start = wp.empty(m, dtype=wp.int32, device=device)
@@ -591,6 +600,7 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         "cells": cells.numpy(),
         "tunnels": 0,
         "whole": whole.numpy(),
+        "closed": False,
     }
     quadrics = cube_info = None
     tunnel_np = tunnel.numpy()
@@ -599,7 +609,11 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         points = tunnel_points(flagged, tunnel_np[flagged], quad_scan, cube_corners, values, codes, origin_wp, spacing)
         open_tunnels(surface, flagged, tunnel_np[flagged] & 15, points)
     tris_np = surface["tris"]
-    if len(tris_np) and tris_np[:, 0].min() < 0:  # quads at the band's edge, where a cube is missing (open surface)
+    complete = tris_np[: 2 * n_quads : 2, 0] >= 0
+    # every crossed edge of an active cube in a quad of four active cubes: closed (an edge with a cube missing has
+    # no quad, or a -1 row where the cube writing it is there)
+    surface["closed"] = bool(int(crossed.numpy().sum(dtype=np.int64)) == 4 * int(np.count_nonzero(complete)))
+    if not complete.all():  # quads at the band's edge, where a cube is missing (open surface)
         complete = tris_np[:, 0] >= 0
         surface["tris"] = tris_np[complete]
         surface["whole"] = surface["whole"][complete[: 2 * len(surface["whole"]) : 2]]  # (a tunnel's fans: last)

@@ -493,8 +493,8 @@ class AdaptiveField:
 
         Args:
             iso: Level to extract (world units; 0 is the surface, positive values offset it outwards). Farther than
-                ISO_REACH voxels, where the finest band no longer holds every cube the level crosses, it is the zero
-                surface of :func:`.fieldops.offset` (``regions`` are not read there: the offset has no sources).
+                ISO_REACH voxels, or where the level leaves the finest band (its surface there is open), it is the
+                zero surface of :func:`.fieldops.offset` (``regions`` are not read there: the offset has no sources).
             sharp: Keep creases and corners (dual marching cubes placing each vertex at the minimiser of the exact
                 tangent planes of its cube, :mod:`.dual`); ``False`` gives marching cubes, vertices on the lattice
                 edges. Default: sharp, except for a re-distanced field (``stats["exact_distance"]``: offsets and
@@ -529,16 +529,18 @@ class AdaptiveField:
             verts, tris = surface["verts"], surface["tris"]
             mesh = (verts, tris) if not quads else (verts, tris.ravel(), np.full(len(tris), 3, np.int32))
             return (*mesh, np.zeros((0, 2), dtype=np.int32)) if return_creases else mesh
-        if abs(iso) > ISO_REACH * self.world_voxel_size:  # past the finest band: the zero surface of its offset
+        asked, out = sharp, None
+        if sharp is None:
+            sharp = not self.stats.get("exact_distance", False)
+        if abs(iso) <= ISO_REACH * self.world_voxel_size:
+            out = field_mesh(
+                self, iso, sharp=sharp, creases=return_creases, quads=quads, adaptivity=adaptivity, regions=regions
+            )
+        if out is None or not out["closed"]:  # the level leaves the finest band: the zero surface of its offset
             from .fieldops import offset
 
             grown = offset(self, iso)
-            return grown.to_mesh(sharp=sharp, return_creases=return_creases, quads=quads, adaptivity=adaptivity)
-        if sharp is None:
-            sharp = not self.stats.get("exact_distance", False)
-        out = field_mesh(
-            self, iso, sharp=sharp, creases=return_creases, quads=quads, adaptivity=adaptivity, regions=regions
-        )
+            return grown.to_mesh(sharp=asked, return_creases=return_creases, quads=quads, adaptivity=adaptivity)
         mesh = (out["verts"], out["faces"], out["sizes"]) if quads else (out["verts"], out["tris"])
         return (*mesh, out["creases"]) if return_creases else mesh
 
@@ -568,9 +570,10 @@ class AdaptiveField:
         return boolean.difference(self, other)
 
 
-# ``to_mesh`` extracts levels up to this many voxels from the surface from the field itself: every cube they cross
-# lies in its finest band (measured at /256: closed to 0.5 voxel and leaking from 0.6, by 24-222 edges, to 1 voxel,
-# by 18-34 k, on a cube, cube - bore, spot and a blended union, marching cubes or sharp); past it, from its offset.
+# ``to_mesh`` extracts levels up to this many voxels from the surface from the field itself where every cube they
+# cross lies in its finest band (measured at /256: closed to 0.5 voxel and leaking from 0.6, by 24-222 edges, to 1
+# voxel, by 18-34 k, on a cube, cube - bore, spot and a blended union, marching cubes or sharp; the beetle with a
+# ball already at 0.3), past it, or where it leaks, from its offset.
 ISO_REACH = 0.5
 
 

@@ -171,6 +171,12 @@ def edge_table(tris: np.ndarray, n_verts: int) -> dict:
     return {"pairs": pairs, "faces": faces, "forward": np.add.reduceat(forward, start).astype(np.int32)}
 
 
+def open_vertices(tris: np.ndarray, n_verts: int) -> np.ndarray:
+    """The vertices of the edges of ``tris`` not in exactly two triangles, opposite ways (none: closed)."""
+    table = edge_table(tris, n_verts)
+    return np.unique(table["pairs"][(table["faces"] != 2) | (table["forward"] != 1)])
+
+
 def problem_faces(tris: np.ndarray, n_verts: int, edges: dict | None = None) -> np.ndarray:
     """(T,) int32, 1 for faces touching a vertex of an open, non-manifold or inconsistently oriented edge (a mesh
     without any is closed: no band refinement, signs spread everywhere). ``edges``: ``edge_table(tris, n_verts)``."""

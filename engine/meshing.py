@@ -15,6 +15,7 @@ from .adaptive import simplify
 from .coarse import COARSE_FROM, coarse_surface
 from .contouring import sharp_surface
 from .extract import extract_octree_level, extract_surface
+from .meshcheck import open_vertices
 from .quadric import crease_edges
 from .quads import merge_pairs, triangulate
 
@@ -25,7 +26,8 @@ def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, ad
 
     Returns:
         dict: ``verts`` (V, 3) float32; ``tris`` (T, 3) int32, or with ``quads`` ``faces`` (C,) int32 and ``sizes``
-        (P,) int32 polygons (quads first); ``creases`` (E, 2) int32.
+        (P,) int32 polygons (quads first); ``creases`` (E, 2) int32; ``closed``: False where a level off the surface
+        left the finest band (an edge in one triangle).
     """
     frame = field.in_frame()
     scale = 1.0 if field.placement is None else field.placement.scale
@@ -37,6 +39,7 @@ def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, ad
     else:
         verts, tris = marching_cubes(frame, iso / scale)
         surface = {"verts": verts, "tris": tris, "ranks": None, "whole": np.zeros(0, np.uint8)}
+    closed = iso == 0.0 or not len(open_vertices(surface["tris"], len(surface["verts"])))  # (see ``to_mesh``)
     found = sharp and (creases or adaptivity > 0.0) and len(surface["tris"])
     crease, fold = (
         crease_edges(surface["verts"], surface["tris"], surface["ranks"], folds=True) if found else (None, None)
@@ -44,14 +47,14 @@ def field_mesh(field, iso: float, *, sharp: bool, creases: bool, quads: bool, ad
     out = {"verts": surface["verts"], "creases": np.zeros((0, 2), np.int32) if crease is None else crease}
     if not quads and adaptivity <= 0.0:
         out["tris"] = surface["tris"]
-        return _placed(field, out)
+        return _placed(field, {**out, "closed": closed})
     out["faces"], out["sizes"] = merge_pairs(surface["tris"], surface["whole"])
     if adaptivity > 0.0 and sharp and len(out["sizes"]):
         coarser = int(coarse is not None)
         out = simplify(frame, {**out, "ranks": surface["ranks"], "folds": fold}, adaptivity, regions, coarser=coarser)
     if not quads:
         out["tris"] = triangulate(out.pop("faces"), out.pop("sizes"))
-    return _placed(field, out)
+    return _placed(field, {**out, "closed": closed})
 
 
 def _placed(field, out: dict) -> dict:
