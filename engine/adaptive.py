@@ -23,12 +23,14 @@ extracted polygons, as vertex clustering over the octree's blocks:
    onto each other) drops out of them. A quad left bent (not planar and convex within :data:`.quads.QUAD_ANGLE`) is
    split along the diagonal between two crease vertices, else the less folded one.
 4. The result is checked: every edge in exactly two faces, opposite ways, every vertex's faces one fan, no face
-   repeating a corner. The components at any failure drop one level and the check runs again, until none fails (at
-   worst every vertex is back at level 0: the surface as extracted), so the result is closed and 2-manifold always.
+   repeating a corner, every merged face's centre within FACE_REACH tolerances of the field's surface and facing
+   the way its gradient does there (none turned over). The components at any failure drop one level and the check
+   runs again, until none fails (at worst every vertex is back at level 0: the surface as extracted), so the result
+   is closed and 2-manifold always.
    A round samples the field only where the one before did not (clusters and triangles by their levels and ids).
 
-Self-intersection is not checked: a merged vertex lies within about the tolerance of its vertices' plane and the
-faces' centres within FACE_REACH tolerances of the surface.
+Self-intersection is not checked beyond that: a merged vertex lies within about the tolerance of its vertices' plane
+and the faces' centres near the surface, facing out.
 """
 
 from __future__ import annotations
@@ -130,6 +132,7 @@ def _checked(lattice, local, faces, cls, level, ids, tol) -> dict:
     Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) cells, ``faces``, ``sizes``."""
     keys = int(ids[1].sum())
     known = {"position": np.full((keys, 3), np.nan), "mean": np.full((keys, 3), np.nan)}
+    outward = _vertex_normals(local, faces[0])
     known.update(tris=np.zeros(0, np.int64), far=np.zeros(0, dtype=bool))
     code = _keys(level, ids, np.arange(len(level)))  # each vertex's cluster's key
     round_ = 0
@@ -139,7 +142,8 @@ def _checked(lattice, local, faces, cls, level, ids, tol) -> dict:
         collapsed = _collapse(*faces, cluster, level)
         new_faces, new_sizes = _split_bent_quads(position, feature, merged, *collapsed, tol)
         bad = _failures(len(position), new_faces, new_sizes)
-        bad |= _strays(lattice, position, new_faces, new_sizes, merged, FACE_REACH * tol, key, known)
+        normals = row_sums(cluster, outward, len(position))  # each cluster's: its vertices' faces' as extracted
+        bad |= _strays(lattice, (position, normals), new_faces, new_sizes, merged, FACE_REACH * tol, key, known)
         if not bad.any() or not (level > 0).any():
             break
         drop = bad[cluster] & (level > 0)
@@ -184,9 +188,11 @@ def _renumbered(lattice, surface, creases, level, merged) -> dict:
     }
 
 
-def _strays(lattice, position, faces, sizes, merged, reach: float, key, known: dict) -> np.ndarray:
+def _strays(lattice, clusters, faces, sizes, merged, reach: float, key, known: dict) -> np.ndarray:
     """(K,) the vertices of faces whose fan triangles' centres lie more than ``reach`` voxels from the field's
-    surface (a face between two merged vertices across a curved part); only faces with a ``merged`` corner. The
+    surface (a face between two merged vertices across a curved part) or that face against their corners' clusters'
+    normals (``clusters``: position and normal of each: turned over, a fold where a merged vertex moved past its
+    neighbours, as a concave quad's fan or a face across a narrow part); only faces with a ``merged`` corner. The
     triangles' results are ``known`` (``tris``: sorted keys of their corners' clusters, ``far``) for the next round,
     and taken from there."""
     tris = _fans(faces, sizes)
@@ -201,8 +207,12 @@ def _strays(lattice, position, faces, sizes, merged, reach: float, key, known: d
         tri_key, seen = None, np.zeros(len(tris), dtype=bool)
     new = np.flatnonzero(~seen)
     field, h = lattice
+    position, normals = clusters
     centres = np.asarray(field.origin, dtype=np.float64) + h * position[tris[new]].mean(axis=1)
-    far[new] = np.abs(field.sample(centres.astype(np.float32), method="linear")) > reach * h
+    corners = position[tris[new]]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    turned = np.einsum("ij,ij->i", normal, normals[tris[new]].sum(axis=1)) < 0.0
+    far[new] = (np.abs(field.sample(centres.astype(np.float32), method="linear")) > reach * h) | turned
     if tri_key is not None:
         order = np.argsort(np.concatenate([known["tris"], tri_key[new]]))
         known["tris"] = np.concatenate([known["tris"], tri_key[new]])[order]
@@ -210,6 +220,14 @@ def _strays(lattice, position, faces, sizes, merged, reach: float, key, known: d
     bad = np.zeros(len(position), dtype=bool)
     bad[tris[far].ravel()] = True
     return bad
+
+
+def _vertex_normals(local, corners) -> np.ndarray:
+    """(V, 3) each vertex's faces' normals summed (``corners`` (P, 4), :func:`_padded`: a quad's diagonals' cross
+    product, a triangle's edges', as its last corner repeats), outward as the faces are."""
+    p = local[corners]
+    normal = np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1])
+    return row_sums(corners.ravel(), np.repeat(normal, 4, axis=0), len(local))
 
 
 def _onto_surface(lattice, position, moved, tol: float, key, known) -> np.ndarray:
