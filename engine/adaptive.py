@@ -52,6 +52,11 @@ FACE_REACH = 3.0
 MIN_CREASE = 6
 
 
+# A merged smooth vertex this near the field's surface (voxels) takes no Newton step onto it: near a crease the linear
+# values bend by as much, and a step there moved the merged planar faces of the low adaptivities off their plane
+# (cube - bore at 0.05: Hausdorff p95 0.015 -> 0.017 voxel).
+STAY_VOXELS = 0.05
+
 # Rounds of the manifold check (step 4); after them any block still at a failure goes back to level 0.
 CHECK_ROUNDS = 6
 
@@ -245,7 +250,7 @@ def _onto_surface(lattice, clusters, moved, tol: float, key, known) -> np.ndarra
         value = field.sample(points.astype(np.float32), method="linear").astype(np.float64)
         unit = normals[rows] / np.maximum(np.linalg.norm(normals[rows], axis=1), 1e-300)[:, None]
         step = value[:, None] * unit / h
-        step[np.abs(value) <= 0.5 * tol * h] = 0.0
+        step[np.abs(value) <= max(0.5 * tol * h, STAY_VOXELS * field.voxel_size)] = 0.0
         known[key[rows]] = position[rows] - np.clip(step, -1.0, 1.0)  # at most a voxel a side: a mean beside a
         # thin part stays put
     out = position.copy()
