@@ -296,6 +296,7 @@ def _build_thick(plan: dict, *, device, field_id: int) -> AdaptiveField:
         top_dims=plan["top_dims"],
         field_ids=(field_id,),
         device=device,
+        cls=AdaptiveField,
     )
     field.timings["mesh_bvh"] = seconds
     field.stats["thickness"] = plan["thickness"]

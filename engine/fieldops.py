@@ -19,7 +19,6 @@ import time
 import numpy as np
 import warp as wp
 
-from .field import AdaptiveField
 from .geometry import mesh_closest_point
 from .octree import code_bits, decode_codes, dense_level, level_layout, morton_decode, node_center, sort_unique
 from .parallel import launch_split
@@ -229,6 +228,7 @@ def levelset_field(
     top_dims,
     field_ids,
     device,
+    cls,
 ):
     """The field of ``g(S)``, re-distanced: the new surface's band found top-down (:func:`band_octets`), every node
     given ``g`` (a point of the new surface as its closest point), then :func:`.redistancing.redistance`.
@@ -240,6 +240,7 @@ def levelset_field(
         voxel_size, levels, origin, top_dims: The new field's lattice and domain (see :func:`plan_grown`).
         field_ids: Ids of the new field (its nodes' sources come from ``base`` where it has them, else the first).
         device: Warp device.
+        cls: The field class (``AdaptiveField``: passed in, so that the field's own module can call this one).
     Returns:
         AdaptiveField, ``stats["exact_distance"]`` True.
     """
@@ -301,7 +302,7 @@ def levelset_field(
             balance=True,
         )
     timings["values"] = time.perf_counter() - t0
-    field = AdaptiveField.from_layout(
+    field = cls.from_layout(
         layout,
         voxel_size=voxel_size,
         origin=origin,
@@ -374,6 +375,7 @@ def _operate(field, kind: int, a: float, grow: float, what: str):
         top_dims=top_dims,
         field_ids=field.field_ids,
         device=field.device,
+        cls=type(field),
     )
 
 

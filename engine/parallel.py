@@ -187,7 +187,9 @@ def launch_split(
     A Warp CPU launch runs on one thread but releases the GIL, so launches from two threads use two cores. ``args``
     is called with (start, count) and returns the launch's ``inputs`` list (slices of per-thread arrays, or an
     offset the kernel adds to its thread id). On CUDA, or for small launches, this is one ordinary launch.
-    ``balance``, ``min_piece``: see :func:`run_split`.
+    ``balance``, ``min_piece``: see :func:`run_split`. Warp's CPU atomics are not atomic across two such launches (a
+    sum into one slot loses one part's additions now and then): a kernel that adds into shared slots runs whole
+    (``wp.launch``) or writes one value per thread, unless all it raises is a flag tested for nonzero.
     """
     if dim <= 0:
         return
