@@ -85,7 +85,7 @@ def coarse_surface(field, iso: float) -> dict | None:
         surface = lattice_surface(coarse, *samples, iso)
     if _missed_octets(field, surface["cube_corners"], iso):
         return None
-    return {**surface, "field": coarse}
+    return surface
 
 
 def _with_missing_nodes(field, coarse, samples, points) -> tuple:

@@ -451,7 +451,7 @@ def test_a_level_past_the_finest_band_is_its_offsets_surface_closed(iso_voxels):
     from tests.support import cad_pairs
 
     op, a, b = cad_pairs()["cube - bore"]
-    h = 1.0 / 128.0
+    h = 1.0 / 96.0
     field = engine.difference(*engine.build_fields([a, b], voxel_size=h))
     verts, tris = field.to_mesh(iso=iso_voxels * h)
     assert is_watertight(tris) and len(tris) > 1000
@@ -459,21 +459,21 @@ def test_a_level_past_the_finest_band_is_its_offsets_surface_closed(iso_voxels):
         offset_verts, offset_tris = engine.offset(field, iso_voxels * h).to_mesh()
         assert np.array_equal(verts, offset_verts) and np.array_equal(tris, offset_tris)
     # its vertices lie at the level (the field sampled there; a sharp corner of the offset planes lies farther out
-    # than the rounded level, so the 95th percentile): measured 0.031, 0.045, 0.039 and 0.20 voxel (two voxels out,
+    # than the rounded level, so the 95th percentile): measured 0.107, 0.099, 0.065 and 0.21 voxel (two voxels out,
     # past the finest band, the field's own samples are the coarse levels' interpolation)
     level = np.abs(field.sample(verts) - iso_voxels * h)
-    bound = {0.4: 0.09, 1.0: 0.13, -1.0: 0.12, 2.0: 0.6}[iso_voxels]
+    bound = {0.4: 0.3, 1.0: 0.3, -1.0: 0.2, 2.0: 0.6}[iso_voxels]
     assert np.percentile(level, 95) < bound * h, np.percentile(level, 95) / h
 
 
 def test_a_level_that_leaks_out_of_the_finest_band_is_its_offsets_surface():
     # the open beetle with a ball: its level 0.3 voxel out already leaves the finest band near the capped holes
-    # (measured: open at the finest level), so to_mesh gives its offset's zero surface, closed
+    # (measured at /128: open at 0.2-0.4 voxel), so to_mesh gives its offset's zero surface, closed
     import engine
     from engine.meshing import field_mesh
     from tests.support import load_mesh, normalised, uv_sphere
 
-    h = 1.0 / 256.0
+    h = 1.0 / 128.0
     beetle = engine.build_field(*normalised(load_mesh("beetle.obj")), voxel_size=h)
     ball = engine.build_field(*normalised(uv_sphere(0.25, center=(0.2, 0.1, 0.0))), voxel_size=h)
     field = engine.union(beetle, ball)
