@@ -593,28 +593,26 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         ],
         device,
     )
-    surface = {
-        "verts": verts.numpy().reshape(-1, 3),
-        "tris": tris.numpy(),
-        "ranks": ranks.numpy(),
-        "cells": cells.numpy(),
-        "tunnels": 0,
-        "whole": whole.numpy(),
-        "closed": False,
-    }
+    surface = {"verts": verts.numpy().reshape(-1, 3), "tris": tris.numpy(), "ranks": ranks.numpy()}
+    surface.update(cells=cells.numpy(), tunnels=0, whole=whole.numpy())
     quadrics = cube_info = None
     tunnel_np = tunnel.numpy()
     flagged = np.flatnonzero(tunnel_np)
     if len(flagged):
         points = tunnel_points(flagged, tunnel_np[flagged], quad_scan, cube_corners, values, codes, origin_wp, spacing)
         open_tunnels(surface, flagged, tunnel_np[flagged] & 15, points)
-    tris_np = surface["tris"]
-    complete = tris_np[: 2 * n_quads : 2, 0] >= 0
-    # every crossed edge of an active cube in a quad of four active cubes: closed (an edge with a cube missing has
-    # no quad, or a -1 row where the cube writing it is there)
+    return _without_missing_quads(surface, n_quads, crossed)
+
+
+def _without_missing_quads(surface: dict, n_quads: int, crossed) -> dict:
+    """``surface`` without the -1 rows of quads at a missing cube, and ``closed``: every crossed edge of an active
+    cube (``crossed``: (M,) how many each has) in a quad of four active cubes (an edge with a cube missing has no
+    quad, or a -1 row where the cube writing it is there)."""
+    tris = surface["tris"]
+    complete = tris[: 2 * n_quads : 2, 0] >= 0
     surface["closed"] = bool(int(crossed.numpy().sum(dtype=np.int64)) == 4 * int(np.count_nonzero(complete)))
     if not complete.all():  # quads at the band's edge, where a cube is missing (open surface)
-        complete = tris_np[:, 0] >= 0
-        surface["tris"] = tris_np[complete]
+        complete = tris[:, 0] >= 0
+        surface["tris"] = tris[complete]
         surface["whole"] = surface["whole"][complete[: 2 * len(surface["whole"]) : 2]]  # (a tunnel's fans: last)
     return surface

@@ -266,13 +266,34 @@ def levelset_field(
     timings["band"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     layout = level_layout(octets, top_dims, levels, device, timings)
-    offsets = layout["offsets"]
+    values, proj, source = _level_values(layout, (mesh_id, f_arg, signs), kind, a, voxel_size, origin, field_ids[0])
+    timings["values"] = time.perf_counter() - t0
+    field = cls.from_layout(
+        layout,
+        voxel_size=voxel_size,
+        origin=origin,
+        values=values,
+        proj=proj,
+        source=source,
+        field_ids=field_ids,
+        timings=timings,
+    )
+    result = redistance(field)
+    result.timings = {**timings, **{f"redistance_{k}": v for k, v in result.timings.items()}}
+    return result
+
+
+def _level_values(layout, surface, kind: int, a: float, voxel_size: float, origin, field_id: int) -> tuple:
+    """Every node of ``layout`` given ``g`` of the surface (``surface``: mesh id, field arg, whether signed; see
+    :func:`levelset_field`): (N,) values, closest points and sources, level by level."""
+    mesh_id, f_arg, signs = surface
+    offsets, levels, device = layout["offsets"], len(layout["offsets"]) - 1, layout["codes"].device
     n = int(offsets[-1])
     values = wp.empty(n, dtype=wp.float32, device=device)
     proj = wp.empty(n, dtype=wp.vec3, device=device)
     source = wp.empty(n, dtype=wp.int32, device=device)
     origin_v = wp.vec3(*origin)
-    diag = float(np.linalg.norm(np.asarray(top_dims) * voxel_size * 2 ** (levels - 1)))
+    diag = float(np.linalg.norm(np.asarray(layout["top_dims"]) * voxel_size * 2 ** (levels - 1)))
     reach0 = level_reach(kind, a)
     for k in range(levels):
         lo, hi = int(offsets[k]), int(offsets[k + 1])
@@ -293,7 +314,7 @@ def levelset_field(
                 float(spacing),
                 k,
                 float(reach),
-                int(field_ids[0]),
+                int(field_id),
                 values,
                 proj,
                 source,
@@ -301,20 +322,7 @@ def levelset_field(
             device,
             balance=True,
         )
-    timings["values"] = time.perf_counter() - t0
-    field = cls.from_layout(
-        layout,
-        voxel_size=voxel_size,
-        origin=origin,
-        values=values,
-        proj=proj,
-        source=source,
-        field_ids=field_ids,
-        timings=timings,
-    )
-    result = redistance(field)
-    result.timings = {**timings, **{f"redistance_{k}": v for k, v in result.timings.items()}}
-    return result
+    return values, proj, source
 
 
 def _empty_field_arg(device) -> FieldArg:
