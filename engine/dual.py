@@ -528,45 +528,10 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
     n_verts = int(vertex_start[-1:].numpy()[0])
     n_quads = int(quad_scan[-1:].numpy()[0])
     quad_counts = None  # (arrays are let go as soon as they are used: the peak of a large extraction is here)
-    verts = wp.empty(n_verts, dtype=wp.vec3, device=device)
-    ranks = wp.empty(n_verts, dtype=wp.int32, device=device)
-    cells = wp.empty(n_verts, dtype=wp.int32, device=device)
-    quadrics = wp.empty(n_verts, dtype=vec10h, device=device)  # only to choose each quad's diagonal: half floats
-    cube_info = wp.empty(m, dtype=wp.vec2i, device=device)
     origin_wp = wp.vec3(*(float(x) for x in origin))
-    launch_split(
-        _place_vertices_kernel,
-        m,
-        lambda s, c: [
-            s,
-            cube_corners,
-            values,
-            codes,
-            proj,
-            origin_wp,
-            float(spacing),
-            float(iso),
-            tables["edge_mask"],
-            tables["end_mask"],
-            tables["spans"],
-            vertex_start,
-            cube_of_node,
-            below,
-            EMPTY_REACH,
-            EIGEN_CUTOFF,
-            SMOOTH_COS,
-            HERMITE_TOLERANCE,
-            HERMITE_NEAR,
-            CELL_MARGIN,
-            verts,
-            ranks,
-            cells,
-            quadrics,
-            cube_info,
-        ],
-        device,
-        balance=True,
-    )
+    nodes = (cube_corners, values, codes, proj, cube_of_node)
+    starts = (vertex_start, below, n_verts)
+    verts, ranks, cells, quadrics, cube_info = _placed_vertices(nodes, starts, tables, origin_wp, spacing, iso)
     vertex_start = below = None
     tris = wp.empty((2 * n_quads, 3), dtype=wp.int32, device=device)
     tunnel = wp.empty(n_quads, dtype=wp.uint8, device=device)
@@ -602,6 +567,22 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         points = tunnel_points(flagged, tunnel_np[flagged], quad_scan, cube_corners, values, codes, origin_wp, spacing)
         open_tunnels(surface, flagged, tunnel_np[flagged] & 15, points)
     return _without_missing_quads(surface, n_quads, crossed)
+
+
+def _placed_vertices(nodes, starts, tables, origin, spacing: float, iso: float) -> tuple:
+    """``_place_vertices_kernel`` over the active cubes (``nodes``: their corners, the nodes' values, codes, closest
+    points and each node's cube; ``starts``: each cube's first vertex, the below flags, the vertex count): the
+    vertices, their ranks, cells, half-float quadrics and each cube's (first vertex, case)."""
+    cube_corners, values, codes, proj, cube_of_node = nodes
+    vertex_start, below, n = starts
+    device, m = cube_corners.device, cube_corners.shape[0]
+    out = [wp.empty(n, dtype=t, device=device) for t in (wp.vec3, wp.int32, wp.int32, vec10h)]
+    out.append(wp.empty(m, dtype=wp.vec2i, device=device))  # (quadrics only to choose each quad's diagonal)
+    fixed = [tables["edge_mask"], tables["end_mask"], tables["spans"], vertex_start, cube_of_node, below]
+    fixed += [EMPTY_REACH, EIGEN_CUTOFF, SMOOTH_COS, HERMITE_TOLERANCE, HERMITE_NEAR, CELL_MARGIN]
+    head = [cube_corners, values, codes, proj, origin, float(spacing), float(iso)]
+    launch_split(_place_vertices_kernel, m, lambda s, c: [s, *head, *fixed, *out], device, balance=True)
+    return tuple(out)
 
 
 def _without_missing_quads(surface: dict, n_quads: int, crossed) -> dict:
