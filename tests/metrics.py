@@ -458,7 +458,7 @@ def _self_intersections_kernel(
     hits: wp.array(dtype=wp.int32),
 ):
     """Count the triangles that share no vertex with triangle ``tid`` and cross it (an edge of one through the
-    other's interior, decided by float64 orientation signs)."""
+    other's interior, decided by float64 orientation signs; symmetric, so each crossing pair is counted at both)."""
     t = wp.tid()
     a = tris[t, 0]
     b = tris[t, 1]
@@ -473,7 +473,7 @@ def _self_intersections_kernel(
     other = int(0)  # noqa: UP018 (a dynamic Warp variable)
     count = int(0)  # noqa: UP018
     while wp.mesh_query_aabb_next(query, other):
-        if other <= t:
+        if other == t:
             continue
         u = tris[other, 0]
         v = tris[other, 1]
@@ -501,6 +501,17 @@ def self_intersections(verts, tris, *, device=None) -> int:
         The number of crossing pairs: an edge of one triangle through the interior of the other, for every pair whose
         bounding boxes overlap (float64 orientation tests on the float32 vertices; touching does not count).
     """
+    return int(_crossings(verts, tris, device).sum()) // 2
+
+
+def self_intersecting_faces(verts, tris, *, device=None) -> np.ndarray:
+    """(T,) bool: the triangles that another triangle sharing no vertex with them crosses (as
+    :func:`self_intersections` counts them): where a surface passes through itself."""
+    return _crossings(verts, tris, device) > 0
+
+
+def _crossings(verts, tris, device) -> np.ndarray:
+    """(T,) int32: how many triangles sharing no vertex with each one cross it."""
     mesh = _wp_mesh(verts, tris, winding=False, device=device)
     device = mesh.device
     tris_wp = wp.array(np.asarray(tris, dtype=np.int32), dtype=wp.int32, device=device)
@@ -512,4 +523,4 @@ def self_intersections(verts, tris, *, device=None) -> int:
         outputs=[hits],
         device=device,
     )
-    return int(hits.numpy().sum())
+    return hits.numpy()

@@ -15,6 +15,8 @@ from tests.metrics import (
     mesh_area,
     mesh_volume,
     sample_surface,
+    self_intersecting_faces,
+    self_intersections,
     unsigned_distance,
     winding_inside,
     winding_numbers,
@@ -181,6 +183,20 @@ def test_exact_winding_numbers_of_closed_open_and_flipped_meshes():
     w = winding_numbers(open_verts, open_tris, [[0.0, 0.0, 0.0], [1.0 + 1e-9, 0.0, 0.0]])
     assert w[0] == pytest.approx(5.0 / 6.0, abs=1e-12)
     assert w[1] == pytest.approx(0.5, abs=1e-6)  # the centre of the opening's plane, seen from just outside it
+
+
+def test_self_intersecting_faces_are_those_another_face_crosses():
+    # two boxes overlapping as one soup: each crosses the other along a loop; a box alone crosses nothing
+    a, b = box_mesh(), box_mesh(center=(1.0, 0.5, 0.25))
+    verts = np.concatenate([a[0], b[0]])
+    tris = np.concatenate([a[1], b[1] + len(a[0])])
+    crossed = self_intersecting_faces(verts, tris)
+    assert crossed.any() and crossed[: len(a[1])].any() and crossed[len(a[1]) :].any()
+    # only the faces the other box passes through: its +x, +y, +z sides and theirs opposite
+    centres = verts[tris].mean(axis=1)
+    assert not crossed[: len(a[1])][centres[: len(a[1]), 0] < -0.99].any()
+    assert self_intersections(verts, tris) * 2 >= crossed.sum()
+    assert not self_intersecting_faces(*a).any() and self_intersections(*a) == 0
 
 
 def test_points_of_the_wrong_shape_are_rejected():

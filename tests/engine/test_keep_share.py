@@ -1,6 +1,8 @@
 """How much of what should be kept comes out kept on messy shared meshes (engine/hybrid.py, engine/zipper.py,
 engine/slits.py): the issue's target is 99 % of the area of the faces farther than 3 voxels from the other operand's
-surface and from the mesh's own defects, on the result's side.
+surface and from the mesh's own defects, on the result's side. Defects as the issue names them: hole boundaries,
+non-manifold edges, duplicated faces, and where the surface passes through itself (its kept faces stay a band from
+there: :mod:`engine.keep`).
 
 Voxel = 1/256 of the operands' bounding-box diagonal. A sample of the mesh's surface counts as kept when it lies on
 a kept face of that mesh (within 1e-5: kept faces are the mesh's own triangles, or pieces of them).
@@ -11,17 +13,18 @@ import pytest
 
 import engine
 from engine.meshcheck import problem_faces, weld_positions
-from tests.metrics import sample_surface, to_manifold, unsigned_distance, winding_inside
+from tests.metrics import sample_surface, self_intersecting_faces, to_manifold, unsigned_distance, winding_inside
 from tests.support import load_mesh, normalised, uv_sphere
 
 
 def _defects(verts, tris) -> np.ndarray:
-    """(T,) bool: triangles at an open, non-manifold or misoriented edge, or repeating another's corners (vertices
-    at one position taken as one)."""
+    """(T,) bool: triangles at an open, non-manifold or misoriented edge, repeating another's corners (vertices
+    at one position taken as one), or crossed by another triangle."""
     welded_verts, welded = weld_positions(verts, tris)
     welded = np.asarray(welded, dtype=np.int32)
     _, inverse, counts = np.unique(np.sort(welded, axis=1), axis=0, return_inverse=True, return_counts=True)
-    return (counts[inverse.reshape(-1)] > 1) | problem_faces(welded, len(welded_verts)).astype(bool)
+    problem = (counts[inverse.reshape(-1)] > 1) | problem_faces(welded, len(welded_verts)).astype(bool)
+    return problem | self_intersecting_faces(verts, tris)
 
 
 def _kept_share(name: str) -> tuple[float, dict]:
@@ -41,9 +44,10 @@ def _kept_share(name: str) -> tuple[float, dict]:
     return float((unsigned_distance(s["verts"], kept, points[should]) < 1e-5).mean()), s
 
 
-# measured at /256, share: teapot 0.988 (a mesh of patches repeating their border vertices), beetle 0.936 (296 open
-# and 47 non-manifold edges); bounds three times the shortfall below (Suzanne: tests/engine/test_rejoin.py)
-@pytest.mark.parametrize(("name", "least"), [("teapot", 0.964), ("beetle", 0.808)])
+# measured at /256, share: teapot 0.994 (a mesh of patches repeating their border vertices: the issue's 99 %), cow
+# 0.983, beetle 0.938 (296 open and 47 non-manifold edges); the cow's and the beetle's bounds three times the
+# shortfall below (Suzanne: tests/engine/test_rejoin.py)
+@pytest.mark.parametrize(("name", "least"), [("teapot", 0.99), ("cow", 0.95), ("beetle", 0.815)])
 def test_messy_meshes_keep_most_of_what_should_be_kept(name, least):
     share, s = _kept_share(name)
     assert share >= least, share
