@@ -267,7 +267,7 @@ def _may_jump(judge: JudgeArg, leaf: LeafArg, x: wp.vec3, near: float) -> bool:
 
 
 @wp.func
-def _reading(judge: JudgeArg, x: wp.vec3, reach: float) -> wp.vec2:
+def reading(judge: JudgeArg, x: wp.vec3, reach: float) -> wp.vec2:
     """(the other leaves' sign pattern, the nearest of their surfaces and the leaf's defects, up to ``reach``) at
     ``x``. A sign is 0 where the value is 0: on a leaf with a BVH, where its surface passes through ``x``. The signs
     do not depend on ``reach``: a field that jumps is read at least a little over the band (its axis probes)."""
@@ -307,12 +307,12 @@ def _read_vertices_kernel(
     codes: wp.array[wp.int32],
     margins: wp.array[wp.float32],
 ):
-    """The reading (:func:`_reading`, up to ``reach``) at each used vertex not read in an earlier round (``again``
+    """The reading (:func:`reading`, up to ``reach``) at each used vertex not read in an earlier round (``again``
     1: at every one)."""
     v = used[wp.tid() + offset]
     if read[v] != wp.int8(0) and again == 0:
         return
-    r = _reading(judge, verts[v], reach)
+    r = reading(judge, verts[v], reach)
     codes[v] = int(r[0])
     margins[v] = r[1]
     read[v] = wp.int8(1)
@@ -434,7 +434,7 @@ def _judge_pieces_kernel(
         v = tris[t, corner]
         margin = margins[v]
         if not full and margin >= judge.corner_reach and keep_reach > judge.corner_reach:  # a large piece's: read on
-            margin = _reading(judge, verts[v], keep_reach)[1]
+            margin = reading(judge, verts[v], keep_reach)[1]
         least = wp.min(least, margin)
         same = same and codes[v] == first
         bounds = _fold(judge, codes[v], margin, bounds)
@@ -460,10 +460,10 @@ def _judge_pieces_kernel(
         while live and i <= steps:
             if r > 0 or (i > 0 and i < steps):
                 x = _row_point(a, b, c, s, i, steps)
-                reading = _reading(judge, x, wp.where(keeps, keep_reach, partly_reach))
-                same = same and int(reading[0]) == first
-                bounds = _fold(judge, int(reading[0]), reading[1], bounds)
-                least = wp.min(least, reading[1])
+                got = reading(judge, x, wp.where(keeps, keep_reach, partly_reach))
+                same = same and int(got[0]) == first
+                bounds = _fold(judge, int(got[0]), got[1], bounds)
+                least = wp.min(least, got[1])
                 if judge.crossing != 0:
                     sides = _fold_side(judge, sides, x, centre, n, own)
                 keeps = _keeps(judge, same, bounds, slack, own, sides)

@@ -15,8 +15,9 @@ built from a mesh is *kept* when, everywhere on it (at samples about a voxel apa
 A triangle that is only partly so and larger than ``SPLIT_VOXELS`` is split (:func:`.refine.split_triangles`) and its
 pieces judged again, so that large faces crossed by a seam keep their far parts; a sliver (a fine cylinder's wall
 triangle, a voxel wide and hundreds long) is cut across into pieces about as wide as it is, so that the kept border
-near a seam is made of short pieces rather than ever narrower needles, and the kept border's vertices on a straight run
-of it go (:func:`.refine.straighten_borders`). Nothing here intersects meshes: the
+near a seam is made of short pieces rather than ever narrower needles (in one pass, where the distances read along it
+say the rounds would cut it: :mod:`.precut`), and the kept border's vertices on a straight run of it go
+(:func:`.refine.straighten_borders`). Nothing here intersects meshes: the
 fields decide inside and outside; distances come from the leaves' meshes (exact, through their BVHs) or fields. The
 band is ``BAND_VOXELS`` of the result's voxels, widened by the widest blend. A round's checks run in two kernel
 launches (:mod:`.judging`), sample by sample (here) for expressions of very many leaves.
@@ -36,6 +37,7 @@ from .judging import MAX_TABLE_LEAVES, FusedJudge, edge_turns, per_triangle_min,
 from .jumps import JumpSpheres, jump_spheres
 from .meshcheck import defect_edges
 from .parallel import launch_split, run_tasks
+from .precut import cut_strips, fused_margins
 from .refine import merge_kept, restore_whole, straighten_borders
 from .slivers import Splitter, strip_parents
 
@@ -308,6 +310,21 @@ class _Judge:
         longest edge when that is more) times ``SLACK_VOXELS / SAMPLE_VOXELS``."""
         return np.maximum(longest / 8.0, self.spacing) * (SLACK_VOXELS / SAMPLE_VOXELS)
 
+    def margins(self, points: np.ndarray, reach: float) -> np.ndarray:
+        """(N,) float32 how far the nearest of the other leaves' surfaces and the leaf's own defects is from each point
+        (N, 3) float32, up to ``reach``: the reading the judge's samples take, by either path."""
+        if self.fused is not None:
+            return fused_margins(self.fused, points, reach)
+        margin = np.full(len(points), reach, dtype=np.float32)
+        for j, other in enumerate(self.leaves):
+            if j != self.index:
+                margin = np.minimum(
+                    margin, _margin(other, self.bvhs[j], self.jumps[j], points, self.band, reach, self.device)[0]
+                )
+        if self.defect_mesh is not None:
+            margin = np.minimum(margin, mesh_distances(self.defect_mesh, points, reach, self.device))
+        return margin
+
     def judge(self, verts, tris, parent, longest, turn, beyond: float | None = None):
         """Per triangle (pieces of original triangles ``parent``): kept, partly keepable, and flipped. A triangle is
         sampled about ``SAMPLE_VOXELS`` apart, or an eighth of its longest edge when that is more (a large triangle
@@ -463,6 +480,11 @@ def _judge_leaf(field, index: int, source, reads: tuple, fused: bool, avoid) -> 
     ends = np.full((len(verts), 2), -1, dtype=np.int64)
     split_edge = SPLIT_VOXELS * field.voxel_size
     splitter = Splitter(verts, tris, split_edge, judge.strips)
+    cut = cut_strips(judge, splitter, verts, status == UNKNOWN, split_edge)
+    if cut is not None:  # slivers cut where the rounds would cut them, the pieces judged
+        verts, tris, rows, ends = cut
+        parent, flip, status = parent[rows], flip[rows], status[rows]
+        _judge_unknown(judge, verts, tris, parent, flip, status, split_edge)
     for _ in range(MAX_SPLIT_ROUNDS - 1):
         mark = status == UNKNOWN  # partly keepable and larger than the split size: split, the pieces judged
         if not mark.any():
@@ -470,13 +492,8 @@ def _judge_leaf(field, index: int, source, reads: tuple, fused: bool, avoid) -> 
         verts, tris, parent, flip, status, ends = splitter.split(
             verts, tris, mark, parent, flip, status, ends, UNKNOWN, DROPPED
         )
-        todo = np.flatnonzero(status == UNKNOWN)
-        if not len(todo):
+        if not _judge_unknown(judge, verts, tris, parent, flip, status, split_edge):
             break
-        longest, turn = edge_turns(verts, tris[todo])
-        kept, partly, flip[todo] = judge.judge(verts, tris[todo], parent[todo], longest, turn)
-        split = partly & ~kept & (longest > split_edge)
-        status[todo] = np.where(kept, KEPT, np.where(split, UNKNOWN, DROPPED))
     status[status == UNKNOWN] = DROPPED
     tris, rows = merge_kept(verts, tris, status == KEPT, ends)
     parent, kept, flip = parent[rows], status[rows] == KEPT, flip[rows]
@@ -487,6 +504,19 @@ def _judge_leaf(field, index: int, source, reads: tuple, fused: bool, avoid) -> 
     tris, rows = straighten_borders(verts, tris, kept, parent, len(source.verts), STRAIGHT_VOXELS * field.voxel_size)
     parent, kept = parent[rows], kept[rows]
     return {"verts": verts, "tris": tris, "parent": parent, "kept": kept, "flip": flip_of[parent] & kept}
+
+
+def _judge_unknown(judge: _Judge, verts, tris, parent, flip, status, split_edge: float) -> bool:
+    """Judge the pieces of status UNKNOWN: each becomes KEPT, DROPPED, or stays UNKNOWN (partly keepable and larger
+    than the split size: to be split); ``status`` and ``flip`` set in place. Returns whether there were any."""
+    todo = np.flatnonzero(status == UNKNOWN)
+    if not len(todo):
+        return False
+    longest, turn = edge_turns(verts, tris[todo])
+    kept, partly, flip[todo] = judge.judge(verts, tris[todo], parent[todo], longest, turn)
+    split = partly & ~kept & (longest > split_edge)
+    status[todo] = np.where(kept, KEPT, np.where(split, UNKNOWN, DROPPED))
+    return True
 
 
 def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndarray, np.ndarray]:
