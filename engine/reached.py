@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .meshcheck import any_corner
 from .octree import morton_decode_np
 from .sources import closest_points
 
@@ -60,5 +61,5 @@ def pulled_back(field, surface: dict, cube_corners: np.ndarray, codes: np.ndarra
     moved[off] = True
     whole = surface["whole"].copy()
     quads = surface["tris"][: 2 * len(whole)].reshape(-1, 6)
-    whole[moved[quads].any(axis=1)] = 0
+    whole[any_corner(moved, quads)] = 0
     return {**surface, "verts": verts, "whole": whole, "pulled_back": len(off)}

@@ -37,6 +37,7 @@ class SourceMesh:
         self.triangle_ids = np.ascontiguousarray(triangle_ids, dtype=np.int32)
         self._bvh = {}  # device -> wp.Mesh
         self._arrays = {}  # device -> (points, flat indices) as Warp arrays
+        self._box = None  # (lowest, highest) corner of the vertices, found on first use
 
     @property
     def nbytes(self) -> int:
@@ -59,6 +60,12 @@ class SourceMesh:
                 wp.array(self.tris.reshape(-1), dtype=wp.int32, device=device),
             )
         return self._arrays[device.alias]
+
+    def box(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lowest, highest) (3,) float32 corner of the vertices' bounding box, found on first use."""
+        if self._box is None:
+            self._box = (self.verts.min(axis=0), self.verts.max(axis=0)) if len(self.verts) else (np.zeros(3),) * 2
+        return self._box
 
     def adopt(self, mesh: wp.Mesh) -> None:
         """Keep ``mesh`` (Warp's mesh of these very triangles, made for the build) as the BVH on its device."""
@@ -251,7 +258,9 @@ def closest_triangles(source: SourceMesh, points, device) -> tuple[np.ndarray, n
         return np.zeros(0, np.int32), np.zeros((0, 3), np.float32)
     mesh = source.bvh(device)
     pts = wp.array(points, dtype=wp.vec3, device=device)
-    reach = 2.0 * float(np.linalg.norm(np.ptp(np.concatenate([source.verts, points]), axis=0))) + 1.0
+    low, high = source.box()
+    extent = np.maximum(high, points.max(axis=0)) - np.minimum(low, points.min(axis=0))
+    reach = 2.0 * float(np.linalg.norm(extent)) + 1.0
     launch_split(
         _closest_triangles_kernel,
         n,
