@@ -47,6 +47,7 @@ ENGINE_MODULES = (
     "fieldops",
     "keep",
     "judging",
+    "selfcross",
     "precut",
     "zipper",
     "slits",

@@ -345,7 +345,7 @@ def _fans(verts, source_tris, fan, p, v) -> tuple[np.ndarray, np.ndarray, np.nda
     return np.concatenate([verts, centres]), np.stack([centre_of[fp], fv, fv[nxt]], axis=1), fp
 
 
-def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: float):
+def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: float, longest: float = np.inf):
     """Collapse the kept region's border vertices that lie on a straight run of it inside one source triangle into
     the border vertex before them: a border that follows a line of pieces cut across a sliver keeps that line's two
     ends rather than every piece's corner on it (the strips along it get as many vertices fewer). Kept triangles only;
@@ -354,7 +354,7 @@ def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: floa
     Args:
         verts: (V, 3) float32; tris: (T, 3) int64 pieces; keep: (T,) bool; parent: (T,) int64 their source
             triangles; n_source: the source's vertex count (vertices below it stay); tolerance: how far off the
-            line through its border neighbours a vertex may lie.
+            line through its border neighbours a vertex may lie; longest: the longest border edge a collapse makes.
     Returns:
         ``(tris, rows)``: the triangles left and (T',) int64 the row of ``tris`` each stands in.
     """
@@ -372,7 +372,7 @@ def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: floa
     v64 = verts.astype(np.float64)
     ranks = position_ranks(verts)
     for _ in range(64):
-        moves = _border_collapses(v64, tris, parent, n_source, tolerance, ranks)
+        moves = _border_collapses(v64, tris, parent, n_source, (tolerance, longest), ranks)
         if moves is None:
             break
         face, target, drop = moves
@@ -383,7 +383,7 @@ def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: floa
     return put_back(tris, rows, aside)
 
 
-def _border_collapses(v64, tris, parent, n_source: int, tolerance: float, ranks: np.ndarray):
+def _border_collapses(v64, tris, parent, n_source: int, bounds: tuple, ranks: np.ndarray):
     """One round of :func:`straighten_borders` over the kept triangles: ``(faces, their new corners, dropped)``, or
     None when no vertex can go."""
     n = len(v64)
@@ -405,7 +405,9 @@ def _border_collapses(v64, tris, parent, n_source: int, tolerance: float, ranks:
     u, w = prev[v], nxt[v]
     d0, d1 = v64[v] - v64[u], v64[w] - v64[v]
     cross = np.linalg.norm(np.cross(d0, d1), axis=1)
-    straight = (cross <= tolerance * np.linalg.norm(d0 + d1, axis=1)) & (np.einsum("ij,ij->i", d0, d1) > 0)
+    tolerance, longest = bounds
+    run = np.linalg.norm(d0 + d1, axis=1)
+    straight = (cross <= tolerance * run) & (np.einsum("ij,ij->i", d0, d1) > 0) & (run <= longest)
     go = np.zeros(n, dtype=bool)
     go[v[straight]] = True
     into = np.full(n, -1, dtype=np.int64)

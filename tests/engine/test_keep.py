@@ -12,9 +12,11 @@ from scipy.spatial import cKDTree
 import engine
 from tests.metrics import (
     exact_boolean,
+    exact_sdf,
     hausdorff,
     mesh_volume,
     sample_surface,
+    self_intersections,
     to_manifold,
     unsigned_distance,
     winding_inside,
@@ -113,6 +115,14 @@ def test_kept_surface_is_closed_and_close_to_the_exact_boolean(case):
     assert d["max"] <= 0.75 * h and d["p95"] <= 0.02 * h, d
     volume, exact = mesh_volume(s["verts"], s["tris"]), mesh_volume(*case["exact"])
     assert abs(volume - exact) < 1e-3 * abs(exact)  # measured <= 5e-5
+    # pairs of faces passing through each other, along the seams (kept border runs straightened to 4 voxels at most:
+    # cube | tilted cube had 1,280 with runs as long as its faces)
+    assert self_intersections(s["verts"], s["tris"]) <= CROSSINGS[case["name"]]
+
+
+# measured: 0, 1, 7, 22 and 41 (the hex prism & sphere's, at its sphere's slivers along the seam)
+CROSSINGS = {"plate - 4 bores": 0, "cube - bore": 3, "rocker-arm - cube": 21, "hex prism & sphere": 123}
+CROSSINGS["cube | tilted cube"] = 66
 
 
 def test_kept_faces_cover_what_should_be_kept_and_new_faces_only_the_seams(case):
@@ -282,6 +292,12 @@ def test_inside_out_and_internal_faces():
     corners = s["verts"][s["tris"][s["kept"] & (s["field_id"] == 0)]]
     inside_both = winding_inside(box_v, box_t, corners.mean(axis=1)) & winding_inside(*other, corners.mean(axis=1))
     assert not inside_both.any()  # no kept face inside the other box
+    # nor any part of one: kept faces stay a band from where the mesh passes through itself (measured: none of
+    # 10,440 samples; 2,094 of 12,500 up to 0.64 voxel inside when only sampled a voxel apart by the judge)
+    samples = np.einsum("tsk,tkd->tsd", np.random.default_rng(0).dirichlet([1, 1, 1], (len(corners), 20)), corners)
+    samples = samples.reshape(-1, 3).astype(np.float32)
+    depth = np.maximum(exact_sdf(box_v, box_t, samples), exact_sdf(*other, samples))  # > 0 outside either box
+    assert (depth > -1e-4 * _voxel(overlap, ball)).all(), depth.min()
     exact = exact_boolean("DIFFERENCE", *exact_boolean("UNION", box_v, box_t, *other), *ball)
     assert abs(mesh_volume(s["verts"], s["tris"]) / mesh_volume(*exact) - 1) < 1e-3
 

@@ -44,10 +44,10 @@ def _kept_share(name: str) -> tuple[float, dict]:
     return float((unsigned_distance(s["verts"], kept, points[should]) < 1e-5).mean()), s
 
 
-# measured at /256, share: teapot 0.994 (a mesh of patches repeating their border vertices: the 99 %), cow
-# 0.983, beetle 0.938 (296 open and 47 non-manifold edges); the cow's and the beetle's bounds three times the
+# measured at /256, share: teapot 0.996 (a mesh of patches repeating their border vertices: the 99 %), cow
+# 0.988, beetle 0.938 (296 open and 47 non-manifold edges); the cow's and the beetle's bounds three times the
 # shortfall below (Suzanne: tests/engine/test_rejoin.py)
-@pytest.mark.parametrize(("name", "least"), [("teapot", 0.99), ("cow", 0.95), ("beetle", 0.815)])
+@pytest.mark.parametrize(("name", "least"), [("teapot", 0.99), ("cow", 0.96), ("beetle", 0.815)])
 def test_messy_meshes_keep_most_of_what_should_be_kept(name, least):
     share, s = _kept_share(name)
     assert share >= least, share

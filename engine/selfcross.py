@@ -1,0 +1,173 @@
+"""Where a mesh passes through itself: the segments along which its triangles cross one another.
+
+A shell that crosses itself (a teapot's spout through its body, two overlapping boxes given as one mesh, Suzanne's
+eyes) has internal faces there, and its own field's surface turns along the crossing. Its faces are kept only a band
+away from those segments, as from its other defects (:mod:`.keep`): a face that reaches the crossing is partly an
+internal face, which the judge's samples a voxel apart could miss by a fraction of a voxel.
+
+Written by hand: Warp's BVH finds the triangles whose boxes overlap each triangle, a kernel tests in float64 whether an
+edge of either passes through the other's interior (triangles sharing a corner, and touching ones, do not count) and
+lists the crossing pairs; numpy finds each pair's segment from the points where the edges pass through.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .components import connected_components
+from .parallel import launch_split
+
+# An edge passes through a triangle where it meets it this far inside its ends and the triangle's edges (a share of
+# their lengths): touching is no crossing.
+INSIDE = 1.0e-6
+
+
+@wp.func
+def _through(p: wp.vec3d, q: wp.vec3d, a: wp.vec3d, b: wp.vec3d, c: wp.vec3d) -> bool:
+    """Whether the segment p-q meets triangle a-b-c at a point strictly inside both (Moller and Trumbore's test)."""
+    d = q - p
+    e1 = b - a
+    e2 = c - a
+    h = wp.cross(d, e2)
+    det = wp.dot(e1, h)
+    if wp.abs(det) <= wp.float64(1.0e-12) * wp.length(e1) * wp.length(e2) * wp.length(d):
+        return False  # parallel, or degenerate
+    s = p - a
+    u = wp.dot(s, h) / det
+    r = wp.cross(s, e1)
+    v = wp.dot(d, r) / det
+    t = wp.dot(e2, r) / det
+    inside = wp.float64(INSIDE)
+    one = wp.float64(1.0)
+    return u > inside and v > inside and u + v < one - inside and t > inside and t < one - inside
+
+
+@wp.func
+def _corner(points: wp.array[wp.vec3], tris: wp.array2d[wp.int32], f: int, k: int) -> wp.vec3d:
+    x = points[tris[f, k]]
+    return wp.vec3d(wp.float64(x[0]), wp.float64(x[1]), wp.float64(x[2]))
+
+
+@wp.func
+def _crosses(points: wp.array[wp.vec3], tris: wp.array2d[wp.int32], f: int, g: int) -> bool:
+    """Whether triangles ``f`` and ``g`` (sharing no corner) pass through each other."""
+    for k in range(6):
+        one = wp.where(k < 3, f, g)
+        other = wp.where(k < 3, g, f)
+        e = k % 3
+        a = _corner(points, tris, other, 0)
+        b = _corner(points, tris, other, 1)
+        c = _corner(points, tris, other, 2)
+        if _through(_corner(points, tris, one, e), _corner(points, tris, one, (e + 1) % 3), a, b, c):
+            return True
+    return False
+
+
+@wp.kernel(enable_backward=False)
+def _pairs_kernel(
+    mesh: wp.uint64,
+    points: wp.array[wp.vec3],
+    tris: wp.array2d[wp.int32],
+    offset: int,
+    first: wp.array[wp.int32],
+    count: wp.array[wp.int32],
+    pairs: wp.array2d[wp.int32],
+):
+    """Per triangle ``f``: how many triangles ``g > f`` sharing no corner with it it crosses (``count``), or, with
+    ``first`` (each one's first row), those pairs written to ``pairs``."""
+    f = wp.tid() + offset
+    lo = wp.min(wp.min(points[tris[f, 0]], points[tris[f, 1]]), points[tris[f, 2]])
+    hi = wp.max(wp.max(points[tris[f, 0]], points[tris[f, 1]]), points[tris[f, 2]])
+    query = wp.mesh_query_aabb(mesh, lo, hi)
+    g = int(0)
+    found = int(0)
+    while wp.mesh_query_aabb_next(query, g):
+        if g <= f:
+            continue
+        shared = False
+        for i in range(3):
+            for j in range(3):
+                if tris[f, i] == tris[g, j]:
+                    shared = True
+        if not shared and _crosses(points, tris, f, g):
+            if first.shape[0] > 0:
+                pairs[first[f] + found, 0] = f
+                pairs[first[f] + found, 1] = g
+            found += 1
+    if first.shape[0] == 0:
+        count[f] = found
+
+
+def crossing_segments(verts: np.ndarray, tris: np.ndarray, device, shortest: float = 0.0) -> np.ndarray:
+    """(S, 2, 3) float32 the segments along which the triangles of a mesh ((V, 3), (T, 3) int; vertices at one
+    position merged by the caller) pass through one another, one per crossing pair, those of crossing curves (the
+    segments joined where they share an end: an edge of one triangle through another) at least ``shortest`` long
+    (empty where none is)."""
+    if not len(tris):
+        return np.zeros((0, 2, 3), dtype=np.float32)
+    flat = np.ascontiguousarray(tris, dtype=np.int32)
+    points_wp = wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device)
+    mesh = wp.Mesh(points=points_wp, indices=wp.array(flat.reshape(-1), dtype=wp.int32, device=device))
+    tris_wp = wp.array(flat, dtype=wp.int32, device=device)
+    count = wp.zeros(len(flat), dtype=wp.int32, device=device)
+    none = wp.zeros(0, dtype=wp.int32, device=device)
+    empty = wp.zeros((0, 2), dtype=wp.int32, device=device)
+    args = [mesh.id, points_wp, tris_wp]
+    launch_split(_pairs_kernel, len(flat), lambda lo, _n: [*args, lo, none, count, empty], device)
+    counts = count.numpy()
+    total = int(counts.sum())
+    if not total:
+        return np.zeros((0, 2, 3), dtype=np.float32)
+    first = wp.array(np.r_[0, np.cumsum(counts)[:-1]].astype(np.int32), dtype=wp.int32, device=device)
+    pairs = wp.zeros((total, 2), dtype=wp.int32, device=device)
+    launch_split(_pairs_kernel, len(flat), lambda lo, _n: [*args, lo, first, count, pairs], device)
+    segments, ends = _segments(np.asarray(verts, dtype=np.float64), flat.astype(np.int64), pairs.numpy())
+    return segments[_curve_lengths(segments, ends, device) >= shortest].astype(np.float32)
+
+
+def _segments(verts: np.ndarray, tris: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each crossing pair's segment, between the two points farthest apart where an edge of one triangle passes
+    through the other (a transversal crossing has two), and (S, 2) int64 what each end is: the edge (its ends' key)
+    and the triangle it passes through, as the neighbouring pair along the curve finds it too."""
+    f, g = pairs[:, 0], pairs[:, 1]
+    n, count = len(verts), len(tris)
+    hits, found, names = [], [], []
+    for one, other in ((f, g), (g, f)):
+        a, b, c = (verts[tris[other, k]] for k in range(3))
+        for k in range(3):
+            u, w = tris[one, k], tris[one, (k + 1) % 3]
+            point, ok = _edge_hits(verts[u], verts[w], a, b, c)
+            hits.append(point)
+            found.append(ok)
+            names.append((np.minimum(u, w) * n + np.maximum(u, w)) * count + other)
+    hits, found, names = np.stack(hits, axis=1), np.stack(found, axis=1), np.stack(names, axis=1)  # (S, 6, ...)
+    rows = np.arange(len(pairs))
+    first = np.argmax(found, axis=1)
+    reach = np.where(found, np.linalg.norm(hits - hits[rows, first][:, None], axis=2), -1.0)
+    last = np.argmax(reach, axis=1)
+    segments = np.stack([hits[rows, first], hits[rows, last]], axis=1)
+    return segments, np.stack([names[rows, first], names[rows, last]], axis=1)
+
+
+def _curve_lengths(segments: np.ndarray, ends: np.ndarray, device) -> np.ndarray:
+    """(S,) the length of the crossing curve each segment lies on: the segments joined through their shared ends."""
+    _, node = np.unique(ends, return_inverse=True)
+    node = node.reshape(-1, 2)
+    curve = connected_components(int(node.max()) + 1, node[:, 0], node[:, 1], device)[node[:, 0]]
+    length = np.linalg.norm(segments[:, 1] - segments[:, 0], axis=1)
+    return np.bincount(curve, weights=length)[curve]
+
+
+def _edge_hits(p, q, a, b, c) -> tuple[np.ndarray, np.ndarray]:
+    """Where each segment p-q meets its triangle a-b-c (rows of (N, 3) each), and whether it does inside both."""
+    d, e1, e2 = q - p, b - a, c - a
+    h = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, h)
+    ok = np.abs(det) > 1e-12 * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1) * np.linalg.norm(d, axis=1)
+    det = np.where(ok, det, 1.0)
+    s = p - a
+    r = np.cross(s, e1)
+    u, v, t = np.einsum("ij,ij->i", s, h) / det, np.einsum("ij,ij->i", d, r) / det, np.einsum("ij,ij->i", e2, r) / det
+    ok &= (u > INSIDE) & (v > INSIDE) & (u + v < 1.0 - INSIDE) & (t > INSIDE) & (t < 1.0 - INSIDE)
+    return p + t[:, None] * d, ok

@@ -1,0 +1,40 @@
+"""Where a mesh passes through itself (engine/selfcross.py): the segments along which its triangles cross lie on both
+crossing surfaces and join into the crossing curves; touching and neighbouring triangles do not cross; short curves
+can be left out."""
+
+import numpy as np
+
+from engine.selfcross import crossing_segments
+from tests.metrics import unsigned_distance
+from tests.support import box_mesh, uv_sphere
+
+
+def test_two_crossing_triangles_cross_along_their_common_segment():
+    verts = np.array([[0, 0, 0], [4, 0, 0], [0, 4, 0], [1, 1, -1], [1, 1, 1], [3, 1, 1]], dtype=np.float32)
+    tris = np.array([[0, 1, 2], [3, 4, 5]])  # the second stands across the first's plane along x from 1 to 2
+    segments = crossing_segments(verts, tris, "cpu")
+    assert segments.shape == (1, 2, 3)
+    ends = segments[0][np.argsort(segments[0][:, 0])]
+    np.testing.assert_allclose(ends, [[1, 1, 0], [2, 1, 0]], atol=1e-6)
+    touching = np.array([[0, 0, 0], [4, 0, 0], [0, 4, 0], [1, 1, 0], [1, 1, 2], [3, 1, 2]], dtype=np.float32)
+    assert len(crossing_segments(touching, tris, "cpu")) == 0  # meeting the plane at a corner is no crossing
+
+
+def test_two_overlapping_boxes_cross_along_closed_curves_on_both_surfaces():
+    a = box_mesh(subdivisions=3)
+    b = box_mesh(center=(1.0, 0.5, 0.25), subdivisions=3)
+    verts = np.concatenate([a[0], b[0]]).astype(np.float32)
+    tris = np.concatenate([a[1], b[1] + len(a[0])])
+    segments = crossing_segments(verts, tris, "cpu")
+    ends = segments.reshape(-1, 3)
+    assert len(segments) > 10
+    assert unsigned_distance(*a, ends).max() < 1e-5 and unsigned_distance(*b, ends).max() < 1e-5
+    # the surfaces meet along the edges of the common box [0, 1] x [-0.5, 1] x [-0.75, 1] between one of a's faces
+    # and one of b's: two of its edges along x (1 long), two along y (1.5) and two along z (1.75), 8.5 in all
+    length = np.linalg.norm(segments[:, 1].astype(np.float64) - segments[:, 0], axis=1).sum()
+    assert abs(length - 8.5) < 1e-5, length
+    assert len(crossing_segments(verts, tris, "cpu", shortest=100.0)) == 0  # no curve that long
+    # alone, a box and a ball pass through nothing
+    assert len(crossing_segments(a[0].astype(np.float32), a[1], "cpu")) == 0
+    ball = uv_sphere(1.0, rings=24, segments=48)
+    assert len(crossing_segments(ball[0].astype(np.float32), ball[1], "cpu")) == 0
