@@ -165,24 +165,24 @@ def _repeated(tris: np.ndarray, n_verts: int) -> np.ndarray:
 CROSSING_VOXELS = 3.0
 
 
-def _own_defects(verts: np.ndarray, tris: np.ndarray, crossing: float | None, device) -> tuple:
+def _own_defects(verts: np.ndarray, tris: np.ndarray, shortest: float | None, device) -> tuple:
     """A mesh's defects (judged with vertices at one position merged): ``(repeated, points, parts)``: (T,) bool the
     triangles repeating another triangle's corners (never kept), and the defects as triangles to measure distances
     to: each open, non-manifold or inconsistently oriented edge and each segment along which the mesh passes through
-    itself (:func:`.selfcross.crossing_segments`, on curves at least ``crossing`` long; None: not looked for) as a
+    itself (:func:`.selfcross.crossing_segments`, on curves at least ``shortest`` long; None: not looked for) as a
     flat triangle ``a b b``, each repeated triangle as itself (``points`` (P, 3) float32, ``parts`` (D, 3) int32;
     empty when the mesh has none). A triangle at a hole's edge keeps its parts farther than the band from that edge,
     one the mesh passes through farther than the band from the crossing."""
     welded_verts, welded, bad = defect_edges(verts, tris)
     repeated = _repeated(welded, len(welded_verts))
     points = np.asarray(welded_verts, dtype=np.float32)
-    crossing = (
+    crossings = (
         np.zeros((0, 2, 3), np.float32)
-        if crossing is None
-        else crossing_segments(points, welded[~repeated], device, crossing)
+        if shortest is None
+        else crossing_segments(points, welded[~repeated], device, shortest)
     )
-    ends = np.arange(len(points), len(points) + 2 * len(crossing)).reshape(-1, 2)
-    points = np.concatenate([points, crossing.reshape(-1, 3)])
+    ends = np.arange(len(points), len(points) + 2 * len(crossings)).reshape(-1, 2)
+    points = np.concatenate([points, crossings.reshape(-1, 3)])
     segments = np.concatenate([bad, ends])
     # a segment as a sliver: its ends and its midpoint a hair off the line (the BVH's point query skips flat triangles)
     a, b = points[segments[:, 0]].astype(np.float64), points[segments[:, 1]].astype(np.float64)
@@ -243,8 +243,8 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     side = _side_at(leaf, verts[tris].mean(axis=1), _unit_normals(verts, tris), offset)
     # where the mesh passes through itself, some triangle has its own inside on both sides (an internal face): only
     # then are its crossings looked for (the bunny's 69 k triangles take 0.07 s)
-    crossing = CROSSING_VOXELS * voxel if (side == 0).any() else None
-    defects, points, parts = _own_defects(verts, tris, crossing, device)
+    shortest = CROSSING_VOXELS * voxel if (side == 0).any() else None
+    defects, points, parts = _own_defects(verts, tris, shortest, device)
     defect_mesh = None
     if len(parts) and not defects.all():
         defect_mesh = wp.Mesh(
