@@ -239,6 +239,9 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     own = _OWN.get(source)
     if own is not None and own.values is leaf.values and own.offset == offset and own.device == device:
         return own
+    own = _placed_own(leaf, voxel, device)
+    if own is not None:
+        return own
     verts, tris = source.verts, source.tris.astype(np.int64)
     side = _side_at(leaf, verts[tris].mean(axis=1), _unit_normals(verts, tris), offset)
     # where the mesh passes through itself, some triangle has its own inside on both sides (an internal face): only
@@ -255,6 +258,21 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     own = _Own(leaf.values, offset, device, defects, side, defect_mesh, strips)
     _OWN[source] = own
     return own
+
+
+def _placed_own(leaf, voxel: float, device) -> _Own | None:
+    """A placed leaf's :class:`_Own` from its unplaced source's (kept with it from move to move): a placement turns,
+    moves and scales it alike on every axis, so the sides and slivers are the same and the defects' mesh is placed.
+    None for an unplaced leaf, or a placement that mirrors (its triangles turn over: found afresh)."""
+    placement = leaf.placement
+    if placement is None or placement.mirrors or len(leaf.sources) != 1:
+        return None
+    own = _own_part(leaf.in_frame(), next(iter(leaf.sources.values())), voxel / placement.scale, device)
+    defect_mesh = own.defect_mesh
+    if defect_mesh is not None:
+        points = placement.to_world(defect_mesh.points.numpy()).astype(np.float32)
+        defect_mesh = wp.Mesh(points=wp.array(points, dtype=wp.vec3, device=device), indices=defect_mesh.indices)
+    return _Own(leaf.values, SIDE_VOXELS * voxel, device, own.defects, own.side, defect_mesh, own.strips)
 
 
 def _octahedra(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
