@@ -359,15 +359,23 @@ class _Judge:
         (N, 3) float32, up to ``reach``: the reading the judge's samples take, by either path."""
         if self.fused is not None:
             return fused_margins(self.fused, points, reach)
+        return self._readings(points, reach)[0]
+
+    def _readings(self, points: np.ndarray, reach: float) -> tuple[np.ndarray, list]:
+        """The general path's reading at each point: ``(margin, signs)``, (N,) float32 as :meth:`margins` and per leaf
+        (N,) int8 its sign (-1 for the judged leaf itself)."""
         margin = np.full(len(points), reach, dtype=np.float32)
+        signs = []
         for j, other in enumerate(self.leaves):
-            if j != self.index:
-                margin = np.minimum(
-                    margin, _margin(other, self.bvhs[j], self.jumps[j], points, self.band, reach, self.device)[0]
-                )
+            if j == self.index:
+                signs.append(np.full(len(points), -1, np.int8))
+                continue
+            near, sign = _margin(other, self.bvhs[j], self.jumps[j], points, self.band, reach, self.device)
+            margin = np.minimum(margin, near)
+            signs.append(sign)
         if self.defect_mesh is not None:
             margin = np.minimum(margin, mesh_distances(self.defect_mesh, points, reach, self.device))
-        return margin
+        return margin, signs
 
     def judge(self, verts, tris, parent, longest, turn, beyond: float | None = None):
         """Per triangle (pieces of original triangles ``parent``): kept, partly keepable, and flipped. A triangle is
@@ -393,20 +401,12 @@ class _Judge:
         spacing = slack * (SAMPLE_VOXELS / SLACK_VOXELS)
         points, first = triangle_samples(verts[used], local, spacing, self.device)
         reach = self.band + float(slack.max()) + self.spacing + beyond
-        margin = np.full(len(points), reach, dtype=np.float32)
+        margin, signs = self._readings(points, reach)
         same = ~self.defects[parent]
-        signs = []
-        for j, other in enumerate(self.leaves):
-            if j == self.index:
-                signs.append(np.full(len(points), -1, np.int8))
-                continue
-            near, sign = _margin(other, self.bvhs[j], self.jumps[j], points, self.band, reach, self.device)
-            margin = np.minimum(margin, near)
-            low, minus_high = per_triangle_min(np.stack([sign, -sign], axis=1), local, len(used), first).T
-            same &= low == -minus_high
-            signs.append(sign)
-        if self.defect_mesh is not None:
-            margin = np.minimum(margin, mesh_distances(self.defect_mesh, points, reach, self.device))
+        for j, sign in enumerate(signs):
+            if j != self.index:  # the other leaves' signs the same all over each triangle
+                low, minus_high = per_triangle_min(np.stack([sign, -sign], axis=1), local, len(used), first).T
+                same &= low == -minus_high
         crosses, flips = self._crossing(signs)
         bounds = np.stack([np.where(crosses, margin, -1.0), np.where(crosses, -margin, 1.0), margin], axis=1)
         least, most, nearest = per_triangle_min(bounds, local, len(used), first).T * np.array([[1.0], [-1.0], [1.0]])

@@ -169,20 +169,15 @@ def zipped(verts, tris, parent, on, source_tris, apex, redo):
     first = first[~off[p[first]] & (side[first] != APEX)]
     p, v, side, t = p[first], v[first], side[first], t[first]
     chain = side != BASE
-    strips, strip_parent = _zip(p[chain], v[chain], side[chain], t[chain], source_tris, apex)
+    strips, strip_parent = zip_points(p[chain], v[chain], side[chain], t[chain], source_tris, apex)
     return _fanned(strips, strip_parent, p[~chain], v[~chain], t[~chain], source_tris, apex)
 
 
 def zip_points(p, v, side, t, source_tris, apex):
-    """The strips of the source triangles ``p`` triangulated from the points ``v`` on their long edges (``side``
-    FIRST or SECOND, ``t`` the place from the apex; each one's far corners at 1, its apex not listed): ``(tris,
-    parent)`` as :func:`zipped` gives them."""
-    return _zip(p, v, side, t, source_tris, apex)
-
-
-def _zip(p, v, side, t, source_tris, apex):
-    """Each strip's points on its two long edges merged by their place from the apex: a first triangle (the apex, the
-    first point of each), then one triangle per further point, on the latest point of each side."""
+    """The strips of the source triangles ``p`` from the points ``v`` on their long edges (``side`` FIRST or SECOND,
+    ``t`` the place from the apex; each one's far corners at 1, its apex not listed), merged by their place: a first
+    triangle (the apex, the first point of each), then one triangle per further point, on the latest point of each
+    side. Returns ``(tris, parent)``."""
     order = np.lexsort((side, t, p))
     p, v, side = p[order], v[order], side[order]
     idx = np.arange(len(p))
