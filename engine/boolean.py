@@ -25,6 +25,7 @@ from .blends import BLEND_MODES, chamfer_needs, sdf_combine
 from .blendzone import blend_octets
 from .expression import OP_DIFFERENCE, OP_INTERSECTION, OP_UNION, combined
 from .octree import code_bits, level_layout, morton_decode, node_center
+from .ondemand import for_boolean
 from .operands import (
     blend_sample,
     estimate,
@@ -271,6 +272,7 @@ def combine(
         AasdfError: If the combined domain would not fit in memory.
     """
     blend, mode, h = _options(a, b, blend, blend_mode, spacing)
+    a, b = for_boolean(a, b, op, blend)  # operands built on demand: their octets the result needs (:mod:`.ondemand`)
     # a sparse finest level under a dense top one, even when both operands are dense (one level)
     levels = max(a.levels, b.levels, 2)
     timings = {}

@@ -27,29 +27,18 @@ from . import distance, fieldops, fim, holes, octree, parallel, redistancing, se
 from .errors import AasdfError
 from .field import AdaptiveField
 from .geometry import tri_box_overlap
-from .holes import cap_lattices, changed_top_cells, sign_change_octets
+from .holes import cap_lattices
+from .levels import LevelBuilder, finished, refined_across_holes
 from .meshcheck import edge_table, encloses_nothing, hole_boundary, problem_faces, weld_positions
-from .octree import add_octets, code_bits, in_sorted, level_layout, match_levels, morton_encode
+from .octree import add_octets, code_bits, in_sorted, morton_encode
+from .ondemand import partial_build
 from .plan import byte_grid_fits, check_budget, checked_plans, plan_field, thick_plan, thicknesses
-from .sampling import LEAF_TOLERANCE
-from .signs import NO_BOXES
-from .sources import SourceMesh
 from .winding import winding_arg
-
-# Rounds of refining coarse leaves the zero set crosses (open meshes: the surface across a hole).
-MAX_SIGN_REFINEMENTS = 4
-
 
 # Finest octets search their candidate triangles in a box (instead of 8 BVH queries) when the mean triangle area is
 # at least this many cell faces (measured break-even about 0.15 on this CPU: the bunny's finest distances take 0.075 s
 # node by node against 0.083 s by boxes at 0.10 cell faces per triangle, 0.19 s against 0.145 s at 0.41).
 OCTET_SEARCH_MIN_AREA = 0.15
-
-# A closed mesh's field keeps the build's BVH of it, for exact values where booleans sample it
-# (``AdaptiveField.distance_mesh``), when the mesh has at most one triangle per this many nodes: the BVH with its
-# winding-number data, points and indices holds about 140 bytes a triangle (measured: 112-135 beside the arrays, on
-# spheres of 100 k and 500 k triangles), the field 18 a node, so the BVH stays within the field's own size.
-KEEP_BVH_NODES_PER_TRIANGLE = 8
 
 # Triangles of all meshes above which build_fields builds one mesh after the other (see there).
 SEQUENTIAL_TRIANGLES = 1_000_000
@@ -180,7 +169,7 @@ def _device(device):
 
 
 def build_fields(
-    meshes, *, voxel_size, levels=4, padding=1, device=None, field_ids=None, thickness=None
+    meshes, *, voxel_size, levels=4, padding=1, device=None, field_ids=None, thickness=None, refine="all"
 ) -> list[AdaptiveField]:
     """Build the fields of several meshes at one voxel size, checked together first (:func:`check_meshes`), so an
     impossible request builds none.
@@ -196,6 +185,7 @@ def build_fields(
         voxel_size, levels, padding, device: As for :func:`build_field`.
         field_ids: One id per mesh (default 0, 1, 2, ...).
         thickness: As for :func:`build_field`: one value for every mesh, or one per mesh (None: none).
+        refine: As for :func:`build_field`.
     Returns:
         One AdaptiveField per mesh, in order.
     Raises:
@@ -203,6 +193,7 @@ def build_fields(
             "Mesh <k>: ".
     """
     meshes = list(meshes)
+    refine = _checked_refine(refine)
     field_ids = list(range(len(meshes))) if field_ids is None else [int(k) for k in field_ids]
     if len(field_ids) != len(meshes):
         raise ValueError(f"build_fields got {len(field_ids)} field ids for {len(meshes)} meshes")
@@ -213,7 +204,7 @@ def build_fields(
 
     def build(k):
         try:
-            fields[k] = _build_planned(plans[k], device=device, field_id=field_ids[k])
+            fields[k] = _build_planned(plans[k], device=device, field_id=field_ids[k], refine=refine)
         except AasdfError as err:
             errors[k] = AasdfError(f"Mesh {k}: {err}")
             errors[k].__cause__ = err
@@ -242,7 +233,7 @@ def build_fields(
 
 
 def build_field(
-    vertices, triangles, *, voxel_size, levels=4, padding=1, device=None, field_id=0, thickness=None
+    vertices, triangles, *, voxel_size, levels=4, padding=1, device=None, field_id=0, thickness=None, refine="all"
 ) -> AdaptiveField:
     """Build the adaptive signed distance field of a triangle mesh.
 
@@ -262,10 +253,13 @@ def build_field(
             shell of half-width ``thickness / 2`` around the triangles (their unsigned distance minus half the
             thickness), so surfaces that enclose nothing (planes, cloth, single-sided scans) become solids; a closed
             mesh becomes a hollow shell centred on its surface. None: the mesh's own inside.
+        refine: ``"all"``: the finest level about every triangle; ``"none"``: every level above it, the finest
+            octets built when a query, a surface or a boolean needs them (:mod:`.ondemand`; a closed, oriented mesh
+            of three levels or more: others are built whole).
     Returns:
         AdaptiveField, negative inside.
     Raises:
-        ValueError: On wrongly shaped or typed arguments.
+        ValueError: On wrongly shaped or typed arguments, or an unknown ``refine``.
         AasdfError: On empty, non-finite or fully degenerate meshes, out-of-range indices, non-positive voxel
             size, ``levels < 1``, ``padding < 0``, a resolution that would not fit in memory, or a thickness under
             two voxels.
@@ -273,7 +267,13 @@ def build_field(
     wall = thicknesses(thickness, 1, voxel_size)[0]
     plan = plan_field(vertices, triangles, voxel_size=voxel_size, levels=levels, padding=padding)
     check_budget(plan["fine_dims"], plan["top_count"], plan["fine_nodes"])
-    return _build_planned(thick_plan(plan, wall), device=device, field_id=field_id)
+    return _build_planned(thick_plan(plan, wall), device=device, field_id=field_id, refine=_checked_refine(refine))
+
+
+def _checked_refine(refine) -> str:
+    if refine not in ("all", "none"):
+        raise ValueError(f"Expected 'refine' to be 'all' or 'none', but got {refine!r}.")
+    return refine
 
 
 def _build_thick(plan: dict, *, device, field_id: int) -> AdaptiveField:
@@ -303,7 +303,7 @@ def _build_thick(plan: dict, *, device, field_id: int) -> AdaptiveField:
     return field
 
 
-def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
+def _build_planned(plan: dict, *, device, field_id: int, refine: str = "all") -> AdaptiveField:
     """:func:`build_field` of a checked :func:`plan_field`: the steps of the module docstring."""
     device = _device(device)
     if plan.get("thickness") is not None:
@@ -322,10 +322,12 @@ def _build_planned(plan: dict, *, device, field_id: int) -> AdaptiveField:
     search_mesh = _search_mesh(plan, facts["frame"], mesh, device, timings)
     winding = winding_arg(mesh, facts["boundary"], device, encloses=facts["encloses"])
     base_octets = _with_cap_sheets(plan, facts["caps"], winding, base_octets, device, timings)
-    levels = _Levels(plan, facts, mesh, search_mesh, winding, device, field_id, timings)
+    levels = LevelBuilder(plan, facts, mesh, search_mesh, winding, device, field_id, timings)
+    if refine == "none" and facts["clean"] and plan["levels"] > 2:  # (:mod:`.ondemand`)
+        return partial_build(levels, base_octets, lambda f, band: finished(f, plan, facts, mesh, field_id, band))
     field = levels.build(base_octets)
-    field = _refined_across_holes(levels, field, base_octets, plan, facts, winding)
-    return _finished(field, plan, facts, mesh, field_id)
+    field = refined_across_holes(levels, field, base_octets, plan, facts, winding)
+    return finished(field, plan, facts, mesh, field_id)
 
 
 class _MeshBuild:
@@ -464,148 +466,3 @@ def _with_cap_sheets(plan: dict, caps, winding, base_octets, device, timings: di
             base_octets = add_octets(base_octets, sheet, fine_dims // 2, end_bit=3 * code_bits(fine_dims // 2))
     timings["cap_lattices"] = time.perf_counter() - t0
     return base_octets
-
-
-class _Levels:
-    """Builds the field on a set of finest octets: its levels placed, distances (finest exactly, coarser solved
-    bottom-up), signs top-down; a refinement round's build keeps what the latest one found (``previous``)."""
-
-    def __init__(self, plan, facts, mesh, search_mesh, winding, device, field_id, timings):
-        self.plan, self.facts, self.mesh, self.search_mesh = plan, facts, mesh, search_mesh
-        self.winding, self.device, self.field_id, self.timings = winding, device, field_id, timings
-        self.expansions = None  # the signs' expansions of the latest build, which a refinement round keeps
-        voxel_size, padding = plan["voxel_size"], plan["padding"]
-        # a band node lies within (padding + 1) cells (L-inf) of a triangle; misses fall back to the domain diagonal
-        self.query_radius = facts["diag"] if plan["levels"] == 1 else (padding + 2) * voxel_size * 1.75
-
-    def build(self, octets, previous=None) -> AdaptiveField:
-        plan, timings = self.plan, self.timings
-        # every node's place first, so each level's values are computed where they are kept
-        layout = level_layout(octets, plan["top_dims"], plan["levels"], self.device, timings)
-        # each node's index in the earlier build (-1: new), shared by distances and signs
-        prev_index = None if previous is None else match_levels(layout["codes"], layout["offsets"], previous)
-        dist, proj, source, tri, neighbours, sweeps = self.distances(layout, previous, prev_index)
-        values, sign_stats, self.expansions = signs.sign_levels(
-            self.winding,
-            layout,
-            dist,
-            neighbours,
-            origin=plan["origin"],
-            voxel_size=plan["voxel_size"],
-            hole_caps=self.facts["caps"],
-            previous=previous,
-            prev_index=prev_index,
-            known=self.expansions,
-            timings=timings,
-        )
-        return AdaptiveField.from_layout(
-            layout,
-            voxel_size=plan["voxel_size"],
-            origin=plan["origin"],
-            values=values,
-            proj=proj,
-            source=source,
-            triangles=tri,
-            field_ids=(self.field_id,),
-            timings=timings,
-            stats={"fim_sweeps": sweeps, **sign_stats},
-        )
-
-    def distances(self, layout, previous, prev_index):
-        """The nodes' distances: the finest exactly (octet by octet), the coarser levels solved bottom-up."""
-        plan, facts, timings = self.plan, self.facts, self.timings
-        origin, voxel_size = plan["origin"], plan["voxel_size"]
-        t0 = time.perf_counter()
-        octets_search = search.OctetSearch(
-            self.mesh.id,
-            self.query_radius,
-            facts["diag"],
-            facts["box_search"],
-            self.search_mesh.id,
-            facts["frame"],
-            facts["thin"],
-            mean_area=facts["mean_area"],
-        )
-        dist, proj, source, tri, octet_points = distance.finest_distances(
-            octets_search,
-            layout,
-            origin=origin,
-            voxel_size=voxel_size,
-            field_id=self.field_id,
-            previous=previous,
-            prev_index=prev_index,
-        )
-        timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
-        neighbours, sweeps = fim.solve_levels(
-            self.mesh.id,
-            layout,
-            dist,
-            proj,
-            source,
-            origin=origin,
-            voxel_size=voxel_size,
-            top_tolerance=LEAF_TOLERANCE,
-            octet_points=octet_points,
-            previous=previous,
-            prev_index=prev_index,
-            timings=timings,
-            # the dense top level by fast sweeping in its 8 orderings (one round, then the BVH refinement) rather than
-            # the fast iterative method's 2: 8 sweeps against 12-23, its solve 0.75-0.97x (fandisk, homer, rocker-arm,
-            # spot, the bunny at /512)
-            level_solver=sweeping.solve_level,
-            exact_level=lambda k, known_nodes, below: distance.level_distances(
-                octets_search, layout, k, dist, proj, known_nodes, below, origin=origin, voxel_size=voxel_size
-            ),
-        )
-        return dist, proj, source, tri, neighbours, sweeps
-
-
-def _refined_across_holes(levels: _Levels, field, base_octets, plan: dict, facts: dict, winding) -> AdaptiveField:
-    """Across a hole of an open mesh the inside/outside boundary (winding number 0.5) runs away from any triangle,
-    through coarse leaves: those leaves are refined to the finest level, in rounds, so the surface there can be
-    extracted too. A closed, consistently oriented mesh (even a self-intersecting one) changes its winding number
-    only across its triangles, which the finest level covers: nothing to check."""
-    fine_dims, top_dims = plan["fine_dims"], plan["top_dims"]
-    caps = facts["caps"]
-    rounds = 0
-    refine_seconds = 0.0
-    region = None
-    while plan["levels"] > 1 and not facts["clean"] and facts["encloses"] and rounds < MAX_SIGN_REFINEMENTS:
-        t_refine = time.perf_counter()
-        # off the caps over the holes the winding number stays near an integer (see hole_caps): the zero set can
-        # only leave the band near them (no caps: the edges cancel, it never does)
-        extra = sign_change_octets(field, caps if caps is not None else NO_BOXES, region, winding)
-        refine_seconds += time.perf_counter() - t_refine
-        if len(extra) == 0:
-            break
-        rounds += 1
-        region = changed_top_cells(extra, top_dims, plan["levels"])
-        check_budget(fine_dims, plan["top_count"], field.level_counts[0] + 8 * 27 * len(extra))
-        t0 = time.perf_counter()
-        base_octets = add_octets(base_octets, extra, fine_dims // 2, end_bit=3 * code_bits(fine_dims // 2))
-        levels.timings["finest_cells"] += time.perf_counter() - t0
-        queries = field.stats["sign_queries"]
-        field = levels.build(base_octets, previous=field)
-        field.stats["sign_queries"] = {k: v + queries.get(k, 0) for k, v in field.stats["sign_queries"].items()}
-    field.stats["sign_refinements"] = rounds
-    field.timings["sign_check"] = refine_seconds
-    return field
-
-
-def _finished(field, plan: dict, facts: dict, mesh, field_id: int) -> AdaptiveField:
-    """``field`` with what its build found about its mesh (``stats``) and its source mesh."""
-    clean, encloses, tris = facts["clean"], facts["encloses"], plan["triangles"]
-    field.stats["clean_mesh"] = clean
-    field.stats["flat"] = not encloses
-    # a closed mesh's closest points lie on the field's surface (an open mesh's surface runs across its holes too,
-    # away from any closest point)
-    field.stats["surface_points"] = clean
-    field.stats["problem_faces"] = int(facts["problem"].sum())
-    source = SourceMesh(plan["vertices"], tris, plan["triangle_ids"])
-    # a closed mesh's field is its signed distance everywhere: booleans read it from the mesh itself where they sample
-    # it (its BVH kept, where that costs no more than the field)
-    field.stats["mesh_distance"] = clean and encloses and len(tris) * KEEP_BVH_NODES_PER_TRIANGLE <= field.node_count
-    if field.stats["mesh_distance"]:
-        source.adopt(mesh)
-    field.sources = {field_id: source}
-    return field

@@ -19,6 +19,7 @@ from .errors import AasdfError
 from .hybrid import kept_surface
 from .meshing import field_mesh
 from .octree import decode_codes
+from .ondemand import refined, whole_expression
 from .placement import Placement
 from .plan import available_memory
 from .sampling import FieldArg, code_proj, sample_field_kernel, source_ids_kernel
@@ -83,6 +84,8 @@ class AdaptiveField:
         self.placement = placement
         # a boolean's operation tree over its operand fields (:mod:`.expression`); None: the field is a leaf
         self.expression = None
+        # what adds the finest octets of a field built on demand (:mod:`.ondemand`); None: built whole
+        self.refiner = None
         self._encloses_volume = None
 
     @classmethod
@@ -320,6 +323,8 @@ class AdaptiveField:
         Raises:
             ValueError: If ``points`` is not (N, 3) or ``method`` is unknown.
         """
+        if self.refiner is not None:  # the finest octets it reads built first (:mod:`.ondemand`)
+            return self._asked(points).sample(points, method, return_gradient=return_gradient)
         pts = self._frame_points(points)
         if method not in ("mls", "linear"):
             raise ValueError(f"Expected 'method' to be 'mls' or 'linear', but got {method!r}.")
@@ -347,6 +352,8 @@ class AdaptiveField:
 
     def source_ids(self, points) -> np.ndarray:
         """(N,) int32: the id of the input field whose surface determines the value at each point."""
+        if self.refiner is not None:
+            return self._asked(points).source_ids(points)
         pts = self._frame_points(points)
         ids = wp.empty(len(pts), dtype=wp.int32, device=self.device)
         if len(pts):
@@ -399,7 +406,8 @@ class AdaptiveField:
             source mesh for that id) and (F, 3, 3) float32 (per corner, the weights of the triangle's corners,
             projected onto its plane and not clamped).
         """
-        return sources.face_sources_of(self, self._frame_points(verts), tris)
+        field = self if self.refiner is None else self._asked(verts)
+        return sources.face_sources_of(field, field._frame_points(verts), tris)
 
     def source_barycentrics(self, field_ids, triangle_ids, points) -> np.ndarray:
         """(N, 3) float32 barycentric coordinates of each point projected onto a given source triangle (the plane of
@@ -476,7 +484,10 @@ class AdaptiveField:
         """The zero surface keeping the operands' own faces wherever it is theirs, new (voxel) surface only along the
         seams, merged where flat (more with an ``adaptivity``, within ``regions``): see :func:`.hybrid.kept_surface`
         (a field that is no boolean of meshes keeps nothing)."""
-        return kept_surface(self, sharp=sharp, adaptivity=adaptivity, regions=regions)
+        field = refined(self, view=True)  # built whole where built on demand (:mod:`.ondemand`)
+        if field.expression is not None:
+            field.expression = whole_expression(field.expression)
+        return kept_surface(field, sharp=sharp, adaptivity=adaptivity, regions=regions)
 
     def to_mesh(
         self,
@@ -517,6 +528,11 @@ class AdaptiveField:
         Raises:
             ValueError: If ``iso`` is not finite or ``adaptivity`` is not within [0, 1].
         """
+        if self.refiner is not None:  # its whole band first (:mod:`.ondemand`)
+            return refined(self, view=True).to_mesh(
+                iso, sharp=sharp, return_creases=return_creases, keep_faces=keep_faces, quads=quads,
+                adaptivity=adaptivity, regions=regions,
+            )  # fmt: skip
         iso, adaptivity = float(iso), float(adaptivity)
         if not np.isfinite(iso):
             raise ValueError(f"Expected a finite 'iso', but got {iso}.")
@@ -543,6 +559,11 @@ class AdaptiveField:
             return grown.to_mesh(sharp=asked, return_creases=return_creases, quads=quads, adaptivity=adaptivity)
         mesh = (out["verts"], out["faces"], out["sizes"]) if quads else (out["verts"], out["tris"])
         return (*mesh, out["creases"]) if return_creases else mesh
+
+    def _asked(self, points) -> AdaptiveField:
+        """A view of this field built on demand with the finest octets its queries at ``points`` read
+        (:mod:`.ondemand`)."""
+        return refined(self, _as_points(points), view=True)
 
     def in_frame(self) -> AdaptiveField:
         """This field in its own frame (unplaced): the same arrays."""

@@ -21,6 +21,7 @@ import warp as wp
 
 from .geometry import mesh_closest_point
 from .octree import code_bits, decode_codes, dense_level, level_layout, morton_decode, node_center, sort_unique
+from .ondemand import refined
 from .parallel import launch_split
 from .plan import check_budget, checked_wall, finite_number, plan_grown
 from .redistancing import KEEP_BAND, redistance
@@ -356,6 +357,7 @@ def _grown_nodes(field, grow: float) -> float:
 
 
 def _operate(field, kind: int, a: float, grow: float, what: str):
+    field = refined(field, view=True)  # built on demand: its whole band (:mod:`.ondemand`)
     if field.placement is not None:  # built in the field's own frame (distances scale with it), then placed
         scale = field.placement.scale
         frame = _operate(field.in_frame(), kind, a / scale, grow / scale, what)

@@ -30,6 +30,7 @@ ENGINE_MODULES = (
     "holes",
     "build",
     "field",
+    "ondemand",
     "sampling",
     "blendzone",
     "prune",

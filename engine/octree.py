@@ -525,7 +525,9 @@ def code_bits(dims) -> int:
     return max(1, int(np.ceil(np.log2(float(np.max(dims)) + 1.0))))
 
 
-def level_layout(octets, top_dims, levels: int, device, timings: dict | None = None, *, lean: bool = False) -> dict:
+def level_layout(
+    octets, top_dims, levels: int, device, timings: dict | None = None, *, lean: bool = False, above=None
+) -> dict:
     """Where every node of a field goes, before any value is computed.
 
     The finest level is the children of ``octets`` (sorted unique octet codes), or with ``octets`` None (and
@@ -534,13 +536,20 @@ def level_layout(octets, top_dims, levels: int, device, timings: dict | None = N
     pair of arrays (finest first), the level ``offsets``, each node's first ``child`` and ``parent`` (-1: none), and
     ``top_dims``. ``lean``: only what a finished field keeps (codes, and child links of the coarse nodes alone, as
     ``AdaptiveField.child``); ``coords`` and ``parent`` are None: 16 bytes a node less at the peak of a boolean.
+    ``above``: level 1's octets (sorted unique codes, holding the parent of every one of ``octets``) instead of the
+    parents of ``octets``: a field refined on demand keeps the level-1 nodes of its whole band while its finest
+    octets are a part of it (:mod:`.ondemand`).
     """
     t0 = time.perf_counter()
     top_dims = np.asarray(top_dims, dtype=np.int64)
     fine_dims = top_dims * 2 ** (levels - 1)
     level_octets = [] if octets is None else [octets]
     parent_index = []  # per octet of a level, its parent's octet among the next level's (all but the last)
-    for k in range(1, levels - 1):
+    if above is not None and levels > 2:
+        level_octets.append(above)
+        index = np.searchsorted(above.numpy(), octets.numpy() >> 3).astype(np.int32)
+        parent_index.append(wp.array(index, dtype=wp.int32, device=device))
+    for k in range(len(level_octets), levels - 1):
         # every level is sorted by code, so the parents of its octets come in order
         dims_k = fine_dims >> k
         up, index = parent_octets(

@@ -22,6 +22,7 @@ from . import fim
 from .distance import finest_distances
 from .geometry import mesh_closest_point
 from .octree import find_key, level_layout, match_levels, morton_decode, morton_encode
+from .ondemand import refined
 from .parallel import launch_split
 from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, locate_leaf, node_source
 from .search import OctetSearch
@@ -202,6 +203,7 @@ def redistance(field, *, method: str = "sweep", top_tolerance: float = LEAF_TOLE
         raise ValueError(f"Expected 'method' to be 'sweep', 'diagonal' or 'fim', but got {method!r}.")
     if not 0.0 <= float(top_tolerance) <= LEAF_TOLERANCE:
         raise ValueError(f"Expected 'top_tolerance' in [0, {LEAF_TOLERANCE}], but got {top_tolerance}.")
+    field = refined(field, view=True)  # built on demand: its whole band (:mod:`.ondemand`)
     timings = {}
     t0 = time.perf_counter()
     mesh, _verts, tris = surface_mesh(field)

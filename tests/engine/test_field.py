@@ -850,7 +850,7 @@ def test_build_fields_refuses_a_bad_mesh_before_building_any(monkeypatch):
         engine.build_fields([good], voxel_size=0.05, field_ids=[0, 1])
     assert calls == []
 
-    def fails_on_mesh_2(plan, *, device, field_id):
+    def fails_on_mesh_2(plan, *, device, field_id, refine):
         if field_id == 2:
             raise engine.AasdfError("no memory left")
         return field_id
@@ -894,7 +894,7 @@ def test_sign_changes_off_the_band_are_found_near_the_hole_caps_only(monkeypatch
     from engine.holes import sign_change_octets
     from engine.meshcheck import hole_caps, weld_positions
 
-    monkeypatch.setattr(engine.build, "MAX_SIGN_REFINEMENTS", 0)
+    monkeypatch.setattr(engine.levels, "MAX_SIGN_REFINEMENTS", 0)
     monkeypatch.setattr(engine.holes, "CAP_LATTICE_MAX_RATIO", 0.0)  # the refinement rounds' own business
     verts, tris = load_mesh("stanford-bunny.obj")
     field = engine.build_field(verts, tris, voxel_size=_voxel(verts, 128))
@@ -928,7 +928,7 @@ def test_refinement_rounds_add_only_the_octets_next_to_the_surface_across_the_ho
 
     verts, tris = load_mesh("beetle.obj")  # its holes are too large for the cap lattices: rounds alone
     h = _voxel(verts, 128)
-    monkeypatch.setattr(engine.build, "MAX_SIGN_REFINEMENTS", 0)
+    monkeypatch.setattr(engine.levels, "MAX_SIGN_REFINEMENTS", 0)
     first = engine.build_field(verts, tris, voxel_size=h)
     monkeypatch.undo()
     welded = weld_positions(verts, tris)
@@ -948,7 +948,7 @@ def test_refinement_rounds_add_only_the_octets_next_to_the_surface_across_the_ho
     assert len(sign_change_octets(refined, caps)) == 0  # no sign change left off the band
     assert is_watertight(refined.to_mesh()[1])
     whole_leaves = lambda field, near, region, _winding: sign_change_octets(field, near, region)  # noqa: E731
-    monkeypatch.setattr(engine.build, "sign_change_octets", whole_leaves)
+    monkeypatch.setattr(engine.levels, "sign_change_octets", whole_leaves)
     leaves = engine.build_field(verts, tris, voxel_size=h)
     assert refined.level_counts[0] < 0.9 * leaves.level_counts[0]  # measured 0.82 (0.72 at /256)
 
@@ -976,7 +976,7 @@ def test_a_refinement_round_reuses_the_nodes_of_the_build_before_it(monkeypatch)
     h = _voxel(verts, 128)
     refined = engine.build_field(verts, tris, voxel_size=h)
     assert refined.stats["sign_refinements"] == 1
-    monkeypatch.setattr(engine.build, "MAX_SIGN_REFINEMENTS", 0)
+    monkeypatch.setattr(engine.levels, "MAX_SIGN_REFINEMENTS", 0)
     first = engine.build_field(verts, tris, voxel_size=h)
     where = match_levels(refined.codes, refined.level_offsets, first).numpy()
     codes, first_codes = refined.codes.numpy(), first.codes.numpy()

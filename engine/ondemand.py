@@ -1,0 +1,251 @@
+"""Fields refined on demand: a mesh's field whose finest octets are a part of its band, more added when asked.
+
+A mesh's field holds its finest level in octets about every triangle (:func:`.build.build_field`), and much of it
+is never read: a boolean keeps its result's finest octets only within a few voxels of its surface, so where an
+operand's surface lies inside the other operand (or outside it, for an intersection) its finest octets are built and
+thrown away. Pavić, Campen and Kobbelt reach fine resolutions by confining the work to the cells near the
+intersections; here a field built with ``refine="none"`` has every level above the finest as the full build has them
+(the same nodes, values, closest points and signs: level 1 is placed as the parents of the whole band's finest
+octets, :func:`.octree.level_layout`'s ``above``, and a level-1 node without children takes its exact closest point
+directly, as a coarse leaf does) and no finest octet. :meth:`Refiner.refined` adds the band's finest octets a
+consumer asks for, as a refinement round of the build does (the nodes found before keep their values, only new
+octets are searched), so a refined place equals the full build's. The most refined field so far is kept with the
+refiner (its cache): every copy of the field (placed, relabelled) asks it, and what one consumer refined the next
+finds.
+
+Asked of a partly refined field, the public queries answer as the full field does: :meth:`.field.AdaptiveField.sample`
+refines about its points first, the surface, offsets and shells take the whole band; a boolean asks only where its
+result's surface may pass (:func:`needed_for_boolean`).
+
+Only a closed, consistently oriented mesh is built this way (an open or messy mesh's build refines across its holes
+from its whole band: it is built whole).
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+
+import numpy as np
+import warp as wp
+
+from . import parallel
+from .expression import OP_DIFFERENCE, OP_UNION, Operation
+from .octree import code_bits, morton_decode_np, morton_encode_np, node_center, parent_octets
+from .sampling import LEAF_TOLERANCE, FieldArg, level_spacing, locate_leaf, node_coords
+
+# What a mesh's build found of it (:func:`.levels.finished`), carried to its refined fields.
+FOUND = ("clean_mesh", "flat", "surface_points", "problem_faces", "mesh_distance")
+
+# A boolean's operand gets the finest octets of its band within this many voxels of where the result's surface may
+# be: the boolean keeps its finest octets within KEEP_BAND (2.5) voxels of it, an octet's centre lies up to sqrt(3)
+# voxels from its nodes, and an MLS sample reads nodes up to 1.5 voxels away (3 voxels to spare).
+BOOLEAN_REACH_VOXELS = 2.5 + 1.75 + 1.5 + 3.0
+
+# Finest octets within this many voxels (L-inf, about a point) are refined for a query there: an MLS sample reads the
+# 27 nodes about the finest node nearest its point, within 1.5 voxels, and the leaf that holds it.
+SAMPLE_REACH_VOXELS = 2.0
+
+
+class Refiner:
+    """What a field built on demand keeps to add finest octets later: the build's levels (:class:`.levels.LevelBuilder`:
+    the mesh, its BVH and winding numbers, the plan), the whole band's finest octets, and the most refined field so
+    far (unplaced, its own field id)."""
+
+    def __init__(self, levels, band: np.ndarray, field):
+        self.levels, self.band = levels, band
+        self.latest = field
+        self.lock = threading.Lock()
+
+    @property
+    def share(self) -> float:
+        """The part of the band's finest octets built so far."""
+        return self.latest.level_counts[0] / max(8 * len(self.band), 1)
+
+    def refined(self, octets: np.ndarray | None):
+        """The field with the band's finest octets among ``octets`` (sorted unique codes; None: all) added."""
+        with self.lock:
+            have = _finest_octets(self.latest)
+            wanted = self.band if octets is None else self.band[np.isin(self.band, octets, assume_unique=True)]
+            new = wanted[~np.isin(wanted, have, assume_unique=True)]
+            if not len(new):
+                return self.latest
+            every = np.union1d(have, new)
+            octets_wp = wp.array(every, dtype=wp.int64, device=self.latest.device)
+            field = self.levels.build(octets_wp, previous=self.latest)
+            # what the first build found of the mesh, and its source mesh (the same object: what is kept with it
+            # stays)
+            field.stats = {**field.stats, **{k: self.latest.stats[k] for k in FOUND}}
+            field.sources, field.refiner = self.latest.sources, self
+            self.latest = field
+            field.stats["refined"] = self.share
+            return field
+
+
+def partial_build(levels, band: wp.array, finish):
+    """A mesh's field with every level above the finest as its full build has them and no finest octet, and its
+    :class:`Refiner` (``levels``: the build's :class:`.levels.LevelBuilder`; ``band``: the whole band's finest octets,
+    sorted; ``finish(field, octets)``: what the build does last to a field, :func:`.levels.finished`)."""
+    end_bit = 3 * code_bits(levels.plan["fine_dims"])
+    levels.above = parent_octets(band, 1, end_bit=end_bit, presorted=True)
+    field = finish(levels.build(wp.empty(0, dtype=wp.int64, device=band.device)), band.shape[0])
+    field.refiner = Refiner(levels, band.numpy(), field)
+    field.stats["refined"] = 0.0
+    return field
+
+
+def refined(field, points=None, reach: float | None = None, *, view: bool = False):
+    """``field`` with the finest octets of its band that queries at ``points`` (world, (N, 3); None: everywhere)
+    read built, placed and labelled as ``field`` is (``reach``: instead, the octets within that many world units,
+    L-inf, of them); ``field`` itself when it was built whole. ``view``: a copy without the refiner, which answers
+    from the octets built (what a query reads after asking)."""
+    refiner = getattr(field, "refiner", None)
+    if refiner is None:
+        return field
+    if view:
+        out = copy.copy(refined(field, points, reach))
+        out.refiner = None
+        return out
+    octets = None
+    if points is not None:
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        scale = 1.0
+        if field.placement is not None:
+            pts, scale = field.placement.to_local(pts), field.placement.scale
+        octets = _read_octets(refiner.latest, pts) if reach is None else octets_near(field, pts, reach / scale)
+    return _as(field, refiner.refined(octets))
+
+
+@wp.kernel(enable_backward=False)
+def _leaf_cells_kernel(f: FieldArg, points: wp.array[wp.vec3], centres: wp.array[wp.vec3], spacing: wp.array[float]):
+    """The centre and spacing of the leaf holding each point."""
+    i = wp.tid()
+    leaf = locate_leaf(f, points[i])
+    s = level_spacing(f, leaf[1])
+    centres[i] = node_center(f.origin, s, node_coords(f, leaf[0]))
+    spacing[i] = s
+
+
+def _read_octets(field, points: np.ndarray) -> np.ndarray:
+    """Sorted codes of the finest octets an MLS sample at each unplaced point may read in the full field: those
+    within SAMPLE_REACH_VOXELS of it (where its leaf is a finest node there), and those holding the centres of the
+    27 cells about its leaf in ``field`` as it stands (the leaves a fit reads, :func:`.sampling.leaf_neighbours`,
+    where its leaf is coarse there; the levels above the finest are the full field's)."""
+    n, device = len(points), field.device
+    centres = wp.empty(n, dtype=wp.vec3, device=device)
+    spacing = wp.empty(n, dtype=wp.float32, device=device)
+    if n:
+        pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
+        wp.launch(_leaf_cells_kernel, dim=n, inputs=[field.arg(), pts, centres, spacing], device=device)
+    coarse = spacing.numpy() > 1.5 * field.voxel_size
+    steps = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    cells = centres.numpy()[coarse, None, :] + spacing.numpy()[coarse, None, None] * steps[None]
+    near = octets_near(field, points, SAMPLE_REACH_VOXELS * field.voxel_size)
+    return np.union1d(near, octets_near(field, cells.reshape(-1, 3).astype(np.float64), 0.0))
+
+
+def _as(field, out):
+    """``out`` (the refiner's unplaced field) placed and labelled as ``field``."""
+    if out.field_ids != field.field_ids:
+        out = out.relabel(field.field_ids[0])
+    if field.placement is None:
+        return out
+    placed = copy.copy(out)
+    placed.placement = field.placement
+    return placed
+
+
+def octets_near(field, points: np.ndarray, reach: float) -> np.ndarray:
+    """Sorted unique codes of the finest octets (of ``field``'s lattice) within ``reach`` (L-inf) of the unplaced
+    ``points``."""
+    octet = 2.0 * field.voxel_size
+    dims = field.fine_dims // 2
+    lo = np.floor((points - field.origin - reach) / octet).astype(np.int64)
+    hi = np.floor((points - field.origin + reach) / octet).astype(np.int64)
+    lo, hi = np.clip(lo, 0, dims - 1), np.clip(hi, 0, dims - 1)
+    span = int((hi - lo).max(initial=0)) + 1
+    steps = np.stack(np.meshgrid(*[np.arange(span)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    corner = np.unique(lo, axis=0) if span == 1 else lo
+    cells = (corner[:, None, :] + steps[None]).reshape(-1, 3)
+    cells = np.unique(np.minimum(cells, dims - 1), axis=0)
+    return np.unique(morton_encode_np(cells))
+
+
+@wp.kernel(enable_backward=False)
+def _value_bounds_kernel(f: FieldArg, points: wp.array[wp.vec3], low: wp.array[wp.float32], high: wp.array[wp.float32]):
+    """Bounds of the field's value at each point from the leaf holding it: its node's value (an exact distance,
+    within LEAF_TOLERANCE on the top level) and the distance to its centre (the field is 1-Lipschitz)."""
+    i = wp.tid()
+    x = points[i]
+    leaf = locate_leaf(f, x)
+    v = f.values[leaf[0]]
+    r = wp.length(x - node_center(f.origin, level_spacing(f, leaf[1]), node_coords(f, leaf[0])))
+    slack = r + LEAF_TOLERANCE * wp.abs(v)
+    low[i] = v - slack
+    high[i] = v + slack
+
+
+def value_bounds(field, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) lower and upper bounds of ``field``'s value at world ``points``, read from its nodes as they stand
+    (nothing refined; :func:`_value_bounds_kernel`)."""
+    pts = np.asarray(points, dtype=np.float64)
+    scale = 1.0
+    if field.placement is not None:
+        pts, scale = field.placement.to_local(pts), field.placement.scale
+    n, device = len(pts), field.device
+    low, high = wp.empty(n, dtype=wp.float32, device=device), wp.empty(n, dtype=wp.float32, device=device)
+    if n:
+        arg = field.in_frame().arg()
+        pts_wp = wp.array(np.ascontiguousarray(pts, dtype=np.float32), dtype=wp.vec3, device=device)
+        parallel.launch_split(
+            _value_bounds_kernel,
+            n,
+            lambda lo, k: [arg, pts_wp[lo : lo + k], low[lo : lo + k], high[lo : lo + k]],
+            device,
+        )
+    return low.numpy() * np.float32(scale), high.numpy() * np.float32(scale)
+
+
+def for_boolean(a, b, op: int, blend: float) -> tuple:
+    """Operands ``a`` and ``b`` of a boolean (``op``: :mod:`.expression`'s, a minus b for a difference), each built on
+    demand refined where the result's surface may pass: where the other's value bounds (:func:`value_bounds`, at
+    the centres of its band's octets) leave room for it within BOOLEAN_REACH_VOXELS (and the blend) of the octet.
+    A union's operand's surface is the result's only where the other's value is not below that reach (outside the
+    other, or near its surface); an intersection's where it is not above it; a difference's first operand as a
+    union's, its second (turned inside out) as an intersection's. What the boolean reads of an operand (its finest
+    nodes and their MLS samples, the pruning's brackets) lies within that reach of the result's surface."""
+    out = [a, b]
+    for k, (x, y) in enumerate(((a, b), (b, a))):
+        if getattr(x, "refiner", None) is None:
+            continue
+        codes, centres = band_centres(x)
+        world = centres if x.placement is None else x.placement.to_world(centres)
+        low, high = value_bounds(y, world)
+        reach = BOOLEAN_REACH_VOXELS * x.world_voxel_size + float(blend)
+        below = op == OP_UNION or (op == OP_DIFFERENCE and k == 0)  # the other's inside buries it
+        near = high >= -reach if below else low <= reach
+        out[k] = _as(x, x.refiner.refined(codes[near]))
+    return tuple(out)
+
+
+def whole_expression(expression):
+    """``expression`` with its leaves built on demand refined whole (the kept faces' judge reads them anywhere)."""
+    if isinstance(expression, Operation):
+        a, b = whole_expression(expression.a), whole_expression(expression.b)
+        if a is expression.a and b is expression.b:
+            return expression
+        return Operation(expression.op, expression.blend, a, b)
+    return refined(expression)
+
+
+def _finest_octets(field) -> np.ndarray:
+    """Sorted codes of ``field``'s finest octets (each octet's 8 nodes lie together, in octant order)."""
+    n0 = field.level_counts[0]
+    return (field.codes[:n0].numpy()[::8] >> 3).astype(np.int64) if n0 else np.zeros(0, np.int64)
+
+
+def band_centres(field) -> tuple[np.ndarray, np.ndarray]:
+    """The codes of a field's whole band of finest octets (its refiner's) and their centres (unplaced)."""
+    band = field.refiner.band
+    octet = 2.0 * field.voxel_size
+    return band, field.origin + (morton_decode_np(band) + 0.5) * octet

@@ -1,0 +1,128 @@
+"""Fields refined on demand (engine/ondemand.py): a field built with refine="none" has every level above the finest
+as the full build has them and no finest octet; what is asked of it (samples, surfaces, booleans, offsets) equals
+what the full field gives, and a boolean builds only the octets its result's surface may need."""
+
+import numpy as np
+import pytest
+
+import engine
+from engine import ondemand
+from tests.support import box_mesh, load_mesh, normalised, rotation, uv_sphere
+
+H = 1.0 / 128
+
+
+@pytest.fixture(scope="module")
+def spot():
+    return normalised(load_mesh("spot.obj"))
+
+
+@pytest.fixture(scope="module")
+def cutter():
+    return normalised(uv_sphere(1.0, rings=24, segments=48), center=(0.3, 0.2, 0.3), diagonal=0.5)
+
+
+@pytest.fixture(scope="module")
+def spot_fields(spot):
+    return engine.build_field(*spot, voxel_size=H), engine.build_field(*spot, voxel_size=H, refine="none")
+
+
+def _levels(field, k):
+    s = field.level_slice(k)
+    return field.codes.numpy()[s], field.values.numpy()[s], field.closest_points.numpy()[s]
+
+
+def test_a_field_built_on_demand_has_the_full_builds_coarse_levels_and_no_finest_octet(spot_fields):
+    full, part = spot_fields
+    assert part.level_counts[0] == 0 and full.level_counts[0] > 0
+    assert part.level_counts[1:] == full.level_counts[1:]
+    assert part.refiner is not None and part.refiner.share == 0.0
+    for k in range(1, full.levels):
+        codes_f, values_f, points_f = _levels(full, k)
+        codes_p, values_p, points_p = _levels(part, k)
+        assert np.array_equal(codes_f, codes_p)
+        assert np.array_equal(np.sign(values_f), np.sign(values_p))
+        assert np.abs(values_f - values_p).max() < 1e-5 * H  # float rounding (measured 2.9e-8 at /256)
+        assert np.abs(points_f - points_p).max() < 1e-3 * H  # half-float offsets
+
+
+def test_refining_everything_gives_the_full_build(spot, spot_fields):
+    full, _ = spot_fields
+    part = engine.build_field(*spot, voxel_size=H, refine="none")
+    whole = ondemand.refined(part)
+    assert whole.refiner is part.refiner and whole.refiner.share == 1.0
+    assert whole.level_counts == full.level_counts
+    assert np.array_equal(whole.codes.numpy(), full.codes.numpy())
+    assert np.abs(whole.values.numpy() - full.values.numpy()).max() < 1e-5 * H
+    assert np.array_equal(whole.tri.numpy(), full.tri.numpy())
+    assert ondemand.refined(whole) is whole  # nothing more to add
+
+
+def test_samples_of_a_field_built_on_demand_equal_the_full_fields_and_build_only_near_them(spot):
+    full = engine.build_field(*spot, voxel_size=H)
+    part = engine.build_field(*spot, voxel_size=H, refine="none")
+    rng = np.random.default_rng(3)
+    verts = spot[0][rng.choice(len(spot[0]), 200, replace=False)]
+    points = verts + rng.normal(scale=2 * H, size=verts.shape)  # near the surface, where the finest level counts
+    values, grads = part.sample(points, return_gradient=True)
+    want, want_grads = full.sample(points, return_gradient=True)
+    assert np.abs(values - want).max() < 1e-5 * H
+    assert np.abs(grads - want_grads).max() < 1e-4
+    assert 0.0 < part.refiner.share < 0.5  # only the octets about the points were built (0.31)
+    assert part.level_counts[0] == 0  # the field asked keeps its own arrays; the refiner keeps what was built
+    ids = part.source_ids(points)
+    assert np.array_equal(ids, full.source_ids(points))
+
+
+def test_a_boolean_of_fields_built_on_demand_equals_the_full_boolean_and_skips_buried_octets(spot, cutter):
+    full = engine.difference(*engine.build_fields([spot, cutter], voxel_size=H))
+    a, b = engine.build_fields([spot, cutter], voxel_size=H, refine="none")
+    part = engine.difference(a, b)
+    assert np.array_equal(part.codes.numpy(), full.codes.numpy())
+    assert np.abs(part.values.numpy() - full.values.numpy()).max() < 1e-5 * H
+    # the ball's surface outside the cow is never the result's: its octets there are not built
+    assert 0.1 < b.refiner.share < 0.6 and a.refiner.share > 0.9  # measured 0.26 and 1.0
+    verts, tris = part.to_mesh()
+    want_verts, want_tris = full.to_mesh()
+    assert len(tris) == len(want_tris) and np.abs(verts - want_verts).max() < 1e-3 * H
+
+
+def test_a_placed_field_built_on_demand_refines_its_source_for_every_copy(spot, cutter):
+    turn = np.eye(4)
+    turn[:3, :3] = rotation(2, 30.0)
+    turn[:3, 3] = (0.05, -0.02, 0.0)
+    full = engine.union(*engine.build_fields([spot, cutter], voxel_size=H))
+    a, b = engine.build_fields([spot, cutter], voxel_size=H, refine="none")
+    placed = engine.union(a, b.transformed(turn))
+    want = engine.union(full.expression.a, full.expression.b.transformed(turn))
+    assert np.array_equal(placed.codes.numpy(), want.codes.numpy())
+    assert np.abs(placed.values.numpy() - want.values.numpy()).max() < 1e-5 * H
+    assert b.refiner.share > 0.0  # the placed copy's octets were built on its source's refiner
+    again = engine.union(a, b.transformed(turn))  # nothing left to build
+    assert np.array_equal(again.values.numpy(), placed.values.numpy())
+
+
+def test_offsets_and_kept_faces_of_fields_built_on_demand_equal_the_full_ones(spot, cutter):
+    full = engine.build_fields([spot, cutter], voxel_size=H)
+    part = engine.build_fields([spot, cutter], voxel_size=H, refine="none")
+    grown, want = engine.offset(part[0], 2 * H), engine.offset(full[0], 2 * H)
+    assert grown.level_counts == want.level_counts
+    assert np.abs(grown.values.numpy() - want.values.numpy()).max() < 1e-4 * H
+    kept = engine.union(*part).kept_surface()
+    want_kept = engine.union(*full).kept_surface()
+    assert len(kept["tris"]) == len(want_kept["tris"]) and kept["kept"].sum() == want_kept["kept"].sum()
+
+
+def test_open_and_single_level_meshes_are_built_whole():
+    bunny = normalised(load_mesh("stanford-bunny.obj"))  # open: its build refines across its holes from the band
+    field = engine.build_field(*bunny, voxel_size=H, refine="none")
+    assert field.refiner is None and field.level_counts[0] > 0
+    box = engine.build_field(*box_mesh(), voxel_size=0.1, levels=2, refine="none")
+    assert box.refiner is None
+
+
+def test_an_unknown_refine_is_refused_before_any_work(spot):
+    with pytest.raises(ValueError, match="'refine' to be 'all' or 'none'"):
+        engine.build_field(*spot, voxel_size=H, refine="seams")
+    with pytest.raises(ValueError, match="'refine' to be 'all' or 'none'"):
+        engine.build_fields([spot], voxel_size=H, refine=None)
