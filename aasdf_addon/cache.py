@@ -37,9 +37,14 @@ _FIELD_ARRAYS = ("codes", "values", "proj", "child", "source", "tri")
 
 
 def field_nbytes(field) -> int:
-    """Bytes held by a field's arrays and the source meshes it keeps."""
-    arrays = sum(getattr(getattr(field, name, None), "capacity", 0) or 0 for name in _FIELD_ARRAYS)
-    return int(arrays + sum(source.nbytes for source in getattr(field, "sources", {}).values()))
+    """Bytes held by a field's arrays and the source meshes it keeps; for a field built on demand, by the most
+    refined one its refiner keeps, and what it keeps to refine."""
+    refiner = getattr(field, "refiner", None)
+    latest = getattr(refiner, "latest", None)
+    held = field if latest is None else latest
+    arrays = sum(getattr(getattr(held, name, None), "capacity", 0) or 0 for name in _FIELD_ARRAYS)
+    extra = 0 if latest is None else refiner.kept_bytes
+    return int(arrays + extra + sum(source.nbytes for source in getattr(field, "sources", {}).values()))
 
 
 def limit_bytes(context=None) -> int:
@@ -84,6 +89,19 @@ def store(key: str, field, matrix, limit: int) -> None:
     _entries[key] = (field, np.asarray(matrix, dtype=np.float64), nbytes)
     _bytes += nbytes
     while _bytes > limit:
+        _bytes -= _entries.popitem(last=False)[1][2]
+        _stats["evictions"] += 1
+
+
+def recount(limit: int | None = None) -> None:
+    """The entries' bytes counted again (fields built on demand grow as they are refined), least recently used
+    entries out past ``limit`` (default: the preferences')."""
+    global _bytes
+    limit = limit_bytes() if limit is None else limit
+    for key, (field, matrix, _nbytes) in list(_entries.items()):
+        _entries[key] = (field, matrix, field_nbytes(field))
+    _bytes = sum(entry[2] for entry in _entries.values())
+    while _bytes > limit and _entries:
         _bytes -= _entries.popitem(last=False)[1][2]
         _stats["evictions"] += 1
 

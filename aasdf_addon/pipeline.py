@@ -209,24 +209,25 @@ def read_checked(inputs, output: Output, depsgraph) -> list:
 
 
 def operand_fields(
-    context, operands, settings: FieldSettings, voxel_size: float, progress=None, thickness=None
+    context, operands, settings: FieldSettings, voxel_size: float, progress=None, thickness=None, refine="all"
 ) -> list:
     """Key → cache → build for read operands (``bridge.read_operands``): one field per operand, operand ``k``'s
     with ``field_id`` k, placed where its object is. A cached field of the same geometry and settings (the object's
     own, or a duplicate's) is placed by the rigid motion and uniform scale from where it was built; what is missing
     is checked together first and built at the same time, one field per distinct geometry. ``thickness`` (one per
     operand, default 0) gives an operand whose surface encloses no volume (a plane, a sheet) a wall that thick,
-    centred on it; operands that enclose a volume stay as they are.
+    centred on it; operands that enclose a volume stay as they are. ``refine``: ``"none"`` builds a new field's
+    finest level where a boolean reads it (``engine.build_field``'s; a cached field serves either way).
 
     Raises:
         AasdfError: From the engine, its message naming the object; or naming an operand that encloses no volume.
     """
     wanted = [0.0] * len(operands) if thickness is None else [float(t) for t in thickness]
-    placed = _placed_fields(context, operands, settings, voxel_size, progress, [0.0] * len(operands))
+    placed = _placed_fields(context, operands, settings, voxel_size, progress, [0.0] * len(operands), refine)
     flat = [k for k, field in enumerate(placed) if not field.encloses_volume and wanted[k] > 0.0]
     if flat:  # a second field, with the wall, for each surface that encloses nothing
         walls = [wanted[k] for k in flat]
-        thick = _placed_fields(context, [operands[k] for k in flat], settings, voxel_size, progress, walls)
+        thick = _placed_fields(context, [operands[k] for k in flat], settings, voxel_size, progress, walls, refine)
         for k, field in zip(flat, thick, strict=True):
             placed[k] = field
     for k, field in enumerate(placed):
@@ -237,7 +238,7 @@ def operand_fields(
     return [field.relabel(k) for k, field in enumerate(placed)]
 
 
-def _placed_fields(context, operands, settings: FieldSettings, voxel_size: float, progress, thickness) -> list:
+def _placed_fields(context, operands, settings: FieldSettings, voxel_size: float, progress, thickness, refine) -> list:
     """One field per operand, each with the wall ``thickness[k]`` (0: none), from the cache or built; placed."""
     device = runtime.device(context)
     options = {"voxel_size": voxel_size, "levels": settings.levels, "padding": settings.padding}
@@ -256,7 +257,7 @@ def _placed_fields(context, operands, settings: FieldSettings, voxel_size: float
         if progress is not None:
             names = ", ".join(operands[ks[0]].name for _build, ks in missing.values())
             progress.step(f"building the fields of {names}")
-        built = _build(operands, list(missing.values()), options, thickness, device)
+        built = _build(operands, list(missing.values()), {**options, "refine": refine}, thickness, device)
         limit = cache.limit_bytes(context)
         for (key, (build, ks)), field in zip(missing.items(), built, strict=True):
             cache.store(key, field, build, limit)
@@ -401,6 +402,10 @@ def _face_sources(field, surface: dict) -> tuple:
     if kept is None or not kept["kept"].any():
         return field.face_sources(verts, tris)
     ids, tri_ids, bary = kept["field_id"].copy(), kept["triangle_id"].copy(), kept["corner_bary"].copy()
+    if "new_sources" in kept:  # found where a boolean made along its seams made them
+        new, *found = kept["new_sources"]
+        ids[new], tri_ids[new], bary[new] = found
+        return ids, tri_ids, bary
     new = np.flatnonzero(~kept["kept"])
     if len(new):
         ids[new], tri_ids[new], bary[new] = field.face_sources(verts, tris[new])
@@ -452,9 +457,10 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             _hide_inputs(objects, output)
             return _record(timer, output.target, voxel_size, source, operation, len(objects))
         with timer.stage("fields"):
-            fields = operand_fields(
-                context, read, settings, voxel_size, progress, thickness=[item.thickness for item in inputs]
-            )
+            # faces kept: the fields' finest levels built along the seams alone (``engine.build_field``'s refine)
+            refine = "none" if output.keep_faces else "all"
+            thickness = [item.thickness for item in inputs]
+            fields = operand_fields(context, read, settings, voxel_size, progress, thickness=thickness, refine=refine)
         with timer.stage("booleans"):
             seams = _seams(read, output)
             field, surface = combined(steps, fields, output, seams, progress)
@@ -506,7 +512,8 @@ def combined(steps, fields, output: Output, seams, progress):
     found = cache.find_result(key)
     if found is not None:
         return found
-    field = plan.evaluate(steps, fields, progress)
+    field = plan.evaluate(steps, fields, progress, seams=output.keep_faces)
+    cache.recount()  # fields built on demand grow as booleans refine them
     return field, cache.store_result(key, fields, field)
 
 

@@ -37,8 +37,9 @@ def boolean_plan(operation: str, count: int, blend: float = 0.0, blend_mode: str
     return ("boolean", operation, float(blend), blend_mode, [("field", k) for k in range(count)])
 
 
-def evaluate(plan: tuple, fields: list, progress=None):
-    """The field of a plan over ``fields`` (the combine stage).
+def evaluate(plan: tuple, fields: list, progress=None, *, seams: bool = False):
+    """The field of a plan over ``fields`` (the combine stage). ``seams``: its last boolean made along its seams
+    (the engine's ``seams``: for kept faces; the booleans under it whole, as the last one reads them).
 
     Raises:
         AasdfError: From the engine (an offset past the octree's reach, a wall too thin for the voxels).
@@ -60,19 +61,20 @@ def evaluate(plan: tuple, fields: list, progress=None):
     options = {"blend": blend, "blend_mode": mode.lower()}
     if operation == "DIFFERENCE" and len(items) > 1:
         cutter = _fold(engine.union, items[1:], {"blend": 0.0}, progress)
-        result = engine.difference(items[0], cutter, **options)
+        result = engine.difference(items[0], cutter, **options, seams=seams)
         _step(progress, "combining fields")
         return result
-    return _fold(getattr(engine, _ENGINE_OPS[operation]), items, options, progress)
+    return _fold(getattr(engine, _ENGINE_OPS[operation]), items, options, progress, seams)
 
 
-def _fold(op, items, options, progress):
-    """``items`` combined pairwise, level by level: a balanced binary tree of ``op``."""
+def _fold(op, items, options, progress, seams: bool = False):
+    """``items`` combined pairwise, level by level: a balanced binary tree of ``op`` (the last one with ``seams``)."""
     items = list(items)
     while len(items) > 1:
         paired = []
         for i in range(0, len(items) - 1, 2):
-            paired.append(op(items[i], items[i + 1], **options))
+            last = len(items) == 2
+            paired.append(op(items[i], items[i + 1], **options, seams=seams and last))
             _step(progress, "combining fields")
         if len(items) % 2:
             paired.append(items[-1])

@@ -13,6 +13,7 @@ the operands.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from typing import TYPE_CHECKING
 
@@ -25,7 +26,7 @@ from .blends import BLEND_MODES, chamfer_needs, sdf_combine
 from .blendzone import blend_octets
 from .expression import OP_DIFFERENCE, OP_INTERSECTION, OP_UNION, combined
 from .octree import code_bits, level_layout, morton_decode, node_center
-from .ondemand import for_boolean
+from .ondemand import Refiner, for_boolean
 from .operands import (
     blend_sample,
     estimate,
@@ -252,8 +253,32 @@ def _check_operands(a, b, blend):
     return blend
 
 
+class BooleanRefiner:
+    """What a boolean of fields built on demand keeps: its operands and options, to give the whole result (its
+    finest octets wherever its surface may pass) where it was made along its seams alone (:mod:`.ondemand`)."""
+
+    def __init__(self, a, b, op: int, options: dict):
+        self.a, self.b, self.op, self.options = a, b, op, options
+        self.whole = None
+        self.lock = threading.Lock()
+
+    def asked(self, points, reach):
+        """The whole result (whatever is asked of it: a boolean's seams hold no surface elsewhere)."""
+        with self.lock:
+            if self.whole is None:
+                self.whole = combine(self.a, self.b, self.op, **self.options, seams=False)
+            return self.whole
+
+
 def combine(
-    a: AdaptiveField, b: AdaptiveField, op: int, *, blend: float = 0.0, spacing: str = "finer", blend_mode="round"
+    a: AdaptiveField,
+    b: AdaptiveField,
+    op: int,
+    *,
+    blend: float = 0.0,
+    spacing: str = "finer",
+    blend_mode="round",
+    seams: bool = False,
 ):
     """Boolean of two fields; ``op`` is OP_UNION, OP_INTERSECTION or OP_DIFFERENCE (a minus b).
 
@@ -265,6 +290,11 @@ def combine(
             bevel meeting each face ``blend`` from the seam where the faces meet at a right angle).
         spacing: ``"finer"`` (default), ``"coarser"``, ``"a"`` or ``"b"``: whose finest spacing the result takes
             (where the operands are placed: ``world_voxel_size``).
+        seams: Where an operand was built on demand (``build_field(refine="none")``), build the result's finest
+            octets along its seams alone (the operands' octets near each other's surfaces,
+            :func:`.ondemand.for_boolean`): what a boolean that keeps the operands' faces reads (``to_mesh(
+            keep_faces=True)``). The result keeps a :class:`BooleanRefiner`, which gives the whole result to any other
+            query. False: the whole result at once (where its surface may pass).
     Returns:
         A new AdaptiveField whose node sources carry the operands' field ids.
     Raises:
@@ -272,7 +302,10 @@ def combine(
         AasdfError: If the combined domain would not fit in memory.
     """
     blend, mode, h = _options(a, b, blend, blend_mode, spacing)
-    a, b = for_boolean(a, b, op, blend)  # operands built on demand: their octets the result needs (:mod:`.ondemand`)
+    asked = (a, b, op, {"blend": blend, "spacing": spacing, "blend_mode": blend_mode})
+    seams = seams and any(isinstance(getattr(f, "refiner", None), Refiner) for f in (a, b))
+    # operands built on demand: the octets the result needs (:mod:`.ondemand`)
+    a, b = for_boolean(a, b, op, blend, seams=seams)
     # a sparse finest level under a dense top one, even when both operands are dense (one level)
     levels = max(a.levels, b.levels, 2)
     timings = {}
@@ -311,6 +344,8 @@ def combine(
         stats={"continuous": not finest["jumps"]},
     )
     result.expression = combined(op, blend, a, b)  # what it was made of, for the faces it keeps (:mod:`.keep`)
+    if seams:
+        result.refiner = BooleanRefiner(*asked)
     return result
 
 
@@ -441,21 +476,39 @@ def _candidate_octets(operands, aligned, origin, h: float, fine_dims, device) ->
 
 
 def union(
-    a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer", blend_mode: str = "round"
+    a: AdaptiveField,
+    b: AdaptiveField,
+    *,
+    blend: float = 0.0,
+    spacing: str = "finer",
+    blend_mode: str = "round",
+    seams: bool = False,
 ) -> AdaptiveField:
     """``a`` or ``b`` (min); blended when ``blend > 0`` (round or chamfer). See :func:`combine`."""
-    return combine(a, b, OP_UNION, blend=blend, spacing=spacing, blend_mode=blend_mode)
+    return combine(a, b, OP_UNION, blend=blend, spacing=spacing, blend_mode=blend_mode, seams=seams)
 
 
 def intersection(
-    a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer", blend_mode: str = "round"
+    a: AdaptiveField,
+    b: AdaptiveField,
+    *,
+    blend: float = 0.0,
+    spacing: str = "finer",
+    blend_mode: str = "round",
+    seams: bool = False,
 ) -> AdaptiveField:
     """``a`` and ``b`` (max); blended when ``blend > 0`` (round or chamfer). See :func:`combine`."""
-    return combine(a, b, OP_INTERSECTION, blend=blend, spacing=spacing, blend_mode=blend_mode)
+    return combine(a, b, OP_INTERSECTION, blend=blend, spacing=spacing, blend_mode=blend_mode, seams=seams)
 
 
 def difference(
-    a: AdaptiveField, b: AdaptiveField, *, blend: float = 0.0, spacing: str = "finer", blend_mode: str = "round"
+    a: AdaptiveField,
+    b: AdaptiveField,
+    *,
+    blend: float = 0.0,
+    spacing: str = "finer",
+    blend_mode: str = "round",
+    seams: bool = False,
 ) -> AdaptiveField:
     """``a`` minus ``b`` (max(a, -b)); blended when ``blend > 0`` (round or chamfer). See :func:`combine`."""
-    return combine(a, b, OP_DIFFERENCE, blend=blend, spacing=spacing, blend_mode=blend_mode)
+    return combine(a, b, OP_DIFFERENCE, blend=blend, spacing=spacing, blend_mode=blend_mode, seams=seams)

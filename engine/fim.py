@@ -357,6 +357,29 @@ def _refine_leaves_kernel(
             proj[i] = p
 
 
+def known_levels(layout: dict, previous, prev_index, dist, proj, source):
+    """Every coarse node's distance, closest point and source taken from ``previous`` (which has them all: a field
+    refined on demand, :mod:`.ondemand`), in place; returns the coarse nodes' same-level neighbours, as
+    :func:`solve_levels` does."""
+    codes, coords, offsets = layout["codes"], layout["coords"], layout["offsets"]
+    device = codes.device
+    levels = len(offsets) - 1
+    n, n0 = int(offsets[-1]), int(offsets[1])
+    fine_dims = (np.asarray(layout["top_dims"], dtype=np.int64)) * 2 ** (levels - 1)
+    neighbours = wp.full((n - n0, 6), -1, dtype=wp.int32, device=device)
+    prev_points, prev_sources = previous.closest_points, previous.node_sources()
+    no_known = wp.empty(0, dtype=wp.int32, device=device)
+    launch_split(
+        take_known_kernel,
+        n - n0,
+        lambda s, _n: [n0 + s, prev_index, previous.values, prev_points, prev_sources, no_known, dist, proj, source],
+        device,
+    )
+    for k in range(1, levels):
+        level_neighbours(coords, int(offsets[k]), int(offsets[k + 1]), fine_dims >> k, neighbours, row0=n0)
+    return neighbours
+
+
 def solve_levels(
     mesh_id,
     layout: dict,

@@ -27,7 +27,7 @@ from .coarsen import coarsened
 from .edgehash import KeyCounts, directed_edges
 from .edges import surface_edges
 from .keep import kept_triangles, mesh_distances
-from .meshcheck import all_corners, any_corner, compacted, position_groups
+from .meshcheck import all_corners, any_corner, compacted, open_vertices, position_groups
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .rejoin import joined_again
@@ -177,13 +177,17 @@ def _pair_loops(points, k_loops, v_loops, reach: float, device) -> dict:
     }
 
 
-def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judged: list | None = None) -> dict:
+def hybrid_surface(
+    field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judged: list | None = None, partial: bool = False
+) -> dict:
     """The result's surface with its operands' faces kept (see the module docstring).
 
     Args:
         field: An unplaced boolean result (:class:`.field.AdaptiveField` with an ``expression``).
         voxel_verts, voxel_tris: Its voxel surface ((V, 3) float32, (F, 3) int32), closed and oriented.
         judged: Its operands' triangles judged (:func:`.keep.kept_triangles`), when found already.
+        partial: The voxel surface is a boolean's along its seams alone (:mod:`.ondemand`), open where they end:
+            every voxel face at its open edges must lie over kept faces, else it is given up (``kept_fallback``).
     Returns:
         dict: ``verts`` (N, 3) float32, ``tris`` (M, 3) int32; per face ``kept`` bool, ``field_id`` and
         ``triangle_id`` int32 (the source triangle of a kept face, -1 for new faces); per vertex ``vertex_field``
@@ -202,6 +206,8 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
     judged_alive = k_alive
     v_gone, closed = np.zeros(len(v_tris), dtype=bool), np.ones(len(v_tris), dtype=bool)
     over, trouble = vertices_over(points, k_tris[k_alive], k_border, np.arange(n_k, n), voxel, device), []
+    if partial and not _edges_covered(voxel_tris, len(voxel_verts), over[n_k:]):
+        return voxel_surface_only(voxel_verts, voxel_tris, "the seams' surface ends short of the kept faces")
     for rounds in range(MAX_ROUNDS):
         v_alive = ~v_gone & ~any_corner(over, v_tris)
         v_alive, v_border = _drop_pinched(v_tris, v_alive, n, (closed, np.zeros((0, 2), np.int64)))
@@ -226,6 +232,14 @@ def hybrid_surface(field, voxel_verts: np.ndarray, voxel_tris: np.ndarray, judge
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
     surface = _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
     return {**surface, "trouble": _trouble(points, k_tris[judged_alive & ~k_alive], trouble, voxel)}
+
+
+def _edges_covered(tris: np.ndarray, n_verts: int, over: np.ndarray) -> bool:
+    """Whether every face of ``tris`` at an open edge has a corner ``over`` kept faces (and so leaves)."""
+    ends = np.zeros(n_verts, dtype=bool)
+    ends[open_vertices(tris, n_verts)] = True
+    at = any_corner(ends, tris)
+    return bool(any_corner(over, tris[at]).all())
 
 
 # A join's failures worth a second judge are at kept faces given up with an edge longer than this many voxels (the
@@ -482,7 +496,9 @@ def _assemble(points, kept, k_tris, k_alive, voxel, strips, voxel_verts, voxel_t
     }
 
 
-def kept_surface(field, *, sharp: bool | None = None, adaptivity: float = 0.0, regions: dict | None = None) -> dict:
+def kept_surface(
+    field, *, sharp: bool | None = None, adaptivity: float = 0.0, regions: dict | None = None, whole=None
+) -> dict:
     """The zero surface of ``field`` keeping the operands' own faces wherever it is theirs and no other surface or
     defect of theirs is near, with new (voxel) surface only along the seams (:func:`hybrid_surface`), made coarse
     where flat (:func:`.coarsen.coarsened`: ``adaptivity`` and ``regions`` as there); a field that is no boolean of
@@ -495,9 +511,13 @@ def kept_surface(field, *, sharp: bool | None = None, adaptivity: float = 0.0, r
         float32, ``voxel_face`` (M,) int64 (the voxel quad half a new face is, else -1), ``quads`` (the first
         ``2 * quads`` faces are the halves of whole quads, ``a b c`` and ``a c d``: :func:`.quads.quad_halves_first`),
         ``stats``.
+
+    ``whole``: gives the whole result where ``field`` is a boolean made along its seams alone (its voxel surface
+    there: :mod:`.ondemand`), should the join fail (its fallback is the whole voxel surface).
     """
     if field.placement is not None:  # joined in its own frame, then placed
-        surface = kept_surface(field.in_frame(), sharp=sharp, adaptivity=adaptivity, regions=regions)
+        frame_whole = None if whole is None else (lambda: whole().in_frame())
+        surface = kept_surface(field.in_frame(), sharp=sharp, adaptivity=adaptivity, regions=regions, whole=frame_whole)
         surface["verts"], surface["tris"] = field.placement.place_surface(surface["verts"], surface["tris"])
         # a reflection turned every face over: the quads' halves read in quad order again
         return quad_halves_first(surface) if field.placement.mirrors else surface
@@ -512,9 +532,12 @@ def kept_surface(field, *, sharp: bool | None = None, adaptivity: float = 0.0, r
     if field.expression is None or not len(tris):
         surface = voxel_surface_only(verts, tris, "not a boolean of meshes", failed=False)
     else:
-        surface = hybrid_surface(field, verts, tris, found["judged"])
-        join = lambda judged: hybrid_surface(field, verts, tris, judged)  # noqa: E731
+        partial = whole is not None  # the voxel surface along the seams alone
+        surface = hybrid_surface(field, verts, tris, found["judged"], partial)
+        join = lambda judged: hybrid_surface(field, verts, tris, judged, partial)  # noqa: E731
         surface = joined_again(field, surface, join, found["judged"])
+        if whole is not None and surface["stats"]["kept_fallback"]:  # along the seams alone: the whole result's
+            return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
         surface = coarsened(field, surface, adaptivity, regions)
     quads = int(np.count_nonzero(np.asarray(sizes) == 4))  # the first, rows 2q and 2q + 1 of ``tris``
     surface["voxel_face"] = np.where(surface["voxel_face"] < 2 * quads, surface["voxel_face"], -1)

@@ -39,13 +39,19 @@ class LevelBuilder:
         # a band node lies within (padding + 1) cells (L-inf) of a triangle; misses fall back to the domain diagonal
         self.query_radius = facts["diag"] if plan["levels"] == 1 else (padding + 2) * voxel_size * 1.75
 
-    def build(self, octets, previous=None) -> AdaptiveField:
+    def build(self, octets, previous=None, *, finest_only: bool = False) -> AdaptiveField:
+        """The field on the finest ``octets``; ``previous``: an earlier build, whose nodes keep their values;
+        ``finest_only``: it has every coarse node this one has (a field refined on demand: ``above`` fixes them), so
+        only the finest level is found (its new octets' distances, their signs from the levels above)."""
         plan, timings = self.plan, self.timings
         # every node's place first, so each level's values are computed where they are kept
         layout = level_layout(octets, plan["top_dims"], plan["levels"], self.device, timings, above=self.above)
         # each node's index in the earlier build (-1: new), shared by distances and signs
         prev_index = None if previous is None else match_levels(layout["codes"], layout["offsets"], previous)
-        dist, proj, source, tri, neighbours, sweeps = self.distances(layout, previous, prev_index)
+        if finest_only:
+            dist, proj, source, tri, neighbours, sweeps = self.finest(layout, previous, prev_index)
+        else:
+            dist, proj, source, tri, neighbours, sweeps = self.distances(layout, previous, prev_index)
         values, sign_stats, self.expansions = signs.sign_levels(
             self.winding,
             layout,
@@ -58,6 +64,7 @@ class LevelBuilder:
             prev_index=prev_index,
             known=self.expansions,
             timings=timings,
+            coarse_known=finest_only,
         )
         return AdaptiveField.from_layout(
             layout,
@@ -72,12 +79,27 @@ class LevelBuilder:
             stats={"fim_sweeps": sweeps, **sign_stats},
         )
 
-    def distances(self, layout, previous, prev_index):
-        """The nodes' distances: the finest exactly (octet by octet), the coarser levels solved bottom-up."""
-        plan, facts, timings = self.plan, self.facts, self.timings
-        origin, voxel_size = plan["origin"], plan["voxel_size"]
+    def finest(self, layout, previous, prev_index):
+        """:meth:`distances` where ``previous`` has every coarse node: they take its values, and only the finest
+        level's new octets are searched."""
+        plan, timings = self.plan, self.timings
         t0 = time.perf_counter()
-        octets_search = search.OctetSearch(
+        dist, proj, source, tri, _ = distance.finest_distances(
+            self._octet_search(),
+            layout,
+            origin=plan["origin"],
+            voxel_size=plan["voxel_size"],
+            field_id=self.field_id,
+            previous=previous,
+            prev_index=prev_index,
+        )
+        timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
+        neighbours = fim.known_levels(layout, previous, prev_index, dist, proj, source)
+        return dist, proj, source, tri, neighbours, {}
+
+    def _octet_search(self) -> search.OctetSearch:
+        facts = self.facts
+        return search.OctetSearch(
             self.mesh.id,
             self.query_radius,
             facts["diag"],
@@ -87,6 +109,13 @@ class LevelBuilder:
             facts["thin"],
             mean_area=facts["mean_area"],
         )
+
+    def distances(self, layout, previous, prev_index):
+        """The nodes' distances: the finest exactly (octet by octet), the coarser levels solved bottom-up."""
+        plan, timings = self.plan, self.timings
+        origin, voxel_size = plan["origin"], plan["voxel_size"]
+        t0 = time.perf_counter()
+        octets_search = self._octet_search()
         dist, proj, source, tri, octet_points = distance.finest_distances(
             octets_search,
             layout,

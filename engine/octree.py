@@ -275,6 +275,8 @@ def _compact_unique_kernel(
 def _radix_sort(work_keys: wp.array, n: int, end_bit: int) -> wp.array:
     """The first ``n`` int64 keys of ``work_keys`` (which has room for 2 n: the sort's buffer) sorted in place on
     their low ``end_bit`` bits; returns that sorted view."""
+    if n == 0:
+        return wp.empty(0, dtype=wp.int64, device=work_keys.device)
     if n > 1:
         values = wp.empty(2 * n, dtype=wp.int32, device=work_keys.device)  # the payload is not used
         wp.utils.radix_sort_pairs(work_keys, values, n, end_bit=max(1, min(63, end_bit)))

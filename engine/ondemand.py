@@ -32,7 +32,10 @@ import warp as wp
 from . import parallel
 from .expression import OP_DIFFERENCE, OP_UNION, Operation
 from .octree import code_bits, morton_decode_np, morton_encode_np, node_center, parent_octets
-from .sampling import LEAF_TOLERANCE, FieldArg, level_spacing, locate_leaf, node_coords
+from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, level_spacing, locate_leaf, node_coords
+
+# Bytes a refiner keeps per triangle of its mesh (:attr:`Refiner.kept_bytes`).
+BYTES_PER_TRIANGLE = 160
 
 # What a mesh's build found of it (:func:`.levels.finished`), carried to its refined fields.
 FOUND = ("clean_mesh", "flat", "surface_points", "problem_faces", "mesh_distance")
@@ -58,9 +61,23 @@ class Refiner:
         self.lock = threading.Lock()
 
     @property
+    def kept_bytes(self) -> int:
+        """Bytes kept to refine later beside the field's arrays: the mesh's BVH with its winding-number data (about
+        130 a triangle, :data:`.levels.KEEP_BVH_NODES_PER_TRIANGLE`'s measure), its points and indices."""
+        return BYTES_PER_TRIANGLE * len(self.levels.plan["triangles"])
+
+    @property
     def share(self) -> float:
         """The part of the band's finest octets built so far."""
         return self.latest.level_counts[0] / max(8 * len(self.band), 1)
+
+    def asked(self, points: np.ndarray | None, reach: float | None):
+        """The field with the octets queries at unplaced ``points`` read built (None: all; ``reach``: instead those
+        within it, L-inf, of them)."""
+        if points is None:
+            return self.refined(None)
+        octets = _read_octets(self.latest, points) if reach is None else octets_near(self.latest, points, reach)
+        return self.refined(octets)
 
     def refined(self, octets: np.ndarray | None):
         """The field with the band's finest octets among ``octets`` (sorted unique codes; None: all) added."""
@@ -72,7 +89,7 @@ class Refiner:
                 return self.latest
             every = np.union1d(have, new)
             octets_wp = wp.array(every, dtype=wp.int64, device=self.latest.device)
-            field = self.levels.build(octets_wp, previous=self.latest)
+            field = self.levels.build(octets_wp, previous=self.latest, finest_only=True)
             # what the first build found of the mesh, and its source mesh (the same object: what is kept with it
             # stays)
             field.stats = {**field.stats, **{k: self.latest.stats[k] for k in FOUND}}
@@ -103,17 +120,12 @@ def refined(field, points=None, reach: float | None = None, *, view: bool = Fals
     if refiner is None:
         return field
     if view:
-        out = copy.copy(refined(field, points, reach))
-        out.refiner = None
-        return out
-    octets = None
-    if points is not None:
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        scale = 1.0
-        if field.placement is not None:
-            pts, scale = field.placement.to_local(pts), field.placement.scale
-        octets = _read_octets(refiner.latest, pts) if reach is None else octets_near(field, pts, reach / scale)
-    return _as(field, refiner.refined(octets))
+        return as_built(refined(field, points, reach))
+    pts = None if points is None else np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if pts is not None and field.placement is not None:
+        pts = field.placement.to_local(pts)
+        reach = None if reach is None else reach / field.placement.scale
+    return _as(field, refiner.asked(pts, reach))
 
 
 @wp.kernel(enable_backward=False)
@@ -174,14 +186,16 @@ def octets_near(field, points: np.ndarray, reach: float) -> np.ndarray:
 @wp.kernel(enable_backward=False)
 def _value_bounds_kernel(f: FieldArg, points: wp.array[wp.vec3], low: wp.array[wp.float32], high: wp.array[wp.float32]):
     """Bounds of the field's value at each point from the leaf holding it: its node's value (an exact distance,
-    within LEAF_TOLERANCE on the top level) and the distance to its centre (the field is 1-Lipschitz)."""
+    within LEAF_TOLERANCE on the top level) and the distance to its centre (the field is 1-Lipschitz); outside the
+    domain, no nearer than the domain (a mesh's surface lies inside its field's domain)."""
     i = wp.tid()
     x = points[i]
     leaf = locate_leaf(f, x)
     v = f.values[leaf[0]]
     r = wp.length(x - node_center(f.origin, level_spacing(f, leaf[1]), node_coords(f, leaf[0])))
     slack = r + LEAF_TOLERANCE * wp.abs(v)
-    low[i] = v - slack
+    out = wp.length(x - clamp_to_domain(f, x))  # outside the domain: at least that far from its surface
+    low[i] = wp.max(v - slack, out)
     high[i] = v + slack
 
 
@@ -206,36 +220,56 @@ def value_bounds(field, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return low.numpy() * np.float32(scale), high.numpy() * np.float32(scale)
 
 
-def for_boolean(a, b, op: int, blend: float) -> tuple:
+def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
     """Operands ``a`` and ``b`` of a boolean (``op``: :mod:`.expression`'s, a minus b for a difference), each built on
     demand refined where the result's surface may pass: where the other's value bounds (:func:`value_bounds`, at
     the centres of its band's octets) leave room for it within BOOLEAN_REACH_VOXELS (and the blend) of the octet.
     A union's operand's surface is the result's only where the other's value is not below that reach (outside the
     other, or near its surface); an intersection's where it is not above it; a difference's first operand as a
     union's, its second (turned inside out) as an intersection's. What the boolean reads of an operand (its finest
-    nodes and their MLS samples, the pruning's brackets) lies within that reach of the result's surface."""
+    nodes and their MLS samples, the pruning's brackets) lies within that reach of the result's surface. ``seams``:
+    only where the other's surface may be within that reach (the seams, where a boolean that keeps the operands'
+    faces makes new surface). An operand that is a boolean built on demand is taken whole."""
     out = [a, b]
-    for k, (x, y) in enumerate(((a, b), (b, a))):
-        if getattr(x, "refiner", None) is None:
-            continue
+
+    def refine(k, x, y):
+        refiner = getattr(x, "refiner", None)
+        if not isinstance(refiner, Refiner):  # a boolean's (:class:`.boolean.BooleanRefiner`): whole
+            out[k] = refined(x)
+            return
         codes, centres = band_centres(x)
         world = centres if x.placement is None else x.placement.to_world(centres)
         low, high = value_bounds(y, world)
         reach = BOOLEAN_REACH_VOXELS * x.world_voxel_size + float(blend)
         below = op == OP_UNION or (op == OP_DIFFERENCE and k == 0)  # the other's inside buries it
-        near = high >= -reach if below else low <= reach
-        out[k] = _as(x, x.refiner.refined(codes[near]))
+        near = (high >= -reach) & (low <= reach) if seams else high >= -reach if below else low <= reach
+        out[k] = _as(x, refiner.refined(codes[near]))
+
+    # side by side (one Python thread each on the CPU; one field used twice is refined once at a time: its lock)
+    asked = [(k, x, y) for k, (x, y) in enumerate(((a, b), (b, a))) if getattr(x, "refiner", None) is not None]
+    parallel.run_tasks([lambda task=task: refine(*task) for task in asked], a.device)
     return tuple(out)
 
 
-def whole_expression(expression):
-    """``expression`` with its leaves built on demand refined whole (the kept faces' judge reads them anywhere)."""
+def as_built(field):
+    """A copy of ``field`` without its refiner: it answers from what is built (nothing is refined on its
+    queries)."""
+    out = copy.copy(field)
+    out.refiner = None
+    return out
+
+
+def built_leaves(expression):
+    """``expression`` (:mod:`.expression`) with its leaves built on demand read as built (:func:`as_built`: each the
+    same arrays): the kept faces' judge reads an operand away from the seams only for its sign and whether it is
+    farther than the band, which its levels above the finest tell (for a mesh without defects, whose distances the
+    judge reads off the mesh itself)."""
     if isinstance(expression, Operation):
-        a, b = whole_expression(expression.a), whole_expression(expression.b)
+        a, b = built_leaves(expression.a), built_leaves(expression.b)
         if a is expression.a and b is expression.b:
             return expression
         return Operation(expression.op, expression.blend, a, b)
-    return refined(expression)
+    return as_built(expression) if getattr(expression, "refiner", None) is not None else expression
 
 
 def _finest_octets(field) -> np.ndarray:

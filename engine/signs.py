@@ -335,6 +335,7 @@ def sign_levels(
     prev_index=None,
     known=None,
     timings: dict,
+    coarse_known: bool = False,
 ):
     """Sign every node of a mesh's field, top-down, and return its signed values.
 
@@ -355,6 +356,7 @@ def sign_levels(
             nodes keep its signs.
         known: The expansions of that earlier build (the third result of this function), kept too.
         timings: ``signs`` seconds are added here.
+        coarse_known: ``previous`` has every coarse node (a field refined on demand): only the finest are signed.
     Returns:
         ``(values, stats, expansions)``: (N,) float32 signed distances, ``{"sign_queries": winding numbers per level,
         "sign_sweeps": (empty-ball, segment) sweeps per level}``, and the coarse nodes' expansions (an
@@ -461,7 +463,7 @@ def sign_levels(
         sign_sweeps[k] = (sweeps[0], sweeps.get(int(mesh_id), 0))
         return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
 
-    if levels > 1:
+    if levels > 1 and not coarse_known:
         # Across a hole of an open mesh the sign changes where no triangle is near, so empty balls prove nothing
         # near it: signs spread only away from the holes' caps (``hole_caps``), the oracle decides the rest.
         nx, ny, nz = (int(d) for d in top_dims)
@@ -497,7 +499,7 @@ def sign_levels(
         rest = spread(levels - 1, top_lo, top_hi)
         oracle(rest, levels - 1)
         oracle_counts[levels - 1] = len(seeds) + len(rest)
-    for k in range(levels - 2, -1, -1):
+    for k in range(0 if coarse_known else levels - 2, -1, -1):
         lo, hi = int(offsets[k]), int(offsets[k + 1])
         launch_split(
             _inherit_sign_kernel,

@@ -19,7 +19,7 @@ def spot():
 
 @pytest.fixture(scope="module")
 def cutter():
-    return normalised(uv_sphere(1.0, rings=24, segments=48), center=(0.3, 0.2, 0.3), diagonal=0.5)
+    return normalised(uv_sphere(1.0, rings=24, segments=48), center=(0.2, 0.1, 0.15), diagonal=0.5)
 
 
 @pytest.fixture(scope="module")
@@ -74,14 +74,29 @@ def test_samples_of_a_field_built_on_demand_equal_the_full_fields_and_build_only
     assert np.array_equal(ids, full.source_ids(points))
 
 
-def test_a_boolean_of_fields_built_on_demand_equals_the_full_boolean_and_skips_buried_octets(spot, cutter):
+def _finest(field):
+    n0 = field.level_counts[0]
+    return field.codes.numpy()[:n0], field.values.numpy()[:n0]
+
+
+def test_a_boolean_of_fields_built_on_demand_is_made_along_its_seams_and_whole_when_asked(spot, cutter):
     full = engine.difference(*engine.build_fields([spot, cutter], voxel_size=H))
     a, b = engine.build_fields([spot, cutter], voxel_size=H, refine="none")
-    part = engine.difference(a, b)
-    assert np.array_equal(part.codes.numpy(), full.codes.numpy())
-    assert np.abs(part.values.numpy() - full.values.numpy()).max() < 1e-5 * H
+    part = engine.difference(a, b, seams=True)
+    # along the seams: a part of the result's finest octets, the same nodes and values there
+    codes, values = _finest(part)
+    want_codes, want_values = _finest(full)
+    assert 0 < len(codes) < 0.5 * len(want_codes)  # measured 0.24
+    at = np.searchsorted(want_codes, codes)
+    assert np.array_equal(want_codes[at], codes) and np.abs(want_values[at] - values).max() < 1e-5 * H
+    assert a.refiner.share < 0.5 and b.refiner.share < 0.7  # measured 0.24 and 0.42
+    # asked for anything else, the whole result: the full boolean's nodes
+    whole = ondemand.refined(part)
+    assert whole.refiner is None
+    assert np.array_equal(whole.codes.numpy(), full.codes.numpy())
+    assert np.abs(whole.values.numpy() - full.values.numpy()).max() < 1e-5 * H
     # the ball's surface outside the cow is never the result's: its octets there are not built
-    assert 0.1 < b.refiner.share < 0.6 and a.refiner.share > 0.9  # measured 0.26 and 1.0
+    assert 0.2 < b.refiner.share < 0.7 and a.refiner.share > 0.9  # measured 0.42 and 1.0
     verts, tris = part.to_mesh()
     want_verts, want_tris = full.to_mesh()
     assert len(tris) == len(want_tris) and np.abs(verts - want_verts).max() < 1e-3 * H
@@ -93,7 +108,8 @@ def test_a_placed_field_built_on_demand_refines_its_source_for_every_copy(spot, 
     turn[:3, 3] = (0.05, -0.02, 0.0)
     full = engine.union(*engine.build_fields([spot, cutter], voxel_size=H))
     a, b = engine.build_fields([spot, cutter], voxel_size=H, refine="none")
-    placed = engine.union(a, b.transformed(turn))
+    placed = engine.union(a, b.transformed(turn))  # whole at once: the full boolean's nodes
+    assert placed.refiner is None
     want = engine.union(full.expression.a, full.expression.b.transformed(turn))
     assert np.array_equal(placed.codes.numpy(), want.codes.numpy())
     assert np.abs(placed.values.numpy() - want.values.numpy()).max() < 1e-5 * H
@@ -108,9 +124,12 @@ def test_offsets_and_kept_faces_of_fields_built_on_demand_equal_the_full_ones(sp
     grown, want = engine.offset(part[0], 2 * H), engine.offset(full[0], 2 * H)
     assert grown.level_counts == want.level_counts
     assert np.abs(grown.values.numpy() - want.values.numpy()).max() < 1e-4 * H
-    kept = engine.union(*part).kept_surface()
+    seams = engine.union(*part, seams=True)
+    kept = seams.kept_surface()
     want_kept = engine.union(*full).kept_surface()
     assert len(kept["tris"]) == len(want_kept["tris"]) and kept["kept"].sum() == want_kept["kept"].sum()
+    assert np.abs(np.sort(kept["verts"], axis=0) - np.sort(want_kept["verts"], axis=0)).max() < 1e-3 * H
+    assert seams.refiner.whole is None  # joined along the seams: the whole result was never made
 
 
 def test_open_and_single_level_meshes_are_built_whole():
