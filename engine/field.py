@@ -19,10 +19,11 @@ from .errors import AasdfError
 from .hybrid import kept_surface
 from .meshing import field_mesh
 from .octree import decode_codes
-from .ondemand import as_built, built_leaves, refined
+from .ondemand import refined
 from .placement import Placement
 from .plan import available_memory
 from .sampling import FieldArg, code_proj, sample_field_kernel, source_ids_kernel
+from .seams import kept_along_seams
 
 
 @wp.kernel(enable_backward=False)
@@ -485,15 +486,8 @@ class AdaptiveField:
         seams, merged where flat (more with an ``adaptivity``, within ``regions``): see :func:`.hybrid.kept_surface`
         (a field that is no boolean of meshes keeps nothing). A boolean made along its seams (``seams=True``) is
         joined there, and gives ``new_sources``: the new faces' rows and their ``face_sources`` (read there)."""
-        if self.refiner is not None and self.expression is not None:  # made along its seams (:mod:`.ondemand`)
-            whole = lambda: refined(self, view=True)  # noqa: E731 (should the join fail there)
-            seams = as_built(self)
-            seams.expression = built_leaves(self.expression)  # the judge reads them as built
-            surface = kept_surface(seams, sharp=sharp, adaptivity=adaptivity, regions=regions, whole=whole)
-            if not surface["stats"]["kept_fallback"]:  # the new faces' sources, read where they were made
-                new = np.flatnonzero(~surface["kept"])
-                surface["new_sources"] = (new, *seams.face_sources(surface["verts"], surface["tris"][new]))
-            return surface
+        if self.refiner is not None and self.expression is not None:  # made along its seams (:mod:`.seams`)
+            return kept_along_seams(self, sharp=sharp, adaptivity=adaptivity, regions=regions)
         return kept_surface(refined(self, view=True), sharp=sharp, adaptivity=adaptivity, regions=regions)
 
     def to_mesh(

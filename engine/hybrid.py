@@ -236,6 +236,8 @@ def hybrid_surface(
 
 def _edges_covered(tris: np.ndarray, n_verts: int, over: np.ndarray) -> bool:
     """Whether every face of ``tris`` at an open edge has a corner ``over`` kept faces (and so leaves)."""
+    if not len(tris):
+        return True
     ends = np.zeros(n_verts, dtype=bool)
     ends[open_vertices(tris, n_verts)] = True
     at = any_corner(ends, tris)
@@ -529,7 +531,7 @@ def kept_surface(
     )
     verts, faces, sizes = found["mesh"]
     tris = triangulate(faces, sizes)
-    if field.expression is None or not len(tris):
+    if field.expression is None or not (len(tris) or whole):  # (along the seams alone: there may be none)
         surface = voxel_surface_only(verts, tris, "not a boolean of meshes", failed=False)
     else:
         partial = whole is not None  # the voxel surface along the seams alone

@@ -36,6 +36,7 @@ from .expression import evaluate_signs, leaves, widest_blend
 from .judging import MAX_TABLE_LEAVES, FusedJudge, edge_turns, per_triangle_min, sign_patterns, triangle_samples
 from .jumps import JumpSpheres, jump_spheres
 from .meshcheck import defect_edges
+from .ondemand import built_on_demand, own_sides
 from .parallel import launch_split, run_tasks
 from .precut import cut_strips, fused_margins
 from .refine import merge_kept, restore_whole, straighten_borders
@@ -243,7 +244,10 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     if own is not None:
         return own
     verts, tris = source.verts, source.tris.astype(np.int64)
-    side = _side_at(leaf, verts[tris].mean(axis=1), _unit_normals(verts, tris), offset)
+    centres, normals = verts[tris].mean(axis=1), _unit_normals(verts, tris)
+    # a field built on demand: off its mesh, or where that is not clear off its field with the octets there built
+    read = (lambda *args: own_sides(*args, _side_at)) if built_on_demand(leaf) else _side_at
+    side = read(leaf, centres, normals, offset)
     # where the mesh passes through itself, some triangle has its own inside on both sides (an internal face): only
     # then are its crossings looked for (the bunny's 69 k triangles take 0.07 s)
     shortest = CROSSING_VOXELS * voxel if (side == 0).any() else None
@@ -258,6 +262,11 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     own = _Own(leaf.values, offset, device, defects, side, defect_mesh, strips)
     _OWN[source] = own
     return own
+
+
+def internal_faces(leaf, voxel: float) -> bool:
+    """Whether some triangle of a (mesh) leaf has its own inside on both sides (it passes through itself)."""
+    return bool((_own_part(leaf, next(iter(leaf.world_sources().values())), voxel, leaf.device).side == 0).any())
 
 
 def _placed_own(leaf, voxel: float, device) -> _Own | None:

@@ -33,9 +33,7 @@ from . import parallel
 from .expression import OP_DIFFERENCE, OP_UNION, Operation
 from .octree import code_bits, morton_decode_np, morton_encode_np, node_center, parent_octets
 from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, level_spacing, locate_leaf, node_coords
-
-# Bytes a refiner keeps per triangle of its mesh (:attr:`Refiner.kept_bytes`).
-BYTES_PER_TRIANGLE = 160
+from .winding import WindingArg, inside_sign, winding_arg
 
 # What a mesh's build found of it (:func:`.levels.finished`), carried to its refined fields.
 FOUND = ("clean_mesh", "flat", "surface_points", "problem_faces", "mesh_distance")
@@ -44,6 +42,17 @@ FOUND = ("clean_mesh", "flat", "surface_points", "problem_faces", "mesh_distance
 # be: the boolean keeps its finest octets within KEEP_BAND (2.5) voxels of it, an octet's centre lies up to sqrt(3)
 # voxels from its nodes, and an MLS sample reads nodes up to 1.5 voxels away (3 voxels to spare).
 BOOLEAN_REACH_VOXELS = 2.5 + 1.75 + 1.5 + 3.0
+
+# With ``seams``, the octets within this many voxels of the other operand's surface: the kept faces end about 2
+# voxels from a seam (the judge's band and slack), and the voxel surface must reach under them (measured on the CAD
+# pairs at /256: 5 joins every pair along its seams, 4 leaves the surface short on all but two; what falls short is
+# joined on the whole result instead).
+SEAM_REACH_VOXELS = 6.0
+
+# A face's side is read off its mesh where the signed distance a side's offset ahead and behind it is beyond this
+# share of the offset (a field's linear values lie within about a tenth of a voxel of it, a quarter of the offset
+# tells an internal face): elsewhere off the field, its octets there built.
+SIDE_SURE_SHARE = 0.5
 
 # Finest octets within this many voxels (L-inf, about a point) are refined for a query there: an MLS sample reads the
 # 27 nodes about the finest node nearest its point, within 1.5 voxels, and the leaf that holds it.
@@ -62,9 +71,10 @@ class Refiner:
 
     @property
     def kept_bytes(self) -> int:
-        """Bytes kept to refine later beside the field's arrays: the mesh's BVH with its winding-number data (about
-        130 a triangle, :data:`.levels.KEEP_BVH_NODES_PER_TRIANGLE`'s measure), its points and indices."""
-        return BYTES_PER_TRIANGLE * len(self.levels.plan["triangles"])
+        """Bytes kept to refine later beside the field's arrays and its source mesh (which keeps the mesh's BVH with
+        its winding-number data): the band's octets, the plan's copy of the mesh."""
+        plan = self.levels.plan
+        return self.band.nbytes + plan["vertices"].nbytes + plan["triangles"].nbytes
 
     @property
     def share(self) -> float:
@@ -107,6 +117,9 @@ def partial_build(levels, band: wp.array, finish):
     levels.above = parent_octets(band, 1, end_bit=end_bit, presorted=True)
     field = finish(levels.build(wp.empty(0, dtype=wp.int64, device=band.device)), band.shape[0])
     field.refiner = Refiner(levels, band.numpy(), field)
+    source = next(iter(field.sources.values()))
+    source.adopt(levels.mesh)  # (with its winding numbers: :func:`own_sides`)
+    source.refiner = field.refiner
     field.stats["refined"] = 0.0
     return field
 
@@ -240,7 +253,7 @@ def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
         codes, centres = band_centres(x)
         world = centres if x.placement is None else x.placement.to_world(centres)
         low, high = value_bounds(y, world)
-        reach = BOOLEAN_REACH_VOXELS * x.world_voxel_size + float(blend)
+        reach = (SEAM_REACH_VOXELS if seams else BOOLEAN_REACH_VOXELS) * x.world_voxel_size + float(blend)
         below = op == OP_UNION or (op == OP_DIFFERENCE and k == 0)  # the other's inside buries it
         near = (high >= -reach) & (low <= reach) if seams else high >= -reach if below else low <= reach
         out[k] = _as(x, refiner.refined(codes[near]))
@@ -257,6 +270,63 @@ def as_built(field):
     out = copy.copy(field)
     out.refiner = None
     return out
+
+
+@wp.func
+def _signed_distance(f: WindingArg, x: wp.vec3) -> float:
+    """The mesh's signed distance at ``x``: its BVH's closest point, the winding number's side."""
+    d = float(1.0e30)
+    q = wp.mesh_query_point_no_sign(f.mesh, x, 1.0e30)
+    if q.result:
+        d = wp.length(x - wp.mesh_eval_position(f.mesh, q.face, q.u, q.v))
+    return inside_sign(f, x) * d
+
+
+@wp.kernel(enable_backward=False)
+def _mesh_sides_kernel(
+    f: WindingArg, front: wp.array[wp.vec3], back: wp.array[wp.vec3], clear: float, out: wp.array[wp.int8]
+):
+    """A face's side from the mesh's signed distance at its point in ``front`` and the one ``back``: +1 where it is
+    outside by more than ``clear`` ahead and inside by more than that behind, -1 the other way round, 0 where it is
+    less clear (as a field's values would read it there is not sure)."""
+    i = wp.tid()
+    ahead = _signed_distance(f, front[i])
+    behind = _signed_distance(f, back[i])
+    out[i] = wp.int8(wp.where(ahead > clear and behind < -clear, 1, wp.where(ahead < -clear and behind > clear, -1, 0)))
+
+
+def own_sides(field, points: np.ndarray, normals: np.ndarray, offset: float, read) -> np.ndarray:
+    """(N,) int8 the side of each (world) point's face on a mesh's field built on demand, as ``read(field, points,
+    normals, offset)`` (:mod:`.keep`'s reading of its values) gives it on the full field: where the mesh's signed
+    distance (its BVH, kept with its source mesh, and winding number) is clear by SIDE_SURE_SHARE of the offset and
+    more on both sides, from it; elsewhere (near a crease, a narrow groove, an internal face) by ``read`` on the field
+    with the octets there built."""
+    source = next(iter(field.sources.values()))
+    ends = [np.asarray(points, np.float64) + sign * offset * np.asarray(normals, np.float64) for sign in (1.0, -1.0)]
+    local = ends if field.placement is None else [field.placement.to_local(end) for end in ends]
+    front, back = (wp.array(end.astype(np.float32), dtype=wp.vec3, device=field.device) for end in local)
+    out = wp.empty(len(points), dtype=wp.int8, device=field.device)
+    if len(points):
+        f = winding_arg(source.kept_bvh(field.device), None, field.device)
+        clear = SIDE_SURE_SHARE * offset / (1.0 if field.placement is None else field.placement.scale)
+        parallel.launch_split(
+            _mesh_sides_kernel,
+            len(points),
+            lambda lo, k: [f, front[lo : lo + k], back[lo : lo + k], clear, out[lo : lo + k]],
+            field.device,
+        )
+    side = out.numpy()
+    unsure = np.flatnonzero(side == 0)
+    if len(unsure):
+        asked = np.concatenate([local[0][unsure], local[1][unsure]])
+        near = as_built(_as(field, source.refiner.asked(asked, None)))
+        side[unsure] = read(near, points[unsure], normals[unsure], offset)
+    return side
+
+
+def built_on_demand(field) -> bool:
+    """Whether ``field`` (or the field a view of it was made from) has a part of its finest level built."""
+    return field.stats.get("refined", 1.0) < 1.0
 
 
 def built_leaves(expression):

@@ -38,6 +38,7 @@ class SourceMesh:
         self._bvh = {}  # device -> wp.Mesh
         self._arrays = {}  # device -> (points, flat indices) as Warp arrays
         self._box = None  # (lowest, highest) corner of the vertices, found on first use
+        self.refiner = None  # what builds its field's finest octets when asked (:mod:`.ondemand`); None: built whole
 
     @property
     def nbytes(self) -> int:

@@ -7,7 +7,8 @@ import pytest
 
 import engine
 from engine import ondemand
-from tests.support import box_mesh, load_mesh, normalised, rotation, uv_sphere
+from tests.metrics import winding_inside
+from tests.support import box_mesh, is_watertight, load_mesh, normalised, rotation, uv_sphere
 
 H = 1.0 / 128
 
@@ -130,6 +131,59 @@ def test_offsets_and_kept_faces_of_fields_built_on_demand_equal_the_full_ones(sp
     assert len(kept["tris"]) == len(want_kept["tris"]) and kept["kept"].sum() == want_kept["kept"].sum()
     assert np.abs(np.sort(kept["verts"], axis=0) - np.sort(want_kept["verts"], axis=0)).max() < 1e-3 * H
     assert seams.refiner.whole is None  # joined along the seams: the whole result was never made
+
+
+def test_a_cutter_that_misses_keeps_every_face_and_seams_too_narrow_are_joined_whole(spot, cutter, monkeypatch):
+    far = normalised(uv_sphere(1.0, rings=24, segments=48), center=(0.6, 0.0, 0.0), diagonal=0.3)
+    a, b = engine.build_fields([spot, far], voxel_size=H, refine="none")
+    missed = engine.difference(a, b, seams=True)
+    assert missed.level_counts[0] == 0  # no seam: no finest octet
+    kept = missed.kept_surface()
+    assert kept["kept"].all() and len(kept["tris"]) == len(spot[1]) and is_watertight(kept["tris"])
+    empty = engine.intersection(a, b, seams=True).kept_surface()
+    assert len(empty["tris"]) == 0
+    # seams so narrow that the voxel surface ends before the kept faces begin: joined on the whole result
+    monkeypatch.setattr(ondemand, "SEAM_REACH_VOXELS", 1.0)
+    full = engine.build_fields([spot, cutter], voxel_size=H)
+    part = engine.build_fields([spot, cutter], voxel_size=H, refine="none")
+    narrow = engine.difference(*part, seams=True)
+    joined = narrow.kept_surface()
+    want = engine.difference(*full).kept_surface()
+    assert narrow.refiner.whole is not None and not joined["stats"]["join_failed"]
+    assert len(joined["tris"]) == len(want["tris"]) and joined["kept"].sum() == want["kept"].sum()
+
+
+def test_own_sides_of_a_field_built_on_demand_are_the_full_fields():
+    from engine.keep import SIDE_VOXELS, _side_at, _unit_normals  # the judge's own reading, on the full field
+
+    verts, tris = normalised(load_mesh("rocker-arm.obj"))
+    h = 1.0 / 256
+    full = engine.build_field(verts, tris, voxel_size=h)
+    part = engine.build_field(verts, tris, voxel_size=h, refine="none")
+    verts, tris = verts.astype(np.float32), np.asarray(tris)
+    centres, normals = verts[tris].mean(axis=1), _unit_normals(verts, tris)
+    want = _side_at(full, centres, normals, SIDE_VOXELS * h)
+    sides = ondemand.own_sides(part, centres, normals, SIDE_VOXELS * h, _side_at)
+    assert np.array_equal(sides, want)  # (a narrow groove reads internal off the mesh, not off the field)
+    assert part.refiner.share < 0.2  # off the field only where the mesh's reading is not clear
+
+
+def test_an_operand_that_passes_through_itself_is_joined_on_the_whole_result():
+    box_v, box_t = normalised(box_mesh(), diagonal=1.0)
+    other = normalised(box_mesh(), center=(0.25, 0.2, 0.15), diagonal=1.0)
+    overlap = (np.concatenate([box_v, other[0]]), np.concatenate([box_t, other[1] + len(box_v)]))
+    ball = normalised(uv_sphere(1.0, rings=32, segments=64), center=(0.3, 0.3, 0.3), diagonal=0.5)
+    a, b = engine.build_fields([overlap, ball], voxel_size=H, refine="none")
+    assert a.refiner is not None  # closed and oriented, though it crosses itself
+    result = engine.difference(a, b, seams=True)
+    kept = result.kept_surface()
+    want = engine.difference(*engine.build_fields([overlap, ball], voxel_size=H)).kept_surface()
+    assert result.refiner.whole is not None  # its internal faces lie away from the seams
+    assert is_watertight(kept["tris"]) and a.refiner.share == 1.0  # read at every sample: built whole
+    corners = kept["verts"][kept["tris"][kept["kept"] & (kept["field_id"] == 0)]].mean(axis=1)
+    assert not (winding_inside(box_v, box_t, corners) & winding_inside(*other, corners)).any()
+    # the same judge; the voxel surface's extent (what the refiners built before) moves a few new faces at its end
+    assert abs(len(kept["tris"]) / len(want["tris"]) - 1) < 0.01 and abs(kept["kept"].sum() - want["kept"].sum()) < 5
 
 
 def test_open_and_single_level_meshes_are_built_whole():

@@ -1,0 +1,44 @@
+"""A boolean's kept faces along its seams alone: its voxel surface made only there (:mod:`.ondemand`).
+
+A boolean of fields built on demand made with ``seams=True`` has its finest octets only where the operands' surfaces
+come near each other; its kept surface (:func:`.hybrid.kept_surface`) joins the kept faces to the voxel surface
+there, the operands read as built. Where that cannot be (an operand that passes through itself: its internal faces,
+which the judge gives up, lie away from the seams, and the judge reads its own field everywhere: it is built whole;
+a voxel surface that ends short of the kept faces), the whole result is made and joined instead.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .expression import leaves
+from .hybrid import kept_surface
+from .keep import internal_faces
+from .ondemand import as_built, built_leaves, built_on_demand, refined
+
+
+def kept_along_seams(field, **options) -> dict:
+    """The kept surface (:func:`.hybrid.kept_surface`, ``options`` as there) of a boolean made along its seams: its
+    voxel surface there, its operands read as built (:func:`.ondemand.built_leaves`), the whole result's should the
+    join fail or an operand built on demand pass through itself; with ``new_sources``: the new faces' rows and their
+    ``face_sources``, read where they were made."""
+    whole = lambda: _read_as_built(refined(field, view=True))  # noqa: E731
+    seams = _read_as_built(as_built(field))
+    pairs = zip(leaves(field.expression), leaves(seams.expression), strict=True)
+    crossing = [leaf for leaf, view in pairs if built_on_demand(view) and internal_faces(view, field.voxel_size)]
+    if crossing:  # the judge reads such an operand's own field at every sample: built whole, then the whole result
+        for leaf in crossing:
+            refined(leaf)
+        return kept_surface(whole(), **options)
+    surface = kept_surface(seams, **options, whole=whole)
+    if not surface["stats"]["kept_fallback"]:
+        new = np.flatnonzero(~surface["kept"])
+        surface["new_sources"] = (new, *seams.face_sources(surface["verts"], surface["tris"][new]))
+    return surface
+
+
+def _read_as_built(view):
+    """A view of a boolean (:func:`.ondemand.as_built`) whose operands are read as built, as the kept faces' judge
+    reads them."""
+    view.expression = built_leaves(view.expression)
+    return view
