@@ -218,7 +218,7 @@ class _Own:
     repeated triangles, and a mesh of every defect to measure distances to), each one's side of the leaf's own field
     (:func:`_side_at`, half a voxel out), and which are slivers to split as strips (:func:`.slivers.strip_parents`)."""
 
-    values: object  # the leaf field's values array it was read from (the same field: the same array)
+    values: object  # the leaf field's values array it was read from (the same field: the same array); None: its mesh
     offset: float
     device: object
     defects: np.ndarray  # (T,) bool: repeated triangles
@@ -238,7 +238,9 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     same field and voxel size, else found."""
     offset = SIDE_VOXELS * voxel
     own = _OWN.get(source)
-    if own is not None and own.values is leaf.values and own.offset == offset and own.device == device:
+    # (a field built on demand reads its sides off its mesh: the same however far it is refined)
+    same = own is not None and (own.values is leaf.values or own.values is None and built_on_demand(leaf))
+    if same and own.offset == offset and own.device == device:
         return own
     own = _placed_own(leaf, voxel, device)
     if own is not None:
@@ -259,7 +261,7 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
             indices=wp.array(parts.reshape(-1), dtype=wp.int32, device=device),
         )
     strips = strip_parents(verts, tris, SPLIT_VOXELS * voxel)
-    own = _Own(leaf.values, offset, device, defects, side, defect_mesh, strips)
+    own = _Own(None if read is not _side_at else leaf.values, offset, device, defects, side, defect_mesh, strips)
     _OWN[source] = own
     return own
 

@@ -24,13 +24,14 @@ def kept_along_seams(field, **options) -> dict:
     ``face_sources``, read where they were made."""
     whole = lambda: _read_as_built(refined(field, view=True))  # noqa: E731
     seams = _read_as_built(as_built(field))
+    surface = kept_surface(seams, **options, whole=whole)
+    # (what the judge found of each operand, kept with it: read again at no cost)
     pairs = zip(leaves(field.expression), leaves(seams.expression), strict=True)
     crossing = [leaf for leaf, view in pairs if built_on_demand(view) and internal_faces(view, field.voxel_size)]
     if crossing:  # the judge reads such an operand's own field at every sample: built whole, then the whole result
         for leaf in crossing:
             refined(leaf)
         return kept_surface(whole(), **options)
-    surface = kept_surface(seams, **options, whole=whole)
     if not surface["stats"]["kept_fallback"]:
         new = np.flatnonzero(~surface["kept"])
         surface["new_sources"] = (new, *seams.face_sources(surface["verts"], surface["tris"][new]))
