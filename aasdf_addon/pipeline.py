@@ -216,8 +216,9 @@ def operand_fields(
     own, or a duplicate's) is placed by the rigid motion and uniform scale from where it was built; what is missing
     is checked together first and built at the same time, one field per distinct geometry. ``thickness`` (one per
     operand, default 0) gives an operand whose surface encloses no volume (a plane, a sheet) a wall that thick,
-    centred on it; operands that enclose a volume stay as they are. ``refine``: ``"none"`` builds a new field's
-    finest level where a boolean reads it (``engine.build_field``'s; a cached field serves either way).
+    centred on it; operands that enclose a volume stay as they are. ``refine``: ``"auto"`` builds a new field's
+    finest level where a boolean reads it where that saves time (``engine.build_field``'s; a cached field serves
+    either way).
 
     Raises:
         AasdfError: From the engine, its message naming the object; or naming an operand that encloses no volume.
@@ -458,7 +459,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             return _record(timer, output.target, voxel_size, source, operation, len(objects))
         with timer.stage("fields"):
             # faces kept: the fields' finest levels built along the seams alone (``engine.build_field``'s refine)
-            refine = "none" if output.keep_faces else "all"
+            refine = "auto" if output.keep_faces else "all"
             thickness = [item.thickness for item in inputs]
             fields = operand_fields(context, read, settings, voxel_size, progress, thickness=thickness, refine=refine)
         with timer.stage("booleans"):

@@ -40,6 +40,12 @@ from .winding import winding_arg
 # node by node against 0.083 s by boxes at 0.10 cell faces per triangle, 0.19 s against 0.145 s at 0.41).
 OCTET_SEARCH_MIN_AREA = 0.15
 
+# ``refine="auto"`` builds a field on demand from this many finest nodes per triangle of its band on: kept faces of
+# booleans along their seams took 0.7x the full builds' time at 54 (the cow at /256; a fifth of its finest octets
+# built), 1.1-1.3x at 10-16 (the rocker arm, the fandisk), where the triangles' sides off the mesh (2 winding numbers
+# each, about 2 us) cost more than the finest nodes not built save (about 0.2 us each).
+ON_DEMAND_NODES_PER_TRIANGLE = 24
+
 # Triangles of all meshes above which build_fields builds one mesh after the other (see there).
 SEQUENTIAL_TRIANGLES = 1_000_000
 
@@ -255,7 +261,8 @@ def build_field(
             mesh becomes a hollow shell centred on its surface. None: the mesh's own inside.
         refine: ``"all"``: the finest level about every triangle; ``"none"``: every level above it, the finest
             octets built when a query, a surface or a boolean needs them (:mod:`.ondemand`; a closed, oriented mesh
-            of three levels or more: others are built whole).
+            of three levels or more: others are built whole); ``"auto"``: on demand where the band is large for the
+            triangles (ON_DEMAND_NODES_PER_TRIANGLE).
     Returns:
         AdaptiveField, negative inside.
     Raises:
@@ -271,9 +278,18 @@ def build_field(
 
 
 def _checked_refine(refine) -> str:
-    if refine not in ("all", "none"):
-        raise ValueError(f"Expected 'refine' to be 'all' or 'none', but got {refine!r}.")
+    if refine not in ("all", "none", "auto"):
+        raise ValueError(f"Expected 'refine' to be 'all', 'none' or 'auto', but got {refine!r}.")
     return refine
+
+
+def _on_demand(refine: str, band, plan: dict) -> bool:
+    """Whether a mesh's field is built on demand: asked (``"none"``), or ``"auto"`` where its band holds at least
+    ON_DEMAND_NODES_PER_TRIANGLE finest nodes per triangle (what it saves grows with the nodes, what it costs a kept
+    surface with the triangles: their sides off the mesh's winding number)."""
+    if refine != "auto":
+        return refine == "none"
+    return 8 * band.shape[0] >= ON_DEMAND_NODES_PER_TRIANGLE * len(plan["triangles"])
 
 
 def _build_thick(plan: dict, *, device, field_id: int) -> AdaptiveField:
@@ -323,7 +339,7 @@ def _build_planned(plan: dict, *, device, field_id: int, refine: str = "all") ->
     winding = winding_arg(mesh, facts["boundary"], device, encloses=facts["encloses"])
     base_octets = _with_cap_sheets(plan, facts["caps"], winding, base_octets, device, timings)
     levels = LevelBuilder(plan, facts, mesh, search_mesh, winding, device, field_id, timings)
-    if refine == "none" and facts["clean"] and plan["levels"] > 2:  # (:mod:`.ondemand`)
+    if _on_demand(refine, base_octets, plan) and facts["clean"] and plan["levels"] > 2:  # (:mod:`.ondemand`)
         return partial_build(levels, base_octets, lambda f, band: finished(f, plan, facts, mesh, field_id, band))
     field = levels.build(base_octets)
     field = refined_across_holes(levels, field, base_octets, plan, facts, winding)

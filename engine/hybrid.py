@@ -27,7 +27,7 @@ from .coarsen import coarsened
 from .edgehash import KeyCounts, directed_edges
 from .edges import surface_edges
 from .keep import kept_triangles, mesh_distances
-from .meshcheck import all_corners, any_corner, compacted, open_vertices, position_groups
+from .meshcheck import all_corners, any_corner, compacted, position_groups
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .rejoin import joined_again
@@ -235,13 +235,17 @@ def hybrid_surface(
 
 
 def _edges_covered(tris: np.ndarray, n_verts: int, over: np.ndarray) -> bool:
-    """Whether every face of ``tris`` at an open edge has a corner ``over`` kept faces (and so leaves)."""
-    if not len(tris):
+    """Whether every face of ``tris`` at an open edge has a corner ``over`` kept faces (and so leaves): whether the
+    faces that stay have each edge's twin (among the faces at their corners: the seams' few, not the whole
+    surface's)."""
+    stay = ~any_corner(over, tris)
+    if not stay.any():
         return True
-    ends = np.zeros(n_verts, dtype=bool)
-    ends[open_vertices(tris, n_verts)] = True
-    at = any_corner(ends, tris)
-    return bool(any_corner(over, tris[at]).all())
+    corners = np.zeros(n_verts, dtype=bool)
+    corners[tris[stay].ravel()] = True
+    _, _, keys, _ = directed_edges(tris[any_corner(corners, tris)], n_verts)
+    _, _, _, twins = directed_edges(tris[stay], n_verts)
+    return bool((KeyCounts(keys).of(twins) > 0).all())
 
 
 # A join's failures worth a second judge are at kept faces given up with an edge longer than this many voxels (the

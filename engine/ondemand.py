@@ -49,11 +49,6 @@ BOOLEAN_REACH_VOXELS = 2.5 + 1.75 + 1.5 + 3.0
 # joined on the whole result instead).
 SEAM_REACH_VOXELS = 6.0
 
-# A face's side is read off its mesh where the signed distance a side's offset ahead and behind it is beyond this
-# share of the offset (a field's linear values lie within about a tenth of a voxel of it, a quarter of the offset
-# tells an internal face): elsewhere off the field, its octets there built.
-SIDE_SURE_SHARE = 0.5
-
 # Finest octets within this many voxels (L-inf, about a point) are refined for a query there: an MLS sample reads the
 # 27 nodes about the finest node nearest its point, within 1.5 voxels, and the leaf that holds it.
 SAMPLE_REACH_VOXELS = 2.0
@@ -272,35 +267,23 @@ def as_built(field):
     return out
 
 
-@wp.func
-def _signed_distance(f: WindingArg, x: wp.vec3) -> float:
-    """The mesh's signed distance at ``x``: its BVH's closest point, the winding number's side."""
-    d = float(1.0e30)
-    q = wp.mesh_query_point_no_sign(f.mesh, x, 1.0e30)
-    if q.result:
-        d = wp.length(x - wp.mesh_eval_position(f.mesh, q.face, q.u, q.v))
-    return inside_sign(f, x) * d
-
-
 @wp.kernel(enable_backward=False)
-def _mesh_sides_kernel(
-    f: WindingArg, front: wp.array[wp.vec3], back: wp.array[wp.vec3], clear: float, out: wp.array[wp.int8]
-):
-    """A face's side from the mesh's signed distance at its point in ``front`` and the one ``back``: +1 where it is
-    outside by more than ``clear`` ahead and inside by more than that behind, -1 the other way round, 0 where it is
-    less clear (as a field's values would read it there is not sure)."""
+def _mesh_sides_kernel(f: WindingArg, front: wp.array[wp.vec3], back: wp.array[wp.vec3], out: wp.array[wp.int8]):
+    """A face's side from the mesh's winding number at its point in ``front`` and the one ``back``: +1 outside ahead
+    and inside behind, -1 the other way round, 0 where both are on one side (which a field's values may read
+    otherwise: near a crease, in a groove narrower than the offset, at an internal face)."""
     i = wp.tid()
-    ahead = _signed_distance(f, front[i])
-    behind = _signed_distance(f, back[i])
-    out[i] = wp.int8(wp.where(ahead > clear and behind < -clear, 1, wp.where(ahead < -clear and behind > clear, -1, 0)))
+    ahead = inside_sign(f, front[i])
+    behind = inside_sign(f, back[i])
+    out[i] = wp.int8(wp.where(ahead == behind, 0, wp.where(ahead > behind, 1, -1)))
 
 
 def own_sides(field, points: np.ndarray, normals: np.ndarray, offset: float, read) -> np.ndarray:
     """(N,) int8 the side of each (world) point's face on a mesh's field built on demand, as ``read(field, points,
-    normals, offset)`` (:mod:`.keep`'s reading of its values) gives it on the full field: where the mesh's signed
-    distance (its BVH, kept with its source mesh, and winding number) is clear by SIDE_SURE_SHARE of the offset and
-    more on both sides, from it; elsewhere (near a crease, a narrow groove, an internal face) by ``read`` on the field
-    with the octets there built."""
+    normals, offset)`` (:mod:`.keep`'s reading of its values) gives it on the full field: where the mesh's winding
+    number (its BVH, kept with its source mesh) puts the points ``offset`` ahead and behind on either side, from it
+    (the field's values there, within a tenth of a voxel of the distance, have those signs: the side it reads);
+    elsewhere (a narrow groove, an internal face) by ``read`` on the field with the octets there built."""
     source = next(iter(field.sources.values()))
     ends = [np.asarray(points, np.float64) + sign * offset * np.asarray(normals, np.float64) for sign in (1.0, -1.0)]
     local = ends if field.placement is None else [field.placement.to_local(end) for end in ends]
@@ -308,11 +291,10 @@ def own_sides(field, points: np.ndarray, normals: np.ndarray, offset: float, rea
     out = wp.empty(len(points), dtype=wp.int8, device=field.device)
     if len(points):
         f = winding_arg(source.kept_bvh(field.device), None, field.device)
-        clear = SIDE_SURE_SHARE * offset / (1.0 if field.placement is None else field.placement.scale)
         parallel.launch_split(
             _mesh_sides_kernel,
             len(points),
-            lambda lo, k: [f, front[lo : lo + k], back[lo : lo + k], clear, out[lo : lo + k]],
+            lambda lo, k: [f, front[lo : lo + k], back[lo : lo + k], out[lo : lo + k]],
             field.device,
         )
     side = out.numpy()

@@ -194,8 +194,15 @@ def test_open_and_single_level_meshes_are_built_whole():
     assert box.refiner is None
 
 
+def test_auto_builds_on_demand_where_the_band_is_large_for_the_triangles(spot):
+    coarse = engine.build_field(*spot, voxel_size=H, refine="auto")  # 13 finest nodes a triangle: built whole
+    fine = engine.build_field(*spot, voxel_size=H / 2, refine="auto")  # 54 a triangle: on demand
+    assert coarse.refiner is None and coarse.level_counts[0] < 24 * len(spot[1])
+    assert fine.refiner is not None and fine.level_counts[0] == 0
+
+
 def test_an_unknown_refine_is_refused_before_any_work(spot):
-    with pytest.raises(ValueError, match="'refine' to be 'all' or 'none'"):
+    with pytest.raises(ValueError, match="'refine' to be 'all', 'none' or 'auto'"):
         engine.build_field(*spot, voxel_size=H, refine="seams")
-    with pytest.raises(ValueError, match="'refine' to be 'all' or 'none'"):
+    with pytest.raises(ValueError, match="'refine' to be 'all', 'none' or 'auto'"):
         engine.build_fields([spot], voxel_size=H, refine=None)
