@@ -52,7 +52,9 @@ def cases() -> dict:
     }
 
 
-def _aasdf(a, b, op, voxel, keep):
+def run_aasdf(a, b, op, voxel, keep):
+    """One ``aasdf.boolean`` run (the field cache cleared first: the fields built), read to write: seconds, faces
+    written, the result's arrays and whether it is closed; its objects removed after."""
     from aasdf.aasdf_addon import cache, pipeline
 
     cache.clear()
@@ -87,8 +89,8 @@ def _modifier(a, b, op, solver):
 METHODS = {
     "Exact": lambda a, b, op, voxel: _modifier(a, b, op, "EXACT"),
     "Manifold": lambda a, b, op, voxel: _modifier(a, b, op, "MANIFOLD"),
-    "AASDF kept faces": lambda a, b, op, voxel: _aasdf(a, b, op, voxel, True),
-    "AASDF remeshed": lambda a, b, op, voxel: _aasdf(a, b, op, voxel, False),
+    "AASDF kept faces": lambda a, b, op, voxel: run_aasdf(a, b, op, voxel, True),
+    "AASDF remeshed": lambda a, b, op, voxel: run_aasdf(a, b, op, voxel, False),
 }
 
 

@@ -47,25 +47,13 @@ if method == "gn":
         return r["seconds"], len(r["tris"])
 else:
     from bench.addon import register
+    from bench.keep_faces import run_aasdf
+
     register()
-    from aasdf.aasdf_addon import cache, pipeline
 
     def once():
-        cache.clear()
-        first, second = baselines.mesh_object("A", *a), baselines.mesh_object("B", *b)
-        bpy.context.view_layer.update()
-        for obj in bpy.context.view_layer.objects:
-            obj.select_set(obj in (first, second))
-        bpy.context.view_layer.objects.active = first
-        t0 = time.perf_counter()
-        status = bpy.ops.aasdf.boolean(operation="UNION", voxel_size=h, hide_inputs=False, keep_faces=True)
-        seconds = time.perf_counter() - t0
-        assert status == {"FINISHED"}, status
-        result = bpy.data.objects[pipeline.last_run["object"]]
-        faces = len(result.data.polygons)
-        for obj in (first, second, result):
-            bpy.data.objects.remove(obj, do_unlink=True)
-        return seconds, faces
+        out = run_aasdf(a, b, "UNION", h, True)
+        return out["seconds"], out["faces"]
 once()  # warm-up
 seconds, faces = once()
 rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

@@ -153,17 +153,26 @@ def test_a_cutter_that_misses_keeps_every_face_and_seams_too_narrow_are_joined_w
     assert len(joined["tris"]) == len(want["tris"]) and joined["kept"].sum() == want["kept"].sum()
 
 
-def test_own_sides_of_a_field_built_on_demand_are_the_full_fields():
-    from engine.keep import SIDE_VOXELS, _side_at, _unit_normals  # the judge's own reading, on the full field
+def _side_at(field, points, normals, offset):
+    """The judge's reading of a face's side off a field (keep's): +1 growing across it, -1 falling, 0 both sides
+    clearly on one side (an internal face)."""
+    front = field.sample(points + offset * normals, method="linear")
+    back = field.sample(points - offset * normals, method="linear")
+    clear = 0.25 * offset
+    internal = (np.maximum(front, back) < -clear) | (np.minimum(front, back) > clear)
+    return np.where(internal, 0, np.where(front >= back, 1, -1)).astype(np.int8)
 
+
+def test_own_sides_of_a_field_built_on_demand_are_the_full_fields():
     verts, tris = normalised(load_mesh("rocker-arm.obj"))
-    h = 1.0 / 256
+    h, offset = 1.0 / 256, 0.5 / 256  # the judge's offset: half a voxel
     full = engine.build_field(verts, tris, voxel_size=h)
     part = engine.build_field(verts, tris, voxel_size=h, refine="none")
     verts, tris = verts.astype(np.float32), np.asarray(tris)
-    centres, normals = verts[tris].mean(axis=1), _unit_normals(verts, tris)
-    want = _side_at(full, centres, normals, SIDE_VOXELS * h)
-    sides = ondemand.own_sides(part, centres, normals, SIDE_VOXELS * h, _side_at)
+    normals = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])
+    centres, normals = verts[tris].mean(axis=1), normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    want = _side_at(full, centres, normals, offset)
+    sides = ondemand.own_sides(part, centres, normals, offset, _side_at)
     assert np.array_equal(sides, want)  # (a narrow groove reads internal off the mesh, not off the field)
     assert part.refiner.share < 0.2  # off the field only where the mesh's reading is not clear
 
