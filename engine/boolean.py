@@ -262,6 +262,10 @@ class BooleanRefiner:
         self.whole = None
         self.lock = threading.Lock()
 
+    def along_seams(self):
+        """The result made along its seams again (its operands refined since: their octets there too)."""
+        return combine(self.a, self.b, self.op, **self.options, seams=True)
+
     def asked(self, points, reach):
         """The whole result (whatever is asked of it: a boolean's seams hold no surface elsewhere)."""
         with self.lock:

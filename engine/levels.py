@@ -192,6 +192,8 @@ def finished(field, plan: dict, facts: dict, mesh, field_id: int, band: int | No
     # away from any closest point)
     field.stats["surface_points"] = clean
     field.stats["problem_faces"] = int(facts["problem"].sum())
+    if facts["caps"] is not None:  # where its sign may jump away from its triangles (:mod:`.ondemand`)
+        field.stats["hole_caps"] = facts["caps"]
     source = SourceMesh(plan["vertices"], tris, plan["triangle_ids"])
     # a closed mesh's field is its signed distance everywhere: booleans read it from the mesh itself where they sample
     # it (its BVH kept, where that costs no more than the field)

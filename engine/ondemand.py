@@ -209,7 +209,10 @@ def _value_bounds_kernel(f: FieldArg, points: wp.array[wp.vec3], low: wp.array[w
 
 def value_bounds(field, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(N,) lower and upper bounds of ``field``'s value at world ``points``, read from its nodes as they stand
-    (nothing refined; :func:`_value_bounds_kernel`)."""
+    (nothing refined; :func:`_value_bounds_kernel`). A field that may jump (an open mesh's, across its holes) is
+    bounded only away from where it may (:func:`_may_jump`), one that may anywhere nowhere (-inf to inf)."""
+    if not (field.stats.get("clean_mesh") or field.stats.get("continuous") or "hole_caps" in field.stats):
+        return np.full(len(points), -np.inf, np.float32), np.full(len(points), np.inf, np.float32)
     pts = np.asarray(points, dtype=np.float64)
     scale = 1.0
     if field.placement is not None:
@@ -225,7 +228,26 @@ def value_bounds(field, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             lambda lo, k: [arg, pts_wp[lo : lo + k], low[lo : lo + k], high[lo : lo + k]],
             device,
         )
-    return low.numpy() * np.float32(scale), high.numpy() * np.float32(scale)
+    low, high = low.numpy() * np.float32(scale), high.numpy() * np.float32(scale)
+    jumps = _may_jump(field, pts)
+    low[jumps], high[jumps] = -np.inf, np.inf
+    return low, high
+
+
+def _may_jump(field, local: np.ndarray) -> np.ndarray:
+    """(N,) where an open mesh's field may change sign away from its triangles near the unplaced ``local`` points:
+    where its caps' boxes (:func:`.meshcheck.hole_caps`: radius r_c, at distance d_c) give sum (r_c / d_c)^2 of 1 or
+    more, the distances less a top leaf's diagonal (a bound reads a node up to that far away)."""
+    caps = field.stats.get("hole_caps")
+    out = np.zeros(len(local), dtype=bool)
+    if caps is None:
+        return out
+    slack = 2.0 * np.sqrt(3.0) * field.top_spacing
+    total = np.zeros(len(local))
+    for lo, hi, radius in zip(*caps, strict=True):
+        d = np.linalg.norm(np.maximum(np.maximum(lo - local, local - hi), 0.0), axis=1)
+        total += (radius / np.maximum(d - slack, 1e-12)) ** 2
+    return total >= 1.0
 
 
 def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
@@ -315,13 +337,14 @@ def built_leaves(expression):
     """``expression`` (:mod:`.expression`) with its leaves built on demand read as built (:func:`as_built`: each the
     same arrays): the kept faces' judge reads an operand away from the seams only for its sign and whether it is
     farther than the band, which its levels above the finest tell (for a mesh without defects, whose distances the
-    judge reads off the mesh itself)."""
+    judge reads off the mesh itself). Each leaf is its refiner's most refined so far."""
     if isinstance(expression, Operation):
         a, b = built_leaves(expression.a), built_leaves(expression.b)
         if a is expression.a and b is expression.b:
             return expression
         return Operation(expression.op, expression.blend, a, b)
-    return as_built(expression) if getattr(expression, "refiner", None) is not None else expression
+    refiner = getattr(expression, "refiner", None)
+    return expression if refiner is None else as_built(_as(expression, refiner.asked(np.zeros((0, 3)), 0.0)))
 
 
 def _finest_octets(field) -> np.ndarray:

@@ -2,9 +2,9 @@
 
 A boolean of fields built on demand made with ``seams=True`` has its finest octets only where the operands' surfaces
 come near each other; its kept surface (:func:`.hybrid.kept_surface`) joins the kept faces to the voxel surface
-there, the operands read as built. Where that cannot be (an operand that passes through itself: its internal faces,
-which the judge gives up, lie away from the seams, and the judge reads its own field everywhere: it is built whole;
-a voxel surface that ends short of the kept faces), the whole result is made and joined instead.
+there, the operands read as built. An operand with internal faces (that passes through itself) is read at every
+sample: it is built whole first. Where the voxel surface ends short of the kept faces (the judge gave up faces away
+from the seams), the whole result is made and joined instead.
 """
 
 from __future__ import annotations
@@ -23,15 +23,16 @@ def kept_along_seams(field, **options) -> dict:
     join fail or an operand built on demand pass through itself; with ``new_sources``: the new faces' rows and their
     ``face_sources``, read where they were made."""
     whole = lambda: _read_as_built(refined(field, view=True))  # noqa: E731
+    # an operand with internal faces (it crosses itself, or reads so in a narrow groove) has its own field read at
+    # every sample by the judge: built whole (its sides found here are kept with its mesh for the judge)
+    pairs = zip(leaves(field.expression), leaves(built_leaves(field.expression)), strict=True)
+    crossing = [leaf for leaf, view in pairs if built_on_demand(view) and internal_faces(view, field.voxel_size)]
+    for leaf in crossing:
+        refined(leaf)
+    if crossing:  # made again: the voxel surface along all of such an operand (its internal faces are given up)
+        field = field.refiner.along_seams()
     seams = _read_as_built(as_built(field))
     surface = kept_surface(seams, **options, whole=whole)
-    # (what the judge found of each operand, kept with it: read again at no cost)
-    pairs = zip(leaves(field.expression), leaves(seams.expression), strict=True)
-    crossing = [leaf for leaf, view in pairs if built_on_demand(view) and internal_faces(view, field.voxel_size)]
-    if crossing:  # the judge reads such an operand's own field at every sample: built whole, then the whole result
-        for leaf in crossing:
-            refined(leaf)
-        return kept_surface(whole(), **options)
     if not surface["stats"]["kept_fallback"]:
         new = np.flatnonzero(~surface["kept"])
         surface["new_sources"] = (new, *seams.face_sources(surface["verts"], surface["tris"][new]))
