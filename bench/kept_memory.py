@@ -4,11 +4,12 @@ Each measurement is a fresh ``bpy`` process (its peak resident memory its own): 
 *Keep Original Faces* (the add-on registered, the field cache cleared before each run: the fields built, read to
 write), or the SDF nodes' union at the same voxel size; each process runs once to warm up (kernels, node tree) and
 then once timed. The two methods' processes run in turns, ``--repeat`` rounds; the ratio is the median of the rounds'
-ratios (smallest and largest in brackets). Pairs of closed meshes, whose fields are built on demand (their finest
-level only along the seams, ``engine/ondemand.py``):
+ratios (smallest and largest in brackets). Their fields are built on demand where their bands are large for their
+triangles (their finest level only along the seams and about an open mesh's holes, ``engine/ondemand.py``):
 
 - ``spot``: spot ∪ spot moved by 0.3 of its diagonal (5.8 k triangles each);
-- ``ball``: a 100 k-triangle ball ∪ spot.
+- ``ball``: a 100 k-triangle ball ∪ spot;
+- ``bunny``: the open Stanford bunny (69 k triangles) ∪ spot, as ``bench/keep_faces.py`` places them.
 
     .venv/bin/python bench/kept_memory.py [--repeat 3] [--resolutions 512 1024] [--cases spot ball]
 """
@@ -37,6 +38,9 @@ from tests.support import load_mesh, normalised, uv_sphere
 if case == "spot":
     a = load_mesh("spot.obj")
     b = (a[0] + np.float32([0.3 * float(np.linalg.norm(a[0].max(0) - a[0].min(0))), 0, 0]), a[1])
+elif case == "bunny":
+    a = normalised(load_mesh("stanford-bunny.obj"), center=(0.25, 0.0, 0.0), diagonal=0.8)
+    b = normalised(load_mesh("spot.obj"))
 else:
     a = normalised(uv_sphere(1.0, rings=224, segments=224))
     b = normalised(load_mesh("spot.obj"), center=(0.3, 0.1, 0.0), diagonal=0.8)

@@ -260,9 +260,9 @@ def build_field(
             thickness), so surfaces that enclose nothing (planes, cloth, single-sided scans) become solids; a closed
             mesh becomes a hollow shell centred on its surface. None: the mesh's own inside.
         refine: ``"all"``: the finest level about every triangle; ``"none"``: every level above it, the finest
-            octets built when a query, a surface or a boolean needs them (:mod:`.ondemand`; a closed, oriented mesh
-            of three levels or more: others are built whole); ``"auto"``: on demand where the band is large for the
-            triangles (ON_DEMAND_NODES_PER_TRIANGLE).
+            octets built when a query, a surface or a boolean needs them (:mod:`.ondemand`; a mesh that encloses a
+            volume, of three levels or more: others are built whole); ``"auto"``: on demand where the band is large
+            for the triangles (ON_DEMAND_NODES_PER_TRIANGLE).
     Returns:
         AdaptiveField, negative inside.
     Raises:
@@ -339,8 +339,12 @@ def _build_planned(plan: dict, *, device, field_id: int, refine: str = "all") ->
     winding = winding_arg(mesh, facts["boundary"], device, encloses=facts["encloses"])
     base_octets = _with_cap_sheets(plan, facts["caps"], winding, base_octets, device, timings)
     levels = LevelBuilder(plan, facts, mesh, search_mesh, winding, device, field_id, timings)
-    if _on_demand(refine, base_octets, plan) and facts["clean"] and plan["levels"] > 2:  # (:mod:`.ondemand`)
-        return partial_build(levels, base_octets, lambda f, band: finished(f, plan, facts, mesh, field_id, band))
+    if _on_demand(refine, base_octets, plan) and facts["encloses"] and plan["levels"] > 2:  # (:mod:`.ondemand`)
+        finish = lambda f, band: finished(f, plan, facts, mesh, field_id, band)  # noqa: E731
+        across = (
+            None if facts["clean"] else lambda f, octets: refined_across_holes(levels, f, octets, plan, facts, winding)
+        )  # noqa: E731
+        return partial_build(levels, base_octets, finish, across)
     field = levels.build(base_octets)
     field = refined_across_holes(levels, field, base_octets, plan, facts, winding)
     return finished(field, plan, facts, mesh, field_id)

@@ -10,7 +10,7 @@ import time
 from . import distance, fim, search, signs, sweeping
 from .field import AdaptiveField
 from .holes import changed_top_cells, sign_change_octets
-from .octree import add_octets, code_bits, level_layout, match_levels
+from .octree import add_octets, code_bits, level_layout, match_levels, merge_unique, parent_octets
 from .plan import check_budget
 from .sampling import LEAF_TOLERANCE
 from .signs import NO_BOXES
@@ -44,6 +44,10 @@ class LevelBuilder:
         ``finest_only``: it has every coarse node this one has (a field refined on demand: ``above`` fixes them), so
         only the finest level is found (its new octets' distances, their signs from the levels above)."""
         plan, timings = self.plan, self.timings
+        if self.above is not None and not finest_only:  # octets a round across the holes adds: their parents too
+            end_bit = 3 * code_bits(plan["fine_dims"])
+            up = parent_octets(octets, 1, end_bit=end_bit, presorted=True)
+            self.above = merge_unique(self.above, up, end_bit=end_bit)
         # every node's place first, so each level's values are computed where they are kept
         layout = level_layout(octets, plan["top_dims"], plan["levels"], self.device, timings, above=self.above)
         # each node's index in the earlier build (-1: new), shared by distances and signs

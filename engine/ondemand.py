@@ -17,8 +17,8 @@ Asked of a partly refined field, the public queries answer as the full field doe
 refines about its points first, the surface, offsets and shells take the whole band; a boolean asks only where its
 result's surface may pass (:func:`needed_for_boolean`).
 
-Only a closed, consistently oriented mesh is built this way (an open or messy mesh's build refines across its holes
-from its whole band: it is built whole).
+An open mesh's build has its band's octets about its holes' caps built first (its rounds across the holes then see
+what the full build's see), and its bounds are not read there (its sign may jump across a hole).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from . import parallel
 from .expression import OP_DIFFERENCE, OP_UNION, Operation
 from .octree import code_bits, morton_decode_np, morton_encode_np, node_center, parent_octets
 from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, level_spacing, locate_leaf, node_coords
-from .winding import WindingArg, inside_sign, winding_arg
+from .winding import WindingArg, inside_sign
 
 # What a mesh's build found of it (:func:`.levels.finished`), carried to its refined fields.
 FOUND = ("clean_mesh", "flat", "surface_points", "problem_faces", "mesh_distance")
@@ -48,6 +48,10 @@ BOOLEAN_REACH_VOXELS = 2.5 + 1.75 + 1.5 + 3.0
 # pairs at /256: 5 joins every pair along its seams, 4 leaves the surface short on all but two; what falls short is
 # joined on the whole result instead).
 SEAM_REACH_VOXELS = 6.0
+
+# An open mesh built on demand has its band's octets this many octets (beside the rounds' own reach) about its caps
+# built first: the band nodes beside the octets the rounds look at.
+CAP_REACH_OCTETS = 2.0
 
 # Finest octets within this many voxels (L-inf, about a point) are refined for a query there: an MLS sample reads the
 # 27 nodes about the finest node nearest its point, within 1.5 voxels, and the leaf that holds it.
@@ -104,19 +108,48 @@ class Refiner:
             return field
 
 
-def partial_build(levels, band: wp.array, finish):
+def partial_build(levels, band: wp.array, finish, across_holes=None):
     """A mesh's field with every level above the finest as its full build has them and no finest octet, and its
     :class:`Refiner` (``levels``: the build's :class:`.levels.LevelBuilder`; ``band``: the whole band's finest octets,
-    sorted; ``finish(field, octets)``: what the build does last to a field, :func:`.levels.finished`)."""
+    sorted; ``finish(field, octets)``: what the build does last to a field, :func:`.levels.finished`). An open mesh's
+    (``across_holes(field, octets)``: the build's rounds across its holes, :func:`.levels.refined_across_holes`) has
+    its band's octets near its holes' caps built first, so the rounds look at what the full build's do and add the
+    same octets (the band takes them too)."""
     end_bit = 3 * code_bits(levels.plan["fine_dims"])
     levels.above = parent_octets(band, 1, end_bit=end_bit, presorted=True)
-    field = finish(levels.build(wp.empty(0, dtype=wp.int64, device=band.device)), band.shape[0])
-    field.refiner = Refiner(levels, band.numpy(), field)
+    codes, first = band.numpy(), np.zeros(0, dtype=np.int64)
+    caps = levels.facts["caps"]
+    if caps is not None:  # the rounds check the leaves and octets near the caps, and the band nodes beside them
+        octet = 2.0 * levels.plan["voxel_size"]
+        centres = levels.plan["origin"] + (morton_decode_np(codes) + 0.5) * octet
+        first = codes[_near_caps(caps, centres, CAP_REACH_OCTETS * octet + _sign_check_reach(levels.plan))]
+    field = levels.build(wp.array(first, dtype=wp.int64, device=band.device))
+    if across_holes is not None:
+        field = across_holes(field, wp.array(first, dtype=wp.int64, device=band.device))
+        codes = np.union1d(codes, _finest_octets(field))
+    field = finish(field, len(codes))
+    field.refiner = Refiner(levels, codes, field)
     source = next(iter(field.sources.values()))
     source.adopt(levels.mesh)  # (with its winding numbers: :func:`own_sides`)
     source.refiner = field.refiner
-    field.stats["refined"] = 0.0
+    field.stats["refined"] = field.refiner.share
     return field
+
+
+def _sign_check_reach(plan: dict) -> float:
+    """How far from a cap :func:`.holes.sign_change_octets` looks (its ``reach``)."""
+    top, h = plan["voxel_size"] * 2 ** (plan["levels"] - 1), plan["voxel_size"]
+    return 1.05 * (0.866 * top + max(0.5 * top + 0.25 * h, 3.465 * h))
+
+
+def _near_caps(caps, points: np.ndarray, margin: float) -> np.ndarray:
+    """(N,) where the caps' cones may move the winding number by 1/4 or more within ``margin`` of each point (as
+    :func:`.geometry.near_cap`: sum of (radius_c / d_c)^2 at least 1, d_c the box's distance less the margin)."""
+    total = np.zeros(len(points))
+    for lo, hi, radius in zip(*caps, strict=True):
+        d = np.linalg.norm(np.maximum(np.maximum(lo - points, points - hi), 0.0), axis=1) - margin
+        total += (radius / np.maximum(d, 1e-12)) ** 2
+    return total >= 1.0
 
 
 def refined(field, points=None, reach: float | None = None, *, view: bool = False):
@@ -236,18 +269,11 @@ def value_bounds(field, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _may_jump(field, local: np.ndarray) -> np.ndarray:
     """(N,) where an open mesh's field may change sign away from its triangles near the unplaced ``local`` points:
-    where its caps' boxes (:func:`.meshcheck.hole_caps`: radius r_c, at distance d_c) give sum (r_c / d_c)^2 of 1 or
-    more, the distances less a top leaf's diagonal (a bound reads a node up to that far away)."""
+    near its caps (:func:`_near_caps`) within a top leaf's diagonal (a bound reads a node up to that far away)."""
     caps = field.stats.get("hole_caps")
-    out = np.zeros(len(local), dtype=bool)
     if caps is None:
-        return out
-    slack = 2.0 * np.sqrt(3.0) * field.top_spacing
-    total = np.zeros(len(local))
-    for lo, hi, radius in zip(*caps, strict=True):
-        d = np.linalg.norm(np.maximum(np.maximum(lo - local, local - hi), 0.0), axis=1)
-        total += (radius / np.maximum(d - slack, 1e-12)) ** 2
-    return total >= 1.0
+        return np.zeros(len(local), dtype=bool)
+    return _near_caps(caps, local, 2.0 * np.sqrt(3.0) * field.top_spacing)
 
 
 def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
@@ -312,7 +338,7 @@ def own_sides(field, points: np.ndarray, normals: np.ndarray, offset: float, rea
     front, back = (wp.array(end.astype(np.float32), dtype=wp.vec3, device=field.device) for end in local)
     out = wp.empty(len(points), dtype=wp.int8, device=field.device)
     if len(points):
-        f = winding_arg(source.kept_bvh(field.device), None, field.device)
+        f = source.refiner.levels.winding  # the build's (an open mesh's: exact near its holes)
         parallel.launch_split(
             _mesh_sides_kernel,
             len(points),
