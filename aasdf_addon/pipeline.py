@@ -458,10 +458,8 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             _hide_inputs(objects, output)
             return _record(timer, output.target, voxel_size, source, operation, len(objects))
         with timer.stage("fields"):
-            # faces kept: the fields' finest levels built along the seams alone (``engine.build_field``'s refine)
-            refine = "auto" if output.keep_faces else "all"
-            thickness = [item.thickness for item in inputs]
-            fields = operand_fields(context, read, settings, voxel_size, progress, thickness=thickness, refine=refine)
+            walls, refine = [item.thickness for item in inputs], "auto" if output.keep_faces else "all"  # (kept: seams)
+            fields = operand_fields(context, read, settings, voxel_size, progress, thickness=walls, refine=refine)
         with timer.stage("booleans"):
             seams = _seams(read, output)
             field, surface = combined(steps, fields, output, seams, progress)

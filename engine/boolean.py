@@ -26,7 +26,7 @@ from .blends import BLEND_MODES, chamfer_needs, sdf_combine
 from .blendzone import blend_octets
 from .expression import OP_DIFFERENCE, OP_INTERSECTION, OP_UNION, combined
 from .octree import code_bits, level_layout, morton_decode, node_center
-from .ondemand import Refiner, for_boolean
+from .ondemand import for_boolean
 from .operands import (
     blend_sample,
     estimate,
@@ -294,11 +294,9 @@ def combine(
             bevel meeting each face ``blend`` from the seam where the faces meet at a right angle).
         spacing: ``"finer"`` (default), ``"coarser"``, ``"a"`` or ``"b"``: whose finest spacing the result takes
             (where the operands are placed: ``world_voxel_size``).
-        seams: Where an operand was built on demand (``build_field(refine="none")``), build the result's finest
-            octets along its seams alone (the operands' octets near each other's surfaces,
-            :func:`.ondemand.for_boolean`): what a boolean that keeps the operands' faces reads (``to_mesh(
-            keep_faces=True)``). The result keeps a :class:`BooleanRefiner`, which gives the whole result to any other
-            query. False: the whole result at once (where its surface may pass).
+        seams: Where an operand was built on demand (``build_field(refine=...)``), build the result's finest
+            octets along its seams alone (:func:`.ondemand.for_boolean`), as kept faces read them; it keeps a
+            :class:`BooleanRefiner` to give any other query the whole result.
     Returns:
         A new AdaptiveField whose node sources carry the operands' field ids.
     Raises:
@@ -307,21 +305,12 @@ def combine(
     """
     blend, mode, h = _options(a, b, blend, blend_mode, spacing)
     asked = (a, b, op, {"blend": blend, "spacing": spacing, "blend_mode": blend_mode})
-    seams = seams and any(isinstance(getattr(f, "refiner", None), Refiner) for f in (a, b))
-    # operands built on demand: the octets the result needs (:mod:`.ondemand`)
-    a, b = for_boolean(a, b, op, blend, seams=seams)
+    a, b, seams = for_boolean(a, b, op, blend, seams=seams)  # built on demand: the octets it needs (:mod:`.ondemand`)
     # a sparse finest level under a dense top one, even when both operands are dense (one level)
     levels = max(a.levels, b.levels, 2)
-    timings = {}
-    t0 = time.perf_counter()
+    timings, t0 = {}, time.perf_counter()
     origin, top_dims = _domain(a, b, h, levels, mode, blend)
-    # a placed operand is resampled from its cells, never aligned
-    aligned = [
-        f.placement is None
-        and bool(np.isclose(f.voxel_size, h, rtol=1e-6, atol=0.0))
-        and np.allclose((f.origin - origin) / h, np.rint((f.origin - origin) / h), atol=1e-3)
-        for f in (a, b)
-    ]
+    aligned = [_aligned(f, origin, h) for f in (a, b)]
     args = (a.arg(), b.arg())
     octets = _candidate_octets((a, b), aligned, origin, h, top_dims * 2 ** (levels - 1), a.device)
     if blend > 0.0:  # and where the blend shapes the surface, away from both operands' own octets
@@ -331,26 +320,26 @@ def combine(
     # Keep the result adaptive: drop the octets the result's surface is far from, before any interpolation.
     t0 = time.perf_counter()
     finest = _pruned(octets, (a, b), args, aligned, origin, h, top_dims * 2 ** (levels - 2), op, blend, mode)
-    octets = None
     timings["finest_prune"] = time.perf_counter() - t0
     # every node's place first, so the finest values are computed where they are kept
     layout = level_layout(finest.pop("octets"), top_dims, levels, a.device, timings, lean=True)
     walk = wp.vec2i(*(int(mode == 1 and f.stats.get("surface_points", False)) for f in (a, b)))
     nodes = _node_values(layout, finest, args, aligned, origin, h, levels, (op, blend, mode, walk), timings)
     result = type(a).from_layout(
-        layout,
-        voxel_size=h,
-        origin=origin,
-        **nodes,
-        field_ids=a.field_ids + b.field_ids,
-        timings=timings,
-        sources={**a.world_sources(), **b.world_sources()},
-        stats={"continuous": not finest["jumps"]},
-    )
+        layout, voxel_size=h, origin=origin, **nodes, field_ids=a.field_ids + b.field_ids, timings=timings,
+        sources={**a.world_sources(), **b.world_sources()}, stats={"continuous": not finest["jumps"]},
+    )  # fmt: skip
     result.expression = combined(op, blend, a, b)  # what it was made of, for the faces it keeps (:mod:`.keep`)
-    if seams:
-        result.refiner = BooleanRefiner(*asked)
+    result.refiner = BooleanRefiner(*asked) if seams else None  # (the whole result, asked anything else)
     return result
+
+
+def _aligned(f, origin, h: float) -> bool:
+    """Whether operand ``f``'s nodes lie on the result's lattice (a placed operand is resampled from its cells, never
+    aligned)."""
+    if f.placement is not None or not np.isclose(f.voxel_size, h, rtol=1e-6, atol=0.0):
+        return False
+    return bool(np.allclose((f.origin - origin) / h, np.rint((f.origin - origin) / h), atol=1e-3))
 
 
 def _options(a, b, blend, blend_mode, spacing) -> tuple:

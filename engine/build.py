@@ -188,24 +188,21 @@ def build_fields(
 
     Args:
         meshes: Sequence of (vertices, triangles) pairs, as for :func:`build_field`.
-        voxel_size, levels, padding, device: As for :func:`build_field`.
+        voxel_size, levels, padding, device, refine: As for :func:`build_field`.
         field_ids: One id per mesh (default 0, 1, 2, ...).
         thickness: As for :func:`build_field`: one value for every mesh, or one per mesh (None: none).
-        refine: As for :func:`build_field`.
     Returns:
         One AdaptiveField per mesh, in order.
     Raises:
         ValueError, AasdfError: As :func:`check_meshes` and :func:`build_field`; messages about one mesh start with
             "Mesh <k>: ".
     """
-    meshes = list(meshes)
-    refine = _checked_refine(refine)
+    meshes, refine = list(meshes), _checked_refine(refine)
     field_ids = list(range(len(meshes))) if field_ids is None else [int(k) for k in field_ids]
     if len(field_ids) != len(meshes):
         raise ValueError(f"build_fields got {len(field_ids)} field ids for {len(meshes)} meshes")
     plans = checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding, thickness=thickness)
-    device = _device(device)
-    fields: list = [None] * len(meshes)
+    device, fields = _device(device), [None] * len(meshes)
     errors: dict = {}
 
     def build(k):

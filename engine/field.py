@@ -529,23 +529,16 @@ class AdaptiveField:
         Raises:
             ValueError: If ``iso`` is not finite or ``adaptivity`` is not within [0, 1].
         """
-        if self.refiner is not None:  # its whole band first (:mod:`.ondemand`)
-            return refined(self, view=True).to_mesh(
-                iso, sharp=sharp, return_creases=return_creases, keep_faces=keep_faces, quads=quads,
-                adaptivity=adaptivity, regions=regions,
-            )  # fmt: skip
         iso, adaptivity = float(iso), float(adaptivity)
         if not np.isfinite(iso):
             raise ValueError(f"Expected a finite 'iso', but got {iso}.")
         if not 0.0 <= adaptivity <= 1.0:
             raise ValueError(f"Expected an 'adaptivity' from 0 to 1, but got {adaptivity}.")
         if keep_faces:
-            if iso != 0.0:
-                raise ValueError(f"Kept faces lie on the zero surface: expected 'iso' 0 with 'keep_faces', got {iso}.")
-            surface = self.kept_surface(sharp=sharp, adaptivity=adaptivity, regions=regions)
-            verts, tris = surface["verts"], surface["tris"]
-            mesh = (verts, tris) if not quads else (verts, tris.ravel(), np.full(len(tris), 3, np.int32))
-            return (*mesh, np.zeros((0, 2), dtype=np.int32)) if return_creases else mesh
+            return self._kept_mesh(iso, (sharp, adaptivity, regions), quads, return_creases)
+        if self.refiner is not None:  # its whole band first (:mod:`.ondemand`)
+            options = {"sharp": sharp, "return_creases": return_creases, "quads": quads, "adaptivity": adaptivity}
+            return refined(self, view=True).to_mesh(iso, regions=regions, **options)
         asked, out = sharp, None
         if sharp is None:
             sharp = not self.stats.get("exact_distance", False)
@@ -560,6 +553,17 @@ class AdaptiveField:
             return grown.to_mesh(sharp=asked, return_creases=return_creases, quads=quads, adaptivity=adaptivity)
         mesh = (out["verts"], out["faces"], out["sizes"]) if quads else (out["verts"], out["tris"])
         return (*mesh, out["creases"]) if return_creases else mesh
+
+    def _kept_mesh(self, iso: float, options: tuple, quads: bool, return_creases: bool):
+        """``to_mesh(keep_faces=True)``: the kept surface (``options``: sharp, adaptivity, regions) as ``to_mesh``
+        returns a surface (its polygons triangles; no crease edges)."""
+        if iso != 0.0:
+            raise ValueError(f"Kept faces lie on the zero surface: expected 'iso' 0 with 'keep_faces', got {iso}.")
+        sharp, adaptivity, regions = options
+        surface = self.kept_surface(sharp=sharp, adaptivity=adaptivity, regions=regions)
+        verts, tris = surface["verts"], surface["tris"]
+        mesh = (verts, tris) if not quads else (verts, tris.ravel(), np.full(len(tris), 3, np.int32))
+        return (*mesh, np.zeros((0, 2), dtype=np.int32)) if return_creases else mesh
 
     def _asked(self, points) -> AdaptiveField:
         """A view of this field built on demand with the finest octets its queries at ``points`` read

@@ -285,7 +285,9 @@ def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
     union's, its second (turned inside out) as an intersection's. What the boolean reads of an operand (its finest
     nodes and their MLS samples, the pruning's brackets) lies within that reach of the result's surface. ``seams``:
     only where the other's surface may be within that reach (the seams, where a boolean that keeps the operands'
-    faces makes new surface). An operand that is a boolean built on demand is taken whole."""
+    faces makes new surface). An operand that is a boolean built on demand is taken whole. Returns the operands, and
+    whether the result is made along its seams (asked, and an operand built on demand)."""
+    seams = seams and any(isinstance(getattr(f, "refiner", None), Refiner) for f in (a, b))
     out = [a, b]
 
     def refine(k, x, y):
@@ -304,7 +306,7 @@ def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
     # side by side (one Python thread each on the CPU; one field used twice is refined once at a time: its lock)
     asked = [(k, x, y) for k, (x, y) in enumerate(((a, b), (b, a))) if getattr(x, "refiner", None) is not None]
     parallel.run_tasks([lambda task=task: refine(*task) for task in asked], a.device)
-    return tuple(out)
+    return out[0], out[1], seams
 
 
 def as_built(field):

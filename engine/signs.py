@@ -322,6 +322,21 @@ def _winding_signs(
     )
 
 
+def _take_known_expansions(previous, prev_index, known, expansions, nodes) -> None:
+    """The coarse nodes (``nodes``: from n0 to n) an earlier build has take its expansions (``known``), in place."""
+    n0, n = nodes
+    where = prev_index.numpy()
+    renumber = np.full(int(previous.node_count), -1, dtype=np.int32)
+    renumber[where[where >= 0]] = np.flatnonzero(where >= 0)
+    renumber_wp = wp.array(renumber, dtype=wp.int32, device=expansions.cert.device)
+    launch_split(
+        take_known_expansion_kernel,
+        n - n0,
+        lambda s, _n: [s, prev_index, renumber_wp, known, expansions],
+        expansions.cert.device,
+    )
+
+
 def sign_levels(
     winding: WindingArg,
     layout: dict,
@@ -383,13 +398,7 @@ def sign_levels(
     exact = winding.mode == WINDING_EXACT and hole_caps is not None
     expansions = expansion_arg(n0, n - n0 if exact else 0, device)
     if exact and known is not None and known.cert.shape[0] > 0:
-        where = prev_index.numpy()
-        renumber = np.full(int(previous.node_count), -1, dtype=np.int32)
-        renumber[where[where >= 0]] = np.flatnonzero(where >= 0)
-        renumber_wp = wp.array(renumber, dtype=wp.int32, device=device)
-        launch_split(
-            take_known_expansion_kernel, n - n0, lambda s, _n: [s, prev_index, renumber_wp, known, expansions], device
-        )
+        _take_known_expansions(previous, prev_index, known, expansions, (n0, n))
 
     def oracle(nodes_np, k, reach=0.8661):
         expand = (dist, expansions) if exact and k > 0 else None
