@@ -130,6 +130,8 @@ def test_offsets_and_kept_faces_of_fields_built_on_demand_equal_the_full_ones(sp
     want_kept = engine.union(*full).kept_surface()
     assert len(kept["tris"]) == len(want_kept["tris"]) and kept["kept"].sum() == want_kept["kept"].sum()
     assert np.abs(np.sort(kept["verts"], axis=0) - np.sort(want_kept["verts"], axis=0)).max() < 1e-3 * H
+    verts, tris = seams.to_mesh(keep_faces=True)
+    assert len(tris) == len(kept["tris"])
     assert seams.refiner.whole is None  # joined along the seams: the whole result was never made
 
 
