@@ -66,6 +66,8 @@ class Refiner:
     def __init__(self, levels, band: np.ndarray, field):
         self.levels, self.band = levels, band
         self.latest = field
+        self.built = np.isin(band, _finest_octets(field), assume_unique=True)  # (the band's octets built so far)
+        self.centres = None  # the band's octets' centres (unplaced), found on first use
         self.lock = threading.Lock()
 
     @property
@@ -90,20 +92,22 @@ class Refiner:
 
     def refined(self, octets: np.ndarray | None):
         """The field with the band's finest octets among ``octets`` (sorted unique codes; None: all) added."""
+        every = np.ones(len(self.band), dtype=bool)
+        return self.refined_where(every if octets is None else np.isin(self.band, octets, assume_unique=True))
+
+    def refined_where(self, wanted: np.ndarray):
+        """The field with the band's finest octets where ``wanted`` ((K,) bool over the band) added."""
         with self.lock:
-            have = _finest_octets(self.latest)
-            wanted = self.band if octets is None else self.band[np.isin(self.band, octets, assume_unique=True)]
-            new = wanted[~np.isin(wanted, have, assume_unique=True)]
-            if not len(new):
+            built = self.built | wanted
+            if np.array_equal(built, self.built):
                 return self.latest
-            every = np.union1d(have, new)
-            octets_wp = wp.array(every, dtype=wp.int64, device=self.latest.device)
+            octets_wp = wp.array(self.band[built], dtype=wp.int64, device=self.latest.device)
             field = self.levels.build(octets_wp, previous=self.latest, finest_only=True)
             # what the first build found of the mesh, and its source mesh (the same object: what is kept with it
             # stays)
             field.stats = {**field.stats, **{k: self.latest.stats[k] for k in FOUND}}
             field.sources, field.refiner = self.latest.sources, self
-            self.latest = field
+            self.latest, self.built = field, built
             field.stats["refined"] = self.share
             return field
 
@@ -295,13 +299,13 @@ def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
         if not isinstance(refiner, Refiner):  # a boolean's (:class:`.boolean.BooleanRefiner`): whole
             out[k] = refined(x)
             return
-        codes, centres = band_centres(x)
+        centres = band_centres(x)
         world = centres if x.placement is None else x.placement.to_world(centres)
         low, high = value_bounds(y, world)
         reach = (SEAM_REACH_VOXELS if seams else BOOLEAN_REACH_VOXELS) * x.world_voxel_size + float(blend)
         below = op == OP_UNION or (op == OP_DIFFERENCE and k == 0)  # the other's inside buries it
         near = (high >= -reach) & (low <= reach) if seams else high >= -reach if below else low <= reach
-        out[k] = _as(x, refiner.refined(codes[near]))
+        out[k] = _as(x, refiner.refined_where(near))
 
     # side by side (one Python thread each on the CPU; one field used twice is refined once at a time: its lock)
     asked = [(k, x, y) for k, (x, y) in enumerate(((a, b), (b, a))) if getattr(x, "refiner", None) is not None]
@@ -381,8 +385,10 @@ def _finest_octets(field) -> np.ndarray:
     return (field.codes[:n0].numpy()[::8] >> 3).astype(np.int64) if n0 else np.zeros(0, np.int64)
 
 
-def band_centres(field) -> tuple[np.ndarray, np.ndarray]:
-    """The codes of a field's whole band of finest octets (its refiner's) and their centres (unplaced)."""
-    band = field.refiner.band
-    octet = 2.0 * field.voxel_size
-    return band, field.origin + (morton_decode_np(band) + 0.5) * octet
+def band_centres(field) -> np.ndarray:
+    """The centres (unplaced) of a field's whole band of finest octets (its refiner's, in its order), found once."""
+    refiner = field.refiner
+    if refiner.centres is None:
+        octet = 2.0 * field.voxel_size
+        refiner.centres = field.origin + (morton_decode_np(refiner.band) + 0.5) * octet
+    return refiner.centres
