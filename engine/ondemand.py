@@ -15,7 +15,8 @@ finds.
 
 Asked of a partly refined field, the public queries answer as the full field does: :meth:`.field.AdaptiveField.sample`
 refines about its points first, the surface, offsets and shells take the whole band; a boolean asks only where its
-result's surface may pass (:func:`needed_for_boolean`).
+result's surface may pass (:func:`for_boolean`), or with ``seams`` only along them, for the kept faces
+(:mod:`.seams`). ``refine="auto"`` builds on demand where a band is large for its mesh's triangles.
 
 An open mesh's build has its band's octets about its holes' caps built first (its rounds across the holes then see
 what the full build's see), and its bounds are not read there (its sign may jump across a hole).
@@ -36,7 +37,7 @@ from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, level_spacing, 
 from .winding import WindingArg, inside_sign
 
 # What a mesh's build found of it (:func:`.levels.finished`), carried to its refined fields.
-FOUND = ("clean_mesh", "flat", "surface_points", "problem_faces", "mesh_distance")
+FOUND = ("clean_mesh", "flat", "surface_points", "problem_faces", "mesh_distance", "hole_caps")
 
 # A boolean's operand gets the finest octets of its band within this many voxels of where the result's surface may
 # be: the boolean keeps its finest octets within KEEP_BAND (2.5) voxels of it, an octet's centre lies up to sqrt(3)
@@ -105,7 +106,7 @@ class Refiner:
             field = self.levels.build(octets_wp, previous=self.latest, finest_only=True)
             # what the first build found of the mesh, and its source mesh (the same object: what is kept with it
             # stays)
-            field.stats = {**field.stats, **{k: self.latest.stats[k] for k in FOUND}}
+            field.stats = {**field.stats, **{k: self.latest.stats[k] for k in FOUND if k in self.latest.stats}}
             field.sources, field.refiner = self.latest.sources, self
             self.latest, self.built = field, built
             field.stats["refined"] = self.share
