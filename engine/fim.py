@@ -357,6 +357,19 @@ def _refine_leaves_kernel(
             proj[i] = p
 
 
+def _take_known_coarse(previous, prev_index, nodes, known, arrays) -> None:
+    """The coarse nodes (``nodes``: from n0 to n) ``previous`` has (``prev_index``) take its distance, closest point
+    and source into ``arrays`` (dist, proj, source), flagged in ``known`` (empty: not flagged)."""
+    n0, n = nodes
+    prev_points, prev_sources = previous.closest_points, previous.node_sources()
+    launch_split(
+        take_known_kernel,
+        n - n0,
+        lambda s, _n: [n0 + s, prev_index, previous.values, prev_points, prev_sources, known, *arrays],
+        known.device if known.shape[0] else prev_index.device,
+    )
+
+
 def known_levels(layout: dict, previous, prev_index, dist, proj, source):
     """Every coarse node's distance, closest point and source taken from ``previous`` (which has them all: a field
     refined on demand, :mod:`.ondemand`), in place; returns the coarse nodes' same-level neighbours, as
@@ -367,14 +380,7 @@ def known_levels(layout: dict, previous, prev_index, dist, proj, source):
     n, n0 = int(offsets[-1]), int(offsets[1])
     fine_dims = (np.asarray(layout["top_dims"], dtype=np.int64)) * 2 ** (levels - 1)
     neighbours = wp.full((n - n0, 6), -1, dtype=wp.int32, device=device)
-    prev_points, prev_sources = previous.closest_points, previous.node_sources()
-    no_known = wp.empty(0, dtype=wp.int32, device=device)
-    launch_split(
-        take_known_kernel,
-        n - n0,
-        lambda s, _n: [n0 + s, prev_index, previous.values, prev_points, prev_sources, no_known, dist, proj, source],
-        device,
-    )
+    _take_known_coarse(previous, prev_index, (n0, n), wp.empty(0, dtype=wp.int32, device=device), (dist, proj, source))
     for k in range(1, levels):
         level_neighbours(coords, int(offsets[k]), int(offsets[k + 1]), fine_dims >> k, neighbours, row0=n0)
     return neighbours
@@ -428,23 +434,7 @@ def solve_levels(
     # Coarse nodes an earlier build of the same mesh and domain has keep their distances (refinement rounds).
     known = wp.zeros(n, dtype=wp.int32, device=device)
     if previous is not None:
-        prev_points, prev_sources = previous.closest_points, previous.node_sources()
-        launch_split(
-            take_known_kernel,
-            n - n0,
-            lambda s, _n: [
-                n0 + s,
-                prev_index,
-                previous.values,
-                prev_points,
-                prev_sources,
-                known,
-                dist,
-                proj,
-                source,
-            ],
-            device,
-        )
+        _take_known_coarse(previous, prev_index, (n0, n), known, (dist, proj, source))
     origin_t = tuple(float(x) for x in origin)
     sweeps = {}
     for k in range(1, levels):

@@ -170,6 +170,26 @@ def _near_band(field, mesh, timings) -> dict:
     return level_layout(octets, field.top_dims, field.levels, device, timings)
 
 
+def _interface(field, layout: dict, where, dist) -> tuple:
+    """The finest nodes at the ends of edges the surface crosses (``_interface_nodes_kernel``), and the factor that
+    makes their old values distances (the median of distance over value there: 1 for a field of distances, a scaled
+    field's scale)."""
+    device, n0 = field.device, int(layout["offsets"][1])
+    interface = wp.empty(n0, dtype=wp.int32, device=device)
+    dense = wp.vec3i(*(int(d) for d in field.top_dims)) if field.levels == 1 else wp.vec3i(0, 0, 0)
+    launch_split(
+        _interface_nodes_kernel,
+        n0,
+        lambda s, _n: [s, layout["coords"], layout["codes"], n0, dense, where, field.values, interface],
+        device,
+    )
+    old = field.arg()
+    ratios = wp.empty(n0, dtype=wp.float32, device=device)
+    launch_split(_interface_ratios_kernel, n0, lambda s, _n: [s, old, where, interface, dist, ratios], device)
+    ratios_np = ratios.numpy()
+    return interface, float(np.median(ratios_np[ratios_np >= 0.0])) if (ratios_np >= 0.0).any() else 1.0
+
+
 def redistance(field, *, method: str = "sweep", top_tolerance: float = LEAF_TOLERANCE):
     """The field's values replaced by the signed distance to its own zero surface (its ``to_mesh`` triangles).
 
@@ -238,21 +258,8 @@ def redistance(field, *, method: str = "sweep", top_tolerance: float = LEAF_TOLE
             level_solver=None if method == "fim" else functools.partial(solve_level, sparse=SPARSE_SOLVERS[method]),
         )
     t0 = time.perf_counter()
-    n, n0 = int(layout["offsets"][-1]), int(layout["offsets"][1])
-    interface = wp.empty(n0, dtype=wp.int32, device=device)
-    dense = wp.vec3i(*(int(d) for d in field.top_dims)) if levels == 1 else wp.vec3i(0, 0, 0)
-    launch_split(
-        _interface_nodes_kernel,
-        n0,
-        lambda s, _n: [s, layout["coords"], layout["codes"], n0, dense, where, field.values, interface],
-        device,
-    )
-    old = field.arg()
-    # the factor that makes the kept values distances where the old ones were all off by one (a scaled field)
-    ratios = wp.empty(n0, dtype=wp.float32, device=device)
-    launch_split(_interface_ratios_kernel, n0, lambda s, _n: [s, old, where, interface, dist, ratios], device)
-    ratios_np = ratios.numpy()
-    scale = float(np.median(ratios_np[ratios_np >= 0.0])) if (ratios_np >= 0.0).any() else 1.0
+    n, old = int(layout["offsets"][-1]), field.arg()
+    interface, scale = _interface(field, layout, where, dist)
     values = wp.empty(n, dtype=wp.float32, device=device)
     launch_split(
         _sign_and_source_kernel,
