@@ -26,7 +26,7 @@ from .blends import BLEND_MODES, chamfer_needs, sdf_combine
 from .blendzone import blend_octets
 from .expression import OP_DIFFERENCE, OP_INTERSECTION, OP_UNION, combined
 from .octree import code_bits, level_layout, morton_decode, node_center
-from .ondemand import for_boolean
+from .ondemand import Refiner, for_boolean, seam_octets
 from .operands import (
     blend_sample,
     estimate,
@@ -312,7 +312,11 @@ def combine(
     origin, top_dims = _domain(a, b, h, levels, mode, blend)
     aligned = [_aligned(f, origin, h) for f in (a, b)]
     args = (a.arg(), b.arg())
-    octets = _candidate_octets((a, b), aligned, origin, h, top_dims * 2 ** (levels - 1), a.device)
+    fine_dims = top_dims * 2 ** (levels - 1)
+    if seams:
+        octets = _seam_candidates((a, b), aligned, origin, h, fine_dims, a.device, blend)
+    else:
+        octets = _candidate_octets((a, b), aligned, origin, h, fine_dims, a.device)
     if blend > 0.0:  # and where the blend shapes the surface, away from both operands' own octets
         zone = blend_octets(*args, origin, h, top_dims, levels, op, blend, mode, KEEP_BAND * h)
         octets = octree.merge_unique(octets, zone, end_bit=3 * code_bits(top_dims * 2 ** (levels - 2)))
@@ -450,6 +454,19 @@ def _node_values(layout, finest: dict, args, aligned, origin, h: float, levels: 
         if at_finest:
             finest["a_first"] = finest["b_first"] = None  # not needed above the finest level
     return out
+
+
+def _seam_candidates(operands, aligned, origin, h: float, fine_dims, device, blend: float) -> wp.array:
+    """:func:`_candidate_octets` of a boolean made along its seams: an operand built on demand's only where the result
+    keeps them (:func:`.ondemand.seam_octets`: what else is built of it was built for other booleans); one built whole
+    has them all, as without seams."""
+    oct_dims = fine_dims // 2
+    parts = []
+    for f, other, al in zip(operands, operands[::-1], aligned, strict=True):
+        codes = operand_octets(f, origin, h, oct_dims, al, device)
+        partly = isinstance(f.refiner, Refiner) and f.refiner.share < 1.0
+        parts.append(seam_octets(codes, f, other, origin, h, blend) if partly else codes)
+    return octree.merge_unique(*parts, end_bit=3 * code_bits(oct_dims))
 
 
 def _candidate_octets(operands, aligned, origin, h: float, fine_dims, device) -> wp.array:

@@ -26,12 +26,13 @@ import warp as wp
 from .coarsen import coarsened
 from .edgehash import KeyCounts, directed_edges
 from .edges import surface_edges
-from .keep import kept_triangles, mesh_distances
+from .keep import kept_triangles
 from .meshcheck import all_corners, any_corner, compacted, position_groups
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .rejoin import joined_again
 from .slits import fill_slits
+from .sources import mesh_distances
 from .twins import zip_twins
 from .zipper import (
     LOCAL_ROUNDS,

@@ -37,11 +37,12 @@ from .judging import MAX_TABLE_LEAVES, FusedJudge, edge_turns, per_triangle_min,
 from .jumps import JumpSpheres, jump_spheres
 from .meshcheck import defect_edges
 from .ondemand import built_on_demand, own_sides
-from .parallel import launch_split, run_tasks
+from .parallel import run_tasks
 from .precut import cut_strips, fused_margins
 from .refine import merge_kept, restore_whole, straighten_borders
 from .selfcross import crossing_segments
 from .slivers import Splitter, strip_parents
+from .sources import mesh_distances
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
 # the seams is joined to them there (the join takes about a voxel of it).
@@ -65,29 +66,6 @@ AVOID_VOXELS = 1.0
 
 AXES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float32)
 UNKNOWN, KEPT, DROPPED = 0, 1, 2
-
-
-@wp.kernel(enable_backward=False)
-def _mesh_distance_kernel(mesh: wp.uint64, points: wp.array[wp.vec3], max_dist: float, out: wp.array[wp.float32]):
-    """Unsigned distance to the mesh, ``max_dist`` where it is farther."""
-    i = wp.tid()
-    q = wp.mesh_query_point_no_sign(mesh, points[i], max_dist)
-    out[i] = max_dist
-    if q.result:
-        out[i] = wp.length(points[i] - wp.mesh_eval_position(mesh, q.face, q.u, q.v))
-
-
-def mesh_distances(mesh: wp.Mesh, points: np.ndarray, reach: float, device) -> np.ndarray:
-    """(N,) float32 unsigned distance from each point to ``mesh`` (``reach`` where it is farther)."""
-    pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
-    out = wp.empty(len(points), dtype=wp.float32, device=device)
-    launch_split(
-        _mesh_distance_kernel,
-        len(points),
-        lambda lo, n: [mesh.id, pts[lo : lo + n], float(reach), out[lo : lo + n]],
-        device,
-    )
-    return out.numpy()
 
 
 def mesh_leaf(field) -> bool:

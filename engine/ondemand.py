@@ -34,6 +34,7 @@ from . import parallel
 from .expression import OP_DIFFERENCE, OP_UNION, Operation
 from .octree import code_bits, morton_decode_np, morton_encode_np, node_center, parent_octets
 from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, level_spacing, locate_leaf, node_coords
+from .sources import mesh_distances
 from .winding import WindingArg, inside_sign
 
 # What a mesh's build found of it (:func:`.levels.finished`), carried to its refined fields.
@@ -49,6 +50,11 @@ BOOLEAN_REACH_VOXELS = 2.5 + 1.75 + 1.5 + 3.0
 # pairs at /256: 5 joins every pair along its seams, 4 leaves the surface short on all but two; what falls short is
 # joined on the whole result instead).
 SEAM_REACH_VOXELS = 6.0
+# The result's finest octets along the seams are those within SEAM_REACH_VOXELS of both operands' surfaces
+# (:func:`seam_octets`); each operand is refined this much farther, so that what their nodes read of it (an octet's
+# nodes up to sqrt(3) voxels from its centre, an MLS sample nodes up to 1.5 voxels away) is built: their values are
+# the full boolean's.
+SEAM_READ_VOXELS = 1.75 + 1.5
 
 # An open mesh built on demand has its band's octets this many octets (beside the rounds' own reach) about its caps
 # built first: the band nodes beside the octets the rounds look at.
@@ -303,15 +309,56 @@ def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
         centres = band_centres(x)
         world = centres if x.placement is None else x.placement.to_world(centres)
         low, high = value_bounds(y, world)
-        reach = (SEAM_REACH_VOXELS if seams else BOOLEAN_REACH_VOXELS) * x.world_voxel_size + float(blend)
+        voxels = SEAM_REACH_VOXELS + SEAM_READ_VOXELS if seams else BOOLEAN_REACH_VOXELS
+        reach = voxels * x.world_voxel_size + float(blend)
         below = op == OP_UNION or (op == OP_DIFFERENCE and k == 0)  # the other's inside buries it
         near = (high >= -reach) & (low <= reach) if seams else high >= -reach if below else low <= reach
+        if seams:  # a coarse leaf's bound is loose by its size: the other's mesh tells how far its surface is
+            near[near] = surface_within(y, world[near], reach)
         out[k] = _as(x, refiner.refined_where(near))
 
     # side by side (one Python thread each on the CPU; one field used twice is refined once at a time: its lock)
     asked = [(k, x, y) for k, (x, y) in enumerate(((a, b), (b, a))) if getattr(x, "refiner", None) is not None]
     parallel.run_tasks([lambda task=task: refine(*task) for task in asked], a.device)
     return out[0], out[1], seams
+
+
+def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> wp.array:
+    """Of the result's finest ``octets`` that cover a boolean's operand ``x`` built on demand (codes on the result's
+    lattice: ``origin``, voxel ``h``), those the result keeps along its seams: within SEAM_REACH_VOXELS (and the
+    ``blend``) of the ``other`` operand's surface (:func:`surface_within`), or about ``x``'s holes' caps (built
+    first, :func:`partial_build`: the result's surface there is its own). Elsewhere ``x`` may have octets built for
+    another boolean (its refiner keeps them), at whose edges it is read off coarser nodes; along the seams it is built
+    SEAM_READ_VOXELS farther (:func:`for_boolean`): the result's values there are the full boolean's."""
+    codes = octets.numpy()
+    if not len(codes):
+        return octets
+    centres = np.asarray(origin, dtype=np.float64) + (morton_decode_np(codes) + 0.5) * (2.0 * h)
+    keep = surface_within(other, centres, SEAM_REACH_VOXELS * h + float(blend))
+    caps, plan = x.refiner.levels.facts["caps"], x.refiner.levels.plan
+    if caps is not None:
+        local = centres if x.placement is None else x.placement.to_local(centres)
+        keep |= _near_caps(caps, local, CAP_REACH_OCTETS * 2.0 * plan["voxel_size"] + _sign_check_reach(plan))
+    return wp.array(codes[keep], dtype=wp.int64, device=octets.device)
+
+
+def surface_within(field, points: np.ndarray, reach: float) -> np.ndarray:
+    """(N,) bool: whether ``field``'s surface may lie within ``reach`` of each world point. A field built from a mesh
+    (no thickness, no expression) has its values' size at most the distance to its triangles, and its surface on them
+    but for an open mesh's caps (where it may jump: every point near them may, :func:`_may_jump`): the distance to
+    the mesh (its BVH, unplaced, kept with its source mesh) answers, with the leaves' tolerance to spare. Any other
+    field may have it anywhere (True)."""
+    may = np.ones(len(points), dtype=bool)
+    source = next(iter(field.sources.values()), None) if len(field.sources) == 1 else None
+    plain = "clean_mesh" in field.stats and field.stats.get("thickness") is None and not field.stats.get("flat")
+    if source is None or not plain or getattr(field, "expression", None) is not None or not len(points):
+        return may
+    local, scale = np.asarray(points, dtype=np.float64), 1.0
+    if field.placement is not None:
+        local, scale = field.placement.to_local(local), field.placement.scale
+    far = (1.0 + 2.0 * LEAF_TOLERANCE) * reach / scale
+    distance = mesh_distances(source.bvh(field.device), local, far, field.device)
+    return (distance < far) | _may_jump(field, local)
 
 
 def as_built(field):

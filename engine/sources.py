@@ -240,6 +240,29 @@ def face_sources(source: SourceMesh, corners, near: float, device) -> tuple[np.n
     return tri_ids, bary.numpy().reshape(n, 3, 3)
 
 
+@wp.kernel(enable_backward=False)
+def _mesh_distance_kernel(mesh: wp.uint64, points: wp.array[wp.vec3], max_dist: float, out: wp.array[wp.float32]):
+    """Unsigned distance to the mesh, ``max_dist`` where it is farther."""
+    i = wp.tid()
+    q = wp.mesh_query_point_no_sign(mesh, points[i], max_dist)
+    out[i] = max_dist
+    if q.result:
+        out[i] = wp.length(points[i] - wp.mesh_eval_position(mesh, q.face, q.u, q.v))
+
+
+def mesh_distances(mesh: wp.Mesh, points: np.ndarray, reach: float, device) -> np.ndarray:
+    """(N,) float32 unsigned distance from each point to ``mesh`` (``reach`` where it is farther)."""
+    pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
+    out = wp.empty(len(points), dtype=wp.float32, device=device)
+    launch_split(
+        _mesh_distance_kernel,
+        len(points),
+        lambda lo, n: [mesh.id, pts[lo : lo + n], float(reach), out[lo : lo + n]],
+        device,
+    )
+    return out.numpy()
+
+
 def closest_triangles(source: SourceMesh, points, device) -> tuple[np.ndarray, np.ndarray]:
     """The closest triangle of ``source`` to each point and the barycentric coordinates of the closest point on it.
 

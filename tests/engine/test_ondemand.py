@@ -7,7 +7,8 @@ import pytest
 
 import engine
 from engine import ondemand
-from tests.metrics import winding_inside
+from engine.octree import morton_decode_np
+from tests.metrics import unsigned_distance, winding_inside
 from tests.support import box_mesh, is_watertight, load_mesh, normalised, rotation, uv_sphere
 
 H = 1.0 / 128
@@ -117,6 +118,48 @@ def test_a_placed_field_built_on_demand_refines_its_source_for_every_copy(spot, 
     assert b.refiner.share > 0.0  # the placed copy's octets were built on its source's refiner
     again = engine.union(a, b.transformed(turn))  # nothing left to build
     assert np.array_equal(again.values.numpy(), placed.values.numpy())
+
+
+def _band_centres(refiner):
+    octet = 2.0 * refiner.levels.plan["voxel_size"]
+    return refiner.levels.plan["origin"] + (morton_decode_np(refiner.band) + 0.5) * octet
+
+
+def test_a_moved_operand_refines_only_its_new_seam(spot):
+    top = spot[0][np.argmax(spot[0][:, 2])]  # a ball about the cow's back: a seam all round
+    ball = normalised(uv_sphere(1.0, rings=24, segments=48), center=tuple(top), diagonal=0.4)
+    a, b = engine.build_fields([spot, ball], voxel_size=H, refine="none")
+    engine.difference(a, b, seams=True)
+    before = a.refiner.built.copy(), b.refiner.built.copy()
+    # only octets along the seam: within the seams' reach and what the result's nodes read beyond it of the other's
+    # surface (measured 10.2 voxels at most; bounds read off the other's nodes alone built 1.5 times as many, up to
+    # 23 voxels off)
+    reach = 1.25 * (ondemand.SEAM_REACH_VOXELS + ondemand.SEAM_READ_VOXELS) * H
+    near_ball = unsigned_distance(*ball, _band_centres(a.refiner)[before[0]])
+    assert near_ball.max() < reach and 0 < before[0].sum() < 0.3 * len(before[0])  # measured 0.13
+    shift = np.float32([6 * H, 0.0, 0.0])
+    move = np.eye(4)
+    move[:3, 3] = shift
+    moved = engine.difference(a, b.transformed(move), seams=True)
+    pairs = list(zip((a.refiner, b.refiner), before, strict=True))
+    assert all((r.built >= was).all() for r, was in pairs)  # nothing built before is built again
+    added = [r.built & ~was for r, was in pairs]
+    # the cow's new octets lie along the ball's new surface, away from its old one; the ball's (in its own frame)
+    # along the cow's surface moved back
+    new_a = _band_centres(a.refiner)[added[0]]
+    assert len(new_a) and unsigned_distance(ball[0] + shift, ball[1], new_a).max() < reach
+    away = 0.9 * (ondemand.SEAM_REACH_VOXELS + ondemand.SEAM_READ_VOXELS) * H
+    assert unsigned_distance(*ball, new_a).min() > away  # measured 10.4 voxels
+    new_b = _band_centres(b.refiner)[added[1]]
+    assert len(new_b) and unsigned_distance(spot[0] - shift, spot[1], new_b).max() < reach
+    assert added[0].sum() < 0.4 * before[0].sum()  # measured 165 octets against 814
+    # and the result is the full boolean's along its seams
+    full = engine.difference(*engine.build_fields([spot, ball], voxel_size=H))
+    full = engine.difference(full.expression.a, full.expression.b.transformed(move))
+    codes, values = _finest(moved)
+    want_codes, want_values = _finest(full)
+    at = np.searchsorted(want_codes, codes)
+    assert np.array_equal(want_codes[at], codes) and np.abs(want_values[at] - values).max() < 1e-5 * H
 
 
 def test_offsets_and_kept_faces_of_fields_built_on_demand_equal_the_full_ones(spot, cutter):
