@@ -382,7 +382,8 @@ def known_levels(layout: dict, previous, prev_index, dist, proj, source):
     neighbours = wp.full((n - n0, 6), -1, dtype=wp.int32, device=device)
     _take_known_coarse(previous, prev_index, (n0, n), wp.empty(0, dtype=wp.int32, device=device), (dist, proj, source))
     for k in range(1, levels):
-        level_neighbours(coords, int(offsets[k]), int(offsets[k + 1]), fine_dims >> k, neighbours, row0=n0)
+        octets = codes if k < levels - 1 else None  # (the dense top level is no level of octets)
+        level_neighbours(coords, int(offsets[k]), int(offsets[k + 1]), fine_dims >> k, neighbours, n0, octets)
     return neighbours
 
 
@@ -441,7 +442,7 @@ def solve_levels(
         tk = time.perf_counter()
         lo, hi = int(offsets[k]), int(offsets[k + 1])
         name = "top_level" if k == levels - 1 else f"level_{k}"
-        level_neighbours(coords, lo, hi, fine_dims >> k, neighbours, row0=n0)
+        level_neighbours(coords, lo, hi, fine_dims >> k, neighbours, n0, codes if k < levels - 1 else None)
         tn = time.perf_counter()
         if exact_level is not None and k < levels - 1:
             octet_points = exact_level(k, known, octet_points)

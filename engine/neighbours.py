@@ -1,8 +1,10 @@
 """Same-level face neighbours of an octree level (Ren et al., Eq. 7): the table the fast iterative method sweeps over.
 
 A level small enough for a dense grid of node indices (``DENSE_NEIGHBOUR_CELLS``, 4 bytes a cell) writes its nodes
-into one and reads each node's six neighbours back; a larger one sorts its nodes by a key per axis (rows padded by one
-so that a row's last node is never the next row's first) and pairs keys one apart.
+into one and reads each node's six neighbours back. A larger level made of octets (every level but the dense top: 8
+siblings in a row, in Morton order) finds each octet's six face-adjacent octets by binary search of their codes: three
+of a node's neighbours are its siblings, the other three the same child of those octets. Any other sorts its nodes by
+a key per axis (rows padded by one so that a row's last node is never the next row's first) and pairs keys one apart.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ import numpy as np
 import warp as wp
 
 from . import parallel
+from .octree import morton_decode, morton_encode
 from .parallel import run_tasks
 
 # Levels with at most this many cells find their neighbours through a dense grid (8 MB), larger ones by sorting.
@@ -76,15 +79,73 @@ def _grid_neighbours_kernel(
                 neighbours[i - row0, k] = j
 
 
-def level_neighbours(coords: wp.array, lo: int, hi: int, dims, neighbours: wp.array, row0: int = 0) -> None:
+@wp.func
+def _octet_at(codes: wp.array[wp.int64], lo: int, n_octets: int, octet: wp.int64) -> int:
+    """The first node of the octet with code ``octet`` of the ``n_octets`` (sorted) from node ``lo``, or -1."""
+    a = int(0)
+    b = n_octets
+    while a < b:
+        m = (a + b) // 2
+        if (codes[lo + 8 * m] >> wp.int64(3)) < octet:
+            a = m + 1
+        else:
+            b = m
+    if a < n_octets:
+        if (codes[lo + 8 * a] >> wp.int64(3)) == octet:
+            return lo + 8 * a
+    return -1
+
+
+@wp.kernel(enable_backward=False)
+def _octet_neighbours_kernel(
+    codes: wp.array[wp.int64], lo: int, n_octets: int, first: int, octet_dims: wp.vec3i, row0: int,
+    neighbours: wp.array2d[wp.int32],
+):  # fmt: skip
+    """Octet ``first + tid``'s nodes' six face neighbours: siblings within it, else the same child (the bit of that
+    axis flipped) of the octet across the face."""
+    t = first + wp.tid()
+    base = lo + 8 * t
+    at = morton_decode(codes[base] >> wp.int64(3))
+    for face in range(6):
+        axis = face // 2
+        up = face % 2  # 1: the +axis side
+        q = at
+        q[axis] = q[axis] + 2 * up - 1
+        across = int(-1)
+        if q[axis] >= 0 and q[axis] < octet_dims[axis]:
+            across = _octet_at(codes, lo, n_octets, morton_encode(q))
+        for k in range(8):
+            bit = (k >> axis) & 1
+            j = int(-1)
+            if bit != up:  # the sibling on that side
+                j = base + (k ^ (1 << axis))
+            elif across >= 0:
+                j = across + (k ^ (1 << axis))
+            if j >= 0:
+                neighbours[base + k - row0, face] = j
+
+
+def level_neighbours(
+    coords: wp.array, lo: int, hi: int, dims, neighbours: wp.array, row0: int = 0, codes: wp.array | None = None
+) -> None:
     """Fill the rows of nodes [lo, hi) of ``neighbours`` (int32, 6 columns, node ``i`` in row ``i - row0``, -1 kept
     where none) with their -x,+x,-y,+y,-z,+z same-level neighbours (Eq. 7), as node indices: through a dense grid of
-    the level when it has at most ``DENSE_NEIGHBOUR_CELLS`` cells (no sort), else by axis-wise key sorting."""
+    the level when it has at most ``DENSE_NEIGHBOUR_CELLS`` cells (no sort); else, given the level's ``codes`` (a level
+    of octets), octet by octet (module docstring), or by axis-wise key sorting."""
     n = hi - lo
     if n == 0:
         return
     device = coords.device
     dims_v = wp.vec3i(*(int(d) for d in dims))
+    if codes is not None and int(np.prod(np.asarray(dims, dtype=np.int64))) > DENSE_NEIGHBOUR_CELLS:
+        octet_dims = wp.vec3i(*(int(d + 1) // 2 for d in dims))
+        parallel.launch_split(
+            _octet_neighbours_kernel,
+            n // 8,
+            lambda start, _k: [codes, lo, n // 8, start, octet_dims, row0, neighbours],
+            device,
+        )
+        return
     if int(np.prod(np.asarray(dims, dtype=np.int64))) <= DENSE_NEIGHBOUR_CELLS:
         grid = wp.full(int(np.prod(np.asarray(dims, dtype=np.int64))), -1, dtype=wp.int32, device=device)
         for fill in (1, 0):

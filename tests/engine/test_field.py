@@ -323,16 +323,18 @@ def test_level_layout_links_each_node_to_its_parent_and_children(levels):
     assert len(internal) * 8 == int(offsets[-2])  # every node below the top is one parent's child
 
 
-@pytest.mark.parametrize("dense_cells", [engine.neighbours.DENSE_NEIGHBOUR_CELLS, 0], ids=["dense grid", "sorted keys"])
-def test_level_neighbours_are_exactly_the_face_adjacent_nodes(dense_cells, monkeypatch):
-    monkeypatch.setattr(engine.neighbours, "DENSE_NEIGHBOUR_CELLS", dense_cells)
+@pytest.mark.parametrize("how", ["dense grid", "sorted keys", "octets"])
+def test_level_neighbours_are_exactly_the_face_adjacent_nodes(how, monkeypatch):
+    monkeypatch.setattr(engine.neighbours, "DENSE_NEIGHBOUR_CELLS", 1 << 21 if how == "dense grid" else 0)
     verts, tris = uv_sphere(1.0, rings=24, segments=48)
     field = engine.build_field(verts, tris, voxel_size=0.08)
     coords = field.coords.numpy().astype(np.int64)
     table = wp.full((field.node_count, 6), -1, dtype=wp.int32)
     for k in range(1, field.levels):
         level = field.level_slice(k)
-        engine.neighbours.level_neighbours(field.coords, level.start, level.stop, field.fine_dims >> k, table)
+        octets = field.codes if how == "octets" and k < field.levels - 1 else None  # (the top level is dense)
+        dims = field.fine_dims >> k
+        engine.neighbours.level_neighbours(field.coords, level.start, level.stop, dims, table, 0, octets)
     table = table.numpy()
     for k in range(1, field.levels):
         level = field.level_slice(k)
