@@ -248,7 +248,8 @@ def build_field(
             that encloses nothing (a plane, a single triangle, a flat sheet) gives a field with no inside
             (``encloses_volume`` False, ``to_mesh()`` empty) and ``stats["flat"]`` True.
         voxel_size: Edge length of the finest cells.
-        levels: Number of levels, finest to dense top (>= 1).
+        levels: Number of levels, finest to dense top (>= 1; from 2, raised while the dense top level would have
+            more than ``plan.TOP_LEVEL_CELLS`` cells).
         padding: Finest cells kept around each triangle (>= 0; 1 or more gives watertight surfaces).
         device: Warp device (``None``: Warp's default).
         field_id: Integer id carried per node through booleans (see ``source_ids``).

@@ -1067,6 +1067,30 @@ def test_node_distances_are_exact_below_the_top_level_and_within_its_tolerance_o
     assert np.mean(rel > 1e-4) < 0.5  # most are exact all the same
 
 
+def test_a_large_dense_top_level_gets_a_level_more_and_the_surface_keeps_its_nodes(monkeypatch):
+    verts, tris = load_mesh("spot.obj")
+    h = _voxel(verts, 64)
+    asked = engine.build_field(verts, tris, voxel_size=h, levels=3)
+    top_cells = int(np.prod(asked.top_dims))
+    plan = engine.plan_field(verts, tris, voxel_size=h / 16, levels=4)  # /1024: 239 k top cells at 4 levels
+    assert plan["levels"] == 5 and plan["top_count"] <= engine.plan.TOP_LEVEL_CELLS
+    assert engine.plan_field(verts, tris, voxel_size=h / 16, levels=1)["levels"] == 1  # a dense grid, as asked
+    monkeypatch.setattr(engine.plan, "TOP_LEVEL_CELLS", top_cells - 1)
+    more = engine.build_field(verts, tris, voxel_size=h, levels=3)
+    assert more.levels == 4 and int(np.prod(more.top_dims)) < top_cells
+    # the finest level is the same nodes (world positions) with the same values
+    n0 = asked.level_counts[0]
+    assert more.level_counts[0] == n0
+
+    def finest(field):
+        centres = field.node_centers()[:n0]
+        order = np.lexsort(centres.T)
+        return centres[order], field.values.numpy()[:n0][order]
+
+    (a_at, a_values), (m_at, m_values) = finest(asked), finest(more)
+    assert np.abs(a_at - m_at).max() < 1e-6 and np.abs(a_values - m_values).max() < 1e-5 * h  # (measured 3.9e-6)
+
+
 def test_seams_that_repeat_vertices_are_not_holes():
     # UV or patch seams repeat a vertex at one position: the index has open edges, the surface has none.
     verts, tris = load_mesh("spot.obj")
