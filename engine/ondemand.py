@@ -32,8 +32,10 @@ import warp as wp
 
 from . import parallel
 from .expression import OP_DIFFERENCE, OP_UNION, Operation
+from .geometry import near_cap
 from .octree import code_bits, morton_decode_np, morton_encode_np, node_center, parent_octets
 from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, level_spacing, locate_leaf, node_coords
+from .signs import box_arrays
 from .sources import mesh_distances
 from .winding import WindingArg, inside_sign
 
@@ -133,7 +135,8 @@ def partial_build(levels, band: wp.array, finish, across_holes=None):
     if caps is not None:  # the rounds check the leaves and octets near the caps, and the band nodes beside them
         octet = 2.0 * levels.plan["voxel_size"]
         centres = levels.plan["origin"] + (morton_decode_np(codes) + 0.5) * octet
-        first = codes[_near_caps(caps, centres, CAP_REACH_OCTETS * octet + _sign_check_reach(levels.plan))]
+        reach = CAP_REACH_OCTETS * octet + _sign_check_reach(levels.plan)
+        first = codes[_near_caps(caps, centres, reach, band.device)]
     field = levels.build(wp.array(first, dtype=wp.int64, device=band.device))
     if across_holes is not None:
         field = across_holes(field, wp.array(first, dtype=wp.int64, device=band.device))
@@ -153,14 +156,31 @@ def _sign_check_reach(plan: dict) -> float:
     return 1.05 * (0.866 * top + max(0.5 * top + 0.25 * h, 3.465 * h))
 
 
-def _near_caps(caps, points: np.ndarray, margin: float) -> np.ndarray:
-    """(N,) where the caps' cones may move the winding number by 1/4 or more within ``margin`` of each point (as
-    :func:`.geometry.near_cap`: sum of (radius_c / d_c)^2 at least 1, d_c the box's distance less the margin)."""
-    total = np.zeros(len(points))
-    for lo, hi, radius in zip(*caps, strict=True):
-        d = np.linalg.norm(np.maximum(np.maximum(lo - points, points - hi), 0.0), axis=1) - margin
-        total += (radius / np.maximum(d, 1e-12)) ** 2
-    return total >= 1.0
+@wp.kernel(enable_backward=False)
+def _near_caps_kernel(
+    points: wp.array[wp.vec3],
+    lo: wp.array[wp.vec3],
+    hi: wp.array[wp.vec3],
+    radius: wp.array[wp.float32],
+    margin: float,
+    out: wp.array[wp.uint8],
+):
+    i = wp.tid()
+    out[i] = wp.uint8(wp.where(near_cap(points[i], lo, hi, radius, margin), 1, 0))
+
+
+def _near_caps(caps, points: np.ndarray, margin: float, device) -> np.ndarray:
+    """(N,) where the caps' cones may move the winding number by 1/4 or more within ``margin`` of each point
+    (:func:`.geometry.near_cap`: sum of (radius_c / d_c)^2 at least 1, d_c the box's distance less the margin)."""
+    n = len(points)
+    out = wp.empty(n, dtype=wp.uint8, device=device)
+    if n:
+        pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
+        boxes = box_arrays(caps, device)
+        parallel.launch_split(
+            _near_caps_kernel, n, lambda lo, k: [pts[lo : lo + k], *boxes, float(margin), out[lo : lo + k]], device
+        )
+    return out.numpy().astype(bool)
 
 
 def refined(field, points=None, reach: float | None = None, *, view: bool = False):
@@ -284,7 +304,7 @@ def _may_jump(field, local: np.ndarray) -> np.ndarray:
     caps = field.stats.get("hole_caps")
     if caps is None:
         return np.zeros(len(local), dtype=bool)
-    return _near_caps(caps, local, 2.0 * np.sqrt(3.0) * field.top_spacing)
+    return _near_caps(caps, local, 2.0 * np.sqrt(3.0) * field.top_spacing, field.device)
 
 
 def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
@@ -338,7 +358,8 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
     caps, plan = x.refiner.levels.facts["caps"], x.refiner.levels.plan
     if caps is not None:
         local = centres if x.placement is None else x.placement.to_local(centres)
-        keep |= _near_caps(caps, local, CAP_REACH_OCTETS * 2.0 * plan["voxel_size"] + _sign_check_reach(plan))
+        reach = CAP_REACH_OCTETS * 2.0 * plan["voxel_size"] + _sign_check_reach(plan)
+        keep |= _near_caps(caps, local, reach, octets.device)
     return wp.array(codes[keep], dtype=wp.int64, device=octets.device)
 
 
