@@ -102,11 +102,11 @@ def _with_missing_nodes(field, coarse, samples, points) -> tuple:
     spacing = coarse.voxel_size
     cube = np.floor((np.asarray(points, dtype=np.float64) - coarse.origin) / spacing - 0.5).astype(np.int64)
     block = np.stack(np.meshgrid(*[np.arange(-1, 3)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
-    near = np.unique((cube[:, None, :] + block[None]).reshape(-1, 3), axis=0)
+    near = (cube[:, None, :] + block[None]).reshape(-1, 3)
     near = near[(near >= 0).all(axis=1) & (near < coarse.fine_dims).all(axis=1)]
-    near_codes = morton_encode_np(near)
-    new = ~in_sorted(np.sort(codes), near_codes)
-    near, near_codes = near[new], near_codes[new]
+    near_codes = np.unique(morton_encode_np(near))  # (unique codes: rows would sort as records, far slower)
+    near_codes = near_codes[~in_sorted(np.sort(codes), near_codes)]
+    near = morton_decode_np(near_codes)
     centres = coarse.origin + (near + 0.5) * spacing
     value, grad = field.sample(centres.astype(np.float32), return_gradient=True)
     on = centres - value[:, None] * grad / np.maximum((grad.astype(np.float64) ** 2).sum(axis=1), 1e-12)[:, None]
