@@ -85,8 +85,8 @@ class AdaptiveField:
         self.placement = placement
         # a boolean's operation tree over its operand fields (:mod:`.expression`); None: the field is a leaf
         self.expression = None
-        # what adds the finest octets of a field built on demand (:mod:`.ondemand`); None: built whole
-        self.refiner = None
+        # what adds the finest octets of a field built on demand (:mod:`.ondemand`; a copy read as built: built_by)
+        self.refiner = self.built_by = None
         self._encloses_volume = None
 
     @classmethod

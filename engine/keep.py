@@ -568,16 +568,18 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     )
     status, flip, margin = status.copy(), flip.copy(), margin.astype(np.float32)
     todo = np.flatnonzero(status == UNKNOWN)
-    kept, partly, flip[todo] = judge.judge(
-        verts, tris[todo], todo, longest[todo], turn[todo], verdicts.REUSE_VOXELS * field.voxel_size
-    )
+    # kept for the next boolean where it can reuse them: another leaf's moves bounded (read exactly)
+    reusable = not judge.avoiding and any(e for j, e in enumerate(exact) if j != index)
+    beyond = verdicts.REUSE_VOXELS * field.voxel_size if reusable else None
+    kept, partly, flip[todo] = judge.judge(verts, tris[todo], todo, longest[todo], turn[todo], beyond)
     split = partly & ~kept & (longest[todo] > SPLIT_VOXELS * field.voxel_size)
     status[todo] = np.where(kept, KEPT, np.where(split, UNKNOWN, DROPPED))
+    if not reusable:
+        return status, flip
     # what the next boolean may reuse: kept whole, or dropped by signs alone or by the mesh itself
     margin[todo] = np.where(judge.found["own_only"], np.inf, judge.found["margin"])
     record = status.copy()
     dropped_by_distance = (status[todo] == DROPPED) & ~judge.found["signs_only"] & ~judge.found["own_only"]
     record[todo[dropped_by_distance]] = UNKNOWN
-    if not judge.avoiding:
-        verdicts.remember(unplaced, *setting, record, flip, margin)
+    verdicts.remember(unplaced, *setting, record, flip, margin)
     return status, flip

@@ -413,9 +413,9 @@ def _leaf_point_distances(field, local: np.ndarray) -> np.ndarray:
 
 def as_built(field):
     """A copy of ``field`` without its refiner: it answers from what is built (nothing is refined on its
-    queries)."""
+    queries); ``built_by`` names the refiner."""
     out = copy.copy(field)
-    out.refiner = None
+    out.refiner, out.built_by = None, field.refiner or field.built_by
     return out
 
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .expression import Operation, leaves
+from .ondemand import Refiner
 
 # Distances are found up to this many voxels beyond the band in a first round, so that a verdict survives moves of
 # this much less what it used (a drag's steps are a few voxels at the working resolution).
@@ -37,7 +38,7 @@ UNKNOWN, KEPT, DROPPED = 0, 1, 2
 @dataclass
 class Record:
     """What a leaf's first round found, and where everything was: ``key`` (:func:`_setting`), ``fields`` weak
-    references to the leaves' values arrays (an identity that cannot pass to a field built later), ``frames`` the
+    references to the leaves' identities (:func:`_lineage`: one that cannot pass to a field built later), ``frames`` the
     leaves' placements (4, 4), per source triangle ``status`` (KEPT, DROPPED, or UNKNOWN: split or not to be reused),
     ``flip`` and ``margin`` (the least distance of another leaf's surface over the triangle, a lower bound)."""
 
@@ -54,11 +55,19 @@ _RECORDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _LOCK = threading.Lock()
 
 
+def _lineage(leaf):
+    """A leaf's identity: its values array, or where it was built on demand its refiner (:mod:`.ondemand`: a field
+    refined further has the same nodes where both are built, and the judge reads it as built: a verdict whose other
+    surfaces are farther than the band reads the same signs off either)."""
+    refiner = leaf.refiner or leaf.built_by
+    return refiner if isinstance(refiner, Refiner) else leaf.values
+
+
 def _structure(expression):
-    """The tree's operations with its leaves as their values arrays' identities (the same fields, placed anywhere)."""
+    """The tree's operations with its leaves as their identities (the same fields, placed anywhere)."""
     if isinstance(expression, Operation):
         return (expression.op, expression.blend, _structure(expression.a), _structure(expression.b))
-    return id(expression.values)
+    return id(_lineage(expression))
 
 
 def _setting(expression, index: int, voxel: float, band: float) -> tuple:
@@ -124,7 +133,7 @@ def reused(source, expression, index: int, voxel: float, band: float, slack: np.
     if (
         record is None
         or record.key != _setting(expression, index, voxel, band)
-        or any(ref() is not leaf.values for ref, leaf in zip(record.fields, every, strict=True))
+        or any(ref() is not _lineage(leaf) for ref, leaf in zip(record.fields, every, strict=True))
         or len(record.status) != len(slack)
     ):
         return None
@@ -143,7 +152,7 @@ def remember(source, expression, index: int, voxel: float, band: float, status, 
     every = leaves(expression)
     record = Record(
         _setting(expression, index, voxel, band),
-        [weakref.ref(leaf.values) for leaf in every],
+        [weakref.ref(_lineage(leaf)) for leaf in every],
         [_frame(leaf) for leaf in every],
         np.asarray(status, dtype=np.int8),
         np.asarray(flip, dtype=bool),

@@ -30,12 +30,12 @@ def reuse_log(monkeypatch):
     verdicts.forget()
 
 
-def _ball_and_box():
+def _ball_and_box(refine="all"):
     ball = normalised(uv_sphere(1.0, rings=32, segments=64))
     box = normalised(box_mesh(), center=(0.3, 0.25, 0.2), diagonal=0.6)
     v = np.concatenate([ball[0], box[0]])
     voxel = float(np.linalg.norm(v.max(0) - v.min(0))) / 128.0
-    return engine.build_fields([ball, box], voxel_size=voxel, field_ids=[0, 1]), voxel
+    return engine.build_fields([ball, box], voxel_size=voxel, field_ids=[0, 1], refine=refine), voxel
 
 
 def _moved(field, shift):
@@ -44,15 +44,17 @@ def _moved(field, shift):
     return field.transformed(matrix)
 
 
-def test_a_moved_cutter_gives_what_a_fresh_judge_gives_and_reuses_the_far_verdicts(reuse_log):
-    (ball, box), voxel = _ball_and_box()
+@pytest.mark.parametrize("refine", ["all", "none"], ids=["built whole", "built on demand, along the seams"])
+def test_a_moved_cutter_gives_what_a_fresh_judge_gives_and_reuses_the_far_verdicts(reuse_log, refine):
+    (ball, box), voxel = _ball_and_box(refine)
+    seams = refine == "none"  # (each move refines the fields further: the verdicts hold across)
     for step in range(4):
         cutter = _moved(box, (2.0 * voxel * step, 0.5 * voxel * step, 0.0))
-        reusing = engine.difference(ball, cutter).kept_surface()
+        reusing = engine.difference(ball, cutter, seams=seams).kept_surface()
         reused = [None if count is None else count / total for index, count, total in reuse_log[-2:] if index == 0]
         kept_records = dict(verdicts._RECORDS)
         verdicts.forget()
-        fresh = engine.difference(ball, cutter).kept_surface()
+        fresh = engine.difference(ball, cutter, seams=seams).kept_surface()
         verdicts._RECORDS.update(kept_records)
         assert np.array_equal(reusing["verts"], fresh["verts"]) and np.array_equal(reusing["tris"], fresh["tris"])
         assert np.array_equal(reusing["kept"], fresh["kept"])
