@@ -313,10 +313,7 @@ def combine(
     aligned = [_aligned(f, origin, h) for f in (a, b)]
     args = (a.arg(), b.arg())
     fine_dims = top_dims * 2 ** (levels - 1)
-    if seams:
-        octets = _seam_candidates((a, b), aligned, origin, h, fine_dims, a.device, blend)
-    else:
-        octets = _candidate_octets((a, b), aligned, origin, h, fine_dims, a.device)
+    octets = _candidate_octets((a, b), aligned, origin, h, fine_dims, a.device, seams=seams, blend=blend)
     if blend > 0.0:  # and where the blend shapes the surface, away from both operands' own octets
         zone = blend_octets(*args, origin, h, top_dims, levels, op, blend, mode, KEEP_BAND * h)
         octets = octree.merge_unique(octets, zone, end_bit=3 * code_bits(top_dims * 2 ** (levels - 2)))
@@ -457,7 +454,7 @@ def _node_values(layout, finest: dict, args, aligned, origin, h: float, levels: 
 
 
 def _seam_candidates(operands, aligned, origin, h: float, fine_dims, device, blend: float) -> wp.array:
-    """:func:`_candidate_octets` of a boolean made along its seams: an operand built on demand's only where the result
+    """The candidate octets of a boolean made along its seams: an operand built on demand's only where the result
     keeps them (:func:`.ondemand.seam_octets`: what else is built of it was built for other booleans); one built whole
     has them all, as without seams."""
     oct_dims = fine_dims // 2
@@ -469,9 +466,12 @@ def _seam_candidates(operands, aligned, origin, h: float, fine_dims, device, ble
     return octree.merge_unique(*parts, end_bit=3 * code_bits(oct_dims))
 
 
-def _candidate_octets(operands, aligned, origin, h: float, fine_dims, device) -> wp.array:
+def _candidate_octets(operands, aligned, origin, h: float, fine_dims, device, *, seams=False, blend=0.0) -> wp.array:
     """(K,) int64 sorted Morton codes of the result's finest octets before pruning: every octet either operand has
-    there (a resampled operand's cells marked on a byte grid when it fits, else the codes merged)."""
+    there (a resampled operand's cells marked on a byte grid when it fits, else the codes merged); ``seams``: along
+    the seams alone (:func:`_seam_candidates`)."""
+    if seams:
+        return _seam_candidates(operands, aligned, origin, h, fine_dims, device, blend)
     oct_dims = fine_dims // 2
     end_bit = 3 * code_bits(oct_dims)
     if not all(aligned) and byte_grid_fits(oct_dims):
