@@ -150,7 +150,8 @@ def _loops(halves: np.ndarray, n: int, reverse: bool):
     nxt = np.arange(n, dtype=np.int64)
     nxt[tails] = heads
     members = np.unique(tails)
-    return nxt, members, loop_labels(nxt, members)
+    labels = loop_labels(nxt, members)
+    return nxt, members[labels[members] >= 0], labels  # (a path that does not close is no loop: left unpaired)
 
 
 def _pair_loops(points, k_loops, v_loops, reach: float, device) -> dict:

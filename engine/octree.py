@@ -200,38 +200,31 @@ def morton_decode(m: wp.int64) -> wp.vec3i:
     )
 
 
-# The magic-number steps of :func:`_spread_bits` and :func:`_compact_bits` (shift, mask), for the host twins below:
-# six passes over the array an axis, against one a bit (63).
-_SPREAD_STEPS = ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F), (4, 0x10C30C30C30C30C3))
-_SPREAD_STEPS += ((2, 0x1249249249249249),)
+# :func:`_spread_bits`' masks after shifts of 32, 16, 8, 4 and 2 (:func:`_compact_bits` the other way), for the host
+# twins below: six passes over the array an axis, against one a bit (63).
+_MASKS = (0x1F00000000FFFF, 0x1F0000FF0000FF, 0x100F00F00F00F00F, 0x10C30C30C30C30C3, 0x1249249249249249)
 
 
 def morton_encode_np(coords: np.ndarray) -> np.ndarray:
     """Host twin of :func:`morton_encode`: (N,3) non-negative ints -> (N,) int64."""
     coords = np.asarray(coords, dtype=np.int64)
-    out = np.zeros(len(coords), dtype=np.int64)
-    x, t = np.empty(len(coords), dtype=np.int64), np.empty(len(coords), dtype=np.int64)
+    out, x, t = (np.zeros(len(coords), dtype=np.int64) for _ in range(3))
     for axis in range(3):
         np.bitwise_and(coords[:, axis], MAX_CELLS_PER_AXIS - 1, out=x)
-        for shift, mask in _SPREAD_STEPS:
+        for shift, mask in zip((32, 16, 8, 4, 2), _MASKS, strict=True):
             _step(x, t, np.left_shift, shift, mask)
-        np.left_shift(x, axis, out=x)
-        out |= x
+        out |= x << axis
     return out
 
 
 def morton_decode_np(codes: np.ndarray) -> np.ndarray:
     """Host twin of :func:`morton_decode`: (N,) int64 -> (N,3) int64."""
     codes = np.asarray(codes, dtype=np.int64)
-    out = np.empty((3, len(codes)), dtype=np.int64)
-    masks = [mask for _, mask in _SPREAD_STEPS[-2::-1]] + [MAX_CELLS_PER_AXIS - 1]
-    t = np.empty(len(codes), dtype=np.int64)
+    out, t = np.empty((3, len(codes)), dtype=np.int64), np.empty(len(codes), dtype=np.int64)
     for axis in range(3):
-        x = out[axis]
-        np.right_shift(codes, axis, out=x)
-        x &= _SPREAD_STEPS[-1][1]
-        for shift, mask in zip((2, 4, 8, 16, 32), masks, strict=True):
-            _step(x, t, np.right_shift, shift, mask)
+        np.bitwise_and(codes >> axis, _MASKS[-1], out=out[axis])
+        for shift, mask in zip((2, 4, 8, 16, 32), _MASKS[-2::-1] + (MAX_CELLS_PER_AXIS - 1,), strict=True):
+            _step(out[axis], t, np.right_shift, shift, mask)
     return np.ascontiguousarray(out.T)
 
 
