@@ -88,10 +88,10 @@ def test_a_boolean_of_fields_built_on_demand_is_made_along_its_seams_and_whole_w
     # along the seams: a part of the result's finest octets, the same nodes and values there
     codes, values = _finest(part)
     want_codes, want_values = _finest(full)
-    assert 0 < len(codes) < 0.2 * len(want_codes)  # measured 0.061 (0.24 read off the other's nodes alone)
+    assert 0 < len(codes) < 0.18 * len(want_codes)  # measured 0.061 (0.24 read off the other's nodes alone)
     at = np.searchsorted(want_codes, codes)
     assert np.array_equal(want_codes[at], codes) and np.abs(want_values[at] - values).max() < 1e-5 * H
-    assert a.refiner.share < 0.3 and b.refiner.share < 0.7  # measured 0.09 and 0.26
+    assert a.refiner.share < 0.27 and b.refiner.share < 0.7  # measured 0.09 and 0.26
     # asked for anything else, the whole result: the full boolean's nodes
     whole = ondemand.refined(part)
     assert whole.refiner is None
