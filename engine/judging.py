@@ -260,10 +260,11 @@ def _jumps_near(judge: JudgeArg, leaf: LeafArg, x: wp.vec3, sign: int) -> bool:
 
 @wp.func
 def _may_jump(judge: JudgeArg, leaf: LeafArg, x: wp.vec3, near: float) -> bool:
-    """Whether the leaf's sign may change within a band of ``x`` (``near`` away from its surface) other than across
-    its surface: below two bands (a value overstates a distance by a fraction of a voxel), or near its defects."""
+    """Whether the leaf's sign may change within a band of ``x`` (``near`` from its surface) but across it: near its
+    defects, or below two bands where read off its field (a value overstates a distance; its mesh's does not)."""
     reach = 2.0 * judge.probe
-    return near < reach or leaf.jumps_anywhere != 0 or near_sphere(leaf.jump_bvh, leaf.jump_spheres, x, reach)
+    read_off_field = near < reach and leaf.mesh == wp.uint64(0)
+    return read_off_field or leaf.jumps_anywhere != 0 or near_sphere(leaf.jump_bvh, leaf.jump_spheres, x, reach)
 
 
 @wp.func

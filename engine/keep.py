@@ -82,9 +82,10 @@ def mesh_leaf(field) -> bool:
 
 # ---- what the other leaves say ----
 def leaf_bvh(field, device):
-    """The BVH of a clean closed mesh leaf's triangles where the leaf is placed (None for any other leaf): its
-    distances are read off its mesh, exactly."""
-    if not (mesh_leaf(field) and field.stats.get("clean_mesh", False)):
+    """The BVH of a mesh leaf's triangles where the leaf is placed (None for any other leaf): its distances are read
+    off its mesh, exactly (its field's values are those distances, interpolated; an open mesh's sign may also jump
+    away from them, where :func:`leaf_jumps` says)."""
+    if not mesh_leaf(field):
         return None
     return next(iter(field.world_sources().values())).bvh(device)
 
@@ -111,12 +112,12 @@ def leaf_jumps(field, device):
 def _margin(field, bvh, jumps, points, band: float, reach: float, device) -> tuple[np.ndarray, np.ndarray]:
     """Per sample: how far the leaf's surface is (up to ``reach``), and the leaf's sign there. A field with jumps (an
     open mesh's, across its holes; :func:`leaf_jumps`) counts as near (0) wherever its sign changes a band away along
-    an axis, read where its value is below two bands or near its defects."""
+    an axis, read near its defects, and where its value (read off its field) is below two bands."""
     values = _leaf_values(field, bvh, points, reach, device)
     margin = np.abs(values)
     if jumps is not None:
-        rows = np.flatnonzero(margin > band)
-        rows = rows[(margin[rows] < 2.0 * band) | jumps.near(points[rows], 2.0 * band)]
+        rows = np.flatnonzero(margin > band)  # (a value read off the field overstates a distance a little)
+        rows = rows[((margin[rows] < 2.0 * band) & (bvh is None)) | jumps.near(points[rows], 2.0 * band)]
         around = (points[rows][:, None, :] + band * AXES[None]).reshape(-1, 3)
         signs = np.sign(field.sample(around, method="linear")).reshape(-1, 6)
         margin[rows[~(signs == np.sign(values[rows])[:, None]).all(axis=1)]] = 0.0
@@ -560,7 +561,7 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     unplaced = next(iter(leaves(field.expression)[index].sources.values()))
     longest, turn = edge_turns(verts, tris)
     slack = judge.slack_of(longest)
-    exact = [bvh is not None for bvh in judge.bvhs]
+    exact = [bvh is not None and jumps is None for bvh, jumps in zip(judge.bvhs, judge.jumps, strict=True)]
     setting = (field.expression, index, field.voxel_size, judge.band)
     found = None if judge.avoiding else verdicts.reused(unplaced, *setting, slack, exact)
     status, flip, margin = (
