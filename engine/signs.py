@@ -378,89 +378,68 @@ def sign_levels(
         :class:`.winding.ExpansionArg`, for ``known`` in a later build).
     """
     t0 = time.perf_counter()
-    codes, coords, offsets = layout["codes"], layout["coords"], layout["offsets"]
-    child, parent = layout["child"], layout["parent"]
-    device = codes.device
+    offsets, n, n0 = layout["offsets"], int(layout["offsets"][-1]), int(layout["offsets"][1])
     levels = len(offsets) - 1
-    top_dims = np.asarray(layout["top_dims"], dtype=np.int64)
-    n, n0 = int(offsets[-1]), int(offsets[1])
-    sign = wp.zeros(n, dtype=wp.float32, device=device)
+    run = _Signing(winding, layout, dist, neighbours, origin, voxel_size, hole_caps)
     if winding.mode == WINDING_NONE:  # nothing enclosed: outside everywhere
-        sign.fill_(1.0)
+        run.sign.fill_(1.0)
     elif previous is not None:
-        launch_split(_take_known_sign_kernel, n, lambda s, _n: [s, prev_index, previous.values, sign], device)
-    top_lo, top_hi = int(offsets[levels - 1]), int(offsets[levels])
-    oracle_counts = {}
-    sign_sweeps = {}
-    origin_v = wp.vec3(*(float(x) for x in origin))
-    cap_args = box_arrays(hole_caps, device)
-    mesh_id = int(winding.mesh)
-    exact = winding.mode == WINDING_EXACT and hole_caps is not None
-    expansions = expansion_arg(n0, n - n0 if exact else 0, device)
-    if exact and known is not None and known.cert.shape[0] > 0:
-        _take_known_expansions(previous, prev_index, known, expansions, (n0, n))
+        launch_split(_take_known_sign_kernel, n, lambda s, _n: [s, prev_index, previous.values, run.sign], run.device)
+    if run.exact and known is not None and known.cert.shape[0] > 0:
+        _take_known_expansions(previous, prev_index, known, run.expansions, (n0, n))
+    if levels > 1 and not coarse_known:
+        run.top_level()
+    for k in range(0 if coarse_known else levels - 2, -1, -1):
+        run.from_parents(k)
+    if levels > 1:
+        run.spread(0, 0, n0)
+    # Undecided finest nodes lie within about half a voxel of the surface, where the pseudo-normal sign is wrong near
+    # open edges and where shells intersect or touch: they pay the winding number.
+    idx = np.flatnonzero(run.sign.numpy()[:n0] == 0.0)
+    run.oracle(idx, 0)
+    run.oracle_counts[0] = len(idx)
+    values = wp.empty(n, dtype=wp.float32, device=run.device)
+    launch_split(_apply_sign_kernel, n, lambda start, _n: [start, dist, run.sign, values], run.device)
+    timings["signs"] = timings.get("signs", 0.0) + time.perf_counter() - t0
+    return values, {"sign_queries": run.oracle_counts, "sign_sweeps": run.sign_sweeps}, run.expansions
 
-    def oracle(nodes_np, k, reach=0.8661):
-        expand = (dist, expansions) if exact and k > 0 else None
-        _winding_signs(winding, layout, nodes_np, k, (origin_v, voxel_size), sign, expand, reach)
 
-    def spread(k, lo, hi):
-        changed = wp.zeros(1, dtype=wp.int32, device=device)
+class _Signing:
+    """The state :func:`sign_levels` signs a field with (the nodes' signs, 0 where unset), and its steps: the oracle,
+    the spread between neighbours, the top level's seeds, a level from its parents."""
+
+    def __init__(self, winding, layout, dist, neighbours, origin, voxel_size: float, hole_caps):
+        self.winding, self.layout, self.dist, self.neighbours = winding, layout, dist, neighbours
+        self.codes, self.coords, self.offsets = layout["codes"], layout["coords"], layout["offsets"]
+        self.child, self.parent = layout["child"], layout["parent"]
+        self.device = self.codes.device
+        self.levels = len(self.offsets) - 1
+        self.n, self.n0 = int(self.offsets[-1]), int(self.offsets[1])
+        self.sign = wp.zeros(self.n, dtype=wp.float32, device=self.device)
+        self.origin_v, self.voxel_size = wp.vec3(*(float(x) for x in origin)), voxel_size
+        self.cap_args = box_arrays(hole_caps, self.device)
+        self.mesh_id = int(winding.mesh)
+        self.exact = winding.mode == WINDING_EXACT and hole_caps is not None
+        self.expansions = expansion_arg(self.n0, self.n - self.n0 if self.exact else 0, self.device)
+        self.oracle_counts, self.sign_sweeps = {}, {}
+
+    def oracle(self, nodes_np, k, reach=0.8661):
+        expand = (self.dist, self.expansions) if self.exact and k > 0 else None
+        _winding_signs(
+            self.winding, self.layout, nodes_np, k, (self.origin_v, self.voxel_size), self.sign, expand, reach
+        )
+
+    def spread(self, k, lo, hi):
+        """Signs spread between level ``k``'s neighbours (nodes ``lo`` to ``hi``); returns the nodes left unset."""
+        changed = wp.zeros(1, dtype=wp.int32, device=self.device)
         # the finest level first spreads by empty balls alone, then across segments that cross no triangle, which
         # costs a box query each and so runs only once the cheap test is exhausted
-        phases = [0, int(mesh_id)]
+        phases = [0, self.mesh_id]
         sweeps = {}
         for phase_mesh in phases:
             for sweep in range(MAX_SIGN_SWEEPS):  # noqa: B007 (the count is kept)
                 changed.zero_()
-                if k == 0:
-                    # in place from two threads: a sign only ever goes from unset to final, so races are harmless
-                    launch_split(
-                        _propagate_sign_octet_kernel,
-                        (hi - lo) // 8,
-                        lambda start, span, phase_mesh=phase_mesh, sweep=sweep: [
-                            start,
-                            codes,
-                            parent,
-                            child,
-                            neighbours,
-                            n0,
-                            dist,
-                            sign,
-                            SIGN_SAFETY * 1.0,
-                            float(voxel_size),
-                            origin_v,
-                            *cap_args,
-                            wp.uint64(phase_mesh),
-                            changed,
-                            span,
-                            sweep % 2,
-                        ],
-                        device,
-                    )
-                else:
-                    # split the same way (racing increments from two threads still leave ``changed`` nonzero)
-                    launch_split(
-                        _propagate_sign_kernel,
-                        hi - lo,
-                        lambda start, span, phase_mesh=phase_mesh, sweep=sweep: [
-                            neighbours,
-                            n0,
-                            lo + start,
-                            dist,
-                            sign,
-                            SIGN_SAFETY,
-                            float(voxel_size * 2**k),
-                            coords,
-                            origin_v,
-                            *cap_args,
-                            wp.uint64(phase_mesh),
-                            changed,
-                            span,
-                            sweep % 2,
-                        ],
-                        device,
-                    )
+                self._sweep(k, lo, hi, phase_mesh, sweep, changed)
                 got = int(changed.numpy()[0])
                 if got == 0:
                     break
@@ -469,79 +448,75 @@ def sign_levels(
                     # segments' phase signs the few nodes another sweep over the whole level would
                     break
             sweeps[phase_mesh] = sweep + 1
-        sign_sweeps[k] = (sweeps[0], sweeps.get(int(mesh_id), 0))
-        return lo + np.flatnonzero(sign.numpy()[lo:hi] == 0.0)
+        self.sign_sweeps[k] = (sweeps[0], sweeps.get(self.mesh_id, 0))
+        return lo + np.flatnonzero(self.sign.numpy()[lo:hi] == 0.0)
 
-    if levels > 1 and not coarse_known:
-        # Across a hole of an open mesh the sign changes where no triangle is near, so empty balls prove nothing
-        # near it: signs spread only away from the holes' caps (``hole_caps``), the oracle decides the rest.
-        nx, ny, nz = (int(d) for d in top_dims)
-        if exact:
+    def _sweep(self, k, lo, hi, phase_mesh, sweep, changed):
+        """One sweep of the spread over level ``k`` (``phase_mesh`` 0: empty balls alone)."""
+        common = [self.dist, self.sign]
+        tail = [self.origin_v, *self.cap_args, wp.uint64(phase_mesh), changed]
+        if k == 0:
+            # in place from two threads: a sign only ever goes from unset to final, so races are harmless
+            head = [self.codes, self.parent, self.child, self.neighbours, self.n0]
+            launch_split(
+                _propagate_sign_octet_kernel,
+                (hi - lo) // 8,
+                lambda start, span: [start, *head, *common, SIGN_SAFETY * 1.0, float(self.voxel_size), *tail]
+                + [span, sweep % 2],
+                self.device,
+            )
+            return
+        # split the same way (racing increments from two threads still leave ``changed`` nonzero)
+        spacing = float(self.voxel_size * 2**k)
+        launch_split(
+            _propagate_sign_kernel,
+            hi - lo,
+            lambda start, span: [self.neighbours, self.n0, lo + start, *common, SIGN_SAFETY, spacing, self.coords]
+            + [*tail, span, sweep % 2],
+            self.device,
+        )
+
+    def top_level(self):
+        """The top level's signs: from a lattice of oracle seeds, spread between neighbours, the oracle for the rest.
+        Across a hole of an open mesh the sign changes where no triangle is near, so empty balls prove nothing near
+        it: signs spread only away from the holes' caps (``hole_caps``), the oracle decides the rest."""
+        levels, offsets = self.levels, self.offsets
+        top_lo, top_hi = int(offsets[levels - 1]), int(offsets[levels])
+        nx, ny, nz = (int(d) for d in np.asarray(self.layout["top_dims"], dtype=np.int64))
+        if self.exact:
             # near the holes nothing spreads: a lattice of seeds every other node expands far enough to decide its
             # neighbours by Taylor's theorem
             ix, iy, iz = (np.arange(0, m, 2) for m in (nx, ny, nz))
         else:
             ix, iy, iz = (np.arange(min(TOP_SEED_STRIDE // 2, m - 1), m, TOP_SEED_STRIDE) for m in (nx, ny, nz))
         seeds = top_lo + (ix[None, None, :] + nx * (iy[None, :, None] + ny * iz[:, None, None])).ravel()
-        seeds = seeds[sign.numpy()[seeds] == 0.0]
-        oracle(seeds, levels - 1, SEED_REACH)
-        if exact:
+        seeds = seeds[self.sign.numpy()[seeds] == 0.0]
+        self.oracle(seeds, levels - 1, SEED_REACH)
+        if self.exact:
+            spacing = float(self.voxel_size * 2 ** (levels - 1))
             launch_split(
                 sign_from_seed_kernel,
                 top_hi - top_lo,
-                lambda start, _n: [
-                    winding,
-                    coords,
-                    top_lo,
-                    start,
-                    wp.vec3i(nx, ny, nz),
-                    origin_v,
-                    float(voxel_size * 2 ** (levels - 1)),
-                    dist,
-                    SIGN_SAFETY,
-                    sign,
-                    expansions,
-                    int(levels > 2),
-                ],
-                device,
+                lambda start, _n: [self.winding, self.coords, top_lo, start, wp.vec3i(nx, ny, nz), self.origin_v]
+                + [spacing, self.dist, SIGN_SAFETY, self.sign, self.expansions, int(levels > 2)],
+                self.device,
             )
-        rest = spread(levels - 1, top_lo, top_hi)
-        oracle(rest, levels - 1)
-        oracle_counts[levels - 1] = len(seeds) + len(rest)
-    for k in range(0 if coarse_known else levels - 2, -1, -1):
-        lo, hi = int(offsets[k]), int(offsets[k + 1])
+        rest = self.spread(levels - 1, top_lo, top_hi)
+        self.oracle(rest, levels - 1)
+        self.oracle_counts[levels - 1] = len(seeds) + len(rest)
+
+    def from_parents(self, k):
+        """Level ``k``'s signs from its parents where they prove them, then (above the finest) spread and the
+        oracle."""
+        lo, hi = int(self.offsets[k]), int(self.offsets[k + 1])
         launch_split(
             _inherit_sign_kernel,
             hi - lo,
-            lambda start, _n, k=k, lo=lo: [
-                coords,
-                parent,
-                lo + start,
-                origin_v,
-                voxel_size * 2**k,
-                dist,
-                sign,
-                SIGN_SAFETY,
-                winding,
-                int(exact),
-                *cap_args,
-                expansions,
-                int(k >= 2),
-            ],
-            device,
+            lambda start, _n: [self.coords, self.parent, lo + start, self.origin_v, self.voxel_size * 2**k, self.dist]
+            + [self.sign, SIGN_SAFETY, self.winding, int(self.exact), *self.cap_args, self.expansions, int(k >= 2)],
+            self.device,
         )
         if k > 0:
-            idx = spread(k, lo, hi)
-            oracle(idx, k)
-            oracle_counts[k] = len(idx)
-    if levels > 1:
-        spread(0, 0, n0)
-    # Undecided finest nodes lie within about half a voxel of the surface, where the pseudo-normal sign is wrong near
-    # open edges and where shells intersect or touch: they pay the winding number.
-    idx = np.flatnonzero(sign.numpy()[:n0] == 0.0)
-    oracle(idx, 0)
-    oracle_counts[0] = len(idx)
-    values = wp.empty(n, dtype=wp.float32, device=device)
-    launch_split(_apply_sign_kernel, n, lambda start, _n: [start, dist, sign, values], device)
-    timings["signs"] = timings.get("signs", 0.0) + time.perf_counter() - t0
-    return values, {"sign_queries": oracle_counts, "sign_sweeps": sign_sweeps}, expansions
+            idx = self.spread(k, lo, hi)
+            self.oracle(idx, k)
+            self.oracle_counts[k] = len(idx)
