@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from tests.metrics import (
+    distance_within,
     exact_boolean,
     exact_sdf,
     hausdorff,
@@ -149,6 +150,21 @@ def test_hausdorff_uses_exact_point_to_triangle_distances():
     assert result["max"] == pytest.approx(0.05, abs=1e-5)
     assert result["a_to_b"]["max"] == pytest.approx(0.05, abs=1e-5)
     assert result["b_to_a"]["max"] == pytest.approx(0.05, abs=1e-5)
+
+
+def test_distance_within_measures_points_on_slivers_in_float64():
+    # a sliver 1e-3 wide and 2 long, tilted: points on it lie on it, points off it are as far as their offset
+    verts = np.array([[0.0, 0.0, 0.0], [2.0, 0.3, 0.7], [2.0, 0.301, 0.7]])
+    verts = np.concatenate([verts, verts + [0.0, 0.0, 1.0]])
+    tris = np.array([[0, 1, 2], [3, 4, 5]])
+    on = sample_surface(verts, tris[:1], 2_000, seed=3).astype(np.float64)
+    n = np.cross(verts[1] - verts[0], verts[2] - verts[0])
+    n /= np.linalg.norm(n)
+    assert distance_within(verts, tris, on, 0.1).max() < 1e-6
+    np.testing.assert_allclose(distance_within(verts, tris, on[:50] + 0.01 * n, 0.1), 0.01, atol=1e-6)
+    beyond = [[5.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [1.0, 0.15, -0.3]]
+    np.testing.assert_allclose(distance_within(verts, tris, beyond, 0.1), 0.1)  # nothing within reach
+    np.testing.assert_allclose(distance_within(verts, tris, [[-0.05, 0.0, 0.0]], 0.1), 0.05, atol=1e-6)  # a corner
 
 
 def test_exact_sdf_of_a_box_matches_the_analytic_distance():
