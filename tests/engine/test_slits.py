@@ -18,9 +18,9 @@ def _sheet(hole_x, hole_y, size: int = 24):
     i, j = (a.ravel() for a in np.meshgrid(np.arange(size), np.arange(size), indexing="ij"))
     out = (i >= hole_x[0]) & (i < hole_x[1]) & (j >= hole_y[0]) & (j < hole_y[1])
     i, j = i[~out], j[~out]
-    tris = np.concatenate(
-        [np.stack([at(i, j), at(i + 1, j), at(i + 1, j + 1)], 1), np.stack([at(i, j), at(i + 1, j + 1), at(i, j + 1)], 1)]
-    )
+    lower = np.stack([at(i, j), at(i + 1, j), at(i + 1, j + 1)], 1)
+    upper = np.stack([at(i, j), at(i + 1, j + 1), at(i, j + 1)], 1)
+    tris = np.concatenate([lower, upper])
     halves = border_halves(tris, len(points))
     nxt = np.arange(len(points), dtype=np.int64)
     nxt[halves[:, 0]] = halves[:, 1]
