@@ -216,10 +216,11 @@ def _gap(points: wp.array[wp.vec3], p: int, pn: int, q: int, qn: int) -> float:
 @wp.func
 def _steps_ahead(
     points: wp.array[wp.vec3], q_next: wp.array[wp.int32], q: int, left: int, target: wp.vec3, near: float
-) -> int:
-    """How many vertices ahead of ``q`` along Q (at most ``left``) the one nearest ``target`` is: the first minimum
-    of the distance within ``near`` of it, walking on until ``PAST`` vertices have not come nearer (a minimum
-    farther than ``near`` is a wiggle of Q, or Q's detour around a kept island it passes first: the walk goes on)."""
+) -> wp.vec2:
+    """How many vertices ahead of ``q`` along Q (at most ``left``) the one nearest ``target`` is, and how far it is
+    from it: the first minimum of the distance within ``near`` of it, walking on until ``PAST`` vertices have not come
+    nearer (a minimum farther than ``near`` is a wiggle of Q, or Q's detour around a kept island it passes first: the
+    walk goes on)."""
     best = wp.length(points[q] - target)
     best_t = int(0)
     walk = q
@@ -231,7 +232,7 @@ def _steps_ahead(
             best_t = t
         if t - best_t >= PAST and best <= near:
             break
-    return best_t
+    return wp.vec2(float(best_t), best)
 
 
 @wp.kernel(enable_backward=False)
@@ -274,7 +275,10 @@ def _zip_kernel(
         qn = q_next[q]
         advance_p = j == m
         if i < n and j < m:
-            ahead = _steps_ahead(points, q_next, q, m - j, points[pn], near)
+            found = _steps_ahead(points, q_next, q, m - j, points[pn], near)
+            ahead = int(found[0])
+            if found[1] > near and i + 1 < n:  # P's next is off Q: Q goes no farther than P's next but one needs
+                ahead = wp.min(ahead, int(_steps_ahead(points, q_next, q, m - j, points[p_next[pn]], near)[0]))
             advance_p = ahead == 0
             if ahead == 1:
                 advance_p = wp.length(points[pn] - points[q]) < wp.length(points[p] - points[qn])
