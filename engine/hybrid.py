@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .adaptive import row_sums
 from .coarsen import coarsened
 from .edgehash import KeyCounts, directed_edges
 from .edges import surface_edges
@@ -207,7 +208,9 @@ def hybrid_surface(
     k_alive, k_border = _drop_pinched(k_tris, ~_doubled_faces(k_tris, n), n)
     judged_alive = k_alive
     v_gone, closed = np.zeros(len(v_tris), dtype=bool), np.ones(len(v_tris), dtype=bool)
-    over, trouble = vertices_over(points, k_tris[k_alive], k_border, np.arange(n_k, n), voxel, device), []
+    ways = _vertex_normals(points, v_tris)  # the voxel surface's way at each of its vertices
+    over = vertices_over(points, k_tris[k_alive], k_border, np.arange(n_k, n), voxel, device, ways)
+    trouble = []
     if partial and not _edges_covered(voxel_tris, len(voxel_verts), over[n_k:]):
         return voxel_surface_only(voxel_verts, voxel_tris, "the seams' surface ends short of the kept faces")
     for rounds in range(MAX_ROUNDS):
@@ -229,7 +232,8 @@ def hybrid_surface(
             points, (k_tris, k_alive, k_border, k_loops), (v_tris, v_alive, v_loops, v_gone), kept_failed,
             paired["voxel_unpaired"], whole, PAIR_VOXELS * voxel, device, far,
         )  # fmt: skip
-        over, trouble = _still_over(points, (k_tris, k_alive, k_border), before, over, voxel, device), trouble + [at]
+        over = _still_over(points, (k_tris, k_alive, k_border, ways), before, over, voxel, device)
+        trouble.append(at)
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
     surface = _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
@@ -255,12 +259,20 @@ def _edges_covered(tris: np.ndarray, n_verts: int, over: np.ndarray) -> bool:
 LARGE_FACE_VOXELS = 3.0
 
 
+def _vertex_normals(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(N, 3) float32 the area-weighted normals of the faces at each point, summed (zeros for points of none)."""
+    corners = points[tris].astype(np.float64)
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    return row_sums(tris.ravel(), np.repeat(normals, 3, axis=0), len(points)).astype(np.float32)
+
+
 def _still_over(points, kept, before: np.ndarray, over: np.ndarray, voxel: float, device) -> np.ndarray:
     """:func:`.zipper.vertices_over` after the kept faces alive ``before`` were given up down to ``kept`` (tris,
-    alive, border): kept faces are only given up, so a vertex not over them stays so, and one farther than the
+    alive, border, and the voxel surface's way at each point): kept faces are only given up, so a vertex not over them
+    stays so, and one farther than the
     reach (and margin) from every face given up keeps its closest kept point and sees no new border within it:
     only the vertices over them within that of the faces given up are read again."""
-    tris, alive, border = kept
+    tris, alive, border, ways = kept
     gone = tris[before & ~alive]
     if not len(gone):
         return over
@@ -272,7 +284,7 @@ def _still_over(points, kept, before: np.ndarray, over: np.ndarray, voxel: float
     rows = np.flatnonzero(over)
     again = rows[mesh_distances(mesh, points[rows], reach, device) < reach]
     out = over.copy()
-    out[again] = vertices_over(points, tris[alive], border, again, voxel, device)[again]
+    out[again] = vertices_over(points, tris[alive], border, again, voxel, device, ways)[again]
     return out
 
 

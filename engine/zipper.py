@@ -2,7 +2,8 @@
 
 The kept triangles (:mod:`.keep`) and the voxel surface of the whole result overlap wherever faces are kept. The
 voxel surface gives up every face with a corner *over* the kept faces (within a voxel of them, its closest point on
-them not on their border), so that it ends just beyond their border; the gap between the two borders, a voxel or
+them not on their border, its surface facing their way: the far side of a part thinner than a voxel is not over the
+near side's faces), so that it ends just beyond their border; the gap between the two borders, a voxel or
 less wide, is closed by a strip of triangles between each border loop of the kept faces and the loop of the voxel
 surface that faces it (the shorter-diagonal advance of mesh zippering, Turk and Levoy 1994, steered by where along
 the voxel loop the kept loop's next vertex lies: a kept border that zigzags across slivers, three times the voxel
@@ -55,18 +56,23 @@ def _over_kernel(
     border_a: wp.array[wp.vec3],
     border_b: wp.array[wp.vec3],
     points: wp.array[wp.vec3],
+    normals: wp.array[wp.vec3],
     reach: float,
     margin: float,
     over: wp.array[wp.uint8],
 ):
     """Whether each point lies over the kept faces: within ``reach`` of them, its closest point not on their border
-    (every border segment farther than that closest point by ``margin``)."""
+    (every border segment farther than that closest point by ``margin``), and its surface facing the way the kept face
+    there does (``normals``, when given: another sheet a voxel off, the far side of a thin part, is not over it)."""
     i = wp.tid()
     p = points[i]
     over[i] = wp.uint8(0)
     q = wp.mesh_query_point_no_sign(kept, p, reach)
     if not q.result:
         return
+    if normals.shape[0] > 0:
+        if wp.dot(normals[i], wp.mesh_eval_face_normal(kept, q.face)) < 0.0:
+            return
     u = wp.length(p - wp.mesh_eval_position(kept, q.face, q.u, q.v))
     r = u + margin
     query = wp.bvh_query_aabb(border, p - wp.vec3(r), p + wp.vec3(r))
@@ -86,9 +92,10 @@ def border_halves(tris: np.ndarray, n_verts: int) -> np.ndarray:
     return np.stack([a[open_], b[open_]], axis=1)
 
 
-def vertices_over(points, kept_tris, border, candidates, voxel: float, device) -> np.ndarray:
+def vertices_over(points, kept_tris, border, candidates, voxel: float, device, normals=None) -> np.ndarray:
     """(N,) bool: which of the ``candidates`` (indices of ``points``) lie over the kept faces ``kept_tris`` (whose
-    border edges are ``border``), within ``OVER_VOXELS`` of them; every other point False."""
+    border edges are ``border``), within ``OVER_VOXELS`` of them, and with ``normals`` ((N, 3) per point: its surface's
+    way) facing the way the kept face nearest them does; every other point False."""
     over_all = np.zeros(len(points), dtype=bool)
     if not len(kept_tris) or not len(candidates):
         return over_all
@@ -109,10 +116,15 @@ def vertices_over(points, kept_tris, border, candidates, voxel: float, device) -
     pts = wp.array(np.ascontiguousarray(points[candidates], dtype=np.float32), dtype=wp.vec3, device=device)
     over = wp.empty(len(candidates), dtype=wp.uint8, device=device)
     reach, margin = OVER_VOXELS * voxel, 1e-3 * voxel
+    ways = np.zeros((0, 3), np.float32) if normals is None else np.ascontiguousarray(normals[candidates], np.float32)
+    ways = wp.array(ways, dtype=wp.vec3, device=device)
     launch_split(
         _over_kernel,
         len(candidates),
-        lambda lo, n: [mesh.id, bvh.id, a_wp, b_wp, pts[lo : lo + n], reach, margin, over[lo : lo + n]],
+        lambda lo, n: [
+            *(mesh.id, bvh.id, a_wp, b_wp, pts[lo : lo + n], ways[lo : lo + n] if ways.shape[0] else ways),
+            *(reach, margin, over[lo : lo + n]),
+        ],
         device,
     )
     over_all[candidates] = over.numpy().astype(bool)

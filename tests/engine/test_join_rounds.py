@@ -28,8 +28,8 @@ def test_rounds_that_read_only_what_changed_join_as_rounds_that_read_everything(
         return border_halves(tris[alive], n_verts)
 
     def still_over(points, kept, before, over, voxel, device):
-        tris, alive, border = kept
-        return vertices_over(points, tris[alive], border, np.flatnonzero(over), voxel, device)
+        tris, alive, border, ways = kept
+        return vertices_over(points, tris[alive], border, np.flatnonzero(over), voxel, device, ways)
 
     monkeypatch.setattr(hybrid, "_border_after", border_after)
     monkeypatch.setattr(hybrid, "_still_over", still_over)

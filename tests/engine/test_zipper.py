@@ -3,7 +3,7 @@
 import numpy as np
 import warp as wp
 
-from engine.zipper import zip_loops
+from engine.zipper import border_halves, vertices_over, zip_loops
 
 
 def _circles(spike: bool):
@@ -43,3 +43,36 @@ def test_a_spike_of_the_kept_loop_does_not_drag_the_voxel_loop_ahead():
     (tris, gaps), n = _zipped(spike=True)
     assert len(tris) == n + 70
     assert gaps.max() < 1.0, gaps.max()  # measured 0.45
+
+
+def _sheet(z: float, up: bool, size: int = 8):
+    """A square sheet of unit squares at height ``z`` (two triangles each), facing +z or -z."""
+    ij = np.stack(np.meshgrid(np.arange(size + 1), np.arange(size + 1), indexing="ij"), -1).reshape(-1, 2)
+    points = np.c_[ij, np.full(len(ij), z)].astype(np.float32)
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(size), np.arange(size), indexing="ij"))
+    at = lambda i, j: i * (size + 1) + j  # noqa: E731
+    tris = np.concatenate(
+        [
+            np.stack([at(i, j), at(i + 1, j), at(i + 1, j + 1)], 1),
+            np.stack([at(i, j), at(i + 1, j + 1), at(i, j + 1)], 1),
+        ]
+    )
+    return points, tris if up else tris[:, [0, 2, 1]]
+
+
+def test_the_far_side_of_a_thin_part_is_not_over_the_near_sides_kept_faces():
+    # kept faces: a sheet facing down (a thin plate's underside); voxel vertices 0.6 voxel above it, inside the sheet's
+    # border: the same side's surface (facing down) is over it, the plate's top (facing up) is not
+    kept_points, kept_tris = _sheet(0.0, up=False)
+    border = border_halves(kept_tris, len(kept_points))
+    xy = np.stack(np.meshgrid(np.linspace(2.0, 6.0, 5), np.linspace(2.0, 6.0, 5)), -1).reshape(-1, 2)
+    probes = np.c_[xy, np.full(len(xy), 0.6)].astype(np.float32)
+    points = np.concatenate([kept_points, probes])
+    candidates = np.arange(len(kept_points), len(points))
+    device = wp.get_device("cpu")
+    for way, expected in ((-1.0, True), (1.0, False)):
+        normals = np.zeros((len(points), 3), np.float32)
+        normals[:, 2] = way
+        over = vertices_over(points, kept_tris, border, candidates, 1.0, device, normals)
+        assert (over[candidates] == expected).all() and not over[: len(kept_points)].any()
+    assert vertices_over(points, kept_tris, border, candidates, 1.0, device)[candidates].all()  # no ways: by distance
