@@ -37,6 +37,7 @@ from .judging import MAX_TABLE_LEAVES, FusedJudge, edge_turns, per_triangle_min,
 from .jumps import JumpSpheres, jump_spheres
 from .meshcheck import defect_edges
 from .ondemand import built_on_demand, own_sides
+from .orient import patch_flips
 from .parallel import run_tasks
 from .precut import cut_strips, fused_margins
 from .refine import merge_kept, restore_whole, straighten_borders
@@ -538,7 +539,8 @@ def _judge_leaf(field, index: int, source, reads: tuple, fused: bool, avoid) -> 
     straight = (STRAIGHT_VOXELS * field.voxel_size, STRAIGHT_RUN_VOXELS * field.voxel_size)
     tris, rows = straighten_borders(verts, tris, kept, parent, len(source.verts), *straight)
     parent, kept = parent[rows], kept[rows]
-    return {"verts": verts, "tris": tris, "parent": parent, "kept": kept, "flip": flip_of[parent] & kept}
+    flip = patch_flips(verts, tris, kept, flip_of[parent], field.device)  # turned as its patch is
+    return {"verts": verts, "tris": tris, "parent": parent, "kept": kept, "flip": flip & kept}
 
 
 def _judge_unknown(judge: _Judge, verts, tris, parent, flip, status, split_edge: float) -> bool:

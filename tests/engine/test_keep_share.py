@@ -52,10 +52,10 @@ def _kept_share(name: str) -> tuple[float, dict]:
 
 
 # measured at /256, share: teapot 0.996 (a mesh of patches repeating their border vertices: the 99 %), cow
-# 0.988, beetle 0.952 (296 open and 47 non-manifold edges; 0.938 while the voxel surface of a thin part's far side was
-# taken for lying over the near side's kept faces); the cow's and the beetle's bounds three times the shortfall below
-# (Suzanne: tests/engine/test_rejoin.py)
-@pytest.mark.parametrize(("name", "least"), [("teapot", 0.99), ("cow", 0.96), ("beetle", 0.855)])
+# 0.988, beetle 0.981 (296 open and 47 non-manifold edges; 0.938 while the voxel surface of a thin part's far side was
+# taken for lying over the near side's kept faces, 0.952 while pieces of its thin parts were turned unlike their
+# neighbours); the cow's and the beetle's bounds three times the shortfall below (Suzanne: tests/engine/test_rejoin.py)
+@pytest.mark.parametrize(("name", "least"), [("teapot", 0.99), ("cow", 0.96), ("beetle", 0.94)])
 def test_messy_meshes_keep_most_of_what_should_be_kept(name, least):
     share, s = _kept_share(name)
     assert share >= least, share
