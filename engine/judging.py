@@ -1,16 +1,16 @@
 """Samples on an operand's triangles, and the judge's verdicts on them in two kernel launches a round.
 
 :mod:`.keep` judges a leaf's triangles (and the pieces of the partly keepable ones) at samples about a voxel apart:
-the corners, and rows of points parallel to the longest edge (:func:`triangle_samples`). Its general path places
-every sample, reads the other leaves there with a launch per leaf and query, and reduces per triangle in numpy.
+the corners, and rows of points parallel to the longest edge (:func:`.samples.triangle_samples`). Its general path
+places every sample, reads the other leaves there with a launch per leaf and query, and reduces per triangle in numpy.
 
 The fused path (:class:`FusedJudge`) writes no sample: one launch reads the pieces' corners (each vertex once per
 judge, whatever the round), and a second, one thread a piece, walks the piece's rows of samples (placed as
-:func:`_row_samples_kernel` places them), reads them, and folds corners and rows into the piece's verdict. A sample's
-reading is every other leaf's sign (its field, linear, as ``field.sample`` reads it; a field that jumps also a band
-away along the axes) and how far the nearest of their surfaces and of the leaf's own defects is (their BVHs, or the
-field where a leaf has none); on a shell that crosses itself, also the leaf's own side across the piece there. What
-the expression makes of the other leaves' signs (whether it crosses with the leaf, and which way) is a table over
+:func:`.samples.triangle_samples` places them), reads them, and folds corners and rows into the piece's verdict. A
+sample's reading is every other leaf's sign (its field, linear, as ``field.sample`` reads it; a field that jumps also
+a band away along the axes) and how far the nearest of their surfaces and of the leaf's own defects is (their BVHs, or
+the field where a leaf has none); on a shell that crosses itself, also the leaf's own side across the piece there.
+What the expression makes of the other leaves' signs (whether it crosses with the leaf, and which way) is a table over
 their sign patterns, three signs a leaf (-, 0, +), found once per judge by the general path's own evaluation.
 
 The verdicts are the general path's: the same samples and float32 readings, the same comparisons in float64. Three
@@ -29,6 +29,7 @@ import warp as wp
 
 from .jumps import JumpSpheres, near_sphere
 from .parallel import host_view, launch_split
+from .samples import row_grid, row_point, row_steps
 from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_proj, sample_linear
 
 # The fused path takes expressions of at most this many leaves besides the judged one (a table of 3^n patterns).
@@ -40,124 +41,6 @@ KEPT_BIT, PARTLY_BIT, FLIP_BIT = 1, 2, 4
 # and, where distances are recorded: no sample where the expression crosses; a defect, or its own field crossing it
 # nowhere
 SIGNS_ONLY_BIT, OWN_ONLY_BIT = 8, 16
-
-# ---- samples ----
-
-
-@wp.func
-def _row_grid(a: wp.vec3, b: wp.vec3, c: wp.vec3, spacing: float) -> wp.vec2:
-    """(the edge from a to b's length, how many rows parallel to it cover the triangle ``spacing`` apart)."""
-    base = wp.length(b - a)
-    height = wp.length(wp.cross(b - a, c - a)) / wp.max(base, 1.0e-30)
-    return wp.vec2(base, float(wp.max(int(wp.ceil(height / spacing)), 1)))
-
-
-@wp.func
-def _row_steps(s: float, base: float, spacing: float) -> int:
-    """How many steps of at most ``spacing`` the row ``s`` of the way from edge a-b to corner c takes."""
-    return wp.max(int(wp.ceil((1.0 - s) * base / spacing)), 1)
-
-
-@wp.func
-def _row_point(a: wp.vec3, b: wp.vec3, c: wp.vec3, s: float, k: int, steps: int) -> wp.vec3:
-    """Sample ``k`` of ``steps`` along the row ``s`` of the way from edge a-b to corner c."""
-    start = a + s * (c - a)
-    end = b + s * (c - b)
-    return start + (float(k) / float(steps)) * (end - start)
-
-
-@wp.kernel(enable_backward=False)
-def _row_counts_kernel(
-    verts: wp.array[wp.vec3],
-    tris: wp.array2d[wp.int32],
-    spacings: wp.array[wp.float32],
-    counts: wp.array[wp.int32],
-):
-    """How many samples :func:`_row_samples_kernel` puts on each triangle besides its corners."""
-    t = wp.tid()
-    spacing = spacings[t]
-    grid = _row_grid(verts[tris[t, 0]], verts[tris[t, 1]], verts[tris[t, 2]], spacing)
-    rows = int(grid[1])
-    n = int(0)
-    for r in range(rows):
-        n += _row_steps(float(r) / float(rows), grid[0], spacing) + 1
-    counts[t] = n - 2  # rows 0..rows-1, less corners a and b (c, row ``rows``, is not among them)
-
-
-@wp.kernel(enable_backward=False)
-def _row_samples_kernel(
-    verts: wp.array[wp.vec3],
-    tris: wp.array2d[wp.int32],
-    spacings: wp.array[wp.float32],
-    first: wp.array[wp.int32],
-    points: wp.array[wp.vec3],
-):
-    """Rows parallel to the edge from corner 0 to corner 1 (the longest), no farther apart than ``spacing``, each
-    sampled no farther apart than ``spacing``; the corners left out."""
-    t = wp.tid()
-    spacing = spacings[t]
-    a = verts[tris[t, 0]]
-    b = verts[tris[t, 1]]
-    c = verts[tris[t, 2]]
-    grid = _row_grid(a, b, c, spacing)
-    rows = int(grid[1])
-    out = first[t]
-    for r in range(rows):
-        s = float(r) / float(rows)
-        steps = _row_steps(s, grid[0], spacing)
-        for k in range(steps + 1):
-            if r > 0 or (k > 0 and k < steps):
-                points[out] = _row_point(a, b, c, s, k, steps)
-                out += 1
-
-
-def edge_turns(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(T,) float64 each triangle's longest edge, (T,) int64 the corner it starts at (edge k: corner k to k + 1)."""
-    at = [[verts[tris[:, k], j].astype(np.float64) for j in range(3)] for k in range(3)]
-    d = [[at[(k + 1) % 3][j] - at[k][j] for j in range(3)] for k in range(3)]
-    s = [(x * x + y * y) + z * z for x, y, z in d]  # as numpy adds a 3-long axis, which it reduces slowly
-    turn = np.where((s[0] >= s[1]) & (s[0] >= s[2]), 0, np.where(s[1] >= s[2], 1, 2))  # argmax's first largest
-    return np.sqrt(np.choose(turn, s)), turn
-
-
-def triangle_samples(verts: np.ndarray, tris: np.ndarray, spacing: np.ndarray, device):
-    """Points on every triangle no farther than about its ``spacing`` from any of its points: the vertices, and on
-    larger triangles rows of points (:func:`_row_samples_kernel`).
-
-    Args:
-        verts: (V, 3) float32; tris: (T, 3) int; spacing: (T,) float, each triangle's.
-    Returns:
-        ``(points, first)``: (V + G, 3) float32, the V vertices first, then each triangle's own samples, the (T + 1,)
-        int64 offsets of the triangles' own among the G after the vertices.
-    """
-    cols = (np.arange(3)[None, :] + edge_turns(verts, tris)[1][:, None]) % 3  # the longest edge from corner 0 to 1
-    turned = np.ascontiguousarray(np.take_along_axis(tris, cols, axis=1), dtype=np.int32)
-    v_wp = wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device)
-    t_wp = wp.array(turned, dtype=wp.int32, device=device)
-    s_wp = wp.array(np.ascontiguousarray(spacing, dtype=np.float32), dtype=wp.float32, device=device)
-    counts = wp.empty(len(tris), dtype=wp.int32, device=device)
-    if len(tris):
-        wp.launch(_row_counts_kernel, len(tris), inputs=[v_wp, t_wp, s_wp, counts], device=device)
-    first = np.zeros(len(tris) + 1, dtype=np.int64)
-    np.cumsum(counts.numpy(), out=first[1:])
-    out = wp.empty(int(first[-1]), dtype=wp.vec3, device=device)
-    if first[-1]:
-        first_wp = wp.array(first[:-1].astype(np.int32), dtype=wp.int32, device=device)
-        wp.launch(_row_samples_kernel, len(tris), inputs=[v_wp, t_wp, s_wp, first_wp, out], device=device)
-    points = np.concatenate([np.asarray(verts, dtype=np.float32), out.numpy().reshape(-1, 3)])
-    return points, first
-
-
-def per_triangle_min(values: np.ndarray, tris: np.ndarray, n_verts: int, first: np.ndarray) -> np.ndarray:
-    """(T,) the least of ``values`` (one per sample of :func:`triangle_samples`) over each triangle's samples; (T, K)
-    for (N, K) values, per column."""
-    least = values[:n_verts][tris].min(axis=1)
-    own = np.flatnonzero(first[1:] > first[:-1])
-    if len(own):
-        lows = np.minimum.reduceat(values[n_verts:], first[own], axis=0)
-        least[own] = np.minimum(least[own], lows)
-    return least
-
 
 # ---- readings ----
 
@@ -451,16 +334,16 @@ def _judge_pieces_kernel(
     b = verts[tris[t, (k + 1) % 3]]
     c = verts[tris[t, (k + 2) % 3]]
     step = wp.float32(slack * judge.sample_share)
-    grid = _row_grid(a, b, c, step)
+    grid = row_grid(a, b, c, step)
     rows = int(grid[1])
     r = int(0)
     while live and r < rows:
         s = float(r) / float(rows)
-        steps = _row_steps(s, grid[0], step)
+        steps = row_steps(s, grid[0], step)
         i = int(0)
         while live and i <= steps:
             if r > 0 or (i > 0 and i < steps):
-                x = _row_point(a, b, c, s, i, steps)
+                x = row_point(a, b, c, s, i, steps)
                 got = reading(judge, x, wp.where(keeps, keep_reach, partly_reach))
                 same = same and int(got[0]) == first
                 bounds = _fold(judge, int(got[0]), got[1], bounds)

@@ -33,7 +33,7 @@ import warp as wp
 
 from . import verdicts
 from .expression import evaluate_signs, leaves, widest_blend
-from .judging import MAX_TABLE_LEAVES, FusedJudge, edge_turns, per_triangle_min, sign_patterns, triangle_samples
+from .judging import MAX_TABLE_LEAVES, FusedJudge, sign_patterns
 from .jumps import JumpSpheres, jump_spheres
 from .meshcheck import defect_edges
 from .ondemand import built_on_demand, own_sides
@@ -41,6 +41,7 @@ from .orient import patch_flips
 from .parallel import run_tasks
 from .precut import cut_strips, fused_margins
 from .refine import merge_kept, restore_whole, straighten_borders
+from .samples import edge_turns, per_triangle_min, triangle_samples
 from .selfcross import crossing_segments
 from .slivers import Splitter, strip_parents
 from .sources import mesh_distances
@@ -372,7 +373,7 @@ class _Judge:
         """Per triangle (pieces of original triangles ``parent``): kept, partly keepable, and flipped. A triangle is
         sampled about ``SAMPLE_VOXELS`` apart, or an eighth of its longest edge when that is more (a large triangle
         near a seam is split anyway), its samples' spacing the slack of its checks (``longest``, ``turn``: (T,) each
-        one's longest edge and the corner it starts at, :func:`.judging.edge_turns`). With ``beyond``, every sample
+        one's longest edge and the corner it starts at, :func:`.samples.edge_turns`). With ``beyond``, every sample
         is read, its distances up to ``beyond`` farther than the checks need; ``self.found`` keeps, per triangle, the
         least of them (``margin``) and whether its verdict is the others' signs' alone (``signs_only``: no sample
         where the expression crosses) or its own mesh's (``own_only``: a defect, or its field crossing it nowhere),

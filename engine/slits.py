@@ -18,8 +18,8 @@ import numpy as np
 import warp as wp
 
 from .adaptive import row_sums
-from .judging import triangle_samples
 from .meshcheck import any_corner
+from .samples import triangle_samples
 
 # A slit's strip has diagonals at most this many voxels long; a wider hole's, at most WIDE_VOXELS, where it lies
 # within ON_VOXELS of the result's zero level all over (Suzanne's holes about its eyes and ears, where the voxel surface
@@ -148,7 +148,7 @@ def fill_slits(points, k_loops, candidates, kept_tris, halves, voxel: float, dev
 
 def _on_surface(field, points, tris, loop_of, wide, n_loops: int, voxel: float, device) -> np.ndarray:
     """(W,) bool: whether each of the ``wide`` loops' strips lies within ``ON_VOXELS`` of the result's zero level at
-    points about a voxel apart all over its triangles (:func:`.judging.triangle_samples`; the field is 1-Lipschitz)."""
+    points about a voxel apart all over its triangles (:func:`.samples.triangle_samples`; the field is 1-Lipschitz)."""
     rows = np.flatnonzero(np.isin(loop_of, wide))
     used, local = np.unique(tris[rows], return_inverse=True)
     local = local.reshape(-1, 3)

@@ -7,8 +7,9 @@ import pytest
 
 import engine
 from engine import verdicts
-from engine.judging import sign_patterns, triangle_samples
+from engine.judging import sign_patterns
 from engine.keep import kept_triangles
+from engine.samples import triangle_samples
 from tests.support import box_mesh, cad_pairs, load_mesh, normalised, rotation, uv_sphere
 
 
