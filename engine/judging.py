@@ -87,7 +87,8 @@ class JudgeArg:
     own: LeafArg
     pull: float
     side_offset: float
-    side_clear: float  # a quarter of side_offset: both sides clearly on one side of the surface: an internal face
+    side_clear: float  # a quarter of side_offset: both sides clearly inside: an internal face (outside: a thin part)
+    thin_side: int  # the side of a part thinner than the field sees (keep's ``THIN``)
 
 
 @wp.func
@@ -241,7 +242,9 @@ def _side_of(judge: JudgeArg, x: wp.vec3, n: wp.vec3) -> int:
     step = judge.side_offset * n
     front = _field_value(judge.own, x + step)
     back = _field_value(judge.own, x - step)
-    internal = wp.max(front, back) < -judge.side_clear or wp.min(front, back) > judge.side_clear
+    if wp.min(front, back) > judge.side_clear:  # a part thinner than the field sees
+        return judge.thin_side
+    internal = wp.max(front, back) < -judge.side_clear
     return wp.where(internal, 0, wp.where(front >= back, 1, -1))
 
 
@@ -415,6 +418,7 @@ class FusedJudge:
     own: object  # the judged leaf's field
     crossing: bool  # its shell crosses itself: its side read at every sample, ``side_offset`` off
     side_offset: float
+    thin_side: int
     device: object
 
     def __post_init__(self):
@@ -430,6 +434,7 @@ class FusedJudge:
         arg.corner_reach = self.band + self.slack + arg.pad
         arg.crossing, arg.own = int(self.crossing), leaf_arg(self.own, None, 0)
         arg.pull, arg.side_offset, arg.side_clear = self.spacing, self.side_offset, 0.25 * self.side_offset
+        arg.thin_side = self.thin_side
         self.arg = arg
         self.defects_wp = wp.array(self.defects.astype(np.int8), dtype=wp.int8, device=self.device)
         self.side_wp = wp.array(self.side.astype(np.int8), dtype=wp.int8, device=self.device)

@@ -7,7 +7,8 @@ built from a mesh is *kept* when, everywhere on it (at samples about a voxel apa
   that jumps across an open mesh's holes is also read a band away along the axes, where its sign must not change);
 - none of its own mesh's defects is within the band: open, non-manifold or inconsistently oriented edges, duplicated
   triangles; and its own field crosses it from inside to outside everywhere (no part of it is an internal face of an
-  overlapping or self-intersecting shell);
+  overlapping or self-intersecting shell; where both sides read outside, a part thinner than the field sees, it faces
+  the way most of the mesh does);
 - its leaf's field changes sign across it, and the expression, with every other leaf's sign as it is there, changes
   sign with it: the triangle is on the result's surface, facing its outside (flipped for a subtracted operand, turned
   outward for an inside-out shell).
@@ -183,14 +184,27 @@ def _unit_normals(verts, tris) -> np.ndarray:
 
 def _side_at(leaf, points, normals, offset: float) -> np.ndarray:
     """(N,) +1 where the leaf's field grows across each point along its normal (inside ``offset`` behind it, outside
-    as far in front), -1 where it falls (an inside-out face), 0 where both sides are clearly on one side (by a
-    quarter of ``offset`` or more: an internal face). Near a crease of the mesh one side reads near 0 (interpolation
-    across the crease): that counts by the difference of the two."""
+    as far in front), -1 where it falls (an inside-out face), 0 where both sides are clearly inside (by a quarter of
+    ``offset`` or more: an internal face), THIN where both are clearly outside (a part thinner than the field sees).
+    Near a crease of the mesh one side reads near 0 (interpolation across the crease): that counts by the difference
+    of the two."""
     front = leaf.sample(points + offset * normals, method="linear")
     back = leaf.sample(points - offset * normals, method="linear")
     clear = 0.25 * offset
-    internal = (np.maximum(front, back) < -clear) | (np.minimum(front, back) > clear)
-    return np.where(internal, 0, np.where(front >= back, 1, -1)).astype(np.int8)
+    internal, thin = np.maximum(front, back) < -clear, np.minimum(front, back) > clear
+    return np.where(thin, THIN, np.where(internal, 0, np.where(front >= back, 1, -1))).astype(np.int8)
+
+
+# :func:`_side_at` where both sides of a face read outside: a part of the mesh thinner than the field sees (a cow's
+# ear, a beetle's leg), whose faces face the way most of the mesh's area does (:func:`_outward`).
+THIN = 2
+
+
+def _outward(side: np.ndarray, verts: np.ndarray, tris: np.ndarray) -> int:
+    """+1 where most of a mesh's area (its triangles' ``side``) faces its outside, -1 where it is inside out."""
+    corners = verts[tris].astype(np.float64)
+    area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    return 1 if area[side == 1].sum() >= area[side == -1].sum() else -1
 
 
 @dataclass
@@ -206,6 +220,7 @@ class _Own:
     side: np.ndarray  # (T,) int8
     defect_mesh: object  # wp.Mesh or None
     strips: tuple  # (strip, apex) per triangle
+    thin: int  # the side of a part thinner than the field sees (:func:`_outward`)
 
 
 # A leaf's own part, kept with its source mesh: an unplaced leaf's source is the same object at every boolean its
@@ -231,6 +246,8 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     # a field built on demand: off its mesh, or where that is not clear off its field with the octets there built
     read = (lambda *args: own_sides(*args, _side_at)) if built_on_demand(leaf) else _side_at
     side = read(leaf, centres, normals, offset)
+    thin = _outward(side, verts, tris)
+    side = np.where(side == THIN, thin, side).astype(np.int8)
     # where the mesh passes through itself, some triangle has its own inside on both sides (an internal face): only
     # then are its crossings looked for (the bunny's 69 k triangles take 0.07 s)
     shortest = CROSSING_VOXELS * voxel if (side == 0).any() else None
@@ -242,7 +259,7 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
             indices=wp.array(parts.reshape(-1), dtype=wp.int32, device=device),
         )
     strips = strip_parents(verts, tris, SPLIT_VOXELS * voxel)
-    own = _Own(None if read is not _side_at else leaf.values, offset, device, defects, side, defect_mesh, strips)
+    own = _Own(None if read is not _side_at else leaf.values, offset, device, defects, side, defect_mesh, strips, thin)
     _OWN[source] = own
     return own
 
@@ -264,7 +281,7 @@ def _placed_own(leaf, voxel: float, device) -> _Own | None:
     if defect_mesh is not None:
         points = placement.to_world(defect_mesh.points.numpy()).astype(np.float32)
         defect_mesh = wp.Mesh(points=wp.array(points, dtype=wp.vec3, device=device), indices=defect_mesh.indices)
-    return _Own(leaf.values, SIDE_VOXELS * voxel, device, own.defects, own.side, defect_mesh, own.strips)
+    return _Own(leaf.values, SIDE_VOXELS * voxel, device, own.defects, own.side, defect_mesh, own.strips, own.thin)
 
 
 def _octahedra(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -309,7 +326,7 @@ class _Judge:
         # across its own concave creases)
         self.crossing = bool((own.side == 0).any())
         self.side_offset = self.band if self.crossing else own.offset
-        self.side = own.side  # each source triangle's, at ``side_offset`` when the shell nowhere crosses itself
+        self.side, self.thin = own.side, own.thin  # each source triangle's side (and a thin part's)
         self.strips = own.strips
         self.fused = self._fused() if fused else None
 
@@ -338,6 +355,7 @@ class _Judge:
             own=self.leaves[self.index],
             crossing=self.crossing,
             side_offset=self.side_offset,
+            thin_side=self.thin,
             device=self.device,
         )
 
@@ -435,6 +453,7 @@ class _Judge:
         side = _side_at(
             self.leaves[self.index], np.concatenate([centres, at]), np.r_[normals, normals[whose]], self.side_offset
         )
+        side[side == THIN] = self.thin
         centre, rest = side[: len(tris)], side[len(tris) :]
         wrong = np.bincount(whose, weights=rest != centre[whose], minlength=len(tris))
         crossed = np.bincount(whose, weights=rest != 0, minlength=len(tris))

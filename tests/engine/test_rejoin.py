@@ -52,9 +52,9 @@ def test_a_point_to_avoid_costs_a_large_face_only_a_disc_about_it():
 def test_a_low_polygon_mesh_keeps_the_large_faces_its_first_join_gave_up(monkeypatch):
     # Suzanne (968 triangles, about five voxels each) with a ball: the first join gives up whole faces at a handful
     # of voxel holes where its ears meet its head; judged again clear of those points it keeps their far parts
-    # (measured share of what should be kept: 0.865 with one join, 0.970 with the second; bounds 3x the gap)
+    # (measured share of what should be kept: 0.895 with one join, 0.974 with the second; bounds 3x the gap)
     share, surface = _kept_share("suzanne")
-    assert share >= 0.91, share
+    assert share >= 0.92, share
     assert surface["stats"]["rejoined"] > 0
     assert engine.surface_edges(surface["tris"], len(surface["verts"])) is not None  # closed, consistently oriented
     assert to_manifold(surface["verts"], surface["tris"]).status().name == "NoError"
