@@ -318,10 +318,13 @@ def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, field):
         strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
     # kept loops left unpaired that face each other are zipped to each other
     near = NEAR_VOXELS * voxel
-    twins, twinned = zip_twins(points, k_loops, paired["kept_unpaired"], reach, near, device)
+    twins, twinned = zip_twins(points, k_loops, np.r_[paired["kept_unpaired"], stretched], reach, near, device)
     if len(twinned):
         k_loops = (k_loops[0], k_loops[1][~np.isin(k_loops[2][k_loops[1]], twinned)], k_loops[2])
         paired = {**paired, "kept_unpaired": np.setdiff1d(paired["kept_unpaired"], twinned)}
+        if np.isin(stretched, twinned).any():  # their voxel loops are paired no more
+            paired = _pair_loops(points, k_loops, v_loops, reach, device)
+            strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
     return k_loops, paired, np.concatenate([strips, fills, twins]), stretched, far
 
 
