@@ -208,7 +208,7 @@ def hybrid_surface(
     k_alive, k_border = _drop_pinched(k_tris, ~_doubled_faces(k_tris, n), n)
     judged_alive = k_alive
     v_gone, closed = np.zeros(len(v_tris), dtype=bool), np.ones(len(v_tris), dtype=bool)
-    ways = _vertex_normals(points, v_tris)  # the voxel surface's way at each of its vertices
+    ways = _vertex_normals(points, v_tris, n_k)  # the voxel surface's way at each of its vertices
     over = vertices_over(points, k_tris[k_alive], k_border, np.arange(n_k, n), voxel, device, ways)
     trouble = []
     if partial and not _edges_covered(voxel_tris, len(voxel_verts), over[n_k:]):
@@ -259,11 +259,14 @@ def _edges_covered(tris: np.ndarray, n_verts: int, over: np.ndarray) -> bool:
 LARGE_FACE_VOXELS = 3.0
 
 
-def _vertex_normals(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """(N, 3) float32 the area-weighted normals of the faces at each point, summed (zeros for points of none)."""
-    corners = points[tris].astype(np.float64)
+def _vertex_normals(points: np.ndarray, tris: np.ndarray, first: int) -> np.ndarray:
+    """(N, 3) float32 the area-weighted normals of the faces ``tris`` at each point, summed (zeros for points of none;
+    the faces use points from ``first`` on)."""
+    corners = points[tris]
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    return row_sums(tris.ravel(), np.repeat(normals, 3, axis=0), len(points)).astype(np.float32)
+    out = np.zeros((len(points), 3), dtype=np.float32)
+    out[first:] = row_sums(tris.ravel() - first, np.repeat(normals, 3, axis=0), len(points) - first)
+    return out
 
 
 def _still_over(points, kept, before: np.ndarray, over: np.ndarray, voxel: float, device) -> np.ndarray:
