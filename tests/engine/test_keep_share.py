@@ -53,11 +53,11 @@ def _kept_share(name: str) -> tuple[float, dict]:
 
 # measured at /256, share: teapot 0.997 (a mesh of patches repeating their border vertices), cow 0.999 (its ears
 # thinner than a voxel: 0.988 while their faces were taken for internal ones, 0.9945 while a kept loop paired with a
-# scrap of voxel surface was not zipped to the kept loop facing it), beetle 0.986 (296 open and 47 non-manifold edges;
+# scrap of voxel surface was not zipped to the kept loop facing it), beetle 0.992 (296 open and 47 non-manifold edges;
 # 0.938 while the voxel surface of a thin part's far side was taken for lying over the near side's kept faces, 0.952
-# while pieces of its thin parts were turned unlike their neighbours); the 99 % on the teapot, the cow's and
-# the beetle's bounds three times their shortfall (Suzanne: tests/engine/test_rejoin.py)
-@pytest.mark.parametrize(("name", "least"), [("teapot", 0.99), ("cow", 0.996), ("beetle", 0.955)])
+# while pieces of its thin parts were turned unlike their neighbours, 0.986 with one join); the 99 % on each,
+# bounds three times their shortfall but the teapot's (Suzanne: tests/engine/test_rejoin.py)
+@pytest.mark.parametrize(("name", "least"), [("teapot", 0.99), ("cow", 0.996), ("beetle", 0.975)])
 def test_messy_meshes_keep_most_of_what_should_be_kept(name, least):
     share, s = _kept_share(name)
     assert share >= least, share
