@@ -423,7 +423,7 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
         islands = failed[sizes[failed] * 10 <= int(v_alive.sum())]
         v_gone = v_gone | (any_corner(np.isin(pieces, islands), v_tris) & v_alive)
         open_loop = np.flatnonzero(at_loop & ~np.isin(pieces, islands))
-        members = k_loops[1]
+        members = np.unique(k_border[:, 0])  # every kept border vertex: a loop zipped to its twin's too
         near = nearest_points(points[members], points[open_loop], reach, device)
         at_failed[members[near[near >= 0]]] = failed_at[members[near[near >= 0]]] = True
     at_failed[far] = failed_at[far] = True

@@ -357,16 +357,19 @@ def test_corner_weights_of_kept_faces_give_back_their_corners():
     assert not s["corner_bary"][~s["kept"]].any()
 
 
-def test_the_beetle_with_its_large_holes_united_with_a_ball_is_closed_and_keeps_faces():
+@pytest.mark.parametrize("centre", [(0.2, 0.2, 0.2), (0.2, 0.15, 0.1)])
+def test_the_beetle_with_its_large_holes_united_with_a_ball_is_closed_and_keeps_faces(centre):
+    # (at the second place, kept loops zipped to each other left a voxel loop with no kept loop near it to give faces
+    # up at, round after round: the join fell back to the voxel surface alone)
     beetle = normalised(load_mesh("beetle.obj"))
-    ball = normalised(uv_sphere(1.0), center=(0.2, 0.2, 0.2), diagonal=0.6)
+    ball = normalised(uv_sphere(1.0), center=centre, diagonal=0.6)
     fa, fb = engine.build_fields([beetle, ball], voxel_size=_voxel(beetle, ball))
     field = fa | fb
     s = field.kept_surface()
     _check_closed(s)
     assert s["stats"]["kept_fallback"] == ""
-    # measured: 9,038 faces kept, 144 k in all against 188 k remeshed (loops near its large holes give theirs up)
-    assert s["kept"].sum() > 3000 and len(s["tris"]) < 0.9 * len(field.to_mesh()[1])
+    # measured: 11,600-12,000 faces kept, 81-84 k in all against 188 k remeshed
+    assert s["kept"].sum() > 4000 and len(s["tris"]) < 0.6 * len(field.to_mesh()[1])
 
 
 SHARED = ("alligator", "beetle", "cow", "fandisk", "homer", "rocker-arm", "spot", "stanford-bunny", "suzanne", "teapot")
