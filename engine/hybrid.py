@@ -272,9 +272,8 @@ def _vertex_normals(points: np.ndarray, tris: np.ndarray, first: int) -> np.ndar
 def _still_over(points, kept, before: np.ndarray, over: np.ndarray, voxel: float, device) -> np.ndarray:
     """:func:`.zipper.vertices_over` after the kept faces alive ``before`` were given up down to ``kept`` (tris,
     alive, border, and the voxel surface's way at each point): kept faces are only given up, so a vertex not over them
-    stays so, and one farther than the
-    reach (and margin) from every face given up keeps its closest kept point and sees no new border within it:
-    only the vertices over them within that of the faces given up are read again."""
+    stays so, and one farther than the reach (and margin) from every face given up keeps its closest kept point and
+    sees no new border within it: only the vertices over them within that of the faces given up are read again."""
     tris, alive, border, ways = kept
     gone = tris[before & ~alive]
     if not len(gone):
