@@ -64,9 +64,8 @@ STRAIGHT_VOXELS = 1e-4
 STRAIGHT_RUN_VOXELS = 4.0
 # A triangle's own field is read this many voxels in front of and behind it (its sign must change there).
 SIDE_VOXELS = 0.5
-# Points to keep clear of (where a join gave kept faces up) count as defects this many voxels across (octahedra; 1.0
-# kept Suzanne 0.974 of what it should with a ball, 0.5 0.976).
-AVOID_VOXELS = 0.5
+# Points to keep clear of (where a join gave kept faces up) count as defects this many voxels across (octahedra).
+AVOID_VOXELS = 1.0
 
 AXES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float32)
 UNKNOWN, KEPT, DROPPED = 0, 1, 2
