@@ -304,30 +304,39 @@ def _trouble(points, given_up, at: list, voxel: float) -> dict:
 def _paired_strips(points, kept, k_loops, v_loops, n_kept: int, field):
     """The loops paired (:func:`_pair_loops`) and their strips (:func:`_strips`), with the kept loops that fail and
     are slits closed by themselves (:func:`.slits.fill_slits`) and left out of the pairing, which runs again without
-    them, and the kept loops left unpaired that face each other zipped to each other (:func:`.twins.zip_twins`).
+    them, and the kept loops left unpaired or stretched that face each other zipped to each other
+    (:func:`.twins.zip_twins`).
     Returns ``(k_loops, paired, strips, stretched, far)``: the kept loops left to pair, and as there."""
     voxel, device = field.voxel_size, field.device
     reach = PAIR_VOXELS * voxel
-    paired = _pair_loops(points, k_loops, v_loops, reach, device)
-    strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
+
+    def pair(k_loops):  # the pairs, their strips, and where those stretch
+        paired = _pair_loops(points, k_loops, v_loops, reach, device)
+        return (paired, *_strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device))
+
+    paired, strips, stretched, far = pair(k_loops)
     failed = np.r_[paired["kept_unpaired"], stretched]
     if not len(failed):
         return k_loops, paired, strips, stretched, far
     fills, filled = fill_slits(points, k_loops, failed, kept[0], kept[1], voxel, device, field)
     if len(filled):
-        k_loops = (k_loops[0], k_loops[1][~np.isin(k_loops[2][k_loops[1]], filled)], k_loops[2])
-        paired = _pair_loops(points, k_loops, v_loops, reach, device)
-        strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
-    # kept loops left unpaired that face each other are zipped to each other
+        k_loops = _without_loops(k_loops, filled)
+        paired, strips, stretched, far = pair(k_loops)
+    # kept loops left unpaired, or stretched to a scrap of voxel surface, that face each other are zipped to each other
     near = NEAR_VOXELS * voxel
     twins, twinned = zip_twins(points, k_loops, np.r_[paired["kept_unpaired"], stretched], reach, near, device)
     if len(twinned):
-        k_loops = (k_loops[0], k_loops[1][~np.isin(k_loops[2][k_loops[1]], twinned)], k_loops[2])
-        paired = {**paired, "kept_unpaired": np.setdiff1d(paired["kept_unpaired"], twinned)}
+        k_loops = _without_loops(k_loops, twinned)
         if np.isin(stretched, twinned).any():  # their voxel loops are paired no more
-            paired = _pair_loops(points, k_loops, v_loops, reach, device)
-            strips, stretched, far = _strips(points, k_loops, v_loops, paired["pairs"], reach, n_kept, device)
+            paired, strips, stretched, far = pair(k_loops)
+        else:
+            paired = {**paired, "kept_unpaired": np.setdiff1d(paired["kept_unpaired"], twinned)}
     return k_loops, paired, np.concatenate([strips, fills, twins]), stretched, far
+
+
+def _without_loops(loops, labels):
+    """``loops`` (next, members, labels) less the loops ``labels``."""
+    return loops[0], loops[1][~np.isin(loops[2][loops[1]], labels)], loops[2]
 
 
 def _failing(points, k_loops, paired, stretched, far, rounds: int, voxel: float, device):
