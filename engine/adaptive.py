@@ -40,6 +40,7 @@ import numpy as np
 from .blockedges import edge_levels
 from .components import connected_components
 from .flatness import far_components
+from .normalsums import quad_normal_sums
 from .quadric import CREASE_ANGLE
 from .quads import QUAD_ANGLE, polygon_edges
 
@@ -137,7 +138,7 @@ def _checked(lattice, local, faces, cls, level, ids, tol) -> dict:
     Returns the surface that passed: ``cluster`` (V,), ``position`` (K, 3) cells, ``faces``, ``sizes``."""
     keys = int(ids[1].sum())
     known = {"position": np.full((keys, 3), np.nan), "mean": np.full((keys, 3), np.nan)}
-    outward = _vertex_normals(local, faces[0])
+    outward = quad_normal_sums(local, faces[0], lattice[0].device)  # as extracted, outward as the faces are
     known.update(tris=np.zeros(0, np.int64), far=np.zeros(0, dtype=bool))
     code = _keys(level, ids, np.arange(len(level)))  # each vertex's cluster's key
     round_ = 0
@@ -225,14 +226,6 @@ def _strays(lattice, clusters, faces, sizes, merged, reach: float, key, known: d
     bad = np.zeros(len(position), dtype=bool)
     bad[tris[far].ravel()] = True
     return bad
-
-
-def _vertex_normals(local, corners) -> np.ndarray:
-    """(V, 3) each vertex's faces' normals summed (``corners`` (P, 4), :func:`_padded`: a quad's diagonals' cross
-    product, a triangle's edges', as its last corner repeats), outward as the faces are."""
-    p = local[corners]
-    normal = np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1])
-    return row_sums(corners.ravel(), np.repeat(normal, 4, axis=0), len(local))
 
 
 def _onto_surface(lattice, clusters, moved, tol: float, key, known) -> np.ndarray:

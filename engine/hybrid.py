@@ -23,12 +23,12 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .adaptive import row_sums
 from .coarsen import coarsened
 from .edgehash import KeyCounts, directed_edges
 from .edges import surface_edges
 from .keep import kept_triangles
 from .meshcheck import all_corners, any_corner, compacted, position_groups
+from .normalsums import triangle_normal_sums
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .rejoin import joined_again
@@ -208,7 +208,7 @@ def hybrid_surface(
     k_alive, k_border = _drop_pinched(k_tris, ~_doubled_faces(k_tris, n), n)
     judged_alive = k_alive
     v_gone, closed = np.zeros(len(v_tris), dtype=bool), np.ones(len(v_tris), dtype=bool)
-    ways = _vertex_normals(points, v_tris, n_k)  # the voxel surface's way at each of its vertices
+    ways = triangle_normal_sums(points, v_tris, n_k, device)  # the voxel surface's way at each of its vertices
     over = vertices_over(points, k_tris[k_alive], k_border, np.arange(n_k, n), voxel, device, ways)
     trouble = []
     if partial and not _edges_covered(voxel_tris, len(voxel_verts), over[n_k:]):
@@ -257,16 +257,6 @@ def _edges_covered(tris: np.ndarray, n_verts: int, over: np.ndarray) -> bool:
 # A join's failures worth a second judge are at kept faces given up with an edge longer than this many voxels (the
 # second keeps a few voxels about them clear, :mod:`.rejoin`: smaller faces lose no more in the first).
 LARGE_FACE_VOXELS = 3.0
-
-
-def _vertex_normals(points: np.ndarray, tris: np.ndarray, first: int) -> np.ndarray:
-    """(N, 3) float32 the area-weighted normals of the faces ``tris`` at each point, summed (zeros for points of none;
-    the faces use points from ``first`` on)."""
-    corners = points[tris]
-    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    out = np.zeros((len(points), 3), dtype=np.float32)
-    out[first:] = row_sums(tris.ravel() - first, np.repeat(normals, 3, axis=0), len(points) - first)
-    return out
 
 
 def _still_over(points, kept, before: np.ndarray, over: np.ndarray, voxel: float, device) -> np.ndarray:

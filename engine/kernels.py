@@ -55,6 +55,7 @@ ENGINE_MODULES = (
     "coarsen",
     "edgehash",
     "jumps",
+    "normalsums",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.

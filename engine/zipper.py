@@ -137,18 +137,20 @@ def pinched(halves: np.ndarray, n_verts: int) -> np.ndarray:
     return np.bincount(halves[:, 0], minlength=n_verts) > 1
 
 
-def loop_labels(nxt: np.ndarray, members: np.ndarray) -> np.ndarray:
+def loop_labels(nxt: np.ndarray, members: np.ndarray, device=None) -> np.ndarray:
     """Label of each vertex's loop under the permutation ``nxt`` of ``members`` (the least member of its loop; -1 for
-    vertices not on a loop), by pointer jumping: log2 of the longest loop rounds."""
+    vertices on a path that does not close: one that reaches a vertex not a member), as the connected components
+    (:func:`.components.connected_components`, in Warp) of the edges from each member to its next."""
     label = np.full(len(nxt), -1, dtype=np.int64)
-    label[members] = members
-    jump = nxt.copy()
-    for _ in range(64):
-        step = np.minimum(label[members], label[jump[members]])
-        if np.array_equal(step, label[members]) and np.array_equal(jump[jump[members]], jump[members]):
-            break
-        label[members] = step
-        jump[members] = jump[jump[members]]
+    if not len(members):
+        return label
+    root = connected_components(len(nxt), members, nxt[members], device)
+    open_ = np.zeros(len(nxt), dtype=bool)
+    ends = nxt[members]
+    member = np.zeros(len(nxt), dtype=bool)
+    member[members] = True
+    open_[root[ends[~member[ends]]]] = True  # a path's end is no member: its piece is no loop
+    label[members] = np.where(open_[root[members]], -1, root[members])
     return label
 
 
