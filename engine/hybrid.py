@@ -24,7 +24,7 @@ import numpy as np
 import warp as wp
 
 from .coarsen import coarsened
-from .edgehash import KeyCounts, directed_edges
+from .edgehash import EdgeCounts, directed_edges
 from .edges import surface_edges
 from .keep import kept_triangles
 from .meshcheck import all_corners, any_corner, compacted, position_groups
@@ -249,9 +249,9 @@ def _edges_covered(tris: np.ndarray, n_verts: int, over: np.ndarray) -> bool:
         return True
     corners = np.zeros(n_verts, dtype=bool)
     corners[tris[stay].ravel()] = True
-    _, _, keys, _ = directed_edges(tris[any_corner(corners, tris)], n_verts)
-    _, _, _, twins = directed_edges(tris[stay], n_verts)
-    return bool((KeyCounts(keys).of(twins) > 0).all())
+    a, b, _, _ = directed_edges(tris[any_corner(corners, tris)], n_verts)
+    c, d, _, _ = directed_edges(tris[stay], n_verts)
+    return bool((EdgeCounts(a, b, n_verts).of(d, c) > 0).all())
 
 
 # A join's failures worth a second judge are at kept faces given up with an edge longer than this many voxels (the
@@ -385,16 +385,16 @@ def _loops_at_unpaired_edges(tris, k_loops, v_loops, pairs, n_verts: int) -> np.
 
 def _doubled_faces(tris: np.ndarray, n_verts: int) -> np.ndarray:
     """(T,) bool: the faces with a directed edge some other face lists too."""
-    _, _, keys, _ = directed_edges(tris, n_verts)
-    return (KeyCounts(keys).of(keys) > 1).reshape(-1, 3).any(axis=1)
+    a, b, _, _ = directed_edges(tris, n_verts)
+    return (EdgeCounts(a, b, n_verts).repeats() > 1).reshape(-1, 3).any(axis=1)
 
 
 def unpaired_edge_vertices(tris: np.ndarray, n_verts: int) -> np.ndarray:
     """The vertices of the directed edges that are not used once each way (a surface's open, doubled or flipped
     edges): empty for a closed, consistently oriented surface."""
-    a, b, keys, reverses = directed_edges(tris, n_verts)
-    table = KeyCounts(keys)
-    bad = (table.of(keys) > 1) | (table.of(reverses) == 0)
+    a, b, _, _ = directed_edges(tris, n_verts)
+    table = EdgeCounts(a, b, n_verts)
+    bad = (table.repeats() > 1) | (table.reverses() == 0)
     return np.unique(np.concatenate([a[bad], b[bad]]))
 
 

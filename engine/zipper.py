@@ -23,7 +23,7 @@ import numpy as np
 import warp as wp
 
 from .components import connected_components
-from .edgehash import KeyCounts, directed_edges
+from .edgehash import EdgeCounts, directed_edges
 from .parallel import launch_split
 
 # A voxel-surface vertex is over the kept faces within this many voxels of them.
@@ -87,8 +87,8 @@ def border_halves(tris: np.ndarray, n_verts: int) -> np.ndarray:
     """(B, 2) int64 the directed edges (as the faces list them) whose reverse no face lists: a surface's border."""
     if not len(tris):
         return np.zeros((0, 2), dtype=np.int64)
-    a, b, keys, reverses = directed_edges(tris, n_verts)
-    open_ = KeyCounts(keys).of(reverses) == 0
+    a, b, _, _ = directed_edges(tris, n_verts)
+    open_ = EdgeCounts(a, b, n_verts).reverses() == 0
     return np.stack([a[open_], b[open_]], axis=1)
 
 

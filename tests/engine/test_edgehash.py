@@ -1,10 +1,13 @@
-"""Counting keys through a hash table (engine/edgehash.py) against numpy's sorting, the twin lookups built on it
+"""Counting keys through a hash table and directed edges by their first vertex (engine/edgehash.py) against numpy's
+sorting, the twin lookups built on it
 (a surface's border edges, doubled faces) on meshes with open, doubled and flipped edges, and the weld's grouping of
 vertices by position (engine/meshcheck.py) against numpy's unique rows."""
 
 import numpy as np
+import pytest
 
-from engine.edgehash import KeyCounts, directed_edges
+from engine import edgehash
+from engine.edgehash import EdgeCounts, KeyCounts, directed_edges
 from engine.meshcheck import compacted, position_groups
 from engine.zipper import border_halves
 from tests.support import box_mesh, uv_sphere
@@ -19,6 +22,32 @@ def test_counts_match_numpy_on_random_keys_with_repeats():
     expected = np.where(values[at] == queries, counts[at], 0)
     assert np.array_equal(KeyCounts(keys).of(queries), expected)
     assert np.array_equal(KeyCounts(np.zeros(0, np.int64)).of(queries), np.zeros(len(queries)))
+
+
+@pytest.mark.parametrize("degree", [6, 5_000])  # listed by vertex; a fan's apex past MAX_DEGREE: hashed
+def test_edge_counts_match_numpy_with_repeats_reverses_and_a_fan(degree):
+    rng = np.random.default_rng(degree)
+    n = 4_000
+    a = rng.integers(0, n, size=6 * n)
+    b = (a + rng.integers(1, 9, size=len(a))) % n  # near vertices, some edges repeated, some with their reverse
+    a, b = np.r_[a, b[:500], np.zeros(degree, np.int64)], np.r_[b, a[:500], rng.integers(1, n, degree)]
+    qa, qb = np.r_[a, b, rng.integers(0, n, 300)], np.r_[b, a, rng.integers(0, n, 300)]
+    keys, queries = a * n + b, qa * n + qb
+    values, counts = np.unique(keys, return_counts=True)
+    at = np.minimum(np.searchsorted(values, queries), len(values) - 1)
+    expected = np.where(values[at] == queries, counts[at], 0)
+    table = EdgeCounts(a, b, n)
+    assert (table.hashed is not None) == (degree > edgehash.MAX_DEGREE)
+    assert np.array_equal(table.of(qa, qb), expected)
+    assert np.array_equal(table.repeats(), expected[: len(a)]) and np.array_equal(
+        table.reverses(), expected[len(a) :][: len(a)]
+    )
+    few = EdgeCounts(a[:10], b[:10], n)  # fewer edges than vertices: hashed
+    assert few.hashed is not None
+    assert np.array_equal(
+        few.reverses(), [np.sum((a[:10] == y) & (b[:10] == x)) for x, y in zip(a[:10], b[:10], strict=True)]
+    )
+    assert len(EdgeCounts(a[:0], b[:0], 0).reverses()) == 0
 
 
 def test_border_of_a_sphere_with_a_cap_removed_is_the_cap_rim():
