@@ -26,7 +26,7 @@ from .blends import BLEND_MODES, chamfer_needs, sdf_combine
 from .blendzone import blend_octets
 from .expression import OP_DIFFERENCE, OP_INTERSECTION, OP_UNION, combined
 from .octree import code_bits, level_layout, morton_decode, node_center
-from .ondemand import Refiner, for_boolean, seam_octets
+from .ondemand import along_seams_only, for_boolean, seam_octets
 from .operands import (
     blend_sample,
     estimate,
@@ -454,15 +454,14 @@ def _node_values(layout, finest: dict, args, aligned, origin, h: float, levels: 
 
 
 def _seam_candidates(operands, aligned, origin, h: float, fine_dims, device, blend: float) -> wp.array:
-    """The candidate octets of a boolean made along its seams: an operand built on demand's only where the result
-    keeps them (:func:`.ondemand.seam_octets`: what else is built of it was built for other booleans); one built whole
-    has them all, as without seams."""
+    """The candidate octets of a boolean made along its seams: an operand built on demand's, or a clean mesh's built
+    whole, only where the result keeps them (:func:`.ondemand.seam_octets`: what else is built of it was built for
+    other booleans, or is covered by its kept faces); any other has them all, as without seams."""
     oct_dims = fine_dims // 2
     parts = []
     for f, other, al in zip(operands, operands[::-1], aligned, strict=True):
         codes = operand_octets(f, origin, h, oct_dims, al, device)
-        partly = isinstance(f.refiner, Refiner) and f.refiner.share < 1.0
-        parts.append(seam_octets(codes, f, other, origin, h, blend) if partly else codes)
+        parts.append(seam_octets(codes, f, other, origin, h, blend) if along_seams_only(f, other) else codes)
     return octree.merge_unique(*parts, end_bit=3 * code_bits(oct_dims))
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import threading
+import weakref
 
 import numpy as np
 import warp as wp
@@ -317,8 +318,11 @@ def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
     nodes and their MLS samples, the pruning's brackets) lies within that reach of the result's surface. ``seams``:
     only where the other's surface may be within that reach (the seams, where a boolean that keeps the operands'
     faces makes new surface). An operand that is a boolean built on demand is taken whole. Returns the operands, and
-    whether the result is made along its seams (asked, and an operand built on demand)."""
-    seams = seams and any(isinstance(getattr(f, "refiner", None), Refiner) for f in (a, b))
+    whether the result is made along its seams (asked, and an operand built on demand or one whose octets it builds
+    along them alone: :func:`along_seams_only`)."""
+    seams = seams and any(
+        isinstance(getattr(x, "refiner", None), Refiner) or along_seams_only(x, y) for x, y in ((a, b), (b, a))
+    )
     out = [a, b]
 
     def refine(k, x, y):
@@ -346,23 +350,55 @@ def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
 
 
 def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> wp.array:
-    """Of the result's finest ``octets`` that cover a boolean's operand ``x`` built on demand (codes on the result's
-    lattice: ``origin``, voxel ``h``), those the result keeps along its seams: within SEAM_REACH_VOXELS (and the
-    ``blend``) of the ``other`` operand's surface (:func:`surface_within`), or about ``x``'s holes' caps (built
-    first, :func:`partial_build`: the result's surface there is its own). Elsewhere ``x`` may have octets built for
-    another boolean (its refiner keeps them), at whose edges it is read off coarser nodes; along the seams it is built
-    SEAM_READ_VOXELS farther (:func:`for_boolean`): the result's values there are the full boolean's."""
+    """Of the result's finest ``octets`` that cover a boolean's operand ``x`` (:func:`along_seams_only`: built on
+    demand, or a clean mesh's; codes on the result's lattice: ``origin``, voxel ``h``), those the result keeps along
+    its seams: within SEAM_REACH_VOXELS (and the ``blend``) of the ``other`` operand's surface
+    (:func:`surface_within`), or about ``x``'s holes' caps (built first, :func:`partial_build`: the result's surface
+    there is its own). Elsewhere ``x`` may have octets built for another boolean (its refiner keeps them), at whose
+    edges it is read off coarser nodes; along the seams it is built SEAM_READ_VOXELS farther (:func:`for_boolean`):
+    the result's values there are the full boolean's."""
     codes = octets.numpy()
     if not len(codes):
         return octets
     centres = np.asarray(origin, dtype=np.float64) + (morton_decode_np(codes) + 0.5) * (2.0 * h)
     keep = surface_within(other, centres, SEAM_REACH_VOXELS * h + float(blend))
-    caps, plan = x.refiner.levels.facts["caps"], x.refiner.levels.plan
-    if caps is not None:
+    if isinstance(x.refiner, Refiner) and x.refiner.levels.facts["caps"] is not None:
+        caps, plan = x.refiner.levels.facts["caps"], x.refiner.levels.plan
         local = centres if x.placement is None else x.placement.to_local(centres)
         reach = CAP_REACH_OCTETS * 2.0 * plan["voxel_size"] + _sign_check_reach(plan)
         keep |= _near_caps(caps, local, reach, octets.device)
     return wp.array(codes[keep], dtype=wp.int64, device=octets.device)
+
+
+# The source meshes a kept-faces judge found passing through themselves (:func:`.keep.internal_faces`): a boolean along
+# its seams builds every finest octet of such an operand, whose faces are given up about the crossings (only the voxel
+# surface is there, away from the seams).
+_CROSSING: weakref.WeakSet = weakref.WeakSet()
+
+
+def crosses_itself(field) -> None:
+    """Mark ``field``'s mesh as passing through itself: booleans along their seams build all of its octets."""
+    _CROSSING.update(field.sources.values())
+
+
+def along_seams_only(field, beside) -> bool:
+    """Whether a boolean along its seams builds an operand's finest octets only along them (``beside``: the other
+    operand): one built on demand (its holes' caps too), or a clean closed mesh's built whole (its kept faces are the
+    rest of its surface on the result's), but not a mesh marked as passing through itself (:func:`crosses_itself`),
+    nor a mesh's built whole beside one (whose join gives up kept faces about its crossings, the other's too, farther
+    from the seams than their voxel surface would reach)."""
+    if _crossing(field):
+        return False
+    if built_on_demand(field):
+        return True
+    stats = field.stats
+    plain = stats.get("thickness") is None and not stats.get("flat", False) and len(field.sources) == 1
+    clean = bool(stats.get("clean_mesh", False)) and plain and getattr(field, "expression", None) is None
+    return clean and not _crossing(beside)
+
+
+def _crossing(field) -> bool:
+    return any(source in _CROSSING for source in field.sources.values())
 
 
 def surface_within(field, points: np.ndarray, reach: float) -> np.ndarray:

@@ -1,10 +1,11 @@
 """A boolean's kept faces along its seams alone: its voxel surface made only there (:mod:`.ondemand`).
 
-A boolean of fields built on demand made with ``seams=True`` has its finest octets only where the operands' surfaces
-come near each other; its kept surface (:func:`.hybrid.kept_surface`) joins the kept faces to the voxel surface
-there, the operands read as built. An operand with internal faces (that passes through itself) is read at every
-sample: it is built whole first. Where the voxel surface ends short of the kept faces (the judge gave up faces away
-from the seams), the whole result is made and joined instead.
+A boolean of fields built on demand (or of clean closed meshes' fields) made with ``seams=True`` has its finest
+octets only where the operands' surfaces come near each other; its kept surface (:func:`.hybrid.kept_surface`) joins
+the kept faces to the voxel surface there, the operands read as built. An operand with internal faces (that passes
+through itself) is read at every sample: it is built whole first, and the voxel surface made along all of it. Where
+the voxel surface ends short of the kept faces (the judge gave up faces away from the seams), the whole result is
+made and joined instead.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 from .expression import leaves
 from .hybrid import kept_surface
 from .keep import internal_faces
-from .ondemand import as_built, built_leaves, built_on_demand, refined
+from .ondemand import along_seams_only, as_built, built_leaves, crosses_itself, refined
 
 
 def kept_along_seams(field, **options) -> dict:
@@ -24,11 +25,14 @@ def kept_along_seams(field, **options) -> dict:
     ``face_sources``, read where they were made."""
     whole = lambda: _read_as_built(refined(field, view=True))  # noqa: E731
     # an operand with internal faces (it crosses itself, or reads so in a narrow groove) has its own field read at
-    # every sample by the judge: built whole (its sides found here are kept with its mesh for the judge)
+    # every sample by the judge: built whole (its sides found here are kept with its mesh for the judge), and its
+    # faces are given up about where it crosses itself, away from the seams too: the voxel surface is made along all
+    # of it (marked so for the next booleans)
     pairs = zip(leaves(field.expression), leaves(built_leaves(field.expression)), strict=True)
-    crossing = [leaf for leaf, view in pairs if built_on_demand(view) and internal_faces(view, field.voxel_size)]
+    crossing = [leaf for leaf, view in pairs if _seams_only(view, field) and internal_faces(view, field.voxel_size)]
     for leaf in crossing:
         refined(leaf)
+        crosses_itself(leaf)
     if crossing:  # made again: the voxel surface along all of such an operand (its internal faces are given up)
         field = field.refiner.along_seams()
     seams = _read_as_built(as_built(field))
@@ -37,6 +41,13 @@ def kept_along_seams(field, **options) -> dict:
         new = np.flatnonzero(~surface["kept"])
         surface["new_sources"] = (new, *seams.face_sources(surface["verts"], surface["tris"][new]))
     return surface
+
+
+def _seams_only(view, field) -> bool:
+    """Whether the boolean ``field`` (along its seams) holds the octets of its leaf read as ``view`` only about its
+    seams (:func:`.ondemand.along_seams_only`, beside any of its other leaves)."""
+    others = [leaf for leaf in leaves(field.expression) if leaf.sources is not view.sources]
+    return any(along_seams_only(view, other) for other in others)
 
 
 def _read_as_built(view):
