@@ -362,8 +362,9 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
         return octets
     centres = np.asarray(origin, dtype=np.float64) + (morton_decode_np(codes) + 0.5) * (2.0 * h)
     keep = surface_within(other, centres, SEAM_REACH_VOXELS * h + float(blend))
-    if isinstance(x.refiner, Refiner) and x.refiner.levels.facts["caps"] is not None:
-        caps, plan = x.refiner.levels.facts["caps"], x.refiner.levels.plan
+    caps = x.stats.get("hole_caps")
+    if caps is not None:
+        plan = {"voxel_size": x.voxel_size, "levels": x.levels}
         local = centres if x.placement is None else x.placement.to_local(centres)
         reach = CAP_REACH_OCTETS * 2.0 * plan["voxel_size"] + _sign_check_reach(plan)
         keep |= _near_caps(caps, local, reach, octets.device)
@@ -382,19 +383,19 @@ def crosses_itself(field) -> None:
 
 
 def along_seams_only(field, beside) -> bool:
-    """Whether a boolean along its seams builds an operand's finest octets only along them (``beside``: the other
-    operand): one built on demand (its holes' caps too), or a clean closed mesh's built whole (its kept faces are the
-    rest of its surface on the result's), but not a mesh marked as passing through itself (:func:`crosses_itself`),
-    nor a mesh's built whole beside one (whose join gives up kept faces about its crossings, the other's too, farther
-    from the seams than their voxel surface would reach)."""
+    """Whether a boolean along its seams builds an operand's finest octets only along them and about its holes' caps
+    (``beside``: the other operand): one built on demand, or a mesh's built whole that is closed or whose only defects
+    are holes (its kept faces are the rest of its surface on the result's), but not a mesh marked as passing through
+    itself (:func:`crosses_itself`), nor a mesh's built whole beside one (whose join gives up kept faces about its
+    crossings, the other's too, farther from the seams than their voxel surface would reach)."""
     if _crossing(field):
         return False
     if built_on_demand(field):
         return True
     stats = field.stats
     plain = stats.get("thickness") is None and not stats.get("flat", False) and len(field.sources) == 1
-    clean = bool(stats.get("clean_mesh", False)) and plain and getattr(field, "expression", None) is None
-    return clean and not _crossing(beside)
+    holes_only = stats.get("clean_mesh", False) or "hole_caps" in stats
+    return bool(holes_only) and plain and getattr(field, "expression", None) is None and not _crossing(beside)
 
 
 def _crossing(field) -> bool:
