@@ -15,7 +15,7 @@ import numpy as np
 from .expression import leaves
 from .hybrid import kept_surface
 from .keep import internal_faces
-from .ondemand import along_seams_only, as_built, built_leaves, crosses_itself, refined
+from .ondemand import along_seams_only, as_built, built_leaves, built_on_demand, crosses_itself, refined
 
 
 def kept_along_seams(field, **options) -> dict:
@@ -29,7 +29,7 @@ def kept_along_seams(field, **options) -> dict:
     # faces are given up about where it crosses itself, away from the seams too: the voxel surface is made along all
     # of it (marked so for the next booleans)
     pairs = zip(leaves(field.expression), leaves(built_leaves(field.expression)), strict=True)
-    crossing = [leaf for leaf, view in pairs if _seams_only(view, field) and internal_faces(view, field.voxel_size)]
+    crossing = [leaf for leaf, view in pairs if _partly(view, field) and internal_faces(view, field.voxel_size)]
     for leaf in crossing:
         refined(leaf)
         crosses_itself(leaf)
@@ -43,11 +43,12 @@ def kept_along_seams(field, **options) -> dict:
     return surface
 
 
-def _seams_only(view, field) -> bool:
-    """Whether the boolean ``field`` (along its seams) holds the octets of its leaf read as ``view`` only about its
-    seams (:func:`.ondemand.along_seams_only`, beside any of its other leaves)."""
+def _partly(view, field) -> bool:
+    """Whether the boolean ``field`` (along its seams) may hold a part of the octets of its leaf read as ``view``: it
+    was built on demand, or its octets are kept along the seams alone (:func:`.ondemand.along_seams_only`, beside any
+    of the other leaves)."""
     others = [leaf for leaf in leaves(field.expression) if leaf.sources is not view.sources]
-    return any(along_seams_only(view, other) for other in others)
+    return built_on_demand(view) or any(along_seams_only(view, other) for other in others)
 
 
 def _read_as_built(view):

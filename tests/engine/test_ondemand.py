@@ -238,6 +238,11 @@ def test_an_operand_that_passes_through_itself_is_built_whole_for_its_kept_faces
     # the same judge; the voxel surface's extent (along the seams alone) moves a few faces at its end (measured 8 kept
     # faces more of 3,811)
     assert abs(len(kept["tris"]) / len(want["tris"]) - 1) < 0.01 and abs(kept["kept"].sum() - want["kept"].sum()) < 16
+    # marked: the next boolean builds all of it at once (the ball built on demand along the seams, as before),
+    # joined without the whole result
+    assert not ondemand.along_seams_only(a, b) and ondemand.along_seams_only(b, a)
+    again = engine.difference(a, b, seams=True)
+    assert len(again.kept_surface()["tris"]) == len(kept["tris"]) and again.refiner.whole is None
 
 
 @pytest.mark.parametrize("hole", [False, True])  # spot, and spot with a hole in its back (about its cap too)
