@@ -16,6 +16,7 @@ from .expression import leaves
 from .hybrid import kept_surface
 from .keep import internal_faces
 from .ondemand import along_seams_only, as_built, built_leaves, built_on_demand, crosses_itself, refined
+from .parallel import run_tasks
 
 
 def kept_along_seams(field, **options) -> dict:
@@ -28,8 +29,15 @@ def kept_along_seams(field, **options) -> dict:
     # every sample by the judge: built whole (its sides found here are kept with its mesh for the judge), and its
     # faces are given up about where it crosses itself, away from the seams too: the voxel surface is made along all
     # of it (marked so for the next booleans)
-    pairs = zip(leaves(field.expression), leaves(built_leaves(field.expression)), strict=True)
-    crossing = [leaf for leaf, view in pairs if _partly(view, field) and internal_faces(view, field.voxel_size)]
+    pairs = list(zip(leaves(field.expression), leaves(built_leaves(field.expression)), strict=True))
+    found = {}  # side by side (each leaf's own part, kept with its mesh for the judge)
+    tasks = [
+        lambda k=k, view=view: found.update({k: internal_faces(view, field.voxel_size)})
+        for k, (_, view) in enumerate(pairs)
+        if _partly(view, field)
+    ]
+    run_tasks(tasks, field.device)
+    crossing = [leaf for k, (leaf, _) in enumerate(pairs) if found.get(k, False)]
     for leaf in crossing:
         refined(leaf)
         crosses_itself(leaf)
