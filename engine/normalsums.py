@@ -50,37 +50,28 @@ def triangle_normal_sums(points: np.ndarray, tris: np.ndarray, first: int = 0, d
     twice the area) of the triangles ``tris`` (T, 3) at it; zeros for points of none. The triangles use points from
     ``first`` on only."""
     out = np.zeros((len(points), 3), dtype=np.float32)
-    if not len(tris):
-        return out
-    sums = wp.zeros(len(points) - first, dtype=wp.vec3d, device=device)
-    wp.launch(
-        _triangle_sums_kernel,
-        dim=len(tris),
-        inputs=[
-            wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device),
-            wp.array(np.ascontiguousarray(tris, dtype=np.int32), dtype=wp.int32, device=device),
-            int(first),
-            sums,
-        ],
-        device=device,
-    )
-    out[first:] = sums.numpy()
+    typed = (points, np.float32, wp.vec3)
+    out[first:] = _summed(_triangle_sums_kernel, typed, tris, len(points) - first, device, first)
     return out
 
 
 def quad_normal_sums(points: np.ndarray, corners: np.ndarray, device=None) -> np.ndarray:
     """(N, 3) float64: at each of ``points`` (N, 3), the sum of the normals of the polygons ``corners`` (P, 4) at
     it (a quad's diagonals' cross product; a triangle given with its last corner repeated counts there twice)."""
-    sums = wp.zeros(len(points), dtype=wp.vec3d, device=device)
+    return _summed(_quad_sums_kernel, (points, np.float64, wp.vec3d), corners, len(points), device)
+
+
+def _summed(kernel, points: tuple, corners: np.ndarray, n: int, device, *options) -> np.ndarray:
+    """(n, 3) float64 the sums ``kernel`` adds up over the faces ``corners`` (``points``: the array, its numpy and
+    Warp types; ``options`` go between the faces and the sums)."""
+    sums = wp.zeros(n, dtype=wp.vec3d, device=device)
     if len(corners):
-        wp.launch(
-            _quad_sums_kernel,
-            dim=len(corners),
-            inputs=[
-                wp.array(np.ascontiguousarray(points, dtype=np.float64), dtype=wp.vec3d, device=device),
-                wp.array(np.ascontiguousarray(corners, dtype=np.int32), dtype=wp.int32, device=device),
-                sums,
-            ],
-            device=device,
-        )
+        values, np_type, wp_type = points
+        inputs = [
+            wp.array(np.ascontiguousarray(values, dtype=np_type), dtype=wp_type, device=device),
+            wp.array(np.ascontiguousarray(corners, dtype=np.int32), dtype=wp.int32, device=device),
+            *(int(x) for x in options),
+            sums,
+        ]
+        wp.launch(kernel, dim=len(corners), inputs=inputs, device=device)
     return sums.numpy()
