@@ -454,9 +454,10 @@ def _node_values(layout, finest: dict, args, aligned, origin, h: float, levels: 
 
 
 def _seam_candidates(operands, aligned, origin, h: float, fine_dims, device, blend: float) -> wp.array:
-    """The candidate octets of a boolean made along its seams: an operand built on demand's, or a clean mesh's built
-    whole, only where the result keeps them (:func:`.ondemand.seam_octets`: what else is built of it was built for
-    other booleans, or is covered by its kept faces); any other has them all, as without seams."""
+    """The candidate octets of a boolean made along its seams: an operand built on demand's, or a mesh's built whole
+    that is closed or open only at holes, only where the result keeps them (:func:`.ondemand.along_seams_only`,
+    :func:`.ondemand.seam_octets`: what else is built of it was built for other booleans, or is covered by its kept
+    faces); any other has them all, as without seams."""
     oct_dims = fine_dims // 2
     parts = []
     for f, other, al in zip(operands, operands[::-1], aligned, strict=True):

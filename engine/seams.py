@@ -1,11 +1,11 @@
 """A boolean's kept faces along its seams alone: its voxel surface made only there (:mod:`.ondemand`).
 
-A boolean of fields built on demand (or of clean closed meshes' fields) made with ``seams=True`` has its finest
-octets only where the operands' surfaces come near each other; its kept surface (:func:`.hybrid.kept_surface`) joins
-the kept faces to the voxel surface there, the operands read as built. An operand with internal faces (that passes
-through itself) is read at every sample: it is built whole first, and the voxel surface made along all of it. Where
-the voxel surface ends short of the kept faces (the judge gave up faces away from the seams), the whole result is
-made and joined instead.
+A boolean of fields built on demand (or of meshes' fields built whole, closed or open only at holes) made with
+``seams=True`` has its finest octets only where the operands' surfaces come near each other; its kept surface
+(:func:`.hybrid.kept_surface`) joins the kept faces to the voxel surface there, the operands read as built. An
+operand with internal faces (that passes through itself) is read at every sample: it is built whole first, and the
+voxel surface made along all of it. Where the voxel surface ends short of the kept faces (the judge gave up faces
+away from the seams), the whole result is made and joined instead.
 """
 
 from __future__ import annotations
