@@ -101,3 +101,46 @@ def _near_kernel(
 ):
     i = wp.tid()
     out[i] = wp.where(near_sphere(bvh, spheres, points[i], reach), wp.uint8(1), wp.uint8(0))
+
+
+@wp.kernel(enable_backward=False)
+def _clear_kernel(
+    bvh: wp.uint64,
+    spheres: wp.array[wp.vec4],
+    centres: wp.array[wp.vec3],
+    radii: wp.array[wp.float32],
+    bound: wp.array[wp.float32],
+):
+    """Each ball (centre, radius)'s ``bound`` lowered to its gap to the nearest sphere (0 where they meet)."""
+    i = wp.tid()
+    c, r = centres[i], radii[i]
+    b = float(bound[i])
+    if bvh != wp.uint64(0) and b > 0.0:
+        reach = b + r
+        query = wp.bvh_query_aabb(bvh, c - wp.vec3(reach), c + wp.vec3(reach))
+        k = int(0)
+        while wp.bvh_query_next(query, k):
+            s = spheres[k]
+            b = wp.min(b, wp.max(wp.length(c - wp.vec3(s[0], s[1], s[2])) - s[3] - r, 0.0))
+    bound[i] = b
+
+
+def clear_of(jumps: JumpSpheres, verts: np.ndarray, tris: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    """(T,) float32 ``bound`` (per triangle of ``verts``, ``tris``) lowered where a sphere of ``jumps`` comes nearer
+    the triangle (a lower bound of the gap: from the ball about it at its centroid): how far each triangle can move
+    against the field without its sign jumping there (``anywhere``: nowhere, 0)."""
+    bound = np.ascontiguousarray(bound, dtype=np.float32).copy()
+    if jumps.anywhere:
+        return np.zeros_like(bound)
+    if not len(tris) or int(jumps.bvh_id) == 0:
+        return bound
+    corners = np.asarray(verts, dtype=np.float64)[tris]
+    centres = corners.mean(axis=1)
+    radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1) * (1.0 + 1e-5) + 1e-6  # (float32)
+    device = jumps.spheres.device
+    out = wp.array(bound, dtype=wp.float32, device=device)
+    args = [
+        wp.array(x.astype(np.float32), dtype=t, device=device) for x, t in ((centres, wp.vec3), (radii, wp.float32))
+    ]
+    wp.launch(_clear_kernel, len(tris), inputs=[jumps.bvh_id, jumps.spheres, *args, out], device=device)
+    return out.numpy()

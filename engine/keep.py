@@ -35,7 +35,7 @@ import warp as wp
 from . import verdicts
 from .expression import evaluate_signs, leaves, widest_blend
 from .judging import MAX_TABLE_LEAVES, FusedJudge, sign_patterns
-from .jumps import JumpSpheres, jump_spheres
+from .jumps import JumpSpheres, clear_of, jump_spheres
 from .meshcheck import defect_edges
 from .ondemand import built_on_demand, own_sides
 from .orient import patch_flips
@@ -583,7 +583,8 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     unplaced = next(iter(leaves(field.expression)[index].sources.values()))
     longest, turn = edge_turns(verts, tris)
     slack = judge.slack_of(longest)
-    exact = [bvh is not None and jumps is None for bvh, jumps in zip(judge.bvhs, judge.jumps, strict=True)]
+    # moves are bounded by a leaf's distances read off its mesh (and where its sign may jump, by its jump spheres)
+    exact = [b is not None and (j is None or not j.anywhere) for b, j in zip(judge.bvhs, judge.jumps, strict=True)]
     setting = (field.expression, index, field.voxel_size, judge.band)
     found = None if judge.avoiding else verdicts.reused(unplaced, *setting, slack, exact)
     status, flip, margin = (
@@ -591,7 +592,7 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     )
     status, flip, margin = status.copy(), flip.copy(), margin.astype(np.float32)
     todo = np.flatnonzero(status == UNKNOWN)
-    # kept for the next boolean where it can reuse them: another leaf's moves bounded (read exactly)
+    # kept for the next boolean where it can reuse them: another leaf's moves bounded (read off its mesh)
     reusable = not judge.avoiding and any(e for j, e in enumerate(exact) if j != index)
     beyond = verdicts.REUSE_VOXELS * field.voxel_size if reusable else None
     kept, partly, flip[todo] = judge.judge(verts, tris[todo], todo, longest[todo], turn[todo], beyond)
@@ -601,6 +602,9 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
         return status, flip
     # what the next boolean may reuse: kept whole, or dropped by signs alone or by the mesh itself
     margin[todo] = np.where(judge.found["own_only"], np.inf, judge.found["margin"])
+    rows = todo[np.isfinite(margin[todo])]  # (not where the mesh itself decided)
+    for jumps in (jumps for j, jumps in enumerate(judge.jumps) if j != index and jumps is not None):
+        margin[rows] = clear_of(jumps, verts, tris[rows], margin[rows])
     record = status.copy()
     dropped_by_distance = (status[todo] == DROPPED) & ~judge.found["signs_only"] & ~judge.found["own_only"]
     record[todo[dropped_by_distance]] = UNKNOWN

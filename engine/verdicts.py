@@ -11,9 +11,11 @@ least distance less the shifts is above the band and its slack; a triangle dropp
 expression did not cross anywhere on it (buried in another operand: signs only) or its own mesh ruled it out (a
 defect). Partly kept triangles, and any triangle the bound cannot settle, are judged again from scratch.
 
-Only leaves whose distances are exact where they are read can move (clean closed meshes, read through their BVH): a
-moved field read through its interpolant (an open mesh, an offset) gives no bound, and nothing is reused. The distances
-are kept to ``REUSE_VOXELS`` beyond the band so that moves of a few voxels (a drag's steps) still find them.
+Only leaves whose distances are exact where they are read can move (meshes, read through their BVH): a moved field
+read through its interpolant alone (an offset) gives no bound, and nothing is reused. An open or messy mesh's sign
+may also jump away from its triangles, about its defect edges (:mod:`.jumps`): a triangle's margin beside one is at
+most its gap to those spheres (:func:`.jumps.clear_of`). The distances are kept to ``REUSE_VOXELS`` beyond the band
+so that moves of a few voxels (a drag's steps) still find them.
 
 Written by hand: a record per leaf of three arrays over its triangles and the placements they were found at.
 """
@@ -122,7 +124,8 @@ def reused(source, expression, index: int, voxel: float, band: float, slack: np.
         expression: The boolean's expression; ``index`` the leaf's place among its leaves.
         voxel, band: The result's voxel size and the judge's band.
         slack: (T,) each triangle's slack in its first round.
-        exact: Per leaf, whether its distances are read exactly (a BVH).
+        exact: Per leaf, whether its distances are read exactly (a BVH; where its sign may jump, its jump spheres
+            bound the margins).
     Returns:
         ``(status, flip, margin)``: (T,) int8 KEPT or DROPPED where reused, UNKNOWN elsewhere; (T,) bool; (T,) float32
         the lower bound of the other leaves' distance now (for the next record), or None when nothing is reusable.

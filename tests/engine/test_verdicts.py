@@ -90,12 +90,24 @@ def test_another_expression_a_rebuilt_field_or_a_far_move_reuses_nothing(reuse_l
     assert all(count in (None, 0) for count in far), far  # a move far beyond the distances kept settles nothing
 
 
-def test_a_moved_leaf_read_through_its_field_gives_no_bound(reuse_log):
+def test_a_moved_open_leaf_is_bounded_by_its_jump_spheres_and_a_moved_offset_gives_no_bound(reuse_log):
     (ball, _), voxel = _ball_and_box()
     verts, tris = normalised(uv_sphere(1.0, rings=24, segments=48), center=(0.3, 0.2, 0.2), diagonal=0.6)
-    open_cap = tris[~(verts[tris][:, :, 2] > 0.25).all(axis=1)]  # the top cap gone: an open mesh, read by its field
+    open_cap = tris[~(verts[tris][:, :, 2] > 0.25).all(axis=1)]  # the top cap gone: its sign may jump over the hole
     (cutter,) = engine.build_fields([(verts, open_cap)], voxel_size=voxel, field_ids=[1])
     engine.difference(ball, cutter).kept_surface()
-    engine.difference(ball, _moved(cutter, (voxel, 0.0, 0.0))).kept_surface()
+    moved = _moved(cutter, (voxel, 0.0, 0.0))
+    reusing = engine.difference(ball, moved).kept_surface()
     ball_entry = [count for index, count, _ in reuse_log[-2:] if index == 0]
-    assert ball_entry == [None], ball_entry  # the ball's triangles: the open cutter moved, no bound
+    assert ball_entry[0] is not None and ball_entry[0] > 0.5 * len(ball.sources[0].tris), ball_entry
+    kept_records = dict(verdicts._RECORDS)
+    verdicts.forget()
+    fresh = engine.difference(ball, moved).kept_surface()  # the surface a fresh judge gives
+    verdicts._RECORDS.update(kept_records)
+    assert np.array_equal(reusing["verts"], fresh["verts"]) and np.array_equal(reusing["tris"], fresh["tris"])
+    assert np.array_equal(reusing["kept"], fresh["kept"])
+    # an offset is read through its field alone: moved, it bounds nothing
+    grown = engine.offset(cutter, voxel)
+    engine.difference(ball, grown).kept_surface()
+    engine.difference(ball, _moved(grown, (voxel, 0.0, 0.0))).kept_surface()
+    assert reuse_log[-1][:2] == (0, None), reuse_log[-1]  # (the ball's the only mesh leaf judged)
