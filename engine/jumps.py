@@ -82,17 +82,23 @@ class JumpSpheres:
 
 
 @wp.func
-def near_sphere(bvh: wp.uint64, spheres: wp.array[wp.vec4], x: wp.vec3, reach: float) -> bool:
-    """Whether ``x`` lies within ``reach`` of one of the spheres (``bvh`` of their boxes, 0: there are none)."""
-    near = bool(False)
+def sphere_gap(bvh: wp.uint64, spheres: wp.array[wp.vec4], x: wp.vec3, reach: float) -> float:
+    """How far ``x`` lies from the nearest of the spheres (negative inside one), ``reach`` where none comes within it
+    (``bvh`` of their boxes, 0: there are none)."""
+    gap = reach
     if bvh != wp.uint64(0):
         query = wp.bvh_query_aabb(bvh, x - wp.vec3(reach), x + wp.vec3(reach))
         k = int(0)
         while wp.bvh_query_next(query, k):
             s = spheres[k]
-            if wp.length(x - wp.vec3(s[0], s[1], s[2])) < s[3] + reach:
-                near = True
-    return near
+            gap = wp.min(gap, wp.length(x - wp.vec3(s[0], s[1], s[2])) - s[3])
+    return gap
+
+
+@wp.func
+def near_sphere(bvh: wp.uint64, spheres: wp.array[wp.vec4], x: wp.vec3, reach: float) -> bool:
+    """Whether ``x`` lies within ``reach`` of one of the spheres (:func:`sphere_gap`)."""
+    return sphere_gap(bvh, spheres, x, reach) < reach
 
 
 @wp.kernel(enable_backward=False)
@@ -113,15 +119,10 @@ def _clear_kernel(
 ):
     """Each ball (centre, radius)'s ``bound`` lowered to its gap to the nearest sphere (0 where they meet)."""
     i = wp.tid()
-    c, r = centres[i], radii[i]
+    r = radii[i]
     b = float(bound[i])
-    if bvh != wp.uint64(0) and b > 0.0:
-        reach = b + r
-        query = wp.bvh_query_aabb(bvh, c - wp.vec3(reach), c + wp.vec3(reach))
-        k = int(0)
-        while wp.bvh_query_next(query, k):
-            s = spheres[k]
-            b = wp.min(b, wp.max(wp.length(c - wp.vec3(s[0], s[1], s[2])) - s[3] - r, 0.0))
+    if b > 0.0:
+        b = wp.min(b, wp.max(sphere_gap(bvh, spheres, centres[i], b + r) - r, 0.0))
     bound[i] = b
 
 

@@ -584,16 +584,16 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     longest, turn = edge_turns(verts, tris)
     slack = judge.slack_of(longest)
     # moves are bounded by a leaf's distances read off its mesh (and where its sign may jump, by its jump spheres)
-    exact = [b is not None and (j is None or not j.anywhere) for b, j in zip(judge.bvhs, judge.jumps, strict=True)]
+    bounded = [b is not None and (j is None or not j.anywhere) for b, j in zip(judge.bvhs, judge.jumps, strict=True)]
     setting = (field.expression, index, field.voxel_size, judge.band)
-    found = None if judge.avoiding else verdicts.reused(unplaced, *setting, slack, exact)
+    found = None if judge.avoiding else verdicts.reused(unplaced, *setting, slack, bounded)
     status, flip, margin = (
         found if found is not None else (np.zeros(len(tris), np.int8), np.zeros(len(tris), bool), np.zeros(len(tris)))
     )
     status, flip, margin = status.copy(), flip.copy(), margin.astype(np.float32)
     todo = np.flatnonzero(status == UNKNOWN)
     # kept for the next boolean where it can reuse them: another leaf's moves bounded (read off its mesh)
-    reusable = not judge.avoiding and any(e for j, e in enumerate(exact) if j != index)
+    reusable = not judge.avoiding and any(e for j, e in enumerate(bounded) if j != index)
     beyond = verdicts.REUSE_VOXELS * field.voxel_size if reusable else None
     kept, partly, flip[todo] = judge.judge(verts, tris[todo], todo, longest[todo], turn[todo], beyond)
     split = partly & ~kept & (longest[todo] > SPLIT_VOXELS * field.voxel_size)
