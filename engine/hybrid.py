@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .carried import carried, remember
 from .coarsen import coarsened
 from .edgehash import EdgeCounts, directed_edges
 from .edges import surface_edges
@@ -546,9 +547,10 @@ def kept_surface(
         # a reflection turned every face over: the quads' halves read in quad order again
         return quad_halves_first(surface) if field.placement.mirrors else surface
     found = {}  # the voxel surface and the operands' triangles judged, side by side (independent work)
+    avoid = carried(field)  # where the last boolean over a leaf gave its faces up (:mod:`.carried`)
     run_tasks(
         [lambda: found.update(mesh=field.to_mesh(sharp=sharp, quads=True))]
-        + ([lambda: found.update(judged=kept_triangles(field))] if field.expression is not None else []),
+        + ([lambda: found.update(judged=kept_triangles(field, avoid=avoid))] if field.expression is not None else []),
         field.device,
     )
     verts, faces, sizes = found["mesh"]
@@ -559,7 +561,8 @@ def kept_surface(
         partial = whole is not None  # the voxel surface along the seams alone
         surface = hybrid_surface(field, verts, tris, found["judged"], partial)
         join = lambda judged: hybrid_surface(field, verts, tris, judged, partial)  # noqa: E731
-        surface = joined_again(field, surface, join, found["judged"])
+        surface, avoided = joined_again(field, surface, join, found["judged"], avoid)
+        remember(field, avoided if not surface["stats"]["kept_fallback"] else np.zeros((0, 3)))
         if whole is not None and surface["stats"]["kept_fallback"]:  # along the seams alone: the whole result's
             return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
         surface = coarsened(field, surface, adaptivity, regions)

@@ -318,7 +318,7 @@ class _Judge:
         self.bvhs, self.jumps = reads  # per leaf, :func:`leaf_bvh` and :func:`leaf_jumps`
         own = _own_part(self.leaves[index], source, voxel, self.device)
         self.tris, self.defects, self.defect_mesh = source.tris.astype(np.int64), own.defects, own.defect_mesh
-        self.avoiding = avoid is not None and len(avoid) > 0
+        self.avoid, self.avoiding = avoid, avoid is not None and len(avoid) > 0
         if self.avoiding:
             self.defect_mesh = _defects_and(own.defect_mesh, avoid, 0.5 * AVOID_VOXELS * voxel, self.device)
         # a shell with internal faces (overlapping or self-intersecting) is read a band away on both sides, so that
@@ -479,7 +479,8 @@ def kept_triangles(field, *, fused: bool = True, avoid=None, previous: list | No
         fused: Judge in two launches a round where that applies (:mod:`.judging`); False: always sample by sample
             (the same verdicts, slower).
         avoid: Optional (P, 3) points (the field's frame) every leaf keeps clear of as of a defect of its own (where
-            a join gave kept faces up: their far parts are kept as pieces); no verdict is reused or kept for reuse.
+            a join gave kept faces up: their far parts are kept as pieces); verdicts are reused where the last judge
+            kept clear of the same points near the leaf (:mod:`.verdicts`).
         previous: This function's answer for the same field with fewer ``avoid`` points: a leaf none of the points
             comes near enough to change a verdict of is taken from it, not judged again.
     Returns:
@@ -586,14 +587,16 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     # moves are bounded by a leaf's distances read off its mesh (and where its sign may jump, by its jump spheres)
     bounded = [b is not None and (j is None or not j.anywhere) for b, j in zip(judge.bvhs, judge.jumps, strict=True)]
     setting = (field.expression, index, field.voxel_size, judge.band)
-    found = None if judge.avoiding else verdicts.reused(unplaced, *setting, slack, bounded)
+    reach = judge.band + (verdicts.REUSE_VOXELS + AVOID_VOXELS + 1.0) * field.voxel_size + float(slack.max())
+    avoided = verdicts.avoided_near(judge.leaves, judge.bvhs, index, judge.avoid, reach, field.device)
+    found = verdicts.reused(unplaced, *setting, slack, bounded, avoided)
     status, flip, margin = (
         found if found is not None else (np.zeros(len(tris), np.int8), np.zeros(len(tris), bool), np.zeros(len(tris)))
     )
     status, flip, margin = status.copy(), flip.copy(), margin.astype(np.float32)
     todo = np.flatnonzero(status == UNKNOWN)
     # kept for the next boolean where it can reuse them: another leaf's moves bounded (read off its mesh)
-    reusable = not judge.avoiding and any(e for j, e in enumerate(bounded) if j != index)
+    reusable = any(e for j, e in enumerate(bounded) if j != index)
     beyond = verdicts.REUSE_VOXELS * field.voxel_size if reusable else None
     kept, partly, flip[todo] = judge.judge(verts, tris[todo], todo, longest[todo], turn[todo], beyond)
     split = partly & ~kept & (longest[todo] > SPLIT_VOXELS * field.voxel_size)
@@ -608,5 +611,5 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     record = status.copy()
     dropped_by_distance = (status[todo] == DROPPED) & ~judge.found["signs_only"] & ~judge.found["own_only"]
     record[todo[dropped_by_distance]] = UNKNOWN
-    verdicts.remember(unplaced, *setting, record, flip, margin)
+    verdicts.remember(unplaced, *setting, record, flip, margin, avoided)
     return status, flip

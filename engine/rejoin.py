@@ -27,22 +27,23 @@ def kept_area(surface: dict) -> float:
     return 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
 
 
-def joined_again(field, surface: dict, join, judged: list) -> dict:
-    """``surface`` (a :func:`.hybrid.hybrid_surface` of ``field``'s ``judged`` triangles, with its ``trouble``), or,
-    where its join gave up large kept faces of ``REJOIN_SHARE`` of its kept area or more (``PER_POINT_VOXELS`` a point
-    they were given up at), the surface ``join(judged)`` makes of the triangles judged again clear of those points
-    (and of the next join's, while each keeps more area than the last and gives up ``AGAIN_SHARE``, up to ``REJOINS``
-    times) that keeps the most area (``stats["rejoined"]``: how many points its judge kept clear of, 0 for the first
-    surface)."""
+def joined_again(field, surface: dict, join, judged: list, avoid=None) -> tuple[dict, np.ndarray]:
+    """``surface`` (a :func:`.hybrid.hybrid_surface` of ``field``'s ``judged`` triangles, judged clear of the points
+    ``avoid`` (P, 3), with its ``trouble``), or, where its join gave up large kept faces of ``REJOIN_SHARE`` of its kept
+    area or more (``PER_POINT_VOXELS`` a point they were given up at), the surface ``join(judged)`` makes of the
+    triangles judged again clear of those points too (and of the next join's, while each keeps more area than the last
+    and gives up ``AGAIN_SHARE``, up to ``REJOINS`` times) that keeps the most area (``stats["rejoined"]``: how many
+    points its judge kept clear of); with the points its judge kept clear of."""
     trouble = surface.pop("trouble", NO_TROUBLE)
-    best, avoid = surface, np.zeros((0, 3), np.float32)
-    best["stats"]["rejoined"] = 0
+    avoid = np.zeros((0, 3), np.float32) if avoid is None else np.asarray(avoid, dtype=np.float32).reshape(-1, 3)
+    best, best_avoid = surface, avoid
+    best["stats"]["rejoined"] = len(avoid)
     if not len(trouble["points"]):  # (most joins: nothing given up, nothing to measure)
-        return best
+        return best, best_avoid
     best_area = kept_area(surface)
     per_point = trouble["area"] / len(trouble["points"]) / field.voxel_size**2
     if per_point < PER_POINT_VOXELS:  # faces hardly larger than what a second judge clears about each point
-        return best
+        return best, best_avoid
     for k in range(REJOINS):
         if not len(trouble["points"]) or trouble["area"] < (AGAIN_SHARE if k else REJOIN_SHARE) * best_area:
             break
@@ -52,9 +53,9 @@ def joined_again(field, surface: dict, join, judged: list) -> dict:
         trouble = surface.pop("trouble", NO_TROUBLE)
         if surface["stats"]["kept_fallback"] or kept_area(surface) <= best_area:
             break
-        best, best_area = surface, kept_area(surface)
+        best, best_area, best_avoid = surface, kept_area(surface), avoid
         best["stats"]["rejoined"] = len(avoid)
-    return best
+    return best, best_avoid
 
 
 # What a join that fell back to the voxel surface alone reports.

@@ -15,7 +15,10 @@ Only leaves whose distances are exact where they are read can move (meshes, read
 read through its interpolant alone (an offset) gives no bound, and nothing is reused. An open or messy mesh's sign
 may also jump away from its triangles, about its defect edges (:mod:`.jumps`): a triangle's margin beside one is at
 most its gap to those spheres (:func:`.jumps.clear_of`). The distances are kept to ``REUSE_VOXELS`` beyond the band
-so that moves of a few voxels (a drag's steps) still find them.
+so that moves of a few voxels (a drag's steps) still find them. Points a judge keeps clear of as of a defect of the
+leaf's own (where a join gave faces up: :mod:`.carried`, :mod:`.rejoin`) count in its margins: a record holds where
+the points near the leaf are the same, each in the frame of the leaf it lies on (one that moved with its leaf is
+bounded by that leaf's shift).
 
 Written by hand: a record per leaf of three arrays over its triangles and the placements they were found at.
 """
@@ -30,11 +33,14 @@ import numpy as np
 
 from .expression import Operation, leaves
 from .ondemand import Refiner
+from .sources import mesh_distances
 
 # Distances are found up to this many voxels beyond the band in a first round, so that a verdict survives moves of
 # this much less what it used (a drag's steps are a few voxels at the working resolution).
 REUSE_VOXELS = 8.0
 UNKNOWN, KEPT, DROPPED = 0, 1, 2
+# Avoided points this many voxels apart or less are the same (one point placed, then brought back to its leaf).
+SAME_VOXELS = 1e-3
 
 
 @dataclass
@@ -42,7 +48,9 @@ class Record:
     """What a leaf's first round found, and where everything was: ``key`` (:func:`_setting`), ``fields`` weak
     references to the leaves' identities (:func:`_lineage`: one that cannot pass to a field built later), ``frames`` the
     leaves' placements (4, 4), per source triangle ``status`` (KEPT, DROPPED, or UNKNOWN: split or not to be reused),
-    ``flip`` and ``margin`` (the least distance of another leaf's surface over the triangle, a lower bound)."""
+    ``flip`` and ``margin`` (the least distance of another leaf's surface over the triangle, a lower bound), and
+    ``avoided`` the points its judge kept clear of near the leaf, each in the frame of the leaf it lies on
+    (:func:`avoided_near`)."""
 
     key: tuple
     fields: list
@@ -50,6 +58,7 @@ class Record:
     status: np.ndarray
     flip: np.ndarray
     margin: np.ndarray
+    avoided: np.ndarray
 
 
 # unplaced source mesh -> {leaf index: Record}; entries go with their sources (a field dropped from the cache)
@@ -116,7 +125,37 @@ def _shifts(record: Record, every: list, index: int, exact: list) -> float | Non
     return largest
 
 
-def reused(source, expression, index: int, voxel: float, band: float, slack: np.ndarray, exact: list):
+def avoided_near(every: list, bvhs: list, index: int, avoid, reach: float, device) -> np.ndarray:
+    """(P, 4) the points of ``avoid`` (the boolean's frame; None: none) within ``reach`` of leaf ``index``'s triangles,
+    each as the leaf it lies nearest to (among ``every`` leaf with a BVH in ``bvhs``, where they are placed) and its
+    place in that leaf's own frame, sorted: what a record's verdicts were judged clear of. An avoided point counts
+    as a defect in the margins; one that moved with its leaf moved as that leaf's surface did (within the shift)."""
+    if avoid is None or not len(avoid):
+        return np.zeros((0, 4))
+    points = np.asarray(avoid, dtype=np.float32)
+    points = points[mesh_distances(bvhs[index], points, reach, device) < reach]
+    near = np.stack([
+        mesh_distances(bvh, points, reach, device) if bvh is not None else np.full(len(points), np.inf)
+        for bvh in bvhs
+    ])  # fmt: skip
+    owner = np.argmin(near, axis=0)
+    out = np.zeros((len(points), 4))
+    out[:, 0] = owner
+    for j in np.unique(owner):
+        rows, placement = owner == j, every[j].placement
+        own = points[rows].astype(np.float64)
+        out[rows, 1:] = own if placement is None else placement.to_local(own)
+    return out[np.lexsort(out.T[::-1])]
+
+
+def _same_points(a: np.ndarray, b: np.ndarray, tolerance: float) -> bool:
+    """Whether two sorted point sets are the same within ``tolerance`` (float rounding of their placement)."""
+    return a.shape == b.shape and (not len(a) or float(np.abs(a - b).max()) <= tolerance)
+
+
+def reused(
+    source, expression, index: int, voxel: float, band: float, slack: np.ndarray, exact: list, avoided: np.ndarray
+):
     """Verdicts of leaf ``index``'s source triangles that hold as the last boolean over the same fields found them.
 
     Args:
@@ -126,6 +165,8 @@ def reused(source, expression, index: int, voxel: float, band: float, slack: np.
         slack: (T,) each triangle's slack in its first round.
         exact: Per leaf, whether its distances are read exactly (a BVH; where its sign may jump, its jump spheres
             bound the margins).
+        avoided: The points the judge keeps clear of near the leaf (:func:`avoided_near`): the record's must be the
+            same.
     Returns:
         ``(status, flip, margin)``: (T,) int8 KEPT or DROPPED where reused, UNKNOWN elsewhere; (T,) bool; (T,) float32
         the lower bound of the other leaves' distance now (for the next record), or None when nothing is reusable.
@@ -138,6 +179,7 @@ def reused(source, expression, index: int, voxel: float, band: float, slack: np.
         or record.key != _setting(expression, index, voxel, band)
         or any(ref() is not _lineage(leaf) for ref, leaf in zip(record.fields, every, strict=True))
         or len(record.status) != len(slack)
+        or not _same_points(record.avoided, avoided, SAME_VOXELS * voxel)
     ):
         return None
     shift = _shifts(record, every, index, exact)
@@ -150,8 +192,9 @@ def reused(source, expression, index: int, voxel: float, band: float, slack: np.
     return status, record.flip, margin
 
 
-def remember(source, expression, index: int, voxel: float, band: float, status, flip, margin) -> None:
-    """Keep a leaf's first-round verdicts (``status`` UNKNOWN where split or not to be reused) with its source."""
+def remember(source, expression, index: int, voxel: float, band: float, status, flip, margin, avoided) -> None:
+    """Keep a leaf's first-round verdicts (``status`` UNKNOWN where split or not to be reused) with its source, and
+    the points ``avoided`` near it (:func:`avoided_near`)."""
     every = leaves(expression)
     record = Record(
         _setting(expression, index, voxel, band),
@@ -160,6 +203,7 @@ def remember(source, expression, index: int, voxel: float, band: float, status, 
         np.asarray(status, dtype=np.int8),
         np.asarray(flip, dtype=bool),
         np.asarray(margin, dtype=np.float32),
+        np.asarray(avoided, dtype=np.float64).reshape(-1, 4),
     )
     with _LOCK:
         _RECORDS.setdefault(source, {})[index] = record
