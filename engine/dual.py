@@ -15,7 +15,8 @@ point lies on a crease it contains the crease line. Where a node's value is not 
 booleans, where the value is a smooth minimum) the plane is taken at the edge crossing with the gradient of the cube's
 trilinear interpolant instead, so smooth blends get no crease. Vertices stay in their cube: a crease line found
 outside it is clipped to the cube, a corner outside it gives way to the crease through the cube, and anything left
-outside is clamped.
+outside is clamped. A node's plane that misses the cube bounds the surface near that node only (a face that ends
+before the cube, beside a concave seam): the crease or corner of the planes through the cube is taken if in it.
 
 Each quad is split along the diagonal whose midpoint fits its two vertices' planes best, which keeps crease lines
 (both ends on the crease) as mesh edges. Vertices whose quadric has two or more significant eigenvalues lie on a
@@ -269,6 +270,9 @@ def _place_vertices_kernel(
         fallback = float(0.0)
         skipped = float(0.0)
         heavy = int(0)
+        through_sums = vec10()
+        through_planes = float(0.0)
+        missing = int(0)
         bits = ends
         while bits != 0:
             low = bits & (-bits)
@@ -291,6 +295,11 @@ def _place_vertices_kernel(
             planes += 1.0
             normal_sum += n
             min_cos = wp.min(min_cos, wp.dot(n, first_normal))
+            if wp.abs(wp.dot(n, wp.vec3(0.5)) - offsets[c]) <= 0.5 * (wp.abs(n[0]) + wp.abs(n[1]) + wp.abs(n[2])):
+                through_sums += terms
+                through_planes += 1.0
+            else:
+                missing += 1
             lost = 1.0 - weights[c]
             if lost > 0.0:
                 near_sums += lost * terms
@@ -309,6 +318,8 @@ def _place_vertices_kernel(
             # its zero set (one Newton step; values are in world units, positions in voxels)
             n = g_mass / gl
             sums += fallback * plane_terms(n, wp.dot(n, mass) - f_mass / gl)
+            through_sums += fallback * plane_terms(n, wp.dot(n, mass) - f_mass / gl)
+            through_planes += fallback
             if planes == 0.0:
                 first_normal = n
             if heavy == 0:
@@ -335,6 +346,13 @@ def _place_vertices_kernel(
                     if cube_of_node[ids[wp.where(a == 0, 1, wp.where(a == 1, 3, 4))]] < 0:
                         wide_hi[a] = hi + reach
                 x, rank, own = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
+                if missing > 0 and through_planes > 0.0:  # (planes missing the cube: see the module docstring)
+                    t_ata, t_atb, t_btb = unpack_terms(through_sums)
+                    t_rhs = t_atb - t_ata * mass
+                    t_x, t_rank, t_own = solve_in_cube(t_ata, t_rhs, mass, cutoff, lo, hi, wide_lo, wide_hi)
+                    if t_own == 1 and t_rank >= 2:
+                        x, rank, own = t_x, t_rank, t_own
+                        ata, atb, btb, planes = t_ata, t_atb, t_btb, through_planes
                 if own == 0 and near_planes > 0.0 and planes - near_planes > 0.0:
                     # the crease or corner that planes of nodes near the surface make misses the cube (a crease just
                     # past it, seen from a node within a fraction of a voxel of its other face): solved with those
