@@ -241,6 +241,19 @@ def hybrid_surface(
     return {**surface, "trouble": _trouble(points, k_tris[judged_alive & ~k_alive], trouble, voxel)}
 
 
+def _joined(field, join, judged: list, avoid: np.ndarray) -> dict:
+    """The surface ``join`` makes of the ``judged`` triangles (judged clear of the points ``avoid`` carried from the
+    last boolean over the leaves, :mod:`.carried`), joined again where it gave large faces up (:mod:`.rejoin`); the
+    points its judge kept clear of remembered for the next. Should the join fall back with points carried, it is made
+    as a first boolean's (their judge clear of nothing)."""
+    surface, avoided = joined_again(field, join(judged), join, judged, avoid)
+    if surface["stats"]["kept_fallback"] and len(avoid):
+        judged = kept_triangles(field)
+        surface, avoided = joined_again(field, join(judged), join, judged)
+    remember(field, avoided if not surface["stats"]["kept_fallback"] else np.zeros((0, 3)))
+    return surface
+
+
 def _edges_covered(tris: np.ndarray, n_verts: int, over: np.ndarray) -> bool:
     """Whether every face of ``tris`` at an open edge has a corner ``over`` kept faces (and so leaves): whether the
     faces that stay have each edge's twin (among the faces at their corners: the seams' few, not the whole
@@ -558,11 +571,8 @@ def kept_surface(
     if field.expression is None or not (len(tris) or whole):  # (along the seams alone: there may be none)
         surface = voxel_surface_only(verts, tris, "not a boolean of meshes", failed=False)
     else:
-        partial = whole is not None  # the voxel surface along the seams alone
-        surface = hybrid_surface(field, verts, tris, found["judged"], partial)
-        join = lambda judged: hybrid_surface(field, verts, tris, judged, partial)  # noqa: E731
-        surface, avoided = joined_again(field, surface, join, found["judged"], avoid)
-        remember(field, avoided if not surface["stats"]["kept_fallback"] else np.zeros((0, 3)))
+        join = lambda judged: hybrid_surface(field, verts, tris, judged, whole is not None)  # noqa: E731
+        surface = _joined(field, join, found["judged"], avoid)
         if whole is not None and surface["stats"]["kept_fallback"]:  # along the seams alone: the whole result's
             return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
         surface = coarsened(field, surface, adaptivity, regions)
