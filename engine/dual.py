@@ -43,6 +43,7 @@ from .octree import morton_decode
 from .parallel import launch_split
 from .quadric import (
     clamp_box,
+    corner_plane,
     cube_corner,
     fold_cos,
     is_smooth,
@@ -51,10 +52,12 @@ from .quadric import (
     quadric_at,
     solve_in_cube,
     solve_smooth,
+    through_cube,
     trilinear,
     unpack_terms,
     vec8,
     vec10,
+    wide_box,
 )
 from .quads import QUAD_ANGLE
 
@@ -215,26 +218,16 @@ def _place_vertices_kernel(
     inv = 1.0 / spacing
     lo = margin
     hi = 1.0 - margin
-    # each corner's plane (cube coordinates: voxels from the cube's minimum corner), shared by the cube's patches:
-    # unit normal (outward) and offset where the node's value is its distance to its closest point, else a zero
-    # normal; state 1 (a plane), 0 (Hermite data does not hold) or -1 (the node lies on the surface: no direction)
-    normals = wp.matrix(0.0, shape=(8, 3), dtype=float)
+    normals = wp.matrix(0.0, shape=(8, 3), dtype=float)  # each corner's plane, shared by the cube's patches
     offsets = vec8()
     weights = vec8()
     state = wp.vector(0, 0, 0, 0, 0, 0, 0, 0, length=8, dtype=int)
     for c in range(8):
-        d = -wp.vec3(proj[ids[c]])  # from the closest point to the node, in voxels
-        q = cube_corner(c) - d
-        dl = wp.length(d)
-        r = vals[c] + iso
-        good = wp.abs(dl - wp.abs(r) * inv) <= tolerance
-        k = wp.where(dl > 1.0e-4, wp.where(good, wp.where(r < 0.0, -1.0, 1.0) / dl, 0.0), 0.0)
-        n = k * d
+        n, offset, weight, s = corner_plane(-wp.vec3(proj[ids[c]]), cube_corner(c), vals[c], iso, inv, tolerance, near)
         normals[c] = n
-        offsets[c] = wp.dot(n, q) + iso * inv
-        # the direction to a closest point is noise close to the surface: such planes may be damped (HERMITE_NEAR)
-        weights[c] = wp.min(1.0, (dl / near) * (dl / near))
-        state[c] = wp.where(dl <= 1.0e-4, -1, wp.where(good, 1, 0))
+        offsets[c] = offset
+        weights[c] = weight
+        state[c] = s
     for p in range(n_patches):
         # the mass point of the patch's edge crossings and the interpolant's value and gradient there
         mass = wp.vec3(0.0)
@@ -337,22 +330,14 @@ def _place_vertices_kernel(
                 x = clamp_box(solve_smooth(ata, atb - ata * mass, mass, normal_sum), lo, hi)
                 rank = 1
             else:
-                # crease and corner vertices may reach this far into a face neighbour the surface does not cross
-                wide_lo = wp.vec3(lo)
-                wide_hi = wp.vec3(hi)
-                for a in range(3):
-                    if below[ids[0] * 3 + a] == wp.uint8(0):
-                        wide_lo[a] = lo - reach
-                    if cube_of_node[ids[wp.where(a == 0, 1, wp.where(a == 1, 3, 4))]] < 0:
-                        wide_hi[a] = hi + reach
+                wide_lo, wide_hi = wide_box(below, cube_of_node, ids, lo, hi, reach)
                 x, rank, own = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
                 if missing > 0 and through_planes > 0.0:  # (planes missing the cube: see the module docstring)
-                    t_ata, t_atb, t_btb = unpack_terms(through_sums)
-                    t_rhs = t_atb - t_ata * mass
-                    t_x, t_rank, t_own = solve_in_cube(t_ata, t_rhs, mass, cutoff, lo, hi, wide_lo, wide_hi)
-                    if t_own == 1 and t_rank >= 2:
-                        x, rank, own = t_x, t_rank, t_own
-                        ata, atb, btb, planes = t_ata, t_atb, t_btb, through_planes
+                    t_x, t_rank = through_cube(through_sums, mass, cutoff, lo, hi, wide_lo, wide_hi)
+                    if t_rank >= 2:
+                        x, rank, own = t_x, t_rank, 1
+                        ata, atb, btb = unpack_terms(through_sums)
+                        planes = through_planes
                 if own == 0 and near_planes > 0.0 and planes - near_planes > 0.0:
                     # the crease or corner that planes of nodes near the surface make misses the cube (a crease just
                     # past it, seen from a node within a fraction of a voxel of its other face): solved with those

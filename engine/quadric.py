@@ -410,3 +410,48 @@ def crease_edges(verts, tris, ranks, angle: float = CREASE_ANGLE, *, folds: bool
     fold = first[at]
     edges = np.stack([low[fold], high[fold]], axis=1).astype(np.int32)
     return (edges, np.degrees(np.arccos(np.clip(cos[at], -1.0, 1.0)))) if folds else edges
+
+
+vec8i = wp.types.vector(length=8, dtype=wp.int32)
+
+
+@wp.func
+def corner_plane(d: wp.vec3, corner: wp.vec3, value: float, iso: float, inv: float, tolerance: float, near: float):
+    """A cube corner's plane (cube coordinates: voxels from the cube's minimum corner; ``d`` from the node's closest
+    point to the node, in voxels): unit normal (outward) and offset where the node's value is its distance to its
+    closest point, else a zero normal; the weight it keeps when damped (the direction to a closest point is noise
+    close to the surface, :data:`.dual.HERMITE_NEAR`); state 1 (a plane), 0 (Hermite data does not hold) or -1 (the
+    node lies on the surface: no direction)."""
+    q = corner - d
+    dl = wp.length(d)
+    r = value + iso
+    good = wp.abs(dl - wp.abs(r) * inv) <= tolerance
+    k = wp.where(dl > 1.0e-4, wp.where(good, wp.where(r < 0.0, -1.0, 1.0) / dl, 0.0), 0.0)
+    n = k * d
+    state = wp.where(dl <= 1.0e-4, -1, wp.where(good, 1, 0))
+    return n, wp.dot(n, q) + iso * inv, wp.min(1.0, (dl / near) * (dl / near)), state
+
+
+@wp.func
+def wide_box(
+    below: wp.array[wp.uint8], cube_of_node: wp.array[wp.int32], ids: vec8i, lo: float, hi: float, reach: float
+):
+    """The box a crease or corner vertex may reach into: ``reach`` past each face of the cube (its corners ``ids``)
+    whose neighbouring cube the surface does not cross."""
+    wide_lo = wp.vec3(lo)
+    wide_hi = wp.vec3(hi)
+    for a in range(3):
+        if below[ids[0] * 3 + a] == wp.uint8(0):
+            wide_lo[a] = lo - reach
+        if cube_of_node[ids[wp.where(a == 0, 1, wp.where(a == 1, 3, 4))]] < 0:
+            wide_hi[a] = hi + reach
+    return wide_lo, wide_hi
+
+
+@wp.func
+def through_cube(sums: vec10, mass: wp.vec3, cutoff: float, lo: float, hi: float, wide_lo: wp.vec3, wide_hi: wp.vec3):
+    """The crease or corner of the planes ``sums`` (those through the cube) and its rank where it lies in the box, else
+    rank 0."""
+    ata, atb, btb = unpack_terms(sums)
+    x, rank, own = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
+    return x, wp.where(own == 1 and rank >= 2, rank, 0)
