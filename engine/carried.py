@@ -22,7 +22,7 @@ import numpy as np
 
 from .expression import leaves
 from .keep import BAND_VOXELS, leaf_bvh, mesh_leaf
-from .sources import mesh_distances
+from .sources import distances_to_each
 
 # A point is carried when it lies within this many voxels of its leaf's triangles (a kept face's corner: on them, up
 # to float rounding) and farther than FAR_VOXELS from every other leaf's surface.
@@ -70,10 +70,7 @@ def remember(field, avoided: np.ndarray) -> None:
     voxel = float(field.voxel_size)
     points = np.asarray(avoided, dtype=np.float32).reshape(-1, 3)
     far = FAR_VOXELS * voxel
-    near = [
-        mesh_distances(leaf_bvh(leaf, field.device), points, far, field.device) if len(points) else np.zeros(0)
-        for leaf, _ in every
-    ]
+    near = distances_to_each([leaf_bvh(leaf, field.device) for leaf, _ in every], points, far, field.device)
     for i, (leaf, source) in enumerate(every):
         rows = near[i] <= ON_VOXELS * voxel
         for j in range(len(every)):

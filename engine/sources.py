@@ -250,6 +250,13 @@ def _mesh_distance_kernel(mesh: wp.uint64, points: wp.array[wp.vec3], max_dist: 
         out[i] = wp.length(points[i] - wp.mesh_eval_position(mesh, q.face, q.u, q.v))
 
 
+def distances_to_each(meshes: list, points: np.ndarray, reach: float, device) -> np.ndarray:
+    """(M, N) float32 :func:`mesh_distances` from each point to each of ``meshes`` (inf for a None among them)."""
+    rows = [np.full(len(points), np.inf, np.float32) if m is None else mesh_distances(m, points, reach, device)
+            for m in meshes]  # fmt: skip
+    return np.stack(rows) if rows else np.zeros((0, len(points)), np.float32)
+
+
 def mesh_distances(mesh: wp.Mesh, points: np.ndarray, reach: float, device) -> np.ndarray:
     """(N,) float32 unsigned distance from each point to ``mesh`` (``reach`` where it is farther)."""
     pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)

@@ -33,7 +33,7 @@ import numpy as np
 
 from .expression import Operation, leaves
 from .ondemand import Refiner
-from .sources import mesh_distances
+from .sources import distances_to_each, mesh_distances
 
 # Distances are found up to this many voxels beyond the band in a first round, so that a verdict survives moves of
 # this much less what it used (a drag's steps are a few voxels at the working resolution).
@@ -134,11 +134,7 @@ def avoided_near(every: list, bvhs: list, index: int, avoid, reach: float, devic
         return np.zeros((0, 4))
     points = np.asarray(avoid, dtype=np.float32)
     points = points[mesh_distances(bvhs[index], points, reach, device) < reach]
-    near = np.stack([
-        mesh_distances(bvh, points, reach, device) if bvh is not None else np.full(len(points), np.inf)
-        for bvh in bvhs
-    ])  # fmt: skip
-    owner = np.argmin(near, axis=0)
+    owner = np.argmin(distances_to_each(bvhs, points, reach, device), axis=0)
     out = np.zeros((len(points), 4))
     out[:, 0] = owner
     for j in np.unique(owner):
