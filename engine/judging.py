@@ -28,6 +28,7 @@ import numpy as np
 import warp as wp
 
 from .jumps import JumpSpheres, near_sphere
+from .ownside import gap_in_front
 from .parallel import host_view, launch_split
 from .samples import row_grid, row_point, row_steps
 from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_proj, sample_linear
@@ -88,7 +89,8 @@ class JudgeArg:
     pull: float
     side_offset: float
     side_clear: float  # a quarter of side_offset: both sides clearly inside: an internal face (outside: a thin part)
-    thin_side: int  # the side of a part thinner than the field sees (keep's ``THIN``)
+    thin_side: int  # the side of a part thinner than the field sees (:data:`.ownside.THIN`)
+    tiny: float  # how far a ray for a gap in front of a face starts off it (:mod:`.ownside`)
 
 
 @wp.func
@@ -238,13 +240,16 @@ def _unit_normal(p0: wp.vec3, p1: wp.vec3, p2: wp.vec3) -> wp.vec3:
 
 @wp.func
 def _side_of(judge: JudgeArg, x: wp.vec3, n: wp.vec3) -> int:
-    """The leaf's own side across ``x`` along ``n`` (keep's ``_side_at``): 1 growing, -1 falling, 0 internal."""
+    """The leaf's own side across ``x`` along ``n`` (:func:`.ownside.side_at`): 1 growing, -1 falling, 0 internal."""
     step = judge.side_offset * n
     front = _field_value(judge.own, x + step)
     back = _field_value(judge.own, x - step)
     if wp.min(front, back) > judge.side_clear:  # a part thinner than the field sees
         return judge.thin_side
     internal = wp.max(front, back) < -judge.side_clear
+    if internal and front > -judge.side_offset:  # a gap narrower than the field sees in front (:mod:`.ownside`)?
+        if gap_in_front(judge.own.mesh, x, n, 2.0 * judge.side_offset, judge.tiny):
+            return 1
     return wp.where(internal, 0, wp.where(front >= back, 1, -1))
 
 
@@ -420,6 +425,8 @@ class FusedJudge:
     side_offset: float
     thin_side: int
     device: object
+    own_rays: object = None  # the BVH of the judged leaf's own mesh (gaps narrower than its field sees), or None
+    ray_start: float = 0.0  # how far a ray for such a gap starts off a face
 
     def __post_init__(self):
         self.leaf_args = [leaf_arg(*other[:2], k, other[2]) for k, other in enumerate(self.others)]  # kept alive
@@ -432,9 +439,9 @@ class FusedJudge:
         arg.partly_at, arg.pad = self.band + self.slack, READ_PAD * self.spacing
         arg.probe, arg.probe_reach = self.band, self.band + arg.pad
         arg.corner_reach = self.band + self.slack + arg.pad
-        arg.crossing, arg.own = int(self.crossing), leaf_arg(self.own, None, 0)
+        arg.crossing, arg.own = int(self.crossing), leaf_arg(self.own, self.own_rays, 0)
         arg.pull, arg.side_offset, arg.side_clear = self.spacing, self.side_offset, 0.25 * self.side_offset
-        arg.thin_side = self.thin_side
+        arg.thin_side, arg.tiny = self.thin_side, self.ray_start
         self.arg = arg
         self.defects_wp = wp.array(self.defects.astype(np.int8), dtype=wp.int8, device=self.device)
         self.side_wp = wp.array(self.side.astype(np.int8), dtype=wp.int8, device=self.device)

@@ -8,7 +8,8 @@ built from a mesh is *kept* when, everywhere on it (at samples about a voxel apa
 - none of its own mesh's defects is within the band: open, non-manifold or inconsistently oriented edges, duplicated
   triangles; and its own field crosses it from inside to outside everywhere (no part of it is an internal face of an
   overlapping or self-intersecting shell; where both sides read outside, a part thinner than the field sees, it faces
-  the way most of the mesh does);
+  the way most of the mesh does; where both read inside across a gap of its mesh narrower than the field sees, it is
+  that gap's wall: :mod:`.ownside`);
 - its leaf's field changes sign across it, and the expression, with every other leaf's sign as it is there, changes
   sign with it: the triangle is on the result's surface, facing its outside (flipped for a subtracted operand, turned
   outward for an inside-out shell).
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import warp as wp
@@ -39,6 +41,7 @@ from .jumps import JumpSpheres, clear_of, jump_spheres
 from .meshcheck import defect_edges
 from .ondemand import built_on_demand, own_sides
 from .orient import patch_flips
+from .ownside import THIN, TINY_VOXELS, outward, side_at
 from .parallel import run_tasks
 from .precut import cut_strips, fused_margins
 from .refine import merge_kept, restore_whole, straighten_borders
@@ -182,36 +185,12 @@ def _unit_normals(verts, tris) -> np.ndarray:
     return (n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)).astype(np.float32)
 
 
-def _side_at(leaf, points, normals, offset: float) -> np.ndarray:
-    """(N,) +1 where the leaf's field grows across each point along its normal (inside ``offset`` behind it, outside
-    as far in front), -1 where it falls (an inside-out face), 0 where both sides are clearly inside (by a quarter of
-    ``offset`` or more: an internal face), THIN where both are clearly outside (a part thinner than the field sees).
-    Near a crease of the mesh one side reads near 0 (interpolation across the crease): that counts by the difference
-    of the two."""
-    front = leaf.sample(points + offset * normals, method="linear")
-    back = leaf.sample(points - offset * normals, method="linear")
-    clear = 0.25 * offset
-    internal, thin = np.maximum(front, back) < -clear, np.minimum(front, back) > clear
-    return np.where(thin, THIN, np.where(internal, 0, np.where(front >= back, 1, -1))).astype(np.int8)
-
-
-# :func:`_side_at` where both sides of a face read outside: a part of the mesh thinner than the field sees (a cow's
-# ear, a beetle's leg), whose faces face the way most of the mesh's area does (:func:`_outward`).
-THIN = 2
-
-
-def _outward(side: np.ndarray, verts: np.ndarray, tris: np.ndarray) -> int:
-    """+1 where most of a mesh's area (its triangles' ``side``) faces its outside, -1 where it is inside out."""
-    corners = verts[tris].astype(np.float64)
-    area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-    return 1 if area[side == 1].sum() >= area[side == -1].sum() else -1
-
-
 @dataclass
 class _Own:
     """What a leaf's own triangles give whatever the other leaves are: their defects (:func:`_own_defects`: the
     repeated triangles, and a mesh of every defect to measure distances to), each one's side of the leaf's own field
-    (:func:`_side_at`, half a voxel out), and which are slivers to split as strips (:func:`.slivers.strip_parents`)."""
+    (:func:`.ownside.side_at`, half a voxel out), and which are slivers to split as strips
+    (:func:`.slivers.strip_parents`)."""
 
     values: object  # the leaf field's values array it was read from (the same field: the same array); None: its mesh
     offset: float
@@ -220,7 +199,7 @@ class _Own:
     side: np.ndarray  # (T,) int8
     defect_mesh: object  # wp.Mesh or None
     strips: tuple  # (strip, apex) per triangle
-    thin: int  # the side of a part thinner than the field sees (:func:`_outward`)
+    thin: int  # the side of a part thinner than the field sees (:func:`.ownside.outward`)
 
 
 # A leaf's own part, kept with its source mesh: an unplaced leaf's source is the same object at every boolean its
@@ -244,9 +223,10 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     verts, tris = source.verts, source.tris.astype(np.int64)
     centres, normals = verts[tris].mean(axis=1), _unit_normals(verts, tris)
     # a field built on demand: off its mesh, or where that is not clear off its field with the octets there built
-    read = (lambda *args: own_sides(*args, _side_at)) if built_on_demand(leaf) else _side_at
-    side = read(leaf, centres, normals, offset)
-    thin = _outward(side, verts, tris)
+    reading = partial(side_at, rays=source.bvh(device), tiny=TINY_VOXELS * voxel)
+    on_demand = built_on_demand(leaf)
+    side = own_sides(leaf, centres, normals, offset, reading) if on_demand else reading(leaf, centres, normals, offset)
+    thin = outward(side, verts, tris)
     side = np.where(side == THIN, thin, side).astype(np.int8)
     # where the mesh passes through itself, some triangle has its own inside on both sides (an internal face): only
     # then are its crossings looked for (the bunny's 69 k triangles take 0.07 s)
@@ -259,7 +239,7 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
             indices=wp.array(parts.reshape(-1), dtype=wp.int32, device=device),
         )
     strips = strip_parents(verts, tris, SPLIT_VOXELS * voxel)
-    own = _Own(None if read is not _side_at else leaf.values, offset, device, defects, side, defect_mesh, strips, thin)
+    own = _Own(None if on_demand else leaf.values, offset, device, defects, side, defect_mesh, strips, thin)
     _OWN[source] = own
     return own
 
@@ -357,6 +337,8 @@ class _Judge:
             side_offset=self.side_offset,
             thin_side=self.thin,
             device=self.device,
+            own_rays=self.bvhs[self.index],
+            ray_start=TINY_VOXELS * self.spacing / SAMPLE_VOXELS,
         )
 
     def slack_of(self, longest) -> np.ndarray:
@@ -431,10 +413,10 @@ class _Judge:
         return kept, partly, flips[local[:, 0]] ^ (side < 0)
 
     def _own_sides(self, verts, tris, points, first, parent):
-        """How the leaf's own field crosses each triangle: (T,) its side at the centre (:func:`_side_at`), whether
-        every sample (corners, rows) has that side, not 0, and whether any has one. Parts of a triangle that its own
-        field does not cross (a self-intersecting or overlapping shell's internal faces) are not kept. On a shell that
-        nowhere crosses itself a piece has its source triangle's (``parent``) side, found already."""
+        """How the leaf's own field crosses each triangle: (T,) its side at the centre (:func:`.ownside.side_at`),
+        whether every sample (corners, rows) has that side, not 0, and whether any has one. Parts of a triangle that
+        its own field does not cross (a self-intersecting or overlapping shell's internal faces) are not kept. On a
+        shell that nowhere crosses itself a piece has its source triangle's (``parent``) side, found already."""
         if not self.crossing:  # a shell that nowhere crosses itself: its side at the centre holds all over
             centre = self.side[parent]
             return centre, centre != 0, centre != 0
@@ -450,9 +432,10 @@ class _Judge:
         length = np.linalg.norm(towards, axis=1, keepdims=True)
         far = length[:, 0] > self.spacing
         whose, at = whose[far], at[far] + towards[far] * (self.spacing / length[far])
-        side = _side_at(
-            self.leaves[self.index], np.concatenate([centres, at]), np.r_[normals, normals[whose]], self.side_offset
-        )
+        side = side_at(
+            self.leaves[self.index], np.concatenate([centres, at]), np.r_[normals, normals[whose]], self.side_offset,
+            rays=self.bvhs[self.index], tiny=TINY_VOXELS * self.spacing / SAMPLE_VOXELS,
+        )  # fmt: skip
         side[side == THIN] = self.thin
         centre, rest = side[: len(tris)], side[len(tris) :]
         wrong = np.bincount(whose, weights=rest != centre[whose], minlength=len(tris))

@@ -1,6 +1,6 @@
 """The join's rounds read again only what a round changed (engine/hybrid.py): the border after faces are dropped, the
-voxel vertices over the kept faces after some are given up. Against reading everything again each round, on a
-join of many rounds (Suzanne with a ball: four to five rounds a join, three joins), the surfaces are the same."""
+voxel vertices over the kept faces after some are given up. Against reading everything again each round, on joins
+of many rounds (the beetle with a ball: two joins), the surfaces are the same."""
 
 import numpy as np
 
@@ -11,8 +11,8 @@ from engine.zipper import border_halves, vertices_over
 from tests.support import load_mesh, normalised, uv_sphere
 
 
-def _suzanne_with_a_ball() -> dict:
-    mesh = normalised(load_mesh("suzanne.obj"))
+def _beetle_with_a_ball() -> dict:
+    mesh = normalised(load_mesh("beetle.obj"))
     ball = normalised(uv_sphere(1.0, rings=48, segments=96), center=(0.2, 0.2, 0.2), diagonal=0.6)
     v = np.concatenate([mesh[0], ball[0]])
     h = float(np.linalg.norm(v.max(0) - v.min(0))) / 256.0
@@ -21,7 +21,7 @@ def _suzanne_with_a_ball() -> dict:
 
 
 def test_rounds_that_read_only_what_changed_join_as_rounds_that_read_everything(monkeypatch):
-    fast = _suzanne_with_a_ball()
+    fast = _beetle_with_a_ball()
     assert fast["stats"]["rejoined"] > 0  # several joins of several rounds each
 
     def border_after(tris, alive, n_verts, before, halves):
@@ -33,7 +33,7 @@ def test_rounds_that_read_only_what_changed_join_as_rounds_that_read_everything(
 
     monkeypatch.setattr(hybrid, "_border_after", border_after)
     monkeypatch.setattr(hybrid, "_still_over", still_over)
-    slow = _suzanne_with_a_ball()
+    slow = _beetle_with_a_ball()
     for key in ("verts", "tris", "kept", "field_id", "triangle_id", "vertex_id"):
         np.testing.assert_array_equal(fast[key], slow[key])
 

@@ -1,0 +1,112 @@
+"""A face's side of its own mesh's field: inside behind it and outside in front, an internal face, a thin part, or
+a wall of a gap narrower than the field sees.
+
+The judge (:mod:`.keep`, :mod:`.judging`) keeps a triangle only where its own field crosses it from inside to outside,
+read a little in front of and behind it (:func:`side_at`): both sides inside is an internal face of overlapping or
+self-intersecting shells (not kept); both outside, a part thinner than the field sees (it faces the way most of the
+mesh does, :func:`outward`). Where two parts of one mesh face each other across a gap narrower than the voxel
+(Suzanne's ears and head: 0.1-1.3 voxel apart), the field closes the gap and both sides of its walls read inside too:
+taken for internal faces, they were dropped, their holes filled with voxel surface that cannot follow the gap, and the
+join gave faces up about them. A wall of such a gap is told apart by the mesh itself (:func:`gap_in_front`): a ray
+from it along its normal meets a face turned back towards it within two offsets, and the gap's middle is outside
+every shell of the mesh (the faces a ray from there crosses, counted +1 leaving a shell and -1 entering one, sum to 0
+or less: the winding number along the ray of closed, consistently turned shells). A face inside another shell (an
+internal one) fails that count.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+# Faces a ray from a gap's middle is followed through at most (more: taken as inside).
+GAP_CROSSINGS = 64
+# The face met in front must turn back towards the ray at least this much (cosine).
+FACING = 0.2
+# A ray starts this many voxels past the face it leaves.
+TINY_VOXELS = 1e-3
+
+
+@wp.func
+def gap_in_front(mesh: wp.uint64, x: wp.vec3, n: wp.vec3, reach: float, tiny: float) -> bool:
+    """Whether in front of ``x`` along the unit ``n`` the mesh leaves a gap (see the module): a face turned back
+    within ``reach``, the gap's middle outside every shell (``tiny``: how far a ray starts past a face)."""
+    if mesh == wp.uint64(0):
+        return False
+    hit = wp.mesh_query_ray(mesh, x + tiny * n, n, reach)
+    if not hit.result or wp.dot(hit.normal, n) > -FACING * wp.length(hit.normal):
+        return False
+    origin = x + (tiny + 0.5 * hit.t) * n
+    winding = int(0)
+    for _k in range(GAP_CROSSINGS):
+        q = wp.mesh_query_ray(mesh, origin, n, 1.0e6)
+        if not q.result:
+            return winding <= 0
+        winding += wp.where(wp.dot(q.normal, n) > 0.0, 1, -1)
+        origin = origin + (q.t + tiny) * n
+    return False
+
+
+@wp.kernel(enable_backward=False)
+def _gaps_kernel(
+    mesh: wp.uint64,
+    points: wp.array[wp.vec3],
+    normals: wp.array[wp.vec3],
+    reach: float,
+    tiny: float,
+    out: wp.array[wp.int8],
+):
+    i = wp.tid()
+    out[i] = wp.int8(wp.where(gap_in_front(mesh, points[i], normals[i], reach, tiny), 1, 0))
+
+
+def gaps_in_front(bvh, points: np.ndarray, normals: np.ndarray, reach: float, tiny: float, device) -> np.ndarray:
+    """(N,) bool :func:`gap_in_front` at each point along its unit normal, against the mesh ``bvh`` (a ``wp.Mesh``;
+    None: no gaps)."""
+    if bvh is None or not len(points):
+        return np.zeros(len(points), dtype=bool)
+    out = wp.empty(len(points), dtype=wp.int8, device=device)
+    wp.launch(
+        _gaps_kernel,
+        dim=len(points),
+        inputs=[
+            bvh.id,
+            wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device),
+            wp.array(np.ascontiguousarray(normals, dtype=np.float32), dtype=wp.vec3, device=device),
+            float(reach),
+            float(tiny),
+            out,
+        ],
+        device=device,
+    )
+    return out.numpy().astype(bool)
+
+
+def side_at(leaf, points, normals, offset: float, rays=None, tiny: float = 0.0) -> np.ndarray:
+    """(N,) +1 where the leaf's field grows across each point along its normal (inside ``offset`` behind it, outside
+    as far in front), -1 where it falls (an inside-out face), 0 where both sides are clearly inside (by a quarter of
+    ``offset`` or more: an internal face), THIN where both are clearly outside (a part thinner than the field sees).
+    Near a crease of the mesh one side reads near 0 (interpolation across the crease): that counts by the difference
+    of the two. With ``rays`` (its mesh's BVH), a face read internal whose front lies less than ``offset`` inside
+    and faces a gap of the mesh narrower than the field sees is +1 (:func:`gap_in_front`)."""
+    front = leaf.sample(points + offset * normals, method="linear")
+    back = leaf.sample(points - offset * normals, method="linear")
+    clear = 0.25 * offset
+    internal, thin = np.maximum(front, back) < -clear, np.minimum(front, back) > clear
+    gap = np.flatnonzero(internal & (front > -offset))
+    gap = gap[gaps_in_front(rays, points[gap], normals[gap], 2.0 * offset, tiny, leaf.device)]
+    grows = front >= back
+    internal[gap], grows[gap] = False, True
+    return np.where(thin, THIN, np.where(internal, 0, np.where(grows, 1, -1))).astype(np.int8)
+
+
+# :func:`side_at` where both sides of a face read outside: a part of the mesh thinner than the field sees (a cow's
+# ear, a beetle's leg), whose faces face the way most of the mesh's area does (:func:`outward`).
+THIN = 2
+
+
+def outward(side: np.ndarray, verts: np.ndarray, tris: np.ndarray) -> int:
+    """+1 where most of a mesh's area (its triangles' ``side``) faces its outside, -1 where it is inside out."""
+    corners = verts[tris].astype(np.float64)
+    area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    return 1 if area[side == 1].sum() >= area[side == -1].sum() else -1
