@@ -28,7 +28,7 @@ import numpy as np
 import warp as wp
 
 from .jumps import JumpSpheres, near_sphere
-from .ownside import gap_in_front
+from .ownside import gap_side
 from .parallel import host_view, launch_split
 from .samples import row_grid, row_point, row_steps
 from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_proj, sample_linear
@@ -247,10 +247,9 @@ def _side_of(judge: JudgeArg, x: wp.vec3, n: wp.vec3) -> int:
     if wp.min(front, back) > judge.side_clear:  # a part thinner than the field sees
         return judge.thin_side
     internal = wp.max(front, back) < -judge.side_clear
-    if internal and front > -judge.side_offset:  # a gap narrower than the field sees in front (:mod:`.ownside`)?
-        if gap_in_front(judge.own.mesh, x, n, 2.0 * judge.side_offset, judge.tiny):
-            return 1
-    return wp.where(internal, 0, wp.where(front >= back, 1, -1))
+    if internal:  # or the wall of a gap narrower than the field sees (:mod:`.ownside`)
+        return gap_side(judge.own.mesh, x, n, front, back, judge.side_offset, judge.tiny, judge.thin_side)
+    return wp.where(front >= back, 1, -1)
 
 
 @wp.func

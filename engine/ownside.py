@@ -7,11 +7,11 @@ self-intersecting shells (not kept); both outside, a part thinner than the field
 mesh does, :func:`outward`). Where two parts of one mesh face each other across a gap narrower than the voxel
 (Suzanne's ears and head: 0.1-1.3 voxel apart), the field closes the gap and both sides of its walls read inside too:
 taken for internal faces, they were dropped, their holes filled with voxel surface that cannot follow the gap, and the
-join gave faces up about them. A wall of such a gap is told apart by the mesh itself (:func:`gap_in_front`): a ray
+join gave faces up about them. A wall of such a gap is told apart by the mesh itself (:func:`gap_side`): a ray
 from it along its normal meets a face turned back towards it within two offsets, and the gap's middle is outside
 every shell of the mesh (the faces a ray from there crosses, counted +1 leaving a shell and -1 entering one, sum to 0
 or less: the winding number along the ray of closed, consistently turned shells). A face inside another shell (an
-internal one) fails that count.
+internal one) fails that count. For a mesh inside out, every face's way is taken reversed.
 """
 
 from __future__ import annotations
@@ -28,76 +28,81 @@ TINY_VOXELS = 1e-3
 
 
 @wp.func
-def gap_in_front(mesh: wp.uint64, x: wp.vec3, n: wp.vec3, reach: float, tiny: float) -> bool:
-    """Whether in front of ``x`` along the unit ``n`` the mesh leaves a gap (see the module): a face turned back
-    within ``reach``, the gap's middle outside every shell (``tiny``: how far a ray starts past a face)."""
+def gap_along(mesh: wp.uint64, x: wp.vec3, d: wp.vec3, reach: float, tiny: float, turn: int) -> bool:
+    """Whether along the unit ``d`` from ``x`` the mesh leaves a gap (see the module): a face turned back within
+    ``reach``, the gap's middle outside every shell (``tiny``: how far a ray starts past a face; ``turn``: 1 for a
+    mesh whose faces face outward, -1 for one inside out: every face's way reversed)."""
     if mesh == wp.uint64(0):
         return False
-    hit = wp.mesh_query_ray(mesh, x + tiny * n, n, reach)
-    if not hit.result or wp.dot(hit.normal, n) > -FACING * wp.length(hit.normal):
+    way = float(turn)
+    hit = wp.mesh_query_ray(mesh, x + tiny * d, d, reach)
+    if not hit.result or way * wp.dot(hit.normal, d) > -FACING * wp.length(hit.normal):
         return False
-    origin = x + (tiny + 0.5 * hit.t) * n
+    origin = x + (tiny + 0.5 * hit.t) * d
     winding = int(0)
     for _k in range(GAP_CROSSINGS):
-        q = wp.mesh_query_ray(mesh, origin, n, 1.0e6)
+        q = wp.mesh_query_ray(mesh, origin, d, 1.0e6)
         if not q.result:
             return winding <= 0
-        winding += wp.where(wp.dot(q.normal, n) > 0.0, 1, -1)
-        origin = origin + (q.t + tiny) * n
+        winding += wp.where(way * wp.dot(q.normal, d) > 0.0, 1, -1)
+        origin = origin + (q.t + tiny) * d
     return False
 
 
+@wp.func
+def gap_side(mesh: wp.uint64, x: wp.vec3, n: wp.vec3, front: float, back: float, offset: float, tiny: float, turn: int):
+    """The side of a face read internal (both sides inside, ``front`` and ``back`` read ``offset`` along its unit
+    normal ``n`` and against it) where it is the wall of a gap narrower than the field sees: 1 with the gap in front
+    (the side read there lies less than ``offset`` inside), -1 with it behind (an inside-out face), else 0."""
+    if front > -offset and gap_along(mesh, x, n, 2.0 * offset, tiny, turn):
+        return 1
+    if back > -offset and gap_along(mesh, x, -n, 2.0 * offset, tiny, turn):
+        return -1
+    return 0
+
+
 @wp.kernel(enable_backward=False)
-def _gaps_kernel(
+def _gap_sides_kernel(
     mesh: wp.uint64,
     points: wp.array[wp.vec3],
     normals: wp.array[wp.vec3],
-    reach: float,
+    front: wp.array[wp.float32],
+    back: wp.array[wp.float32],
+    offset: float,
     tiny: float,
+    turn: int,
     out: wp.array[wp.int8],
 ):
     i = wp.tid()
-    out[i] = wp.int8(wp.where(gap_in_front(mesh, points[i], normals[i], reach, tiny), 1, 0))
+    out[i] = wp.int8(gap_side(mesh, points[i], normals[i], front[i], back[i], offset, tiny, turn))
 
 
-def gaps_in_front(bvh, points: np.ndarray, normals: np.ndarray, reach: float, tiny: float, device) -> np.ndarray:
-    """(N,) bool :func:`gap_in_front` at each point along its unit normal, against the mesh ``bvh`` (a ``wp.Mesh``;
-    None: no gaps)."""
-    if bvh is None or not len(points):
-        return np.zeros(len(points), dtype=bool)
-    out = wp.empty(len(points), dtype=wp.int8, device=device)
-    wp.launch(
-        _gaps_kernel,
-        dim=len(points),
-        inputs=[
-            bvh.id,
-            wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device),
-            wp.array(np.ascontiguousarray(normals, dtype=np.float32), dtype=wp.vec3, device=device),
-            float(reach),
-            float(tiny),
-            out,
-        ],
-        device=device,
-    )
-    return out.numpy().astype(bool)
-
-
-def side_at(leaf, points, normals, offset: float, rays=None, tiny: float = 0.0) -> np.ndarray:
+def side_at(leaf, points, normals, offset: float, rays=None, tiny: float = 0.0, turn: int = 1) -> np.ndarray:
     """(N,) +1 where the leaf's field grows across each point along its normal (inside ``offset`` behind it, outside
     as far in front), -1 where it falls (an inside-out face), 0 where both sides are clearly inside (by a quarter of
     ``offset`` or more: an internal face), THIN where both are clearly outside (a part thinner than the field sees).
     Near a crease of the mesh one side reads near 0 (interpolation across the crease): that counts by the difference
-    of the two. With ``rays`` (its mesh's BVH), a face read internal whose front lies less than ``offset`` inside
-    and faces a gap of the mesh narrower than the field sees is +1 (:func:`gap_in_front`)."""
+    of the two. With ``rays`` (its mesh's BVH), a face read internal that is the wall of a gap of the mesh narrower
+    than the field sees has its side towards the gap (:func:`gap_side`; ``turn``: -1 for a mesh inside out)."""
     front = leaf.sample(points + offset * normals, method="linear")
     back = leaf.sample(points - offset * normals, method="linear")
     clear = 0.25 * offset
     internal, thin = np.maximum(front, back) < -clear, np.minimum(front, back) > clear
-    gap = np.flatnonzero(internal & (front > -offset))
-    gap = gap[gaps_in_front(rays, points[gap], normals[gap], 2.0 * offset, tiny, leaf.device)]
-    grows = front >= back
-    internal[gap], grows[gap] = False, True
-    return np.where(thin, THIN, np.where(internal, 0, np.where(grows, 1, -1))).astype(np.int8)
+    side = np.where(thin, THIN, np.where(internal, 0, np.where(front >= back, 1, -1))).astype(np.int8)
+    rows = np.flatnonzero(internal)
+    if rays is not None and len(rows):
+        device = leaf.device
+        out = wp.empty(len(rows), dtype=wp.int8, device=device)
+        arrays = [(points, wp.vec3), (normals, wp.vec3), (front, wp.float32), (back, wp.float32)]
+        inputs = [wp.array(np.ascontiguousarray(a[rows], dtype=np.float32), dtype=t, device=device) for a, t in arrays]
+        wp.launch(
+            _gap_sides_kernel,
+            dim=len(rows),
+            inputs=[rays.id, *inputs, float(offset), float(tiny), int(turn), out],
+            device=device,
+        )
+        side[rows] = out.numpy()
+    return side
 
 
 # :func:`side_at` where both sides of a face read outside: a part of the mesh thinner than the field sees (a cow's
