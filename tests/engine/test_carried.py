@@ -97,14 +97,14 @@ def test_verdicts_reused_beside_carried_points_give_what_a_fresh_judge_gives(fre
         verdicts.forget()
         carried.forget()
         prints, log[:] = [], []
-        for step in range(4):
+        for step in range(3):
             if forget:
                 verdicts.forget()  # the points carried, every triangle judged afresh
             prints.append(_fingerprint(engine.union(fa, _moved(fb, h, step), seams=True).kept_surface(sharp=True)))
         runs.append((prints, sum(log)))
     assert runs[0][0] == runs[1][0]
-    # measured: 2,173 verdicts reused over the moves, none where the records were forgotten
-    assert runs[0][1] > 700 and runs[1][1] == 0, (runs[0][1], runs[1][1])
+    # measured: 1,483 verdicts reused over the two moves, none where the records were forgotten
+    assert runs[0][1] > 500 and runs[1][1] == 0, (runs[0][1], runs[1][1])
 
 
 def test_points_are_carried_with_their_leaf_and_only_far_from_the_others(fresh):
