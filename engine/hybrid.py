@@ -438,6 +438,13 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
         members = np.unique(k_border[:, 0])  # every kept border vertex: a loop zipped to its twin's too
         near = nearest_points(points[members], points[open_loop], reach, device)
         at_failed[members[near[near >= 0]]] = failed_at[members[near[near >= 0]]] = True
+        # a loop with no kept border in reach (voxel surface over the middle of kept faces, across a gap they leave)
+        # gives up the kept faces in reach of it instead
+        stuck = open_loop[~np.isin(v_loops[2][open_loop], v_loops[2][open_loop[near >= 0]])]
+        if len(stuck):
+            inner = np.unique(k_tris[k_alive].ravel())
+            near = nearest_points(points[inner], points[stuck], reach, device)
+            at_failed[inner[near[near >= 0]]] = failed_at[inner[near[near >= 0]]] = True
     at_failed[far] = failed_at[far] = True
     alive, border = _drop_pinched(k_tris, k_alive & ~any_corner(at_failed, k_tris), n, (k_alive, k_border))
     if (alive != k_alive).any():  # the voxel faces over the kept ones given up come back: judged afresh

@@ -34,9 +34,12 @@ def _defects(verts, tris) -> np.ndarray:
     return problem | self_intersecting_faces(verts, tris)
 
 
-def _kept_share(name: str) -> tuple[float, dict]:
-    """The mesh united with a ball at /256: the share of the samples that should be kept that are, and the surface."""
+def _kept_share(name: str, inside_out: bool = False) -> tuple[float, dict]:
+    """The mesh (turned inside out: every triangle reversed) united with a ball at /256: the share of the samples
+    that should be kept that are, and the surface."""
     mesh = normalised(load_mesh(f"{name}.obj"))
+    if inside_out:
+        mesh = (mesh[0], mesh[1][:, ::-1].copy())
     ball = normalised(uv_sphere(1.0, rings=48, segments=96), center=(0.2, 0.2, 0.2), diagonal=0.6)
     v = np.concatenate([mesh[0], ball[0]])
     h = float(np.linalg.norm(v.max(0) - v.min(0))) / 256.0
@@ -48,6 +51,8 @@ def _kept_share(name: str) -> tuple[float, dict]:
     if defects.any():
         should &= unsigned_distance(mesh[0], mesh[1][defects], points) > 3 * h
     kept = s["tris"][s["kept"] & (s["field_id"] == 0)]
+    if not len(kept):  # (the voxel surface alone)
+        return 0.0, s
     return float((distance_within(s["verts"], kept, points[should], h) < 1e-5).mean()), s
 
 
@@ -65,3 +70,16 @@ def test_messy_meshes_keep_most_of_what_should_be_kept(name, least):
     assert s["stats"]["kept_fallback"] == ""
     assert engine.surface_edges(s["tris"], len(s["verts"])) is not None  # closed, consistently oriented
     assert to_manifold(s["verts"], s["tris"]).status().name == "NoError"
+
+
+@pytest.mark.parametrize(("name", "least"), [("beetle", 0.985), ("suzanne", 0.995)])
+def test_meshes_inside_out_keep_as_much(name, least):
+    # measured: the beetle 0.9949 (0.9924 when the walls of its gaps narrower than a voxel were dropped; kept, its
+    # join fell back to the voxel surface alone where a scrap of voxel surface across a gap had no kept border in
+    # reach to give up), Suzanne 1.000; bounds three times the shortfall
+    share, s = _kept_share(name, inside_out=True)
+    assert share >= least, share
+    assert s["stats"]["kept_fallback"] == ""
+    assert engine.surface_edges(s["tris"], len(s["verts"])) is not None
+    manifold = to_manifold(s["verts"], s["tris"])
+    assert manifold.status().name == "NoError" and manifold.volume() > 0.0  # closed, turned outward
