@@ -419,8 +419,9 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
     a few rings of faces deep, see :func:`_widened`), and the kept vertices ``far`` where a strip stretched the faces
     at them. A voxel loop that
     failed gives up its piece of the voxel surface when that is an island (a tenth of the voxel faces or less, left
-    over kept faces), else the kept faces near it. Returns the kept faces' mask and border halves, the given-up voxel
-    faces' mask, and the kept vertices the faces were given up at (before the widening)."""
+    over kept faces), else the kept faces near it (at the kept border, or anywhere where no border is in reach).
+    Returns the kept faces' mask and border halves, the given-up voxel faces' mask, and the kept vertices the faces
+    were given up at (before the widening)."""
     (k_tris, k_alive, k_border, k_loops), (v_tris, v_alive, v_loops, v_gone) = kept, voxel
     n = len(points)
     at_failed = np.isin(k_loops[2], kept_failed)
