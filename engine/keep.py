@@ -226,14 +226,16 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     # a field built on demand: off its mesh, or where that is not clear off its field with the octets there built
     on_demand = built_on_demand(leaf)
 
-    def sides(turn: int) -> np.ndarray:  # (a gap's walls face away from it on a mesh inside out: ownside.gap_side)
+    def sides(turn: int, rows) -> np.ndarray:  # (a gap's walls face away from it on a mesh inside out: ownside)
         reading = partial(side_at, rays=source.bvh(device), tiny=TINY_VOXELS * voxel, turn=turn)
-        args = (leaf, centres, normals, offset)
+        args = (leaf, centres[rows], normals[rows], offset)
         return own_sides(*args, reading) if on_demand else reading(*args)
 
-    side = sides(1)
-    thin = outward(side, verts, tris)
-    side = side if thin > 0 else sides(-1)
+    side = sides(1, slice(None))
+    thin = outward(side, verts, tris)  # (from the faces not read internal: the same whichever way gaps are read)
+    internal = np.flatnonzero(side == 0)
+    if thin < 0 and len(internal):  # inside out: the faces read internal read again, a gap's walls turned
+        side[internal] = sides(-1, internal)
     side = np.where(side == THIN, thin, side).astype(np.int8)
     # where the mesh passes through itself, some triangle has its own inside on both sides (an internal face): only
     # then are its crossings looked for (the bunny's 69 k triangles take 0.07 s)
@@ -301,6 +303,7 @@ class _Judge:
         self.index, self.device, voxel = index, field.device, field.voxel_size
         self.band = BAND_VOXELS * voxel + widest_blend(self.expression)
         self.spacing, self.slack = SAMPLE_VOXELS * voxel, SLACK_VOXELS * voxel
+        self.ray_start = TINY_VOXELS * voxel  # (a gap's wall: :mod:`.ownside`)
         self.tiny = 1e-3 * voxel
         self.bvhs, self.jumps = reads  # per leaf, :func:`leaf_bvh` and :func:`leaf_jumps`
         own = _own_part(self.leaves[index], source, voxel, self.device)
@@ -345,7 +348,7 @@ class _Judge:
             thin_side=self.thin,
             device=self.device,
             own_rays=self.bvhs[self.index],
-            ray_start=TINY_VOXELS * self.spacing / SAMPLE_VOXELS,
+            ray_start=self.ray_start,
         )
 
     def slack_of(self, longest) -> np.ndarray:
@@ -441,7 +444,7 @@ class _Judge:
         whose, at = whose[far], at[far] + towards[far] * (self.spacing / length[far])
         side = side_at(
             self.leaves[self.index], np.concatenate([centres, at]), np.r_[normals, normals[whose]], self.side_offset,
-            rays=self.bvhs[self.index], tiny=TINY_VOXELS * self.spacing / SAMPLE_VOXELS, turn=self.thin,
+            rays=self.bvhs[self.index], tiny=self.ray_start, turn=self.thin,
         )  # fmt: skip
         side[side == THIN] = self.thin
         centre, rest = side[: len(tris)], side[len(tris) :]
