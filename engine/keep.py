@@ -49,6 +49,7 @@ from .samples import edge_turns, per_triangle_min, triangle_samples
 from .selfcross import crossing_segments
 from .slivers import Splitter, strip_parents
 from .sources import mesh_distances
+from .trimeasures import triangle_measures
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
 # the seams is joined to them there (the join takes about a voxel of it).
@@ -135,12 +136,15 @@ def _repeated(tris: np.ndarray, n_verts: int) -> np.ndarray:
     """(T,) bool: the triangles whose corners another triangle repeats (in any order): one key per sorted corner
     triple where three indices fit in 63 bits (numpy's unique over rows sorts them as bytes, 8x slower), else the
     rows themselves."""
+    if n_verts**3 < 2**63:  # the duplicated keys found in a sort of the keys (no inverse permutation)
+        a, b, c = (tris[:, k].astype(np.int64) for k in range(3))
+        low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+        key = (low * n_verts + (a + b + c - low - high)) * n_verts + high
+        ordered = np.sort(key)
+        repeated = ordered[1:][ordered[1:] == ordered[:-1]]
+        return np.isin(key, repeated) if len(repeated) else np.zeros(len(key), dtype=bool)
     corners = np.sort(tris, axis=1).astype(np.int64)
-    if n_verts**3 < 2**63:
-        _, inverse, counts = np.unique((corners[:, 0] * n_verts + corners[:, 1]) * n_verts + corners[:, 2],
-                                       return_inverse=True, return_counts=True)  # fmt: skip
-    else:
-        _, inverse, counts = np.unique(corners, axis=0, return_inverse=True, return_counts=True)
+    _, inverse, counts = np.unique(corners, axis=0, return_inverse=True, return_counts=True)
     return counts[inverse.reshape(-1)] > 1
 
 
@@ -222,7 +226,8 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     if own is not None:
         return own
     verts, tris = source.verts, source.tris.astype(np.int64)
-    centres, normals = verts[tris].mean(axis=1), _unit_normals(verts, tris)
+    measures = triangle_measures(verts, tris)
+    centres, normals = measures.centres, measures.normals
     # a field built on demand: off its mesh, or where that is not clear off its field with the octets there built
     on_demand = built_on_demand(leaf)
 
@@ -232,7 +237,8 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
         return own_sides(*args, reading) if on_demand else reading(*args)
 
     side = sides(1, slice(None))
-    thin = outward(side, verts, tris)  # (from the faces not read internal: the same whichever way gaps are read)
+    # (from the faces not read internal: the same whichever way gaps are read)
+    thin = outward(side, measures.doubled_areas)
     internal = np.flatnonzero(side == 0)
     if thin < 0 and len(internal):  # inside out: the faces read internal read again, a gap's walls turned
         side[internal] = sides(-1, internal)
@@ -247,7 +253,7 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
             points=wp.array(points, dtype=wp.vec3, device=device),
             indices=wp.array(parts.reshape(-1), dtype=wp.int32, device=device),
         )
-    strips = strip_parents(verts, tris, SPLIT_VOXELS * voxel)
+    strips = strip_parents(verts, tris, SPLIT_VOXELS * voxel, measures)
     own = _Own(None if on_demand else leaf.values, offset, device, defects, side, defect_mesh, strips, thin)
     _OWN[source] = own
     return own

@@ -103,12 +103,24 @@ def weld_positions(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndar
     """The same triangles over one vertex per distinct position: (P, 3) positions, sorted as ``np.unique(axis=0)``
     sorts them, and (T, 3) int64 indices (the geometry, and so every distance and winding number, is unchanged)."""
     verts = np.asarray(vertices)
-    order = np.lexsort((verts[:, 2], verts[:, 1], verts[:, 0]))
+    if verts.dtype == np.float32:  # by keys that sort as the values do (a quarter of the time of three float columns)
+        keys = _ordered_bits(verts)
+        order = np.lexsort((keys[:, 2], (keys[:, 0] << np.uint64(32)) | keys[:, 1]))
+    else:
+        order = np.lexsort((verts[:, 2], verts[:, 1], verts[:, 0]))
     rows = verts[order]
     first = np.r_[True, (rows[1:] != rows[:-1]).any(axis=1)]  # first row of each run of equal positions
     index = np.empty(len(verts), dtype=np.int64)
     index[order] = np.cumsum(first) - 1
     return rows[first], index[np.asarray(triangles, dtype=np.int64)]
+
+
+def _ordered_bits(points: np.ndarray) -> np.ndarray:
+    """(N, 3) uint64 keys of float32 ``points`` that order as their values do (-0 taken as 0; no NaN): the bits of a
+    positive value with the sign bit set, a negative value's bits inverted."""
+    bits = (points + np.float32(0.0)).view(np.uint32)
+    negative = bits >> np.uint32(31) == 1
+    return np.where(negative, ~bits, bits | np.uint32(1 << 31)).astype(np.uint64)
 
 
 def position_groups(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

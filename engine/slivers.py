@@ -21,20 +21,21 @@ from __future__ import annotations
 import numpy as np
 
 from .refine import edge_of_new, split_triangles
+from .trimeasures import triangle_measures
 
 # A source triangle is cut as a strip when no wider than the split size and at least this many times as long.
 SLIVER_ASPECT = 3.0
 APEX, FIRST, SECOND, BASE = 0, 1, 2, 3  # a strip's sides: its apex, its two long edges from it, its shortest edge
 
 
-def strip_parents(verts: np.ndarray, tris: np.ndarray, split_edge: float) -> tuple[np.ndarray, np.ndarray]:
+def strip_parents(verts: np.ndarray, tris: np.ndarray, split_edge: float, measures=None) -> tuple:
     """``(strip, apex)``: (S,) bool which source triangles are cut as strips, and (S,) int64 each one's apex corner
-    (0, 1, 2: the corner opposite its shortest edge)."""
-    p = verts[tris].astype(np.float64)
-    e = p[:, [1, 2, 0]] - p  # edge k: corner k -> k + 1
-    lengths = np.linalg.norm(e, axis=2)
+    (0, 1, 2: the corner opposite its shortest edge). ``measures``: the triangles' :class:`.TriangleMeasures` where
+    the caller has them."""
+    measures = measures or triangle_measures(verts, tris)
+    lengths = measures.lengths  # edge k: corner k -> k + 1
     longest = lengths.max(axis=1)
-    width = np.linalg.norm(np.cross(e[:, 0], -e[:, 2]), axis=1) / np.maximum(longest, 1e-300)
+    width = measures.doubled_areas / np.maximum(longest, 1e-300)
     strip = (width <= split_edge) & (longest > split_edge) & (longest >= SLIVER_ASPECT * width)
     apex = (np.argmin(lengths, axis=1) + 2) % 3
     return _among_strips(tris, strip, apex, len(verts)), apex
@@ -49,12 +50,18 @@ def _among_strips(tris: np.ndarray, strip: np.ndarray, apex: np.ndarray, n: int)
     if not len(rows):
         return strip
     t = np.asarray(tris, dtype=np.int64)
-    keys = (np.minimum(t, np.roll(t, -1, axis=1)) * n + np.maximum(t, np.roll(t, -1, axis=1))).ravel()
-    long_keys = np.stack([keys.reshape(-1, 3)[rows, apex[rows]], keys.reshape(-1, 3)[rows, (apex[rows] + 2) % 3]], 1)
+    u = t[:, [1, 2, 0]]
+    mark = np.zeros(n, dtype=bool)
+    mark[t[rows]] = True
+    near = np.flatnonzero((mark[t] & mark[u]).ravel())  # the edges both of whose ends are a sliver's corners
+    keys = np.minimum(t.ravel()[near], u.ravel()[near]) * n + np.maximum(t.ravel()[near], u.ravel()[near])
+    sliver_keys = np.minimum(t[rows], u[rows]) * n + np.maximum(t[rows], u[rows])
+    at = np.arange(len(rows))
+    long_keys = np.stack([sliver_keys[at, apex[rows]], sliver_keys[at, (apex[rows] + 2) % 3]], 1)
     edges = np.unique(long_keys)
     at = np.minimum(np.searchsorted(edges, keys), len(edges) - 1)
     hit = np.flatnonzero(edges[at] == keys)  # the triangles' edges that are a sliver's long edge
-    face, edge = hit // 3, at[hit]
+    face, edge = near[hit] // 3, at[hit]
     long_edge = np.searchsorted(edges, long_keys)
     for _ in range(len(rows) + 1):
         shared_with_other = np.zeros(len(edges), dtype=bool)
