@@ -7,8 +7,13 @@ extracts once to warm up, then times one extraction per request. The ratio is th
 first in even rounds, theirs first in odd ones), with the smallest and largest. Timings drift on a shared machine:
 they are indicative.
 
+With ``--adaptivity A`` this checkout extracts ``to_mesh(quads=True, adaptivity=A)`` and the other its plain
+``to_mesh()``: what an adaptivity costs against the extraction of another commit (issue #38 counts from the one it was
+filed at, 7c6829f).
+
     git worktree add /tmp/before <commit>
     .venv/bin/python bench/to_mesh_against.py --before /tmp/before [--repeat 9] [--cases "cube - bore" spot.obj ...]
+    .venv/bin/python bench/to_mesh_against.py --before /tmp/before --adaptivity 0.5 --cases "plate - 4 bores"
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ def worker(root: str, cache: str) -> None:
     """Extract the surfaces of the cases named on stdin with the engine at ``root``; one JSON line (``@@``) each."""
     sys.path.insert(0, root)
     os.environ["WARP_CACHE_PATH"] = cache
+    import numpy as np
     import warp as wp
 
     wp.config.quiet = True
@@ -35,23 +41,29 @@ def worker(root: str, cache: str) -> None:
     import engine
 
     sys.path.insert(0, str(ROOT))  # this checkout's test shapes (engine imported already): both sides use the same
-    from tests.support import cad_pairs, load_mesh, normalised
+    from tests.support import cad_pairs, load_mesh, normalised, plate_and_bores
 
     ops = {"UNION": engine.union, "INTERSECT": engine.intersection, "DIFFERENCE": engine.difference}
     h = 1.0 / 256
+    ours = Path(root).resolve() == ROOT
     fields = {}
     for line in sys.stdin:
-        name = line.strip()
+        name, _, adaptivity = line.strip().partition("@")
+        options = {"quads": True, "adaptivity": float(adaptivity)} if adaptivity and ours else {}
         if name not in fields:
             if name.endswith(".obj"):
                 fields[name] = engine.build_field(*normalised(load_mesh(name)), voxel_size=h)
             else:
-                op, a, b = cad_pairs()[name]
-                fields[name] = ops[op](engine.build_field(*a, voxel_size=h), engine.build_field(*b, voxel_size=h))
-            fields[name].to_mesh()
+                op, a, b = {**cad_pairs(), "plate - 4 bores": ("DIFFERENCE", *plate_and_bores())}[name]
+                corners = np.concatenate([a[0], b[0]])  # the plate at its own diagonal / 256, as bench/adaptivity.py
+                voxel = h if name in cad_pairs() else float(np.linalg.norm(np.ptp(corners, axis=0))) / 256
+                pair = (engine.build_field(*a, voxel_size=voxel), engine.build_field(*b, voxel_size=voxel))
+                fields[name] = ops[op](*pair)
+            fields[name].to_mesh(**options)
         start = time.perf_counter()
-        _verts, tris = fields[name].to_mesh()
-        print("@@" + json.dumps({"seconds": time.perf_counter() - start, "triangles": len(tris)}), flush=True)
+        mesh = fields[name].to_mesh(**options)
+        seconds = time.perf_counter() - start
+        print("@@" + json.dumps({"seconds": seconds, "triangles": len(mesh[-1])}), flush=True)
 
 
 def main() -> None:
@@ -59,6 +71,7 @@ def main() -> None:
     parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
     parser.add_argument("--before", type=Path, help="the other checkout")
     parser.add_argument("--repeat", type=int, default=9)
+    parser.add_argument("--adaptivity", type=float, help="this checkout's polygons at this adaptivity")
     default_cases = ["fandisk - cylinder", "rocker-arm - cube", "cube | tilted cube", "cube - bore"]
     parser.add_argument("--cases", nargs="*", default=[*default_cases, "hex prism & sphere", "spot.obj"])
     args = parser.parse_args()
@@ -76,7 +89,8 @@ def main() -> None:
     print("| case | triangles after | after s | before s | after / before |")
     print("|---|---|---|---|---|")
     for name in args.cases:
-        after, before = alternate(ours, theirs, name, args.repeat)
+        request = name if args.adaptivity is None else f"{name}@{args.adaptivity}"
+        after, before = alternate(ours, theirs, request, args.repeat)
         ratio, low, high = round_ratios([r["seconds"] for r in after], [r["seconds"] for r in before])
         label = name.replace("|", "\\|")
         print(
