@@ -432,9 +432,14 @@ def _moved_corners(tris, corner_bary, group, out_tris, rows) -> np.ndarray:
     if not len(moved):
         return bary
     n = int(max(tris.max(), 1)) + 1
-    keys = group.repeat(3) * n + tris.ravel()  # (source triangle, vertex) of every corner before
+    target = out_tris[moved[:, 0], moved[:, 1]]
+    # (source triangle, vertex) of the corners before at a vertex some corner moved to: the only ones looked up
+    is_target = np.zeros(n, dtype=bool)
+    is_target[target] = True
+    corner = np.flatnonzero(is_target[tris.ravel()])
+    keys = group[corner // 3] * n + tris.ravel()[corner]
     order = np.argsort(keys, kind="stable")
-    wanted = group[rows[moved[:, 0]]] * n + out_tris[moved[:, 0], moved[:, 1]]
-    at = order[np.minimum(np.searchsorted(keys[order], wanted), len(keys) - 1)]
+    wanted = group[rows[moved[:, 0]]] * n + target
+    at = corner[order[np.minimum(np.searchsorted(keys[order], wanted), len(keys) - 1)]]
     bary[moved[:, 0], moved[:, 1]] = corner_bary.reshape(-1, 3)[at]
     return bary

@@ -86,14 +86,14 @@ def quad_halves_first(surface: dict) -> dict:
     rest = np.ones(len(surface["tris"]), dtype=bool)
     rest[first] = rest[second] = False
     order = np.r_[np.stack([first, second], axis=1).ravel(), np.flatnonzero(rest)]
-    turn = np.zeros(len(order), dtype=np.int64)
-    turn[: 2 * len(first)] = np.stack([turn_first, turn_second], axis=1).ravel()
+    pairs = 2 * len(first)  # only the pairs' rows turn (the rest keep their corners as they are)
+    turn = np.stack([turn_first, turn_second], axis=1).ravel()
     corners = (turn[:, None] + np.arange(3)) % 3
     out = dict(surface)
     for key in KEPT_FACE_KEYS:
         out[key] = surface[key][order]
-    out["tris"] = np.ascontiguousarray(np.take_along_axis(out["tris"], corners, axis=1))
-    out["corner_bary"] = np.take_along_axis(out["corner_bary"], corners[:, :, None], axis=1)
+    out["tris"][:pairs] = np.take_along_axis(out["tris"][:pairs], corners, axis=1)
+    out["corner_bary"][:pairs] = np.take_along_axis(out["corner_bary"][:pairs], corners[:, :, None], axis=1)
     out["quads"] = len(first)
     return out
 
