@@ -32,7 +32,7 @@ def strip_parents(verts: np.ndarray, tris: np.ndarray, split_edge: float, measur
     """``(strip, apex)``: (S,) bool which source triangles are cut as strips, and (S,) int64 each one's apex corner
     (0, 1, 2: the corner opposite its shortest edge). ``measures``: the triangles' :class:`.TriangleMeasures` where
     the caller has them."""
-    measures = measures or triangle_measures(verts, tris)
+    measures = triangle_measures(verts, tris) if measures is None else measures
     lengths = measures.lengths  # edge k: corner k -> k + 1
     longest = lengths.max(axis=1)
     width = measures.doubled_areas / np.maximum(longest, 1e-300)
@@ -56,8 +56,8 @@ def _among_strips(tris: np.ndarray, strip: np.ndarray, apex: np.ndarray, n: int)
     near = np.flatnonzero((mark[t] & mark[u]).ravel())  # the edges both of whose ends are a sliver's corners
     keys = np.minimum(t.ravel()[near], u.ravel()[near]) * n + np.maximum(t.ravel()[near], u.ravel()[near])
     sliver_keys = np.minimum(t[rows], u[rows]) * n + np.maximum(t[rows], u[rows])
-    at = np.arange(len(rows))
-    long_keys = np.stack([sliver_keys[at, apex[rows]], sliver_keys[at, (apex[rows] + 2) % 3]], 1)
+    k = np.arange(len(rows))
+    long_keys = np.stack([sliver_keys[k, apex[rows]], sliver_keys[k, (apex[rows] + 2) % 3]], 1)
     edges = np.unique(long_keys)
     at = np.minimum(np.searchsorted(edges, keys), len(edges) - 1)
     hit = np.flatnonzero(edges[at] == keys)  # the triangles' edges that are a sliver's long edge

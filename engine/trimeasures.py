@@ -4,7 +4,7 @@ The kept faces' judge reads these of every source triangle of an operand (:mod:`
 which way most of its area faces, which slivers it cuts as strips). Each used to gather the (T, 3, 3) corners again
 and call ``np.cross`` and ``np.linalg.norm`` on them; here the corners are gathered once per coordinate and the same
 products and sums are taken in the same order, so every value is the same to the bit (a 69 k-triangle scan's
-measures 0.08 -> 0.02 s).
+measures 0.044 -> 0.014 s).
 """
 
 from __future__ import annotations
