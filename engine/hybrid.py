@@ -134,16 +134,17 @@ def _drop_pinched(tris: np.ndarray, alive: np.ndarray, n_verts: int, was=None, r
 
 
 def _border_after(tris, alive, n_verts: int, before, halves) -> np.ndarray:
-    """The border halves of ``tris[alive]``, those of a superset ``before`` of it being ``halves``: read off the faces
-    left where they are fewer than those gone (the voxel surface less the part over the kept faces)."""
-    gone = before & ~alive
-    if np.count_nonzero(alive) <= np.count_nonzero(gone):
+    """The border halves of ``tris[alive]``, those of ``tris[before]`` being ``halves``: a half's status changes only
+    with a face listing its edge, all of whose corners are then corners of a face that changed, so the halves with an
+    end at none of those stay and the rest are read off the faces at them (all of ``tris[alive]`` where the faces that
+    changed are as many: the voxel surface less the part over the kept faces)."""
+    changed = before ^ alive
+    if np.count_nonzero(alive) <= np.count_nonzero(changed):
         return border_halves(tris[alive], n_verts)
     hot = np.zeros(n_verts, dtype=bool)
-    hot[halves.ravel()] = True
-    hot[tris[gone].ravel()] = True
+    hot[tris[changed].ravel()] = True
     near = border_halves(tris[alive & any_corner(hot, tris)], n_verts)
-    return near[all_corners(hot, near)]
+    return np.concatenate([halves[~all_corners(hot, halves)], near[all_corners(hot, near)]])
 
 
 def _loops(halves: np.ndarray, n: int, reverse: bool):
@@ -214,9 +215,11 @@ def hybrid_surface(
     trouble = []
     if partial and not _edges_covered(voxel_tris, len(voxel_verts), over[n_k:]):
         return voxel_surface_only(voxel_verts, voxel_tris, "the seams' surface ends short of the kept faces")
+    was = (closed, np.zeros((0, 2), np.int64))
     for rounds in range(MAX_ROUNDS):
         v_alive = ~v_gone & ~any_corner(over, v_tris)
-        v_alive, v_border = _drop_pinched(v_tris, v_alive, n, (closed, np.zeros((0, 2), np.int64)))
+        v_alive, v_border = _drop_pinched(v_tris, v_alive, n, was)
+        was = (v_alive, v_border)  # (the next round's border read where its faces changed)
         k_loops = _loops(k_border, n, reverse=False)
         v_loops = _loops(v_border, n, reverse=True)
         k_loops, paired, strips, stretched, far = _paired_strips(
