@@ -228,7 +228,8 @@ def hybrid_surface(
         kept_failed, far, whole = _failing(points, k_loops, paired, stretched, far, rounds, voxel, device)
         if not len(kept_failed) and not len(far) and not len(paired["voxel_unpaired"]):
             joined = np.concatenate([k_tris[k_alive], v_tris[v_alive], strips.astype(np.int64)])
-            kept_failed, whole = _loops_at_unpaired_edges(joined, k_loops, v_loops, paired["pairs"], n), False
+            seams = (k_border, v_border, strips)
+            kept_failed, whole = _loops_at_unpaired_edges(joined, seams, k_loops, v_loops, paired["pairs"], n), False
             if not len(kept_failed):
                 break
         before = k_alive
@@ -391,10 +392,19 @@ def _crowding(points, k_loops, unpaired, reach: float, device):
     return crowded, np.setdiff1d(unpaired, labels[crowded])
 
 
-def _loops_at_unpaired_edges(tris, k_loops, v_loops, pairs, n_verts: int) -> np.ndarray:
+def _loops_at_unpaired_edges(tris, seams, k_loops, v_loops, pairs, n_verts: int) -> np.ndarray:
     """The kept loops at an edge of the joined surface that is not used once each way (directly, or through the
-    voxel loop paired with them): empty when the join is closed and consistently oriented."""
-    bad = unpaired_edge_vertices(tris, n_verts)
+    voxel loop paired with them): empty when the join is closed and consistently oriented. Only the edges at the
+    ``seams`` (the kept faces' border, the voxel faces' and the strips' vertices) are read: the kept faces alive and
+    the voxel faces alive each use their other edges once each way, and share no vertex but through the strips."""
+    hot = np.zeros(n_verts, dtype=bool)
+    for part in seams:
+        hot[np.asarray(part, dtype=np.int64).ravel()] = True
+    near = tris[any_corner(hot, tris)]
+    a, b, _, _ = directed_edges(near, n_verts)
+    table = EdgeCounts(a, b, n_verts)
+    wrong = ((table.repeats() > 1) | (table.reverses() == 0)) & (hot[a] | hot[b])
+    bad = np.unique(np.concatenate([a[wrong], b[wrong]]))
     through_voxel_loops = pairs[np.isin(pairs[:, 1], v_loops[2][bad]), 0]
     failed = np.unique(np.r_[k_loops[2][bad], through_voxel_loops])
     return failed[failed >= 0]
@@ -404,15 +414,6 @@ def _doubled_faces(tris: np.ndarray, n_verts: int) -> np.ndarray:
     """(T,) bool: the faces with a directed edge some other face lists too."""
     a, b, _, _ = directed_edges(tris, n_verts)
     return (EdgeCounts(a, b, n_verts).repeats() > 1).reshape(-1, 3).any(axis=1)
-
-
-def unpaired_edge_vertices(tris: np.ndarray, n_verts: int) -> np.ndarray:
-    """The vertices of the directed edges that are not used once each way (a surface's open, doubled or flipped
-    edges): empty for a closed, consistently oriented surface."""
-    a, b, _, _ = directed_edges(tris, n_verts)
-    table = EdgeCounts(a, b, n_verts)
-    bad = (table.repeats() > 1) | (table.reverses() == 0)
-    return np.unique(np.concatenate([a[bad], b[bad]]))
 
 
 def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach: float, device, far):
