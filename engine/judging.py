@@ -223,7 +223,7 @@ def _norm(v: wp.vec3) -> float:
 
 @wp.func
 def _unit_normal(p0: wp.vec3, p1: wp.vec3, p2: wp.vec3) -> wp.vec3:
-    """The triangle's unit normal as keep's ``_unit_normals`` finds it (float32 cross, float64 normalised)."""
+    """The triangle's unit normal as :func:`.trimeasures.unit_normals` finds it (float32 cross, float64 normalised)."""
     e = p1 - p0
     f = p2 - p0
     n = wp.vec3d(

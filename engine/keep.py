@@ -49,7 +49,7 @@ from .samples import edge_turns, per_triangle_min, triangle_samples
 from .selfcross import crossing_segments
 from .slivers import Splitter, strip_parents
 from .sources import mesh_distances
-from .trimeasures import triangle_measures
+from .trimeasures import triangle_measures, unit_normals
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
 # the seams is joined to them there (the join takes about a voxel of it).
@@ -183,11 +183,6 @@ def _own_defects(verts: np.ndarray, tris: np.ndarray, shortest: float | None, de
     slivers = np.stack([segments[:, 0], segments[:, 1], mids], axis=1)
     parts = np.concatenate([slivers, welded[repeated]]).astype(np.int32)
     return repeated, np.concatenate([points, (0.5 * (a + b) + off).astype(np.float32)]), parts
-
-
-def _unit_normals(verts, tris) -> np.ndarray:
-    n = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]]).astype(np.float64)
-    return (n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)).astype(np.float32)
 
 
 @dataclass
@@ -436,7 +431,7 @@ class _Judge:
         if not self.crossing:  # a shell that nowhere crosses itself: its side at the centre holds all over
             centre = self.side[parent]
             return centre, centre != 0, centre != 0
-        normals = _unit_normals(verts, tris)
+        normals = unit_normals(verts, tris)
         owner = np.repeat(np.arange(len(tris)), np.diff(first))
         centres = verts[tris].mean(axis=1)
         whose = np.concatenate([np.repeat(np.arange(len(tris)), 3), owner])

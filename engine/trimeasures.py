@@ -34,12 +34,25 @@ def triangle_measures(verts: np.ndarray, tris: np.ndarray) -> TriangleMeasures:
     corners = [[c[t[:, k]] for c in columns] for k in range(3)]  # corners[k][d]: coordinate d of corner k, float32
     a, b, c = corners
     centres = np.stack([(a[d] + b[d] + c[d]) / np.float32(3.0) for d in range(3)], axis=1)
-    normals = _unit(_cross([b[d] - a[d] for d in range(3)], [c[d] - a[d] for d in range(3)]))
+    normals = _normals_of(a, b, c)
     wide = [[q.astype(np.float64) for q in corner] for corner in corners]
     edges = [[wide[(k + 1) % 3][d] - wide[k][d] for d in range(3)] for k in range(3)]
     lengths = np.stack([_norm(e) for e in edges], axis=1)
     doubled = _norm(_cross(edges[0], [-q for q in edges[2]]))
     return TriangleMeasures(centres, normals, lengths, doubled)
+
+
+def unit_normals(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(T, 3) float32 the triangles' unit normals alone, as :func:`triangle_measures` gives them."""
+    v = np.asarray(verts, dtype=np.float32)
+    t = np.asarray(tris, dtype=np.int64)
+    columns = [np.ascontiguousarray(v[:, k]) for k in range(3)]
+    return _normals_of(*([c[t[:, k]] for c in columns] for k in range(3)))
+
+
+def _normals_of(a: list, b: list, c: list) -> np.ndarray:
+    """Unit normals of triangles given by their corners' coordinate columns (float32 cross, float64 lengths)."""
+    return _unit(_cross([b[d] - a[d] for d in range(3)], [c[d] - a[d] for d in range(3)]))
 
 
 def _cross(u: list, w: list) -> list:
