@@ -24,6 +24,7 @@ import warp.geometry
 from . import octree, parallel
 from .blends import BLEND_MODES, chamfer_needs, sdf_combine
 from .blendzone import blend_octets
+from .earlyjudge import start_judge
 from .expression import OP_DIFFERENCE, OP_INTERSECTION, OP_UNION, combined
 from .octree import code_bits, level_layout, morton_decode, node_center
 from .ondemand import along_seams_only, for_boolean, seam_octets
@@ -306,6 +307,8 @@ def combine(
     blend, mode, h = _options(a, b, blend, blend_mode, spacing)
     asked = (a, b, op, {"blend": blend, "spacing": spacing, "blend_mode": blend_mode})
     a, b, seams = for_boolean(a, b, op, blend, seams=seams)  # built on demand: the octets it needs (:mod:`.ondemand`)
+    expression = combined(op, blend, a, b)
+    early = start_judge(expression, h, a.device) if seams else None  # its kept faces' judge, beside the rest
     # a sparse finest level under a dense top one, even when both operands are dense (one level)
     levels = max(a.levels, b.levels, 2)
     timings, t0 = {}, time.perf_counter()
@@ -330,7 +333,8 @@ def combine(
         layout, voxel_size=h, origin=origin, **nodes, field_ids=a.field_ids + b.field_ids, timings=timings,
         sources={**a.world_sources(), **b.world_sources()}, stats={"continuous": not finest["jumps"]},
     )  # fmt: skip
-    result.expression = combined(op, blend, a, b)  # what it was made of, for the faces it keeps (:mod:`.keep`)
+    result.expression = expression  # what it was made of, for the faces it keeps (:mod:`.keep`)
+    result.early_judge = early
     result.refiner = BooleanRefiner(*asked) if seams else None  # (the whole result, asked anything else)
     return result
 

@@ -25,6 +25,7 @@ import warp as wp
 
 from .carried import carried, remember
 from .coarsen import coarsened
+from .earlyjudge import early_verdicts
 from .edgehash import EdgeCounts, directed_edges
 from .edges import surface_edges
 from .keep import kept_triangles
@@ -243,6 +244,13 @@ def hybrid_surface(
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
     surface = _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
     return {**surface, "trouble": _trouble(points, k_tris[judged_alive & ~k_alive], trouble, voxel)}
+
+
+def _judged(field, avoid: np.ndarray) -> list:
+    """The operands' triangles judged clear of ``avoid``: as the judge started beside the boolean found them
+    (:mod:`.earlyjudge`), else judged here."""
+    early = early_verdicts(field, avoid)
+    return kept_triangles(field, avoid=avoid) if early is None else early
 
 
 def _joined(field, join, judged: list, avoid: np.ndarray) -> dict:
@@ -575,7 +583,7 @@ def kept_surface(
     avoid = carried(field)  # where the last boolean over a leaf gave its faces up (:mod:`.carried`)
     run_tasks(
         [lambda: found.update(mesh=field.to_mesh(sharp=sharp, quads=True))]
-        + ([lambda: found.update(judged=kept_triangles(field, avoid=avoid))] if field.expression is not None else []),
+        + ([lambda: found.update(judged=_judged(field, avoid))] if field.expression is not None else []),
         field.device,
     )
     verts, faces, sizes = found["mesh"]

@@ -12,11 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .expression import leaves
+from .earlyjudge import crossing_leaves
 from .hybrid import kept_surface
-from .keep import internal_faces
-from .ondemand import along_seams_only, as_built, built_leaves, built_on_demand, crosses_itself, refined
-from .parallel import run_tasks
+from .ondemand import as_built, built_leaves, crosses_itself, refined
 
 
 def kept_along_seams(field, **options) -> dict:
@@ -29,15 +27,10 @@ def kept_along_seams(field, **options) -> dict:
     # every sample by the judge: built whole (its sides found here are kept with its mesh for the judge), and its
     # faces are given up about where it crosses itself, away from the seams too: the voxel surface is made along all
     # of it (marked so for the next booleans)
-    pairs = list(zip(leaves(field.expression), leaves(built_leaves(field.expression)), strict=True))
-    found = {}  # side by side (each leaf's own part, kept with its mesh for the judge)
-    tasks = [
-        lambda k=k, view=view: found.update({k: internal_faces(view, field.voxel_size)})
-        for k, (_, view) in enumerate(pairs)
-        if _partly(view, field)
-    ]
-    run_tasks(tasks, field.device)
-    crossing = [leaf for k, (leaf, _) in enumerate(pairs) if found.get(k, False)]
+    early = getattr(field, "early_judge", None)  # (:mod:`.earlyjudge`: these steps taken beside the boolean)
+    crossing = None if early is None else early.crossing()
+    if crossing is None:
+        crossing = crossing_leaves(field.expression, field.voxel_size, field.device)
     for leaf in crossing:
         refined(leaf)
         crosses_itself(leaf)
@@ -49,14 +42,6 @@ def kept_along_seams(field, **options) -> dict:
         new = np.flatnonzero(~surface["kept"])
         surface["new_sources"] = (new, *seams.face_sources(surface["verts"], surface["tris"][new]))
     return surface
-
-
-def _partly(view, field) -> bool:
-    """Whether the boolean ``field`` (along its seams) may hold a part of the octets of its leaf read as ``view``: it
-    was built on demand, or its octets are kept along the seams alone (:func:`.ondemand.along_seams_only`, beside any
-    of the other leaves)."""
-    others = [leaf for leaf in leaves(field.expression) if leaf.sources is not view.sources]
-    return built_on_demand(view) or any(along_seams_only(view, other) for other in others)
 
 
 def _read_as_built(view):

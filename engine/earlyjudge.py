@@ -1,0 +1,138 @@
+"""The kept faces' judge started beside the rest of a boolean made along its seams.
+
+A boolean made for kept faces (:func:`.boolean.combine` with ``seams=True``) refines its operands along the seams
+first (:func:`.ondemand.for_boolean`). What follows (its candidate octets, their pruning, its nodes' values: 30-45 ms
+on the bench's CAD pairs at /256) reads the operands and changes nothing of them, and the judge of their triangles
+(:func:`.keep.kept_triangles`, 50-100 ms there, mostly numpy between small launches) reads only the operands as built
+by then. So the judge starts right after the refinement, in a thread of its own, and the two share the cores; the
+kept surface (:func:`.hybrid.kept_surface`) takes its verdicts where it would judge the same operands clear of the
+same points, and judges them itself otherwise.
+
+The thread takes the steps :func:`.seams.kept_along_seams` takes first: the own part of each operand that may hold a
+part of its octets (:func:`crossing_leaves`), and no judge where one passes through itself (the result is made again
+along all of such an operand, its judge then the new result's). Verdicts are the same whichever thread finds them:
+the same operands' arrays, the same points kept clear of (:mod:`.carried`), and each judge's record of its verdicts
+for the next boolean (:mod:`.verdicts`) written as it would be. Not on CUDA, where a boolean's launches already fill
+the device: there the kept surface judges as before.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .carried import carried
+from .expression import Operation, leaves
+from .keep import internal_faces, kept_triangles
+from .ondemand import along_seams_only, built_leaves, built_on_demand
+from .parallel import run_tasks
+
+
+def crossing_leaves(expression, voxel: float, device) -> list:
+    """The leaves of a boolean's ``expression`` that pass through themselves (:func:`.keep.internal_faces`), of those
+    that may hold a part of their finest octets (:func:`partly_built`); their own parts found side by side (each kept
+    with its mesh for the judge)."""
+    pairs = list(zip(leaves(expression), leaves(built_leaves(expression)), strict=True))
+    found = {}
+    tasks = [
+        lambda k=k, view=view: found.update({k: internal_faces(view, voxel)})
+        for k, (_, view) in enumerate(pairs)
+        if partly_built(view, expression)
+    ]
+    run_tasks(tasks, device)
+    return [leaf for k, (leaf, _) in enumerate(pairs) if found.get(k, False)]
+
+
+def partly_built(view, expression) -> bool:
+    """Whether a boolean along its seams may hold a part of the octets of its leaf read as ``view``: it was built on
+    demand, or its octets are kept along the seams alone (:func:`.ondemand.along_seams_only`, beside any of the other
+    leaves)."""
+    others = [leaf for leaf in leaves(expression) if leaf.sources is not view.sources]
+    return built_on_demand(view) or any(along_seams_only(view, other) for other in others)
+
+
+@dataclass
+class JudgeView:
+    """What the judge reads of a boolean result: its expression (the operands read as built), voxel size, device."""
+
+    expression: object
+    voxel_size: float
+    device: object
+
+
+class EarlyJudge:
+    """The judge of a boolean's operands, running in a thread of its own (module docstring)."""
+
+    def __init__(self, expression, voxel: float, device):
+        self._found = None
+        self._crossing = None
+        self._checked = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(expression, voxel, device), daemon=True)
+        self._thread.start()
+
+    def _run(self, expression, voxel: float, device) -> None:
+        try:
+            self._crossing = crossing_leaves(expression, voxel, device)
+            self._checked.set()
+            if self._crossing:  # made again along all of such an operand (:mod:`.seams`)
+                return
+            view = JudgeView(built_leaves(expression), voxel, device)
+            avoid = carried(view)
+            self._found = (view, avoid, kept_triangles(view, avoid=avoid))
+        except Exception:  # noqa: BLE001 (the kept surface judges again, and meets the error in its own thread)
+            self._crossing = None
+        finally:
+            self._checked.set()
+
+    def crossing(self) -> list | None:
+        """:func:`crossing_leaves` of the boolean's expression, once the thread has found them (None: it failed)."""
+        self._checked.wait()
+        return self._crossing
+
+    def take(self, field, avoid) -> list | None:
+        """The verdicts (:func:`.keep.kept_triangles`) for ``field`` (a view of the boolean, its operands read as
+        built) judged clear of the points ``avoid``, when the thread judged the same (once: they are let go);
+        else None."""
+        self._thread.join()
+        found, self._found = self._found, None
+        if found is None:
+            return None
+        view, their_avoid, judged = found
+        same = view.voxel_size == field.voxel_size and same_operands(view.expression, field.expression)
+        return judged if same and np.array_equal(their_avoid, avoid) else None
+
+
+def start_judge(expression, voxel: float, device) -> EarlyJudge | None:
+    """The judge of ``expression``'s operands started beside the rest of their boolean (None on CUDA)."""
+    if wp.get_device(device).is_cuda:
+        return None
+    return EarlyJudge(expression, voxel, device)
+
+
+def early_verdicts(field, avoid) -> list | None:
+    """What the early judge of the boolean ``field`` is a view of found for it, clear of ``avoid`` (None: judge)."""
+    early = getattr(field, "early_judge", None)
+    return None if early is None else early.take(field, avoid)
+
+
+def same_operands(a, b) -> bool:
+    """Whether two expressions are the same operations over the same operands, each read off the same arrays at the
+    same placement."""
+    if isinstance(a, Operation) or isinstance(b, Operation):
+        return (
+            isinstance(a, Operation)
+            and isinstance(b, Operation)
+            and (a.op, a.blend) == (b.op, b.blend)
+            and same_operands(a.a, b.a)
+            and same_operands(a.b, b.b)
+        )
+    if a.values is not b.values or a.field_ids != b.field_ids or a.sources.keys() != b.sources.keys():
+        return False
+    if any(a.sources[k] is not b.sources[k] for k in a.sources):
+        return False
+    if a.placement is None or b.placement is None:
+        return a.placement is None and b.placement is None
+    return bool(np.array_equal(a.placement.matrix, b.placement.matrix))

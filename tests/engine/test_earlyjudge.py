@@ -1,0 +1,78 @@
+"""The kept faces' judge started beside a boolean made along its seams: the same verdicts as a judge after it, taken
+only where they hold, and none where an operand passes through itself."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import engine
+from engine import earlyjudge, hybrid
+from engine.keep import kept_triangles
+from engine.ondemand import as_built, built_leaves
+from tests.support import box_mesh, load_mesh, normalised, uv_sphere
+
+H = 1.0 / 128
+
+
+@pytest.fixture(scope="module")
+def pair():
+    spot = normalised(load_mesh("spot.obj"))
+    cutter = normalised(uv_sphere(1.0, rings=24, segments=48), center=(0.2, 0.1, 0.15), diagonal=0.5)
+    return spot, cutter
+
+
+def _view(result):
+    view = as_built(result)
+    view.expression = built_leaves(view.expression)
+    return view
+
+
+def _same_judged(found, want) -> bool:
+    keys = ("field_id", "verts", "tris", "parent", "kept", "flip")
+    return len(found) == len(want) and all(
+        all(np.array_equal(f[k], w[k]) for k in keys) for f, w in zip(found, want, strict=True)
+    )
+
+
+def test_the_early_judge_gives_what_a_judge_after_the_boolean_gives(pair):
+    a, b = engine.build_fields(list(pair), voxel_size=H, refine="auto")
+    result = engine.difference(a, b, seams=True)
+    assert isinstance(result.early_judge, earlyjudge.EarlyJudge) and result.early_judge.crossing() == []
+    view = _view(result)
+    avoid = np.zeros((0, 3))
+    found = earlyjudge.early_verdicts(view, avoid)
+    want = kept_triangles(view, avoid=avoid)
+    assert found is not None and _same_judged(found, want)
+    assert sum(int(leaf["kept"].sum()) for leaf in found) > 1000
+    assert earlyjudge.early_verdicts(view, avoid) is None  # taken once: let go
+
+
+def test_verdicts_for_other_points_or_operands_are_not_taken(pair, monkeypatch):
+    a, b = engine.build_fields(list(pair), voxel_size=H, refine="auto")
+    result = engine.difference(a, b, seams=True)
+    assert result.early_judge.take(_view(result), np.array([[0.0, 0.0, 0.1]])) is None  # clear of other points
+    moved = np.eye(4)
+    moved[0, 3] = 3 * H
+    other = engine.difference(a, b.transformed(moved), seams=True)
+    assert engine.difference(a, b, seams=True).early_judge.take(_view(other), np.zeros((0, 3))) is None
+    # without its early judge, the kept surface judges itself, to the same surface
+    with_early = other.kept_surface()
+    calls = []
+    monkeypatch.setattr(hybrid, "kept_triangles", lambda *args, **kw: calls.append(1) or kept_triangles(*args, **kw))
+    alone = engine.difference(a, b.transformed(moved), seams=True)
+    alone.early_judge = None
+    alone = alone.kept_surface()
+    assert calls == [1] and all(np.array_equal(with_early[k], alone[k]) for k in ("verts", "tris", "kept"))
+
+
+def test_no_early_verdicts_where_an_operand_passes_through_itself():
+    box_v, box_t = normalised(box_mesh(), diagonal=1.0)
+    other = normalised(box_mesh(), center=(0.25, 0.2, 0.15), diagonal=1.0)
+    overlap = (np.concatenate([box_v, other[0]]), np.concatenate([box_t, other[1] + len(box_v)]))
+    ball = normalised(uv_sphere(1.0, rings=32, segments=64), center=(0.3, 0.3, 0.3), diagonal=0.5)
+    a, b = engine.build_fields([overlap, ball], voxel_size=H, refine="none")
+    result = engine.difference(a, b, seams=True)
+    crossing = result.early_judge.crossing()
+    assert [leaf.sources for leaf in crossing] == [a.sources]
+    assert result.early_judge.take(_view(result), np.zeros((0, 3))) is None
