@@ -41,7 +41,7 @@ PLANE_QUALITY = 0.2
 # Rounds of collapses at most; they stop earlier when a round removes under MIN_ROUND_SHARE of the vertices left.
 MAX_ROUNDS = 48
 MIN_ROUND_SHARE = 0.01
-# Passes of claims a round makes (:func:`_claimed`).
+# Passes of claims a round makes (:func:`claimed`).
 CLAIM_PASSES = 3
 
 
@@ -215,6 +215,83 @@ def _claim_kernel(
     won[i] = ok
 
 
+@wp.func
+def _ring_vertex(
+    tris: wp.array[wp.int32], corners: wp.array[wp.int32], first: wp.array[wp.int32], u: int, c: int
+) -> int:
+    """Vertex ``c`` of ``u``'s closed 1-ring, ``c`` from ``first[u] - 1`` (``u`` itself) to ``first[u + 1] - 1``."""
+    if c < first[u]:
+        return u
+    return _next_corner(tris, corners[c], 1)
+
+
+@wp.kernel(enable_backward=False)
+def _ring_marks_kernel(
+    tris: wp.array[wp.int32],
+    corners: wp.array[wp.int32],
+    first: wp.array[wp.int32],
+    seeds: wp.array[wp.int32],
+    marks: wp.array[wp.int32],
+):
+    """Every vertex of each face at each of ``seeds`` marked (a mark only ever set: the same whatever the order)."""
+    u = seeds[wp.tid()]
+    for c in range(first[u], first[u + 1]):
+        face = corners[c] // 3
+        for k in range(3):
+            marks[tris[face * 3 + k]] = 1
+
+
+@wp.kernel(enable_backward=False)
+def _claim_passes_kernel(
+    tris: wp.array[wp.int32],
+    corners: wp.array[wp.int32],
+    first: wp.array[wp.int32],
+    rows: wp.array[wp.int32],
+    keys: wp.array[wp.int32],
+    passes: int,
+    claim: wp.array[wp.int32],
+    state: wp.array[wp.int32],
+):
+    """One thread: the passes of :func:`_claim_kernel` one after the other, with the same winners (``state`` 1; 2: a
+    candidate that met an earlier pass's winner's ring; ``claim`` starts free, ``len(rows)`` everywhere), without a
+    launch and a copy to the host per pass."""
+    n = rows.shape[0]
+    for _p in range(passes):
+        for i in range(n):  # claims: the smallest key takes each vertex
+            if state[i] == 0:
+                u = rows[i]
+                for c in range(first[u] - 1, first[u + 1]):
+                    if claim[_ring_vertex(tris, corners, first, u, c)] == -1:
+                        state[i] = 2
+                if state[i] == 0:
+                    for c in range(first[u] - 1, first[u + 1]):
+                        w = _ring_vertex(tris, corners, first, u, c)
+                        claim[w] = wp.min(claim[w], keys[i])
+        wins = int(0)
+        for i in range(n):  # a candidate that holds every vertex it claimed collapses
+            if state[i] == 0:
+                u = rows[i]
+                ok = int(1)
+                for c in range(first[u] - 1, first[u + 1]):
+                    if claim[_ring_vertex(tris, corners, first, u, c)] != keys[i]:
+                        ok = 0
+                if ok == 1:
+                    state[i] = 3  # (won in this pass)
+                    wins += 1
+        for i in range(n):  # the winners' rings held, every other vertex claimed free again
+            if state[i] == 0 or state[i] == 3:
+                u = rows[i]
+                for c in range(first[u] - 1, first[u + 1]):
+                    w = _ring_vertex(tris, corners, first, u, c)
+                    if claim[w] != -1:
+                        claim[w] = wp.where(state[i] == 3, -1, n)
+        for i in range(n):
+            if state[i] == 3:
+                state[i] = 1
+        if wins == 0:
+            return
+
+
 def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, tol: float, device):
     """Remove ``movable`` vertices of a closed, oriented triangle surface where flat (module docstring).
 
@@ -241,10 +318,10 @@ def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, gro
     place = position_hash(points)
     movable = movable.astype(np.int32)
     best, length = np.full(n, -1, dtype=np.int32), np.zeros(n, dtype=np.float32)
-    active = np.flatnonzero(movable).astype(np.int32)
+    active, targets = np.flatnonzero(movable).astype(np.int32), None
     left = len(active)
     for _ in range(MAX_ROUNDS):
-        state = (active, best, length, place)
+        state = (active, targets, best, length, place)
         won_rows, targets = _round(pts, tris, movable, group[rows], state, float(tol), device)
         if not len(won_rows):
             break
@@ -258,33 +335,32 @@ def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, gro
         if len(won_rows) < MIN_ROUND_SHARE * left:
             break
         left -= len(won_rows)
-        active = _near(tris, targets, n) & (movable > 0)
-        active = np.flatnonzero(active).astype(np.int32)
     return np.concatenate([tris, rest_tris]), np.concatenate([rows, rest])
 
 
-def _near(tris: np.ndarray, targets: np.ndarray, n: int) -> np.ndarray:
-    """(V,) bool: the vertices within two edges of ``targets``: the only ones whose checks a collapse onto them
-    changes (their fans, or their neighbours' neighbours)."""
-    mark = np.zeros(n, dtype=bool)
-    mark[targets] = True
+def _near(mesh, targets: np.ndarray, n: int, device) -> np.ndarray:
+    """(V,) bool: the vertices within two edges of ``targets`` (of ``mesh``, :func:`vertex_corners`): the only ones
+    whose checks a collapse onto them changes (their fans, or their neighbours' neighbours)."""
+    mark = np.zeros(n, dtype=np.int32)
+    mark[targets] = 1
+    marks = wp.array(mark, dtype=wp.int32, device=device)
+    seeds = np.asarray(targets, dtype=np.int32)
     for _ in range(2):
-        mark[tris[any_corner(mark, tris)].ravel()] = True
-    return mark
+        w_seeds = wp.array(seeds, dtype=wp.int32, device=device)
+        wp.launch(_ring_marks_kernel, dim=len(seeds), inputs=[*mesh, w_seeds, marks], device=device)
+        seeds = np.flatnonzero(marks.numpy()).astype(np.int32)
+    return marks.numpy() > 0
 
 
 def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state, tol: float, device):
     """One round: the ``active`` vertices' best collapses found again (``best``, ``length`` kept between rounds,
     changed in place), then the vertices that collapse (at least three edges apart) and their targets."""
-    active, best, length, place = state
+    active, targets, best, length, place = state
     n = len(best)
-    flat = tris.ravel()
-    first = np.zeros(n + 1, dtype=np.int32)
-    np.cumsum(np.bincount(flat, minlength=n), out=first[1:])
-    w_tris, w_first = wp.array(flat, dtype=wp.int32, device=device), wp.array(first, dtype=wp.int32, device=device)
-    w_corners = wp.empty(len(flat), dtype=wp.int32, device=device)
-    fill = wp.zeros(n, dtype=wp.int32, device=device)
-    wp.launch(_corners_kernel, dim=len(flat), inputs=[w_tris, w_first, fill, w_corners], device=device)
+    w_tris, w_corners, w_first = vertex_corners(tris, n, device)
+    if targets is not None:  # after a round: the movable vertices within two edges of its targets
+        near = _near((w_tris, w_corners, w_first), targets, n, device)
+        active = np.flatnonzero(near & (movable > 0)).astype(np.int32)
     w_movable = wp.array(movable, dtype=wp.int32, device=device)
     w_group = wp.array(np.ascontiguousarray(group, dtype=np.int64), dtype=wp.int64, device=device)
     w_active = wp.array(active, dtype=wp.int32, device=device)
@@ -315,15 +391,36 @@ def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state,
     if not len(rows):
         return rows, rows
     keys = _keys(place[rows], length[rows], int(len(active)))
-    won = _claimed((w_tris, w_corners, w_first), rows, keys, n, device)
+    won = claimed((w_tris, w_corners, w_first), rows, keys, n, device)
     chosen = rows[won]
     return chosen, best[chosen]
 
 
-def _claimed(mesh, rows: np.ndarray, keys: np.ndarray, n: int, device) -> np.ndarray:
-    """(R,) bool: the candidates ``rows`` that collapse, their closed 1-rings disjoint (:func:`_claim_kernel`). A
-    pass's winners hold their rings; the candidates left that touch none of those claim again, up to
-    ``CLAIM_PASSES`` passes (one pass lets about a tenth of a flat region's candidates go)."""
+def vertex_corners(tris: np.ndarray, n: int, device) -> tuple:
+    """``(tris, corners, first)`` on ``device``: the corners (rows of ``tris.ravel()``) at each of ``n`` vertices,
+    vertex ``v``'s from ``first[v]`` to ``first[v + 1]`` (in any order)."""
+    flat = np.ascontiguousarray(tris, dtype=np.int32).ravel()
+    first = np.zeros(n + 1, dtype=np.int32)
+    np.cumsum(np.bincount(flat, minlength=n), out=first[1:])
+    w_tris, w_first = wp.array(flat, dtype=wp.int32, device=device), wp.array(first, dtype=wp.int32, device=device)
+    w_corners = wp.empty(len(flat), dtype=wp.int32, device=device)
+    fill = wp.zeros(n, dtype=wp.int32, device=device)
+    wp.launch(_corners_kernel, dim=len(flat), inputs=[w_tris, w_first, fill, w_corners], device=device)
+    return w_tris, w_corners, w_first
+
+
+def claimed(mesh, rows: np.ndarray, keys: np.ndarray, n: int, device, in_one: bool | None = None) -> np.ndarray:
+    """(R,) bool: the candidates ``rows`` that collapse, their closed 1-rings disjoint (:func:`_claim_kernel`), of the
+    ``n`` vertices of ``mesh`` (:func:`vertex_corners`). A pass's winners hold their rings; the candidates left that
+    touch none of those claim again, up to ``CLAIM_PASSES`` passes (one pass lets about a tenth of a flat region's
+    candidates go). ``in_one``: the passes in one thread (:func:`_claim_passes_kernel`, the same winners; None: on
+    the CPU, where a pass's two launches and copies cost more than the claims, 0.6 ms a round on a plate's 1,800)."""
+    if wp.get_device(device).is_cpu if in_one is None else in_one:
+        state = wp.zeros(len(rows), dtype=wp.int32, device=device)
+        claim = wp.full(n, len(rows), dtype=wp.int32, device=device)
+        args = [wp.array(x, dtype=wp.int32, device=device) for x in (rows, keys)]
+        wp.launch(_claim_passes_kernel, dim=1, inputs=[*mesh, *args, CLAIM_PASSES, claim, state], device=device)
+        return state.numpy() == 1
     won = np.zeros(len(rows), dtype=bool)
     claim_np = np.full(n, len(rows), dtype=np.int32)
     left = np.arange(len(rows))

@@ -4,7 +4,7 @@ surface stays closed and where it was, and flat parts lose most of their faces."
 import numpy as np
 
 import engine
-from engine.coarsen import TOLERANCE_VOXELS, coarsened, collapse_flat
+from engine.coarsen import TOLERANCE_VOXELS, claimed, coarsened, collapse_flat, vertex_corners
 from engine.hybrid import hybrid_surface
 from tests.metrics import exact_boolean, hausdorff, to_manifold
 from tests.support import box_mesh, cad_pairs, is_watertight
@@ -104,3 +104,20 @@ def test_a_flat_face_collapses_to_about_its_border():
     # measured: 12,288 -> 804 (2,406 when a round's claims made one pass: its winners a tenth of the candidates, the
     # rounds stopped once few went)
     assert len(out) < 900, len(out)
+
+
+def test_a_rounds_claims_in_one_thread_are_the_passes_ones():
+    # every vertex of a subdivided box a candidate (then a third of them), in a random order: the passes' winners (each
+    # pass two launches, as on CUDA) and the one thread's are the same, and their closed 1-rings are disjoint
+    verts, tris = box_mesh(subdivisions=24)
+    n = len(verts)
+    mesh = vertex_corners(tris, n, "cpu")
+    rng = np.random.default_rng(7)
+    for share in (1.0, 0.3):
+        rows = np.flatnonzero(rng.random(n) < share).astype(np.int32)
+        keys = rng.permutation(len(rows)).astype(np.int32)
+        one = claimed(mesh, rows, keys, n, "cpu", in_one=True)
+        assert np.array_equal(one, claimed(mesh, rows, keys, n, "cpu", in_one=False))
+        rings = [np.unique(tris[(tris == u).any(axis=1)]) for u in rows[one]]
+        assert len(np.concatenate(rings)) == len(np.unique(np.concatenate(rings)))
+        assert one.sum() > len(rows) / 32  # (measured: 325 of 3,458, and 271 of 993)
