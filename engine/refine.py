@@ -158,17 +158,19 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
             end = ends[mid, side]
             at_face = tris[face]
             drop = (at_face[:, 0] == end) | (at_face[:, 1] == end) | (at_face[:, 2] == end)
-            moved = np.where(tris[face] == mid[:, None], end[:, None], tris[face])
-            turns = ~drop & turned_over(v64, tris[face], moved)
-            bad = np.zeros(len(ends), dtype=bool)
-            bad[mid[turns]] = True
             two_drops = np.bincount(mid[drop], minlength=len(ends)) == 2
+            live = np.flatnonzero(two_drops[mid])  # (only a midpoint with two faces to drop can collapse)
+            moved = np.where(at_face[live] == mid[live, None], end[live, None], at_face[live])
+            turns = ~drop[live] & turned_over(v64, at_face[live], moved)
+            bad = np.zeros(len(ends), dtype=bool)
+            bad[mid[live[turns]]] = True
             ok = ~bad[mid] & two_drops[mid]
             win = claims_won(face, mid, ok, len(tris), ranks)
             if not win.any():
                 continue
             merged = True
-            tris[face[win & ~drop]] = moved[win & ~drop]
+            stay = win[live] & ~drop[live]
+            tris[face[live[stay]]] = moved[stay]
             alive = np.ones(len(tris), dtype=bool)
             alive[face[win & drop]] = False
             tris, rows, keep = tris[alive], rows[alive], keep[alive]
