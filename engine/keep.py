@@ -574,7 +574,8 @@ def _judge_unknown(judge: _Judge, verts, tris, parent, flip, status, split_edge:
 def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndarray, np.ndarray]:
     """Each source triangle's status after the first round (KEPT, DROPPED, or UNKNOWN: to be split and judged again)
     and flip: the verdicts the last boolean over the same fields found, where its distances bound them
-    (:mod:`.verdicts`), the rest judged whole, with distances read far enough for the next boolean to reuse."""
+    (:mod:`.verdicts`), the rest judged whole, with distances read far enough for the next boolean to reuse where
+    the leaves were judged before elsewhere (:func:`.verdicts.worth_recording`: a drag)."""
     unplaced = next(iter(leaves(field.expression)[index].sources.values()))
     longest, turn = edge_turns(verts, tris)
     slack = judge.slack_of(longest)
@@ -591,6 +592,9 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     todo = np.flatnonzero(status == UNKNOWN)
     # kept for the next boolean where it can reuse them: another leaf's moves bounded (read off its mesh)
     reusable = any(e for j, e in enumerate(bounded) if j != index)
+    if reusable and not verdicts.worth_recording(unplaced, *setting):  # a first boolean over these fields
+        verdicts.mark_judged(unplaced, *setting)
+        reusable = False
     beyond = verdicts.REUSE_VOXELS * field.voxel_size if reusable else None
     kept, partly, flip[todo] = judge.judge(verts, tris[todo], todo, longest[todo], turn[todo], beyond)
     split = partly & ~kept & (longest[todo] > SPLIT_VOXELS * field.voxel_size)

@@ -205,6 +205,32 @@ def remember(source, expression, index: int, voxel: float, band: float, status, 
         _RECORDS.setdefault(source, {})[index] = record
 
 
+def worth_recording(source, expression, index: int, voxel: float, band: float) -> bool:
+    """Whether leaf ``index``'s judge should record its first verdicts for the next boolean (:func:`remember`): the
+    same fields were judged before (a record, or the mark of :func:`mark_judged`) and either verdicts were kept (a
+    drag goes on) or the leaves were placed elsewhere then (a drag begins). A first boolean over them leaves a mark
+    alone: reading every sample as far as a record needs costs up to twice its first round (the bunny's 69 k
+    triangles beside spot: 69 against 37 ms), which only moves get back."""
+    with _LOCK:
+        record = _RECORDS.get(source, {}).get(index)
+    every = leaves(expression)
+    if (
+        record is None
+        or record.key != _setting(expression, index, voxel, band)
+        or any(ref() is not _lineage(leaf) for ref, leaf in zip(record.fields, every, strict=True))
+    ):
+        return False
+    if len(record.status):
+        return True
+    return any(not np.array_equal(then, _frame(leaf)) for then, leaf in zip(record.frames, every, strict=True))
+
+
+def mark_judged(source, expression, index: int, voxel: float, band: float) -> None:
+    """Mark leaf ``index`` judged over these fields at their placements, no verdict kept (:func:`worth_recording`)."""
+    nothing = np.zeros(0)
+    remember(source, expression, index, voxel, band, nothing, nothing, nothing, np.zeros((0, 4)))
+
+
 def forget() -> None:
     """Drop every record (the next boolean of each leaf judges all its triangles)."""
     with _LOCK:

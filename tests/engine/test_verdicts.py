@@ -58,7 +58,9 @@ def test_a_moved_cutter_gives_what_a_fresh_judge_gives_and_reuses_the_far_verdic
         verdicts._RECORDS.update(kept_records)
         assert np.array_equal(reusing["verts"], fresh["verts"]) and np.array_equal(reusing["tris"], fresh["tris"])
         assert np.array_equal(reusing["kept"], fresh["kept"])
-        if step:
+        if step == 1:  # a first move records (a first boolean marks the fields judged, no more)
+            assert reused[0] is None, reused
+        if step >= 2:
             # the ball's triangles far from the box: 0.92 of them measured at each step
             assert reused[0] is not None and reused[0] >= 0.6, reused
 
@@ -67,13 +69,27 @@ def test_turning_the_ball_itself_reuses_too(reuse_log):
     (ball, box), voxel = _ball_and_box()
     engine.difference(ball, box).kept_surface()
     turn = np.eye(4)
-    turn[:3, :3] = [[np.cos(0.01), -np.sin(0.01), 0], [np.sin(0.01), np.cos(0.01), 0], [0, 0, 1]]
+    turn[:3, :3] = [[np.cos(0.005), -np.sin(0.005), 0], [np.sin(0.005), np.cos(0.005), 0], [0, 0, 1]]
+    engine.difference(ball.transformed(turn), box).kept_surface()  # (the first turn records)
+    turn = turn @ turn
     turned = engine.difference(ball.transformed(turn), box).kept_surface()
     reused = [None if count is None else count / total for index, count, total in reuse_log[-2:] if index == 0]
     assert reused[0] is not None and reused[0] >= 0.6, reused  # measured 0.96
     verdicts.forget()
     fresh = engine.difference(ball.transformed(turn), box).kept_surface()
     assert np.array_equal(turned["tris"], fresh["tris"]) and np.array_equal(turned["verts"], fresh["verts"])
+
+
+def test_a_first_boolean_and_its_repeats_in_place_record_nothing_a_move_records(reuse_log, monkeypatch):
+    (ball, box), voxel = _ball_and_box()
+    recorded = []
+    remember = verdicts.remember
+    monkeypatch.setattr(verdicts, "remember", lambda *args: recorded.append(len(args[5])) or remember(*args))
+    first = engine.difference(ball, box).kept_surface()
+    again = engine.difference(ball, box).kept_surface()  # in place (as a second join's judge): a mark again
+    assert recorded == [0, 0, 0, 0] and np.array_equal(first["tris"], again["tris"])
+    engine.difference(ball, _moved(box, (voxel, 0.0, 0.0))).kept_surface()
+    assert sorted(recorded[4:]) == sorted([len(ball.sources[0].tris), len(box.sources[1].tris)])  # moved: recorded
 
 
 def test_another_expression_a_rebuilt_field_or_a_far_move_reuses_nothing(reuse_log):
@@ -96,6 +112,7 @@ def test_a_moved_open_leaf_is_bounded_by_its_jump_spheres_and_a_moved_offset_giv
     open_cap = tris[~(verts[tris][:, :, 2] > 0.25).all(axis=1)]  # the top cap gone: its sign may jump over the hole
     (cutter,) = engine.build_fields([(verts, open_cap)], voxel_size=voxel, field_ids=[1])
     engine.difference(ball, cutter).kept_surface()
+    engine.difference(ball, _moved(cutter, (0.5 * voxel, 0.0, 0.0))).kept_surface()  # (the first move records)
     moved = _moved(cutter, (voxel, 0.0, 0.0))
     reusing = engine.difference(ball, moved).kept_surface()
     ball_entry = [count for index, count, _ in reuse_log[-2:] if index == 0]
