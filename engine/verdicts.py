@@ -149,6 +149,20 @@ def _same_points(a: np.ndarray, b: np.ndarray, tolerance: float) -> bool:
     return a.shape == b.shape and (not len(a) or float(np.abs(a - b).max()) <= tolerance)
 
 
+def _record_of(source, expression, index: int, voxel: float, band: float) -> Record | None:
+    """Leaf ``index``'s record (or mark) where it was made in the same setting over the same fields, else None."""
+    with _LOCK:
+        record = _RECORDS.get(source, {}).get(index)
+    every = leaves(expression)
+    if (
+        record is None
+        or record.key != _setting(expression, index, voxel, band)
+        or any(ref() is not _lineage(leaf) for ref, leaf in zip(record.fields, every, strict=True))
+    ):
+        return None
+    return record
+
+
 def reused(
     source, expression, index: int, voxel: float, band: float, slack: np.ndarray, exact: list, avoided: np.ndarray
 ):
@@ -167,13 +181,10 @@ def reused(
         ``(status, flip, margin)``: (T,) int8 KEPT or DROPPED where reused, UNKNOWN elsewhere; (T,) bool; (T,) float32
         the lower bound of the other leaves' distance now (for the next record), or None when nothing is reusable.
     """
-    with _LOCK:
-        record = _RECORDS.get(source, {}).get(index)
+    record = _record_of(source, expression, index, voxel, band)
     every = leaves(expression)
     if (
         record is None
-        or record.key != _setting(expression, index, voxel, band)
-        or any(ref() is not _lineage(leaf) for ref, leaf in zip(record.fields, every, strict=True))
         or len(record.status) != len(slack)
         or not _same_points(record.avoided, avoided, SAME_VOXELS * voxel)
     ):
@@ -211,17 +222,12 @@ def worth_recording(source, expression, index: int, voxel: float, band: float) -
     drag goes on) or the leaves were placed elsewhere then (a drag begins). A first boolean over them leaves a mark
     alone: reading every sample as far as a record needs costs up to twice its first round (the bunny's 69 k
     triangles beside spot: 69 against 37 ms), which only moves get back."""
-    with _LOCK:
-        record = _RECORDS.get(source, {}).get(index)
-    every = leaves(expression)
-    if (
-        record is None
-        or record.key != _setting(expression, index, voxel, band)
-        or any(ref() is not _lineage(leaf) for ref, leaf in zip(record.fields, every, strict=True))
-    ):
+    record = _record_of(source, expression, index, voxel, band)
+    if record is None:
         return False
     if len(record.status):
         return True
+    every = leaves(expression)
     return any(not np.array_equal(then, _frame(leaf)) for then, leaf in zip(record.frames, every, strict=True))
 
 

@@ -230,3 +230,11 @@ def plate_and_bores(bore_segments: int = 36):
     verts = np.concatenate([v for v, _ in parts]).astype(np.float32)
     tris = np.concatenate([t + o for (_, t), o in zip(parts, offsets, strict=True)]).astype(np.int32)
     return plate, (verts, tris)
+
+
+def overlapping_boxes():
+    """Two unit boxes (diagonal 1), the second's centre at (0.25, 0.2, 0.15), given as one mesh: it passes through
+    itself, the faces of each inside the other internal faces."""
+    box_v, box_t = normalised(box_mesh(), diagonal=1.0)
+    other = normalised(box_mesh(), center=(0.25, 0.2, 0.15), diagonal=1.0)
+    return np.concatenate([box_v, other[0]]), np.concatenate([box_t, other[1] + len(box_v)])

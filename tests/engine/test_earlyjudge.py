@@ -10,7 +10,7 @@ import engine
 from engine import earlyjudge, hybrid
 from engine.keep import kept_triangles
 from engine.ondemand import as_built, built_leaves
-from tests.support import box_mesh, load_mesh, normalised, uv_sphere
+from tests.support import load_mesh, normalised, overlapping_boxes, uv_sphere
 
 H = 1.0 / 128
 
@@ -67,9 +67,7 @@ def test_verdicts_for_other_points_or_operands_are_not_taken(pair, monkeypatch):
 
 
 def test_no_early_verdicts_where_an_operand_passes_through_itself():
-    box_v, box_t = normalised(box_mesh(), diagonal=1.0)
-    other = normalised(box_mesh(), center=(0.25, 0.2, 0.15), diagonal=1.0)
-    overlap = (np.concatenate([box_v, other[0]]), np.concatenate([box_t, other[1] + len(box_v)]))
+    overlap = overlapping_boxes()
     ball = normalised(uv_sphere(1.0, rings=32, segments=64), center=(0.3, 0.3, 0.3), diagonal=0.5)
     a, b = engine.build_fields([overlap, ball], voxel_size=H, refine="none")
     result = engine.difference(a, b, seams=True)

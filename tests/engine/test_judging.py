@@ -10,7 +10,7 @@ from engine import verdicts
 from engine.judging import sign_patterns
 from engine.keep import kept_triangles
 from engine.samples import triangle_samples
-from tests.support import box_mesh, cad_pairs, load_mesh, normalised, rotation, uv_sphere
+from tests.support import box_mesh, cad_pairs, load_mesh, normalised, overlapping_boxes, rotation, uv_sphere
 
 
 def _fields(*meshes, resolution: int = 128):
@@ -86,9 +86,7 @@ def test_fused_verdicts_match_with_a_blend_and_with_placed_operands():
 def test_fused_verdicts_match_beside_an_open_mesh_and_on_a_shell_crossing_itself(overlap):
     ball = normalised(uv_sphere(1.0, rings=32, segments=64), center=(0.2, 0.2, 0.2), diagonal=0.6)
     if overlap:  # two overlapping boxes as one mesh: its own field read across every piece
-        box_v, box_t = normalised(box_mesh(), diagonal=1.0)
-        other = normalised(box_mesh(), center=(0.25, 0.2, 0.15), diagonal=1.0)
-        shape = (np.concatenate([box_v, other[0]]), np.concatenate([box_t, other[1] + len(box_v)]))
+        shape = overlapping_boxes()
     else:  # the beetle has large holes: its field jumps across them, read a band away along the axes (the ball's
         # verdicts differ here when the probes are left out)
         shape = normalised(load_mesh("beetle.obj"))

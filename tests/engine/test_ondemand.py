@@ -9,7 +9,7 @@ import engine
 from engine import ondemand
 from engine.octree import morton_decode_np
 from tests.metrics import unsigned_distance, winding_inside
-from tests.support import box_mesh, is_watertight, load_mesh, normalised, rotation, uv_sphere
+from tests.support import box_mesh, is_watertight, load_mesh, normalised, overlapping_boxes, rotation, uv_sphere
 
 H = 1.0 / 128
 
@@ -263,9 +263,7 @@ def test_meshes_built_whole_closed_or_open_are_made_along_their_seams(spot, cutt
 
 def test_a_mesh_built_whole_that_passes_through_itself_is_made_along_all_of_it_and_so_is_its_partner():
     # two overlapping boxes as one mesh: its faces are given up about where it crosses itself, away from the seams
-    box_v, box_t = normalised(box_mesh(), diagonal=1.0)
-    other = normalised(box_mesh(), center=(0.25, 0.2, 0.15), diagonal=1.0)
-    overlap = (np.concatenate([box_v, other[0]]), np.concatenate([box_t, other[1] + len(box_v)]))
+    overlap = overlapping_boxes()
     ball = normalised(uv_sphere(1.0, rings=32, segments=64), center=(0.3, 0.3, 0.3), diagonal=0.5)
     c, d = engine.build_fields([overlap, ball], voxel_size=H)
     first = engine.difference(c, d, seams=True)
