@@ -306,9 +306,14 @@ def combine(
     """
     blend, mode, h = _options(a, b, blend, blend_mode, spacing)
     asked = (a, b, op, {"blend": blend, "spacing": spacing, "blend_mode": blend_mode})
-    a, b, seams = for_boolean(a, b, op, blend, seams=seams)  # built on demand: the octets it needs (:mod:`.ondemand`)
-    expression = combined(op, blend, a, b)
-    early = start_judge(expression, h, a.device) if seams else None  # its kept faces' judge, beside the rest
+    early = start_judge(combined(op, blend, a, b), h, a.device) if seams else None  # its kept faces' judge, beside
+    expression = None
+    try:  # built on demand: the octets it needs (:mod:`.ondemand`)
+        a, b, seams = for_boolean(a, b, op, blend, seams=seams)
+        expression = combined(op, blend, a, b)
+    finally:
+        if early is not None:  # the judge goes on with the refined operands (or stops)
+            early.proceed(expression if seams else None)
     # a sparse finest level under a dense top one, even when both operands are dense (one level)
     levels = max(a.levels, b.levels, 2)
     timings, t0 = {}, time.perf_counter()
@@ -334,7 +339,7 @@ def combine(
         sources={**a.world_sources(), **b.world_sources()}, stats={"continuous": not finest["jumps"]},
     )  # fmt: skip
     result.expression = expression  # what it was made of, for the faces it keeps (:mod:`.keep`)
-    result.early_judge = early
+    result.early_judge = early if seams else None
     result.refiner = BooleanRefiner(*asked) if seams else None  # (the whole result, asked anything else)
     return result
 

@@ -4,9 +4,10 @@ A boolean made for kept faces (:func:`.boolean.combine` with ``seams=True``) ref
 first (:func:`.ondemand.for_boolean`). What follows (its candidate octets, their pruning, its nodes' values: 30-45 ms
 on the bench's CAD pairs at /256) reads the operands and changes nothing of them, and the judge of their triangles
 (:func:`.keep.kept_triangles`, 50-100 ms there, mostly numpy between small launches) reads only the operands as built
-by then. So the judge starts right after the refinement, in a thread of its own, and the two share the cores; the
-kept surface (:func:`.hybrid.kept_surface`) takes its verdicts where it would judge the same operands clear of the
-same points, and judges them itself otherwise.
+by then. So the judge runs in a thread of its own from the boolean's start: it finds the operands' own parts (their
+sides, defects and slivers, kept with their meshes: the same however far a field is refined) while they are refined,
+then judges the refined operands beside the rest of the boolean. The kept surface (:func:`.hybrid.kept_surface`) takes
+its verdicts where it would judge the same operands clear of the same points, and judges them itself otherwise.
 
 The thread takes the steps :func:`.seams.kept_along_seams` takes first: the own part of each operand that may hold a
 part of its octets (:func:`crossing_leaves`), and no judge where one passes through itself (the result is made again
@@ -64,17 +65,30 @@ class JudgeView:
 
 
 class EarlyJudge:
-    """The judge of a boolean's operands, running in a thread of its own (module docstring)."""
+    """The judge of a boolean's operands, running in a thread of its own (module docstring): it finds their own parts
+    while they are refined, then waits for the refined operands (:meth:`proceed`)."""
 
     def __init__(self, expression, voxel: float, device):
         self._found = None
         self._crossing = None
+        self._refined = None
+        self._given = threading.Event()
         self._checked = threading.Event()
         self._thread = threading.Thread(target=self._run, args=(expression, voxel, device), daemon=True)
         self._thread.start()
 
-    def _run(self, expression, voxel: float, device) -> None:
+    def proceed(self, expression) -> None:
+        """Go on with the boolean's ``expression`` over its refined operands (None: stop, nothing to judge)."""
+        self._refined = expression
+        self._given.set()
+
+    def _run(self, unrefined, voxel: float, device) -> None:
         try:
+            crossing_leaves(unrefined, voxel, device)  # their own parts found (kept with their meshes) meanwhile
+            self._given.wait()
+            expression = self._refined
+            if expression is None:
+                return
             self._crossing = crossing_leaves(expression, voxel, device)
             self._checked.set()
             if self._crossing:  # made again along all of such an operand (:mod:`.seams`)
@@ -106,7 +120,8 @@ class EarlyJudge:
 
 
 def start_judge(expression, voxel: float, device) -> EarlyJudge | None:
-    """The judge of ``expression``'s operands started beside the rest of their boolean (None on CUDA)."""
+    """The judge of a boolean's operands (``expression`` over them before they are refined) started beside the
+    boolean: :meth:`EarlyJudge.proceed` gives it the refined ones (None on CUDA)."""
     if wp.get_device(device).is_cuda:
         return None
     return EarlyJudge(expression, voxel, device)
