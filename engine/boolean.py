@@ -310,14 +310,14 @@ def combine(
     expression = None
     try:  # built on demand: the octets it needs (:mod:`.ondemand`)
         a, b, seams = for_boolean(a, b, op, blend, seams=seams)
+        # a sparse finest level under a dense top one, even when both operands are dense (one level)
+        levels = max(a.levels, b.levels, 2)
+        timings, t0 = {}, time.perf_counter()
+        origin, top_dims = _domain(a, b, h, levels, mode, blend)  # (a domain too large is refused: no judge)
         expression = combined(op, blend, a, b)
     finally:
         if early is not None:  # the judge goes on with the refined operands (or stops)
             early.proceed(expression if seams else None)
-    # a sparse finest level under a dense top one, even when both operands are dense (one level)
-    levels = max(a.levels, b.levels, 2)
-    timings, t0 = {}, time.perf_counter()
-    origin, top_dims = _domain(a, b, h, levels, mode, blend)
     aligned = [_aligned(f, origin, h) for f in (a, b)]
     args = (a.arg(), b.arg())
     fine_dims = top_dims * 2 ** (levels - 1)

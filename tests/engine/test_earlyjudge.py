@@ -3,14 +3,16 @@ only where they hold, and none where an operand passes through itself."""
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
 import engine
-from engine import earlyjudge, hybrid
+from engine import boolean, earlyjudge, hybrid
 from engine.keep import kept_triangles
 from engine.ondemand import as_built, built_leaves
-from tests.support import load_mesh, normalised, overlapping_boxes, uv_sphere
+from tests.support import box_mesh, load_mesh, normalised, overlapping_boxes, uv_sphere
 
 H = 1.0 / 128
 
@@ -74,3 +76,19 @@ def test_no_early_verdicts_where_an_operand_passes_through_itself():
     crossing = result.early_judge.crossing()
     assert [leaf.sources for leaf in crossing] == [a.sources]
     assert result.early_judge.take(_view(result), np.zeros((0, 3))) is None
+
+
+def test_a_boolean_refused_for_its_domain_stops_its_judge(monkeypatch):
+    # two small boxes far apart: each field is small, their boolean's domain more than the octree can address
+    started = []
+    start = boolean.start_judge
+    monkeypatch.setattr(boolean, "start_judge", lambda *args: started.append(start(*args)) or started[-1])
+    near = normalised(box_mesh(), diagonal=0.1)
+    far = normalised(box_mesh(), center=(1e4, 0.0, 0.0), diagonal=0.1)
+    a, b = engine.build_fields([near, far], voxel_size=H / 8, refine="auto")
+    with pytest.raises(engine.AasdfError, match="octree can address"):
+        engine.union(a, b, seams=True)
+    waiting = threading.Thread(target=started[0].crossing)  # ends once the judge's thread has stopped
+    waiting.start()
+    waiting.join(timeout=30)
+    assert not waiting.is_alive() and started[0].crossing() is None
