@@ -180,6 +180,16 @@ def _corners_kernel(
     corners[first[v] + wp.atomic_add(fill, v, 1)] = i
 
 
+@wp.func
+def _ring_vertex(
+    tris: wp.array[wp.int32], corners: wp.array[wp.int32], first: wp.array[wp.int32], u: int, c: int
+) -> int:
+    """Vertex ``c`` of ``u``'s closed 1-ring, ``c`` from ``first[u] - 1`` (``u`` itself) to ``first[u + 1] - 1``."""
+    if c < first[u]:
+        return u
+    return _next_corner(tris, corners[c], 1)
+
+
 @wp.kernel(enable_backward=False)
 def _claim_kernel(
     tris: wp.array[wp.int32],
@@ -198,31 +208,16 @@ def _claim_kernel(
     u = rows[i]
     ok = int(1)
     for c in range(first[u] - 1, first[u + 1]):
-        w = u
-        if c >= first[u]:
-            w = _next_corner(tris, corners[c], 1)
-        if claim[w] == -1:
+        if claim[_ring_vertex(tris, corners, first, u, c)] == -1:
             won[i] = 0
             return
     for c in range(first[u] - 1, first[u + 1]):
-        w = u
-        if c >= first[u]:
-            w = _next_corner(tris, corners[c], 1)
+        w = _ring_vertex(tris, corners, first, u, c)
         if check == 0:
             wp.atomic_min(claim, w, keys[i])
         elif claim[w] != keys[i]:
             ok = 0
     won[i] = ok
-
-
-@wp.func
-def _ring_vertex(
-    tris: wp.array[wp.int32], corners: wp.array[wp.int32], first: wp.array[wp.int32], u: int, c: int
-) -> int:
-    """Vertex ``c`` of ``u``'s closed 1-ring, ``c`` from ``first[u] - 1`` (``u`` itself) to ``first[u + 1] - 1``."""
-    if c < first[u]:
-        return u
-    return _next_corner(tris, corners[c], 1)
 
 
 @wp.kernel(enable_backward=False)
@@ -348,8 +343,9 @@ def _near(mesh, targets: np.ndarray, n: int, device) -> np.ndarray:
     for _ in range(2):
         w_seeds = wp.array(seeds, dtype=wp.int32, device=device)
         wp.launch(_ring_marks_kernel, dim=len(seeds), inputs=[*mesh, w_seeds, marks], device=device)
-        seeds = np.flatnonzero(marks.numpy()).astype(np.int32)
-    return marks.numpy() > 0
+        mark = marks.numpy()
+        seeds = np.flatnonzero(mark).astype(np.int32)
+    return mark > 0
 
 
 def _round(pts, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, state, tol: float, device):
