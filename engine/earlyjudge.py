@@ -11,7 +11,8 @@ its verdicts where it would judge the same operands clear of the same points, an
 
 The thread takes the steps :func:`.seams.kept_along_seams` takes first: the own part of each operand that may hold a
 part of its octets (:func:`crossing_leaves`), and no judge where one passes through itself (the result is made again
-along all of such an operand, its judge then the new result's). Verdicts are the same whichever thread finds them:
+along all of such an operand, its judge then the new result's: such an operand is built whole in the thread, beside
+the rest of the boolean). Verdicts are the same whichever thread finds them:
 the same operands' arrays, the same points kept clear of (:mod:`.carried`), and each judge's record of its verdicts
 for the next boolean (:mod:`.verdicts`) written as it would be. Not on CUDA, where a boolean's launches already fill
 the device: there the kept surface judges as before.
@@ -28,7 +29,7 @@ import warp as wp
 from .carried import carried
 from .expression import Operation, leaves
 from .keep import internal_faces, kept_triangles
-from .ondemand import along_seams_only, built_leaves, built_on_demand
+from .ondemand import along_seams_only, built_leaves, built_on_demand, refined
 from .parallel import run_tasks
 
 
@@ -90,9 +91,10 @@ class EarlyJudge:
             if expression is None:
                 return
             self._crossing = crossing_leaves(expression, voxel, device)
-            self._checked.set()
-            if self._crossing:  # made again along all of such an operand (:mod:`.seams`)
+            if self._crossing:  # made again along all of such an operand (:mod:`.seams`): built whole meanwhile
+                run_tasks([lambda leaf=leaf: refined(leaf) for leaf in self._crossing], device)
                 return
+            self._checked.set()
             view = JudgeView(built_leaves(expression), voxel, device)
             avoid = carried(view)
             self._found = (view, avoid, kept_triangles(view, avoid=avoid))

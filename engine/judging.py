@@ -37,6 +37,12 @@ from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_proj, sample_
 MAX_TABLE_LEAVES = 10
 # A reach exceeds the distance it must tell apart by this many least spacings of samples (float32 rounds far less).
 READ_PAD = 0.01
+# Where distances are recorded, a piece of more samples than this (besides its corners, about) has its centre read
+# instead of each of them beyond what its verdict needs: a bound by Lipschitz's, its farthest corner's distance less.
+CENTRE_SAMPLES = 8
+# ... and whose corners lie within this many least spacings of its centre (the bound is that much looser, twice over:
+# a large face's read whole keeps its verdict over moves of a few voxels)
+CENTRE_SPREAD = 8.0
 # Verdict bits of :func:`judge_pieces`.
 KEPT_BIT, PARTLY_BIT, FLIP_BIT = 1, 2, 4
 # and, where distances are recorded: no sample where the expression crosses; a defect, or its own field crossing it
@@ -305,10 +311,7 @@ def _judge_pieces_kernel(
     keep_reach = wp.float32(judge.band + slack + judge.pad)
     partly_reach = wp.float32(wp.max(judge.partly_at - slack, wp.float64(0.0)) + judge.pad)
     full = full_reach > 0.0
-    if full:
-        keep_reach = full_reach
-        partly_reach = full_reach
-    least = float(1.0e30)  # the least margin of any sample
+    least = float(1.0e30)  # the least margin of the samples read as far as recorded
     first = codes[tris[t, 0]]
     same = True
     bounds = wp.vec2(1.0e30, -1.0e30)
@@ -335,7 +338,6 @@ def _judge_pieces_kernel(
     # a shell that crosses itself may be crossed by its own field at a later sample
     may_cross = own != 0 or judge.crossing != 0
     live = defects[parent[t]] == wp.int8(0) and (keeps or (may_cross and not _partly(judge, bounds, slack, own, sides)))
-    live = live or full
     k = int(turn[t])
     a = verts[tris[t, k]]
     b = verts[tris[t, (k + 1) % 3]]
@@ -343,6 +345,17 @@ def _judge_pieces_kernel(
     step = wp.float32(slack * judge.sample_share)
     grid = row_grid(a, b, c, step)
     rows = int(grid[1])
+    first_steps = row_steps(0.0, grid[0], step)
+    inner = rows > 1 or first_steps > 1  # samples besides the corners
+    # distances recorded (``full``): a piece of few samples has each read that far; one of many, its centre
+    spread = wp.max(wp.max(wp.length(p0 - centre), wp.length(p1 - centre)), wp.length(p2 - centre))
+    small = wp.float64(spread) <= wp.float64(CENTRE_SPREAD) * judge.spacing
+    dense = full and rows * (first_steps + 2) > 2 * CENTRE_SAMPLES and small
+    if full and not dense:
+        keep_reach = full_reach
+        partly_reach = full_reach
+        live = True
+    complete = live or not inner  # every sample read (or the piece was given up with rows unread)
     r = int(0)
     while live and r < rows:
         s = float(r) / float(rows)
@@ -354,11 +367,12 @@ def _judge_pieces_kernel(
                 got = reading(judge, x, wp.where(keeps, keep_reach, partly_reach))
                 same = same and int(got[0]) == first
                 bounds = _fold(judge, int(got[0]), got[1], bounds)
-                least = wp.min(least, got[1])
+                if not dense:
+                    least = wp.min(least, got[1])
                 if judge.crossing != 0:
                     sides = _fold_side(judge, sides, x, centre, n, own)
                 keeps = _keeps(judge, same, bounds, slack, own, sides)
-                live = full or keeps or not _partly(judge, bounds, slack, own, sides)
+                live = (full and not dense) or keeps or not _partly(judge, bounds, slack, own, sides)
             i += 1
         r += 1
     bits = int(0)
@@ -368,11 +382,13 @@ def _judge_pieces_kernel(
         bits = bits | PARTLY_BIT
     if ((int(judge.table[first]) & 2) != 0) != (own < 0):
         bits = bits | FLIP_BIT
-    if bounds[1] < 0.0:
+    if bounds[1] < 0.0 and complete:
         bits = bits | SIGNS_ONLY_BIT
-    if defects[parent[t]] != wp.int8(0) or not (own != 0 or (sides & 2) != 0):
+    if defects[parent[t]] != wp.int8(0) or (complete and not (own != 0 or (sides & 2) != 0)):
         bits = bits | OWN_ONLY_BIT
     verdicts[t] = wp.int8(bits)
+    if dense:  # its samples lie within the farthest corner's distance of the centre
+        least = wp.min(least, reading(judge, centre, full_reach + spread)[1] - spread)
     nearest[t] = least
 
 

@@ -9,6 +9,7 @@ import pytest
 
 import engine
 from engine import verdicts
+from engine.keep import kept_triangles
 from tests.support import box_mesh, normalised, uv_sphere
 
 
@@ -128,3 +129,31 @@ def test_a_moved_open_leaf_is_bounded_by_its_jump_spheres_and_a_moved_offset_giv
     engine.difference(ball, grown).kept_surface()
     engine.difference(ball, _moved(grown, (voxel, 0.0, 0.0))).kept_surface()
     assert reuse_log[-1][:2] == (0, None), reuse_log[-1]  # (the ball's the only mesh leaf judged)
+
+
+def test_recorded_distances_bound_every_sample_read_from_a_centre_where_a_face_has_many_samples():
+    # a face of many samples and a few voxels across (the ball's) has its centre read as far as a record needs (its
+    # samples only as far as its verdict does): a bound below every sample's distance, within twice the face's spread
+    # of it; a face far larger (the box's) has every sample read that far, as the sample-by-sample path reads them
+    (ball, box), voxel = _ball_and_box()
+    records = {}
+    for fused in (True, False):
+        verdicts.forget()
+        kept_triangles(engine.difference(ball, box), fused=fused)  # (a first boolean marks)
+        kept_triangles(engine.difference(ball, _moved(box, (voxel, 0.0, 0.0))), fused=fused)  # a move records
+        records[fused] = [verdicts._RECORDS[field.sources[k]][k] for k, field in enumerate((ball, box))]
+    verdicts.forget()
+    for k, field in enumerate((ball, box)):
+        centre, general = records[True][k], records[False][k]
+        np.testing.assert_array_equal(centre.status, general.status)
+        np.testing.assert_array_equal(centre.flip, general.flip)
+        source = field.sources[k]
+        corners = source.verts[source.tris].astype(np.float64)
+        spread = np.linalg.norm(corners - corners.mean(axis=1, keepdims=True), axis=2).max(axis=1)
+        read = np.isfinite(general.margin)
+        if k == 1:  # the box's faces, 27 voxels from their centres
+            np.testing.assert_array_equal(centre.margin, general.margin)
+            continue
+        assert (centre.margin[read] <= general.margin[read] + 1e-6).all()  # a bound of every sample's distance
+        assert (centre.margin[read] >= general.margin[read] - 2.0 * spread[read] - 1e-6).all()
+        assert (centre.margin[read] < general.margin[read] - 0.1 * voxel).sum() > 100  # measured
