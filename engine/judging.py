@@ -17,7 +17,9 @@ The verdicts are the general path's: the same samples and float32 readings, the 
 things differ and cannot change them: a piece's rows are read only while they can change its verdict (kept only ever
 turns false, partly keepable only true); a sample's distances are read only as far as its piece's checks look (a
 margin beyond passes them whatever it is), not as far as the round's largest piece needs; a corner's reading is kept
-from the round that first read it.
+from the round that first read it. Where distances are recorded for the next boolean (:mod:`.verdicts`), a piece of
+many samples a few voxels across records a bound read at its centre (Lipschitz's), a little below its samples' least
+distance: a verdict reused from it is one its samples would give again.
 """
 
 from __future__ import annotations
@@ -304,8 +306,10 @@ def _judge_pieces_kernel(
     """A piece's verdict bits (:class:`FusedJudge`) from its corners' readings and its rows' (read here, while they
     can change the verdict). A sample is read as far as the piece's checks look: a margin beyond them passes them
     whatever it is (a piece that may be kept: over its band and slack, one that may not: over the partly keepable
-    margin). With a ``full_reach`` (above 0), every sample is read that far (distances recorded: ``nearest``, and the
-    bits SIGNS_ONLY_BIT, OWN_ONLY_BIT)."""
+    margin). With a ``full_reach`` (above 0), distances are recorded (``nearest``, and the bits SIGNS_ONLY_BIT,
+    OWN_ONLY_BIT, set only where every sample was read): the corners and a piece of few samples have each read that
+    far; a piece of many, a few voxels across, its centre that far and its farthest corner's distance, a bound of
+    its samples' (Lipschitz's: a few voxels looser, where reading each would cost most)."""
     t = wp.tid() + offset
     slack = wp.max(longest[t] / wp.float64(8.0), judge.spacing) * judge.slack_share
     keep_reach = wp.float32(judge.band + slack + judge.pad)
@@ -467,8 +471,10 @@ class FusedJudge:
     def __call__(self, verts, tris, parent, longest, turn, beyond: float | None = None):
         """Per piece (``tris`` (T, 3) int64 of ``verts`` (V, 3) float32, in source triangles ``parent``, ``longest``
         and ``turn`` their :func:`edge_turns`): ``(kept, partly, flip, found)``, as keep's general path finds them.
-        With ``beyond``, every sample is read, up to ``beyond`` farther than the round's largest piece needs, and
-        ``found`` is what keep's general path records (``margin``, ``signs_only``, ``own_only``; else None).
+        With ``beyond``, distances up to ``beyond`` farther than the round's largest piece needs are recorded, and
+        ``found`` is what keep's general path records (``margin``, ``signs_only``, ``own_only``; else None), with
+        ``margin`` a bound of its samples' least distance (:func:`_judge_pieces_kernel`: a piece of many samples
+        has its centre read), and the bits set only where they hold for certain.
         Successive calls pass the vertices of one mesh that only grows (vertices appended): a vertex is read once
         (again where distances are recorded)."""
         device = self.device
