@@ -207,8 +207,7 @@ def hybrid_surface(
     points = np.concatenate([kept["verts"], voxel_verts]).astype(np.float32)
     k_tris, v_tris = kept["tris"], np.asarray(voxel_tris, dtype=np.int64) + n_k
     n = len(points)
-    # kept faces that list an edge another kept face lists the same way (pieces that overlap) are given up
-    k_alive, k_border = _drop_pinched(k_tris, ~_doubled_faces(k_tris, n), n)
+    k_alive, k_border = _undoubled(k_tris, n)
     judged_alive = k_alive
     v_gone, closed = np.zeros(len(v_tris), dtype=bool), np.ones(len(v_tris), dtype=bool)
     ways = triangle_normal_sums(points, v_tris, n_k, device)  # the voxel surface's way at each of its vertices
@@ -418,10 +417,17 @@ def _loops_at_unpaired_edges(tris, seams, k_loops, v_loops, pairs, n_verts: int)
     return failed[failed >= 0]
 
 
-def _doubled_faces(tris: np.ndarray, n_verts: int) -> np.ndarray:
-    """(T,) bool: the faces with a directed edge some other face lists too."""
+def _undoubled(tris: np.ndarray, n_verts: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_drop_pinched` of the kept faces less those that list an edge another face lists the same way (pieces
+    that overlap): ``(alive, border halves)``. Where none does (most joins), the border is read off the same count of
+    their edges."""
     a, b, _, _ = directed_edges(tris, n_verts)
-    return (EdgeCounts(a, b, n_verts).repeats() > 1).reshape(-1, 3).any(axis=1)
+    counts = EdgeCounts(a, b, n_verts)
+    doubled = (counts.repeats() > 1).reshape(-1, 3).any(axis=1)
+    if doubled.any():
+        return _drop_pinched(tris, ~doubled, n_verts)
+    open_ = counts.reverses() == 0
+    return _drop_pinched(tris, ~doubled, n_verts, (~doubled, np.stack([a[open_], b[open_]], axis=1)))
 
 
 def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach: float, device, far):
