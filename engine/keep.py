@@ -200,6 +200,7 @@ class _Own:
     defect_mesh: object  # wp.Mesh or None
     strips: tuple  # (strip, apex) per triangle
     thin: int  # the side of a part thinner than the field sees (:func:`.ownside.outward`)
+    turns: tuple | None = None  # :func:`.samples.edge_turns` of its triangles where unplaced (a placed one's: found)
 
 
 # A leaf's own part, kept with its source mesh: an unplaced leaf's source is the same object at every boolean its
@@ -250,6 +251,7 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
         )
     strips = strip_parents(verts, tris, SPLIT_VOXELS * voxel, measures)
     own = _Own(None if on_demand else leaf.values, offset, device, defects, side, defect_mesh, strips, thin)
+    own.turns = edge_turns(verts, tris)
     _OWN[source] = own
     return own
 
@@ -318,6 +320,7 @@ class _Judge:
         self.crossing = bool((own.side == 0).any())
         self.side_offset = self.band if self.crossing else own.offset
         self.side, self.thin = own.side, own.thin  # each source triangle's side (and a thin part's)
+        self.turns = own.turns  # (the source triangles' longest edges, where found with the own part)
         self.strips = own.strips
         self.fused = self._fused() if fused else None
 
@@ -577,7 +580,7 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     (:mod:`.verdicts`), the rest judged whole, with distances read far enough for the next boolean to reuse where
     the leaves were judged before elsewhere (:func:`.verdicts.worth_recording`: a drag)."""
     unplaced = next(iter(leaves(field.expression)[index].sources.values()))
-    longest, turn = edge_turns(verts, tris)
+    longest, turn = edge_turns(verts, tris) if judge.turns is None else judge.turns
     slack = judge.slack_of(longest)
     # moves are bounded by a leaf's distances read off its mesh (and where its sign may jump, by its jump spheres)
     bounded = [b is not None and (j is None or not j.anywhere) for b, j in zip(judge.bvhs, judge.jumps, strict=True)]
