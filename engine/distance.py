@@ -414,7 +414,15 @@ def _take_known_triangles_kernel(
 
 
 def finest_distances(
-    search: OctetSearch, layout: dict, *, origin, voxel_size: float, field_id: int, previous=None, prev_index=None
+    search: OctetSearch,
+    layout: dict,
+    *,
+    origin,
+    voxel_size: float,
+    field_id: int,
+    previous=None,
+    prev_index=None,
+    known=None,
 ):
     """Exact closest points of the finest level of ``layout`` (:func:`.octree.level_layout`) on a mesh.
 
@@ -429,7 +437,8 @@ def finest_distances(
         origin, voxel_size: The field's lattice.
         field_id: Source id written to the finest nodes.
         previous, prev_index: An earlier field of the same mesh and domain and each node's index in it (-1: new;
-            :func:`.octree.match_levels`): its octets keep their closest points.
+            :func:`.octree.match_levels`): its octets keep their closest points; ``known``: its (closest points,
+            node sources) where decoded already.
     Returns:
         ``(dist, proj, source, tri, octet_points)``: (N,) float32 unsigned distances, (N,) vec3 closest points and (N,)
         int32 source ids for every node of the layout, the finest level's filled in; (N0,) int32 the triangle (index
@@ -449,7 +458,7 @@ def finest_distances(
     if previous is not None:
         launch_split(_take_known_triangles_kernel, n0, lambda s, _n: [s, prev_index, previous.tri, tri], device)
         no_known = wp.empty(0, dtype=wp.int32, device=device)
-        prev_points, prev_sources = previous.closest_points, previous.node_sources()
+        prev_points, prev_sources = (previous.closest_points, previous.node_sources()) if known is None else known
         launch_split(
             take_known_kernel,
             n0,

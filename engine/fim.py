@@ -357,11 +357,12 @@ def _refine_leaves_kernel(
             proj[i] = p
 
 
-def _take_known_coarse(previous, prev_index, nodes, known, arrays) -> None:
+def _take_known_coarse(previous, prev_index, nodes, known, arrays, decoded=None) -> None:
     """The coarse nodes (``nodes``: from n0 to n) ``previous`` has (``prev_index``) take its distance, closest point
-    and source into ``arrays`` (dist, proj, source), flagged in ``known`` (empty: not flagged)."""
+    and source into ``arrays`` (dist, proj, source), flagged in ``known`` (empty: not flagged); ``decoded``: its
+    (closest points, node sources) where decoded already."""
     n0, n = nodes
-    prev_points, prev_sources = previous.closest_points, previous.node_sources()
+    prev_points, prev_sources = (previous.closest_points, previous.node_sources()) if decoded is None else decoded
     launch_split(
         take_known_kernel,
         n - n0,
@@ -370,17 +371,18 @@ def _take_known_coarse(previous, prev_index, nodes, known, arrays) -> None:
     )
 
 
-def known_levels(layout: dict, previous, prev_index, dist, proj, source):
+def known_levels(layout: dict, previous, prev_index, dist, proj, source, decoded=None):
     """Every coarse node's distance, closest point and source taken from ``previous`` (which has them all: a field
-    refined on demand, :mod:`.ondemand`), in place; returns the coarse nodes' same-level neighbours, as
-    :func:`solve_levels` does."""
+    refined on demand, :mod:`.ondemand`; ``decoded``: its closest points and node sources, where decoded already), in
+    place; returns the coarse nodes' same-level neighbours, as :func:`solve_levels` does."""
     codes, coords, offsets = layout["codes"], layout["coords"], layout["offsets"]
     device = codes.device
     levels = len(offsets) - 1
     n, n0 = int(offsets[-1]), int(offsets[1])
     fine_dims = (np.asarray(layout["top_dims"], dtype=np.int64)) * 2 ** (levels - 1)
     neighbours = wp.full((n - n0, 6), -1, dtype=wp.int32, device=device)
-    _take_known_coarse(previous, prev_index, (n0, n), wp.empty(0, dtype=wp.int32, device=device), (dist, proj, source))
+    unflagged = wp.empty(0, dtype=wp.int32, device=device)
+    _take_known_coarse(previous, prev_index, (n0, n), unflagged, (dist, proj, source), decoded)
     for k in range(1, levels):
         octets = codes if k < levels - 1 else None  # (the dense top level is no level of octets)
         level_neighbours(coords, int(offsets[k]), int(offsets[k + 1]), fine_dims >> k, neighbours, n0, octets)

@@ -88,6 +88,7 @@ class LevelBuilder:
         level's new octets are searched."""
         plan, timings = self.plan, self.timings
         t0 = time.perf_counter()
+        decoded = (previous.closest_points, previous.node_sources())  # (read by both steps)
         dist, proj, source, tri, _ = distance.finest_distances(
             self._octet_search(),
             layout,
@@ -96,9 +97,10 @@ class LevelBuilder:
             field_id=self.field_id,
             previous=previous,
             prev_index=prev_index,
+            known=decoded,
         )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
-        neighbours = fim.known_levels(layout, previous, prev_index, dist, proj, source)
+        neighbours = fim.known_levels(layout, previous, prev_index, dist, proj, source, decoded)
         return dist, proj, source, tri, neighbours, {}
 
     def _octet_search(self) -> search.OctetSearch:
