@@ -10,7 +10,7 @@ import time
 from . import distance, fim, search, signs, sweeping
 from .field import AdaptiveField
 from .holes import changed_top_cells, sign_change_octets
-from .octree import add_octets, code_bits, level_layout, match_levels, merge_unique, parent_octets
+from .octree import add_octets, code_bits, level_layout, match_levels, merge_unique, parent_octets, upper_levels
 from .plan import check_budget
 from .sampling import LEAF_TOLERANCE
 from .signs import NO_BOXES
@@ -35,6 +35,7 @@ class LevelBuilder:
         self.winding, self.device, self.field_id, self.timings = winding, device, field_id, timings
         self.expansions = None  # the signs' expansions of the latest build, which a refinement round keeps
         self.above = None  # level 1's octets where the finest octets are a part of the band (:mod:`.ondemand`)
+        self.upper = (None, None)  # (``above``, :func:`.octree.upper_levels` of it), found once for refinements
         voxel_size, padding = plan["voxel_size"], plan["padding"]
         # a band node lies within (padding + 1) cells (L-inf) of a triangle; misses fall back to the domain diagonal
         self.query_radius = facts["diag"] if plan["levels"] == 1 else (padding + 2) * voxel_size * 1.75
@@ -49,7 +50,7 @@ class LevelBuilder:
             up = parent_octets(octets, 1, end_bit=end_bit, presorted=True)
             self.above = merge_unique(self.above, up, end_bit=end_bit)
         # every node's place first, so each level's values are computed where they are kept
-        layout = level_layout(octets, plan["top_dims"], plan["levels"], self.device, timings, above=self.above)
+        layout = level_layout(octets, plan["top_dims"], plan["levels"], self.device, timings, above=self._upper())
         # each node's index in the earlier build (-1: new), shared by distances and signs
         prev_index = None if previous is None else match_levels(layout["codes"], layout["offsets"], previous)
         if finest_only:
@@ -82,6 +83,14 @@ class LevelBuilder:
             timings=timings,
             stats={"fim_sweeps": sweeps, **sign_stats},
         )
+
+    def _upper(self):
+        """``above`` with the levels over it (:func:`.octree.upper_levels`), found once while it stays."""
+        if self.above is None or self.plan["levels"] <= 2:
+            return self.above
+        if self.upper[0] is not self.above:
+            self.upper = (self.above, upper_levels(self.above, self.plan["top_dims"], self.plan["levels"]))
+        return self.upper[1]
 
     def finest(self, layout, previous, prev_index):
         """:meth:`distances` where ``previous`` has every coarse node: they take its values, and only the finest

@@ -542,6 +542,28 @@ def code_bits(dims) -> int:
     return max(1, int(np.ceil(np.log2(float(np.max(dims)) + 1.0))))
 
 
+def _levels_above(level_octets: list, top_dims, levels: int) -> tuple[list, list]:
+    """The octets of the levels above ``level_octets`` (finest first) up to the one below the dense top, each the
+    parents of the one below (sorted by code: they come in order), and each level's parents' index among them."""
+    fine_dims = np.asarray(top_dims, dtype=np.int64) * 2 ** (levels - 1)
+    octets, index = [], []
+    for k in range(len(level_octets), levels - 1):
+        below = (level_octets + octets)[-1]
+        up, up_index = parent_octets(
+            below, 1, end_bit=3 * code_bits((fine_dims >> k) * 2), presorted=True, return_index=True
+        )
+        octets.append(up)
+        index.append(up_index)
+    return octets, index
+
+
+def upper_levels(above: wp.array, top_dims, levels: int) -> tuple[list, list]:
+    """Level 1's octets ``above`` and the octets of the levels above them, with each one's parents' index (the
+    coarse part of :func:`level_layout`, the same for every refinement of a field built on demand)."""
+    octets, index = _levels_above([None, above], top_dims, levels)
+    return [above, *octets], index
+
+
 def level_layout(
     octets, top_dims, levels: int, device, timings: dict | None = None, *, lean: bool = False, above=None
 ) -> dict:
@@ -555,25 +577,21 @@ def level_layout(
     ``AdaptiveField.child``); ``coords`` and ``parent`` are None: 16 bytes a node less at the peak of a boolean.
     ``above``: level 1's octets (sorted unique codes, holding the parent of every one of ``octets``) instead of the
     parents of ``octets``: a field refined on demand keeps the level-1 nodes of its whole band while its finest
-    octets are a part of it (:mod:`.ondemand`).
+    octets are a part of it (:mod:`.ondemand`); or :func:`upper_levels` of them, found once for every refinement.
     """
     t0 = time.perf_counter()
     top_dims = np.asarray(top_dims, dtype=np.int64)
-    fine_dims = top_dims * 2 ** (levels - 1)
     level_octets = [] if octets is None else [octets]
     parent_index = []  # per octet of a level, its parent's octet among the next level's (all but the last)
     if above is not None and levels > 2:
-        level_octets.append(above)
-        index = np.searchsorted(above.numpy(), octets.numpy() >> 3).astype(np.int32)
-        parent_index.append(wp.array(index, dtype=wp.int32, device=device))
-    for k in range(len(level_octets), levels - 1):
-        # every level is sorted by code, so the parents of its octets come in order
-        dims_k = fine_dims >> k
-        up, index = parent_octets(
-            level_octets[-1], 1, end_bit=3 * code_bits(dims_k * 2), presorted=True, return_index=True
-        )
-        level_octets.append(up)
-        parent_index.append(index)
+        upper, upper_index = above if isinstance(above, tuple) else upper_levels(above, top_dims, levels)
+        index = np.searchsorted(upper[0].numpy(), octets.numpy() >> 3).astype(np.int32)
+        level_octets += upper
+        parent_index += [wp.array(index, dtype=wp.int32, device=device), *upper_index]
+    else:
+        more, more_index = _levels_above(level_octets, top_dims, levels)
+        level_octets += more
+        parent_index += more_index
     parent_index.append(wp.empty(0, dtype=wp.int32, device=device))  # the dense top level: by coordinates
     sizes = [8 * o.shape[0] for o in level_octets] + [int(np.prod(top_dims))]
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
