@@ -26,7 +26,8 @@ from .blends import BLEND_MODES, chamfer_needs, sdf_combine
 from .blendzone import blend_octets
 from .earlyjudge import start_judge
 from .expression import OP_DIFFERENCE, OP_INTERSECTION, OP_UNION, combined
-from .octree import code_bits, level_layout, morton_decode, node_center
+from .layout import level_layout
+from .octree import code_bits, morton_decode, node_center
 from .ondemand import along_seams_only, for_boolean, seam_octets
 from .operands import (
     blend_sample,

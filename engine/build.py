@@ -6,7 +6,7 @@ Pipeline of :func:`build_field`:
    lie within ``padding`` cells of it (Eq. 4-5: whole octets, so every parent gets exactly 8 children), marked in a
    byte per octet (or, for very large grids, all (triangle, octet) pairs radix-sorted), gathered, radix-sorted into
    Morton order, expanded to cells; exact closest points octet by octet (:mod:`.distance`);
-2. coarser levels: placed by :func:`.octree.level_layout`, their distances solved bottom-up (:mod:`.distance`);
+2. coarser levels: placed by :func:`.layout.level_layout`, their distances solved bottom-up (:mod:`.distance`);
 3. signs, top-down (:mod:`.signs`): inside means |w| >= 1/2, w the generalised winding number, decided exactly where
    the fast one is not sure (:mod:`.winding`);
 4. open meshes: the surface across their holes (:mod:`.holes`), before the first build and in refinement rounds.

@@ -424,7 +424,7 @@ def finest_distances(
     prev_index=None,
     known=None,
 ):
-    """Exact closest points of the finest level of ``layout`` (:func:`.octree.level_layout`) on a mesh.
+    """Exact closest points of the finest level of ``layout`` (:func:`.layout.level_layout`) on a mesh.
 
     Args:
         search: The mesh and how its octets search it (:class:`.search.OctetSearch`): its ``query_radius`` is a
@@ -437,7 +437,7 @@ def finest_distances(
         origin, voxel_size: The field's lattice.
         field_id: Source id written to the finest nodes.
         previous, prev_index: An earlier field of the same mesh and domain and each node's index in it (-1: new;
-            :func:`.octree.match_levels`): its octets keep their closest points; ``known``: its (closest points,
+            :func:`.layout.match_levels`): its octets keep their closest points; ``known``: its (closest points,
             node sources) where decoded already.
     Returns:
         ``(dist, proj, source, tri, octet_points)``: (N,) float32 unsigned distances, (N,) vec3 closest points and (N,)

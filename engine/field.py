@@ -105,7 +105,7 @@ class AdaptiveField:
         sources=None,
         triangles=None,
     ):
-        """The field whose nodes are placed by ``layout`` (:func:`.octree.level_layout`: codes, coordinates, level
+        """The field whose nodes are placed by ``layout`` (:func:`.layout.level_layout`: codes, coordinates, level
         offsets, child links, top-level dims) with these (N,) node arrays: ``values`` float32 signed distances,
         ``proj`` vec3 closest surface points (or vec3h offsets, as the field keeps them: see ``closest_points``),
         ``source`` int32 ids of the operand each node's value came from; ``sources`` maps field ids to the

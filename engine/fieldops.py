@@ -20,7 +20,8 @@ import numpy as np
 import warp as wp
 
 from .geometry import mesh_closest_point
-from .octree import code_bits, decode_codes, dense_level, level_layout, morton_decode, node_center, sort_unique
+from .layout import level_layout
+from .octree import code_bits, decode_codes, dense_level, morton_decode, node_center, sort_unique
 from .ondemand import refined
 from .parallel import launch_split
 from .plan import check_budget, checked_wall, finite_number, plan_grown

@@ -410,7 +410,7 @@ def solve_levels(
 
     Args:
         mesh_id: ``wp.Mesh.id`` of the mesh.
-        layout: Every node's place (:func:`.octree.level_layout`).
+        layout: Every node's place (:func:`.layout.level_layout`).
         dist, proj, source: (N,) arrays of :func:`finest_distances`, the finest level filled in.
         origin, voxel_size: The field's lattice.
         top_tolerance: Relative error allowed to the closest points of the dense top level's leaves.

@@ -21,6 +21,7 @@ from pathlib import Path
 # other than the pinned one (extract.py's fallback), where prebuilt kernels cannot match anyway: not prebuilt.
 ENGINE_MODULES = (
     "octree",
+    "layout",
     "neighbours",
     "distance",
     "search",

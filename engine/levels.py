@@ -10,7 +10,8 @@ import time
 from . import distance, fim, search, signs, sweeping
 from .field import AdaptiveField
 from .holes import changed_top_cells, sign_change_octets
-from .octree import add_octets, code_bits, level_layout, match_levels, merge_unique, parent_octets, upper_levels
+from .layout import level_layout, match_levels, upper_levels
+from .octree import add_octets, code_bits, merge_unique, parent_octets
 from .plan import check_budget
 from .sampling import LEAF_TOLERANCE
 from .signs import NO_BOXES
@@ -35,7 +36,7 @@ class LevelBuilder:
         self.winding, self.device, self.field_id, self.timings = winding, device, field_id, timings
         self.expansions = None  # the signs' expansions of the latest build, which a refinement round keeps
         self.above = None  # level 1's octets where the finest octets are a part of the band (:mod:`.ondemand`)
-        self.upper = (None, None)  # (``above``, :func:`.octree.upper_levels` of it), found once for refinements
+        self.upper = (None, None)  # (``above``, :func:`.layout.upper_levels` of it), found once for refinements
         voxel_size, padding = plan["voxel_size"], plan["padding"]
         # a band node lies within (padding + 1) cells (L-inf) of a triangle; misses fall back to the domain diagonal
         self.query_radius = facts["diag"] if plan["levels"] == 1 else (padding + 2) * voxel_size * 1.75
@@ -85,7 +86,7 @@ class LevelBuilder:
         )
 
     def _upper(self):
-        """``above`` with the levels over it (:func:`.octree.upper_levels`), found once while it stays."""
+        """``above`` with the levels over it (:func:`.layout.upper_levels`), found once while it stays."""
         if self.above is None or self.plan["levels"] <= 2:
             return self.above
         if self.upper[0] is not self.above:

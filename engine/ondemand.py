@@ -6,7 +6,7 @@ operand's surface lies inside the other operand (or outside it, for an intersect
 thrown away. Pavić, Campen and Kobbelt reach fine resolutions by confining the work to the cells near the
 intersections; here a field built with ``refine="none"`` has every level above the finest as the full build has them
 (the same nodes, values, closest points and signs: level 1 is placed as the parents of the whole band's finest
-octets, :func:`.octree.level_layout`'s ``above``, and a level-1 node without children takes its exact closest point
+octets, :func:`.layout.level_layout`'s ``above``, and a level-1 node without children takes its exact closest point
 directly, as a coarse leaf does) and no finest octet. :meth:`Refiner.refined` adds the band's finest octets a
 consumer asks for, as a refinement round of the build does (the nodes found before keep their values, only new
 octets are searched), so a refined place equals the full build's. The most refined field so far is kept with the

@@ -21,7 +21,8 @@ import warp as wp
 from . import fim
 from .distance import finest_distances
 from .geometry import mesh_closest_point
-from .octree import find_key, level_layout, match_levels, morton_decode, morton_encode
+from .layout import level_layout, match_levels
+from .octree import find_key, morton_decode, morton_encode
 from .ondemand import refined
 from .parallel import launch_split
 from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, locate_leaf, node_source

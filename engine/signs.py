@@ -361,7 +361,7 @@ def sign_levels(
 
     Args:
         winding: The mesh's :class:`.winding.WindingArg` (its BVH, built with winding-number support, and boundary).
-        layout: Every node's place (:func:`.octree.level_layout`).
+        layout: Every node's place (:func:`.layout.level_layout`).
         dist: (N,) float32 unsigned distances of every node.
         neighbours: (N - N0, 6) same-level neighbours of the coarse nodes (:func:`.distance.solve_levels`).
         origin, voxel_size: The field's lattice.

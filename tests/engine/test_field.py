@@ -307,7 +307,7 @@ def test_level_layout_links_each_node_to_its_parent_and_children(levels):
     field = engine.build_field(verts, tris, voxel_size=0.05, levels=levels)
     n0 = field.level_counts[0]
     octets = wp.array(field.codes.numpy()[:n0:8] >> 3, dtype=wp.int64)
-    layout = engine.octree.level_layout(octets, field.top_dims, levels, octets.device)
+    layout = engine.layout.level_layout(octets, field.top_dims, levels, octets.device)
     codes, coords = layout["codes"].numpy(), layout["coords"].numpy()
     child, parent, offsets = layout["child"].numpy(), layout["parent"].numpy(), layout["offsets"]
     np.testing.assert_array_equal(codes, field.codes.numpy())
@@ -971,7 +971,7 @@ def test_a_refinement_round_looks_again_only_near_the_top_cells_it_changed():
 
 
 def test_a_refinement_round_reuses_the_nodes_of_the_build_before_it(monkeypatch):
-    from engine.octree import match_levels
+    from engine.layout import match_levels
 
     monkeypatch.setattr(engine.holes, "CAP_LATTICE_MAX_RATIO", 0.0)  # no lattice around the caps: the rounds
     verts, tris = load_mesh("stanford-bunny.obj")
