@@ -25,55 +25,62 @@ def whole_faces(kept: dict, tris: np.ndarray, operands) -> dict | None:
     field_id, tri_id = kept["field_id"].astype(np.int64), kept["triangle_id"].astype(np.int64)
     vertex_field, vertex_id = kept["vertex_field"].astype(np.int64), kept["vertex_id"].astype(np.int64)
     rows = np.flatnonzero(kept["kept"] & (field_id >= 0) & (field_id < len(operands)))
-    rows = rows[(vertex_field[tris[rows]] == field_id[rows, None]).all(axis=1) & (vertex_id[tris[rows]] >= 0).all(1)]
+    corners = [tris[rows, k] for k in range(3)]  # (column by column: numpy reduces a 3-long axis slowly)
+    own = (vertex_id[corners[0]] >= 0) & (vertex_id[corners[1]] >= 0) & (vertex_id[corners[2]] >= 0)
+    for k in range(3):
+        own &= vertex_field[corners[k]] == field_id[rows]
+    rows = rows[own]
     if not len(rows):
         return None
-    # stacked over the operands: triangle, face and corner numbers made unique by offsets
-    tri_first = np.cumsum([0] + [len(op.tris) for op in operands])
+    # each row's source triangle and face, gathered operand by operand; faces numbered over the operands by offsets
     face_first = np.cumsum([0] + [len(op.loop_start) for op in operands])
-    loop_first = np.cumsum([0] + [len(op.corner_vert) for op in operands])
-    source_tris = np.concatenate([op.tris for op in operands]).astype(np.int64)
-    faces = np.concatenate([op.faces.astype(np.int64) + face_first[k] for k, op in enumerate(operands)])
-    stacked = tri_first[field_id[rows]] + tri_id[rows]
-    corners, source = vertex_id[tris[rows]], source_tris[stacked]
+    of = field_id[rows]
+    source, face, need = (
+        np.empty((len(rows), 3), np.int64),
+        np.empty(len(rows), np.int64),
+        np.empty(len(rows), np.int64),
+    )
+    for k, op in enumerate(operands):
+        at = np.flatnonzero(of == k)
+        triangle = tri_id[rows[at]]
+        source[at] = op.tris[triangle]
+        face[at] = op.faces[triangle]
+        need[at] = np.bincount(op.faces, minlength=len(op.loop_start))[face[at]]  # (its face's triangles)
+        face[at] += face_first[k]
+    corners = vertex_id[tris[rows]]
     same = np.zeros(len(rows), dtype=bool)
     turned = np.zeros(len(rows), dtype=bool)
     for k in range(3):  # the source triangle's corners, in its turn or reversed (column by column: no copies)
         first = corners[:, k] == source[:, 0]
         same |= first & (corners[:, (k + 1) % 3] == source[:, 1]) & (corners[:, (k + 2) % 3] == source[:, 2])
         turned |= first & (corners[:, (k + 2) % 3] == source[:, 1]) & (corners[:, (k + 1) % 3] == source[:, 2])
-    rows, stacked = rows[same | turned], stacked[same | turned]
-    flip_of_row = turned[same | turned] & ~same[same | turned]
-    face = faces[stacked]
-    need = np.bincount(faces, minlength=int(face_first[-1]))
-    have = np.bincount(face, minlength=len(need))
-    whole = (have == need) & (need > 0)
-    keep_rows = whole[face]
+    match = same | turned
+    rows, face, need, flip_of_row = rows[match], face[match], need[match], turned[match] & ~same[match]
+    have = np.bincount(face, minlength=int(face_first[-1]))
+    keep_rows = have[face] == need
     rows, face, flip_of_row = rows[keep_rows], face[keep_rows], flip_of_row[keep_rows]
     if not len(rows):
         return None
     # one entry per whole face, its corners in its own order
     whole_faces_ = np.unique(face)
-    flip = np.zeros(len(need), dtype=bool)
+    flip = np.zeros(int(face_first[-1]), dtype=bool)
     flip[face] = flip_of_row
     operand = np.searchsorted(face_first, whole_faces_, side="right") - 1
     local = whole_faces_ - face_first[operand]
-    loop_start = np.concatenate([op.loop_start.astype(np.int64) + loop_first[k] for k, op in enumerate(operands)])
-    loop_end = np.concatenate(
-        [
-            np.r_[op.loop_start[1:], len(op.corner_vert)].astype(np.int64) + loop_first[k]
-            for k, op in enumerate(operands)
-        ]
-    )
-    sizes = (loop_end - loop_start)[whole_faces_]
-    offsets = np.repeat(loop_start[whole_faces_], sizes)
+    start, sizes = np.empty(len(local), np.int64), np.empty(len(local), np.int64)
+    for k, op in enumerate(operands):
+        at = np.flatnonzero(operand == k)
+        ends = np.r_[op.loop_start[1:], len(op.corner_vert)].astype(np.int64)
+        start[at] = op.loop_start[local[at]]
+        sizes[at] = ends[local[at]] - start[at]
     within = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
     reverse = np.repeat(flip[whole_faces_], sizes)
-    size_rep = np.repeat(sizes, sizes)
-    loops = offsets + np.where(reverse, (size_rep - within) % size_rep, within)
-    corner_vert_all = np.concatenate([op.corner_vert.astype(np.int64) for op in operands])
-    source_vertex = corner_vert_all[loops]
+    loops = np.repeat(start, sizes) + np.where(reverse & (within > 0), np.repeat(sizes, sizes) - within, within)
     corner_operand = np.repeat(operand, sizes)
+    source_vertex = np.empty(len(loops), np.int64)
+    for k, op in enumerate(operands):
+        at = np.flatnonzero(corner_operand == k)
+        source_vertex[at] = op.corner_vert[loops[at]]
     result_vertex = _result_vertices(vertex_field, vertex_id, corner_operand, source_vertex)
     return {
         "rows": rows,
@@ -81,7 +88,7 @@ def whole_faces(kept: dict, tris: np.ndarray, operands) -> dict | None:
         "face": local,
         "sizes": sizes,
         "corner_vert": result_vertex,
-        "loops": loops - loop_first[corner_operand],
+        "loops": loops,
         "flip": flip[whole_faces_],
     }
 
