@@ -22,6 +22,40 @@ def whole_faces(kept: dict, tris: np.ndarray, operands) -> dict | None:
         "face": (Q,) its face, "sizes": (Q,), "corner_vert": (C,) result vertex of each corner, "loops": (C,) the
         operand's corner (loop) each copies, "flip": (Q,) bool}``.
     """
+    face_first = np.cumsum([0] + [len(op.loop_start) for op in operands])  # faces numbered over the operands
+    found = _source_triangles(kept, tris, operands, face_first)
+    if found is None:
+        return None
+    rows, face, flip_of_row = found
+    # one entry per whole face, its corners in its own order
+    whole_faces_ = np.unique(face)
+    flip = np.zeros(int(face_first[-1]), dtype=bool)
+    flip[face] = flip_of_row
+    operand = np.searchsorted(face_first, whole_faces_, side="right") - 1
+    local = whole_faces_ - face_first[operand]
+    loops, sizes = _face_loops(operands, operand, local, flip[whole_faces_])
+    corner_operand = np.repeat(operand, sizes)
+    source_vertex = np.empty(len(loops), np.int64)
+    for k, op in enumerate(operands):
+        at = np.flatnonzero(corner_operand == k)
+        source_vertex[at] = op.corner_vert[loops[at]]
+    vertex_field, vertex_id = kept["vertex_field"].astype(np.int64), kept["vertex_id"].astype(np.int64)
+    result_vertex = _result_vertices(vertex_field, vertex_id, corner_operand, source_vertex)
+    return {
+        "rows": rows,
+        "field": operand,
+        "face": local,
+        "sizes": sizes,
+        "corner_vert": result_vertex,
+        "loops": loops,
+        "flip": flip[whole_faces_],
+    }
+
+
+def _source_triangles(kept: dict, tris: np.ndarray, operands, face_first) -> tuple | None:
+    """The kept triangles that are their source triangle, corner for corner (turned over or not), where every
+    triangle of its face is: ``(rows, face numbered over the operands, turned over)``, or None. Gathered operand by
+    operand from each one's own arrays."""
     field_id, tri_id = kept["field_id"].astype(np.int64), kept["triangle_id"].astype(np.int64)
     vertex_field, vertex_id = kept["vertex_field"].astype(np.int64), kept["vertex_id"].astype(np.int64)
     rows = np.flatnonzero(kept["kept"] & (field_id >= 0) & (field_id < len(operands)))
@@ -32,19 +66,15 @@ def whole_faces(kept: dict, tris: np.ndarray, operands) -> dict | None:
     rows = rows[own]
     if not len(rows):
         return None
-    # each row's source triangle and face, gathered operand by operand; faces numbered over the operands by offsets
-    face_first = np.cumsum([0] + [len(op.loop_start) for op in operands])
-    of = field_id[rows]
     source, face, need = (
         np.empty((len(rows), 3), np.int64),
         np.empty(len(rows), np.int64),
         np.empty(len(rows), np.int64),
     )
     for k, op in enumerate(operands):
-        at = np.flatnonzero(of == k)
+        at = np.flatnonzero(field_id[rows] == k)
         triangle = tri_id[rows[at]]
-        source[at] = op.tris[triangle]
-        face[at] = op.faces[triangle]
+        source[at], face[at] = op.tris[triangle], op.faces[triangle]
         need[at] = np.bincount(op.faces, minlength=len(op.loop_start))[face[at]]  # (its face's triangles)
         face[at] += face_first[k]
     corners = vertex_id[tris[rows]]
@@ -56,17 +86,13 @@ def whole_faces(kept: dict, tris: np.ndarray, operands) -> dict | None:
         turned |= first & (corners[:, (k + 2) % 3] == source[:, 1]) & (corners[:, (k + 1) % 3] == source[:, 2])
     match = same | turned
     rows, face, need, flip_of_row = rows[match], face[match], need[match], turned[match] & ~same[match]
-    have = np.bincount(face, minlength=int(face_first[-1]))
-    keep_rows = have[face] == need
-    rows, face, flip_of_row = rows[keep_rows], face[keep_rows], flip_of_row[keep_rows]
-    if not len(rows):
-        return None
-    # one entry per whole face, its corners in its own order
-    whole_faces_ = np.unique(face)
-    flip = np.zeros(int(face_first[-1]), dtype=bool)
-    flip[face] = flip_of_row
-    operand = np.searchsorted(face_first, whole_faces_, side="right") - 1
-    local = whole_faces_ - face_first[operand]
+    whole = np.bincount(face, minlength=int(face_first[-1]))[face] == need
+    return (rows[whole], face[whole], flip_of_row[whole]) if whole.any() else None
+
+
+def _face_loops(operands, operand, local, flip) -> tuple[np.ndarray, np.ndarray]:
+    """``(loops, sizes)``: the corners (loops) of each face ``local`` of ``operand``, in its own order (reversed
+    from its first corner where ``flip``), and each face's size."""
     start, sizes = np.empty(len(local), np.int64), np.empty(len(local), np.int64)
     for k, op in enumerate(operands):
         at = np.flatnonzero(operand == k)
@@ -74,23 +100,8 @@ def whole_faces(kept: dict, tris: np.ndarray, operands) -> dict | None:
         start[at] = op.loop_start[local[at]]
         sizes[at] = ends[local[at]] - start[at]
     within = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-    reverse = np.repeat(flip[whole_faces_], sizes)
-    loops = np.repeat(start, sizes) + np.where(reverse & (within > 0), np.repeat(sizes, sizes) - within, within)
-    corner_operand = np.repeat(operand, sizes)
-    source_vertex = np.empty(len(loops), np.int64)
-    for k, op in enumerate(operands):
-        at = np.flatnonzero(corner_operand == k)
-        source_vertex[at] = op.corner_vert[loops[at]]
-    result_vertex = _result_vertices(vertex_field, vertex_id, corner_operand, source_vertex)
-    return {
-        "rows": rows,
-        "field": operand,
-        "face": local,
-        "sizes": sizes,
-        "corner_vert": result_vertex,
-        "loops": loops,
-        "flip": flip[whole_faces_],
-    }
+    reverse = np.repeat(flip, sizes)
+    return np.repeat(start, sizes) + np.where(reverse & (within > 0), np.repeat(sizes, sizes) - within, within), sizes
 
 
 def _result_vertices(vertex_field, vertex_id, operand, source_vertex) -> np.ndarray:

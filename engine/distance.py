@@ -413,6 +413,20 @@ def _take_known_triangles_kernel(
         tri[i] = prev_tri[j]
 
 
+def _take_known_octets(previous, prev_index, known, arrays) -> np.ndarray:
+    """The finest nodes ``previous`` has (``prev_index``) take its distance, closest point, source and triangle into
+    ``arrays`` (dist, proj, source, tri of the finest level; ``known``: its closest points and node sources, where
+    decoded already); returns the first node of each octet it does not have (matched octet by octet)."""
+    dist0, proj0, src0, tri = arrays
+    n0, device = tri.shape[0], tri.device
+    launch_split(_take_known_triangles_kernel, n0, lambda s, _n: [s, prev_index, previous.tri, tri], device)
+    no_known = wp.empty(0, dtype=wp.int32, device=device)
+    points, sources = (previous.closest_points, previous.node_sources()) if known is None else known
+    args = [prev_index, previous.values, points, sources, no_known, dist0, proj0, src0]
+    launch_split(take_known_kernel, n0, lambda s, _n: [s, *args], device)
+    return 8 * np.flatnonzero(prev_index.numpy()[:n0:8] < 0)
+
+
 def finest_distances(
     search: OctetSearch,
     layout: dict,
@@ -456,26 +470,7 @@ def finest_distances(
     # Octets an earlier build of this mesh already has keep their closest points; only new ones are queried.
     first_nodes = np.arange(0, n0, 8)
     if previous is not None:
-        launch_split(_take_known_triangles_kernel, n0, lambda s, _n: [s, prev_index, previous.tri, tri], device)
-        no_known = wp.empty(0, dtype=wp.int32, device=device)
-        prev_points, prev_sources = (previous.closest_points, previous.node_sources()) if known is None else known
-        launch_split(
-            take_known_kernel,
-            n0,
-            lambda s, _n: [
-                s,
-                prev_index,
-                previous.values,
-                prev_points,
-                prev_sources,
-                no_known,
-                dist0,
-                proj0,
-                src0,
-            ],
-            device,
-        )
-        first_nodes = 8 * np.flatnonzero(prev_index.numpy()[:n0:8] < 0)  # matched octet by octet
+        first_nodes = _take_known_octets(previous, prev_index, known, (dist0, proj0, src0, tri))
     src0.fill_(int(field_id))
     origin_v = wp.vec3(*origin)
     if len(offsets) == 2:  # a single dense level: node by node
