@@ -24,7 +24,7 @@ import warp as wp
 
 from .components import connected_components
 from .edgehash import EdgeCounts, directed_edges
-from .parallel import launch_split
+from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
 
 # A voxel-surface vertex is over the kept faces within this many voxels of them.
 OVER_VOXELS = 1.0
@@ -126,6 +126,7 @@ def vertices_over(points, kept_tris, border, candidates, voxel: float, device, n
             *(reach, margin, over[lo : lo + n]),
         ],
         device,
+        min_dim=EMIT_SPLIT_MIN_DIM,  # (a BVH query each: the join runs alone, the other core is free)
     )
     over_all[candidates] = over.numpy().astype(bool)
     return over_all
