@@ -10,7 +10,6 @@ extracts the zero surface from the finest band (:mod:`.extract`); ``|``, ``&`` a
 from __future__ import annotations
 
 import copy
-import weakref
 
 import numpy as np
 import warp as wp
@@ -32,11 +31,6 @@ def _find_inside_kernel(values: wp.array[wp.float32], found: wp.array[wp.int32])
     """``found[0]`` becomes 1 when some node is inside (every such thread writes the same 1: races are harmless)."""
     if values[wp.tid()] < 0.0:
         found[0] = 1
-
-
-# Placement -> {id(source): (source, the source placed)}: a placed field's sources made once for its placement and
-# shared by its copies (refined, relabelled, read as built); entries go with the placement.
-_PLACED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 class AdaptiveField:
@@ -184,16 +178,7 @@ class AdaptiveField:
     def world_sources(self) -> dict:
         """``sources`` with their vertices where the field is placed (the same objects when it is not); a placed
         field's are made once for its placement, so what is built on them (a BVH) is shared by every reader."""
-        if self.placement is None:
-            return dict(self.sources)
-        known = _PLACED.setdefault(self.placement, {})  # (the copies of a placed field share its placement)
-        out = {}
-        for k, source in self.sources.items():
-            hit = known.get(id(source))
-            if hit is None or hit[0] is not source:
-                hit = known[id(source)] = (source, source.placed(self.placement.to_world))
-            out[k] = hit[1]
-        return out
+        return dict(self.sources) if self.placement is None else sources.placed_sources(self.sources, self.placement)
 
     # -- geometry of the domain --
     @property

@@ -14,12 +14,31 @@ winding-number data: about 130).
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 import warp as wp
 
 from .geometry import mesh_closest_face
 from .parallel import EMIT_SPLIT_MIN_DIM, host_view, launch_split
 from .sampling import face_nodes_kernel
+
+# Placement -> {id(source): (source, the source placed)}: a placed field's sources made once for its placement and
+# shared by its copies (refined, relabelled, read as built: they share the placement); entries go with it.
+_PLACED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def placed_sources(sources: dict, placement) -> dict:
+    """``sources`` ({field id: :class:`SourceMesh`}) placed by ``placement`` (``to_world``), each made once for that
+    placement, so that what is built on them (a BVH) is shared by every reader."""
+    known = _PLACED.setdefault(placement, {})
+    out = {}
+    for k, source in sources.items():
+        hit = known.get(id(source))
+        if hit is None or hit[0] is not source:
+            hit = known[id(source)] = (source, source.placed(placement.to_world))
+        out[k] = hit[1]
+    return out
 
 
 class SourceMesh:
