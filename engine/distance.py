@@ -413,16 +413,15 @@ def _take_known_triangles_kernel(
         tri[i] = prev_tri[j]
 
 
-def _take_known_octets(previous, prev_index, known, arrays) -> np.ndarray:
+def _take_known_octets(previous, prev_index, decoded, arrays) -> np.ndarray:
     """The finest nodes ``previous`` has (``prev_index``) take its distance, closest point, source and triangle into
-    ``arrays`` (dist, proj, source, tri of the finest level; ``known``: its closest points and node sources, where
-    decoded already); returns the first node of each octet it does not have (matched octet by octet)."""
+    ``arrays`` (dist, proj, source, tri of the finest level; ``decoded``: its closest points and node sources);
+    returns the first node of each octet it does not have (matched octet by octet)."""
     dist0, proj0, src0, tri = arrays
     n0, device = tri.shape[0], tri.device
     launch_split(_take_known_triangles_kernel, n0, lambda s, _n: [s, prev_index, previous.tri, tri], device)
     no_known = wp.empty(0, dtype=wp.int32, device=device)
-    points, sources = (previous.closest_points, previous.node_sources()) if known is None else known
-    args = [prev_index, previous.values, points, sources, no_known, dist0, proj0, src0]
+    args = [prev_index, previous.values, *decoded, no_known, dist0, proj0, src0]
     launch_split(take_known_kernel, n0, lambda s, _n: [s, *args], device)
     return 8 * np.flatnonzero(prev_index.numpy()[:n0:8] < 0)
 
@@ -436,7 +435,7 @@ def finest_distances(
     field_id: int,
     previous=None,
     prev_index=None,
-    known=None,
+    decoded=None,
 ):
     """Exact closest points of the finest level of ``layout`` (:func:`.layout.level_layout`) on a mesh.
 
@@ -451,8 +450,8 @@ def finest_distances(
         origin, voxel_size: The field's lattice.
         field_id: Source id written to the finest nodes.
         previous, prev_index: An earlier field of the same mesh and domain and each node's index in it (-1: new;
-            :func:`.layout.match_levels`): its octets keep their closest points; ``known``: its (closest points,
-            node sources) where decoded already.
+            :func:`.layout.match_levels`): its octets keep their closest points; ``decoded``: its (closest points,
+            node sources), decoded once for every step that reads them.
     Returns:
         ``(dist, proj, source, tri, octet_points)``: (N,) float32 unsigned distances, (N,) vec3 closest points and (N,)
         int32 source ids for every node of the layout, the finest level's filled in; (N0,) int32 the triangle (index
@@ -470,7 +469,7 @@ def finest_distances(
     # Octets an earlier build of this mesh already has keep their closest points; only new ones are queried.
     first_nodes = np.arange(0, n0, 8)
     if previous is not None:
-        first_nodes = _take_known_octets(previous, prev_index, known, (dist0, proj0, src0, tri))
+        first_nodes = _take_known_octets(previous, prev_index, decoded, (dist0, proj0, src0, tri))
     src0.fill_(int(field_id))
     origin_v = wp.vec3(*origin)
     if len(offsets) == 2:  # a single dense level: node by node

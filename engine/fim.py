@@ -357,12 +357,12 @@ def _refine_leaves_kernel(
             proj[i] = p
 
 
-def _take_known_coarse(previous, prev_index, nodes, known, arrays, decoded=None) -> None:
+def _take_known_coarse(previous, prev_index, nodes, known, arrays, decoded) -> None:
     """The coarse nodes (``nodes``: from n0 to n) ``previous`` has (``prev_index``) take its distance, closest point
     and source into ``arrays`` (dist, proj, source), flagged in ``known`` (empty: not flagged); ``decoded``: its
-    (closest points, node sources) where decoded already."""
+    (closest points, node sources)."""
     n0, n = nodes
-    prev_points, prev_sources = (previous.closest_points, previous.node_sources()) if decoded is None else decoded
+    prev_points, prev_sources = decoded
     launch_split(
         take_known_kernel,
         n - n0,
@@ -371,9 +371,9 @@ def _take_known_coarse(previous, prev_index, nodes, known, arrays, decoded=None)
     )
 
 
-def known_levels(layout: dict, previous, prev_index, dist, proj, source, decoded=None):
+def known_levels(layout: dict, previous, prev_index, dist, proj, source, decoded):
     """Every coarse node's distance, closest point and source taken from ``previous`` (which has them all: a field
-    refined on demand, :mod:`.ondemand`; ``decoded``: its closest points and node sources, where decoded already), in
+    refined on demand, :mod:`.ondemand`; ``decoded``: its closest points and node sources), in
     place; returns the coarse nodes' same-level neighbours, as :func:`solve_levels` does."""
     codes, coords, offsets = layout["codes"], layout["coords"], layout["offsets"]
     device = codes.device
@@ -402,6 +402,7 @@ def solve_levels(
     octet_points=None,
     previous=None,
     prev_index=None,
+    decoded=None,
     timings: dict,
     level_solver=None,
     exact_level=None,
@@ -415,8 +416,8 @@ def solve_levels(
         origin, voxel_size: The field's lattice.
         top_tolerance: Relative error allowed to the closest points of the dense top level's leaves.
         octet_points: The finest octets' centre closest points (:func:`.distance.finest_distances`).
-        previous, prev_index: An earlier field of the same mesh and domain and each node's index in it: its
-            coarse nodes keep their distances.
+        previous, prev_index, decoded: An earlier field of the same mesh and domain, each node's index in it, and
+            its (closest points, node sources): its coarse nodes keep their distances.
         timings: Seconds per level are added here.
         level_solver: Solves one level (default :func:`solve_level`; the same arguments, e.g.
             ``sweeping.solve_level``).
@@ -437,7 +438,7 @@ def solve_levels(
     # Coarse nodes an earlier build of the same mesh and domain has keep their distances (refinement rounds).
     known = wp.zeros(n, dtype=wp.int32, device=device)
     if previous is not None:
-        _take_known_coarse(previous, prev_index, (n0, n), known, (dist, proj, source))
+        _take_known_coarse(previous, prev_index, (n0, n), known, (dist, proj, source), decoded)
     origin_t = tuple(float(x) for x in origin)
     sweeps = {}
     for k in range(1, levels):

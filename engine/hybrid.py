@@ -423,11 +423,11 @@ def _undoubled(tris: np.ndarray, n_verts: int) -> tuple[np.ndarray, np.ndarray]:
     their edges."""
     a, b, _, _ = directed_edges(tris, n_verts)
     counts = EdgeCounts(a, b, n_verts)
-    doubled = (counts.repeats() > 1).reshape(-1, 3).any(axis=1)
-    if doubled.any():
-        return _drop_pinched(tris, ~doubled, n_verts)
+    alive = ~(counts.repeats() > 1).reshape(-1, 3).any(axis=1)
+    if not alive.all():
+        return _drop_pinched(tris, alive, n_verts)
     open_ = counts.reverses() == 0
-    return _drop_pinched(tris, ~doubled, n_verts, (~doubled, np.stack([a[open_], b[open_]], axis=1)))
+    return _drop_pinched(tris, alive, n_verts, (alive, np.stack([a[open_], b[open_]], axis=1)))
 
 
 def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach: float, device, far):

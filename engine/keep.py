@@ -250,8 +250,8 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
             indices=wp.array(parts.reshape(-1), dtype=wp.int32, device=device),
         )
     strips = strip_parents(verts, tris, SPLIT_VOXELS * voxel, measures)
-    own = _Own(None if on_demand else leaf.values, offset, device, defects, side, defect_mesh, strips, thin)
-    own.turns = edge_turns(verts, tris)
+    values = None if on_demand else leaf.values
+    own = _Own(values, offset, device, defects, side, defect_mesh, strips, thin, edge_turns(verts, tris))
     _OWN[source] = own
     return own
 

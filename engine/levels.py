@@ -54,10 +54,16 @@ class LevelBuilder:
         layout = level_layout(octets, plan["top_dims"], plan["levels"], self.device, timings, above=self._upper())
         # each node's index in the earlier build (-1: new), shared by distances and signs
         prev_index = None if previous is None else match_levels(layout["codes"], layout["offsets"], previous)
+        # its closest points and sources, decoded once for the finest level's take and the coarse levels'
+        earlier = (
+            previous,
+            prev_index,
+            None if previous is None else (previous.closest_points, previous.node_sources()),
+        )
         if finest_only:
-            dist, proj, source, tri, neighbours, sweeps = self.finest(layout, previous, prev_index)
+            dist, proj, source, tri, neighbours, sweeps = self.finest(layout, *earlier)
         else:
-            dist, proj, source, tri, neighbours, sweeps = self.distances(layout, previous, prev_index)
+            dist, proj, source, tri, neighbours, sweeps = self.distances(layout, *earlier)
         values, sign_stats, self.expansions = signs.sign_levels(
             self.winding,
             layout,
@@ -93,12 +99,11 @@ class LevelBuilder:
             self.upper = (self.above, upper_levels(self.above, self.plan["top_dims"], self.plan["levels"]))
         return self.upper[1]
 
-    def finest(self, layout, previous, prev_index):
+    def finest(self, layout, previous, prev_index, decoded):
         """:meth:`distances` where ``previous`` has every coarse node: they take its values, and only the finest
         level's new octets are searched."""
         plan, timings = self.plan, self.timings
         t0 = time.perf_counter()
-        decoded = (previous.closest_points, previous.node_sources())  # (read by both steps)
         dist, proj, source, tri, _ = distance.finest_distances(
             self._octet_search(),
             layout,
@@ -107,7 +112,7 @@ class LevelBuilder:
             field_id=self.field_id,
             previous=previous,
             prev_index=prev_index,
-            known=decoded,
+            decoded=decoded,
         )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
         neighbours = fim.known_levels(layout, previous, prev_index, dist, proj, source, decoded)
@@ -126,7 +131,7 @@ class LevelBuilder:
             mean_area=facts["mean_area"],
         )
 
-    def distances(self, layout, previous, prev_index):
+    def distances(self, layout, previous, prev_index, decoded):
         """The nodes' distances: the finest exactly (octet by octet), the coarser levels solved bottom-up."""
         plan, timings = self.plan, self.timings
         origin, voxel_size = plan["origin"], plan["voxel_size"]
@@ -140,6 +145,7 @@ class LevelBuilder:
             field_id=self.field_id,
             previous=previous,
             prev_index=prev_index,
+            decoded=decoded,
         )
         timings["finest_distance"] = timings.get("finest_distance", 0.0) + time.perf_counter() - t0
         neighbours, sweeps = fim.solve_levels(
@@ -154,6 +160,7 @@ class LevelBuilder:
             octet_points=octet_points,
             previous=previous,
             prev_index=prev_index,
+            decoded=decoded,
             timings=timings,
             # the dense top level by fast sweeping in its 8 orderings (one round, then the BVH refinement) rather than
             # the fast iterative method's 2: 8 sweeps against 12-23, its solve 0.75-0.97x (fandisk, homer, rocker-arm,
