@@ -12,8 +12,12 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from . import generic_attributes
 from .edge_attributes import EDGE_ATTRIBUTES, kept_edge_values
 from .transfer import OPERAND_ATTRIBUTE
+
+# Attributes carried by name (or written by the add-on itself), never as generic ones (:mod:`.generic_attributes`).
+NAMED_ATTRIBUTES = {"position", "material_index", "sharp_face", "custom_normal", OPERAND_ATTRIBUTE, *EDGE_ATTRIBUTES}
 
 
 @dataclass(eq=False)
@@ -40,6 +44,7 @@ class Operand:
     edge_verts: np.ndarray = None  # (E, 2) int32 vertices of each edge
     edge_attributes: dict = field(default_factory=dict)  # name -> (E,) values (``edge_attributes.EDGE_ATTRIBUTES``)
     custom_normals: np.ndarray = None  # (L, 3) float32 per corner, local space, where the mesh has custom normals
+    generic: dict = field(default_factory=dict)  # name -> (domain, data type, values): ``generic_attributes``
 
     @property
     def name(self) -> str:
@@ -93,9 +98,24 @@ def read_mesh_operand(evaluated, matrix) -> Operand:
                 operand.colors[attr.name] = (attr.domain, attr.data_type, values)
         if mesh.has_custom_normals:  # the normals Blender shades with, the custom ones applied
             operand.custom_normals = _get(mesh.corner_normals, "vector", np.float32, 3)
+        operand.generic = _generic_attributes(mesh, {*NAMED_ATTRIBUTES, *operand.uv_maps, *operand.colors})
     finally:
         evaluated.to_mesh_clear()
     return operand
+
+
+def _generic_attributes(mesh, taken) -> dict:
+    """name -> (domain, data type, values) of the mesh's attributes carried as :mod:`.generic_attributes` (none of
+    the names ``taken``, nor internal, nor of another domain or type than it carries)."""
+    out = {}
+    for attribute in mesh.attributes:
+        name, domain, kind = attribute.name, attribute.domain, attribute.data_type
+        if name in taken or name.startswith(".") or domain not in generic_attributes.DOMAINS:
+            continue
+        if kind in generic_attributes.TYPES and not attribute.is_internal:
+            prop, dtype, width, _ = generic_attributes.TYPES[kind]
+            out[name] = (domain, kind, _get(attribute.data, prop, dtype, width))
+    return out
 
 
 def _triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -238,7 +258,8 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
         attributes: What the faces carry (``transfer.face_attributes``): ``materials`` (the slots, ``None`` an empty
             one), ``material_index`` (F,), ``smooth`` (F,) bool, ``operand`` (F,) int (written as the face attribute
             ``transfer.OPERAND_ATTRIBUTE``), ``uv_maps`` {name: (3F, 2)} and ``colors`` {name: (data type, (3F, 4))}
-            per corner, ``creases`` (E, 2) vertex pairs of edges to mark sharp (``sharp_edge``), ``polygons``
+            per corner, ``generic`` {name: (domain, data type, values)} (``generic_attributes.carried``),
+            ``creases`` (E, 2) vertex pairs of edges to mark sharp (``sharp_edge``), ``polygons``
             (sizes (Q,), corner vertices) of faces written before the triangles (``polygons.as_polygons``: then
             every face and corner array covers them first); any may be missing (default: flat faces, no materials).
         edge_cache: Optional dict kept with these triangles: an empty one receives the edges Blender derives, a filled
@@ -287,6 +308,9 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
     for color_name, (kind, values) in attributes.get("colors", {}).items():
         layer = mesh.color_attributes.new(color_name, kind, "CORNER")
         layer.data.foreach_set("color", np.ascontiguousarray(values, dtype=np.float32).ravel())
+    for name, (domain, kind, values) in attributes.get("generic", {}).items():
+        prop, dtype, _width, _ = generic_attributes.TYPES[kind]
+        _new_attribute(mesh, name, kind, domain, prop, values, dtype)
     if len(mesh.color_attributes):  # what exporters and the viewport show: the first one
         mesh.color_attributes.active_color_index = mesh.color_attributes.render_color_index = 0
     if attributes.get("custom_normals") is not None:  # zero vectors: Blender's own normal there
@@ -315,7 +339,8 @@ def _mark_sharp_edges(mesh, creases, vertex_count):
 
 def _carry_edge_attributes(mesh, kept, operands):
     """The operands' UV seams, sharp edges and edge creases on the result's edges that are theirs (a sharp edge
-    stays sharp where the surface folds too)."""
+    stays sharp where the surface folds too), and their other edge attributes (bevel weights), written whatever
+    their values."""
     pairs = _get(mesh.attributes[".edge_verts"].data, "value", np.int32, 2)
     for name, values in kept_edge_values(kept, operands, pairs).items():
         kind, dtype = EDGE_ATTRIBUTES[name]
@@ -323,6 +348,11 @@ def _carry_edge_attributes(mesh, kept, operands):
             values = values | _get(mesh.attributes[name].data, "value", bool)
         if values.any():
             _new_attribute(mesh, name, kind, "EDGE", "value", values, dtype)
+    generic = generic_attributes.edge_columns(operands)
+    columns = {name: (generic_attributes.TYPES[kind][1], parts) for name, (kind, parts) in generic.items()}
+    for name, values in kept_edge_values(kept, operands, pairs, columns).items():
+        prop, dtype, _width, _ = generic_attributes.TYPES[generic[name][0]]
+        _new_attribute(mesh, name, generic[name][0], "EDGE", prop, values, dtype)
 
 
 def _new_attribute(mesh, name, kind, domain, prop, values, dtype):

@@ -1,9 +1,10 @@
-"""Edge attributes of kept faces: UV seams, sharp edges and edge creases of the operands, where a result edge is one
-of their own edges.
+"""Edge attributes of kept faces: UV seams, sharp edges and edge creases of the operands, where a result edge is one of
+their own edges.
 
 An edge of the result whose two ends are vertices of one operand's kept faces, and which that operand has as an edge,
 takes the operand's values of ``uv_seam``, ``sharp_edge`` and ``crease_edge`` (a sharp edge stays sharp as well where
-the surface folds). Arrays only: ``bridge`` reads the operands' edges and writes the result's.
+the surface folds), and of any other edge attribute it has (bevel weights: :mod:`.generic_attributes`). Arrays only:
+``bridge`` reads the operands' edges and writes the result's.
 """
 
 import numpy as np
@@ -12,18 +13,27 @@ import numpy as np
 EDGE_ATTRIBUTES = {"uv_seam": ("BOOLEAN", bool), "sharp_edge": ("BOOLEAN", bool), "crease_edge": ("FLOAT", np.float32)}
 
 
-def kept_edge_values(kept: dict, operands, edge_verts: np.ndarray) -> dict:
+def known_columns(operands) -> dict:
+    """name -> (numpy dtype, per operand its (E,) values or None) of the edge attributes of EDGE_ATTRIBUTES some
+    operand has."""
+    names = sorted({name for op in operands for name in op.edge_attributes})
+    return {name: (EDGE_ATTRIBUTES[name][1], [op.edge_attributes.get(name) for op in operands]) for name in names}
+
+
+def kept_edge_values(kept: dict, operands, edge_verts: np.ndarray, columns: dict | None = None) -> dict:
     """Per result edge, its source edge's attribute values.
 
     Args:
         kept: The kept surface's vertex sources (``vertex_field``, ``vertex_id``; ``AdaptiveField.kept_surface``).
-        operands: ``bridge.Operand`` per field id, with ``edge_verts`` and ``edge_attributes``.
+        operands: ``bridge.Operand`` per field id, with ``edge_verts``.
         edge_verts: (E, 2) int result vertex pairs.
+        columns: name -> (numpy dtype, per operand its (E_k, ...) edge values or None: zeros); default: the
+            operands' ``edge_attributes`` (:func:`known_columns`).
     Returns:
-        name -> (E,) values (zeros where the edge is no operand's) for each attribute some operand has.
+        name -> (E, ...) values (zeros where the edge is no operand's) for each attribute of ``columns``.
     """
-    names = sorted({name for op in operands for name in op.edge_attributes})
-    if not names or not len(edge_verts):
+    columns = known_columns(operands) if columns is None else columns
+    if not columns or not len(edge_verts):
         return {}
     field, vertex = kept["vertex_field"].astype(np.int64), kept["vertex_id"].astype(np.int64)
     a, b = edge_verts[:, 0].astype(np.int64), edge_verts[:, 1].astype(np.int64)
@@ -40,12 +50,15 @@ def kept_edge_values(kept: dict, operands, edge_verts: np.ndarray) -> dict:
     hit = (source_keys[order][at] == wanted) if found else np.zeros(len(rows), dtype=bool)
     rows, source_edge = rows[hit], order[at[hit]]
     out = {}
-    for name in names:
-        dtype = EDGE_ATTRIBUTES[name][1]
+    for name, (dtype, parts) in columns.items():
+        shape = next((np.shape(p)[1:] for p in parts if p is not None), ())
         stacked = np.concatenate(
-            [np.asarray(op.edge_attributes.get(name, np.zeros(len(op.edge_verts))), dtype=dtype) for op in operands]
+            [
+                np.zeros((len(op.edge_verts), *shape), dtype) if p is None else np.asarray(p, dtype=dtype)
+                for op, p in zip(operands, parts, strict=True)
+            ]
         )
-        values = np.zeros(len(edge_verts), dtype=dtype)
+        values = np.zeros((len(edge_verts), *shape), dtype=dtype)
         values[rows] = stacked[source_edge]
         out[name] = values
     return out

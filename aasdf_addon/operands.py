@@ -95,7 +95,7 @@ def instance_pieces(evaluated, matrix, depsgraph) -> list:
 
 def joined(operand, pieces):
     """``operand`` with the geometry of ``pieces`` (operands already in its space) appended: vertices, triangles,
-    corners and faces renumbered; UV maps and colours kept where every part has them."""
+    corners and faces renumbered; UV maps, colours and other attributes kept where every part has them."""
     parts = [operand, *pieces]
     vert_offsets = np.cumsum([0] + [len(p.verts) for p in parts])[:-1]
     corner_offsets = np.cumsum([0] + [p.corner_count for p in parts])[:-1]
@@ -123,6 +123,11 @@ def joined(operand, pieces):
         name: (kind, data_type, np.concatenate([p.colors[name][2] for p in parts]))
         for name, (kind, data_type, _values) in operand.colors.items()
         if all(name in p.colors and p.colors[name][0] == kind for p in parts)
+    }
+    operand.generic = {
+        name: (domain, kind, np.concatenate([p.generic[name][2] for p in parts]))
+        for name, (domain, kind, _values) in operand.generic.items()
+        if all(p.generic.get(name, (None, None))[:2] == (domain, kind) for p in parts)
     }
     return operand
 

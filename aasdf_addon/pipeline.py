@@ -14,7 +14,7 @@ tree: read → key → cache → build → combine → extract → write, in tha
 5. combine: a plan (``aasdf_addon.plan``: booleans, offsets, shells over the operands' fields) evaluated; the last
    result is reused when nothing changed (``cache.find_result``);
 6. extract: the result's zero surface (creases kept sharp unless asked otherwise), each face carrying over its source
-   face's material, shading, UV maps and colours (``transfer``);
+   face's material, shading, UV maps and colours (``transfer``) and every other attribute (``generic_attributes``);
 7. write: a new object, or new mesh data for an existing one, plus debug objects and hidden inputs when asked.
 
 ``run`` does all of it, owns the progress bar and the status text, and returns the numbers of the run, also kept in
@@ -33,6 +33,7 @@ from . import (
     bridge,
     cache,
     custom_normals,
+    generic_attributes,
     placement,
     plan,
     polygons,
@@ -356,6 +357,8 @@ def carry_over(field, surface: dict, operands) -> dict:
     if "sources" not in surface:  # every corner on its face's source triangle, so the source's seams stay seams
         surface["sources"] = _face_sources(field, surface)
     attributes = transfer.face_attributes(operands, *surface["sources"])
+    sources, n_verts = surface["sources"], len(surface["verts"])
+    attributes["generic"] = generic_attributes.carried(operands, sources, tris, n_verts, surface.get("kept"))
     normals = custom_normals.kept_corner_normals(
         operands, surface["verts"], tris, surface.get("kept"), surface["sources"]
     )

@@ -1,15 +1,15 @@
 """Kept polygons stay polygons: a source face whose every triangle the result kept whole comes back as that face.
 
-The engine keeps triangles (Blender's triangulation of each operand, ``bridge.Operand.tris``). Where all the
-triangles of one of an operand's faces are kept, unsplit, the result gets the face itself back: its corners in its
-own order (reversed for a subtracted operand's), its material and shading, and every corner attribute (UV maps,
-colours) copied from its own corners, bit for bit. The rest of the result stays triangles with the attributes
-``transfer`` gives them. Arrays only; ``bridge.result_mesh`` writes the layout (``attributes["polygons"]``).
+The engine keeps triangles (Blender's triangulation of each operand, ``bridge.Operand.tris``). Where all the triangles
+of one of an operand's faces are kept, unsplit, the result gets the face itself back: its corners in its own order
+(reversed for a subtracted operand's), its material and shading, its face attributes, and every corner attribute (UV
+maps, colours, others) copied from its own corners, bit for bit. The rest of the result stays triangles with the
+attributes ``transfer`` gives them. Arrays only; ``bridge.result_mesh`` writes the layout (``attributes["polygons"]``).
 """
 
 import numpy as np
 
-from . import custom_normals
+from . import custom_normals, generic_attributes
 from .transfer import merged_materials
 
 
@@ -151,6 +151,7 @@ def as_polygons(result: dict, whole: dict, operands) -> dict:
         )
         for name, (kind, values) in attrs["colors"].items()
     }
+    out["generic"] = generic_attributes.whole_faces(attrs.get("generic", {}), operands, whole, rest, corner_rest)
     if attrs.get("custom_normals") is not None:
         flip = np.repeat(whole["flip"], whole["sizes"])
         copied = custom_normals.whole_face_normals(operands, corner_operand, whole["loops"], flip)

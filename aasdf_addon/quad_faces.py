@@ -1,15 +1,17 @@
 """Remeshed surfaces written as quads, as Blender's Voxel Remesh writes them.
 
 The engine gives a remeshed surface as polygons (``AdaptiveField.to_mesh(quads=True)``: the quads first, then
-triangles). The add-on's stages work on triangles (each face's source, its attributes, its edges), so the polygons
-are first taken apart into their fans (:func:`fans`: quad k is rows 2k and 2k + 1, ``a b c`` and ``a c d``), and
-put back together just before writing (:func:`quads_back`): a quad whose two halves carry the same material,
-shading and operand, and the same UVs and colours at the two corners they share, is written as one face. A quad
-across a seam of its sources (a UV island's edge, a colour border, a material change) stays two triangles, each
-with its own corner values. Arrays only; ``bridge.result_mesh`` writes the layout (``attributes["polygons"]``).
+triangles). The add-on's stages work on triangles (each face's source, its attributes, its edges), so the polygons are
+first taken apart into their fans (:func:`fans`: quad k is rows 2k and 2k + 1, ``a b c`` and ``a c d``), and put back
+together just before writing (:func:`quads_back`): a quad whose two halves carry the same material, shading and operand
+(and face attributes), and the same UVs, colours and corner attributes at the two corners they share, is written as one
+face. A quad across a seam of its sources (a UV island's edge, a colour border, a material change) stays two triangles,
+each with its own corner values. Arrays only; ``bridge.result_mesh`` writes the layout (``attributes["polygons"]``).
 """
 
 import numpy as np
+
+from .generic_attributes import agree
 
 # Corner values of the two halves at a shared corner agree within this fraction of the first half's mean UV edge
 # (plus an absolute 1e-6: a map that is zero everywhere); farther apart, a seam runs along the diagonal.
@@ -67,6 +69,10 @@ def quads_back(result: dict, quads: int) -> dict:
             out[name] = faces(attrs[name]).astype(attrs[name].dtype)
     out["uv_maps"] = {k: corner_values(v) for k, v in attrs.get("uv_maps", {}).items()}
     out["colors"] = {k: (kind, corner_values(v)) for k, (kind, v) in attrs.get("colors", {}).items()}
+    out["generic"] = {
+        name: (domain, kind, faces(v) if domain == "FACE" else corner_values(v) if domain == "CORNER" else v)
+        for name, (domain, kind, v) in attrs.get("generic", {}).items()
+    }
     if attrs.get("custom_normals") is not None:
         out["custom_normals"] = corner_values(attrs["custom_normals"])
     edges = _polygon_edges(result["edges"], first, rest) if not faces_before else {}
@@ -78,6 +84,10 @@ def _triangles_part(attrs: dict, faces_before: int, corners_before: int) -> dict
     out = {name: attrs[name][faces_before:] for name in ("material_index", "smooth", "operand") if name in attrs}
     out["uv_maps"] = {k: v[corners_before:] for k, v in attrs.get("uv_maps", {}).items()}
     out["colors"] = {k: (kind, v[corners_before:]) for k, (kind, v) in attrs.get("colors", {}).items()}
+    out["generic"] = {
+        name: (domain, kind, v[faces_before:] if domain == "FACE" else v[corners_before:] if domain == "CORNER" else v)
+        for name, (domain, kind, v) in attrs.get("generic", {}).items()
+    }
     return out
 
 
@@ -117,7 +127,7 @@ def mergeable(attrs: dict, quads: int) -> np.ndarray:
     for _kind, values in attrs.get("colors", {}).values():
         rgba = np.asarray(values, dtype=np.float32)[: 6 * quads].reshape(quads, 6, 4)
         ok &= np.maximum(_gap(rgba[:, 0], rgba[:, 3]), _gap(rgba[:, 2], rgba[:, 4])) <= COLOR_TOLERANCE
-    return ok
+    return ok & agree(attrs.get("generic", {}), quads)
 
 
 def _gap(a, b) -> np.ndarray:
