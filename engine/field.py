@@ -509,7 +509,8 @@ class AdaptiveField:
             sharp: Keep creases and corners (dual marching cubes placing each vertex at the minimiser of the exact
                 tangent planes of its cube, :mod:`.dual`); ``False`` gives marching cubes, vertices on the lattice
                 edges. Default: sharp, except for a re-distanced field (``stats["exact_distance"]``: offsets and
-                shells), whose closest points lie on a marching-cubes surface, so there is no crease to recover.
+                shells), whose closest points lie on a marching-cubes surface, so there is no crease to recover:
+                marching cubes there, unless ``quads`` or an ``adaptivity`` are asked (they are the dual surface's).
             return_creases: Also return the crease edges the sharp extraction reconstructed.
             keep_faces: Keep the operands' own triangles wherever the surface is theirs, away from the seams
                 (:meth:`kept_surface`; ``iso`` 0 only; no crease edges are returned with them); an ``adaptivity``
@@ -540,7 +541,7 @@ class AdaptiveField:
             return refined(self, view=True).to_mesh(iso, regions=regions, **options)
         asked, out = sharp, None
         if sharp is None:
-            sharp = not self.stats.get("exact_distance", False)
+            sharp = not self.stats.get("exact_distance", False) or quads or adaptivity > 0.0
         if abs(iso) <= ISO_REACH * self.world_voxel_size:
             out = field_mesh(
                 self, iso, sharp=sharp, creases=return_creases, quads=quads, adaptivity=adaptivity, regions=regions
