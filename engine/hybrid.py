@@ -12,7 +12,8 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
    (:func:`.twins.zip_twins`), and the loops that still cannot be paired given up (kept faces or voxel faces at
    them; where a strip stretches at a few steps, or a loop crowds another, first only the kept faces there), until
    all pair;
-4. a strip between each pair (:func:`.zipper.zip_loops`), and the three parts as one surface, checked closed and
+4. a strip between each pair (:func:`.zipper.zip_loops`; two steps folding over each other flipped,
+   :func:`.zipper.unfolded`), and the three parts as one surface, checked closed and
    consistently oriented; where the join cannot be made, the voxel surface alone (``stats["kept_fallback"]``);
 5. where the join gave up large kept faces (a low-polygon mesh's), the triangles judged again clear of the places it
    failed and joined again (:mod:`.rejoin`).
@@ -49,6 +50,7 @@ from .zipper import (
     loop_labels,
     nearest_points,
     pinched,
+    unfolded,
     vertex_components,
     vertices_over,
     zip_loops,
@@ -505,6 +507,7 @@ def _strips(points, k_loops, v_loops, pairs, reach: float, n_kept: int, device):
     if not len(strips):
         return strips, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     counts = k_count + v_count
+    strips = unfolded(points, strips, counts, n_kept)
     first = np.r_[0, np.cumsum(counts)[:-1]]
     reach = STRETCH_VOXELS * reach / PAIR_VOXELS
     far = np.unique(strips[gaps > reach])

@@ -336,3 +336,45 @@ def zip_loops(points, p_next, q_next, p_start, q_any, p_count, q_count, device, 
             device=device,
         )
     return out.numpy().reshape(-1, 3).astype(np.int32), gaps.numpy()
+
+
+# Passes of :func:`unfolded` (each over every other pair of steps, then the others).
+UNFOLD_PASSES = 2
+
+
+def unfolded(points, strips: np.ndarray, counts, n_kept: int) -> np.ndarray:
+    """``strips`` (:func:`zip_loops`: each loop pair's steps in turn, ``counts`` of them) with each two steps that fold
+    over each other (facing opposite ways: a vertex of one loop inside the other's triangle, where the walk took the
+    step the next one folds back over) flipped across the quadrilateral they make, when the flipped pair folds not:
+    the strip's borders are the same, its diagonal the other one (between a kept vertex, below ``n_kept``, and a voxel
+    one)."""
+    tris = np.asarray(strips, dtype=np.int64).copy()
+    p = np.asarray(points, dtype=np.float64)
+    last = np.cumsum(counts) - 1  # a strip's last step has no next one in it
+    for parity in (0, 1) * UNFOLD_PASSES:
+        i = np.arange(parity, len(tris) - 1, 2)
+        i = i[~np.isin(i, last)]
+        a, b = tris[i], tris[i + 1]
+        # a = (x, u, w) and b = (y, w, u): x and y the corners the two do not share
+        x_at = (~(a[:, :, None] == b[:, None, :]).any(axis=2)).argmax(axis=1)
+        y_at = (~(b[:, :, None] == a[:, None, :]).any(axis=2)).argmax(axis=1)
+        rows = np.arange(len(i))
+        x, u, w = a[rows, x_at], a[rows, (x_at + 1) % 3], a[rows, (x_at + 2) % 3]
+        y = b[rows, y_at]
+        shared = (b[rows, (y_at + 1) % 3] == w) & (b[rows, (y_at + 2) % 3] == u) & (x != y)
+        mixed = (x < n_kept) != (y < n_kept)
+        fold = _faces_against(p, (x, u, w), (y, w, u))
+        flip = shared & mixed & fold & ~_faces_against(p, (x, u, y), (y, w, x))
+        tris[i[flip]] = np.stack([x, u, y], axis=1)[flip]
+        tris[i[flip] + 1] = np.stack([y, w, x], axis=1)[flip]
+    return tris.astype(np.asarray(strips).dtype)
+
+
+def _faces_against(p: np.ndarray, first, second) -> np.ndarray:
+    """Whether the triangles ``first`` and ``second`` (corner index arrays) face opposite ways."""
+
+    def normal(t):
+        a, b, c = (p[k] for k in t)
+        return np.cross(b - a, c - a)
+
+    return np.einsum("ij,ij->i", normal(first), normal(second)) < 0.0

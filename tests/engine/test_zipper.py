@@ -3,7 +3,7 @@
 import numpy as np
 import warp as wp
 
-from engine.zipper import border_halves, vertices_over, zip_loops
+from engine.zipper import border_halves, unfolded, vertices_over, zip_loops
 
 
 def _circles(spike: bool):
@@ -76,3 +76,33 @@ def test_the_far_side_of_a_thin_part_is_not_over_the_near_sides_kept_faces():
         over = vertices_over(points, kept_tris, border, candidates, 1.0, device, normals)
         assert (over[candidates] == expected).all() and not over[: len(kept_points)].any()
     assert vertices_over(points, kept_tris, border, candidates, 1.0, device)[candidates].all()  # no ways: by distance
+
+
+def _directed_edges(tris) -> list:
+    return sorted((int(t[k]), int(t[(k + 1) % 3])) for t in tris for k in range(3))
+
+
+def _normals_z(points, tris) -> np.ndarray:
+    a, b, c = (points[np.asarray(tris)[:, k]] for k in range(3))
+    return np.cross(b - a, c - a)[:, 2]
+
+
+def test_two_steps_that_fold_over_each_other_are_flipped():
+    # kept p0 p1 (0, 1), voxel q0 q1 (2, 3): P's step (p1 p0 q0) holds q1, so Q's next step (q0 q1 p1) folds back
+    points = np.array([[0, 0, 0], [2, 0, 0], [0, 1, 0], [0.5, 0.4, 0]], dtype=np.float32)
+    folded = np.array([[1, 0, 2], [2, 3, 1]])
+    assert np.sign(_normals_z(points, folded)).tolist() == [-1, 1]
+    out = unfolded(points, folded, [2], n_kept=2)
+    assert (np.sign(_normals_z(points, out)) == -1).all()  # both facing as the strip does
+    # the same quadrilateral, its diagonal between a kept and a voxel vertex
+    shared = set(out[0]) & set(out[1])
+    assert len(shared) == 2 and len(shared & {0, 1}) == 1
+    inner = {(a, b) for a, b in _directed_edges(out)} & {(b, a) for a, b in _directed_edges(out)}
+    outer = [e for e in _directed_edges(out) if e not in inner]
+    assert outer == [e for e in _directed_edges(folded) if e not in {(1, 2), (2, 1)}]
+
+
+def test_a_strip_without_folds_is_left_as_it_is():
+    strip, n = _zipped(spike=False)
+    points, _, _ = _circles(spike=False)
+    np.testing.assert_array_equal(unfolded(points, strip[0], [len(strip[0])], n), strip[0])
