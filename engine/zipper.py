@@ -350,10 +350,13 @@ def unfolded(points, strips: np.ndarray, counts, n_kept: int) -> np.ndarray:
     one)."""
     tris = np.asarray(strips, dtype=np.int64).copy()
     p = np.asarray(points, dtype=np.float64)
-    last = np.cumsum(counts) - 1  # a strip's last step has no next one in it
+    within = np.ones(max(len(tris) - 1, 0), dtype=bool)  # steps i and i + 1 of one strip
+    within[(np.cumsum(counts) - 1)[:-1]] = False
     for parity in (0, 1) * UNFOLD_PASSES:
-        i = np.arange(parity, len(tris) - 1, 2)
-        i = i[~np.isin(i, last)]
+        normals = _normals(p, tris.T)
+        folds = np.einsum("ij,ij->i", normals[:-1], normals[1:]) < 0.0
+        i = np.flatnonzero(folds & within)
+        i = i[i % 2 == parity]
         a, b = tris[i], tris[i + 1]
         # a = (x, u, w) and b = (y, w, u): x and y the corners the two do not share
         x_at = (~(a[:, :, None] == b[:, None, :]).any(axis=2)).argmax(axis=1)
@@ -363,18 +366,14 @@ def unfolded(points, strips: np.ndarray, counts, n_kept: int) -> np.ndarray:
         y = b[rows, y_at]
         shared = (b[rows, (y_at + 1) % 3] == w) & (b[rows, (y_at + 2) % 3] == u) & (x != y)
         mixed = (x < n_kept) != (y < n_kept)
-        fold = _faces_against(p, (x, u, w), (y, w, u))
-        flip = shared & mixed & fold & ~_faces_against(p, (x, u, y), (y, w, x))
+        flip = shared & mixed
+        flip[flip] = np.einsum("ij,ij->i", _normals(p, (x, u, y))[flip], _normals(p, (y, w, x))[flip]) >= 0.0
         tris[i[flip]] = np.stack([x, u, y], axis=1)[flip]
         tris[i[flip] + 1] = np.stack([y, w, x], axis=1)[flip]
     return tris.astype(np.asarray(strips).dtype)
 
 
-def _faces_against(p: np.ndarray, first, second) -> np.ndarray:
-    """Whether the triangles ``first`` and ``second`` (corner index arrays) face opposite ways."""
-
-    def normal(t):
-        a, b, c = (p[k] for k in t)
-        return np.cross(b - a, c - a)
-
-    return np.einsum("ij,ij->i", normal(first), normal(second)) < 0.0
+def _normals(p: np.ndarray, corners) -> np.ndarray:
+    """(N, 3) the normals of the triangles of ``corners`` (three index arrays)."""
+    a, b, c = (p[k] for k in corners)
+    return np.cross(b - a, c - a)
