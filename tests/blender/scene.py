@@ -1,4 +1,5 @@
-"""Scene helpers shared by the Blender tests: mesh objects from numpy arrays, selection, world-space arrays."""
+"""Scene helpers shared by the Blender tests: mesh objects from numpy arrays, a box of quads, selection, world-space
+arrays."""
 
 import bpy
 import numpy as np
@@ -21,6 +22,17 @@ def add_mesh_object(name, verts, tris, location=(0.0, 0.0, 0.0), materials=(), c
     obj.location = location
     bpy.context.view_layer.update()  # matrix_world follows the location
     return obj
+
+
+def quad_box(name: str, cuts: int = 3):
+    """Blender's 2 x 2 x 2 cube at the origin, its faces subdivided ``cuts`` times (quads of their own), named."""
+    bpy.ops.mesh.primitive_cube_add(size=2.0)
+    box = bpy.context.active_object
+    box.name = name
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.subdivide(number_cuts=cuts)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    return box
 
 
 def select(*objects, active=None):

@@ -7,7 +7,7 @@ import bpy
 import numpy as np
 import pytest
 
-from tests.blender.scene import select, world_arrays
+from tests.blender.scene import quad_box, select, world_arrays
 from tests.metrics import closest_triangles, unsigned_distance
 
 RESOLUTION = 128
@@ -32,12 +32,7 @@ def weight(points) -> np.ndarray:
 def scene():
     """The box (2 x 2 x 2, three cuts a side: 96 quads) holding an attribute of each kind, and a 12-sided cylinder
     through a corner of its top with a "Part" of its own (7 on every face)."""
-    bpy.ops.mesh.primitive_cube_add(size=2.0)
-    box = bpy.context.active_object
-    box.name = "Box"
-    bpy.ops.object.mode_set(mode="EDIT")
-    bpy.ops.mesh.subdivide(number_cuts=3)
-    bpy.ops.object.mode_set(mode="OBJECT")
+    box = quad_box("Box")
     mesh, rng = box.data, np.random.default_rng(3)
     n_v, n_e, n_f, n_c = len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops)
     put(mesh, "bevel_weight_edge", "FLOAT", "EDGE", rng.random(n_e).astype(np.float32))

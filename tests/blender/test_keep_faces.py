@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from aasdf.aasdf_addon import pipeline
-from tests.blender.scene import select, world_arrays
+from tests.blender.scene import quad_box, select, world_arrays
 from tests.metrics import exact_boolean, hausdorff, mesh_volume
 from tests.support import is_watertight
 
@@ -36,12 +36,7 @@ def faces_of(mesh):
 def scene():
     """A 2 x 2 x 2 box of six quads (materials per face, "UVMap", a second map, a corner colour), subdivided once so
     that its faces far from the cut are quads of their own, and a 12-sided cylinder through one corner of its top."""
-    bpy.ops.mesh.primitive_cube_add(size=2.0)
-    box = bpy.context.active_object
-    box.name = "Box"
-    bpy.ops.object.mode_set(mode="EDIT")
-    bpy.ops.mesh.subdivide(number_cuts=3)
-    bpy.ops.object.mode_set(mode="OBJECT")
+    box = quad_box("Box")
     for k in range(2):
         box.data.materials.append(bpy.data.materials.new(f"Side{k}"))
     n = len(box.data.polygons)
