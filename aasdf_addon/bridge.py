@@ -13,7 +13,7 @@ import bpy
 import numpy as np
 
 from . import generic_attributes
-from .edge_attributes import EDGE_ATTRIBUTES, kept_edge_values
+from .edge_attributes import EDGE_ATTRIBUTES, kept_edge_values, known_columns
 from .transfer import OPERAND_ATTRIBUTE
 
 # Attributes carried by name (or written by the add-on itself), never as generic ones (:mod:`.generic_attributes`).
@@ -342,17 +342,18 @@ def _carry_edge_attributes(mesh, kept, operands):
     stays sharp where the surface folds too), and their other edge attributes (bevel weights), written whatever
     their values."""
     pairs = _get(mesh.attributes[".edge_verts"].data, "value", np.int32, 2)
-    for name, values in kept_edge_values(kept, operands, pairs).items():
+    generic = generic_attributes.edge_columns(operands)
+    columns = {name: (generic_attributes.TYPES[kind][1], parts) for name, (kind, parts) in generic.items()}
+    for name, values in kept_edge_values(kept, operands, pairs, {**known_columns(operands), **columns}).items():
+        if name in generic:
+            prop, dtype, _width, _ = generic_attributes.TYPES[generic[name][0]]
+            _new_attribute(mesh, name, generic[name][0], "EDGE", prop, values, dtype)
+            continue
         kind, dtype = EDGE_ATTRIBUTES[name]
         if name == "sharp_edge" and name in mesh.attributes:
             values = values | _get(mesh.attributes[name].data, "value", bool)
         if values.any():
             _new_attribute(mesh, name, kind, "EDGE", "value", values, dtype)
-    generic = generic_attributes.edge_columns(operands)
-    columns = {name: (generic_attributes.TYPES[kind][1], parts) for name, (kind, parts) in generic.items()}
-    for name, values in kept_edge_values(kept, operands, pairs, columns).items():
-        prop, dtype, _width, _ = generic_attributes.TYPES[generic[name][0]]
-        _new_attribute(mesh, name, generic[name][0], "EDGE", prop, values, dtype)
 
 
 def _new_attribute(mesh, name, kind, domain, prop, values, dtype):

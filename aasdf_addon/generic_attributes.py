@@ -127,14 +127,13 @@ def _at_corners(kind, own, index, stacked, weights, has) -> np.ndarray:
 
 def _at_points(corner_values, holds, own, surface, kind) -> np.ndarray:
     """(V, ...) a point attribute at the result's vertices (``surface``: its triangles, vertex count and kept vertex
-    sources or None): one of its corners' values at each, a corner whose face's operand ``holds`` the attribute where
-    there is one (a vertex on a seam is in both operands' faces), a kept vertex's own."""
+    sources or None): a corner's value at each (its corners read one source point), a corner whose face's operand
+    ``holds`` the attribute where there is one (a vertex on a seam is in both operands' faces), a kept vertex's own."""
     tris, n_verts, kept = surface
     out = _zeros(n_verts, kind)
     vertex = np.asarray(tris, dtype=np.int64).ravel()
-    order = np.lexsort((holds, vertex))  # per vertex, its corners that hold the attribute last
-    last = order[np.r_[vertex[order][1:] != vertex[order][:-1], True]] if len(order) else order
-    out[vertex[last]] = corner_values[last]
+    out[vertex] = corner_values
+    out[vertex[holds]] = corner_values[holds]
     if kept is None:
         return out
     field, source = np.asarray(kept["vertex_field"], np.int64), np.asarray(kept["vertex_id"], np.int64)
@@ -157,22 +156,20 @@ def edge_columns(operands) -> dict:
 def whole_faces(values: dict, operands, whole: dict, rest, corner_rest) -> dict:
     """The carried ``values`` in ``polygons.as_polygons``' layout: the faces kept whole first (face and corner values
     copied from their own face and corners), then the triangles left (``rest``, ``corner_rest``)."""
+    corner_operand = np.repeat(whole["field"], whole["sizes"])
+    corners = [np.flatnonzero(corner_operand == k) for k in range(len(operands))]  # each operand's, once
     out = {}
     for name, (domain, kind, v) in values.items():
+        own = [_own(op, name, domain, kind) for op in operands]
         if domain == "FACE":
-            parts = [_own(op, name, domain, kind) for op in operands]
-            parts = [
-                _zeros(len(op.loop_start), kind) if p is None else p for op, p in zip(operands, parts, strict=True)
-            ]
+            parts = [_zeros(len(op.loop_start), kind) if p is None else p for op, p in zip(operands, own, strict=True)]
             first = np.cumsum([0] + [len(p) for p in parts])
             v = np.concatenate([np.concatenate(parts)[first[whole["field"]] + whole["face"]], v[rest]])
         elif domain == "CORNER":
-            corner_operand = np.repeat(whole["field"], whole["sizes"])
             copied = _zeros(len(whole["loops"]), kind)
-            for k, op in enumerate(operands):
-                rows, own = np.flatnonzero(corner_operand == k), _own(op, name, domain, kind)
-                if own is not None and len(rows):
-                    copied[rows] = own[whole["loops"][rows]]
+            for rows, values_k in zip(corners, own, strict=True):
+                if values_k is not None and len(rows):
+                    copied[rows] = values_k[whole["loops"][rows]]
             v = np.concatenate([copied, v[corner_rest]])
         out[name] = (domain, kind, v)
     return out
