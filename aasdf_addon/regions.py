@@ -1,12 +1,13 @@
 """Source regions: which triangles of an operand a merged polygon may span (``AdaptiveField.to_mesh(adaptivity=...,
-regions=...)``). A region is a run of an operand's triangles with one material and, for every UV map, one UV island:
-triangles joined across an edge whose two ends have the same UVs on both sides. Adaptivity merges the remeshed
-surface's cells only within a region, so a merged polygon never spans a material border or a UV seam. Arrays only.
+regions=...)``). A region is a run of an operand's triangles with one material, one value of every integer or
+boolean face attribute (a part id: :mod:`.generic_attributes`) and, for every UV map, one UV island: triangles joined
+across an edge whose two ends have the same UVs on both sides. Adaptivity merges the remeshed surface's cells only
+within a region, so a merged polygon never spans a material border, a part's border or a UV seam. Arrays only.
 """
 
 import numpy as np
 
-from . import runtime
+from . import generic_attributes, runtime
 
 
 def source_regions(operands) -> dict:
@@ -38,4 +39,8 @@ def _regions(op) -> np.ndarray:
     face_s, face_t = s // 3, t // 3
     if material is not None:
         joined &= material[face_s] == material[face_t]
+    for domain, kind, values in op.generic.values():
+        if domain == "FACE" and not generic_attributes.TYPES[kind][3]:  # a label: integers and booleans
+            per_tri = np.asarray(values)[op.faces].reshape(n, -1)
+            joined &= (per_tri[face_s] == per_tri[face_t]).all(axis=1)
     return runtime.engine().connected_components(n, face_s[joined], face_t[joined])

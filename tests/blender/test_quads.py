@@ -62,14 +62,14 @@ def test_halves_with_different_attributes_are_not_merged():
 BORDER = 0.3  # a material border across the box's sides, off the lattice's blocks
 
 
-def _box_minus_ball(adaptivity: float, materials: bool):
-    """A box (its triangles above z = BORDER another material, or one material) minus a ball, remeshed at
-    ``adaptivity``: the result object."""
+def _box_minus_ball(adaptivity: float, border: str | None):
+    """A box (its triangles above z = BORDER another value of the face attribute ``border``: "material_index", or a
+    part id "Part"; None: one material) minus a ball, remeshed at ``adaptivity``: the result object."""
     verts, tris = box_mesh(subdivisions=20)
     slots = [bpy.data.materials.new("Low"), bpy.data.materials.new("High")]
     box = add_mesh_object("Box", verts, tris, materials=slots)
-    index = (verts[tris].mean(axis=1)[:, 2] > BORDER).astype(np.int32) if materials else np.zeros(len(tris), np.int32)
-    box.data.attributes.new("material_index", "INT", "FACE").data.foreach_set("value", index)
+    index = (verts[tris].mean(axis=1)[:, 2] > BORDER).astype(np.int32) if border else np.zeros(len(tris), np.int32)
+    box.data.attributes.new(border or "material_index", "INT", "FACE").data.foreach_set("value", index)
     ball = add_mesh_object("Ball", *uv_sphere(0.5, rings=32, segments=64), location=(0.0, 0.0, 1.0))
     select(box, ball)
     status = bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96, keep_faces=False, adaptivity=adaptivity)
@@ -90,9 +90,9 @@ def _spanning(mesh, reach: float) -> int:
 
 
 def test_adaptivity_merges_flat_faces_but_not_across_a_material_border(fresh_cache):
-    fine = _box_minus_ball(0.0, True)
+    fine = _box_minus_ball(0.0, "material_index")
     fine_faces = len(fine.data.polygons)
-    coarse = _box_minus_ball(1.0, True)
+    coarse = _box_minus_ball(1.0, "material_index")
     mesh = coarse.data
     # measured: 50,808 faces at 0 and 2,204 at 1
     assert len(mesh.polygons) < 0.1 * fine_faces
@@ -104,7 +104,17 @@ def test_adaptivity_merges_flat_faces_but_not_across_a_material_border(fresh_cac
     # the material border at z = BORDER runs across the box's flat sides: no merged face spans it, where one material
     # lets them (measured 0 against 12)
     assert _spanning(mesh, 2.0 * voxel) == 0
-    assert _spanning(_box_minus_ball(1.0, False).data, 2.0 * voxel) > 0
+    assert _spanning(_box_minus_ball(1.0, None).data, 2.0 * voxel) > 0
+
+
+def test_adaptivity_does_not_merge_across_a_part_border(fresh_cache):
+    """An integer face attribute (a part id) borders merged faces as a material does, and comes back on them."""
+    mesh = _box_minus_ball(1.0, "Part").data
+    voxel = boolean_op.last_run["voxel_size"]
+    assert _spanning(mesh, 2.0 * voxel) == 0  # measured 0 (24 where part ids bordered nothing)
+    part = np.empty(len(mesh.polygons), np.int32)
+    mesh.attributes["Part"].data.foreach_get("value", part)
+    assert set(np.unique(part)) == {0, 1}
 
 
 def test_the_csg_output_node_has_an_adaptivity(fresh_cache):
@@ -129,7 +139,7 @@ def test_the_csg_output_node_has_an_adaptivity(fresh_cache):
     assert counts[1] < 0.2 * counts[0], counts
 
 
-def test_source_regions_split_at_material_borders_and_uv_seams():
+def test_source_regions_split_at_material_borders_part_borders_and_uv_seams():
     from types import SimpleNamespace
 
     from aasdf.aasdf_addon import regions
@@ -140,7 +150,7 @@ def test_source_regions_split_at_material_borders_and_uv_seams():
     corners = np.arange(12, dtype=np.int32).reshape(4, 3)
     uv = verts[tris.ravel(), :2].copy()
 
-    def operand(material, uv_map):
+    def operand(material, uv_map, generic=None):
         return SimpleNamespace(
             tris=tris,
             verts=verts,
@@ -148,6 +158,7 @@ def test_source_regions_split_at_material_borders_and_uv_seams():
             faces=np.arange(4),
             face_material=np.asarray(material),
             uv_maps={"UVMap": uv_map},
+            generic=generic or {},
         )
 
     def groups(op):
@@ -159,3 +170,8 @@ def test_source_regions_split_at_material_borders_and_uv_seams():
     seam = uv.copy()
     seam[6:12, 0] += 5.0  # the second quad's UVs moved: a seam along the shared edge
     assert groups(operand([0, 0, 0, 0], seam)) == [0, 0, 2, 2]
+    # a part id (an integer face attribute) borders a region as a material does; a float one (a weight) does not
+    part = {"Part": ("FACE", "INT", np.array([3, 3, 4, 4], np.int32))}
+    assert groups(operand([0, 0, 0, 0], uv, part)) == [0, 0, 2, 2]
+    weight = {"Weight": ("FACE", "FLOAT", np.array([0.1, 0.1, 0.9, 0.9], np.float32))}
+    assert groups(operand([0, 0, 0, 0], uv, weight)) == [0, 0, 0, 0]
