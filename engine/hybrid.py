@@ -6,7 +6,8 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
 (open meshes capped across their holes, self-intersecting or inside-out shells, blends) holds there as everywhere:
 
 1. :func:`.keep.kept_triangles`: which triangles of which operand are the surface, facing which way;
-2. the voxel surface less its faces with a corner over the kept ones (:func:`.zipper.vertices_over`);
+2. the voxel surface less its faces with a corner over the kept ones (:func:`.zipper.vertices_over`), and less the
+   teeth of its border left (faces with two edges on it, which the strips beside them would fold over);
 3. the border loops of both (kept vertices at one position welded), paired; a failing kept loop that is a slit
    closed by itself (:func:`.slits.fill_slits`), unpaired kept loops facing each other zipped to each other
    (:func:`.twins.zip_twins`), and the loops that still cannot be paired given up (kept faces or voxel faces at
@@ -50,6 +51,7 @@ from .zipper import (
     loop_labels,
     nearest_points,
     pinched,
+    teeth,
     unfolded,
     vertex_components,
     vertices_over,
@@ -221,6 +223,9 @@ def hybrid_surface(
     for rounds in range(MAX_ROUNDS):
         v_alive = ~v_gone & ~any_corner(over, v_tris)
         v_alive, v_border = _drop_pinched(v_tris, v_alive, n, was)
+        v_alive, v_border = _drop_pinched(
+            v_tris, v_alive & ~teeth(v_tris, v_alive, v_border, n), n, (v_alive, v_border)
+        )
         was = (v_alive, v_border)  # (the next round's border read where its faces changed)
         k_loops = _loops(k_border, n, reverse=False)
         v_loops = _loops(v_border, n, reverse=True)

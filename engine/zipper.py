@@ -211,6 +211,25 @@ def nearest_points(cloud: np.ndarray, points: np.ndarray, radius: float, device,
     return out.numpy()
 
 
+def teeth(tris, alive, halves, n_verts: int) -> np.ndarray:
+    """(F,) bool: the faces ``alive`` with two edges on their border (``halves``, :func:`border_halves`): a tooth of
+    the voxel loop, which the strip beside it would fold over."""
+    at = np.zeros(n_verts, dtype=bool)
+    at[np.asarray(halves).ravel()] = True
+    rows = np.flatnonzero(alive & at[tris[:, 0]] & at[tris[:, 1]] & at[tris[:, 2]])
+    out = np.zeros(len(tris), dtype=bool)
+    if not len(rows) or not len(halves):
+        return out
+    t = np.asarray(tris[rows], dtype=np.int64)
+    border = np.sort(halves[:, 0].astype(np.int64) * n_verts + halves[:, 1])
+    count = np.zeros(len(rows), dtype=np.int64)
+    for k in range(3):
+        edge = t[:, k] * n_verts + t[:, (k + 1) % 3]
+        count += border[np.minimum(np.searchsorted(border, edge), len(border) - 1)] == edge
+    out[rows[count >= 2]] = True
+    return out
+
+
 # ---- the strip ----
 # Q is searched this many vertices ahead for the vertex nearest P's next one (a kept border's longest straight run
 # is a few tens of voxels, the voxel loop's edges about one), and no farther than this many past the nearest so far.

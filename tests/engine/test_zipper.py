@@ -3,7 +3,7 @@
 import numpy as np
 import warp as wp
 
-from engine.zipper import border_halves, unfolded, vertices_over, zip_loops
+from engine.zipper import border_halves, teeth, unfolded, vertices_over, zip_loops
 
 
 def _circles(spike: bool):
@@ -106,3 +106,16 @@ def test_a_strip_without_folds_is_left_as_it_is():
     strip, n = _zipped(spike=False)
     points, _, _ = _circles(spike=False)
     np.testing.assert_array_equal(unfolded(points, strip[0], [len(strip[0])], n), strip[0])
+
+
+def test_a_tooth_of_the_voxel_border_is_found():
+    # a row of six unit quads (each split a b c, a c d) with a triangle standing on the third one's top edge: the
+    # tooth, and the row's two end triangles (two edges on the border each), nothing else
+    v = lambda i, j: 7 * j + i  # noqa: E731
+    quads = [(v(i, 0), v(i + 1, 0), v(i + 1, 1), v(i, 1)) for i in range(6)]
+    tris = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))] + [[v(3, 1), 14, v(2, 1)]])
+    alive = np.ones(len(tris), dtype=bool)
+    found = teeth(tris, alive, border_halves(tris, 15), 15)
+    assert np.flatnonzero(found).tolist() == [1, 10, 12]  # the first quad's second half, the last's first, the tooth
+    alive[12] = False  # without the tooth, the third quad's top half has one edge on the border, as before
+    assert np.flatnonzero(teeth(tris, alive, border_halves(tris[alive], 15), 15)).tolist() == [1, 10]
