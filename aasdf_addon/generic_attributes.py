@@ -76,15 +76,16 @@ def carried(operands, sources, tris, n_verts: int, kept=None) -> dict:
         name -> (domain, data type, values): (F,) per face, (3F,) per corner (face after face), (V,) per point (a
         second axis for types of several values).
     """
+    names = {name: found for name, found in carried_names(operands).items() if found[0] != "EDGE"}
+    if not names:  # (most meshes: nothing to gather)
+        return {}
     field_ids, triangle_ids, bary = (np.asarray(a) for a in sources)
     first = np.cumsum([0] + [len(op.tris) for op in operands])
     has = (field_ids >= 0) & (field_ids < len(operands)) & (triangle_ids >= 0)
     stacked = np.where(has, first[np.where(has, field_ids, 0)] + triangle_ids, 0).astype(np.int64)
     weights = np.where(has[:, None, None], np.asarray(bary, dtype=np.float32), np.float32(0.0))
     out = {}
-    for name, (domain, kind) in carried_names(operands).items():
-        if domain == "EDGE":
-            continue
+    for name, (domain, kind) in names.items():
         own = [_own(op, name, domain, kind) for op in operands]
         if domain == "FACE":
             per_tri = [
@@ -156,6 +157,8 @@ def edge_columns(operands) -> dict:
 def whole_faces(values: dict, operands, whole: dict, rest, corner_rest) -> dict:
     """The carried ``values`` in ``polygons.as_polygons``' layout: the faces kept whole first (face and corner values
     copied from their own face and corners), then the triangles left (``rest``, ``corner_rest``)."""
+    if not values:
+        return {}
     corner_operand = np.repeat(whole["field"], whole["sizes"])
     corners = [np.flatnonzero(corner_operand == k) for k in range(len(operands))]  # each operand's, once
     out = {}
