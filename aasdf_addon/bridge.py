@@ -18,6 +18,8 @@ from .transfer import OPERAND_ATTRIBUTE
 
 # Attributes carried by name (or written by the add-on itself), never as generic ones (:mod:`.generic_attributes`).
 NAMED_ATTRIBUTES = {"position", "material_index", "sharp_face", "custom_normal", OPERAND_ATTRIBUTE, *EDGE_ATTRIBUTES}
+# Blender's own attributes, hidden from the attribute list, that sculpting keeps per face and per vertex: carried.
+SCULPT_ATTRIBUTES = {".sculpt_face_set", ".sculpt_mask"}
 
 
 @dataclass(eq=False)
@@ -106,13 +108,15 @@ def read_mesh_operand(evaluated, matrix) -> Operand:
 
 def _generic_attributes(mesh, taken) -> dict:
     """name -> (domain, data type, values) of the mesh's attributes carried as :mod:`.generic_attributes` (none of
-    the names ``taken``, nor internal, nor of another domain or type than it carries)."""
+    the names ``taken``, nor internal but sculpting's face sets and mask, nor of another domain or type than it
+    carries)."""
     out = {}
     for attribute in mesh.attributes:
         name, domain, kind = attribute.name, attribute.domain, attribute.data_type
-        if name in taken or name.startswith(".") or domain not in generic_attributes.DOMAINS:
+        internal = attribute.is_internal or name.startswith(".")
+        if name in taken or domain not in generic_attributes.DOMAINS or internal and name not in SCULPT_ATTRIBUTES:
             continue
-        if kind in generic_attributes.TYPES and not attribute.is_internal:
+        if kind in generic_attributes.TYPES:
             prop, dtype, width, _ = generic_attributes.TYPES[kind]
             out[name] = (domain, kind, _get(attribute.data, prop, dtype, width))
     return out

@@ -1,7 +1,8 @@
 """Every other attribute an operand holds comes back under its name, domain and type (aasdf_addon/generic_attributes):
 bevel weights, a float weight linear in position, integer, boolean and colour face attributes, a vector per corner,
-8-bit and 2D integers. Checked on a quad box holding them minus a cylinder holding a face attribute of its own: kept
-faces, vertices and edges bit for bit, new faces from their source faces, new vertices read off their source."""
+8-bit and 2D integers, sculpting's face sets and mask. Checked on a quad box holding them minus a cylinder holding a
+face attribute of its own: kept faces, vertices and edges bit for bit, new faces from their source faces, new
+vertices read off their source."""
 
 import bpy
 import numpy as np
@@ -44,6 +45,8 @@ def scene():
     put(mesh, "Tone", "FLOAT_COLOR", "FACE", rng.random((n_f, 4)).astype(np.float32), "color")
     put(mesh, "Offset", "FLOAT_VECTOR", "CORNER", rng.random((n_c, 3)).astype(np.float32), "vector")
     put(mesh, "Pair", "INT32_2D", "EDGE", rng.integers(0, 9, (n_e, 2)).astype(np.int32))
+    put(mesh, ".sculpt_face_set", "INT", "FACE", (np.arange(n_f) % 3 + 1).astype(np.int32))  # sculpting's, hidden
+    put(mesh, ".sculpt_mask", "FLOAT", "POINT", rng.random(n_v).astype(np.float32))
     bpy.ops.mesh.primitive_cylinder_add(vertices=12, radius=0.3, depth=3.0, location=(0.55, 0.55, 0.0))
     cutter = bpy.context.active_object
     cutter.name = "Cutter"
@@ -76,7 +79,17 @@ def result(request, fresh_cache):
 
 def test_attributes_come_back_under_their_name_domain_and_type(result):
     box, _, out, keep = result
-    for name in ("bevel_weight_vert", "Weight", "Flag", "Part", "Tag", "Tone", "Offset"):
+    for name in (
+        "bevel_weight_vert",
+        "Weight",
+        "Flag",
+        "Part",
+        "Tag",
+        "Tone",
+        "Offset",
+        ".sculpt_face_set",
+        ".sculpt_mask",
+    ):
         src, dst = box.data.attributes[name], out.data.attributes.get(name)
         assert dst is not None, name
         assert (dst.domain, dst.data_type) == (src.domain, src.data_type), name
@@ -99,6 +112,8 @@ def test_kept_faces_vertices_and_edges_keep_their_values_bit_for_bit(fresh_cache
     mine, theirs = np.array(pairs).T
     np.testing.assert_array_equal(read(dst, "Part", dtype=np.int32)[mine], read(src, "Part", dtype=np.int32)[theirs])
     np.testing.assert_array_equal(read(dst, "Tag", dtype=bool)[mine], read(src, "Tag", dtype=bool)[theirs])
+    sets = read(dst, ".sculpt_face_set", dtype=np.int32)
+    np.testing.assert_array_equal(sets[mine], read(src, ".sculpt_face_set", dtype=np.int32)[theirs])
     np.testing.assert_array_equal(read(dst, "Tone", "color", 4)[mine], read(src, "Tone", "color", 4)[theirs])
     d_loops = (d_start[mine][:, None] + np.arange(4)).ravel()
     s_loops = (s_start[theirs][:, None] + np.arange(4)).ravel()
@@ -107,7 +122,12 @@ def test_kept_faces_vertices_and_edges_keep_their_values_bit_for_bit(fresh_cache
     at = {tuple(p): k for k, p in enumerate(s_co)}
     verts = np.array([(k, at[tuple(p)]) for k, p in enumerate(d_co) if tuple(p) in at])
     assert len(verts) > 80
-    for name, dtype in (("bevel_weight_vert", np.float32), ("Weight", np.float32), ("Flag", np.int8)):
+    for name, dtype in (
+        ("bevel_weight_vert", np.float32),
+        ("Weight", np.float32),
+        ("Flag", np.int8),
+        (".sculpt_mask", np.float32),
+    ):
         np.testing.assert_array_equal(
             read(dst, name, dtype=dtype)[verts[:, 0]], read(src, name, dtype=dtype)[verts[:, 1]]
         )
