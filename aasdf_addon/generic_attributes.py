@@ -3,8 +3,8 @@
 The attributes the add-on knows by name (materials, shading, UV maps, colours, seams, sharp edges, edge creases,
 custom normals) are carried by ``transfer``, ``polygons`` and ``edge_attributes``. Here is everything else an operand's
 mesh holds that Blender lets a user make: a float, float2, vector, colour, integer, 8-bit integer, 2D integer or
-boolean attribute on points, edges, faces or face corners (:data:`TYPES`). Each comes back on the result under its own
-name, domain and type:
+boolean attribute on points, edges, faces or face corners (:data:`TYPES`), and sculpting's face sets and mask (hidden:
+``bridge.SCULPT_ATTRIBUTES``). Each comes back on the result under its own name, domain and type:
 
 - a face takes its source face's value (a kept face its own, a new face the face of the operand it came from), as the
   material does;
