@@ -442,7 +442,8 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
 
     A kept loop that failed gives up the kept faces at it (``whole``: a small kept piece it bounds whole, a large one
     a few rings of faces deep, see :func:`_widened`), and the kept vertices ``far`` where a strip stretched the faces
-    at them. A voxel loop that
+    at them (``whole``: as deep; a finger of kept faces the strip stretches to, given up at its tip a vertex a round,
+    outlasted the rounds). A voxel loop that
     failed gives up its piece of the voxel surface when that is an island (a tenth of the voxel faces or less, left
     over kept faces), else the kept faces near it (at the kept border, or anywhere where no border is in reach).
     Returns the kept faces' mask and border halves, the given-up voxel faces' mask, and the kept vertices the faces
@@ -450,6 +451,7 @@ def _give_up(points, kept, voxel, kept_failed, voxel_failed, whole: bool, reach:
     (k_tris, k_alive, k_border, k_loops), (v_tris, v_alive, v_loops, v_gone) = kept, voxel
     n = len(points)
     at_failed = np.isin(k_loops[2], kept_failed)
+    at_failed[far] = True
     failed_at = at_failed.copy()
     if whole:
         at_failed = _widened(k_tris, k_alive, at_failed, n, device)
