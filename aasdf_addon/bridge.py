@@ -291,11 +291,17 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
     if not _set_cached_edges(mesh, edge_cache):
         mesh.update(calc_edges=True)
         _cache_edges(mesh, edge_cache)
-    if not len(starts):
-        return mesh
+    if len(starts):
+        _write_attributes(mesh, attributes, len(starts), len(verts))
+    return mesh
+
+
+def _write_attributes(mesh, attributes: dict, faces: int, vertex_count: int) -> None:
+    """What the faces carry (``result_mesh``'s ``attributes``) written into ``mesh`` (its ``faces`` and
+    ``vertex_count`` vertices made, its edges derived)."""
     creases = attributes.get("creases")
     if creases is not None and len(creases):
-        _mark_sharp_edges(mesh, creases, len(verts))
+        _mark_sharp_edges(mesh, creases, vertex_count)
     if attributes.get("kept_edges") is not None:
         _carry_edge_attributes(mesh, *attributes["kept_edges"])
     if attributes.get("material_index") is not None:
@@ -303,7 +309,7 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
     smooth = attributes.get("smooth")
     if smooth is None or not np.all(smooth):  # meshes without a "sharp_face" attribute are smooth
         # the attribute directly: Mesh.shade_flat() takes ~0.2 s on a million faces
-        sharp = np.ones(len(starts), dtype=bool) if smooth is None else ~np.asarray(smooth, dtype=bool)
+        sharp = np.ones(faces, dtype=bool) if smooth is None else ~np.asarray(smooth, dtype=bool)
         _new_attribute(mesh, "sharp_face", "BOOLEAN", "FACE", "value", sharp, bool)
     if attributes.get("operand") is not None:
         _new_attribute(mesh, OPERAND_ATTRIBUTE, "INT", "FACE", "value", attributes["operand"], np.int32)
@@ -319,7 +325,6 @@ def result_mesh(name, verts, tris, attributes=None, edge_cache=None):
         mesh.color_attributes.active_color_index = mesh.color_attributes.render_color_index = 0
     if attributes.get("custom_normals") is not None:  # zero vectors: Blender's own normal there
         mesh.normals_split_custom_set(np.ascontiguousarray(attributes["custom_normals"], dtype=np.float32))
-    return mesh
 
 
 def _mark_sharp_edges(mesh, creases, vertex_count):

@@ -507,10 +507,9 @@ class AdaptiveField:
                 ISO_REACH voxels, or where the level leaves the finest band (its surface there is open), it is the
                 zero surface of :func:`.fieldops.offset` (``regions`` are not read there: the offset has no sources).
             sharp: Keep creases and corners (dual marching cubes placing each vertex at the minimiser of the exact
-                tangent planes of its cube, :mod:`.dual`); ``False`` gives marching cubes, vertices on the lattice
-                edges. Default: sharp, except for a re-distanced field (``stats["exact_distance"]``: offsets and
-                shells), whose closest points lie on a marching-cubes surface, so there is no crease to recover:
-                marching cubes there, unless ``quads`` or an ``adaptivity`` are asked (they are the dual surface's).
+                tangent planes of its cube, :mod:`.dual`); ``False`` gives marching cubes. Default: sharp, but for a
+                re-distanced field (offsets, shells: its closest points lie on a marching-cubes surface, no crease to
+                recover) marching cubes unless ``quads`` or an ``adaptivity`` (the dual surface's) are asked.
             return_creases: Also return the crease edges the sharp extraction reconstructed.
             keep_faces: Keep the operands' own triangles wherever the surface is theirs, away from the seams
                 (:meth:`kept_surface`; ``iso`` 0 only; no crease edges are returned with them); an ``adaptivity``
@@ -539,18 +538,17 @@ class AdaptiveField:
         if self.refiner is not None:  # its whole band first (:mod:`.ondemand`)
             options = {"sharp": sharp, "return_creases": return_creases, "quads": quads, "adaptivity": adaptivity}
             return refined(self, view=True).to_mesh(iso, regions=regions, **options)
-        asked, out = sharp, None
-        if sharp is None:
-            sharp = not self.stats.get("exact_distance", False) or quads or adaptivity > 0.0
+        out, redistanced = None, self.stats.get("exact_distance", False)
+        dual = sharp if sharp is not None else not redistanced or quads or adaptivity > 0.0
         if abs(iso) <= ISO_REACH * self.world_voxel_size:
             out = field_mesh(
-                self, iso, sharp=sharp, creases=return_creases, quads=quads, adaptivity=adaptivity, regions=regions
+                self, iso, sharp=dual, creases=return_creases, quads=quads, adaptivity=adaptivity, regions=regions
             )
         if out is None or not out["closed"]:  # the level leaves the finest band: the zero surface of its offset
             from .fieldops import offset
 
             grown = offset(self, iso)
-            return grown.to_mesh(sharp=asked, return_creases=return_creases, quads=quads, adaptivity=adaptivity)
+            return grown.to_mesh(sharp=sharp, return_creases=return_creases, quads=quads, adaptivity=adaptivity)
         mesh = (out["verts"], out["faces"], out["sizes"]) if quads else (out["verts"], out["tris"])
         return (*mesh, out["creases"]) if return_creases else mesh
 

@@ -221,14 +221,9 @@ def hybrid_surface(
         return voxel_surface_only(voxel_verts, voxel_tris, "the seams' surface ends short of the kept faces")
     was = (closed, np.zeros((0, 2), np.int64))
     for rounds in range(MAX_ROUNDS):
-        v_alive = ~v_gone & ~any_corner(over, v_tris)
-        v_alive, v_border = _drop_pinched(v_tris, v_alive, n, was)
-        v_alive, v_border = _drop_pinched(
-            v_tris, v_alive & ~teeth(v_tris, v_alive, v_border, n), n, (v_alive, v_border)
-        )
+        v_alive, v_border = _voxel_left(v_tris, ~v_gone & ~any_corner(over, v_tris), n, was)
         was = (v_alive, v_border)  # (the next round's border read where its faces changed)
-        k_loops = _loops(k_border, n, reverse=False)
-        v_loops = _loops(v_border, n, reverse=True)
+        k_loops, v_loops = _loops(k_border, n, reverse=False), _loops(v_border, n, reverse=True)
         k_loops, paired, strips, stretched, far = _paired_strips(
             points, (k_tris[k_alive], k_border), k_loops, v_loops, n_k, field
         )
@@ -250,6 +245,13 @@ def hybrid_surface(
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
     surface = _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
     return {**surface, "trouble": _trouble(points, k_tris[judged_alive & ~k_alive], trouble, voxel)}
+
+
+def _voxel_left(v_tris, alive, n: int, was) -> tuple:
+    """The voxel faces ``alive`` less those at pinched vertices and the teeth of their border (:func:`.zipper.teeth`),
+    and their border halves (``was`` as :func:`_drop_pinched` takes it)."""
+    alive, border = _drop_pinched(v_tris, alive, n, was)
+    return _drop_pinched(v_tris, alive & ~teeth(v_tris, alive, border, n), n, (alive, border))
 
 
 def _judged(field, avoid: np.ndarray) -> list:
