@@ -1,6 +1,7 @@
 """Booleans that keep the operands' own faces, in Blender, beside the Boolean modifier's Exact and Manifold solvers and
 AASDF remeshed: seconds (read to write, the fields built: a first run), faces, closed or not, and for closed pairs the
-Hausdorff distance to manifold3d's exact boolean (max and p95, voxels). One ``bpy`` process, the add-on registered;
+Hausdorff distance to manifold3d's exact boolean (max and p95, voxels), and how many pairs of its faces pass through
+each other (``tests.metrics.self_intersections``). One ``bpy`` process, the add-on registered;
 each case runs its four methods in turn for ``--repeat`` rounds (the order alternating, ``bench/paired.py``), times are
 medians. Voxel = the pair's bounding-box diagonal / 256.
 
@@ -25,7 +26,7 @@ import bpy  # noqa: E402
 
 from bench import baselines  # noqa: E402
 from bench.addon import register  # noqa: E402
-from tests.metrics import exact_boolean, hausdorff  # noqa: E402
+from tests.metrics import exact_boolean, hausdorff, self_intersections  # noqa: E402
 from tests.support import cad_pairs, load_mesh, normalised, plate_and_bores, uv_sphere  # noqa: E402
 
 RESOLUTION = 256
@@ -112,7 +113,8 @@ def measure(name, op, a, b, closed, repeat):
         if exact is not None and out["closed"] and len(out["tris"]):
             d = hausdorff(out["verts"], out["tris"], *exact, n=100_000)
             error = f"{d['max'] / voxel:.2f} / {d['p95'] / voxel:.3f}"
-        rows.append((name, method, statistics.median(times[method]), out["faces"], out["closed"], error))
+        crossings = self_intersections(out["verts"], out["tris"]) if len(out["tris"]) else 0
+        rows.append((name, method, statistics.median(times[method]), out["faces"], out["closed"], error, crossings))
     return rows
 
 
@@ -125,14 +127,12 @@ def main(argv=None):
     bpy.ops.wm.read_homefile(use_empty=True)
     chosen = {k: v for k, v in cases().items() if not args.cases or any(c in k for c in args.cases)}
     print(f"keep faces: {platform.machine()}, {os.cpu_count()} cores, Blender {bpy.app.version_string}, /{RESOLUTION}")
-    print("| pair | method | seconds | faces | closed | Hausdorff max / p95 (voxels) |")
-    print("|---|---|---|---|---|---|")
+    print("| pair | method | seconds | faces | closed | Hausdorff max / p95 (voxels) | crossing pairs |")
+    print("|---|---|---|---|---|---|---|")
     for name, (op, a, b, closed) in chosen.items():
         for row in measure(name, op, a, b, closed, args.repeat):
-            print(
-                f"| {row[0]} | {row[1]} | {row[2]:.3f} | {row[3]:,} | {'yes' if row[4] else 'no'} | {row[5]} |",
-                flush=True,
-            )
+            closed = "yes" if row[4] else "no"
+            print(f"| {row[0]} | {row[1]} | {row[2]:.3f} | {row[3]:,} | {closed} | {row[5]} | {row[6]} |", flush=True)
 
 
 if __name__ == "__main__":
