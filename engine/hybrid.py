@@ -17,7 +17,8 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
    :func:`.zipper.unfolded`), and the three parts as one surface, checked closed and
    consistently oriented; where the join cannot be made, the voxel surface alone (``stats["kept_fallback"]``);
 5. where the join gave up large kept faces (a low-polygon mesh's), the triangles judged again clear of the places it
-   failed and joined again (:mod:`.rejoin`).
+   failed and joined again (:mod:`.rejoin`);
+6. after the new faces are made coarse where flat, those that pass through other faces tiled again (:mod:`.uncross`).
 """
 
 from __future__ import annotations
@@ -25,11 +26,11 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .assembly import assembled, voxel_surface_only
 from .carried import carried, remember
 from .coarsen import coarsened
 from .earlyjudge import early_verdicts
 from .edgehash import EdgeCounts, directed_edges
-from .edges import surface_edges
 from .keep import kept_triangles
 from .meshcheck import all_corners, any_corner, compacted, position_groups
 from .normalsums import triangle_normal_sums
@@ -39,6 +40,7 @@ from .rejoin import joined_again
 from .slits import fill_slits
 from .sources import mesh_distances
 from .twins import zip_twins
+from .uncross import uncrossed
 from .zipper import (
     LOCAL_ROUNDS,
     MAX_ROUNDS,
@@ -243,7 +245,7 @@ def hybrid_surface(
         trouble.append(at)
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
-    surface = _assemble(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
+    surface = assembled(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
     return {**surface, "trouble": _trouble(points, k_tris[judged_alive & ~k_alive], trouble, voxel)}
 
 
@@ -523,55 +525,6 @@ def _strips(points, k_loops, v_loops, pairs, reach: float, n_kept: int, device):
     return strips, pairs[np.maximum.reduceat(gaps, first) > reach, 0], far[far < n_kept].astype(np.int64)
 
 
-def voxel_surface_only(verts, tris, why: str, failed: bool = True) -> dict:
-    """A voxel surface as :func:`hybrid_surface` returns one, nothing kept (``why`` in its stats, and whether a join
-    ``failed``: ``stats["join_failed"]``, False where there was nothing to keep)."""
-    n_f, n_v = len(tris), len(verts)
-    return {
-        "verts": np.asarray(verts, dtype=np.float32),
-        "tris": np.asarray(tris, dtype=np.int32),
-        "kept": np.zeros(n_f, dtype=bool),
-        "field_id": np.full(n_f, -1, np.int32),
-        "triangle_id": np.full(n_f, -1, np.int32),
-        "vertex_field": np.full(n_v, -1, np.int32),
-        "vertex_id": np.full(n_v, -1, np.int32),
-        "corner_bary": np.zeros((n_f, 3, 3), np.float32),
-        "voxel_face": np.arange(n_f, dtype=np.int64),
-        "stats": {"kept_faces": 0, "new_faces": n_f, "kept_fallback": why, "join_failed": failed},
-    }
-
-
-def _assemble(points, kept, k_tris, k_alive, voxel, strips, voxel_verts, voxel_tris, device) -> dict:
-    """The kept faces, the voxel faces left (``voxel``: all of them and which are left) and the strips as one
-    surface on the vertices they use, or the voxel surface alone if that is not closed and consistently oriented."""
-    v_rows = np.flatnonzero(voxel[1])
-    tris = np.concatenate([k_tris[k_alive], voxel[0][v_rows], strips.astype(np.int64)])
-    used, local = compacted(tris, len(points))
-    tris = local.astype(np.int32)
-    if surface_edges(tris, len(used), device) is None:
-        return voxel_surface_only(voxel_verts, voxel_tris, "the join is not a closed oriented surface")
-    n_k, n_kept = len(kept["verts"]), int(k_alive.sum())
-    n_new = len(tris) - n_kept
-    from_kept = used < n_k
-    vertex_field = np.full(len(used), -1, np.int32)
-    vertex_id = np.full(len(used), -1, np.int32)
-    vertex_field[from_kept] = kept["vertex_field"][used[from_kept]]
-    vertex_id[from_kept] = kept["vertex_id"][used[from_kept]]
-    return {
-        "verts": points[used],
-        "tris": tris,
-        "kept": np.r_[np.ones(n_kept, bool), np.zeros(n_new, bool)],
-        "field_id": np.r_[kept["field_id"][k_alive], np.full(n_new, -1, np.int32)],
-        "triangle_id": np.r_[kept["triangle_id"][k_alive], np.full(n_new, -1, np.int32)],
-        "vertex_field": vertex_field,
-        "vertex_id": vertex_id,
-        "corner_bary": np.concatenate([kept["corner_bary"][k_alive], np.zeros((n_new, 3, 3), np.float32)]),
-        "voxel_face": np.r_[np.full(n_kept, -1), v_rows, np.full(len(strips), -1)].astype(np.int64),
-        "stats": {"kept_faces": n_kept, "new_faces": n_new, "strip_faces": len(strips)}
-        | {"kept_fallback": "", "join_failed": False},
-    }
-
-
 def kept_surface(
     field, *, sharp: bool | None = None, adaptivity: float = 0.0, regions: dict | None = None, whole=None
 ) -> dict:
@@ -613,7 +566,7 @@ def kept_surface(
         surface = _joined(field, join, found["judged"], avoid)
         if whole is not None and surface["stats"]["kept_fallback"]:  # along the seams alone: the whole result's
             return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
-        surface = coarsened(field, surface, adaptivity, regions)
+        surface = uncrossed(coarsened(field, surface, adaptivity, regions), field.voxel_size, field.device)
     quads = int(np.count_nonzero(np.asarray(sizes) == 4))  # the first, rows 2q and 2q + 1 of ``tris``
     surface["voxel_face"] = np.where(surface["voxel_face"] < 2 * quads, surface["voxel_face"], -1)
     return quad_halves_first(surface)

@@ -69,21 +69,25 @@ def _pairs_kernel(
     mesh: wp.uint64,
     points: wp.array[wp.vec3],
     tris: wp.array2d[wp.int32],
+    rows: wp.array[wp.int32],
+    member: wp.array[wp.uint8],
     offset: int,
     first: wp.array[wp.int32],
     count: wp.array[wp.int32],
     pairs: wp.array2d[wp.int32],
 ):
-    """Per triangle ``f``: how many triangles ``g > f`` sharing no corner with it it crosses (``count``), or, with
-    ``first`` (each one's first row), those pairs written to ``pairs``."""
+    """Per triangle ``f``: how many triangles ``g`` of ``mesh`` (built on ``rows`` of ``tris``) sharing no corner with
+    it it crosses, ``g > f`` where ``f`` is one of them too (``member``) (``count``), or, with ``first`` (each one's
+    first row), those pairs written to ``pairs``."""
     f = wp.tid() + offset
     lo = wp.min(wp.min(points[tris[f, 0]], points[tris[f, 1]]), points[tris[f, 2]])
     hi = wp.max(wp.max(points[tris[f, 0]], points[tris[f, 1]]), points[tris[f, 2]])
     query = wp.mesh_query_aabb(mesh, lo, hi)
-    g = int(0)
+    local = int(0)
     found = int(0)
-    while wp.mesh_query_aabb_next(query, g):
-        if g <= f:
+    while wp.mesh_query_aabb_next(query, local):
+        g = rows[local]
+        if g == f or (member[f] != wp.uint8(0) and g < f):
             continue
         shared = False
         for i in range(3):
@@ -99,30 +103,49 @@ def _pairs_kernel(
         count[f] = found
 
 
+def crossing_pairs(verts: np.ndarray, tris: np.ndarray, device, rows: np.ndarray | None = None) -> np.ndarray:
+    """(P, 2) int64 the pairs of triangles of a mesh ((V, 3), (T, 3) int) that pass through each other and share no
+    corner (touching is no crossing), each pair once; with ``rows`` ((R,) ints), only the pairs with a triangle among
+    those rows (the second of each pair)."""
+    rows = np.arange(len(tris)) if rows is None else np.asarray(rows, dtype=np.int64)
+    if not len(rows):
+        return np.zeros((0, 2), dtype=np.int64)
+    flat = np.ascontiguousarray(tris, dtype=np.int32)
+    points_wp = wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device)
+    indices = wp.array(np.ascontiguousarray(flat[rows]).reshape(-1), dtype=wp.int32, device=device)
+    mesh = wp.Mesh(points=points_wp, indices=indices)
+    member = np.zeros(len(flat), dtype=np.uint8)
+    member[rows] = 1
+    args = [
+        mesh.id,
+        points_wp,
+        wp.array(flat, dtype=wp.int32, device=device),
+        wp.array(rows.astype(np.int32), dtype=wp.int32, device=device),
+        wp.array(member, dtype=wp.uint8, device=device),
+    ]
+    count = wp.zeros(len(flat), dtype=wp.int32, device=device)
+    none = wp.zeros(0, dtype=wp.int32, device=device)
+    empty = wp.zeros((0, 2), dtype=wp.int32, device=device)
+    launch_split(_pairs_kernel, len(flat), lambda lo, _n: [*args, lo, none, count, empty], device)
+    counts = count.numpy()
+    total = int(counts.sum())
+    if not total:
+        return np.zeros((0, 2), dtype=np.int64)
+    first = wp.array(np.r_[0, np.cumsum(counts)[:-1]].astype(np.int32), dtype=wp.int32, device=device)
+    pairs = wp.zeros((total, 2), dtype=wp.int32, device=device)
+    launch_split(_pairs_kernel, len(flat), lambda lo, _n: [*args, lo, first, count, pairs], device)
+    return pairs.numpy().astype(np.int64)
+
+
 def crossing_segments(verts: np.ndarray, tris: np.ndarray, device, shortest: float = 0.0) -> np.ndarray:
     """(S, 2, 3) float32 the segments along which the triangles of a mesh ((V, 3), (T, 3) int; vertices at one
     position merged by the caller) pass through one another, one per crossing pair, those of crossing curves (the
     segments joined where they share an end: an edge of one triangle through another) at least ``shortest`` long
     (empty where none is)."""
-    if not len(tris):
+    pairs = crossing_pairs(verts, tris, device)
+    if not len(pairs):
         return np.zeros((0, 2, 3), dtype=np.float32)
-    flat = np.ascontiguousarray(tris, dtype=np.int32)
-    points_wp = wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device)
-    mesh = wp.Mesh(points=points_wp, indices=wp.array(flat.reshape(-1), dtype=wp.int32, device=device))
-    tris_wp = wp.array(flat, dtype=wp.int32, device=device)
-    count = wp.zeros(len(flat), dtype=wp.int32, device=device)
-    none = wp.zeros(0, dtype=wp.int32, device=device)
-    empty = wp.zeros((0, 2), dtype=wp.int32, device=device)
-    args = [mesh.id, points_wp, tris_wp]
-    launch_split(_pairs_kernel, len(flat), lambda lo, _n: [*args, lo, none, count, empty], device)
-    counts = count.numpy()
-    total = int(counts.sum())
-    if not total:
-        return np.zeros((0, 2, 3), dtype=np.float32)
-    first = wp.array(np.r_[0, np.cumsum(counts)[:-1]].astype(np.int32), dtype=wp.int32, device=device)
-    pairs = wp.zeros((total, 2), dtype=wp.int32, device=device)
-    launch_split(_pairs_kernel, len(flat), lambda lo, _n: [*args, lo, first, count, pairs], device)
-    segments, ends = _segments(np.asarray(verts, dtype=np.float64), flat.astype(np.int64), pairs.numpy())
+    segments, ends = _segments(np.asarray(verts, dtype=np.float64), np.asarray(tris, dtype=np.int64), pairs)
     return segments[_curve_lengths(segments, ends, device) >= shortest].astype(np.float32)
 
 

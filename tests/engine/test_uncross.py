@@ -1,0 +1,98 @@
+"""New faces that pass through other faces, tiled again (engine/uncross.py): polygons tiled without folds and around
+the chords they may not take, and a fold of new faces over kept ones made flat with the kept faces untouched."""
+
+import numpy as np
+
+from engine.uncross import TOLERANCE_VOXELS, tiled_polygons, uncrossed
+from tests.metrics import self_intersections
+
+
+def _tile(polygons, forbid=()):
+    """Each polygon's tiles and whether it has them; ``forbid``: (polygon, i, j) chords no tile may take."""
+    sizes = np.array([len(p) for p in polygons])
+    starts = np.cumsum(sizes) - sizes
+    squares = np.cumsum(sizes * sizes) - sizes * sizes
+    forbidden = np.zeros(int((sizes * sizes).sum()), dtype=np.uint8)
+    for k, i, j in forbid:
+        forbidden[squares[k] + min(i, j) * sizes[k] + max(i, j)] = 1
+    plane = np.concatenate([np.asarray(p, dtype=np.float64) for p in polygons])
+    tiles, done = tiled_polygons(plane, starts, sizes, forbidden, "cpu")
+    first = np.cumsum(sizes - 2) - (sizes - 2)
+    return [tiles[first[k] : first[k] + sizes[k] - 2] for k in range(len(sizes))], done
+
+
+def _area(points) -> float:
+    x, y = np.asarray(points, dtype=np.float64).T
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def test_polygons_are_tiled_without_folds_and_around_forbidden_chords():
+    comb = [(0, 0), (9, 0), (9, 3)] + [(x, 3 if k % 2 else 1) for k, x in enumerate(range(8, 0, -1))] + [(0, 3)]
+    square = [(0, 0), (1, 0), (1, 1), (0, 1)]
+    bow_tie = [(0, 0), (1, 1), (1, 0), (0, 1)]
+    polygons = [comb, square, square, bow_tie]
+    tiles, done = _tile(polygons, forbid=[(1, 0, 2), (2, 0, 2), (2, 1, 3)])
+    assert done.tolist() == [True, True, False, False]  # the second square can take neither diagonal
+    for k in (0, 1):
+        points = np.asarray(polygons[k], dtype=np.float64)
+        areas = [_area(points[t]) for t in tiles[k]]
+        assert min(areas) > 0  # no tile turned over
+        assert abs(sum(areas) - _area(points)) < 1e-9  # together they cover the polygon once: no overlap
+    assert sorted(map(sorted, tiles[1].tolist())) == [[0, 1, 3], [1, 2, 3]]  # along the diagonal 1-3
+
+
+def _fold_surface():
+    """A flat grid of 12 x 6 squares in z = 0: its left half kept faces, its right half new faces, and the new vertex
+    beside the kept border and the next pushed over kept faces, 0.2 voxel above and below them: new faces fold over
+    kept ones, through them."""
+    n, m = 13, 7
+    x, y = np.meshgrid(np.arange(n, dtype=np.float32), np.arange(m, dtype=np.float32), indexing="ij")
+    verts = np.stack([x.ravel(), y.ravel(), np.zeros(n * m, np.float32)], axis=1)
+    at = lambda i, j: i * m + j  # noqa: E731
+    quads = [(at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)) for i in range(n - 1) for j in range(m - 1)]
+    tris = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))], dtype=np.int32)
+    kept = verts[tris].mean(axis=1)[:, 0] < 6
+    verts[at(7, 3)] = (5.6, 3.2, 0.2)
+    verts[at(7, 4)] = (5.5, 4.1, -0.2)
+    f, v = len(tris), len(verts)
+    surface = {
+        "verts": verts,
+        "tris": tris,
+        "kept": kept,
+        "field_id": np.where(kept, 0, -1).astype(np.int32),
+        "triangle_id": np.where(kept, np.arange(f), -1).astype(np.int32),
+        "vertex_field": np.zeros(v, np.int32),
+        "vertex_id": np.arange(v, dtype=np.int32),
+        "corner_bary": np.zeros((f, 3, 3), np.float32),
+        "voxel_face": np.where(kept, -1, np.arange(f)),
+        "stats": {"kept_faces": int(kept.sum()), "new_faces": int((~kept).sum())},
+    }
+    return surface
+
+
+def test_a_fold_of_new_faces_over_kept_ones_is_tiled_flat_and_the_kept_faces_stay():
+    s = _fold_surface()
+    assert self_intersections(s["verts"], s["tris"]) > 0
+    out = uncrossed(s, 1.0, "cpu")
+    assert self_intersections(out["verts"], out["tris"]) == 0
+    assert out["stats"]["uncrossed"] == 1 and out["stats"]["crossing_left"] == 0
+    # kept faces: the same triangles on the same positions, with their own sources
+    before = np.sort(s["verts"][s["tris"][s["kept"]]].reshape(-1, 9), axis=0)
+    after = np.sort(out["verts"][out["tris"][out["kept"]]].reshape(-1, 9), axis=0)
+    assert np.array_equal(before, after)
+    assert np.array_equal(np.sort(out["triangle_id"][out["kept"]]), np.sort(s["triangle_id"][s["kept"]]))
+    # the grid's border is the same, each edge on one face, every other edge on two (tiles oriented as the rest)
+    t = out["tris"].astype(np.int64)
+    a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
+    _, counts = np.unique(np.minimum(a, b) * len(out["verts"]) + np.maximum(a, b), return_counts=True)
+    assert counts.max() == 2 and (counts == 1).sum() == 2 * (12 + 6)
+    assert len(np.unique(a * len(out["verts"]) + b)) == len(a)  # no directed edge twice: one orientation
+    # the pushed vertices are gone, the tiles flat (every vertex left in z = 0) and the new faces' sources cleared
+    assert np.abs(out["verts"][:, 2]).max() == 0
+    tiles = (out["voxel_face"] < 0) & ~out["kept"]
+    assert tiles.sum() >= 4 and (out["triangle_id"][tiles] == -1).all() and (out["field_id"][tiles] == -1).all()
+    assert len(out["verts"]) <= len(s["verts"]) - 2  # (and the patch's other inner vertices, within the tolerance)
+    # a fold too far off its patch's plane is left as it is
+    s["verts"][7 * 7 + 3, 2], s["verts"][7 * 7 + 4, 2] = 3 * TOLERANCE_VOXELS, -3 * TOLERANCE_VOXELS
+    left = uncrossed(s, 1.0, "cpu")
+    assert left["stats"]["crossing_left"] > 0 and len(left["tris"]) == len(s["tris"])
