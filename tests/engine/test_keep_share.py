@@ -67,9 +67,16 @@ def _kept_share(name: str, inside_out: bool = False) -> tuple[float, dict]:
 def test_messy_meshes_keep_most_of_what_should_be_kept(name, least):
     share, s = _kept_share(name)
     assert share >= least, share
+    assert s["stats"]["crossing_left"] <= CROSSINGS_LEFT[name]
     assert s["stats"]["kept_fallback"] == ""
     assert engine.surface_edges(s["tris"], len(s["verts"])) is not None  # closed, consistently oriented
     assert to_manifold(s["verts"], s["tris"]).status().name == "NoError"
+
+
+# pairs of faces passing through each other with a new face among them (engine/uncross.py), measured: teapot 9 (78
+# before faces crossing others were tiled again), cow 17 (37), beetle 118 (267), Suzanne 0 (51); most of the cow's
+# and the beetle's lie where the voxel surface alone passes through itself, at parts thinner than a voxel
+CROSSINGS_LEFT = {"teapot": 27, "cow": 51, "beetle": 354, "suzanne": 0}
 
 
 @pytest.mark.parametrize(("name", "least"), [("beetle", 0.985), ("suzanne", 0.995)])

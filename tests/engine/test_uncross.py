@@ -3,7 +3,8 @@ the chords they may not take, and a fold of new faces over kept ones made flat w
 
 import numpy as np
 
-from engine.uncross import TOLERANCE_VOXELS, tiled_polygons, uncrossed
+from engine.tiling import tiled_polygons, with_points
+from engine.uncross import TOLERANCE_VOXELS, uncrossed
 from tests.metrics import self_intersections
 
 
@@ -39,6 +40,34 @@ def test_polygons_are_tiled_without_folds_and_around_forbidden_chords():
         assert min(areas) > 0  # no tile turned over
         assert abs(sum(areas) - _area(points)) < 1e-9  # together they cover the polygon once: no overlap
     assert sorted(map(sorted, tiles[1].tolist())) == [[0, 1, 3], [1, 2, 3]]  # along the diagonal 1-3
+
+
+def test_points_inside_a_tiled_polygon_are_inserted_and_the_tiles_still_cover_it_once():
+    square = np.array([(0, 0), (4, 0), (4, 4), (0, 4)], dtype=np.float64)
+    inner = np.array([(1, 1), (3, 1.5), (2, 3), (2.5, 2.2), (6, 2), (2, 0)], dtype=np.float64)  # then out, on an edge
+    starts, sizes = np.array([0]), np.array([4])
+    tiles, done = tiled_polygons(square, starts, sizes, np.zeros(16, np.uint8), "cpu")
+    tiles, counts, inserted = with_points(
+        square, starts, sizes, tiles, done, inner, np.array([0]), np.array([6]), "cpu"
+    )
+    assert inserted.tolist() == [True, True, True, True, False, False]
+    assert counts.tolist() == [2 + 2 * 4] and len(tiles) == 10
+    points = np.concatenate([square, inner])
+    areas = [_area(points[t]) for t in tiles]
+    assert min(areas) > 0 and abs(sum(areas) - 16.0) < 1e-9  # no tile turned over, the square covered once
+    used = np.unique(tiles)
+    assert used.tolist() == [0, 1, 2, 3, 4, 5, 6, 7]  # every corner and every inserted point, none else
+    # Delaunay: no inserted point inside the circle of a tile it is not a corner of
+    for t in tiles:
+        a, b, c = points[t]
+        for k in range(4, 8):
+            if k in t:
+                continue
+            d = points[k]
+            m = np.array(
+                [[*(a - d), np.sum((a - d) ** 2)], [*(b - d), np.sum((b - d) ** 2)], [*(c - d), np.sum((c - d) ** 2)]]
+            )
+            assert np.linalg.det(m) <= 1e-9
 
 
 def _fold_surface():
