@@ -18,6 +18,8 @@ import warp as wp
 from .components import connected_components
 from .parallel import launch_split
 
+# Slots for the pairs of each triangle in the first pass (a triangle that crosses more is searched again).
+PAIRS_ROOM = 4
 # An edge passes through a triangle where it meets it this far inside its ends and the triangle's edges (a share of
 # their lengths): touching is no crossing.
 INSIDE = 1.0e-6
@@ -72,13 +74,13 @@ def _pairs_kernel(
     rows: wp.array[wp.int32],
     member: wp.array[wp.uint8],
     offset: int,
-    first: wp.array[wp.int32],
+    room: int,
     count: wp.array[wp.int32],
     pairs: wp.array2d[wp.int32],
 ):
     """Per triangle ``f``: how many triangles ``g`` of ``mesh`` (built on ``rows`` of ``tris``) sharing no corner with
-    it it crosses, ``g > f`` where ``f`` is one of them too (``member``) (``count``), or, with ``first`` (each one's
-    first row), those pairs written to ``pairs``."""
+    it it crosses, ``g > f`` where ``f`` is one of them too (``member``) (``count[f]``), the first ``room`` of those
+    pairs written to rows ``f * room`` on of ``pairs`` (one slot range a thread: no atomics across split launches)."""
     f = wp.tid() + offset
     lo = wp.min(wp.min(points[tris[f, 0]], points[tris[f, 1]]), points[tris[f, 2]])
     hi = wp.max(wp.max(points[tris[f, 0]], points[tris[f, 1]]), points[tris[f, 2]])
@@ -95,18 +97,17 @@ def _pairs_kernel(
                 if tris[f, i] == tris[g, j]:
                     shared = True
         if not shared and _crosses(points, tris, f, g):
-            if first.shape[0] > 0:
-                pairs[first[f] + found, 0] = f
-                pairs[first[f] + found, 1] = g
+            if found < room:
+                pairs[f * room + found, 0] = f
+                pairs[f * room + found, 1] = g
             found += 1
-    if first.shape[0] == 0:
-        count[f] = found
+    count[f] = found
 
 
 def crossing_pairs(verts: np.ndarray, tris: np.ndarray, device, rows: np.ndarray | None = None) -> np.ndarray:
     """(P, 2) int64 the pairs of triangles of a mesh ((V, 3), (T, 3) int) that pass through each other and share no
-    corner (touching is no crossing), each pair once; with ``rows`` ((R,) ints), only the pairs with a triangle among
-    those rows (the second of each pair)."""
+    corner (touching is no crossing), each pair once, in order of their first; with ``rows`` ((R,) ints), only the
+    pairs with a triangle among those rows (the second of each pair)."""
     rows = np.arange(len(tris)) if rows is None else np.asarray(rows, dtype=np.int64)
     if not len(rows):
         return np.zeros((0, 2), dtype=np.int64)
@@ -123,18 +124,19 @@ def crossing_pairs(verts: np.ndarray, tris: np.ndarray, device, rows: np.ndarray
         wp.array(rows.astype(np.int32), dtype=wp.int32, device=device),
         wp.array(member, dtype=wp.uint8, device=device),
     ]
-    count = wp.zeros(len(flat), dtype=wp.int32, device=device)
-    none = wp.zeros(0, dtype=wp.int32, device=device)
-    empty = wp.zeros((0, 2), dtype=wp.int32, device=device)
-    launch_split(_pairs_kernel, len(flat), lambda lo, _n: [*args, lo, none, count, empty], device)
-    counts = count.numpy()
-    total = int(counts.sum())
-    if not total:
-        return np.zeros((0, 2), dtype=np.int64)
-    first = wp.array(np.r_[0, np.cumsum(counts)[:-1]].astype(np.int32), dtype=wp.int32, device=device)
-    pairs = wp.zeros((total, 2), dtype=wp.int32, device=device)
-    launch_split(_pairs_kernel, len(flat), lambda lo, _n: [*args, lo, first, count, pairs], device)
-    return pairs.numpy().astype(np.int64)
+    count, pairs = _pairs_found(args, len(flat), PAIRS_ROOM, device)
+    if count.max() > PAIRS_ROOM:  # again, with room for every pair of the triangle crossing the most
+        count, pairs = _pairs_found(args, len(flat), int(count.max()), device)
+    room = pairs.shape[0] // len(flat)
+    return pairs.reshape(len(flat), room, 2)[np.arange(room) < count[:, None]].astype(np.int64)
+
+
+def _pairs_found(args: list, n: int, room: int, device) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_pairs_kernel` over ``n`` triangles with ``room`` slots each: per triangle its count, and the slots."""
+    count = wp.zeros(n, dtype=wp.int32, device=device)
+    pairs = wp.empty((n * room, 2), dtype=wp.int32, device=device)
+    launch_split(_pairs_kernel, n, lambda lo, _n: [*args, lo, room, count, pairs], device)
+    return count.numpy(), pairs.numpy()
 
 
 def crossing_segments(verts: np.ndarray, tris: np.ndarray, device, shortest: float = 0.0) -> np.ndarray:

@@ -75,18 +75,17 @@ def _nearest_in_range_kernel(
 def uncrossed(surface: dict, voxel: float, device) -> dict:
     """A kept surface (:func:`.hybrid.kept_surface`'s dict) with its faces tiled again where they pass through
     other faces (the module's steps); every per-face and per-vertex array follows, a tile is a new face of no voxel
-    face. ``stats["uncrossed"]``: places tiled; ``stats["crossing_left"]``:
-    the crossing pairs with a new face the last round found (0 where its tiles cross nothing)."""
+    face. ``stats["uncrossed"]``: places tiled; ``stats["crossing_left"]``: the crossing pairs with a new face left."""
     tris, kept = surface["tris"].astype(np.int64), surface["kept"]
     origin = np.arange(len(tris))
-    rows, places = np.flatnonzero(~kept), 0
-    for rings, mode in (*ROUNDS, (0, "")):
-        pairs = crossing_pairs(surface["verts"], tris, device, rows)
-        if not len(pairs) or not rings:  # (the last round counts what is left)
+    pairs, places = crossing_pairs(surface["verts"], tris, device, np.flatnonzero(~kept)), 0
+    for rings, mode in ROUNDS:
+        if not len(pairs):
             break
-        fixed = kept & ~_small(surface["verts"], tris, kept & (mode == "kept"), voxel)
-        patch = _patch(tris, fixed, pairs, rings, len(surface["verts"]))
+        patch = _patch(surface["verts"], tris, kept, pairs, rings, voxel if mode == "kept" else 0.0)
         gone, tiles, tiled = _tiled(surface["verts"], tris, patch, voxel, device, mode != "border")
+        if not tiled:
+            continue  # nothing changed: the same pairs for the next round
         places += tiled
         alive = np.ones(len(tris), dtype=bool)
         alive[gone] = False
@@ -94,28 +93,26 @@ def uncrossed(surface: dict, voxel: float, device) -> dict:
         tris = np.concatenate([tris[alive], tiles])
         kept = np.r_[kept[alive], np.zeros(len(tiles), dtype=bool)]
         origin = np.r_[origin[alive], np.full(len(tiles), -1)]
-        rank = np.cumsum(alive) - 1
-        rows = np.r_[rank[still[alive[still]]], np.arange(len(tiles)) + int(alive.sum())]
+        rows = np.r_[(np.cumsum(alive) - 1)[still[alive[still]]], np.arange(len(tiles)) + int(alive.sum())]
+        pairs = crossing_pairs(surface["verts"], tris, device, rows)  # where tiles were laid, and where none were
     return _rebuilt(surface, tris, origin, {"uncrossed": places, "crossing_left": len(pairs)})
 
 
-def _small(verts, tris: np.ndarray, rows: np.ndarray, voxel: float) -> np.ndarray:
-    """(T,) bool the faces among ``rows`` of at most ``SMALL_AREA_VOXELS`` square voxels."""
-    small = np.zeros(len(tris), dtype=bool)
-    corners = verts[tris[rows]].astype(np.float64)
-    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-    small[rows] = area <= SMALL_AREA_VOXELS * voxel * voxel
-    return small
+def _patch(verts, tris: np.ndarray, kept: np.ndarray, pairs: np.ndarray, rings: int, small: float) -> np.ndarray:
+    """(T,) bool the faces of the crossing ``pairs`` and ``rings`` rings of faces about them: new faces, and kept faces
+    of at most ``SMALL_AREA_VOXELS`` square voxels of size ``small`` (none where it is 0)."""
 
+    def taken(rows: np.ndarray) -> np.ndarray:
+        corners = verts[tris[rows]].astype(np.float64)
+        area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+        return rows[~kept[rows] | (area <= SMALL_AREA_VOXELS * small * small)]
 
-def _patch(tris: np.ndarray, kept: np.ndarray, pairs: np.ndarray, rings: int, n_verts: int) -> np.ndarray:
-    """(T,) bool the faces of the crossing ``pairs`` and ``rings`` rings of faces about them, none ``kept``."""
     patch = np.zeros(len(tris), dtype=bool)
-    patch[pairs[~kept[pairs]]] = True
+    patch[taken(np.unique(pairs))] = True
     for _ in range(rings):
-        marked = np.zeros(n_verts, dtype=bool)
+        marked = np.zeros(len(verts), dtype=bool)
         marked[tris[patch]] = True
-        patch |= any_corner(marked, tris) & ~kept
+        patch[taken(np.flatnonzero(any_corner(marked, tris) & ~patch))] = True
     return patch
 
 

@@ -4,9 +4,10 @@ can be left out."""
 
 import numpy as np
 
-from engine.selfcross import crossing_segments
-from tests.metrics import unsigned_distance
-from tests.support import box_mesh, uv_sphere
+from engine import selfcross
+from engine.selfcross import crossing_pairs, crossing_segments
+from tests.metrics import self_intersections, unsigned_distance
+from tests.support import box_mesh, rotation, uv_sphere
 
 
 def test_two_crossing_triangles_cross_along_their_common_segment():
@@ -38,3 +39,22 @@ def test_two_overlapping_boxes_cross_along_closed_curves_on_both_surfaces():
     assert len(crossing_segments(a[0].astype(np.float32), a[1], "cpu")) == 0
     ball = uv_sphere(1.0, rings=24, segments=48)
     assert len(crossing_segments(ball[0].astype(np.float32), ball[1], "cpu")) == 0
+
+
+def test_crossing_pairs_are_each_found_once_however_many_there_are(monkeypatch):
+    # two finely divided boxes through each other, one turned (no edge along another's face)
+    a = box_mesh(subdivisions=24)
+    b = box_mesh(center=(0.31, 0.17, 0.23), subdivisions=24)
+    b = ((b[0] - (0.31, 0.17, 0.23)) @ rotation(0, 13.0).T @ rotation(2, 7.0).T + (0.31, 0.17, 0.23), b[1])
+    verts = np.concatenate([a[0], b[0]]).astype(np.float32)
+    tris = np.concatenate([a[1], b[1] + len(a[0])])
+    pairs = crossing_pairs(verts, tris, "cpu")
+    assert len(pairs) > 256 and len(pairs) == self_intersections(verts, tris)
+    assert len(np.unique(np.sort(pairs, axis=1), axis=0)) == len(pairs)  # no pair twice
+    assert (np.isin(pairs[:, 0], np.arange(len(a[1]))) != np.isin(pairs[:, 1], np.arange(len(a[1])))).all()
+    # with rows, only the pairs with one of those faces: here a's faces
+    of_a = crossing_pairs(verts, tris, "cpu", np.arange(len(a[1])))
+    assert {tuple(sorted(p)) for p in of_a.tolist()} == {tuple(sorted(p)) for p in pairs.tolist()}
+    # a triangle crossing more than its slots hold is searched again, with room for all
+    monkeypatch.setattr(selfcross, "PAIRS_ROOM", 1)
+    assert np.array_equal(crossing_pairs(verts, tris, "cpu"), pairs)
