@@ -74,6 +74,97 @@ def _shape(a: wp.vec2d, b: wp.vec2d, c: wp.vec2d) -> wp.float64:
     return _turn(a, b, c) / wp.max(edges, wp.float64(1.0e-300))
 
 
+@wp.func
+def _mark_chords(
+    plane: wp.array[wp.vec2d],
+    start: int,
+    n: int,
+    sq: int,
+    forbidden: wp.array[wp.uint8],
+    usable: wp.array[wp.uint8],
+    best: wp.array[wp.float64],
+):
+    """A polygon's square of corner pairs i < j: ``usable`` 1 for its edges and the chords inside it not forbidden;
+    ``best`` +inf for its edges (no triangle), -1 (none yet) elsewhere."""
+    for i in range(n):
+        for j in range(i + 1, n):
+            ok = j == i + 1 or (i == 0 and j == n - 1)
+            if not ok and forbidden[sq + i * n + j] == wp.uint8(0):
+                ok = _chord_clear(plane, start, n, i, j)
+            usable[sq + i * n + j] = wp.where(ok, wp.uint8(1), wp.uint8(0))
+            best[sq + i * n + j] = wp.where(j == i + 1, wp.float64(1.0e300), wp.float64(-1.0))
+
+
+@wp.func
+def _best_splits(
+    plane: wp.array[wp.vec2d],
+    start: int,
+    n: int,
+    sq: int,
+    usable: wp.array[wp.uint8],
+    best: wp.array[wp.float64],
+    split: wp.array[wp.int32],
+):
+    """The dynamic program, shorter spans first: for each usable span i-j, the corner k whose triangle (i, k, j) and
+    the spans i-k and k-j triangulated best leave the best worst shape (``best``; ``split`` its k)."""
+    none = wp.float64(-1.0)
+    for length in range(2, n):
+        for i in range(n - length):
+            j = i + length
+            if usable[sq + i * n + j] == wp.uint8(0):
+                continue
+            top = none
+            arg = int(-1)
+            for k in range(i + 1, j):
+                if usable[sq + i * n + k] == wp.uint8(0) or usable[sq + k * n + j] == wp.uint8(0):
+                    continue
+                left = best[sq + i * n + k]
+                right = best[sq + k * n + j]
+                shape = _shape(plane[start + i], plane[start + k], plane[start + j])
+                if left <= none or right <= none or shape <= wp.float64(0.0):
+                    continue
+                worst = wp.min(shape, wp.min(left, right))
+                if worst > top:
+                    top = worst
+                    arg = k
+            best[sq + i * n + j] = top
+            split[sq + i * n + j] = arg
+
+
+@wp.func
+def _write_tiles(
+    n: int,
+    sq: int,
+    split: wp.array[wp.int32],
+    stack: wp.array[wp.int32],
+    top: int,
+    row: int,
+    tiles: wp.array2d[wp.int32],
+):
+    """The triangles the splits of span 0-(n - 1) make, read depth first (at most n spans wait on ``stack`` from
+    ``top``), written to ``tiles`` from ``row``."""
+    stack[top] = 0
+    stack[top + 1] = n - 1
+    depth = int(1)
+    at = row
+    while depth > 0:
+        depth -= 1
+        i = stack[top + 2 * depth]
+        j = stack[top + 2 * depth + 1]
+        if j - i < 2:
+            continue
+        k = split[sq + i * n + j]
+        tiles[at, 0] = i
+        tiles[at, 1] = k
+        tiles[at, 2] = j
+        at += 1
+        stack[top + 2 * depth] = i
+        stack[top + 2 * depth + 1] = k
+        stack[top + 2 * depth + 2] = k
+        stack[top + 2 * depth + 3] = j
+        depth += 2
+
+
 @wp.kernel(enable_backward=False)
 def _tile_loops_kernel(
     plane: wp.array[wp.vec2d],
@@ -96,65 +187,12 @@ def _tile_loops_kernel(
     start = starts[loop]
     n = sizes[loop]
     sq = square_starts[loop]
-    none = wp.float64(-1.0)
-    for i in range(n):
-        for j in range(n):
-            near = j == i + 1 or i == j + 1 or (i == 0 and j == n - 1) or (j == 0 and i == n - 1)
-            ok = near
-            if not near and i < j and forbidden[sq + i * n + j] == wp.uint8(0):
-                ok = _chord_clear(plane, start, n, i, j)
-            if i < j:
-                usable[sq + i * n + j] = wp.where(ok, wp.uint8(1), wp.uint8(0))
-            best[sq + i * n + j] = wp.where(j == i + 1, wp.float64(1.0e300), none)
-    for length in range(2, n):
-        for i in range(n - length):
-            j = i + length
-            if usable[sq + i * n + j] == wp.uint8(0):
-                continue
-            top = none
-            arg = int(-1)
-            for k in range(i + 1, j):
-                if usable[sq + i * n + k] == wp.uint8(0) or usable[sq + k * n + j] == wp.uint8(0):
-                    continue
-                left = best[sq + i * n + k]
-                right = best[sq + k * n + j]
-                if left <= none or right <= none:
-                    continue
-                shape = _shape(plane[start + i], plane[start + k], plane[start + j])
-                if shape <= wp.float64(0.0):
-                    continue
-                worst = wp.min(shape, wp.min(left, right))
-                if worst > top:
-                    top = worst
-                    arg = k
-            best[sq + i * n + j] = top
-            split[sq + i * n + j] = arg
-    ok = best[sq + n - 1] > none
+    _mark_chords(plane, start, n, sq, forbidden, usable, best)
+    _best_splits(plane, start, n, sq, usable, best, split)
+    ok = best[sq + n - 1] > wp.float64(-1.0)
     tiled[loop] = wp.where(ok, wp.uint8(1), wp.uint8(0))
-    if not ok:
-        return
-    # the triangles, read from the splits depth first (at most n intervals wait on the stack)
-    row = start - 2 * loop
-    top_ = 2 * start
-    stack[top_] = 0
-    stack[top_ + 1] = n - 1
-    depth = int(1)
-    while depth > 0:
-        depth -= 1
-        i = stack[top_ + 2 * depth]
-        j = stack[top_ + 2 * depth + 1]
-        if j - i < 2:
-            continue
-        k = split[sq + i * n + j]
-        tiles[row, 0] = i
-        tiles[row, 1] = k
-        tiles[row, 2] = j
-        row += 1
-        stack[top_ + 2 * depth] = i
-        stack[top_ + 2 * depth + 1] = k
-        stack[top_ + 2 * depth + 2] = k
-        stack[top_ + 2 * depth + 3] = j
-        depth += 2
+    if ok:
+        _write_tiles(n, sq, split, stack, 2 * start, start - 2 * loop, tiles)
 
 
 def tiled_polygons(plane, starts, sizes, forbidden, device) -> tuple[np.ndarray, np.ndarray]:
@@ -225,6 +263,79 @@ def _third(tiles: wp.array2d[wp.int32], t: int, u: int, v: int) -> int:
     return -1
 
 
+@wp.func
+def _holding(
+    plane: wp.array[wp.vec2d],
+    start: int,
+    n: int,
+    inner: wp.array[wp.vec2d],
+    inner_start: int,
+    tiles: wp.array2d[wp.int32],
+    first: int,
+    count: int,
+    x: wp.vec2d,
+) -> int:
+    """The tile among rows ``first`` .. ``first + count - 1`` that holds ``x`` strictly inside (-1 if none)."""
+    eps = wp.float64(INSIDE)
+    for t in range(first, first + count):
+        a = _corner(plane, start, n, inner, inner_start, tiles[t, 0])
+        b = _corner(plane, start, n, inner, inner_start, tiles[t, 1])
+        c = _corner(plane, start, n, inner, inner_start, tiles[t, 2])
+        if _turn(a, b, x) > eps and _turn(b, c, x) > eps and _turn(c, a, x) > eps:
+            return t
+    return -1
+
+
+@wp.func
+def _legalised(
+    plane: wp.array[wp.vec2d],
+    start: int,
+    n: int,
+    inner: wp.array[wp.vec2d],
+    inner_start: int,
+    tiles: wp.array2d[wp.int32],
+    first: int,
+    count: int,
+    q: int,
+    stack: wp.array[wp.int32],
+    base: int,
+    room: int,
+    depth_: int,
+):
+    """Lawson's flips about the point ``q`` just inserted: each edge u-v on ``stack`` (its tile u, v, q) flipped to
+    q-w where the tile across it (v, u, w) has w inside the circle of (u, v, q) and the quadrilateral is convex; the
+    new edges u-w and w-v pushed in turn. A polygon edge has no tile across."""
+    depth = depth_
+    x = _corner(plane, start, n, inner, inner_start, q)
+    while depth > 0:
+        depth -= 1
+        u = stack[base + 2 * depth]
+        v = stack[base + 2 * depth + 1]
+        across = _tile_with(tiles, first, count, v, u)
+        if across < 0:
+            continue
+        w = _third(tiles, across, v, u)
+        pu = _corner(plane, start, n, inner, inner_start, u)
+        pv = _corner(plane, start, n, inner, inner_start, v)
+        pw = _corner(plane, start, n, inner, inner_start, w)
+        zero = wp.float64(0.0)
+        if _in_circle(pu, pv, x, pw) <= zero or _turn(x, pu, pw) <= zero or _turn(x, pw, pv) <= zero:
+            continue
+        here = _tile_with(tiles, first, count, u, v)
+        tiles[here, 0] = u
+        tiles[here, 1] = w
+        tiles[here, 2] = q
+        tiles[across, 0] = w
+        tiles[across, 1] = v
+        tiles[across, 2] = q
+        if 2 * depth + 4 <= room:
+            stack[base + 2 * depth] = u
+            stack[base + 2 * depth + 1] = w
+            stack[base + 2 * depth + 2] = w
+            stack[base + 2 * depth + 3] = v
+            depth += 2
+
+
 @wp.kernel(enable_backward=False)
 def _insert_points_kernel(
     plane: wp.array[wp.vec2d],
@@ -242,7 +353,8 @@ def _insert_points_kernel(
 ):
     """Per polygon: its inner points inserted into its tiles (rows ``tile_starts[p]`` on, ``counts[p]`` of them; room
     for two more a point), each in the tile holding it, split in three, then the edges opposite it flipped where the
-    Delaunay criterion asks; ``inserted`` 1 for each point taken. ``stack``: room for 4 entries a tile row."""
+    Delaunay criterion asks (:func:`_legalised`); ``inserted`` 1 for each point taken. ``stack``: room for 4 entries
+    a tile row."""
     p = wp.tid() + offset
     start = starts[p]
     n = sizes[p]
@@ -250,67 +362,28 @@ def _insert_points_kernel(
     count = counts[p]
     base = 4 * first
     room = 4 * (n - 2 + 2 * inner_sizes[p])
-    eps = wp.float64(INSIDE)
-    zero = wp.float64(0.0)
     for k in range(inner_sizes[p]):
         x = inner[inner_starts[p] + k]
-        hold = int(-1)
-        for t in range(first, first + count):
-            a = _corner(plane, start, n, inner, inner_starts[p], tiles[t, 0])
-            b = _corner(plane, start, n, inner, inner_starts[p], tiles[t, 1])
-            c = _corner(plane, start, n, inner, inner_starts[p], tiles[t, 2])
-            if _turn(a, b, x) > eps and _turn(b, c, x) > eps and _turn(c, a, x) > eps:
-                hold = t
-                break
+        hold = _holding(plane, start, n, inner, inner_starts[p], tiles, first, count, x)
         if hold < 0:
             continue
         inserted[inner_starts[p] + k] = wp.uint8(1)
         q = n + k
-        a0 = tiles[hold, 0]
-        b0 = tiles[hold, 1]
-        c0 = tiles[hold, 2]
+        a = tiles[hold, 0]
+        b = tiles[hold, 1]
+        c = tiles[hold, 2]
         tiles[hold, 2] = q
-        tiles[first + count, 0] = b0
-        tiles[first + count, 1] = c0
+        tiles[first + count, 0] = b
+        tiles[first + count, 1] = c
         tiles[first + count, 2] = q
-        tiles[first + count + 1, 0] = c0
-        tiles[first + count + 1, 1] = a0
+        tiles[first + count + 1, 0] = c
+        tiles[first + count + 1, 1] = a
         tiles[first + count + 1, 2] = q
         count += 2
-        depth = int(3)
-        stack[base + 0] = a0
-        stack[base + 1] = b0
-        stack[base + 2] = b0
-        stack[base + 3] = c0
-        stack[base + 4] = c0
-        stack[base + 5] = a0
-        while depth > 0:
-            depth -= 1
-            u = stack[base + 2 * depth]
-            v = stack[base + 2 * depth + 1]
-            across = _tile_with(tiles, first, count, v, u)
-            if across < 0:
-                continue  # a polygon edge
-            w = _third(tiles, across, v, u)
-            pu = _corner(plane, start, n, inner, inner_starts[p], u)
-            pv = _corner(plane, start, n, inner, inner_starts[p], v)
-            pq = x
-            pw = _corner(plane, start, n, inner, inner_starts[p], w)
-            if _in_circle(pu, pv, pq, pw) <= zero or _turn(pq, pu, pw) <= zero or _turn(pq, pw, pv) <= zero:
-                continue
-            here = _tile_with(tiles, first, count, u, v)
-            tiles[here, 0] = u
-            tiles[here, 1] = w
-            tiles[here, 2] = q
-            tiles[across, 0] = w
-            tiles[across, 1] = v
-            tiles[across, 2] = q
-            if 2 * depth + 4 <= room:
-                stack[base + 2 * depth] = u
-                stack[base + 2 * depth + 1] = w
-                stack[base + 2 * depth + 2] = w
-                stack[base + 2 * depth + 3] = v
-                depth += 2
+        for e in range(3):  # the held tile's edges, opposite the point
+            stack[base + 2 * e] = wp.where(e == 0, a, wp.where(e == 1, b, c))
+            stack[base + 2 * e + 1] = wp.where(e == 0, b, wp.where(e == 1, c, a))
+        _legalised(plane, start, n, inner, inner_starts[p], tiles, first, count, q, stack, base, room, 3)
     counts[p] = count
 
 
