@@ -119,11 +119,16 @@ def _patch(verts, tris: np.ndarray, kept: np.ndarray, pairs: np.ndarray, rings: 
 
 
 def _face_components(tris: np.ndarray, n_verts: int, device) -> np.ndarray:
-    """(F,) the connected piece (through shared corners) of each face: its first corner's least vertex."""
+    """(F,) the connected piece (through shared edges) of each face, numbered 0 .. P - 1."""
     if not len(tris):
         return np.zeros(0, dtype=np.int64)
-    root = connected_components(n_verts, tris[:, [0, 1]].ravel(), tris[:, [1, 2]].ravel(), device)
-    return root[tris[:, 0]]
+    a, b = tris.ravel(), tris[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * n_verts + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    same = key[order][1:] == key[order][:-1]
+    face = np.repeat(np.arange(len(tris)), 3)[order]
+    root = connected_components(len(tris), face[:-1][same], face[1:][same], device)
+    return np.unique(root, return_inverse=True)[1].reshape(-1)
 
 
 def _tiled(
@@ -161,7 +166,7 @@ def _tiled(
 
 def _inner_vertices(faces, piece, order, sizes, loop_piece, n: int) -> tuple[np.ndarray, np.ndarray]:
     """The vertices of each bordered piece's faces that are not on its border, loop after loop, and how many each."""
-    loop_at = np.full(n, -1, dtype=np.int64)
+    loop_at = np.full(int(piece.max()) + 1, -1, dtype=np.int64)
     loop_at[loop_piece] = np.arange(len(sizes))
     vertex_loop = np.full(n, -1, dtype=np.int64)
     vertex_loop[faces.ravel()] = np.repeat(loop_at[piece], 3)
@@ -172,34 +177,41 @@ def _inner_vertices(faces, piece, order, sizes, loop_piece, n: int) -> tuple[np.
 
 
 def _border_loops(faces: np.ndarray, piece: np.ndarray, n: int, device) -> tuple:
-    """The border loop of each piece of ``faces`` (``piece`` per face) that is a disc (one loop, no vertex on it
-    twice, Euler characteristic 1) of 3 to ``MAX_LOOP`` vertices: ``order`` (the loops' vertices one after another,
-    the faces on their left), ``starts``, ``sizes`` and the ``piece`` of each loop."""
+    """The border loop of each piece of ``faces`` (``piece`` per face, 0 .. P - 1, connected through edges) that is a
+    disc (one loop, no vertex on it twice, Euler characteristic 1, at most one vertex shared with other pieces: two
+    pieces' tiles could join the same two vertices) of 3 to ``MAX_LOOP`` vertices: ``order`` (the loops' vertices one
+    after another, the faces on their left), ``starts``, ``sizes`` and the ``piece`` of each loop. The loops are
+    followed along border half-edges, so pieces that touch at a vertex each have theirs."""
     u, w = faces.ravel(), faces[:, [1, 2, 0]].ravel()
     border = ~np.isin(w * n + u, u * n + w)
-    bu, bw = u[border], w[border]
-    pieces, face_piece = np.unique(piece, return_inverse=True)
-    count = lambda at: np.bincount(at, minlength=len(pieces))  # noqa: E731
-    vertex_piece = np.full(n, -1, dtype=np.int64)
-    vertex_piece[u] = np.repeat(face_piece, 3)
-    nxt = np.full(n, -1, dtype=np.int64)
-    nxt[bu] = bw
-    members = np.unique(bu)
-    label = loop_labels(nxt, members, device)
-    twice = np.bincount(bu, minlength=n)[members] > 1
-    bad = count(vertex_piece[members[twice | (label[members] < 0)]]) > 0
-    bad |= count(np.unique(np.stack([vertex_piece[members], label[members]], axis=1), axis=0)[:, 0]) != 1
-    edges = np.unique(np.minimum(u, w) * n + np.maximum(u, w))
-    bad |= count(vertex_piece[np.unique(u)]) - count(vertex_piece[edges // n]) + count(face_piece) != 1
-    size = count(vertex_piece[members])
+    bu, bw, bp = u[border], w[border], np.repeat(piece, 3)[border]
+    if not len(bu):
+        return bu, bu, bu, bu
+    count = lambda at: np.bincount(at, minlength=int(piece.max()) + 1)  # noqa: E731
+    leaving = bp * n + bu
+    by_start = np.argsort(leaving, kind="stable")
+    at = np.minimum(np.searchsorted(leaving[by_start], bp * n + bw), len(bu) - 1)
+    found = leaving[by_start][at] == bp * n + bw
+    nxt = np.where(found, by_start[at], np.arange(len(bu)))
+    twice = np.r_[False, leaving[by_start][1:] == leaving[by_start][:-1]]
+    bad = count(np.r_[bp[by_start][twice], bp[~found]]) > 0
+    corners = np.unique(np.repeat(piece, 3) * n + u)
+    shared = np.bincount(corners % n, minlength=n)[corners % n] > 1
+    bad |= count(corners[shared] // n) > 1
+    edges = np.unique(np.repeat(piece, 3) * n * n + np.minimum(u, w) * n + np.maximum(u, w))
+    bad |= count(corners // n) - count(edges // (n * n)) + count(piece) != 1
+    keep = np.flatnonzero(~bad[bp])
+    label = loop_labels(nxt, keep, device)
+    bad |= count(np.unique(np.stack([bp[keep], label[keep]], axis=1), axis=0)[:, 0]) != 1
+    size = count(bp)
     bad |= (size < 3) | (size > MAX_LOOP)
-    keep = members[~bad[vertex_piece[members]]]
+    keep = keep[~bad[bp[keep]]]
     if not len(keep):
-        return keep, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), keep
+        return keep, keep, keep, keep
     position = _loop_positions(nxt, keep, label, int(size[~bad].max()))
     keep = keep[np.lexsort((position[keep], label[keep]))]
     _, starts, sizes = np.unique(label[keep], return_index=True, return_counts=True)
-    return keep, starts, sizes, pieces[vertex_piece[keep[starts]]]
+    return bu[keep], starts, sizes, bp[keep[starts]]
 
 
 def _loop_positions(nxt: np.ndarray, members: np.ndarray, label: np.ndarray, longest: int) -> np.ndarray:
@@ -269,7 +281,7 @@ def _close_enough(verts, patch_faces, piece, outside, tiles, tile_loop, lost, lo
     around the loop: every vertex the patch loses (``lost``: vertices and their loops) near the tiled surface, every
     tile's centre and edge midpoints near the patch's (a vertex of a fold over the faces beside it lies near those)."""
     n, count = len(verts), len(loop_piece)
-    loop_at = np.full(n, -1, dtype=np.int64)
+    loop_at = np.full(int(piece.max()) + 1, -1, dtype=np.int64)
     loop_at[loop_piece] = np.arange(count)
     face_loop = loop_at[piece]
     vertex_loop = np.full(n, -1, dtype=np.int64)
