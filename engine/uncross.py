@@ -86,11 +86,11 @@ def uncrossed(surface: dict, voxel: float, device) -> dict:
             break
         patch = _patch(surface["verts"], tris, kept, pairs, rings, voxel if mode == "kept" else 0.0)
         gone, tiles, tiled = _tiled(surface["verts"], tris, patch, voxel, device, mode != "border")
-        if not tiled:
-            continue  # nothing changed: the same pairs for the next round
-        places += tiled
         alive = np.ones(len(tris), dtype=bool)
         alive[gone] = False
+        if not tiled or not _sound(np.concatenate([tris[alive], tiles]), len(tiles), len(surface["verts"])):
+            continue  # nothing changed: the same pairs for the next round
+        places += tiled
         still = np.unique(pairs[~kept[pairs]])
         tris = np.concatenate([tris[alive], tiles])
         kept = np.r_[kept[alive], np.zeros(len(tiles), dtype=bool)]
@@ -98,6 +98,21 @@ def uncrossed(surface: dict, voxel: float, device) -> dict:
         rows = np.r_[(np.cumsum(alive) - 1)[still[alive[still]]], np.arange(len(tiles)) + int(alive.sum())]
         pairs = crossing_pairs(surface["verts"], tris, device, rows)  # where tiles were laid, and where none were
     return _rebuilt(surface, tris, origin, {"uncrossed": places, "crossing_left": len(pairs)})
+
+
+def _sound(tris: np.ndarray, tiles: int, n_verts: int) -> bool:
+    """Whether each edge of the last ``tiles`` faces of ``tris`` is one face's that way and one other's the other way
+    (a guard: the tiling's chords avoid the surface's edges, so this holds unless two pieces' tiles meet)."""
+    on = np.zeros(n_verts, dtype=bool)
+    on[tris[len(tris) - tiles :]] = True
+    near = tris[any_corner(on, tris)]
+    keys, counts = np.unique(near.ravel() * n_verts + near[:, [1, 2, 0]].ravel(), return_counts=True)
+    ends = tris[len(tris) - tiles :]
+    found = []
+    for a, b in ((ends.ravel(), ends[:, [1, 2, 0]].ravel()), (ends[:, [1, 2, 0]].ravel(), ends.ravel())):
+        at = np.minimum(np.searchsorted(keys, a * n_verts + b), len(keys) - 1)
+        found.append((keys[at] == a * n_verts + b) & (counts[at] == 1))
+    return bool(np.all(found))
 
 
 def _patch(verts, tris: np.ndarray, kept: np.ndarray, pairs: np.ndarray, rings: int, small: float) -> np.ndarray:
