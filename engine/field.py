@@ -22,7 +22,8 @@ from .octree import decode_codes
 from .ondemand import refined
 from .placement import Placement
 from .plan import available_memory
-from .sampling import FieldArg, code_proj, sample_field_kernel, source_ids_kernel
+from .queries import code_proj, sample_field_kernel, source_ids_kernel
+from .sampling import FieldArg
 from .seams import kept_along_seams
 
 
@@ -291,6 +292,7 @@ class AdaptiveField:
         f.fine_count = int(self.level_offsets[1])
         f.tri = self.tri if self.tri is not None else wp.empty(0, dtype=wp.int32, device=self.device)
         f.exact = int(bool(self.stats.get("exact_distance", False)))
+        f.inner_points = int(getattr(self, "expression", None) is not None)
         f.mesh = wp.uint64(getattr(self.distance_mesh, "id", 0))
         return f
 

@@ -21,7 +21,7 @@ import warp as wp
 
 from .geometry import mesh_closest_face
 from .parallel import EMIT_SPLIT_MIN_DIM, host_view, launch_split
-from .sampling import face_nodes_kernel
+from .queries import face_nodes_kernel
 
 # Placement -> {id(source): (source, the source placed)}: a placed field's sources made once for its placement and
 # shared by its copies (refined, relabelled, read as built: they share the placement); entries go with it.

@@ -71,9 +71,10 @@ def mesh_boolean():
 def test_a_smooth_union_becomes_the_distance_to_its_surface(blended_spheres):
     before, after = blended_spheres
     old, new = _distance_errors(before), _distance_errors(after)
-    # before: the blend's values are far from distances (measured far p95 27 %; grad p95 0.74 % since the blend's
-    # zone alone is refined: the grown band's nodes, 8.8 %, are gone)
-    assert old["far_p95"] > 0.2, old
+    # before: the blend's values are far from distances (measured far p95 14.5 %, 27 % while a boolean's coarse leaves
+    # were read off its operands' closest points alone, engine/sampling.py's coarse_mls; grad p95 0.74 % since the
+    # blend's zone alone is refined: the grown band's nodes, 8.8 %, are gone)
+    assert old["far_p95"] > 0.05, old
     assert new["band_p99"] <= 0.11, new  # measured 0.036 voxel (issue: 0.5)
     assert new["far_p95"] <= 0.0024, new  # measured 0.079 % (issue: 2 %)
     assert new["grad_p95"] <= 0.022, new  # measured 0.73 % (issue: 5 %)
