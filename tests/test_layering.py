@@ -196,3 +196,12 @@ def test_no_kernel_with_atomics_runs_in_parallel_parts_but_a_flag():
                     split.add(node.args[0].id)
     assert atomic and split, "nothing found: the scan is broken"
     assert (atomic & split) <= FLAG_ONLY_ATOMICS, sorted((atomic & split) - FLAG_ONLY_ATOMICS)
+
+
+def test_every_engine_module_with_kernels_is_prebuilt():
+    # the zip carries the kernels of ENGINE_MODULES (engine/kernels.py): a module left out compiles on a user's first
+    # boolean (seconds), as engine/ownside.py and engine/samples.py did until this test
+    from engine.kernels import ENGINE_MODULES
+
+    with_kernels = {path.stem for path in (ROOT / "engine").glob("*.py") if "@wp.kernel" in path.read_text()}
+    assert with_kernels - set(ENGINE_MODULES) == set()
