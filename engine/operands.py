@@ -34,6 +34,8 @@ from .sampling import (
     stored_proj,
     to_frame,
     to_world_sample,
+    trilinear_weights,
+    unit_gradient,
     vec27i,
 )
 
@@ -137,20 +139,10 @@ def finest_sample(f: FieldArg, x: wp.vec3) -> wp.vec4:
         phi = f.values[nb[0]]
         lo = wp.min(lo, phi)
         hi = wp.max(hi, phi)
-        wx = wp.where(ox == 1, t[0], 1.0 - t[0])
-        wy = wp.where(oy == 1, t[1], 1.0 - t[1])
-        wz = wp.where(oz == 1, t[2], 1.0 - t[2])
-        sx = wp.where(ox == 1, 1.0, -1.0)
-        sy = wp.where(oy == 1, 1.0, -1.0)
-        sz = wp.where(oz == 1, 1.0, -1.0)
-        v += phi * wp.vec4(wx * wy * wz, sx * wy * wz, wx * sy * wz, wx * wy * sz)
+        v += phi * trilinear_weights(o, t)
     if hi - lo > 1.75 * s * (1.0 + LEAF_SLACK):  # farther apart than the cell's diagonal allows: a jump
         return sample_operand(f, x)
-    g = wp.vec3(v[1], v[2], v[3])
-    ln = wp.length(g)
-    if ln > 0.0:
-        g = g / ln
-    return to_world_sample(f, wp.vec4(v[0], g[0], g[1], g[2]))
+    return to_world_sample(f, unit_gradient(v))
 
 
 @wp.func

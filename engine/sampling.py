@@ -229,6 +229,29 @@ def _spline_weight(xn: wp.vec3, sn: float, x: wp.vec3, s: float) -> float:
 
 
 @wp.func
+def trilinear_weights(o: int, t: wp.vec3) -> wp.vec4:
+    """Corner ``o``'s (bits x, y, z) trilinear weight at ``t`` in the cell (0 to 1 per axis) and its derivatives along
+    x, y and z (in the cell's units)."""
+    wx = wp.where((o & 1) == 1, t[0], 1.0 - t[0])
+    wy = wp.where(((o >> 1) & 1) == 1, t[1], 1.0 - t[1])
+    wz = wp.where(((o >> 2) & 1) == 1, t[2], 1.0 - t[2])
+    sx = wp.where((o & 1) == 1, 1.0, -1.0)
+    sy = wp.where(((o >> 1) & 1) == 1, 1.0, -1.0)
+    sz = wp.where(((o >> 2) & 1) == 1, 1.0, -1.0)
+    return wp.vec4(wx * wy * wz, sx * wy * wz, wx * sy * wz, wx * wy * sz)
+
+
+@wp.func
+def unit_gradient(v: wp.vec4) -> wp.vec4:
+    """(value, gradient) with the gradient made a unit vector (left as it is where it is zero)."""
+    g = wp.vec3(v[1], v[2], v[3])
+    ln = wp.length(g)
+    if ln > 0.0:
+        g = g / ln
+    return wp.vec4(v[0], g[0], g[1], g[2])
+
+
+@wp.func
 def coarse_linear(f: FieldArg, x: wp.vec3, s: float) -> wp.vec4:
     """(phi, unit gradient) at ``x`` by trilinear interpolation between the 8 lattice centres of spacing ``s`` around
     it, each the value of the leaf that contains it (as :func:`sample_linear`), the gradient the interpolant's."""
@@ -241,19 +264,8 @@ def coarse_linear(f: FieldArg, x: wp.vec3, s: float) -> wp.vec4:
         oy = (o >> 1) & 1
         oz = (o >> 2) & 1
         q = f.origin + s * (base + wp.vec3(float(ox) + 0.5, float(oy) + 0.5, float(oz) + 0.5))
-        phi = f.values[locate_leaf(f, clamp_to_domain(f, q))[0]]
-        wx = wp.where(ox == 1, t[0], 1.0 - t[0])
-        wy = wp.where(oy == 1, t[1], 1.0 - t[1])
-        wz = wp.where(oz == 1, t[2], 1.0 - t[2])
-        sx = wp.where(ox == 1, 1.0, -1.0)
-        sy = wp.where(oy == 1, 1.0, -1.0)
-        sz = wp.where(oz == 1, 1.0, -1.0)
-        v += phi * wp.vec4(wx * wy * wz, sx * wy * wz, wx * sy * wz, wx * wy * sz)
-    g = wp.vec3(v[1], v[2], v[3])
-    ln = wp.length(g)
-    if ln > 0.0:
-        g = g / ln
-    return wp.vec4(v[0], g[0], g[1], g[2])
+        v += f.values[locate_leaf(f, clamp_to_domain(f, q))[0]] * trilinear_weights(o, t)
+    return unit_gradient(v)
 
 
 @wp.func
