@@ -13,6 +13,17 @@ import warp as wp
 
 BLEND_MODES = {"round": 0, "chamfer": 1}
 
+
+def lipschitz(mode: int, blend: float, la: float, lb: float) -> float:
+    """A bound on the gradient of a boolean of fields bounded by ``la`` and ``lb``: min and max keep the larger, and so
+    does a round blend (its gradient is h grad a + (1 - h) grad b); a chamfer's plane (a + b - k) / sqrt(2) has up to
+    (la + lb) / sqrt(2) where the operands' gradients agree (sqrt(2) over two distances, more over a chamfered
+    boolean: a chamfer over a chamfer about 1.71)."""
+    if mode == 1 and blend > 0.0:
+        return max(la, lb, (la + lb) * 0.7071067811865476)
+    return max(la, lb)
+
+
 # 1 / sqrt(2), and sqrt(2) - 1: the chamfer's plane and where it stops mattering
 SQRT_HALF = wp.constant(0.7071067811865476)
 SQRT2_MINUS_1 = wp.constant(0.41421356237309515)

@@ -46,7 +46,7 @@ def centre_sample(f: FieldArg, centre: wp.vec3, h: float) -> wp.vec3:
             if found == 1:
                 return wp.vec3(r[0], 1.001, 0.01 * h)
     v = sample_operand(f, centre)[0]
-    if f.inner_points == 1:  # a boolean's: read trilinearly where its fit is off, a cell's error (no narrowing)
+    if f.inner_points >= 1:  # a boolean's: read trilinearly where its fit is off, a cell's error (no narrowing)
         return wp.vec3(v, 1.1, 1.0e30)
     return wp.vec3(v, 1.1, 0.1 * wp.abs(v) + 0.1 * h)
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from functools import partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -22,8 +23,9 @@ import warp as wp
 import warp.geometry
 
 from . import octree, parallel
-from .blends import BLEND_MODES, chamfer_needs, sdf_combine
+from .blends import BLEND_MODES, chamfer_needs, lipschitz, sdf_combine
 from .blendzone import blend_octets
+from .closure import closed, needs_closure
 from .earlyjudge import start_judge
 from .expression import OP_DIFFERENCE, OP_INTERSECTION, OP_UNION, combined
 from .layout import level_layout
@@ -49,6 +51,8 @@ if TYPE_CHECKING:  # the field type imports this module for its operators
 
 # Consecutive nodes per thread of the combination (an octet on the sparse levels).
 COMBINE_GROUP = 8
+# Rounds of octets added about a surface read off a blended boolean (:mod:`.closure`): one or two are met.
+CLOSURE_ROUNDS = 4
 
 
 @wp.kernel(enable_backward=False)
@@ -322,6 +326,7 @@ def combine(
     aligned = [_aligned(f, origin, h) for f in (a, b)]
     args = (a.arg(), b.arg())
     fine_dims = top_dims * 2 ** (levels - 1)
+    slope = lipschitz(mode, blend, *(f.stats.get("lipschitz", 1.0) for f in (a, b)))  # (more than 1: chamfers)
     octets = _candidate_octets((a, b), aligned, origin, h, fine_dims, a.device, seams=seams, blend=blend)
     if blend > 0.0:  # and where the blend shapes the surface, away from both operands' own octets
         zone = blend_octets(*args, origin, h, top_dims, levels, op, blend, mode, KEEP_BAND * h)
@@ -329,15 +334,20 @@ def combine(
     timings["finest_cells"] = time.perf_counter() - t0
     # Keep the result adaptive: drop the octets the result's surface is far from, before any interpolation.
     t0 = time.perf_counter()
-    finest = _pruned(octets, (a, b), args, aligned, origin, h, top_dims * 2 ** (levels - 2), op, blend, mode)
+    oct_dims = top_dims * 2 ** (levels - 2)
+    how = (op, blend, mode)
+    pruned = partial(_pruned, fields=(a, b), args=args, aligned=aligned, origin=origin, h=h, oct_dims=oct_dims, how=how)
+    finest = pruned(octets)
     timings["finest_prune"] = time.perf_counter() - t0
-    # every node's place first, so the finest values are computed where they are kept
-    layout = level_layout(finest.pop("octets"), top_dims, levels, a.device, timings, lean=True)
     walk = wp.vec2i(*(int(mode == 1 and f.stats.get("surface_points", False)) for f in (a, b)))
-    nodes = _node_values(layout, finest, args, aligned, origin, h, levels, (op, blend, mode, walk), timings)
+    closure = pruned if needs_closure(a, b, blend) else None  # (octets the values need about the surface: added)
+    layout, nodes = _laid_out(
+        finest, closure, (top_dims, levels), args, aligned, origin, h, (op, blend, mode, walk), timings
+    )
     result = type(a).from_layout(
         layout, voxel_size=h, origin=origin, **nodes, field_ids=a.field_ids + b.field_ids, timings=timings,
-        sources={**a.world_sources(), **b.world_sources()}, stats={"continuous": not finest["jumps"]},
+        sources={**a.world_sources(), **b.world_sources()},
+        stats={"continuous": not finest["jumps"], "lipschitz": slope},
     )  # fmt: skip
     result.expression = expression  # what it was made of, for the faces it keeps (:mod:`.keep`)
     result.early_judge = early if seams else None
@@ -381,86 +391,122 @@ def _domain(a, b, h: float, levels: int, mode: int, blend: float) -> tuple:
     return origin, top_dims
 
 
-def _pruned(octets, fields, args, aligned, origin, h: float, oct_dims, op: int, blend: float, mode: int) -> dict:
-    """The candidate ``octets`` the result's surface may pass near (:func:`.prune.prune_octets`), with what the
-    combination needs of the operands there: ``octets``, ``a_first``/``b_first``, ``octet_flags``, ``offsets`` and
-    ``jumps``."""
+def _pruned(octets, fields, args, aligned, origin, h: float, oct_dims, how: tuple, band=None) -> dict:
+    """The candidate ``octets`` the result's surface may pass near (:func:`.prune.prune_octets`; ``how``: op, blend,
+    mode; ``band`` in voxels, default KEEP_BAND), with what the combination needs of the operands there: ``octets``,
+    ``a_first``/``b_first``, ``octet_flags``, ``offsets`` and ``jumps``."""
     offs = [
         wp.vec3i(*(int(v) for v in (-offset_to(f, origin, h) if al else (0, 0, 0))))
         for f, al in zip(fields, aligned, strict=False)
     ]
     flags = [int(al and not (offset_to(f, origin, h) % 2).any()) for f, al in zip(fields, aligned, strict=False)]
     jumps = not all(continuous(f) for f in fields)
+    op, blend, mode = how
     octets, a_first, b_first = prune_octets(
-        octets, args, [int(al) for al in aligned], flags, offs, origin, h, op, blend, mode, oct_dims, jumps=jumps
-    )
+        octets, args, [int(al) for al in aligned], flags, offs, origin, h, op, blend, mode, oct_dims, jumps=jumps,
+        band=KEEP_BAND if band is None else band,
+    )  # fmt: skip
     return {"octets": octets, "a_first": a_first, "b_first": b_first, "octet_flags": flags, "offsets": offs,
             "jumps": jumps}  # fmt: skip
 
 
-def _node_values(layout, finest: dict, args, aligned, origin, h: float, levels: int, how, timings: dict) -> dict:
+def _laid_out(finest: dict, closure, grid, args, aligned, origin, h: float, how, timings: dict) -> tuple:
+    """(layout, node values) of the result's finest ``finest`` octets (:func:`_pruned`'s; ``grid``: top dims and
+    levels): every node's place first, so the finest values are computed where they are kept. With ``closure`` (the
+    pruning, :func:`.closure.needs_closure`) the finest values come first, and the octets they show lacking about
+    the surface are added with theirs (:func:`.closure.closed`)."""
+    (top_dims, levels), device, done = grid, finest["octets"].device, None
+    if closure is not None:
+        t0 = time.perf_counter()
+        values_of = partial(_finest_values, args=args, aligned=aligned, origin=origin, h=h, levels=levels, how=how)
+        finest, done = closed(finest, closure, values_of, top_dims * 2 ** (levels - 2), CLOSURE_ROUNDS)
+        timings["finest_closed"] = time.perf_counter() - t0
+    layout = level_layout(finest.pop("octets"), top_dims, levels, device, timings, lean=True)
+    return layout, _node_values(layout, finest, args, aligned, origin, h, levels, how, timings, done=done)
+
+
+def _node_values(layout, finest: dict, args, aligned, origin, h: float, levels: int, how, timings: dict, done=None):
     """Every node's value, closest point, source and (finest) triangle, level by level: the finest from the operands'
-    nodes or MLS samples, the coarser levels from the operands' own nodes there or their leaves extrapolated (Eq. 8
-    per node: a result is a field like any other). ``how``: (op, blend, mode, walk). The pruning's arrays in
-    ``finest`` are let go after the finest level."""
-    op, blend, mode, walk = how
-    device = layout["codes"].device
-    offsets, offs, octet_flags = layout["offsets"], finest["offsets"], finest["octet_flags"]
-    n = int(offsets[-1])
-    out = {
+    nodes or MLS samples (or ``done``: :func:`_finest_values` of them), the coarser levels from the operands' own
+    nodes there or their leaves extrapolated (Eq. 8 per node: a result is a field like any other). ``how``: (op,
+    blend, mode, walk). The pruning's arrays in ``finest`` are let go after the finest level."""
+    device, offsets = layout["codes"].device, layout["offsets"]
+    out = _node_arrays(int(offsets[-1]), int(offsets[1]), device)
+    tk = time.perf_counter()
+    if done is None:
+        _level_values(0, layout["codes"], (0, int(offsets[1])), out, finest, args, aligned, origin, h, levels, how)
+    else:
+        for key, array in done.items():
+            wp.copy(out[key], array, count=array.shape[0])
+    timings["finest_values"] = time.perf_counter() - tk
+    finest["a_first"] = finest["b_first"] = None  # not needed above the finest level
+    for k in range(1, levels):
+        tk = time.perf_counter()
+        span = (int(offsets[k]), int(offsets[k + 1]))
+        _level_values(k, layout["codes"], span, out, finest, args, aligned, origin, h, levels, how)
+        timings["top_level" if k == levels - 1 else f"level_{k}"] = time.perf_counter() - tk
+    return out
+
+
+def _finest_values(finest: dict, *, args, aligned, origin, h: float, levels: int, how) -> dict:
+    """:func:`_node_values`' finest level alone, of ``finest``'s octets (their children, in order)."""
+    codes, _coords = octree.expand_octets(finest["octets"])
+    out = _node_arrays(codes.shape[0], codes.shape[0], codes.device)
+    _level_values(0, codes, (0, codes.shape[0]), out, finest, args, aligned, origin, h, levels, how)
+    return out
+
+
+def _node_arrays(n: int, n_finest: int, device) -> dict:
+    return {
         "proj": wp.empty(n, dtype=wp.vec3h, device=device),
         "source": wp.empty(n, dtype=wp.int32, device=device),
         "values": wp.empty(n, dtype=wp.float32, device=device),
-        "triangles": wp.empty(int(offsets[1]), dtype=wp.int32, device=device),
+        "triangles": wp.empty(n_finest, dtype=wp.int32, device=device),
     }
-    no_octets = wp.empty(0, dtype=wp.int32, device=device)
-    origin_v = wp.vec3(*origin)
-    group = COMBINE_GROUP
-    for k in range(levels):
-        tk = time.perf_counter()
-        lo, hi, spacing, at_finest = int(offsets[k]), int(offsets[k + 1]), h * 2**k, k == 0
-        flags = [int(aligned[0] and at_finest), int(aligned[1] and at_finest)]
-        octet_args = [
-            octet_flags[0] if at_finest else 0,
-            octet_flags[1] if at_finest else 0,
-            finest["a_first"] if at_finest else no_octets,
-            finest["b_first"] if at_finest else no_octets,
-        ]
-        parallel.launch_split(
-            _combine_nodes_kernel,
-            (hi - lo + group - 1) // group,
-            lambda start, count, lo=lo, hi=hi, spacing=spacing, k=k, flags=flags, octet_args=octet_args: [
-                *args,
-                *flags,
-                offs[0],
-                offs[1],
-                layout["codes"],
-                lo + group * start,
-                min(hi, lo + group * (start + count)),
-                group,
-                int(k < levels - 1),
-                origin_v,
-                float(spacing),
-                int(op),
-                blend,
-                mode,
-                walk,
-                int(k == 0),
-                out["proj"],
-                out["source"],
-                out["values"],
-                out["triangles"],
-                *octet_args,
-            ],  # fmt: skip
-            device,
-            balance=True,  # MLS samples bunch where the operands meet
-        )
-        timings["finest_values" if k == 0 else "top_level" if k == levels - 1 else f"level_{k}"] = (
-            time.perf_counter() - tk
-        )
-        if at_finest:
-            finest["a_first"] = finest["b_first"] = None  # not needed above the finest level
-    return out
+
+
+def _level_values(k: int, codes, span, out: dict, finest: dict, args, aligned, origin, h, levels: int, how) -> None:
+    """The combination of level ``k``'s nodes ``codes[span[0]:span[1]]`` into ``out``'s rows alike."""
+    op, blend, mode, walk = how
+    (lo, hi), spacing, at_finest, group = span, h * 2**k, k == 0, COMBINE_GROUP
+    flags = [int(aligned[0] and at_finest), int(aligned[1] and at_finest)]
+    no_octets = wp.empty(0, dtype=wp.int32, device=codes.device)
+    octet_args = [
+        finest["octet_flags"][0] if at_finest else 0,
+        finest["octet_flags"][1] if at_finest else 0,
+        finest["a_first"] if at_finest else no_octets,
+        finest["b_first"] if at_finest else no_octets,
+    ]
+    offs = finest["offsets"]
+    parallel.launch_split(
+        _combine_nodes_kernel,
+        (hi - lo + group - 1) // group,
+        lambda start, count: [
+            *args,
+            *flags,
+            offs[0],
+            offs[1],
+            codes,
+            lo + group * start,
+            min(hi, lo + group * (start + count)),
+            group,
+            int(k < levels - 1),
+            wp.vec3(*origin),
+            float(spacing),
+            int(op),
+            blend,
+            mode,
+            walk,
+            int(k == 0),
+            out["proj"],
+            out["source"],
+            out["values"],
+            out["triangles"],
+            *octet_args,
+        ],  # fmt: skip
+        codes.device,
+        balance=True,  # MLS samples bunch where the operands meet
+    )
 
 
 def _seam_candidates(operands, aligned, origin, h: float, fine_dims, device, blend: float) -> wp.array:

@@ -293,6 +293,9 @@ class AdaptiveField:
         f.tri = self.tri if self.tri is not None else wp.empty(0, dtype=wp.int32, device=self.device)
         f.exact = int(bool(self.stats.get("exact_distance", False)))
         f.inner_points = int(getattr(self, "expression", None) is not None)
+        if f.inner_points and self.stats.get("lipschitz", 1.0) > 1.0:  # a chamfer's (:func:`.sampling.coarse_mls`)
+            f.inner_points = 2
+        f.lipschitz = float(self.stats.get("lipschitz", 1.0))
         f.mesh = wp.uint64(getattr(self.distance_mesh, "id", 0))
         return f
 

@@ -338,6 +338,7 @@ def _empty_field_arg(device) -> FieldArg:
     f.tri = wp.empty(0, dtype=wp.int32, device=device)
     f.exact = 0
     f.inner_points = 0
+    f.lipschitz = 1.0
     f.moved = 0
     return f
 

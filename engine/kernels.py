@@ -32,6 +32,7 @@ ENGINE_MODULES = (
     "build",
     "field",
     "ondemand",
+    "closure",
     "sampling",
     "queries",
     "blendzone",

@@ -265,7 +265,7 @@ def _value_bounds_kernel(f: FieldArg, points: wp.array[wp.vec3], low: wp.array[w
     x = points[i]
     leaf = locate_leaf(f, x)
     v = f.values[leaf[0]]
-    r = wp.length(x - node_center(f.origin, level_spacing(f, leaf[1]), node_coords(f, leaf[0])))
+    r = f.lipschitz * wp.length(x - node_center(f.origin, level_spacing(f, leaf[1]), node_coords(f, leaf[0])))
     slack = r + LEAF_TOLERANCE * wp.abs(v)
     out = wp.length(x - clamp_to_domain(f, x))  # outside the domain: at least that far from its surface
     low[i] = wp.where(out > 0.0, wp.max(v - slack, out), v - slack)

@@ -140,7 +140,7 @@ def finest_sample(f: FieldArg, x: wp.vec3) -> wp.vec4:
         lo = wp.min(lo, phi)
         hi = wp.max(hi, phi)
         v += phi * trilinear_weights(o, t)
-    if hi - lo > 1.75 * s * (1.0 + LEAF_SLACK):  # farther apart than the cell's diagonal allows: a jump
+    if hi - lo > 1.75 * s * (f.lipschitz + LEAF_SLACK):  # farther apart than the cell's diagonal allows: a jump
         return sample_operand(f, x)
     return to_world_sample(f, unit_gradient(v))
 
@@ -242,7 +242,8 @@ def leaf_estimate(f: FieldArg, x: wp.vec3, leaf: wp.vec2i):
     out = wp.length(xf - xc)
     if out > 0.0:
         phi = wp.max(phi, 0.0) + out
-    return phi * f.scale, (wp.length(xc - centre) + LEAF_SLACK * wp.abs(f.values[leaf[0]])) * f.scale, leaf
+    radius = f.lipschitz * wp.length(xc - centre) + LEAF_SLACK * wp.abs(f.values[leaf[0]])
+    return phi * f.scale, radius * f.scale, leaf
 
 
 @wp.func
@@ -273,7 +274,7 @@ def finest_bracket(f: FieldArg, x: wp.vec3, node: int):
     xc = clamp_to_domain(f, to_frame(f, x))
     centre = node_center(f.origin, f.voxel_size, node_coords(f, node))
     v = f.values[node]
-    return v * f.scale, (wp.length(xc - centre) + LEAF_SLACK * wp.abs(v)) * f.scale
+    return v * f.scale, (f.lipschitz * wp.length(xc - centre) + LEAF_SLACK * wp.abs(v)) * f.scale
 
 
 @wp.func
@@ -321,7 +322,7 @@ def node_bracket(
     if leaf >= 0:
         centre = node_center(f.origin, level_spacing(f, level), node_coords(f, leaf))
         phi = f.values[leaf]
-        return phi, wp.length(x - centre) + LEAF_SLACK * wp.abs(phi)
+        return phi, f.lipschitz * wp.length(x - centre) + LEAF_SLACK * wp.abs(phi)
     if level < 0:  # the octet lies outside the operand's domain: no node of it to look up
         phi, radius, _leaf = estimate(f, x)
         return phi, radius

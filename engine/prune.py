@@ -309,18 +309,22 @@ def operand_octets(f: AdaptiveField, origin, spacing, oct_dims, aligned, device,
     )
 
 
-def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, blend, mode, oct_dims, *, jumps=True):
+def prune_octets(
+    octets, args, aligned, octet_flags, offsets, origin, h, op, blend, mode, oct_dims, *, jumps=True, band=KEEP_BAND
+):
     """The octets of ``octets`` (sorted Morton codes on the result lattice) that may change the result's surface,
     and for each its first node in either operand (``octet_source``; -1 where not octet-aligned).
 
     Keep the result adaptive: drop octets the result's surface is far from (an operand's band buried inside the
     other operand, say), deciding from the operands' brackets before any interpolation, so only kept nodes pay
     for MLS. A marching cube with a corner farther than its diagonal from the surface cannot contain it, so
-    octets whose nodes are all beyond KEEP_BAND voxels change no surface — unless the field jumps there (the
+    octets whose nodes are all beyond ``band`` voxels change no surface — unless the field jumps there (the
     surface an open operand gets across a hole): octets with both signs, or next to one of the other sign, stay. Where
     neither operand jumps (``jumps`` False: the combination is continuous and changes by at most sqrt(2) times the
     distance moved, a chamfer's most, so every corner of a cube the surface crosses lies within sqrt(6) < KEEP_BAND
     voxels of it) the band alone decides: the neighbours' signs kept an octet more on either side of the surface.
+    (A chamfer over a chamfered boolean changes faster, and a blended boolean read off its coarse leaves strays from
+    its brackets: there the boolean adds what its values show lacking, :mod:`.closure`.)
 
     Args:
         octets: (M,) int64 Warp array of octet codes.
@@ -362,7 +366,7 @@ def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, ble
             int(op),
             blend,
             mode,
-            KEEP_BAND * h,
+            band * h,
             near,
             has_neg,
             has_pos,
@@ -372,6 +376,8 @@ def prune_octets(octets, args, aligned, octet_flags, offsets, origin, h, op, ble
         device,
         balance=True,
     )
+    if band == np.inf:  # every octet kept: what the combination reads of them
+        return octets, a_first, b_first
     dims_v = wp.vec3i(*(int(d) for d in oct_dims))
     if jumps and byte_grid_fits(oct_dims):
         # a byte per octet of the grid: the 26 neighbours are found by index rather than by binary search
