@@ -14,7 +14,10 @@ overlap within a few degrees of one plane and pass through each other. Each such
    polygon's projection is simple where a tiling is found, so the tiles neither fold nor overlap;
 4. a tiling taken where it stays within ``TOLERANCE_VOXELS`` of the patch (each removed vertex from the tiles, each
    tile's centre and edge midpoints from the patch's faces, either with the faces beside the border);
-5. the crossing pairs found again where tiles were laid and where tiling failed, for the next round (``ROUNDS``).
+5. the crossing pairs found again where tiles were laid and where tiling failed, for the next round (``ROUNDS``);
+6. last, a place no plane tiles (a patch folded across a sharp crease, a crumpled corner where three surfaces meet)
+   made a fan about one of its own vertices, where the fan stays within ``FAN_TOLERANCE_VOXELS`` of it and none of
+   its faces passes through another.
 
 Kept faces that stay keep their positions and sources bit for bit; tiles are new faces.
 """
@@ -33,10 +36,15 @@ from .tiling import tiled_polygons, with_points
 from .zipper import loop_labels
 
 # Per round: rings of faces about the crossing faces removed, and what the tiles keep or take: "inner" (the patch's
-# vertices inside the border), "border" (the border alone), "kept" (kept faces in the patch too, and inner vertices).
+# vertices inside the border), "border" (the border alone), "kept" (kept faces in the patch too, and inner vertices),
+# "fan" (new faces only, a fan about one of the patch's vertices: a patch folded across a crease, or a crumpled corner
+# where three surfaces meet, has no plane to be tiled in).
 # A place still crossing after a round is tiled again from a wider patch; measured on messy meshes, borders alone
 # after inner vertices mend folds that stand out, and kept faces given up last mend kept slivers folded with the seam.
-ROUNDS = ((1, "inner"), (2, "inner"), (3, "inner"), (1, "border"), (2, "border"), (1, "kept"), (2, "kept"), (3, "kept"))
+ROUNDS = (
+    *((1, "inner"), (2, "inner"), (3, "inner"), (1, "border"), (2, "border"), (1, "kept"), (2, "kept"), (3, "kept")),
+    *((1, "fan"), (2, "fan")),
+)
 # Kept faces given up in the last rounds are at most this large (square voxels): slivers along the seam, never a
 # low-polygon mesh's large faces (the beetle lost 1.2 % of what should be kept when any kept face could go; the
 # teapot's seams keep 9 crossing pairs with faces up to 2 square voxels given up, 20 with 0.5).
@@ -45,6 +53,9 @@ SMALL_AREA_VOXELS = 2.0
 # (measured with a ball, crossing pairs left at 0.3 / 0.4 / 0.5: teapot 9 / 8 / 7, cow 17 / 7 / 7, beetle 118 / 100 /
 # 97; the CAD pairs' surfaces the same at all three).
 TOLERANCE_VOXELS = 0.4
+# A fan (the last rounds, where no tiling is found) is taken within this: it cuts across the crease or the crumpled
+# corner it replaces (the cow with a ball: its seam's corner fanned within 0.6, not 0.4).
+FAN_TOLERANCE_VOXELS = 0.6
 # Border loops longer than this are not tiled (the dynamic program's work grows as the cube of it).
 MAX_LOOP = 96
 # Per-face and per-vertex arrays of a kept surface (:func:`.hybrid.kept_surface`).
@@ -85,7 +96,10 @@ def uncrossed(surface: dict, voxel: float, device) -> dict:
         if not len(pairs):
             break
         patch = _patch(surface["verts"], tris, kept, pairs, rings, voxel if mode == "kept" else 0.0)
-        gone, tiles, tiled = _tiled(surface["verts"], tris, patch, voxel, device, mode != "border")
+        if mode == "fan":
+            gone, tiles, tiled = _fanned(surface["verts"], tris, patch, voxel, device)
+        else:
+            gone, tiles, tiled = _tiled(surface["verts"], tris, patch, voxel, device, mode != "border")
         alive = np.ones(len(tris), dtype=bool)
         alive[gone] = False
         if not tiled or not _sound(np.concatenate([tris[alive], tiles]), len(tiles), len(surface["verts"])):
@@ -177,6 +191,54 @@ def _tiled(
     )
     good = np.isin(piece, loop_piece[done])
     return rows[good], tiles[done[tile_loop]], int(done.sum())
+
+
+def _fanned(verts, tris: np.ndarray, patch: np.ndarray, voxel: float, device) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`_tiled`'s results with fans: each disc piece of the ``patch`` with inner vertices made a fan about the
+    one nearest their mean (its other inner vertices dropped), where the fan lies within ``FAN_TOLERANCE_VOXELS`` of the
+    patch and none of its faces passes through another face. A fan needs no plane; its edges are the border's and new
+    ones to a vertex only the patch used, so it joins the surface as the patch did."""
+    rows, n = np.flatnonzero(patch), len(verts)
+    piece = _face_components(tris[rows], n, device)
+    order, starts, sizes, loop_piece = _border_loops(tris[rows], piece, n, device)
+    inner, inner_sizes = _inner_vertices(tris[rows], piece, order, sizes, loop_piece, n) if len(sizes) else (order,) * 2
+    if not len(inner):
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3), dtype=np.int64), 0
+    inner_loop = np.repeat(np.arange(len(sizes)), inner_sizes)
+    points = verts[inner].astype(np.float64)
+    mean = np.stack([np.bincount(inner_loop, points[:, k], len(sizes)) for k in range(3)], axis=1)
+    mean /= np.maximum(inner_sizes, 1)[:, None]
+    by = np.lexsort((np.linalg.norm(points - mean[inner_loop], axis=1), inner_loop))
+    first = by[np.r_[True, inner_loop[by][1:] != inner_loop[by][:-1]]]  # per loop with inner vertices, the nearest
+    centre = np.full(len(sizes), -1, dtype=np.int64)
+    centre[inner_loop[first]] = inner[first]
+    step = np.arange(len(order))
+    loop = np.repeat(np.arange(len(sizes)), sizes)
+    step = starts[loop] + (step - starts[loop] + 1) % sizes[loop]  # the next vertex along each loop
+    has = centre[loop] >= 0
+    tiles, tile_loop = np.stack([order, order[step], centre[loop]], axis=1)[has], loop[has]
+    lost = np.ones(len(inner), dtype=bool)
+    lost[first] = False
+    done = (centre >= 0) & _close_enough(
+        verts, tris[rows], piece, tris[~patch], tiles, tile_loop, (inner[lost], inner_loop[lost]), loop_piece, voxel,
+        device, FAN_TOLERANCE_VOXELS,
+    )  # fmt: skip
+    laid = done[tile_loop]
+    gone = rows[np.isin(piece, loop_piece[done])]
+    done[_crossing_loops(verts, tris, gone, tiles[laid], tile_loop[laid], device)] = False
+    good = np.isin(piece, loop_piece[done])
+    return rows[good], tiles[done[tile_loop]], int(done.sum())
+
+
+def _crossing_loops(verts, tris: np.ndarray, gone: np.ndarray, tiles: np.ndarray, tile_loop, device) -> np.ndarray:
+    """The loops (``tile_loop`` per tile) whose tiles pass through a face of ``tris`` without its rows ``gone`` and
+    with all the ``tiles`` laid."""
+    alive = np.ones(len(tris), dtype=bool)
+    alive[gone] = False
+    both = np.concatenate([tris[alive], tiles])
+    pairs = crossing_pairs(verts, both, device, np.arange(int(alive.sum()), len(both)))
+    hit = pairs[pairs >= int(alive.sum())] - int(alive.sum())
+    return np.unique(tile_loop[hit])
 
 
 def _inner_vertices(faces, piece, order, sizes, loop_piece, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -291,10 +353,13 @@ def _forbidden_chords(outside: np.ndarray, order, starts, sizes, n: int) -> np.n
     return np.isin(np.minimum(p, q) * n + np.maximum(p, q), edges).astype(np.uint8)
 
 
-def _close_enough(verts, patch_faces, piece, outside, tiles, tile_loop, lost, loop_piece, voxel, device):
-    """(L,) bool per loop: its patch and its tiles lie within ``TOLERANCE_VOXELS`` of each other, each with the faces
-    around the loop: every vertex the patch loses (``lost``: vertices and their loops) near the tiled surface, every
-    tile's centre and edge midpoints near the patch's (a vertex of a fold over the faces beside it lies near those)."""
+def _close_enough(
+    verts, patch_faces, piece, outside, tiles, tile_loop, lost, loop_piece, voxel, device, tolerance=None
+):
+    """(L,) bool per loop: its patch and its tiles lie within ``tolerance`` (voxels, default ``TOLERANCE_VOXELS``) of
+    each other, each with the faces around the loop: every vertex the patch loses (``lost``: vertices and their loops)
+    near the tiled surface, every tile's centre and edge midpoints near the patch's (a vertex of a fold over the faces
+    beside it lies near those)."""
     n, count = len(verts), len(loop_piece)
     loop_at = np.full(int(piece.max()) + 1, -1, dtype=np.int64)
     loop_at[loop_piece] = np.arange(count)
@@ -322,7 +387,7 @@ def _close_enough(verts, patch_faces, piece, outside, tiles, tile_loop, lost, lo
         per = np.bincount(at, minlength=count)
         first = np.cumsum(per) - per
         distance = _nearest_in_range(points, first[loops], per[loops], verts[faces[by_loop]], device)
-        far[loops[distance > TOLERANCE_VOXELS * voxel]] = True
+        far[loops[distance > (TOLERANCE_VOXELS if tolerance is None else tolerance) * voxel]] = True
     return ~far
 
 

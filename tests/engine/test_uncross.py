@@ -125,3 +125,52 @@ def test_a_fold_of_new_faces_over_kept_ones_is_tiled_flat_and_the_kept_faces_sta
     s["verts"][7 * 7 + 3, 2], s["verts"][7 * 7 + 4, 2] = 3 * TOLERANCE_VOXELS, -3 * TOLERANCE_VOXELS
     left = uncrossed(s, 1.0, "cpu")
     assert left["stats"]["crossing_left"] > 0 and len(left["tris"]) == len(s["tris"])
+
+
+def _crease_surface():
+    """New faces on a grid of 12 x 6 squares bent along its middle row to a sharp crease (the second half folded back
+    45 degrees over the first), two vertices beside the crease pulled across it: faces on both sides of the crease
+    pass through each other, and no plane sees the patch about them without overlap."""
+    n, m = 13, 7
+    u, y = np.meshgrid(np.arange(n, dtype=np.float32), np.arange(m, dtype=np.float32), indexing="ij")
+    u, y = u.ravel(), y.ravel()
+    w = np.maximum(u - 6, 0)
+    verts = np.stack([np.minimum(u, 6) - w * np.cos(np.pi / 4), y, w * np.sin(np.pi / 4)], axis=1).astype(np.float32)
+    at = lambda i, j: i * m + j  # noqa: E731
+    quads = [(at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)) for i in range(n - 1) for j in range(m - 1)]
+    tris = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))], dtype=np.int32)
+    verts[at(7, 3)] = (5.7, 3.0, 0.2)
+    verts[at(5, 3)] = (5.8, 3.1, 0.3)
+    f, v = len(tris), len(verts)
+    return {
+        "verts": verts,
+        "tris": tris,
+        "kept": np.zeros(f, dtype=bool),
+        "field_id": np.full(f, -1, np.int32),
+        "triangle_id": np.full(f, -1, np.int32),
+        "vertex_field": np.zeros(v, np.int32),
+        "vertex_id": np.arange(v, dtype=np.int32),
+        "corner_bary": np.zeros((f, 3, 3), np.float32),
+        "voxel_face": np.arange(f),
+        "stats": {"kept_faces": 0, "new_faces": f},
+    }
+
+
+def test_a_crumpled_crease_no_plane_can_tile_is_made_a_fan(monkeypatch):
+    import engine.uncross as uncross
+
+    s = _crease_surface()
+    assert self_intersections(s["verts"], s["tris"]) == 9  # (measured)
+    planar = tuple(r for r in uncross.ROUNDS if r[1] != "fan")
+    with monkeypatch.context() as m:
+        m.setattr(uncross, "ROUNDS", planar)
+        assert uncrossed(dict(s), 1.0, "cpu")["stats"]["crossing_left"] > 0  # no plane tiles it
+    out = uncrossed(dict(s), 1.0, "cpu")
+    assert out["stats"]["crossing_left"] == 0 and self_intersections(out["verts"], out["tris"]) == 0
+    # a fan adds no vertex: every vertex left is one of the grid's, and the grid's border stays, one orientation
+    assert set(map(tuple, out["verts"].tolist())) <= set(map(tuple, s["verts"].tolist()))
+    t = out["tris"].astype(np.int64)
+    a, b = t.ravel(), t[:, [1, 2, 0]].ravel()
+    _, counts = np.unique(np.minimum(a, b) * len(out["verts"]) + np.maximum(a, b), return_counts=True)
+    assert counts.max() == 2 and (counts == 1).sum() == 2 * (12 + 6)
+    assert len(np.unique(a * len(out["verts"]) + b)) == len(a)
