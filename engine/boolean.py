@@ -316,34 +316,18 @@ def combine(
     try:  # built on demand: the octets it needs (:mod:`.ondemand`)
         a, b, seams = for_boolean(a, b, op, blend, seams=seams)
         # a sparse finest level under a dense top one, even when both operands are dense (one level)
-        levels = max(a.levels, b.levels, 2)
-        timings, t0 = {}, time.perf_counter()
+        levels, timings = max(a.levels, b.levels, 2), {}
         origin, top_dims = _domain(a, b, h, levels, mode, blend)  # (a domain too large is refused: no judge)
         expression = combined(op, blend, a, b)
     finally:
         if early is not None:  # the judge goes on with the refined operands (or stops)
             early.proceed(expression if seams else None)
-    aligned = [_aligned(f, origin, h) for f in (a, b)]
-    args = (a.arg(), b.arg())
-    fine_dims = top_dims * 2 ** (levels - 1)
-    slope = lipschitz(mode, blend, *(f.stats.get("lipschitz", 1.0) for f in (a, b)))  # (more than 1: chamfers)
-    octets = _candidate_octets((a, b), aligned, origin, h, fine_dims, a.device, seams=seams, blend=blend)
-    if blend > 0.0:  # and where the blend shapes the surface, away from both operands' own octets
-        zone = blend_octets(*args, origin, h, top_dims, levels, op, blend, mode, KEEP_BAND * h)
-        octets = octree.merge_unique(octets, zone, end_bit=3 * code_bits(top_dims * 2 ** (levels - 2)))
-    timings["finest_cells"] = time.perf_counter() - t0
-    # Keep the result adaptive: drop the octets the result's surface is far from, before any interpolation.
-    t0 = time.perf_counter()
-    oct_dims = top_dims * 2 ** (levels - 2)
-    how = (op, blend, mode)
-    pruned = partial(_pruned, fields=(a, b), args=args, aligned=aligned, origin=origin, h=h, oct_dims=oct_dims, how=how)
-    finest = pruned(octets)
-    timings["finest_prune"] = time.perf_counter() - t0
+    aligned, args, grid = [_aligned(f, origin, h) for f in (a, b)], (a.arg(), b.arg()), (origin, top_dims, levels)
+    finest, pruned = _finest(a, b, args, aligned, grid, h, (op, blend, mode), seams, timings)
     walk = wp.vec2i(*(int(mode == 1 and f.stats.get("surface_points", False)) for f in (a, b)))
     closure = pruned if needs_closure(a, b, blend) else None  # (octets the values need about the surface: added)
-    layout, nodes = _laid_out(
-        finest, closure, (top_dims, levels), args, aligned, origin, h, (op, blend, mode, walk), timings
-    )
+    layout, nodes = _laid_out(finest, closure, grid[1:], args, aligned, origin, h, (op, blend, mode, walk), timings)
+    slope = lipschitz(mode, blend, *(f.stats.get("lipschitz", 1.0) for f in (a, b)))  # (more than 1: chamfers)
     result = type(a).from_layout(
         layout, voxel_size=h, origin=origin, **nodes, field_ids=a.field_ids + b.field_ids, timings=timings,
         sources={**a.world_sources(), **b.world_sources()},
@@ -389,6 +373,28 @@ def _domain(a, b, h: float, levels: int, mode: int, blend: float) -> tuple:
     origin, top_dims = plan_domain(lo, hi, h, levels, reach / h + 1.0 if blend > 0.0 else 0.0)
     check_budget(top_dims * 2 ** (levels - 1), int(np.prod(top_dims)), 8 * (a.level_counts[0] + b.level_counts[0]))
     return origin, top_dims
+
+
+def _finest(a, b, args, aligned, grid, h: float, how: tuple, seams: bool, timings: dict) -> tuple:
+    """The result's finest octets (:func:`_pruned`'s dict): the candidates (:func:`_candidate_octets`, and where a blend
+    shapes the surface, away from both operands' own octets) pruned, keeping the result adaptive: the octets its
+    surface is far from dropped before any interpolation. Also the pruning of other octets (``pruned(codes, band)``).
+    ``grid``: origin, top dims and levels; ``how``: op, blend, mode."""
+    (origin, top_dims, levels), (op, blend, mode) = grid, how
+    t0 = time.perf_counter()
+    octets = _candidate_octets(
+        (a, b), aligned, origin, h, top_dims * 2 ** (levels - 1), a.device, seams=seams, blend=blend
+    )
+    if blend > 0.0:
+        zone = blend_octets(*args, origin, h, top_dims, levels, op, blend, mode, KEEP_BAND * h)
+        octets = octree.merge_unique(octets, zone, end_bit=3 * code_bits(top_dims * 2 ** (levels - 2)))
+    timings["finest_cells"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    oct_dims = top_dims * 2 ** (levels - 2)
+    pruned = partial(_pruned, fields=(a, b), args=args, aligned=aligned, origin=origin, h=h, oct_dims=oct_dims, how=how)
+    finest = pruned(octets)
+    timings["finest_prune"] = time.perf_counter() - t0
+    return finest, pruned
 
 
 def _pruned(octets, fields, args, aligned, origin, h: float, oct_dims, how: tuple, band=None) -> dict:
@@ -457,6 +463,7 @@ def _finest_values(finest: dict, *, args, aligned, origin, h: float, levels: int
 
 
 def _node_arrays(n: int, n_finest: int, device) -> dict:
+    """What the combination writes per node (``n``) and per finest node (``n_finest``), unset."""
     return {
         "proj": wp.empty(n, dtype=wp.vec3h, device=device),
         "source": wp.empty(n, dtype=wp.int32, device=device),
