@@ -33,11 +33,6 @@ def needs_closure(a, b, blend: float) -> bool:
 
 
 @wp.func
-def _in_grid(q: wp.vec3i, dims: wp.vec3i) -> bool:
-    return q[0] >= 0 and q[1] >= 0 and q[2] >= 0 and q[0] < dims[0] and q[1] < dims[1] and q[2] < dims[2]
-
-
-@wp.func
 def _step(slot: int) -> wp.vec3i:
     """Slot ``slot`` of 27 (x slowest): its step (-1, 0 or 1 per axis)."""
     return wp.vec3i(slot // 9 - 1, (slot // 3) % 3 - 1, slot % 3 - 1)
@@ -81,7 +76,7 @@ def _lacking(octets: wp.array[wp.int64], values: wp.array[wp.float32], dims: wp.
         for side in range(2):
             q = c
             q[axis] = q[axis] + 2 * side - 1
-            if _in_grid(q, dims):
+            if octree.in_grid(q, dims):
                 j = octree.find_key(octets, 0, n, octree.morton_encode(q))
                 if j >= 0:
                     for k in range(8):
@@ -100,7 +95,7 @@ def _lacking(octets: wp.array[wp.int64], values: wp.array[wp.float32], dims: wp.
     for slot in range(27):
         if (want >> slot) & 1 == 1:
             q = c + _step(slot)
-            if _in_grid(q, dims):
+            if octree.in_grid(q, dims):
                 if octree.find_key(octets, 0, n, octree.morton_encode(q)) < 0:
                     lacking = lacking | (1 << slot)
     return lacking

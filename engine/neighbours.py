@@ -13,7 +13,7 @@ import numpy as np
 import warp as wp
 
 from . import parallel
-from .octree import morton_decode, morton_encode
+from .octree import in_grid, morton_decode, morton_encode
 from .parallel import run_tasks
 
 # Levels with at most this many cells find their neighbours through a dense grid (8 MB), larger ones by sorting.
@@ -73,7 +73,7 @@ def _grid_neighbours_kernel(
     for k in range(6):
         q = c
         q[k // 2] = q[k // 2] + 2 * (k % 2) - 1
-        if q[0] >= 0 and q[1] >= 0 and q[2] >= 0 and q[0] < dims[0] and q[1] < dims[1] and q[2] < dims[2]:
+        if in_grid(q, dims):
             j = grid[q[0] + dims[0] * (q[1] + dims[1] * q[2])]
             if j >= 0:
                 neighbours[i - row0, k] = j

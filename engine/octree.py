@@ -189,6 +189,12 @@ def morton_encode(c: wp.vec3i) -> wp.int64:
 
 
 @wp.func
+def in_grid(q: wp.vec3i, dims: wp.vec3i) -> bool:
+    """Whether cell ``q`` lies within a grid of ``dims`` cells."""
+    return q[0] >= 0 and q[1] >= 0 and q[2] >= 0 and q[0] < dims[0] and q[1] < dims[1] and q[2] < dims[2]
+
+
+@wp.func
 def morton_decode(m: wp.int64) -> wp.vec3i:
     return wp.vec3i(
         wp.int32(_compact_bits(m)),
@@ -421,7 +427,7 @@ def _dilate_octets_kernel(octets: wp.array[wp.int64], radius: int, dims: wp.vec3
         d = wp.vec3i(n % w - radius, (n // w) % w - radius, n // (w * w) - radius)
         q = c + d
         code = octets[t]
-        if q[0] >= 0 and q[1] >= 0 and q[2] >= 0 and q[0] < dims[0] and q[1] < dims[1] and q[2] < dims[2]:
+        if in_grid(q, dims):
             code = morton_encode(q)
         out[t * w * w * w + n] = code
 

@@ -156,7 +156,7 @@ def _keep_octets_kernel(
     other = wp.where(has_pos[t] == 1, 1, 0) + wp.where(has_neg[t] == 1, 2, 0)
     for o in range(27):
         q = c + wp.vec3i(o % 3 - 1, (o // 3) % 3 - 1, o // 9 - 1)
-        if o != 13 and q[0] >= 0 and q[1] >= 0 and q[2] >= 0 and q[0] < dims[0] and q[1] < dims[1] and q[2] < dims[2]:
+        if o != 13 and octree.in_grid(q, dims):
             if signs.shape[0] > 0:
                 if (int(signs[q[0] + dims[0] * (q[1] + dims[1] * q[2])]) & other) != 0:
                     keep[t] = 1
