@@ -26,6 +26,9 @@ import numpy as np
 # well below the crease angle (quadric.CREASE_ANGLE, 25), so no reconstructed crease runs through a polygon; above
 # the bend of a quad on a sphere of 4 voxels' radius.
 QUAD_ANGLE = 20.0
+# Where a whole quad's corners lie in its two rows (``a b c``, ``d e f``), by its ``whole`` flag: split along q0-q2
+# (``q0 q1 q2``, ``q0 q2 q3``: q0 q1 q2 q3) or along q1-q3 (``q0 q1 q3``, ``q1 q2 q3``: q1 q2 q3 q0).
+_QUAD_CORNERS = np.array([[0, 0, 0, 0], [0, 1, 2, 5], [3, 4, 5, 0]], dtype=np.intp)
 
 
 def merge_pairs(tris, whole) -> tuple[np.ndarray, np.ndarray]:
@@ -44,7 +47,8 @@ def merge_pairs(tris, whole) -> tuple[np.ndarray, np.ndarray]:
     tris = np.asarray(tris, dtype=np.int32)
     whole = np.asarray(whole)
     pairs = tris[: 2 * len(whole)].reshape(-1, 6)
-    quads = np.where((whole == 1)[:, None], pairs[:, [0, 1, 2, 5]], pairs[:, [3, 4, 5, 0]])[whole > 0]
+    kept = np.flatnonzero(whole)  # each whole quad's four corners gathered once from its two rows
+    quads = pairs.reshape(-1)[(6 * kept)[:, None] + _QUAD_CORNERS[whole[kept]]]
     split = pairs[whole == 0].reshape(-1, 3)
     rest = tris[2 * len(whole) :]
     faces = np.concatenate([quads.ravel(), split.ravel(), rest.ravel()])
