@@ -35,10 +35,11 @@ import numpy as np
 import warp as wp
 
 from . import verdicts
+from .coplanar import TIES, coplanar_readings, coplanar_triangles, flush_triangles, tied_to_earlier, tied_values
+from .defects import AXES, CROSSING_VOXELS, defects_and, own_defects
 from .expression import evaluate_signs, leaves, widest_blend
 from .judging import MAX_TABLE_LEAVES, FusedJudge, sign_patterns
 from .jumps import JumpSpheres, clear_of, jump_spheres
-from .meshcheck import defect_edges
 from .ondemand import built_on_demand, own_sides
 from .orient import patch_flips
 from .ownside import THIN, TINY_VOXELS, outward, side_at
@@ -46,7 +47,6 @@ from .parallel import run_tasks
 from .precut import cut_strips, fused_margins
 from .refine import merge_kept, restore_whole, straighten_borders
 from .samples import edge_turns, per_triangle_min, triangle_samples
-from .selfcross import crossing_segments
 from .slivers import Splitter, strip_parents
 from .sources import mesh_distances
 from .trimeasures import triangle_measures, unit_normals
@@ -71,8 +71,9 @@ SIDE_VOXELS = 0.5
 # Points to keep clear of (where a join gave kept faces up) count as defects this many voxels across (octahedra).
 AVOID_VOXELS = 1.0
 
-AXES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float32)
 UNKNOWN, KEPT, DROPPED = 0, 1, 2
+# What a judge finds for :mod:`.verdicts` besides each triangle's margin.
+FOUND_FLAGS = ("signs_only", "own_only")
 
 
 def mesh_leaf(field) -> bool:
@@ -97,13 +98,14 @@ def leaf_bvh(field, device):
     return next(iter(field.world_sources().values())).bvh(device)
 
 
-def _leaf_values(field, bvh, points: np.ndarray, reach: float, device) -> np.ndarray:
+def _leaf_values(field, bvh, points: np.ndarray, reach: float, device, distance=None) -> np.ndarray:
     """(N,) float32 how far the leaf's surface is from each point (up to ``reach``), negative inside it: from its
-    mesh's ``bvh`` (:func:`leaf_bvh`) where it has one, else from its field."""
+    mesh's ``bvh`` (:func:`leaf_bvh`) where it has one (or the unsigned ``distance`` given), else from its field."""
     values = field.sample(points, method="linear")  # a tenth of MLS's time: signs, and distances within the slack
     if bvh is None:
         return np.clip(values, -reach, reach).astype(np.float32)
-    return np.copysign(mesh_distances(bvh, points, reach, device), values).astype(np.float32)
+    distance = mesh_distances(bvh, points, reach, device) if distance is None else distance
+    return np.copysign(distance, values).astype(np.float32)
 
 
 def leaf_jumps(field, device):
@@ -116,11 +118,12 @@ def leaf_jumps(field, device):
     return JumpSpheres(jump_spheres(next(iter(field.world_sources().values()))), device)
 
 
-def _margin(field, bvh, jumps, points, band: float, reach: float, device) -> tuple[np.ndarray, np.ndarray]:
-    """Per sample: how far the leaf's surface is (up to ``reach``), and the leaf's sign there. A field with jumps (an
-    open mesh's, across its holes; :func:`leaf_jumps`) counts as near (0) wherever its sign changes a band away along
-    an axis, read near its defects, and where its value (read off its field) is below two bands."""
-    values = _leaf_values(field, bvh, points, reach, device)
+def _margin(field, bvh, jumps, points, band: float, reach: float, device, distance=None) -> tuple:
+    """Per sample: how far the leaf's surface is (up to ``reach``; or ``distance``), and the leaf's sign there. A
+    field with jumps (an open mesh's, across its holes; :func:`leaf_jumps`) counts as near (0) wherever its sign
+    changes a band away along an axis, read near its defects, and where its value (read off its field) is below two
+    bands."""
+    values = _leaf_values(field, bvh, points, reach, device, distance)
     margin = np.abs(values)
     if jumps is not None:
         rows = np.flatnonzero(margin > band)  # (a value read off the field overstates a distance a little)
@@ -131,63 +134,10 @@ def _margin(field, bvh, jumps, points, band: float, reach: float, device) -> tup
     return margin, np.sign(values).astype(np.int8)
 
 
-# ---- the leaf's own defects ----
-def _repeated(tris: np.ndarray, n_verts: int) -> np.ndarray:
-    """(T,) bool: the triangles whose corners another triangle repeats (in any order): one key per sorted corner
-    triple where three indices fit in 63 bits (numpy's unique over rows sorts them as bytes, 8x slower), else the
-    rows themselves."""
-    if n_verts**3 < 2**63:  # the duplicated keys found in a sort of the keys (no inverse permutation)
-        a, b, c = (tris[:, k].astype(np.int64) for k in range(3))
-        low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
-        key = (low * n_verts + (a + b + c - low - high)) * n_verts + high
-        ordered = np.sort(key)
-        repeated = ordered[1:][ordered[1:] == ordered[:-1]]
-        return np.isin(key, repeated) if len(repeated) else np.zeros(len(key), dtype=bool)
-    corners = np.sort(tris, axis=1).astype(np.int64)
-    _, inverse, counts = np.unique(corners, axis=0, return_inverse=True, return_counts=True)
-    return counts[inverse.reshape(-1)] > 1
-
-
-# Where a mesh passes through itself along a curve at least this many voxels long, its faces stay a band from it as from
-# its other defects (a face reaching it is partly inside: kept, overlapping boxes given as one mesh kept pieces of
-# their faces up to 0.64 voxel inside each other). Shorter ones are pokes under the field's resolution: as defects
-# they cost the beetle 6 % of what it kept, through the join, while its gaps' walls were taken for internal faces;
-# Suzanne's of 2-3 voxels, left out at 3, made 82 of its 163 crossing pairs (the beetle's of 2-3 voxels change nothing).
-CROSSING_VOXELS = 2.0
-
-
-def _own_defects(verts: np.ndarray, tris: np.ndarray, shortest: float | None, device) -> tuple:
-    """A mesh's defects (judged with vertices at one position merged): ``(repeated, points, parts)``: (T,) bool the
-    triangles repeating another triangle's corners (never kept), and the defects as triangles to measure distances
-    to: each open, non-manifold or inconsistently oriented edge and each segment along which the mesh passes through
-    itself (:func:`.selfcross.crossing_segments`, on curves at least ``shortest`` long; None: not looked for) as a
-    flat triangle ``a b b``, each repeated triangle as itself (``points`` (P, 3) float32, ``parts`` (D, 3) int32;
-    empty when the mesh has none). A triangle at a hole's edge keeps its parts farther than the band from that edge,
-    one the mesh passes through farther than the band from the crossing."""
-    welded_verts, welded, bad = defect_edges(verts, tris)
-    repeated = _repeated(welded, len(welded_verts))
-    points = np.asarray(welded_verts, dtype=np.float32)
-    crossings = (
-        np.zeros((0, 2, 3), np.float32)
-        if shortest is None
-        else crossing_segments(points, welded[~repeated], device, shortest)
-    )
-    ends = np.arange(len(points), len(points) + 2 * len(crossings)).reshape(-1, 2)
-    points = np.concatenate([points, crossings.reshape(-1, 3)])
-    segments = np.concatenate([bad, ends])
-    # a segment as a sliver: its ends and its midpoint a hair off the line (the BVH's point query skips flat triangles)
-    a, b = points[segments[:, 0]].astype(np.float64), points[segments[:, 1]].astype(np.float64)
-    off = np.zeros_like(a)
-    off[np.arange(len(a)), np.argmin(np.abs(b - a), axis=1)] = 1e-5 * np.linalg.norm(b - a, axis=1)
-    mids = np.arange(len(points), len(points) + len(segments))
-    slivers = np.stack([segments[:, 0], segments[:, 1], mids], axis=1)
-    parts = np.concatenate([slivers, welded[repeated]]).astype(np.int32)
-    return repeated, np.concatenate([points, (0.5 * (a + b) + off).astype(np.float32)]), parts
-
-
+# ---- the leaf's own part ----
 @dataclass
 class _Own:
-    """What a leaf's own triangles give whatever the other leaves are: their defects (:func:`_own_defects`: the
+    """What a leaf's own triangles give whatever the other leaves are: their defects (:func:`.defects.own_defects`: the
     repeated triangles, and a mesh of every defect to measure distances to), each one's side of the leaf's own field
     (:func:`.ownside.side_at`, half a voxel out), and which are slivers to split as strips
     (:func:`.slivers.strip_parents`)."""
@@ -242,7 +192,7 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     # where the mesh passes through itself, some triangle has its own inside on both sides (an internal face): only
     # then are its crossings looked for (the bunny's 69 k triangles take 0.07 s)
     shortest = CROSSING_VOXELS * voxel if (side == 0).any() else None
-    defects, points, parts = _own_defects(verts, tris, shortest, device)
+    defects, points, parts = own_defects(verts, tris, shortest, device)
     defect_mesh = None
     if len(parts) and not defects.all():
         defect_mesh = wp.Mesh(
@@ -276,26 +226,6 @@ def _placed_own(leaf, voxel: float, device) -> _Own | None:
     return _Own(leaf.values, SIDE_VOXELS * voxel, device, own.defects, own.side, defect_mesh, own.strips, own.thin)
 
 
-def _octahedra(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """An octahedron of ``radius`` about each point, as ``(verts, tris)``: a point kept clear of by a BVH's
-    distances (they skip flat triangles), farther by at most ``radius`` than the point itself."""
-    corners = (points[:, None, :] + radius * AXES[None]).reshape(-1, 3).astype(np.float32)
-    faces = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
-    return corners, (faces[None] + 6 * np.arange(len(points))[:, None, None]).reshape(-1, 3).astype(np.int32)
-
-
-def _defects_and(defect_mesh, avoid, radius: float, device):
-    """A mesh of a leaf's defects (``defect_mesh``, or None) and of octahedra about the ``avoid`` points."""
-    points, parts = _octahedra(np.asarray(avoid, dtype=np.float32).reshape(-1, 3), radius)
-    if defect_mesh is not None:
-        own_points, own_parts = defect_mesh.points.numpy(), defect_mesh.indices.numpy().reshape(-1, 3)
-        points, parts = np.concatenate([own_points, points]), np.concatenate([own_parts, parts + len(own_points)])
-    return wp.Mesh(
-        points=wp.array(points, dtype=wp.vec3, device=device),
-        indices=wp.array(parts.reshape(-1).astype(np.int32), dtype=wp.int32, device=device),
-    )
-
-
 class _Judge:
     """The checks of one leaf's triangles against the rest of the expression (see the module docstring); ``avoid``
     (P, 3) points count as its own defects (``AVOID_VOXELS`` across)."""
@@ -303,7 +233,8 @@ class _Judge:
     def __init__(self, field, index: int, source, reads: tuple, fused: bool = True, avoid=None):
         self.expression = field.expression
         self.leaves = leaves(self.expression)
-        self.index, self.device, voxel = index, field.device, field.voxel_size
+        self.index, self.device, self.voxel = index, field.device, field.voxel_size
+        voxel = self.voxel
         self.band = BAND_VOXELS * voxel + widest_blend(self.expression)
         self.spacing, self.slack = SAMPLE_VOXELS * voxel, SLACK_VOXELS * voxel
         self.ray_start = TINY_VOXELS * voxel  # (a gap's wall: :mod:`.ownside`)
@@ -313,7 +244,7 @@ class _Judge:
         self.tris, self.defects, self.defect_mesh = source.tris.astype(np.int64), own.defects, own.defect_mesh
         self.avoid, self.avoiding = avoid, avoid is not None and len(avoid) > 0
         if self.avoiding:
-            self.defect_mesh = _defects_and(own.defect_mesh, avoid, 0.5 * AVOID_VOXELS * voxel, self.device)
+            self.defect_mesh = defects_and(own.defect_mesh, avoid, 0.5 * AVOID_VOXELS * voxel, self.device)
         # a shell with internal faces (overlapping or self-intersecting) is read a band away on both sides, so that
         # kept faces stay a band from where it crosses itself; a clean one half a voxel away (a band would reach
         # across its own concave creases)
@@ -323,6 +254,26 @@ class _Judge:
         self.turns = own.turns  # (the source triangles' longest edges, where found with the own part)
         self.strips = own.strips
         self.fused = self._fused() if fused else None
+        self.coplanar = self._coplanar_faces(source)  # (T,) bool or None: sample by sample with their planes
+        self.normals = None if self.coplanar is None else unit_normals(source.verts, self.tris)
+        self.flush = {}  # per other leaf: (its triangles flush with this leaf's, and this leaf's with its)
+
+    def _coplanar_faces(self, source) -> np.ndarray | None:
+        """(T,) bool the triangles in another leaf's plane (:func:`.coplanar.coplanar_triangles`) where the
+        expression can cross with both: faces that may be kept there once (a union's facing one way, a difference's
+        touching); None where there is none (faces that can only be internal there are judged as any)."""
+        meshes = [None if j == self.index else b for j, b in enumerate(self.bvhs)]
+        flagged = np.zeros(len(self.tris), dtype=bool)
+        for j, bits in enumerate(coplanar_triangles(source.verts, self.tris, meshes, self.voxel, self.device)):
+            for bit, tie in TIES if bits is not None else ():
+                others = [k for k in range(len(self.leaves)) if k not in (j, self.index)]
+                patterns = sign_patterns(len(others))
+                signs = [np.full(len(patterns), tie if k == j else -1, np.int8) for k in range(len(self.leaves))]
+                for col, k in enumerate(others):
+                    signs[k] = patterns[:, col]
+                if self._crossing(signs)[0].any():
+                    flagged |= (bits & bit) > 0
+        return flagged if flagged.any() else None
 
     def _fused(self) -> FusedJudge | None:
         """The fused path of this judge (:mod:`.judging`), where there are few enough other leaves for a table of
@@ -367,21 +318,44 @@ class _Judge:
             return fused_margins(self.fused, points, reach)
         return self._readings(points, reach)[0]
 
-    def _readings(self, points: np.ndarray, reach: float) -> tuple[np.ndarray, list]:
+    def _readings(self, points: np.ndarray, reach: float, normals=None) -> tuple[np.ndarray, list]:
         """The general path's reading at each point: ``(margin, signs)``, (N,) float32 as :meth:`margins` and per leaf
-        (N,) int8 its sign (-1 for the judged leaf itself)."""
+        (N,) int8 its sign (-1 for the judged leaf itself). With ``normals`` (N, 3) (the points' faces'), a mesh
+        leaf's triangles in a point's plane are read as :func:`.coplanar.coplanar_readings` reads them: no surface,
+        and where the point lies on one, the leaf's sign tied to the face's (+2 / -2)."""
         margin = np.full(len(points), reach, dtype=np.float32)
         signs = []
         for j, other in enumerate(self.leaves):
             if j == self.index:
                 signs.append(np.full(len(points), -1, np.int8))
                 continue
-            near, sign = _margin(other, self.bvhs[j], self.jumps[j], points, self.band, reach, self.device)
+            bvh, distance, tie = self.bvhs[j], None, None
+            if normals is not None and bvh is not None:
+                distance, tie = self._coplanar(j, points, normals, reach)
+            near, sign = _margin(other, bvh, self.jumps[j], points, self.band, reach, self.device, distance)
             margin = np.minimum(margin, near)
-            signs.append(sign)
+            signs.append(sign if tie is None else np.where(tie != 0, 2 * tie, sign).astype(np.int8))
         if self.defect_mesh is not None:
             margin = np.minimum(margin, mesh_distances(self.defect_mesh, points, reach, self.device))
         return margin, signs
+
+    def _coplanar(self, j: int, points, normals, reach: float) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`.coplanar.coplanar_readings` of leaf ``j``'s mesh at points of this leaf's faces (unit ``normals``);
+        where a point lies on that leaf's face, this leaf's own faces out of its plane and not flush with that leaf
+        count too: where this leaf's face ends and the other's goes on in the plane, there is a seam."""
+        own, bvh = self.bvhs[self.index], self.bvhs[j]
+        if j not in self.flush:  # (each mesh's triangles flush with the other's, found once a judge)
+            self.flush[j] = (
+                flush_triangles(bvh, own, self.voxel, self.device),
+                flush_triangles(own, bvh, self.voxel, self.device),
+            )
+        theirs, ours = self.flush[j]
+        distance, tie = coplanar_readings(bvh, own, theirs, points, normals, reach, self.voxel, self.device)
+        tied = np.flatnonzero(tie != 0)
+        if len(tied):
+            ends, _ = coplanar_readings(own, bvh, ours, points[tied], normals[tied], reach, self.voxel, self.device)
+            distance[tied] = np.minimum(distance[tied], ends)
+        return distance, tie
 
     def judge(self, verts, tris, parent, longest, turn, beyond: float | None = None):
         """Per triangle (pieces of original triangles ``parent``): kept, partly keepable, and flipped. A triangle is
@@ -391,7 +365,11 @@ class _Judge:
         is read, its distances up to ``beyond`` farther than the checks need; ``self.found`` keeps, per triangle, the
         least of them (``margin``) and whether its verdict is the others' signs' alone (``signs_only``: no sample
         where the expression crosses) or its own mesh's (``own_only``: a defect, or its field crossing it nowhere),
-        for :mod:`.verdicts`. In two launches where the fused path applies (:meth:`_fused`), else sample by sample."""
+        for :mod:`.verdicts`. In two launches where the fused path applies (:meth:`_fused`), else sample by sample;
+        triangles in another leaf's planes (:mod:`.coplanar`) sample by sample with their planes, apart."""
+        apart = np.zeros(len(tris), dtype=bool) if self.coplanar is None else self.coplanar[parent]
+        if apart.any():
+            return self._judge_apart(verts, tris, parent, longest, turn, beyond, apart)
         if self.fused is None:
             return self._judge_samples(verts, tris, parent, longest, 0.0 if beyond is None else beyond)
         kept, partly, flip, found = self.fused(verts, tris, parent, longest, turn, beyond)
@@ -399,21 +377,45 @@ class _Judge:
             self.found = found
         return kept, partly, flip
 
-    def _judge_samples(self, verts, tris, parent, longest, beyond: float):
-        """:meth:`judge` with every sample placed, each other leaf read at all of them, reduced per triangle."""
+    def _judge_apart(self, verts, tris, parent, longest, turn, beyond, apart: np.ndarray):
+        """:meth:`judge` of the triangles ``apart`` (in another leaf's planes) with their planes, of the rest as ever;
+        what is found for :mod:`.verdicts` of the ones apart lets none be reused (a margin of 0)."""
+        out = [np.zeros(len(tris), dtype=bool) for _ in range(3)]
+        found = {"margin": np.zeros(len(tris), np.float32), **{k: np.zeros(len(tris), bool) for k in FOUND_FLAGS}}
+        rest = np.flatnonzero(~apart)
+        if len(rest):
+            self.found = None
+            for k, verdict in enumerate(self.judge(verts, tris[rest], parent[rest], longest[rest], turn[rest], beyond)):
+                out[k][rest] = verdict
+            for key, value in (self.found or {}).items():
+                found[key][rest] = value
+        rows = np.flatnonzero(apart)
+        for k, verdict in enumerate(self._judge_samples(verts, tris[rows], parent[rows], longest[rows], 0.0, True)):
+            out[k][rows] = verdict
+        self.found = found
+        return tuple(out)
+
+    def _judge_samples(self, verts, tris, parent, longest, beyond: float, coplanar: bool = False):
+        """:meth:`judge` with every sample placed, each other leaf read at all of them, reduced per triangle; with
+        ``coplanar``, read with their faces' planes (each face its own corners: a corner reads by its face's plane)."""
+        if coplanar:
+            verts, tris = verts[tris].reshape(-1, 3), np.arange(3 * len(tris)).reshape(-1, 3)
         used, local = np.unique(tris, return_inverse=True)
         local = local.reshape(-1, 3)
         slack = self.slack_of(longest)
         spacing = slack * (SAMPLE_VOXELS / SLACK_VOXELS)
         points, first = triangle_samples(verts[used], local, spacing, self.device)
         reach = self.band + float(slack.max()) + self.spacing + beyond
-        margin, signs = self._readings(points, reach)
+        owner = np.r_[np.arange(len(used)) // 3, np.repeat(np.arange(len(tris)), np.diff(first))] if coplanar else None
+        margin, signs = self._readings(points, reach, None if owner is None else self.normals[parent][owner])
         same = ~self.defects[parent]
         for j, sign in enumerate(signs):
             if j != self.index:  # the other leaves' signs the same all over each triangle
                 low, minus_high = per_triangle_min(np.stack([sign, -sign], axis=1), local, len(used), first).T
                 same &= low == -minus_high
         crosses, flips = self._crossing(signs)
+        if coplanar:  # a face in an earlier leaf's plane, both crossing there: that leaf's to keep
+            margin = np.where(tied_to_earlier(signs, self.index) & crosses, 0.0, margin)
         bounds = np.stack([np.where(crosses, margin, -1.0), np.where(crosses, -margin, 1.0), margin], axis=1)
         least, most, nearest = per_triangle_min(bounds, local, len(used), first).T * np.array([[1.0], [-1.0], [1.0]])
         side, crossed, partly_crossed = self._own_sides(verts[used], local, points, first, parent)
@@ -459,11 +461,8 @@ class _Judge:
     def _crossing(self, signs: list) -> tuple[np.ndarray, np.ndarray]:
         """Per sample: whether the expression changes sign with this leaf's value (every other leaf's sign as it is
         there), and whether the result's inside is then on the leaf's outside."""
-        values = [s.astype(np.float32) for s in signs]
-        values[self.index] = np.full(len(values[0]), -self.tiny, np.float32)
-        inside = evaluate_signs(self.expression, values)
-        values[self.index] = np.full(len(values[0]), self.tiny, np.float32)
-        outside = evaluate_signs(self.expression, values)
+        inside = evaluate_signs(self.expression, tied_values(signs, self.index, -self.tiny))
+        outside = evaluate_signs(self.expression, tied_values(signs, self.index, self.tiny))
         crosses = (inside < 0) != (outside < 0)
         return crosses, crosses & (outside < 0)
 
@@ -592,6 +591,8 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
         found if found is not None else (np.zeros(len(tris), np.int8), np.zeros(len(tris), bool), np.zeros(len(tris)))
     )
     status, flip, margin = status.copy(), flip.copy(), margin.astype(np.float32)
+    apart = np.zeros(len(tris), dtype=bool) if judge.coplanar is None else judge.coplanar
+    status[apart] = UNKNOWN  # (in another leaf's planes: judged afresh, never recorded)
     todo = np.flatnonzero(status == UNKNOWN)
     # kept for the next boolean where it can reuse them: another leaf's moves bounded (read off its mesh)
     reusable = any(e for j, e in enumerate(bounded) if j != index)
@@ -612,5 +613,6 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     record = status.copy()
     dropped_by_distance = (status[todo] == DROPPED) & ~judge.found["signs_only"] & ~judge.found["own_only"]
     record[todo[dropped_by_distance]] = UNKNOWN
+    record[apart] = UNKNOWN
     verdicts.remember(unplaced, *setting, record, flip, margin, avoided)
     return status, flip

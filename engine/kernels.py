@@ -50,6 +50,7 @@ ENGINE_MODULES = (
     "redistancing",
     "fieldops",
     "keep",
+    "coplanar",
     "judging",
     "samples",
     "ownside",
