@@ -27,14 +27,14 @@ import bpy  # noqa: E402
 from bench import baselines  # noqa: E402
 from bench.addon import register  # noqa: E402
 from tests.metrics import exact_boolean, hausdorff, self_intersections  # noqa: E402
-from tests.support import cad_pairs, load_mesh, normalised, plate_and_bores, uv_sphere  # noqa: E402
+from tests.support import box_mesh, cad_pairs, load_mesh, normalised, plate_and_bores, uv_sphere  # noqa: E402
 
 RESOLUTION = 256
 
 
 def cases() -> dict:
-    """name -> (operation, a, b, closed): CAD pairs, a pair of scans, open scans with a ball, and a low-polygon mesh
-    that passes through itself with a ball."""
+    """name -> (operation, a, b, closed): CAD pairs, a pair of scans, open scans with a ball, a low-polygon mesh that
+    passes through itself with a ball, and pairs whose faces lie in each other's planes."""
     cad = cad_pairs()
     ball = normalised(uv_sphere(1.0), center=(0.2, 0.2, 0.2), diagonal=0.6)
     spot = normalised(load_mesh("spot.obj"))
@@ -50,6 +50,13 @@ def cases() -> dict:
         "bunny ∪ spot (open scan)": ("UNION", bunny, spot, False),
         "beetle ∪ ball (open scan)": ("UNION", beetle, ball, False),
         "Suzanne ∪ ball (crosses itself)": ("UNION", suzanne, ball, False),
+        "boxes side by side (coplanar)": (
+            "UNION",
+            box_mesh((1.0, 0.5, 0.5)),
+            box_mesh((1.0, 0.5, 0.5), (1.0, 0, 0)),
+            True,
+        ),
+        "rocker arm ∪ its copy (coplanar)": ("UNION", cad["rocker-arm - cube"][1], cad["rocker-arm - cube"][1], True),
     }
 
 
