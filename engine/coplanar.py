@@ -172,17 +172,18 @@ def _readings_kernel(
     flush: wp.array[wp.uint8],
     points: wp.array[wp.vec3],
     normals: wp.array[wp.vec3],
-    reach: float,
+    reaches: wp.array[wp.float32],
     eps: float,
     distance: wp.array[wp.float32],
     tie: wp.array[wp.int8],
 ):
     """Per point (on a face of unit normal ``normals``): the distance to the nearest triangle of ``mesh`` out of the
-    face's plane whose nearest point is not on a triangle of ``own`` in its plane (``reach`` where farther), and +1 /
+    face's plane whose nearest point is not on a triangle of ``own`` in its plane (its reach where farther), and +1 /
     -1 where it lies on a triangle in the face's plane facing the same / the other way (0 where on none)."""
     i = wp.tid()
     p = points[i]
     n = normals[i]
+    reach = reaches[i]
     pad = wp.vec3(reach, reach, reach)
     query = wp.mesh_query_aabb(mesh, p - pad, p + pad)
     best = reach
@@ -207,14 +208,16 @@ def _readings_kernel(
     tie[i] = wp.int8(side)
 
 
-def coplanar_readings(mesh, own, flush, points, normals, reach: float, voxel: float, device) -> tuple:
+def coplanar_readings(mesh, own, flush, points, normals, reach, voxel: float, device) -> tuple:
     """For each point (N, 3) on a face of unit normal ``normals`` (N, 3) of the mesh ``own`` (its BVH, or None): (N,)
     float32 its distance to ``mesh``'s nearest triangle out of the face's plane and not flush with ``own`` where
-    nearest (up to ``reach``; ``flush``: :func:`flush_triangles` of ``mesh`` on ``own``), and (N,) int8 its tie: +1
-    / -1 where it lies on a triangle of ``mesh`` in that plane facing the face's way / the other way, else 0."""
+    nearest (up to its ``reach``, (N,) or one for all: its candidates are the triangles in a box of that size;
+    ``flush``: :func:`flush_triangles` of ``mesh`` on ``own``), and (N,) int8 its tie: +1 / -1 where it lies on a
+    triangle of ``mesh`` in that plane facing the face's way / the other way, else 0."""
     n = len(points)
     pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
     nrm = wp.array(np.ascontiguousarray(normals, dtype=np.float32), dtype=wp.vec3, device=device)
+    reaches = wp.array(np.broadcast_to(np.asarray(reach, np.float32), (n,)).copy(), dtype=wp.float32, device=device)
     distance = wp.empty(n, dtype=wp.float32, device=device)
     tie = wp.empty(n, dtype=wp.int8, device=device)
     eps = COPLANAR_VOXELS * voxel
@@ -223,7 +226,7 @@ def coplanar_readings(mesh, own, flush, points, normals, reach: float, voxel: fl
         n,
         lambda lo, k: [
             *(mesh.id, wp.uint64(0) if own is None else own.id, flush, pts[lo : lo + k], nrm[lo : lo + k]),
-            *(float(reach), eps),
+            *(reaches[lo : lo + k], eps),
             *(distance[lo : lo + k], tie[lo : lo + k]),
         ],
         device,

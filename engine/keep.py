@@ -318,11 +318,12 @@ class _Judge:
             return fused_margins(self.fused, points, reach)
         return self._readings(points, reach)[0]
 
-    def _readings(self, points: np.ndarray, reach: float, normals=None) -> tuple[np.ndarray, list]:
+    def _readings(self, points: np.ndarray, reach: float, planes=None) -> tuple[np.ndarray, list]:
         """The general path's reading at each point: ``(margin, signs)``, (N,) float32 as :meth:`margins` and per leaf
-        (N,) int8 its sign (-1 for the judged leaf itself). With ``normals`` (N, 3) (the points' faces'), a mesh
-        leaf's triangles in a point's plane are read as :func:`.coplanar.coplanar_readings` reads them: no surface,
-        and where the point lies on one, the leaf's sign tied to the face's (+2 / -2)."""
+        (N,) int8 its sign (-1 for the judged leaf itself). With ``planes`` ((N, 3) the points' faces' normals, (N,)
+        how far each is read), a mesh leaf's triangles in a point's plane are read as
+        :func:`.coplanar.coplanar_readings` reads them: no surface, and where the point lies on one, the leaf's sign
+        tied to the face's (+2 / -2)."""
         margin = np.full(len(points), reach, dtype=np.float32)
         signs = []
         for j, other in enumerate(self.leaves):
@@ -330,8 +331,8 @@ class _Judge:
                 signs.append(np.full(len(points), -1, np.int8))
                 continue
             bvh, distance, tie = self.bvhs[j], None, None
-            if normals is not None and bvh is not None:
-                distance, tie = self._coplanar(j, points, normals, reach)
+            if planes is not None and bvh is not None:
+                distance, tie = self._coplanar(j, points, *planes)
             near, sign = _margin(other, bvh, self.jumps[j], points, self.band, reach, self.device, distance)
             margin = np.minimum(margin, near)
             signs.append(sign if tie is None else np.where(tie != 0, 2 * tie, sign).astype(np.int8))
@@ -339,7 +340,7 @@ class _Judge:
             margin = np.minimum(margin, mesh_distances(self.defect_mesh, points, reach, self.device))
         return margin, signs
 
-    def _coplanar(self, j: int, points, normals, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    def _coplanar(self, j: int, points, normals, reach) -> tuple[np.ndarray, np.ndarray]:
         """:func:`.coplanar.coplanar_readings` of leaf ``j``'s mesh at points of this leaf's faces (unit ``normals``);
         where a point lies on that leaf's face, this leaf's own faces out of its plane and not flush with that leaf
         count too: where this leaf's face ends and the other's goes on in the plane, there is a seam."""
@@ -353,7 +354,9 @@ class _Judge:
         distance, tie = coplanar_readings(bvh, own, theirs, points, normals, reach, self.voxel, self.device)
         tied = np.flatnonzero(tie != 0)
         if len(tied):
-            ends, _ = coplanar_readings(own, bvh, ours, points[tied], normals[tied], reach, self.voxel, self.device)
+            ends, _ = coplanar_readings(
+                own, bvh, ours, points[tied], normals[tied], reach[tied], self.voxel, self.device
+            )
             distance[tied] = np.minimum(distance[tied], ends)
         return distance, tie
 
@@ -406,8 +409,11 @@ class _Judge:
         spacing = slack * (SAMPLE_VOXELS / SLACK_VOXELS)
         points, first = triangle_samples(verts[used], local, spacing, self.device)
         reach = self.band + float(slack.max()) + self.spacing + beyond
-        owner = np.r_[np.arange(len(used)) // 3, np.repeat(np.arange(len(tris)), np.diff(first))] if coplanar else None
-        margin, signs = self._readings(points, reach, None if owner is None else self.normals[parent][owner])
+        planes = None
+        if coplanar:  # each sample its face's normal, and the reach its own face's checks need
+            owner = np.r_[np.arange(len(used)) // 3, np.repeat(np.arange(len(tris)), np.diff(first))]
+            planes = (self.normals[parent][owner], (self.band + slack + self.spacing + beyond)[owner])
+        margin, signs = self._readings(points, reach, planes)
         same = ~self.defects[parent]
         for j, sign in enumerate(signs):
             if j != self.index:  # the other leaves' signs the same all over each triangle
