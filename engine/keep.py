@@ -330,12 +330,18 @@ class _Judge:
             if j == self.index:
                 signs.append(np.full(len(points), -1, np.int8))
                 continue
-            bvh, distance, tie = self.bvhs[j], None, None
-            if planes is not None and bvh is not None:
-                distance, tie = self._coplanar(j, points, *planes)
-            near, sign = _margin(other, bvh, self.jumps[j], points, self.band, reach, self.device, distance)
+            bvh = self.bvhs[j]
+            if planes is None or bvh is None:
+                near, sign = _margin(other, bvh, self.jumps[j], points, self.band, reach, self.device)
+            else:  # where tied, its sign is the tie's: its field is read at the other points alone
+                near, tie = self._coplanar(j, points, *planes)
+                sign = (2 * tie).astype(np.int8)
+                rows = np.flatnonzero(tie == 0)
+                near[rows], sign[rows] = _margin(
+                    other, bvh, self.jumps[j], points[rows], self.band, reach, self.device, near[rows]
+                )
             margin = np.minimum(margin, near)
-            signs.append(sign if tie is None else np.where(tie != 0, 2 * tie, sign).astype(np.int8))
+            signs.append(sign)
         if self.defect_mesh is not None:
             margin = np.minimum(margin, mesh_distances(self.defect_mesh, points, reach, self.device))
         return margin, signs
