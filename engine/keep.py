@@ -261,7 +261,10 @@ class _Judge:
     def _coplanar_faces(self, source) -> np.ndarray | None:
         """(T,) bool the triangles in another leaf's plane (:func:`.coplanar.coplanar_triangles`) where the
         expression can cross with both: faces that may be kept there once (a union's facing one way, a difference's
-        touching); None where there is none (faces that can only be internal there are judged as any)."""
+        touching); None where there is none (faces that can only be internal there are judged as any), or where the
+        expression blends (a blend of two coinciding surfaces moves off both: none of their faces is the result's)."""
+        if widest_blend(self.expression) > 0.0:
+            return None
         meshes = [None if j == self.index else b for j, b in enumerate(self.bvhs)]
         flagged = np.zeros(len(self.tris), dtype=bool)
         for j, bits in enumerate(coplanar_triangles(source.verts, self.tris, meshes, self.voxel, self.device)):
