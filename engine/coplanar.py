@@ -41,6 +41,9 @@ from .parallel import launch_split
 COPLANAR_VOXELS = 1e-3
 # :func:`coplanar_triangles`' bits, and the sign a leaf tied so takes (:func:`tied_values`).
 TIED_SAME, TIED_OPPOSITE = 1, 2
+# A triangle's nearest point lying flush on the operand's own faces counts as flush where its surface this many voxels
+# about it does too, where it goes on (:func:`_flush_about`).
+FLUSH_STEP_VOXELS = 0.5
 TIES = ((TIED_SAME, 2), (TIED_OPPOSITE, -2))
 
 
@@ -73,6 +76,22 @@ def _on_own(own: wp.uint64, q: wp.vec3, m: wp.vec3, eps: float) -> bool:
             if wp.length(q - closest_on_triangle(q, a, b, c, edges, inward, lengths, n)) <= eps:
                 return True
     return False
+
+
+@wp.func
+def _flush_about(mesh: wp.uint64, own: wp.uint64, q: wp.vec3, m: wp.vec3, eps: float, step: float) -> bool:
+    """Whether ``mesh``'s surface about its point ``q`` (on a triangle of unit normal ``m``) lies flush on ``own``:
+    ``q`` does, and so does every point ``step`` from it in that plane along two axes where ``mesh`` goes on (one that
+    only touches ``own`` along an edge, or goes on past ``own``'s face there, is not flush)."""
+    if not _on_own(own, q, m, eps):
+        return False
+    e1 = wp.normalize(wp.cross(m, wp.where(wp.abs(m[0]) < 0.9, wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0))))
+    e2 = wp.cross(m, e1)
+    for k in range(4):
+        o = q + step * wp.where(k < 2, e1, e2) * wp.where(k % 2 == 0, 1.0, -1.0)
+        if _on_own(mesh, o, m, eps) and not _on_own(own, o, m, eps):
+            return False
+    return True
 
 
 @wp.kernel(enable_backward=False)
@@ -174,11 +193,12 @@ def _readings_kernel(
     normals: wp.array[wp.vec3],
     reaches: wp.array[wp.float32],
     eps: float,
+    step: float,
     distance: wp.array[wp.float32],
     tie: wp.array[wp.int8],
 ):
     """Per point (on a face of unit normal ``normals``): the distance to the nearest triangle of ``mesh`` out of the
-    face's plane whose nearest point is not on a triangle of ``own`` in its plane (its reach where farther), and +1 /
+    face's plane whose surface about its nearest point does not lie flush on ``own`` (its reach where farther), and +1 /
     -1 where it lies on a triangle in the face's plane facing the same / the other way (0 where on none)."""
     i = wp.tid()
     p = points[i]
@@ -202,7 +222,7 @@ def _readings_kernel(
         if plane:
             if d <= eps:
                 side = wp.where(wp.dot(m, n) >= 0.0, 1, -1)
-        elif d < best and not _on_own(own, q, m, eps):
+        elif d < best and not _flush_about(mesh, own, q, m, eps, step):
             best = d
     distance[i] = best
     tie[i] = wp.int8(side)
@@ -226,7 +246,7 @@ def coplanar_readings(mesh, own, flush, points, normals, reach, voxel: float, de
         n,
         lambda lo, k: [
             *(mesh.id, wp.uint64(0) if own is None else own.id, flush, pts[lo : lo + k], nrm[lo : lo + k]),
-            *(reaches[lo : lo + k], eps),
+            *(reaches[lo : lo + k], eps, FLUSH_STEP_VOXELS * voxel),
             *(distance[lo : lo + k], tie[lo : lo + k]),
         ],
         device,
