@@ -21,7 +21,8 @@ import weakref
 import numpy as np
 
 from .expression import leaves
-from .keep import BAND_VOXELS, leaf_bvh, mesh_leaf
+from .keep import BAND_VOXELS
+from .otherleaves import leaf_bvh, mesh_leaf
 from .sources import distances_to_each
 
 # A point is carried when it lies within this many voxels of its leaf's triangles (a kept face's corner: on them, up

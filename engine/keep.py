@@ -36,12 +36,13 @@ import warp as wp
 
 from . import verdicts
 from .coplanar import TIES, coplanar_readings, coplanar_triangles, flush_triangles, tied_to_earlier, tied_values
-from .defects import AXES, CROSSING_VOXELS, defects_and, own_defects
+from .defects import CROSSING_VOXELS, defects_and, own_defects
 from .expression import evaluate_signs, leaves, widest_blend
 from .judging import MAX_TABLE_LEAVES, FusedJudge, sign_patterns
-from .jumps import JumpSpheres, clear_of, jump_spheres
+from .jumps import clear_of
 from .ondemand import built_on_demand, own_sides
 from .orient import patch_flips
+from .otherleaves import leaf_bvh, leaf_jumps, leaf_margin, mesh_leaf
 from .ownside import THIN, TINY_VOXELS, outward, side_at
 from .parallel import run_tasks
 from .precut import cut_strips, fused_margins
@@ -74,64 +75,6 @@ AVOID_VOXELS = 1.0
 UNKNOWN, KEPT, DROPPED = 0, 1, 2
 # What a judge finds for :mod:`.verdicts` besides each triangle's margin.
 FOUND_FLAGS = ("signs_only", "own_only")
-
-
-def mesh_leaf(field) -> bool:
-    """Whether a leaf field's surface is its source mesh's triangles (a field built from a mesh that encloses a
-    volume, without a thickness): only such leaves have faces to keep."""
-    stats = field.stats
-    return (
-        "clean_mesh" in stats
-        and stats.get("thickness") is None
-        and not stats.get("flat", False)
-        and len(field.sources) == 1
-    )
-
-
-# ---- what the other leaves say ----
-def leaf_bvh(field, device):
-    """The BVH of a mesh leaf's triangles where the leaf is placed (None for any other leaf): its distances are read
-    off its mesh, exactly (its field's values are those distances, interpolated; an open mesh's sign may also jump
-    away from them, where :func:`leaf_jumps` says)."""
-    if not mesh_leaf(field):
-        return None
-    return next(iter(field.world_sources().values())).bvh(device)
-
-
-def _leaf_values(field, bvh, points: np.ndarray, reach: float, device, distance=None) -> np.ndarray:
-    """(N,) float32 how far the leaf's surface is from each point (up to ``reach``), negative inside it: from its
-    mesh's ``bvh`` (:func:`leaf_bvh`) where it has one (or the unsigned ``distance`` given), else from its field."""
-    values = field.sample(points, method="linear")  # a tenth of MLS's time: signs, and distances within the slack
-    if bvh is None:
-        return np.clip(values, -reach, reach).astype(np.float32)
-    distance = mesh_distances(bvh, points, reach, device) if distance is None else distance
-    return np.copysign(distance, values).astype(np.float32)
-
-
-def leaf_jumps(field, device):
-    """Where a leaf's field may jump (:mod:`.jumps`): None for a field that does not (a clean mesh's, a continuous
-    one), else the spheres about its mesh's defect edges (a leaf without a mesh: anywhere)."""
-    if field.stats.get("continuous", field.stats.get("clean_mesh", False)):
-        return None
-    if not mesh_leaf(field):
-        return JumpSpheres(None, device)
-    return JumpSpheres(jump_spheres(next(iter(field.world_sources().values()))), device)
-
-
-def _margin(field, bvh, jumps, points, band: float, reach: float, device, distance=None) -> tuple:
-    """Per sample: how far the leaf's surface is (up to ``reach``; or ``distance``), and the leaf's sign there. A
-    field with jumps (an open mesh's, across its holes; :func:`leaf_jumps`) counts as near (0) wherever its sign
-    changes a band away along an axis, read near its defects, and where its value (read off its field) is below two
-    bands."""
-    values = _leaf_values(field, bvh, points, reach, device, distance)
-    margin = np.abs(values)
-    if jumps is not None:
-        rows = np.flatnonzero(margin > band)  # (a value read off the field overstates a distance a little)
-        rows = rows[((margin[rows] < 2.0 * band) & (bvh is None)) | jumps.near(points[rows], 2.0 * band)]
-        around = (points[rows][:, None, :] + band * AXES[None]).reshape(-1, 3)
-        signs = np.sign(field.sample(around, method="linear")).reshape(-1, 6)
-        margin[rows[~(signs == np.sign(values[rows])[:, None]).all(axis=1)]] = 0.0
-    return margin, np.sign(values).astype(np.int8)
 
 
 # ---- the leaf's own part ----
@@ -335,12 +278,12 @@ class _Judge:
                 continue
             bvh = self.bvhs[j]
             if planes is None or bvh is None:
-                near, sign = _margin(other, bvh, self.jumps[j], points, self.band, reach, self.device)
+                near, sign = leaf_margin(other, bvh, self.jumps[j], points, self.band, reach, self.device)
             else:  # where tied, its sign is the tie's: its field is read at the other points alone
                 near, tie = self._coplanar(j, points, *planes)
                 sign = (2 * tie).astype(np.int8)
                 rows = np.flatnonzero(tie == 0)
-                near[rows], sign[rows] = _margin(
+                near[rows], sign[rows] = leaf_margin(
                     other, bvh, self.jumps[j], points[rows], self.band, reach, self.device, near[rows]
                 )
             margin = np.minimum(margin, near)
