@@ -33,8 +33,10 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .expression import evaluate_signs
 from .geometry import closest_on_triangle, triangle_frame
 from .parallel import launch_split
+from .samples import triangle_samples
 
 # A triangle lies in a face's plane where each of its corners is this many voxels or less off it (float rounding of
 # a placement is about 1e-7 of the coordinates; a voxel is about 4e-3 of the operands' size at /256).
@@ -194,12 +196,17 @@ def _readings_kernel(
     reaches: wp.array[wp.float32],
     eps: float,
     step: float,
+    earlier: int,
+    across: int,
     distance: wp.array[wp.float32],
     tie: wp.array[wp.int8],
+    live: wp.array[wp.uint8],
 ):
     """Per point (on a face of unit normal ``normals``): the distance to the nearest triangle of ``mesh`` out of the
-    face's plane whose surface about its nearest point does not lie flush on ``own`` (its reach where farther), and +1 /
-    -1 where it lies on a triangle in the face's plane facing the same / the other way (0 where on none)."""
+    face's plane whose surface about its nearest point does not lie flush on ``own`` (its reach where farther), +1 /
+    -1 where it lies on a triangle in the face's plane facing the same / the other way (0 where on none), and 1 where
+    such a triangle is not one ``flush`` skips (one inside the result: a face that only touches the point's along
+    an edge, and goes on out of the result)."""
     i = wp.tid()
     p = points[i]
     n = normals[i]
@@ -207,11 +214,13 @@ def _readings_kernel(
     pad = wp.vec3(reach, reach, reach)
     query = wp.mesh_query_aabb(mesh, p - pad, p + pad)
     best = reach
+    beside = reach  # (the nearest of its triangles in the plane that the point is not on)
     side = int(0)
+    alive = int(0)
     g = int(0)
     while wp.mesh_query_aabb_next(query, g):
         plane = _in_plane(mesh, g, p, n, eps)
-        if (plane and side != 0) or (not plane and flush[g] != wp.uint8(0)):
+        if (plane and alive != 0) or (not plane and flush[g] != wp.uint8(0)):
             continue  # (a tie found already; a triangle all flush with ``own``: no other surface)
         a = wp.mesh_get_point(mesh, 3 * g)
         b = wp.mesh_get_point(mesh, 3 * g + 1)
@@ -222,36 +231,50 @@ def _readings_kernel(
         if plane:
             if d <= eps:
                 side = wp.where(wp.dot(m, n) >= 0.0, 1, -1)
+                alive = wp.where(flush[g] == wp.uint8(0), 1, alive)
+            beside = wp.min(beside, d)
         elif d < best and not _flush_about(mesh, own, q, m, eps, step):
-            best = d
+            # (``across``: only where ``own``'s face in the point's plane goes on past it)
+            if across == 0 or _on_own(own, q + step * wp.normalize(q - p + 1.0e-30 * n), n, eps):
+                best = d
+    if earlier != 0 and side == 0:  # off an earlier operand's face in the plane: where it ends, so does what it keeps
+        best = wp.min(best, beside)
     distance[i] = best
     tie[i] = wp.int8(side)
+    live[i] = wp.uint8(alive)
 
 
-def coplanar_readings(mesh, own, flush, points, normals, reach, voxel: float, device) -> tuple:
+def coplanar_readings(mesh, own, flush, points, normals, reach, voxel: float, device, earlier=False, across=False):
     """For each point (N, 3) on a face of unit normal ``normals`` (N, 3) of the mesh ``own`` (its BVH, or None): (N,)
     float32 its distance to ``mesh``'s nearest triangle out of the face's plane and not flush with ``own`` where
     nearest (up to its ``reach``, (N,) or one for all: its candidates are the triangles in a box of that size;
-    ``flush``: :func:`flush_triangles` of ``mesh`` on ``own``), and (N,) int8 its tie: +1 / -1 where it lies on a
-    triangle of ``mesh`` in that plane facing the face's way / the other way, else 0."""
+    ``flush``: :func:`flush_triangles` of ``mesh`` on ``own``, with any other triangle to skip), (N,) int8 its tie:
+    +1 / -1 where it lies on a triangle of ``mesh`` in that plane facing the face's way / the other way, else 0, and
+    (N,) bool whether one such triangle is not one ``flush`` skips.
+    With ``earlier`` (``mesh`` is an operand before ``own``'s in the expression, whose faces are kept where both
+    coincide), its triangles in the plane that a point is off count as a surface: where that operand's face ends in
+    the plane, ``own``'s face takes over, a seam. With ``across``, a triangle out of the plane counts only where
+    ``own``'s face in the point's plane goes on past it (half a voxel on from its nearest point, away from the
+    point): where ``mesh``'s face ends and ``own``'s goes on."""
     n = len(points)
     pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
     nrm = wp.array(np.ascontiguousarray(normals, dtype=np.float32), dtype=wp.vec3, device=device)
     reaches = wp.array(np.broadcast_to(np.asarray(reach, np.float32), (n,)).copy(), dtype=wp.float32, device=device)
     distance = wp.empty(n, dtype=wp.float32, device=device)
     tie = wp.empty(n, dtype=wp.int8, device=device)
+    live = wp.empty(n, dtype=wp.uint8, device=device)
     eps = COPLANAR_VOXELS * voxel
     launch_split(
         _readings_kernel,
         n,
         lambda lo, k: [
             *(mesh.id, wp.uint64(0) if own is None else own.id, flush, pts[lo : lo + k], nrm[lo : lo + k]),
-            *(reaches[lo : lo + k], eps, FLUSH_STEP_VOXELS * voxel),
-            *(distance[lo : lo + k], tie[lo : lo + k]),
+            *(reaches[lo : lo + k], eps, FLUSH_STEP_VOXELS * voxel, int(earlier), int(across)),
+            *(distance[lo : lo + k], tie[lo : lo + k], live[lo : lo + k]),
         ],
         device,
     )
-    return distance.numpy(), tie.numpy()
+    return distance.numpy(), tie.numpy(), live.numpy() > 0
 
 
 def tied_values(signs: list, index: int, own: float) -> list:
@@ -275,4 +298,47 @@ def tied_to_earlier(signs: list, index: int) -> np.ndarray:
     out = np.zeros(len(signs[index]), dtype=bool)
     for s in signs[:index]:
         out |= np.abs(s) == 2
+    return out
+
+
+def source_verts_near(leaf, tris: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) the world corners of the rows ``tris`` of a mesh leaf's triangles."""
+    source = next(iter(leaf.world_sources().values()))
+    return source.verts[source.tris[np.asarray(tris)]] if len(tris) else np.zeros((0, 3, 3), np.float32)
+
+
+def internal_triangles(
+    leaves: list, j: int, expression, near: np.ndarray, reach: float, flush, voxel: float
+) -> np.ndarray:
+    """(G,) uint8 1 for leaf ``j``'s triangles within ``reach`` of the corners ``near`` (a judged leaf's faces in
+    other leaves' planes), not ``flush``, that lie inside the result, no part of them its surface (a box's end wall
+    inside the box beside it): at samples a voxel apart and a voxel in from their edges, every other leaf's sign is
+    clear (a quarter voxel off its surface) and the expression does not cross with ``j``'s. Such a wall is no
+    surface where it meets a face in the plane."""
+    source = next(iter(leaves[j].world_sources().values()))
+    corners = source.verts[source.tris]
+    out = np.zeros(len(source.tris), dtype=np.uint8)
+    if not len(near):
+        return out
+    lo, hi = near.min(axis=(0, 1)) - reach, near.max(axis=(0, 1)) + reach
+    rows = np.flatnonzero((flush == 0) & (corners.max(axis=1) >= lo).all(1) & (corners.min(axis=1) <= hi).all(1))
+    if not len(rows):
+        return out
+    device = leaves[j].device
+    points, first = triangle_samples(source.verts, source.tris[rows], np.full(len(rows), voxel), device)
+    owner = np.r_[np.repeat(np.arange(len(rows)), 3), np.repeat(np.arange(len(rows)), np.diff(first))]
+    points = np.concatenate([corners[rows].reshape(-1, 3), points[len(source.verts) :]])
+    towards = corners[rows].mean(axis=1)[owner] - points  # each sample a voxel in, towards its triangle's centre
+    length = np.linalg.norm(towards, axis=1, keepdims=True)
+    points = (points + towards * np.minimum(1.0, voxel / np.maximum(length, 1e-30))).astype(np.float32)
+    signs, clear = [], np.ones(len(points), dtype=bool)
+    for k, leaf in enumerate(leaves):
+        values = leaf.sample(points) if k != j else np.full(len(points), -1.0, np.float32)
+        clear &= (np.abs(values) > 0.25 * voxel) | (k == j)
+        signs.append(np.sign(values).astype(np.int8))
+    tiny = 1e-3 * voxel
+    inside = evaluate_signs(expression, tied_values(signs, j, -tiny))
+    outside = evaluate_signs(expression, tied_values(signs, j, tiny))
+    crosses = ((inside < 0) != (outside < 0)) | ~clear
+    out[rows] = np.bincount(owner, weights=crosses, minlength=len(rows)) == 0
     return out

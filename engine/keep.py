@@ -35,7 +35,16 @@ import numpy as np
 import warp as wp
 
 from . import verdicts
-from .coplanar import TIES, coplanar_readings, coplanar_triangles, flush_triangles, tied_to_earlier, tied_values
+from .coplanar import (
+    TIES,
+    coplanar_readings,
+    coplanar_triangles,
+    flush_triangles,
+    internal_triangles,
+    source_verts_near,
+    tied_to_earlier,
+    tied_values,
+)
 from .defects import CROSSING_VOXELS, defects_and, own_defects
 from .expression import evaluate_signs, leaves, widest_blend
 from .judging import MAX_TABLE_LEAVES, FusedJudge, sign_patterns
@@ -298,16 +307,22 @@ class _Judge:
         count too: where this leaf's face ends and the other's goes on in the plane, there is a seam."""
         own, bvh = self.bvhs[self.index], self.bvhs[j]
         if j not in self.flush:  # (each mesh's triangles flush with the other's, found once a judge)
-            self.flush[j] = (
-                flush_triangles(bvh, own, self.voxel, self.device),
-                flush_triangles(own, bvh, self.voxel, self.device),
+            theirs = flush_triangles(bvh, own, self.voxel, self.device)
+            near = source_verts_near(self.leaves[self.index], np.flatnonzero(self.coplanar))
+            inside = internal_triangles(
+                self.leaves, j, self.expression, near, 4 * self.band, theirs.numpy(), self.voxel
             )
+            theirs = wp.array(theirs.numpy() | inside, dtype=wp.uint8, device=self.device)
+            self.flush[j] = (theirs, flush_triangles(own, bvh, self.voxel, self.device))
         theirs, ours = self.flush[j]
-        distance, tie = coplanar_readings(bvh, own, theirs, points, normals, reach, self.voxel, self.device)
-        tied = np.flatnonzero(tie != 0)
+        earlier = j < self.index
+        distance, tie, live = coplanar_readings(
+            bvh, own, theirs, points, normals, reach, self.voxel, self.device, earlier
+        )
+        tied = np.flatnonzero(live)  # (tied to a face inside the result, as where it only touches: no seam of ours)
         if len(tied):
-            ends, _ = coplanar_readings(
-                own, bvh, ours, points[tied], normals[tied], reach[tied], self.voxel, self.device
+            ends, _, _ = coplanar_readings(
+                own, bvh, ours, points[tied], normals[tied], reach[tied], self.voxel, self.device, across=True
             )
             distance[tied] = np.minimum(distance[tied], ends)
         return distance, tie
@@ -367,11 +382,12 @@ class _Judge:
             planes = (self.normals[parent][owner], (self.band + slack + self.spacing + beyond)[owner])
         margin, signs = self._readings(points, reach, planes)
         same = ~self.defects[parent]
-        for j, sign in enumerate(signs):
-            if j != self.index:  # the other leaves' signs the same all over each triangle
-                low, minus_high = per_triangle_min(np.stack([sign, -sign], axis=1), local, len(used), first).T
-                same &= low == -minus_high
         crosses, flips = self._crossing(signs)
+        # the other leaves' signs the same all over each triangle; in other leaves' planes, where a face there begins
+        # (tied) and the wall it begins at is no surface (it lies inside), the way the expression crosses
+        for sign in [flips.astype(np.int8)] if coplanar else [s for j, s in enumerate(signs) if j != self.index]:
+            low, minus_high = per_triangle_min(np.stack([sign, -sign], axis=1), local, len(used), first).T
+            same &= low == -minus_high
         if coplanar:  # a face in an earlier leaf's plane, both crossing there: that leaf's to keep
             margin = np.where(tied_to_earlier(signs, self.index) & crosses, 0.0, margin)
         bounds = np.stack([np.where(crosses, margin, -1.0), np.where(crosses, -margin, 1.0), margin], axis=1)
