@@ -67,6 +67,16 @@ def _in_plane(mesh: wp.uint64, g: int, a: wp.vec3, n: wp.vec3, eps: float) -> bo
 
 
 @wp.func
+def _closest_on(mesh: wp.uint64, g: int, p: wp.vec3):
+    """(the point of triangle ``g`` of ``mesh`` closest to ``p``, the triangle's unit normal)."""
+    a = wp.mesh_get_point(mesh, 3 * g)
+    b = wp.mesh_get_point(mesh, 3 * g + 1)
+    c = wp.mesh_get_point(mesh, 3 * g + 2)
+    edges, inward, lengths, n = triangle_frame(a, b, c)
+    return closest_on_triangle(p, a, b, c, edges, inward, lengths, n), n
+
+
+@wp.func
 def _on_own(own: wp.uint64, q: wp.vec3, m: wp.vec3, eps: float) -> bool:
     """Whether point ``q`` (on a triangle of unit normal ``m``) lies on a triangle of ``own`` in that triangle's
     plane: there the two surfaces coincide (a wall of one operand flush with the other's), no other surface. (Any
@@ -78,11 +88,8 @@ def _on_own(own: wp.uint64, q: wp.vec3, m: wp.vec3, eps: float) -> bool:
     t = int(0)
     while wp.mesh_query_aabb_next(query, t):
         if _in_plane(own, t, q, m, eps):
-            a = wp.mesh_get_point(own, 3 * t)
-            b = wp.mesh_get_point(own, 3 * t + 1)
-            c = wp.mesh_get_point(own, 3 * t + 2)
-            edges, inward, lengths, n = triangle_frame(a, b, c)
-            if wp.length(q - closest_on_triangle(q, a, b, c, edges, inward, lengths, n)) <= eps:
+            on, _n = _closest_on(own, t, q)
+            if wp.length(q - on) <= eps:
                 return True
     return False
 
@@ -181,16 +188,16 @@ def _flush_kernel(mesh: wp.uint64, own: wp.uint64, eps: float, offset: int, out:
     out[wp.tid()] = wp.uint8(flush)
 
 
-def flush_triangles(mesh, own, voxel: float, device) -> wp.array:
+def flush_triangles(mesh, own, voxel: float, device) -> np.ndarray:
     """(G,) uint8 per triangle of ``mesh`` (a BVH): 1 where it lies flush on ``own``'s triangles in its plane
     (:func:`_flush_kernel`; none where ``own`` is None)."""
     count = mesh.indices.shape[0] // 3
     if own is None:
-        return wp.zeros(count, dtype=wp.uint8, device=device)
+        return np.zeros(count, dtype=np.uint8)
     out = wp.empty(count, dtype=wp.uint8, device=device)
     eps = COPLANAR_VOXELS * voxel
     launch_split(_flush_kernel, count, lambda lo, k: [mesh.id, own.id, eps, lo, out[lo : lo + k]], device)
-    return out
+    return out.numpy()
 
 
 @wp.kernel(enable_backward=False)
@@ -229,11 +236,7 @@ def _readings_kernel(
         plane = _in_plane(mesh, g, p, n, eps)
         if (plane and alive != 0) or (not plane and flush[g] != wp.uint8(0)):
             continue  # (a tie found already; a triangle all flush with ``own``: no other surface)
-        a = wp.mesh_get_point(mesh, 3 * g)
-        b = wp.mesh_get_point(mesh, 3 * g + 1)
-        c = wp.mesh_get_point(mesh, 3 * g + 2)
-        edges, inward, lengths, m = triangle_frame(a, b, c)
-        q = closest_on_triangle(p, a, b, c, edges, inward, lengths, m)
+        q, m = _closest_on(mesh, g, p)
         d = wp.length(p - q)
         if plane:
             if d <= eps:
@@ -255,15 +258,16 @@ def coplanar_readings(mesh, own, flush, points, normals, reach, voxel: float, de
     """For each point (N, 3) on a face of unit normal ``normals`` (N, 3) of the mesh ``own`` (its BVH, or None): (N,)
     float32 its distance to ``mesh``'s nearest triangle out of the face's plane and not flush with ``own`` where
     nearest (up to its ``reach``, (N,) or one for all: its candidates are the triangles in a box of that size;
-    ``flush``: :func:`flush_triangles` of ``mesh`` on ``own``, with any other triangle to skip), (N,) int8 its tie:
-    +1 / -1 where it lies on a triangle of ``mesh`` in that plane facing the face's way / the other way, else 0, and
-    (N,) bool whether one such triangle is not one ``flush`` skips.
+    ``flush``: (G,) uint8, numpy or Warp, :func:`flush_triangles` of ``mesh`` on ``own`` and any other triangle to
+    skip), (N,) int8 its tie: +1 / -1 where it lies on a triangle of ``mesh`` in that plane facing the face's way /
+    the other way, else 0, and (N,) bool whether one such triangle is not one ``flush`` skips.
     With ``earlier`` (``mesh`` is an operand before ``own``'s in the expression, whose faces are kept where both
     coincide), its triangles in the plane that a point is off count as a surface: where that operand's face ends in
     the plane, ``own``'s face takes over, a seam. With ``across``, a triangle out of the plane counts only where
     ``own``'s face in the point's plane goes on past it (half a voxel on from its nearest point, away from the
     point): where ``mesh``'s face ends and ``own``'s goes on."""
     n = len(points)
+    flush = wp.array(flush, dtype=wp.uint8, device=device) if isinstance(flush, np.ndarray) else flush
     pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
     nrm = wp.array(np.ascontiguousarray(normals, dtype=np.float32), dtype=wp.vec3, device=device)
     reaches = wp.array(np.broadcast_to(np.asarray(reach, np.float32), (n,)).copy(), dtype=wp.float32, device=device)

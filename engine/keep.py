@@ -306,14 +306,13 @@ class _Judge:
         where a point lies on that leaf's face, this leaf's own faces out of its plane and not flush with that leaf
         count too: where this leaf's face ends and the other's goes on in the plane, there is a seam."""
         own, bvh = self.bvhs[self.index], self.bvhs[j]
-        if j not in self.flush:  # (each mesh's triangles flush with the other's, found once a judge)
+        if j not in self.flush:  # (each mesh's triangles flush with the other's, found once a judge; and its own
+            # inside the result, skipped alike)
             theirs = flush_triangles(bvh, own, self.voxel, self.device)
             near = source_verts_near(self.leaves[self.index], np.flatnonzero(self.coplanar))
-            inside = internal_triangles(
-                self.leaves, j, self.expression, near, 4 * self.band, theirs.numpy(), self.voxel
-            )
-            theirs = wp.array(theirs.numpy() | inside, dtype=wp.uint8, device=self.device)
-            self.flush[j] = (theirs, flush_triangles(own, bvh, self.voxel, self.device))
+            theirs |= internal_triangles(self.leaves, j, self.expression, near, 4 * self.band, theirs, self.voxel)
+            ours = flush_triangles(own, bvh, self.voxel, self.device)
+            self.flush[j] = tuple(wp.array(x, dtype=wp.uint8, device=self.device) for x in (theirs, ours))
         theirs, ours = self.flush[j]
         earlier = j < self.index
         distance, tie, live = coplanar_readings(

@@ -294,14 +294,20 @@ def coarse_mls(
 
 
 @wp.func
+def _cell_centre(f: FieldArg, x: wp.vec3, s: float) -> wp.vec3:
+    """The centre of the cell of spacing ``s`` holding ``x`` (where a leaf of that spacing has its node)."""
+    rel = (x - f.origin) / s
+    return f.origin + s * wp.vec3(wp.floor(rel[0]) + 0.5, wp.floor(rel[1]) + 0.5, wp.floor(rel[2]) + 0.5)
+
+
+@wp.func
 def _on_leaf_side(f: FieldArg, x: wp.vec3, s: float, leaf_value: float, r: wp.vec4) -> wp.vec4:
     """``r`` with its value on its coarse leaf's side of the surface, at least as far as the Lipschitz bound from the
     leaf's value keeps it (a thousandth of a spacing where that bound reaches the surface): a boolean keeps every
     octet its surface crosses, so no surface lies in a coarser leaf. Its neighbours read past one (a trilinear read
     across a buried operand's surface) could put a value on the other side: an intersection of two boxes read 1.9
     voxels inside gave +0.48 voxel, and a union over it a sheet of faces inside the solid."""
-    rel = (x - f.origin) / s
-    centre = f.origin + s * wp.vec3(wp.floor(rel[0]) + 0.5, wp.floor(rel[1]) + 0.5, wp.floor(rel[2]) + 0.5)
+    centre = _cell_centre(f, x, s)
     side = wp.where(leaf_value < 0.0, -1.0, 1.0)
     least = wp.max(wp.abs(leaf_value) - f.lipschitz * wp.length(x - centre), 1.0e-3 * s)
     return wp.vec4(side * wp.max(side * r[0], least), r[1], r[2], r[3])
@@ -311,8 +317,7 @@ def _on_leaf_side(f: FieldArg, x: wp.vec3, s: float, leaf_value: float, r: wp.ve
 def _within_leaf(f: FieldArg, x: wp.vec3, s: float, leaf_value: float, r: wp.vec4) -> wp.vec4:
     """``r`` with its value held within what the field's Lipschitz bound allows from the value of the leaf of spacing
     ``s`` holding ``x`` (the bracket a boolean prunes with, :func:`.operands.node_bracket`)."""
-    rel = (x - f.origin) / s
-    centre = f.origin + s * wp.vec3(wp.floor(rel[0]) + 0.5, wp.floor(rel[1]) + 0.5, wp.floor(rel[2]) + 0.5)
+    centre = _cell_centre(f, x, s)
     reach = f.lipschitz * wp.length(x - centre)
     return wp.vec4(wp.clamp(r[0], leaf_value - reach, leaf_value + reach), r[1], r[2], r[3])
 

@@ -94,7 +94,7 @@ def test_coplanar_readings_skip_the_faces_in_a_points_plane_and_tie_its_sign():
     # read from a copy of the box: every wall lies flush on the copy's, so none is another surface
     copy = wp.Mesh(points=wp.array(verts + np.float32(1e-7), dtype=wp.vec3), indices=mesh.indices)
     flush = flush_triangles(mesh, copy, 0.01, "cpu")
-    assert flush.numpy().all()
+    assert flush.all()
     distance, tie, _ = coplanar_readings(mesh, copy, flush, points, normals, 5.0, 0.01, "cpu")
     np.testing.assert_array_equal(tie, [1, -1, 1, 0])
     np.testing.assert_allclose(distance, 5.0)
