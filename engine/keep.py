@@ -163,6 +163,20 @@ def internal_faces(leaf, voxel: float) -> bool:
     return bool((_own_part(leaf, next(iter(leaf.world_sources().values())), voxel, leaf.device).side == 0).any())
 
 
+def own_region(leaf, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where a (mesh) leaf's faces may be given up whatever the other leaves are, in its own frame: its defects as the
+    judge measures distances to them (crossings included) and its triangles that read internal, as ``(points (P, 3)
+    float32, tris (D, 3) int32)``."""
+    frame = leaf.in_frame()
+    source = next(iter(frame.world_sources().values()))
+    own = _own_part(frame, source, voxel / (1.0 if leaf.placement is None else leaf.placement.scale), leaf.device)
+    points, tris = source.verts.astype(np.float32), source.tris[own.side == 0].astype(np.int32)
+    if own.defect_mesh is None:
+        return points, tris
+    parts = own.defect_mesh.indices.numpy().reshape(-1, 3) + len(points)
+    return np.concatenate([points, own.defect_mesh.points.numpy()]), np.concatenate([tris, parts])
+
+
 def _placed_own(leaf, voxel: float, device) -> _Own | None:
     """A placed leaf's :class:`_Own` from its unplaced source's (kept with it from move to move): a placement turns,
     moves and scales it alike on every axis, so the sides and slivers are the same and the defects' mesh is placed.

@@ -354,7 +354,8 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
     demand, or a mesh's built whole; codes on the result's lattice: ``origin``, voxel ``h``), those the result keeps
     along its seams: within SEAM_REACH_VOXELS (and the ``blend``) of the ``other`` operand's surface
     (:func:`surface_within`), or about ``x``'s holes' caps (built first, :func:`partial_build`: the result's surface
-    there is its own). Elsewhere ``x`` may have octets built for another boolean (its refiner keeps them), at whose
+    there is its own), or about where a mesh of either that passes through itself may give its faces up
+(:func:`crosses_itself`). Elsewhere ``x`` may have octets built for another boolean (its refiner keeps them), at whose
     edges it is read off coarser nodes; along the seams it is built SEAM_READ_VOXELS farther (:func:`for_boolean`):
     the result's values there are the full boolean's."""
     codes = octets.numpy()
@@ -362,6 +363,11 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
         return octets
     centres = np.asarray(origin, dtype=np.float64) + (morton_decode_np(codes) + 0.5) * (2.0 * h)
     keep = surface_within(other, centres, SEAM_REACH_VOXELS * h + float(blend))
+    for f in (x, other):  # about where a mesh that passes through itself may give its faces up
+        near = _near_region(f, centres, SEAM_REACH_VOXELS * h + float(blend), h)
+        if near is None:
+            return octets
+        keep |= near
     caps = x.stats.get("hole_caps")
     if caps is not None:
         plan = {"voxel_size": x.voxel_size, "levels": x.levels}
@@ -373,13 +379,31 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
 
 # The source meshes a kept-faces judge found passing through themselves (:func:`.keep.internal_faces`): a boolean along
 # its seams builds every finest octet of such an operand, whose faces are given up about the crossings (only the voxel
-# surface is there, away from the seams).
+# surface is there, away from the seams), unless it knows where they may be given up (``_REGIONS``).
 _CROSSING: weakref.WeakSet = weakref.WeakSet()
+# Per such source mesh: where its faces may be given up whatever the other operand is (:func:`.keep.own_region`: its
+# defects, crossings included, and its faces that read internal), as ``(voxel, BVH)`` in its own frame, at the voxel
+# size it was judged at. A boolean along its seams at that voxel size keeps the finest octets about it too, of both
+# operands (:func:`seam_octets`), instead of all of them: the voxel surface reaches under every face given up there.
+_REGIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def crosses_itself(field) -> None:
-    """Mark ``field``'s mesh as passing through itself: booleans along their seams build all of its octets."""
+def crosses_itself(field, region: tuple | None = None, voxel: float | None = None) -> None:
+    """Mark ``field``'s mesh as passing through itself: booleans along their seams build all of its octets, or with
+    ``region`` (``(points, tris)`` in the field's own frame, judged at the world ``voxel``) only those about it."""
     _CROSSING.update(field.sources.values())
+    if region is None:
+        return
+    points, tris = region
+    scale, device = 1.0 if field.placement is None else field.placement.scale, field.device
+    mesh = None
+    if len(tris):
+        mesh = wp.Mesh(
+            points=wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device),
+            indices=wp.array(np.ascontiguousarray(tris, dtype=np.int32).reshape(-1), dtype=wp.int32, device=device),
+        )
+    for source in field.sources.values():
+        _REGIONS[source] = (float(voxel) / scale, mesh)
 
 
 def along_seams_only(field, beside) -> bool:
@@ -387,15 +411,36 @@ def along_seams_only(field, beside) -> bool:
     (``beside``: the other operand): one built on demand, or a mesh's built whole that is closed or whose only defects
     are holes (its kept faces are the rest of its surface on the result's), but not a mesh marked as passing through
     itself (:func:`crosses_itself`), nor a mesh's built whole beside one (whose join gives up kept faces about its
-    crossings, the other's too, farther from the seams than their voxel surface would reach)."""
-    if _crossing(field):
+    crossings, the other's too, farther from the seams than their voxel surface would reach), unless each such mesh's
+    region is known (its octets there kept too, :func:`seam_octets`)."""
+    if _crossing(field) and not _regioned(field):
         return False
     if built_on_demand(field):
         return True
     stats = field.stats
     plain = stats.get("thickness") is None and not stats.get("flat", False) and len(field.sources) == 1
-    holes_only = stats.get("clean_mesh", False) or "hole_caps" in stats
-    return bool(holes_only) and plain and getattr(field, "expression", None) is None and not _crossing(beside)
+    holes_only = stats.get("clean_mesh", False) or "hole_caps" in stats or _regioned(field)
+    beside_ok = not _crossing(beside) or _regioned(beside)
+    return bool(holes_only) and plain and getattr(field, "expression", None) is None and beside_ok
+
+
+def _regioned(field) -> bool:
+    return len(field.sources) == 1 and next(iter(field.sources.values())) in _REGIONS
+
+
+def _near_region(field, centres: np.ndarray, reach: float, h: float) -> np.ndarray | None:
+    """(N,) bool the world ``centres`` within ``reach`` of ``field``'s region (:data:`_REGIONS`), all False where its
+    mesh crosses itself nowhere; None where it does and its region is unknown at the voxel ``h`` (every octet kept)."""
+    if not _crossing(field):
+        return np.zeros(len(centres), dtype=bool)
+    scale = 1.0 if field.placement is None else field.placement.scale
+    found = _REGIONS.get(next(iter(field.sources.values()))) if len(field.sources) == 1 else None
+    if found is None or not np.isclose(found[0], h / scale, rtol=1e-6):
+        return None
+    if found[1] is None:
+        return np.zeros(len(centres), dtype=bool)
+    local = centres if field.placement is None else field.placement.to_local(centres)
+    return mesh_distances(found[1], local, reach / scale, field.device) < reach / scale
 
 
 def _crossing(field) -> bool:

@@ -4,7 +4,8 @@ A boolean of fields built on demand (or of meshes' fields built whole, closed or
 ``seams=True`` has its finest octets only where the operands' surfaces come near each other; its kept surface
 (:func:`.hybrid.kept_surface`) joins the kept faces to the voxel surface there, the operands read as built. An
 operand with internal faces (that passes through itself) is read at every sample: it is built whole first, and the
-voxel surface made along all of it. Where the voxel surface ends short of the kept faces (the judge gave up faces
+voxel surface made about where its faces may be given up too (its defects, crossings included, and its faces that
+read internal: :func:`.keep.own_region`). Where the voxel surface ends short of the kept faces (the judge gave up faces
 away from the seams), the whole result is made and joined instead.
 """
 
@@ -14,6 +15,7 @@ import numpy as np
 
 from .earlyjudge import crossing_leaves
 from .hybrid import kept_surface
+from .keep import own_region
 from .ondemand import as_built, built_leaves, crosses_itself, refined
 
 
@@ -25,16 +27,16 @@ def kept_along_seams(field, **options) -> dict:
     whole = lambda: _read_as_built(refined(field, view=True))  # noqa: E731
     # an operand with internal faces (it crosses itself, or reads so in a narrow groove) has its own field read at
     # every sample by the judge: built whole (its sides found here are kept with its mesh for the judge), and its
-    # faces are given up about where it crosses itself, away from the seams too: the voxel surface is made along all
-    # of it (marked so for the next booleans)
+    # faces are given up about where it crosses itself, away from the seams too: the voxel surface is made about
+    # there as well (marked so for the next booleans)
     early = getattr(field, "early_judge", None)  # (:mod:`.earlyjudge`: these steps taken beside the boolean)
     crossing = None if early is None else early.crossing()
     if crossing is None:
         crossing = crossing_leaves(field.expression, field.voxel_size, field.device)
     for leaf in crossing:
         refined(leaf)
-        crosses_itself(leaf)
-    if crossing:  # made again: the voxel surface along all of such an operand (its internal faces are given up)
+        crosses_itself(leaf, own_region(leaf, field.voxel_size), field.voxel_size)
+    if crossing:  # made again: the voxel surface also about where such an operand gives its faces up
         field = field.refiner.along_seams()
     seams = _read_as_built(as_built(field))
     surface = kept_surface(seams, **options, whole=whole)
