@@ -73,15 +73,18 @@ def _pairs_kernel(
     tris: wp.array2d[wp.int32],
     rows: wp.array[wp.int32],
     member: wp.array[wp.uint8],
+    which: wp.array[wp.int32],
     offset: int,
     room: int,
     count: wp.array[wp.int32],
     pairs: wp.array2d[wp.int32],
 ):
-    """Per triangle ``f``: how many triangles ``g`` of ``mesh`` (built on ``rows`` of ``tris``) sharing no corner with
-    it it crosses, ``g > f`` where ``f`` is one of them too (``member``) (``count[f]``), the first ``room`` of those
-    pairs written to rows ``f * room`` on of ``pairs`` (one slot range a thread: no atomics across split launches)."""
-    f = wp.tid() + offset
+    """Per triangle ``f = which[i]``: how many triangles ``g`` of ``mesh`` (built on ``rows`` of ``tris``) sharing no
+    corner with it it crosses, ``g > f`` where ``f`` is one of them too (``member``) (``count[i]``), the first ``room``
+    of those pairs written to rows ``i * room`` on of ``pairs`` (one slot range a thread: no atomics across split
+    launches)."""
+    i = wp.tid() + offset
+    f = which[i]
     lo = wp.min(wp.min(points[tris[f, 0]], points[tris[f, 1]]), points[tris[f, 2]])
     hi = wp.max(wp.max(points[tris[f, 0]], points[tris[f, 1]]), points[tris[f, 2]])
     query = wp.mesh_query_aabb(mesh, lo, hi)
@@ -92,16 +95,16 @@ def _pairs_kernel(
         if g == f or (member[f] != wp.uint8(0) and g < f):
             continue
         shared = False
-        for i in range(3):
-            for j in range(3):
-                if tris[f, i] == tris[g, j]:
+        for a in range(3):
+            for b in range(3):
+                if tris[f, a] == tris[g, b]:
                     shared = True
         if not shared and _crosses(points, tris, f, g):
             if found < room:
-                pairs[f * room + found, 0] = f
-                pairs[f * room + found, 1] = g
+                pairs[i * room + found, 0] = f
+                pairs[i * room + found, 1] = g
             found += 1
-    count[f] = found
+    count[i] = found
 
 
 def crossing_pairs(verts: np.ndarray, tris: np.ndarray, device, rows: np.ndarray | None = None) -> np.ndarray:
@@ -124,18 +127,33 @@ def crossing_pairs(verts: np.ndarray, tris: np.ndarray, device, rows: np.ndarray
         wp.array(rows.astype(np.int32), dtype=wp.int32, device=device),
         wp.array(member, dtype=wp.uint8, device=device),
     ]
-    count, pairs = _pairs_found(args, len(flat), PAIRS_ROOM, device)
-    if count.max() > PAIRS_ROOM:  # again, with room for every pair of the triangle crossing the most
-        count, pairs = _pairs_found(args, len(flat), int(count.max()), device)
-    room = pairs.shape[0] // len(flat)
-    return pairs.reshape(len(flat), room, 2)[np.arange(room) < count[:, None]].astype(np.int64)
+    # a triangle crossing more than its slots hold is searched again alone, with room for all of its pairs
+    which = np.arange(len(flat), dtype=np.int32)
+    count, pairs = _pairs_found(args, which, PAIRS_ROOM, device)
+    over = np.flatnonzero(count > PAIRS_ROOM)
+    found = _slots(which, count, pairs, PAIRS_ROOM)
+    if len(over):
+        again, more = _pairs_found(args, which[over], int(count[over].max()), device)
+        found = np.concatenate([found, _slots(which[over], again, more, int(count[over].max()))])
+        found = found[np.argsort(found[:, 0], kind="stable")]  # (in order of their first: each one's run as found)
+    return found.astype(np.int64)
 
 
-def _pairs_found(args: list, n: int, room: int, device) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_pairs_kernel` over ``n`` triangles with ``room`` slots each: per triangle its count, and the slots."""
+def _slots(which: np.ndarray, count: np.ndarray, pairs: np.ndarray, room: int) -> np.ndarray:
+    """The pairs of each triangle of ``which`` whose slots hold them all (``count`` at most ``room``)."""
+    rows = np.flatnonzero((count > 0) & (count <= room))
+    held = pairs.reshape(len(which), room, 2)[rows]
+    return held[np.arange(room)[None, :] < count[rows, None]]
+
+
+def _pairs_found(args: list, which: np.ndarray, room: int, device) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_pairs_kernel` over the triangles ``which`` with ``room`` slots each: per triangle its count, and the
+    slots."""
+    n = len(which)
+    which_wp = wp.array(np.ascontiguousarray(which, dtype=np.int32), dtype=wp.int32, device=device)
     count = wp.zeros(n, dtype=wp.int32, device=device)
     pairs = wp.empty((n * room, 2), dtype=wp.int32, device=device)
-    launch_split(_pairs_kernel, n, lambda lo, _n: [*args, lo, room, count, pairs], device)
+    launch_split(_pairs_kernel, n, lambda lo, _n: [*args, which_wp, lo, room, count, pairs], device)
     return count.numpy(), pairs.numpy()
 
 
