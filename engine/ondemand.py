@@ -351,13 +351,13 @@ def for_boolean(a, b, op: int, blend: float, *, seams: bool = False) -> tuple:
 
 def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> wp.array:
     """Of the result's finest ``octets`` that cover a boolean's operand ``x`` (:func:`along_seams_only`: built on
-        demand, or a mesh's built whole; codes on the result's lattice: ``origin``, voxel ``h``), those the result keeps
-        along its seams: within SEAM_REACH_VOXELS (and the ``blend``) of the ``other`` operand's surface
-        (:func:`surface_within`), or about ``x``'s holes' caps (built first, :func:`partial_build`: the result's surface
-        there is its own), or about where a mesh of either that passes through itself may give its faces up
-    (:func:`crosses_itself`). Elsewhere ``x`` may have octets built for another boolean (its refiner keeps them), at whose
-        edges it is read off coarser nodes; along the seams it is built SEAM_READ_VOXELS farther (:func:`for_boolean`):
-        the result's values there are the full boolean's."""
+    demand, or a mesh's built whole; codes on the result's lattice: ``origin``, voxel ``h``), those the result keeps
+    along its seams: within SEAM_REACH_VOXELS (and the ``blend``) of the ``other`` operand's surface
+    (:func:`surface_within`), or about ``x``'s holes' caps (built first, :func:`partial_build`: the result's surface
+    there is its own), or about where a mesh of either that passes through itself may give its faces up
+    (:func:`crosses_itself`). Elsewhere ``x`` may have octets built for another boolean (its refiner keeps them), at
+    whose edges it is read off coarser nodes; along the seams it is built SEAM_READ_VOXELS farther
+    (:func:`for_boolean`): the result's values there are the full boolean's."""
     codes = octets.numpy()
     if not len(codes):
         return octets
