@@ -22,7 +22,7 @@ from . import fim
 from .distance import finest_distances
 from .geometry import mesh_closest_point
 from .layout import level_layout, match_levels
-from .octree import find_key, morton_decode, morton_encode
+from .octree import find_key, morton_decode, morton_encode, node_center
 from .ondemand import refined
 from .parallel import launch_split
 from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, locate_leaf, node_source
@@ -113,6 +113,19 @@ def _interface_ratios_kernel(
             ratios[i] = dist[i] / v
 
 
+@wp.func
+def _old_side(old: FieldArg, j: int, spacing: float) -> float:
+    """Old node ``j``'s value, or where it has children (a parent's value is what its level read of a boolean's
+    operands, whose sign may be wrong a few voxels off the surface: a rocker arm chamfered with itself) the value of
+    the leaf that holds its centre: its side of the surface (a finest leaf's centre lies within a voxel of it, and a
+    node that stays a leaf lies farther than that from the surface)."""
+    v = old.values[j]
+    if j >= old.fine_count:
+        if old.child[j - old.fine_count] >= 0:
+            v = old.values[locate_leaf(old, node_center(old.origin, spacing, morton_decode(old.codes[j])))[0]]
+    return v
+
+
 @wp.kernel(enable_backward=False)
 def _sign_and_source_kernel(
     first: int,
@@ -120,19 +133,20 @@ def _sign_and_source_kernel(
     where: wp.array[wp.int32],
     interface: wp.array[wp.int32],
     scale: float,
+    spacing: wp.array[wp.float32],
     dist: wp.array[wp.float32],
     proj: wp.array[wp.vec3],
     values: wp.array[wp.float32],
     source: wp.array[wp.int32],
 ):
-    """Node ``first + tid`` (node ``where[i]`` of the old field) takes its new distance with its old value's sign
-    (its side of the surface), and the source id the old field has where its closest point lies. A finest node that
-    ends an edge the surface crosses keeps its old value times ``scale`` (one factor for all: where the surface
-    crosses an edge depends only on the ratio of its ends' values), so the surface stays where it was; its closest
-    point is on the surface all the same (what reads closest points takes them for surface points)."""
+    """Node ``first + tid`` (node ``where[i]`` of the old field, ``spacing[i]`` its level's) takes its new distance
+    with its old side's sign (:func:`_old_side`), and the source id the old field has where its closest point lies. A
+    finest node that ends an edge the surface crosses keeps its old value times ``scale`` (one factor for all: where
+    the surface crosses an edge depends only on the ratio of its ends' values), so the surface stays where it was;
+    its closest point is on the surface all the same (what reads closest points takes them for surface points)."""
     i = first + wp.tid()
     j = where[i]
-    v = old.values[j]
+    v = _old_side(old, j, spacing[i])
     values[i] = wp.where(v < 0.0, -dist[i], dist[i])
     if i < interface.shape[0]:
         if interface[i] == 1:
@@ -262,10 +276,12 @@ def redistance(field, *, method: str = "sweep", top_tolerance: float = LEAF_TOLE
     n, old = int(layout["offsets"][-1]), field.arg()
     interface, scale = _interface(field, layout, where, dist)
     values = wp.empty(n, dtype=wp.float32, device=device)
+    counts = np.diff(np.asarray(layout["offsets"], dtype=np.int64))
+    spacing = wp.array(np.repeat(h * 2.0 ** np.arange(len(counts)), counts).astype(np.float32), device=device)
     launch_split(
         _sign_and_source_kernel,
         n,
-        lambda s, _n: [s, old, where, interface, scale, dist, proj, values, source],
+        lambda s, _n: [s, old, where, interface, scale, spacing, dist, proj, values, source],
         device,
     )
     timings["signs"] = time.perf_counter() - t0

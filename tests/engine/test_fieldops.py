@@ -7,10 +7,11 @@ import pytest
 
 import engine
 from engine import fieldops
+from engine.octree import morton_decode_np
 from engine.quads import triangulate
 from tests.engine.test_field import _check_structure
-from tests.metrics import exact_boolean, hausdorff, mesh_volume, to_manifold
-from tests.support import box_mesh, is_watertight, uv_sphere
+from tests.metrics import exact_boolean, hausdorff, mesh_volume, to_manifold, unsigned_distance, winding_inside
+from tests.support import box_mesh, is_watertight, load_mesh, normalised, uv_sphere
 
 H = 0.04
 HALF = np.array([0.6, 0.5, 0.4])
@@ -105,6 +106,25 @@ def test_a_boolean_is_redistanced_before_its_offset():
     assert np.percentile(err, 99) <= 0.11 * H  # measured 0.038 voxel
     # the largest error is at the seam x = 0.6, where the union's marching-cubes surface bridges the crease
     assert err.max() <= 0.75 * H  # measured 0.47 voxel
+
+
+def test_a_chamfered_boolean_is_redistanced_on_the_side_its_leaves_read():
+    # a rocker arm chamfered with itself: some of the boolean's coarse nodes that have children hold a value of the
+    # wrong sign a few voxels off its surface (what their level read of the chamfer); redistanced, such a node that
+    # became a leaf kept that sign, and the offset's surface ran into it and left a hole
+    mesh = normalised(load_mesh("rocker-arm.obj"))
+    h = 1.0 / 128
+    (arm,) = engine.build_fields([mesh], voxel_size=h)
+    chamfered = engine.intersection(arm, arm, blend=16 * h, blend_mode="chamfer")
+    verts, tris = chamfered.to_mesh()
+    field = engine.redistance(chamfered)
+    for k in range(1, field.levels - 1):
+        rows = slice(int(field.level_offsets[k]), int(field.level_offsets[k + 1]))
+        centres = field.origin + (morton_decode_np(field.codes.numpy()[rows]) + 0.5) * h * 2**k
+        truth = np.where(winding_inside(verts, tris, centres), -1.0, 1.0) * unsigned_distance(verts, tris, centres)
+        wrong = (np.sign(field.values.numpy()[rows]) != np.sign(truth)) & (np.abs(truth) > h)
+        assert not wrong.any(), (k, int(wrong.sum()))  # 49 nodes more than a voxel off, before
+    assert is_watertight(engine.offset(chamfered, 1.9 * h).to_mesh()[1])  # 40 open edges before
 
 
 def test_a_far_offset_of_a_concave_shape_outside_its_domain_is_exact():
