@@ -211,7 +211,8 @@ def redistance(field, *, method: str = "sweep", top_tolerance: float = LEAF_TOLE
     The surface stays where it is: the finest nodes at the ends of edges it crosses keep their values up to one
     common factor (the median of distance over value there: 1 for a field of distances, and a field scaled as a whole
     comes back to distances), so ``to_mesh`` gives the same triangles; every other node takes its exact distance to
-    the surface with its old sign. The finest band is rebuilt around the surface (octets with a node within
+    the surface with its old sign (a node that had children, the sign of the leaf that held its centre). The finest
+    band is rebuilt around the surface (octets with a node within
     ``KEEP_BAND`` voxels of it), the coarser levels solved from it level by level.
 
     Args:
