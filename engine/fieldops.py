@@ -25,7 +25,7 @@ from .octree import code_bits, decode_codes, dense_level, morton_decode, node_ce
 from .ondemand import refined
 from .parallel import launch_split
 from .plan import check_budget, checked_wall, finite_number, plan_grown
-from .redistancing import KEEP_BAND, redistance
+from .redistancing import KEEP_BAND, redistance, surface_mesh
 from .sampling import (
     FieldArg,
     closest_stored_point,
@@ -41,6 +41,11 @@ from .sampling import (
 
 KIND_OFFSET, KIND_INSIDE, KIND_OUTSIDE, KIND_CENTER = 0, 1, 2, 3
 SIDES = {"inside": KIND_INSIDE, "outside": KIND_OUTSIDE, "center": KIND_CENTER}
+# An offset's distances through the field's closest points are held within this many voxels of the distance to its
+# surface's triangles (:func:`surface_distance`): those triangles (``to_mesh(sharp=False)``) cut its sharp edges by
+# up to about half a voxel, so only a walk that ended farther than that is bounded (a turned box grown, less itself
+# blended and grown again: cells read one to three voxels far, and the surface had holes; at a slack of 1, still one).
+MESH_SLACK_VOXELS = 0.5
 
 
 @wp.func
@@ -84,26 +89,51 @@ def side_of(f: FieldArg, x: wp.vec3) -> float:
 
 
 @wp.func
-def surface_distance(mesh: wp.uint64, f: FieldArg, signs: int, x: wp.vec3, reach: float, level: int):
+def surface_distance(
+    mesh: wp.uint64, f: FieldArg, signs: int, x: wp.vec3, reach: float, level: int, kind: int, a: float, near: float
+):
     """(S, closest point, found): with ``signs`` 1 the distance from ``x`` to the field ``f``'s surface through its
-    closest points (:func:`.sampling.closest_stored_point`), signed by :func:`side_of`; else the unsigned distance
-    to the mesh's triangles within ``reach`` (``reach`` and ``x`` itself when none is nearer)."""
+    closest points (:func:`.sampling.closest_stored_point`), signed by :func:`side_of`; where that puts ``x`` within
+    ``near`` of the new surface (``g`` of ``kind`` and ``a``), at most MESH_SLACK_VOXELS more than the distance to
+    the field's surface's triangles (``mesh``, where given: a walk through its closest points can end a voxel or two
+    far in a concave blend, and a band cell the new surface passes be culled). Else the unsigned distance to the
+    mesh's triangles within ``reach`` (``reach`` and ``x`` itself when none is nearer)."""
     if signs == 1:
-        # a node of the field's own at x, below its top level (whose closest points may be 5 % off): its closest point
-        node = locate_node(f, x, level)
-        if node[1] == level and level < f.levels - 1 and inside_domain(f, x):
-            s = level_spacing(f, level)
-            centre = node_center(f.origin, s, node_coords(f, node[0]))
-            if wp.length(centre - x) < 0.25 * s:
-                p = stored_proj(f, node[0], centre, s)
-                return wp.length(x - p) * side_of(f, x), p, True
-        d, p = closest_stored_point(f, x)
-        return d * side_of(f, x), p, True
+        d, p = _stored_distance(f, x, level)
+        side = side_of(f, x)
+        if mesh != wp.uint64(0) and wp.abs(level_value(kind, d * side, a)) <= near:
+            slack = MESH_SLACK_VOXELS * f.voxel_size
+            found, q = mesh_closest_point(mesh, x, wp.min(reach, d - slack))
+            if found and wp.length(x - q) + slack < d:
+                d = wp.length(x - q) + slack
+                p = q
+        return d * side, p, True
     found, p = mesh_closest_point(mesh, x, reach)
     d = reach
     if found:
         d = wp.length(x - p)
     return d, p, found
+
+
+@wp.func
+def _mesh_near(f: FieldArg) -> float:
+    """How near the new surface a node's or cell's ``g`` read through closest points must be to be bounded by the
+    mesh: the band, and how far a walk may end beyond that (2 voxels seen) and the slack."""
+    return (KEEP_BAND + 2.0 + MESH_SLACK_VOXELS) * f.voxel_size
+
+
+@wp.func
+def _stored_distance(f: FieldArg, x: wp.vec3, level: int):
+    """(distance, point): the nearest of the field's stored closest points to ``x`` (:func:`surface_distance`); at a
+    node of the field's own below its top level (whose closest points may be 5 % off), its closest point."""
+    node = locate_node(f, x, level)
+    if node[1] == level and level < f.levels - 1 and inside_domain(f, x):
+        s = level_spacing(f, level)
+        centre = node_center(f.origin, s, node_coords(f, node[0]))
+        if wp.length(centre - x) < 0.25 * s:
+            p = stored_proj(f, node[0], centre, s)
+            return wp.length(x - p), p
+    return closest_stored_point(f, x)
 
 
 @wp.kernel(enable_backward=False)
@@ -126,7 +156,7 @@ def _band_cells_kernel(
     band of the new surface: ``|g|`` at its centre within ``radius``."""
     t = first + wp.tid()
     x = node_center(origin, spacing, morton_decode(codes[t]))
-    s, p, found = surface_distance(mesh, f, signs, x, reach, level)
+    s, p, found = surface_distance(mesh, f, signs, x, reach, level, kind, a, radius + _mesh_near(f))
     keep[t] = wp.where(wp.abs(level_value(kind, s, a)) <= radius, 1, 0)
 
 
@@ -152,7 +182,7 @@ def _level_values_kernel(
     node, along the old closest point's normal) and the source id of the old surface there."""
     i = first + wp.tid()
     x = node_center(origin, spacing, coords[i])
-    s, p, found = surface_distance(mesh, f, signs, x, reach, level)
+    s, p, found = surface_distance(mesh, f, signs, x, reach, level, kind, a, _mesh_near(f))
     values[i] = level_value(kind, s, a)
     n = x - p
     ln = wp.length(n)
@@ -236,8 +266,9 @@ def levelset_field(
     given ``g`` (a point of the new surface as its closest point), then :func:`.redistancing.redistance`.
 
     Args:
-        mesh_id: ``wp.Mesh.id`` of the surface's triangles when ``base`` is None (``S`` their unsigned distance).
-        base: The field whose surface is offset or hollowed (``S`` through its closest points, signed by its values).
+        mesh_id: ``wp.Mesh.id`` of the surface's triangles (``S`` their unsigned distance when ``base`` is None, a
+            bound on it through ``base``'s closest points otherwise: :func:`surface_distance`; 0: none).
+        base: The field whose surface is offset or hollowed (``S`` signed by its values).
         kind, a: Which ``g`` (KIND_OFFSET, KIND_INSIDE, KIND_OUTSIDE, KIND_CENTER) and its distance or thickness.
         voxel_size, levels, origin, top_dims: The new field's lattice and domain (see :func:`plan_grown`).
         field_ids: Ids of the new field (its nodes' sources come from ``base`` where it has them, else the first).
@@ -369,16 +400,18 @@ def _operate(field, kind: int, a: float, grow: float, what: str):
     lo, hi = field.bounds
     # refused before any work: the field's domain holds its surface
     plan_grown(lo, hi, grow, voxel_size=h, levels=field.levels, nodes=_grown_nodes(field, grow), what=what)
+    surface = surface_mesh(field)  # (the same surface after redistancing)
     if not field.stats.get("surface_points", False):
-        field = redistance(field)  # closest points on its own surface
+        field = redistance(field, surface=surface)  # closest points on its own surface
     if field.is_empty:  # nothing to offset or hollow: nothing comes out
         return field
     verts_lo, verts_hi = _surface_box(field)
     origin, top_dims, levels = plan_grown(
         verts_lo, verts_hi, grow, voxel_size=h, levels=field.levels, nodes=_grown_nodes(field, grow), what=what
     )
+    mesh = surface[0]  # its surface's triangles bound the distances its closest points give (:func:`surface_distance`)
     return levelset_field(
-        0,
+        0 if mesh is None else mesh.id,
         field,
         kind,
         a,

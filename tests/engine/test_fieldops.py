@@ -127,6 +127,30 @@ def test_a_chamfered_boolean_is_redistanced_on_the_side_its_leaves_read():
     assert is_watertight(engine.offset(chamfered, 1.9 * h).to_mesh()[1])  # 40 open edges before
 
 
+def test_an_offset_of_a_blended_shell_is_closed():
+    # a turned box grown by 3.3 voxels, less the box blended by 4 and grown again by 4.6: in the shell's concave
+    # blend, walks through its closest points ended a voxel or two far, a band cell the new surface passes was culled
+    # and a node read outside what it lies inside (3 open edges); the distances are now held near its triangles'
+    corners = np.float32(
+        [
+            [-0.141327, 0.750933, 0.434358],
+            [-0.335364, 0.566085, 0.202186],
+            [0.277618, 0.582361, 0.218439],
+            [0.083581, 0.397513, -0.013733],
+            [-0.142834, 1.021514, 0.22019],
+            [-0.33687, 0.836666, -0.011982],
+            [0.276111, 0.852942, 0.00427],
+            [0.082075, 0.668094, -0.227902],
+        ]
+    )
+    tris = np.int32([[3, 2, 0], [1, 3, 0], [4, 6, 7], [4, 7, 5], [5, 1, 0], [4, 5, 0], [2, 3, 7], [2, 7, 6]])
+    tris = np.concatenate([tris, np.int32([[6, 4, 0], [2, 6, 0], [1, 5, 7], [1, 7, 3]])])
+    h = 0.0112
+    box = engine.build_field(corners, tris, voxel_size=h)
+    shell = engine.difference(engine.offset(box, 3.3 * h), box, blend=4.0 * h)
+    assert is_watertight(engine.offset(shell, 4.6 * h).to_mesh()[1])
+
+
 def test_a_far_offset_of_a_concave_shape_outside_its_domain_is_exact():
     # 93 % of the new surface lies outside the union's domain, where the nearest of the union's closest points is
     # looked for from the domain's border: its foot may lie as far aside as the point lies out
