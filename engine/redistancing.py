@@ -154,6 +154,25 @@ def _sign_and_source_kernel(
     source[i] = node_source(old, locate_leaf(old, clamp_to_domain(old, proj[i]))[0])
 
 
+def _signed(field, layout: dict, where, found: tuple):
+    """The new layout's values (its distances ``found``: ``(dist, proj, source)``, ``source`` set in place) signed as
+    the old ``field`` has them where ``where`` matches its nodes (:func:`_sign_and_source_kernel`), and the scale of
+    the values kept at the surface's edges."""
+    dist, proj, source = found
+    n, old, h = int(layout["offsets"][-1]), field.arg(), field.voxel_size
+    interface, scale = _interface(field, layout, where, dist)
+    values = wp.empty(n, dtype=wp.float32, device=field.device)
+    counts = np.diff(np.asarray(layout["offsets"], dtype=np.int64))
+    spacing = wp.array(np.repeat(h * 2.0 ** np.arange(len(counts)), counts).astype(np.float32), device=field.device)
+    launch_split(
+        _sign_and_source_kernel,
+        n,
+        lambda s, _n: [s, old, where, interface, scale, spacing, dist, proj, values, source],
+        field.device,
+    )
+    return values, scale
+
+
 def surface_mesh(field):
     """``wp.Mesh`` (a BVH, no winding numbers) of the field's ``to_mesh`` surface, and its (V, 3) float32 vertices
     and (T, 3) int32 triangles; None for the mesh when the field has no surface."""
@@ -247,7 +266,7 @@ def redistance(field, *, method: str = "sweep", top_tolerance: float = LEAF_TOLE
     timings["surface"] = time.perf_counter() - t0
     if mesh is None:
         return field
-    device, h, levels = field.device, field.voxel_size, field.levels
+    h, levels = field.voxel_size, field.levels
     t0 = time.perf_counter()
     layout = _near_band(field, mesh, timings)
     where = match_levels(layout["codes"], layout["offsets"], field)
@@ -275,17 +294,7 @@ def redistance(field, *, method: str = "sweep", top_tolerance: float = LEAF_TOLE
             level_solver=None if method == "fim" else functools.partial(solve_level, sparse=SPARSE_SOLVERS[method]),
         )
     t0 = time.perf_counter()
-    n, old = int(layout["offsets"][-1]), field.arg()
-    interface, scale = _interface(field, layout, where, dist)
-    values = wp.empty(n, dtype=wp.float32, device=device)
-    counts = np.diff(np.asarray(layout["offsets"], dtype=np.int64))
-    spacing = wp.array(np.repeat(h * 2.0 ** np.arange(len(counts)), counts).astype(np.float32), device=device)
-    launch_split(
-        _sign_and_source_kernel,
-        n,
-        lambda s, _n: [s, old, where, interface, scale, spacing, dist, proj, values, source],
-        device,
-    )
+    values, scale = _signed(field, layout, where, (dist, proj, source))
     timings["signs"] = time.perf_counter() - t0
     return type(field).from_layout(
         layout,
