@@ -231,8 +231,8 @@ def redistance(field, *, method: str = "sweep", top_tolerance: float = LEAF_TOLE
     common factor (the median of distance over value there: 1 for a field of distances, and a field scaled as a whole
     comes back to distances), so ``to_mesh`` gives the same triangles; every other node takes its exact distance to
     the surface with its old sign (a node that had children, the sign of the leaf that held its centre). The finest
-    band is rebuilt around the surface (octets with a node within
-    ``KEEP_BAND`` voxels of it), the coarser levels solved from it level by level.
+    band is rebuilt around the surface (octets with a node within ``KEEP_BAND`` voxels of it), the coarser levels
+    solved from it level by level.
 
     Args:
         field: AdaptiveField, e.g. a boolean or blend result whose values are bounds rather than distances.
