@@ -283,18 +283,8 @@ def levelset_field(
     f_arg = base.arg() if signs else _empty_field_arg(device)
     octets = None
     if levels > 1:
-        octets = band_octets(
-            mesh_id,
-            f_arg,
-            signs,
-            kind,
-            a,
-            origin=origin,
-            top_dims=top_dims,
-            levels=levels,
-            voxel_size=voxel_size,
-            device=device,
-        )
+        grid = {"origin": origin, "top_dims": top_dims, "levels": levels, "voxel_size": voxel_size, "device": device}
+        octets = band_octets(mesh_id, f_arg, signs, kind, a, **grid)
         octets = sort_unique(octets, end_bit=3 * code_bits(np.asarray(top_dims) * 2 ** (levels - 2)))
     timings["band"] = time.perf_counter() - t0
     t0 = time.perf_counter()
