@@ -94,14 +94,14 @@ def surface_distance(
 ):
     """(S, closest point, found): with ``signs`` 1 the distance from ``x`` to the field ``f``'s surface through its
     closest points (:func:`.sampling.closest_stored_point`), signed by :func:`side_of`; where that puts ``x`` within
-    ``near`` of the new surface (``g`` of ``kind`` and ``a``), at most MESH_SLACK_VOXELS more than the distance to
-    the field's surface's triangles (``mesh``, where given: a walk through its closest points can end a voxel or two
-    far in a concave blend, and a band cell the new surface passes be culled). Else the unsigned distance to the
-    mesh's triangles within ``reach`` (``reach`` and ``x`` itself when none is nearer)."""
+    ``near`` of the new surface (``g`` of ``kind`` and ``a``) through a walk (not a node's own closest point), at most
+    MESH_SLACK_VOXELS more than the distance to the field's surface's triangles (``mesh``, where given: a walk can
+    end a voxel or two far in a concave blend, and a band cell the new surface passes be culled). Else the unsigned
+    distance to the mesh's triangles within ``reach`` (``reach`` and ``x`` itself when none is nearer)."""
     if signs == 1:
-        d, p = _stored_distance(f, x, level)
+        d, p, exact = _stored_distance(f, x, level)
         side = side_of(f, x)
-        if mesh != wp.uint64(0) and wp.abs(level_value(kind, d * side, a)) <= near:
+        if mesh != wp.uint64(0) and not exact and wp.abs(level_value(kind, d * side, a)) <= near:
             slack = MESH_SLACK_VOXELS * f.voxel_size
             found, q = mesh_closest_point(mesh, x, wp.min(reach, d - slack))
             if found and wp.length(x - q) + slack < d:
@@ -124,16 +124,18 @@ def _mesh_near(f: FieldArg) -> float:
 
 @wp.func
 def _stored_distance(f: FieldArg, x: wp.vec3, level: int):
-    """(distance, point): the nearest of the field's stored closest points to ``x`` (:func:`surface_distance`); at a
-    node of the field's own below its top level (whose closest points may be 5 % off), its closest point."""
+    """(distance, point, exact): the nearest of the field's stored closest points to ``x`` (:func:`surface_distance`);
+    at a node of the field's own below its top level (whose closest points may be 5 % off), its closest point
+    (``exact``)."""
     node = locate_node(f, x, level)
     if node[1] == level and level < f.levels - 1 and inside_domain(f, x):
         s = level_spacing(f, level)
         centre = node_center(f.origin, s, node_coords(f, node[0]))
         if wp.length(centre - x) < 0.25 * s:
             p = stored_proj(f, node[0], centre, s)
-            return wp.length(x - p), p
-    return closest_stored_point(f, x)
+            return wp.length(x - p), p, True
+    d, p = closest_stored_point(f, x)
+    return d, p, False
 
 
 @wp.kernel(enable_backward=False)
