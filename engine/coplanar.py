@@ -54,6 +54,8 @@ TIED_SAME, TIED_OPPOSITE = 1, 2
 # about it does too, where it goes on (:func:`_flush_about`).
 FLUSH_STEP_VOXELS = 0.5
 TIES = ((TIED_SAME, 2), (TIED_OPPOSITE, -2))
+# :func:`internal_triangles` reads samples this many voxels apart before those a voxel apart.
+COARSE_SAMPLES = 8.0
 
 
 @wp.func
@@ -325,7 +327,9 @@ def internal_triangles(
     other leaves' planes), not ``flush``, that lie inside the result, no part of them its surface (a box's end wall
     inside the box beside it): at samples a voxel apart and a voxel in from their edges, every other leaf's sign is
     clear (a quarter voxel off its surface) and the expression does not cross with ``j``'s. Such a wall is no
-    surface where it meets a face in the plane."""
+    surface where it meets a face in the plane. Samples ``COARSE_SAMPLES`` voxels apart are read first: most
+    candidates are faces of the result, and one crossing sample tells (two boxes side by side: 34 k samples a voxel
+    apart, 100 ms, against some hundreds)."""
     source = next(iter(leaves[j].world_sources().values()))
     corners = source.verts[source.tris]
     out = np.zeros(len(source.tris), dtype=np.uint8)
@@ -333,13 +337,25 @@ def internal_triangles(
         return out
     lo, hi = near.min(axis=(0, 1)) - reach, near.max(axis=(0, 1)) + reach
     rows = np.flatnonzero((flush == 0) & (corners.max(axis=1) >= lo).all(1) & (corners.min(axis=1) <= hi).all(1))
-    if not len(rows):
-        return out
+    for spacing in (COARSE_SAMPLES * voxel, voxel):
+        if not len(rows):
+            break
+        crossed = _crossed_somewhere(leaves, j, expression, source, rows, spacing, voxel)
+        rows = rows[~crossed]
+    out[rows] = 1
+    return out
+
+
+def _crossed_somewhere(leaves: list, j: int, expression, source, rows, spacing: float, voxel: float) -> np.ndarray:
+    """(R,) bool per triangle ``rows`` of leaf ``j``'s world ``source``: at one of its samples ``spacing`` apart and
+    a voxel in from its edges, a leaf's value lies within a quarter voxel of its surface or the expression crosses
+    with ``j``'s (see :func:`internal_triangles`)."""
+    corners = source.verts[source.tris[rows]]
     device = leaves[j].device
-    points, first = triangle_samples(source.verts, source.tris[rows], np.full(len(rows), voxel), device)
+    points, first = triangle_samples(source.verts, source.tris[rows], np.full(len(rows), spacing), device)
     owner = np.r_[np.repeat(np.arange(len(rows)), 3), np.repeat(np.arange(len(rows)), np.diff(first))]
-    points = np.concatenate([corners[rows].reshape(-1, 3), points[len(source.verts) :]])
-    towards = corners[rows].mean(axis=1)[owner] - points  # each sample a voxel in, towards its triangle's centre
+    points = np.concatenate([corners.reshape(-1, 3), points[len(source.verts) :]])
+    towards = corners.mean(axis=1)[owner] - points  # each sample a voxel in, towards its triangle's centre
     length = np.linalg.norm(towards, axis=1, keepdims=True)
     points = (points + towards * np.minimum(1.0, voxel / np.maximum(length, 1e-30))).astype(np.float32)
     signs, clear = [], np.ones(len(points), dtype=bool)
@@ -351,5 +367,4 @@ def internal_triangles(
     inside = evaluate_signs(expression, tied_values(signs, j, -tiny))
     outside = evaluate_signs(expression, tied_values(signs, j, tiny))
     crosses = ((inside < 0) != (outside < 0)) | ~clear
-    out[rows] = np.bincount(owner, weights=crosses, minlength=len(rows)) == 0
-    return out
+    return np.bincount(owner, weights=crosses, minlength=len(rows)) > 0
