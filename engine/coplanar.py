@@ -205,6 +205,7 @@ def flush_triangles(mesh, own, voxel: float, device) -> np.ndarray:
 @wp.kernel(enable_backward=False)
 def _readings_kernel(
     mesh: wp.uint64,
+    surface: wp.uint64,
     own: wp.uint64,
     flush: wp.array[wp.uint8],
     points: wp.array[wp.vec3],
@@ -222,41 +223,65 @@ def _readings_kernel(
     face's plane whose surface about its nearest point does not lie flush on ``own`` (its reach where farther), +1 /
     -1 where it lies on a triangle in the face's plane facing the same / the other way (0 where on none), and 1 where
     such a triangle is not one ``flush`` skips (one inside the result: a face that only touches the point's along
-    an edge, and goes on out of the result)."""
+    an edge, and goes on out of the result). ``surface``: ``mesh``'s triangles that ``flush`` does not skip (0:
+    none), searched over the reach; the triangles the point lies on are looked for in a box of ``eps`` about it."""
     i = wp.tid()
     p = points[i]
     n = normals[i]
     reach = reaches[i]
-    pad = wp.vec3(reach, reach, reach)
-    query = wp.mesh_query_aabb(mesh, p - pad, p + pad)
-    best = reach
-    beside = reach  # (the nearest of its triangles in the plane that the point is not on)
     side = int(0)
     alive = int(0)
+    tight = wp.vec3(eps, eps, eps)
+    on = wp.mesh_query_aabb(mesh, p - tight, p + tight)
     g = int(0)
-    while wp.mesh_query_aabb_next(query, g):
-        plane = _in_plane(mesh, g, p, n, eps)
-        if (plane and alive != 0) or (not plane and flush[g] != wp.uint8(0)):
-            continue  # (a tie found already; a triangle all flush with ``own``: no other surface)
+    while wp.mesh_query_aabb_next(on, g):
+        if alive != 0 or (side != 0 and flush[g] != wp.uint8(0)) or not _in_plane(mesh, g, p, n, eps):
+            continue  # (a tie found already, or one that this one cannot make live)
         q, m = _closest_on(mesh, g, p)
-        d = wp.length(p - q)
-        if plane:
-            if d <= eps:
-                side = wp.where(wp.dot(m, n) >= 0.0, 1, -1)
-                alive = wp.where(flush[g] == wp.uint8(0), 1, alive)
-            beside = wp.min(beside, d)
-        elif d < best and not _flush_about(mesh, own, q, m, eps, step):
-            # (``across``: only where ``own``'s face in the point's plane goes on past it)
-            if across == 0 or _on_own(own, q + step * wp.normalize(q - p + 1.0e-30 * n), n, eps):
-                best = d
+        if wp.length(p - q) <= eps:
+            side = wp.where(wp.dot(m, n) >= 0.0, 1, -1)
+            alive = wp.where(flush[g] == wp.uint8(0), 1, alive)
+    best = reach
+    pad = wp.vec3(reach, reach, reach)
+    if surface != wp.uint64(0):
+        near = wp.mesh_query_aabb(surface, p - pad, p + pad)
+        h = int(0)
+        while wp.mesh_query_aabb_next(near, h):
+            if _in_plane(surface, h, p, n, eps):
+                continue
+            q, m = _closest_on(surface, h, p)
+            d = wp.length(p - q)
+            if d < best and not _flush_about(mesh, own, q, m, eps, step):
+                # (``across``: only where ``own``'s face in the point's plane goes on past it)
+                if across == 0 or _on_own(own, q + step * wp.normalize(q - p + 1.0e-30 * n), n, eps):
+                    best = d
     if earlier != 0 and side == 0:  # off an earlier operand's face in the plane: where it ends, so does what it keeps
-        best = wp.min(best, beside)
+        beside = wp.mesh_query_aabb(mesh, p - pad, p + pad)
+        f = int(0)
+        while wp.mesh_query_aabb_next(beside, f):
+            if _in_plane(mesh, f, p, n, eps):
+                e, _m = _closest_on(mesh, f, p)
+                best = wp.min(best, wp.length(p - e))
     distance[i] = best
     tie[i] = wp.int8(side)
     live[i] = wp.uint8(alive)
 
 
-def coplanar_readings(mesh, own, flush, points, normals, reach, voxel: float, device, earlier=False, across=False):
+def unflushed(mesh, flush: np.ndarray, device):
+    """``mesh``'s triangles that ``flush`` ((G,) uint8, :func:`flush_triangles` and any other to skip) does not skip,
+    as a BVH on the same points: ``mesh`` itself where it skips none, None where it skips all."""
+    keep = np.asarray(flush) == 0
+    if keep.all():
+        return mesh
+    if not keep.any():
+        return None
+    indices = mesh.indices.numpy().reshape(-1, 3)[keep].ravel()
+    return wp.Mesh(points=mesh.points, indices=wp.array(indices, dtype=wp.int32, device=device))
+
+
+def coplanar_readings(
+    mesh, own, flush, points, normals, reach, voxel: float, device, earlier=False, across=False, surface=False
+):
     """For each point (N, 3) on a face of unit normal ``normals`` (N, 3) of the mesh ``own`` (its BVH, or None): (N,)
     float32 its distance to ``mesh``'s nearest triangle out of the face's plane and not flush with ``own`` where
     nearest (up to its ``reach``, (N,) or one for all: its candidates are the triangles in a box of that size;
@@ -267,8 +292,11 @@ def coplanar_readings(mesh, own, flush, points, normals, reach, voxel: float, de
     coincide), its triangles in the plane that a point is off count as a surface: where that operand's face ends in
     the plane, ``own``'s face takes over, a seam. With ``across``, a triangle out of the plane counts only where
     ``own``'s face in the point's plane goes on past it (half a voxel on from its nearest point, away from the
-    point): where ``mesh``'s face ends and ``own``'s goes on."""
+    point): where ``mesh``'s face ends and ``own``'s goes on. ``surface``: :func:`unflushed` of ``mesh`` and
+    ``flush``, where the caller has it (False: made here)."""
     n = len(points)
+    if surface is False:
+        surface = unflushed(mesh, flush.numpy() if isinstance(flush, wp.array) else flush, device)
     flush = wp.array(flush, dtype=wp.uint8, device=device) if isinstance(flush, np.ndarray) else flush
     pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
     nrm = wp.array(np.ascontiguousarray(normals, dtype=np.float32), dtype=wp.vec3, device=device)
@@ -277,16 +305,17 @@ def coplanar_readings(mesh, own, flush, points, normals, reach, voxel: float, de
     tie = wp.empty(n, dtype=wp.int8, device=device)
     live = wp.empty(n, dtype=wp.uint8, device=device)
     eps = COPLANAR_VOXELS * voxel
+    meshes = (mesh.id, wp.uint64(0) if surface is None else surface.id, wp.uint64(0) if own is None else own.id)
     launch_split(
         _readings_kernel,
         n,
         lambda lo, k: [
-            *(mesh.id, wp.uint64(0) if own is None else own.id, flush, pts[lo : lo + k], nrm[lo : lo + k]),
+            *meshes, flush, pts[lo : lo + k], nrm[lo : lo + k],
             *(reaches[lo : lo + k], eps, FLUSH_STEP_VOXELS * voxel, int(earlier), int(across)),
             *(distance[lo : lo + k], tie[lo : lo + k], live[lo : lo + k]),
         ],
         device,
-    )
+    )  # fmt: skip
     return distance.numpy(), tie.numpy(), live.numpy() > 0
 
 

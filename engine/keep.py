@@ -44,6 +44,7 @@ from .coplanar import (
     source_verts_near,
     tied_to_earlier,
     tied_values,
+    unflushed,
 )
 from .defects import CROSSING_VOXELS, defects_and, own_defects
 from .expression import evaluate_signs, leaves, widest_blend
@@ -222,7 +223,7 @@ class _Judge:
         self.fused = self._fused() if fused else None
         self.coplanar = self._coplanar_faces(source)  # (T,) bool or None: sample by sample with their planes
         self.normals = None if self.coplanar is None else unit_normals(source.verts, self.tris)
-        self.flush = {}  # per other leaf: (its triangles flush with this leaf's, and this leaf's with its)
+        self.flush = {}  # (other leaf, whose): :meth:`_flush`
 
     def _coplanar_faces(self, source) -> np.ndarray | None:
         """(T,) bool the triangles in another leaf's plane (:func:`.coplanar.coplanar_triangles`) where the
@@ -320,25 +321,37 @@ class _Judge:
         where a point lies on that leaf's face, this leaf's own faces out of its plane and not flush with that leaf
         count too: where this leaf's face ends and the other's goes on in the plane, there is a seam."""
         own, bvh = self.bvhs[self.index], self.bvhs[j]
-        if j not in self.flush:  # (each mesh's triangles flush with the other's, found once a judge; and its own
-            # inside the result, skipped alike)
-            theirs = flush_triangles(bvh, own, self.voxel, self.device)
-            near = source_verts_near(self.leaves[self.index], np.flatnonzero(self.coplanar))
-            theirs |= internal_triangles(self.leaves, j, self.expression, near, 4 * self.band, theirs, self.voxel)
-            ours = flush_triangles(own, bvh, self.voxel, self.device)
-            self.flush[j] = tuple(wp.array(x, dtype=wp.uint8, device=self.device) for x in (theirs, ours))
-        theirs, ours = self.flush[j]
+        theirs, their_surface = self._flush(j, "theirs")
         earlier = j < self.index
         distance, tie, live = coplanar_readings(
-            bvh, own, theirs, points, normals, reach, self.voxel, self.device, earlier
+            bvh, own, theirs, points, normals, reach, self.voxel, self.device, earlier, surface=their_surface
         )
         tied = np.flatnonzero(live)  # (tied to a face inside the result, as where it only touches: no seam of ours)
         if len(tied):
+            ours, our_surface = self._flush(j, "ours")
             ends, _, _ = coplanar_readings(
-                own, bvh, ours, points[tied], normals[tied], reach[tied], self.voxel, self.device, across=True
-            )
+                own, bvh, ours, points[tied], normals[tied], reach[tied], self.voxel, self.device, across=True,
+                surface=our_surface,
+            )  # fmt: skip
             distance[tied] = np.minimum(distance[tied], ends)
         return distance, tie
+
+    def _flush(self, j: int, whose: str) -> tuple:
+        """(flags as a Warp array, :func:`.coplanar.unflushed` BVH) of leaf ``j``'s triangles flush with this leaf's
+        and inside the result (``"theirs"``), or of this leaf's flush with ``j``'s (``"ours"``): found once a judge,
+        when first needed."""
+        if (j, whose) not in self.flush:
+            own, bvh = self.bvhs[self.index], self.bvhs[j]
+            if whose == "theirs":
+                flags = flush_triangles(bvh, own, self.voxel, self.device)
+                near = source_verts_near(self.leaves[self.index], np.flatnonzero(self.coplanar))
+                flags |= internal_triangles(self.leaves, j, self.expression, near, 4 * self.band, flags, self.voxel)
+                surface = unflushed(bvh, flags, self.device)
+            else:
+                flags = flush_triangles(own, bvh, self.voxel, self.device)
+                surface = unflushed(own, flags, self.device)
+            self.flush[(j, whose)] = (wp.array(flags, dtype=wp.uint8, device=self.device), surface)
+        return self.flush[(j, whose)]
 
     def judge(self, verts, tris, parent, longest, turn, beyond: float | None = None):
         """Per triangle (pieces of original triangles ``parent``): kept, partly keepable, and flipped. A triangle is

@@ -8,7 +8,7 @@ import pytest
 import warp as wp
 
 import engine
-from engine.coplanar import coplanar_readings, flush_triangles
+from engine.coplanar import coplanar_readings, flush_triangles, unflushed
 from tests.metrics import distance_within, exact_boolean, hausdorff, mesh_area, mesh_volume, sample_surface, to_manifold
 from tests.support import box_mesh, is_watertight
 
@@ -98,6 +98,17 @@ def test_coplanar_readings_skip_the_faces_in_a_points_plane_and_tie_its_sign():
     distance, tie, _ = coplanar_readings(mesh, copy, flush, points, normals, 5.0, 0.01, "cpu")
     np.testing.assert_array_equal(tie, [1, -1, 1, 0])
     np.testing.assert_allclose(distance, 5.0)
+    assert unflushed(mesh, flush, "cpu") is None  # (no triangle left to search over the reach)
+    # the walls at x = +-1 skipped: the nearest out of the plane is a wall at y = +-1; the top face still ties
+    walls = (np.abs(verts[tris][:, :, 0] - np.abs(verts[tris][:, :, 0]).max()) < 1e-6).all(axis=1)
+    walls |= (np.abs(verts[tris][:, :, 0] + np.abs(verts[tris][:, :, 0]).max()) < 1e-6).all(axis=1)
+    skip = (alone | walls).astype(np.uint8)
+    surface = unflushed(mesh, skip, "cpu")
+    assert surface.indices.shape[0] == 3 * int((skip == 0).sum()) == 3 * 8
+    for given in (False, surface):
+        distance, tie, live = coplanar_readings(mesh, None, skip, points, normals, 5.0, 0.01, "cpu", surface=given)
+        np.testing.assert_array_equal(tie, [1, -1, 1, 0])
+        np.testing.assert_allclose(distance[:3], [0.7, 0.7, 1.0], atol=1e-6)
 
 
 def test_a_blend_over_coinciding_faces_keeps_none_of_them():
