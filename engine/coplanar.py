@@ -389,7 +389,7 @@ def _crossed_somewhere(leaves: list, j: int, expression, source, rows, spacing: 
     points = (points + towards * np.minimum(1.0, voxel / np.maximum(length, 1e-30))).astype(np.float32)
     signs, clear = [], np.ones(len(points), dtype=bool)
     for k, leaf in enumerate(leaves):
-        values = leaf.sample(points) if k != j else np.full(len(points), -1.0, np.float32)
+        values = leaf.sample(points, method="linear") if k != j else np.full(len(points), -1.0, np.float32)
         clear &= (np.abs(values) > 0.25 * voxel) | (k == j)
         signs.append(np.sign(values).astype(np.int8))
     tiny = 1e-3 * voxel
