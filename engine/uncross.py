@@ -69,19 +69,23 @@ def _nearest_in_range_kernel(
     first: wp.array[wp.int32],
     count: wp.array[wp.int32],
     corners: wp.array[wp.vec3],
+    within: float,
     offset: int,
     distance: wp.array[wp.float32],
 ):
-    """Per point: its distance to the nearest of triangles ``first`` .. ``first + count - 1`` (corners 3 a row)."""
+    """Per point: its distance to the nearest of triangles ``first`` .. ``first + count - 1`` (corners 3 a row), or
+    the first one found ``within`` that (at most ``within``: where the caller asks only whether one lies so near)."""
     p = wp.tid() + offset
     x = points[p]
     nearest = float(1.0e30)
-    for t in range(first[p], first[p] + count[p]):
+    t = first[p]
+    while t < first[p] + count[p] and nearest > within:
         a = corners[3 * t]
         b = corners[3 * t + 1]
         c = corners[3 * t + 2]
         edges, inward, lengths, n = triangle_frame(a, b, c)
         nearest = wp.min(nearest, wp.length(x - closest_on_triangle(x, a, b, c, edges, inward, lengths, n)))
+        t += 1
     distance[p] = nearest
 
 
@@ -386,13 +390,15 @@ def _close_enough(
         by_loop = np.argsort(at, kind="stable")
         per = np.bincount(at, minlength=count)
         first = np.cumsum(per) - per
-        distance = _nearest_in_range(points, first[loops], per[loops], verts[faces[by_loop]], device)
-        far[loops[distance > (TOLERANCE_VOXELS if tolerance is None else tolerance) * voxel]] = True
+        reach = (TOLERANCE_VOXELS if tolerance is None else tolerance) * voxel
+        distance = _nearest_in_range(points, first[loops], per[loops], verts[faces[by_loop]], device, reach)
+        far[loops[distance > reach]] = True
     return ~far
 
 
-def _nearest_in_range(points, first, count, corners, device) -> np.ndarray:
-    """(P,) float32 each point's distance to the nearest of its range of triangles (``_nearest_in_range_kernel``)."""
+def _nearest_in_range(points, first, count, corners, device, within: float = -1.0) -> np.ndarray:
+    """(P,) float32 each point's distance to the nearest of its range of triangles (``_nearest_in_range_kernel``; with
+    ``within``, one found within that is taken: whether the nearest lies within it is all that is told)."""
     if not len(points):
         return np.zeros(0, dtype=np.float32)
     args = [
@@ -402,7 +408,7 @@ def _nearest_in_range(points, first, count, corners, device) -> np.ndarray:
         wp.array(np.ascontiguousarray(corners, dtype=np.float32).reshape(-1, 3), dtype=wp.vec3, device=device),
     ]
     distance = wp.zeros(len(points), dtype=wp.float32, device=device)
-    launch_split(_nearest_in_range_kernel, len(points), lambda lo, _n: [*args, lo, distance], device)
+    launch_split(_nearest_in_range_kernel, len(points), lambda lo, _n: [*args, float(within), lo, distance], device)
     return distance.numpy()
 
 
