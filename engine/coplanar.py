@@ -360,12 +360,14 @@ def internal_triangles(
     candidates are faces of the result, and one crossing sample tells (two boxes side by side: 34 k samples a voxel
     apart, 100 ms, against some hundreds)."""
     source = next(iter(leaves[j].world_sources().values()))
-    corners = source.verts[source.tris]
     out = np.zeros(len(source.tris), dtype=np.uint8)
-    if not len(near):
+    rows = np.flatnonzero(flush == 0)
+    if not len(near) or not len(rows):
         return out
-    lo, hi = near.min(axis=(0, 1)) - reach, near.max(axis=(0, 1)) + reach
-    rows = np.flatnonzero((flush == 0) & (corners.max(axis=1) >= lo).all(1) & (corners.min(axis=1) <= hi).all(1))
+    corners = source.verts[source.tris[rows]]
+    points = near.reshape(-1, 3)
+    lo, hi = points.min(axis=0) - reach, points.max(axis=0) + reach
+    rows = rows[(corners.max(axis=1) >= lo).all(1) & (corners.min(axis=1) <= hi).all(1)]
     for spacing in (COARSE_SAMPLES * voxel, voxel):
         if not len(rows):
             break
