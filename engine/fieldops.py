@@ -393,10 +393,10 @@ def _operate(field, kind: int, a: float, grow: float, what: str):
     # refused before any work: the field's domain holds its surface
     plan_grown(lo, hi, grow, voxel_size=h, levels=field.levels, nodes=_grown_nodes(field, grow), what=what)
     surface = surface_mesh(field)  # (the same surface after redistancing)
+    if surface[0] is None:  # nothing to offset or hollow: nothing comes out
+        return _without_surface(field)
     if not field.stats.get("surface_points", False):
         field = redistance(field, surface=surface)  # closest points on its own surface
-    if field.is_empty:  # nothing to offset or hollow: nothing comes out
-        return field
     verts_lo, verts_hi = _surface_box(field)
     origin, top_dims, levels = plan_grown(
         verts_lo, verts_hi, grow, voxel_size=h, levels=field.levels, nodes=_grown_nodes(field, grow), what=what
@@ -415,6 +415,24 @@ def _operate(field, kind: int, a: float, grow: float, what: str):
         device=field.device,
         cls=type(field),
     )
+
+
+def _without_surface(field):
+    """What an offset or a shell makes of a field without a surface: the field itself where its finest nodes lie
+    inside or it has none inside (all or nothing), else the field with no node inside. A boolean of surfaces that do
+    not meet can leave a coarse node a little below 0 where its finest nodes are all above (the intersection of a
+    closed mesh with a sheet that encloses nothing, chamfered: -0.27 voxel, read off the sheet's MLS fit); grown, that
+    node became a surface with holes."""
+    values = field.values.numpy()
+    n0 = field.level_counts[0] if field.levels > 1 else len(values)
+    if not (values < 0.0).any() or (n0 and (values[:n0] < 0.0).all()):
+        return field
+    return type(field)(
+        voxel_size=field.voxel_size, levels=field.levels, origin=field.origin, top_dims=field.top_dims,
+        level_offsets=field.level_offsets, codes=field.codes, proj=field.proj, child=field.child, source=field.source,
+        values=wp.array(np.abs(values), dtype=wp.float32, device=field.device), field_ids=field.field_ids,
+        device=field.device, stats=field.stats, sources=field.sources, triangles=field.tri, placement=field.placement,
+    )  # fmt: skip
 
 
 def _surface_box(field):

@@ -409,3 +409,23 @@ def test_an_offset_asked_for_polygons_is_dual_contoured_and_merges_where_flat(cu
             assert error.max() <= 0.8, error.max()  # measured 0.27 voxel
     assert counts[0.5] < counts[0.0] / 6.5, counts  # measured 7,272 -> 372 polygons
     np.testing.assert_array_equal(grown.to_mesh()[0], grown.to_mesh(sharp=False)[0])  # triangles: marching cubes
+
+
+def test_offsets_and_shells_of_a_boolean_without_surface_are_empty():
+    """A box intersected with a sheet turned about (a surface that encloses nothing), chamfered: no surface, yet 14
+    nodes read a little below 0 (the sheet's resampled values). Grown by 5 voxels that made 8,980 triangles with
+    holes, a shell of 3 voxels 239; nothing comes out now."""
+    h = 2.0 * np.sqrt(3.0) / 64
+    turn = np.eye(4)
+    c, s = np.cos([0.714, 1.958, 0.264]), np.sin([0.714, 1.958, 0.264])
+    rx = np.array([[1, 0, 0], [0, c[0], -s[0]], [0, s[0], c[0]]])
+    ry = np.array([[c[1], 0, s[1]], [0, 1, 0], [-s[1], 0, c[1]]])
+    rz = np.array([[c[2], -s[2], 0], [s[2], c[2], 0], [0, 0, 1]])
+    turn[:3, :3], turn[:3, 3] = rz @ ry @ rx, [0.133, 0.115, -0.104]
+    sheet = _sheet(n=24)
+    sheet = (sheet[0] + np.float32([0.0, 0.0, 0.05]), sheet[1])
+    fa, fb = engine.build_fields([box_mesh(half=(0.5, 0.5, 0.5)), sheet], voxel_size=h)
+    field = engine.intersection(fa, fb.transformed(turn), blend=8 * h, blend_mode="chamfer")
+    assert not len(field.to_mesh()[1]) and (field.values.numpy() < 0.0).any()
+    for out in (engine.offset(field, 5 * h), engine.offset(field, -2 * h), engine.shell(field, 3 * h)):
+        assert out.is_empty and not len(out.to_mesh()[1])
