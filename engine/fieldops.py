@@ -419,18 +419,19 @@ def _operate(field, kind: int, a: float, grow: float, what: str):
 
 def _without_surface(field):
     """What an offset or a shell makes of a field without a surface: the field itself where its finest nodes lie
-    inside or it has none inside (all or nothing), else the field with no node inside. A boolean of surfaces that do
-    not meet can leave a coarse node a little below 0 where its finest nodes are all above (the intersection of a
-    closed mesh with a sheet that encloses nothing, chamfered: -0.27 voxel, read off the sheet's MLS fit); grown, that
-    node became a surface with holes."""
+    inside (all of its domain), else nothing: every node as far out as the domain is across, so that no blend over it
+    makes anything either. A boolean of surfaces that do not meet can leave nodes a little below 0 where its finest
+    nodes are all above (a closed mesh intersected with a sheet that encloses nothing, chamfered: down to -1.8 voxels,
+    the sheet's resampled values); grown, they became a surface with holes."""
     values = field.values.numpy()
     n0 = field.level_counts[0] if field.levels > 1 else len(values)
-    if not (values < 0.0).any() or (n0 and (values[:n0] < 0.0).all()):
+    if n0 and (values[:n0] < 0.0).all():
         return field
+    far = float(np.linalg.norm(field.fine_dims * field.voxel_size))
     return type(field)(
         voxel_size=field.voxel_size, levels=field.levels, origin=field.origin, top_dims=field.top_dims,
         level_offsets=field.level_offsets, codes=field.codes, proj=field.proj, child=field.child, source=field.source,
-        values=wp.array(np.abs(values), dtype=wp.float32, device=field.device), field_ids=field.field_ids,
+        values=wp.full(len(values), far, dtype=wp.float32, device=field.device), field_ids=field.field_ids,
         device=field.device, stats=field.stats, sources=field.sources, triangles=field.tri, placement=field.placement,
     )  # fmt: skip
 
