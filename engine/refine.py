@@ -398,11 +398,12 @@ def _border_collapses(v64, tris, parent, n_source: int, bounds: tuple, ranks: np
     prev = np.full(n, -1, dtype=np.int64)
     nxt = np.full(n, -1, dtype=np.int64)
     prev[b[border]], nxt[a[border]] = a[border], b[border]
-    owner = np.repeat(parent, 3)
-    low, high = np.full(n, np.iinfo(np.int64).max), np.full(n, -1)
-    np.minimum.at(low, tris.ravel(), owner)
-    np.maximum.at(high, tris.ravel(), owner)
-    one_run = (out_count == 1) & (in_count == 1) & (low == high) & (np.arange(n) >= n_source)
+    flat, owner = tris.ravel(), np.repeat(parent, 3)
+    some = np.full(n, -1, dtype=np.int64)  # one source triangle of each vertex's pieces; any other marks it
+    some[flat] = owner
+    one_parent = some >= 0
+    one_parent[flat[owner != some[flat]]] = False
+    one_run = (out_count == 1) & (in_count == 1) & one_parent & (np.arange(n) >= n_source)
     v = np.flatnonzero(one_run)
     u, w = prev[v], nxt[v]
     d0, d1 = v64[v] - v64[u], v64[w] - v64[v]
