@@ -278,6 +278,33 @@ def _inherit_sign_kernel(
         sign[i] = sign[p]
 
 
+@wp.kernel(enable_backward=False)
+def _parent_segment_kernel(
+    nodes: wp.array[wp.int32],
+    coords: wp.array[wp.vec3i],
+    parent: wp.array[wp.int32],
+    origin: wp.vec3,
+    spacing: float,
+    sign: wp.array[wp.float32],
+    mesh: wp.uint64,
+    cap_lo: wp.array[wp.vec3],
+    cap_hi: wp.array[wp.vec3],
+    cap_radius: wp.array[wp.float32],
+):
+    """A finest node left unset takes its parent's sign where the segment between them surely crosses no triangle,
+    away from an open mesh's holes (there the winding number jumps without a triangle)."""
+    i = nodes[wp.tid()]
+    p = parent[i]
+    if p < 0 or sign[p] == 0.0:
+        return
+    xi = node_center(origin, spacing, coords[i])
+    xp = node_center(origin, 2.0 * spacing, coords[p])
+    if near_cap(xi, cap_lo, cap_hi, cap_radius, wp.length(xi - xp)):
+        return
+    if segment_clear(mesh, xi, xp):
+        sign[i] = sign[p]
+
+
 # ---- host side: the top-down pass ----
 
 
@@ -395,7 +422,7 @@ def sign_levels(
         run.spread(0, 0, n0)
     # Undecided finest nodes lie within about half a voxel of the surface, where the pseudo-normal sign is wrong near
     # open edges and where shells intersect or touch: they pay the winding number.
-    idx = np.flatnonzero(run.sign.numpy()[:n0] == 0.0)
+    idx = run.across_to_parents(np.flatnonzero(run.sign.numpy()[:n0] == 0.0))
     run.oracle(idx, 0)
     run.oracle_counts[0] = len(idx)
     values = wp.empty(n, dtype=wp.float32, device=run.device)
@@ -428,6 +455,23 @@ class _Signing:
         _winding_signs(
             self.winding, self.layout, nodes_np, k, (self.origin_v, self.voxel_size), self.sign, expand, reach
         )
+
+    def across_to_parents(self, nodes_np) -> np.ndarray:
+        """Of the finest ``nodes_np`` left unset, those still unset after taking their parents' signs across segments
+        that cross no triangle (:func:`_parent_segment_kernel`): a field built on demand along a seam, in a ring on a
+        large face, has its layer of nodes just off the face with no signed neighbour to spread from (a plate's, 20 k
+        winding numbers; a full build spreads them from its rim)."""
+        if not len(nodes_np) or self.mesh_id == 0 or self.levels < 2:
+            return nodes_np
+        nodes = wp.array(nodes_np.astype(np.int32), dtype=wp.int32, device=self.device)
+        launch_split(
+            _parent_segment_kernel,
+            len(nodes_np),
+            lambda lo, n: [nodes[lo : lo + n], self.coords, self.parent, self.origin_v, float(self.voxel_size)]
+            + [self.sign, wp.uint64(self.mesh_id), *self.cap_args],
+            self.device,
+        )
+        return nodes_np[self.sign.numpy()[nodes_np] == 0.0]
 
     def spread(self, k, lo, hi):
         """Signs spread between level ``k``'s neighbours (nodes ``lo`` to ``hi``); returns the nodes left unset."""

@@ -252,3 +252,27 @@ def test_a_boundary_too_long_to_sum_leaves_the_signs_to_the_accurate_fast_windin
     far = unsigned_distance(verts, tris, points) > 2.0 * h
     inside = np.abs(winding_numbers(verts, tris, points[far])) >= 0.5
     assert np.mean((approximate.sample(points[far]) < 0.0) == inside) >= 0.995
+
+
+def test_a_plates_ring_refined_about_a_bore_takes_its_signs_from_its_parents():
+    """A plate refined along a bore's wall only: its layer of nodes just off the faces, in a ring away from the rim,
+    has no signed neighbour to spread from. Each takes its parent's sign across a segment that meets no triangle
+    (before: 20,032 winding numbers on the bench's plate minus four bores); the values are the full build's."""
+    from engine.ondemand import refined
+    from tests.support import plate_and_bores
+
+    plate, bores = plate_and_bores()
+    h = _voxel(np.concatenate([plate[0], bores[0]]), 256)
+    whole = engine.build_fields([plate], voxel_size=h, refine="all")[0]
+    coarse = engine.build_fields([plate], voxel_size=h, refine="none")[0]
+    turn = np.linspace(0.0, 2.0 * np.pi, 64)
+    ring = np.c_[0.5 + 0.2 * np.cos(turn), 0.5 + 0.2 * np.sin(turn)]  # a bore's wall through the plate
+    points = np.concatenate([np.c_[ring, np.full(64, z)] for z in (-0.1, 0.0, 0.1)]).astype(np.float32)
+    ring_field = refined(coarse, points, reach=6 * h)
+    assert ring_field.stats["sign_queries"][0] == 0
+    n0 = ring_field.level_counts[0]
+    codes, values = ring_field.codes.numpy()[:n0], ring_field.values.numpy()[:n0]
+    whole_codes = whole.codes.numpy()[: whole.level_counts[0]]
+    at = np.minimum(np.searchsorted(whole_codes, codes), len(whole_codes) - 1)
+    assert len(codes) > 1000 and (whole_codes[at] == codes).all()
+    np.testing.assert_array_equal(values, whole.values.numpy()[at])
