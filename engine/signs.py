@@ -421,7 +421,8 @@ def sign_levels(
     if levels > 1:
         run.spread(0, 0, n0)
     # Undecided finest nodes lie within about half a voxel of the surface, where the pseudo-normal sign is wrong near
-    # open edges and where shells intersect or touch: they pay the winding number.
+    # open edges and where shells intersect or touch: they take their parent's sign across a segment that meets no
+    # triangle, else pay the winding number.
     idx = run.across_to_parents(np.flatnonzero(run.sign.numpy()[:n0] == 0.0))
     run.oracle(idx, 0)
     run.oracle_counts[0] = len(idx)
