@@ -315,6 +315,8 @@ def combine(
     expression = None
     try:  # built on demand: the octets it needs (:mod:`.ondemand`)
         a, b, seams = for_boolean(a, b, op, blend, seams=seams)
+        if seams and early is not None and early.crossed_ahead():  # along all of such an operand's crossings too
+            a, b, seams = for_boolean(*asked[:3], blend, seams=seams)
         # a sparse finest level under a dense top one, even when both operands are dense (one level)
         levels, timings = max(a.levels, b.levels, 2), {}
         origin, top_dims = _domain(a, b, h, levels, mode, blend)  # (a domain too large is refused: no judge)

@@ -28,8 +28,8 @@ import warp as wp
 
 from .carried import carried
 from .expression import Operation, leaves
-from .keep import internal_faces, kept_triangles
-from .ondemand import along_seams_only, built_leaves, built_on_demand, refined
+from .keep import internal_faces, kept_triangles, own_region
+from .ondemand import along_seams_only, built_leaves, built_on_demand, crosses_itself, refined
 from .parallel import run_tasks
 
 
@@ -72,9 +72,11 @@ class EarlyJudge:
     def __init__(self, expression, voxel: float, device):
         self._found = None
         self._crossing = None
+        self._ahead = None
         self._refined = None
         self._given = threading.Event()
         self._checked = threading.Event()
+        self._looked = threading.Event()
         self._thread = threading.Thread(target=self._run, args=(expression, voxel, device), daemon=True)
         self._thread.start()
 
@@ -85,13 +87,14 @@ class EarlyJudge:
 
     def _run(self, unrefined, voxel: float, device) -> None:
         try:
-            crossing_leaves(unrefined, voxel, device)  # their own parts found (kept with their meshes) meanwhile
+            self._ahead = _made_about_crossings(crossing_leaves(unrefined, voxel, device), voxel, device)
+            self._looked.set()
             self._given.wait()
             expression = self._refined
             if expression is None:
                 return
             self._crossing = crossing_leaves(expression, voxel, device)
-            if self._crossing:  # made again along all of such an operand (:mod:`.seams`): built whole meanwhile
+            if not self.about(self._crossing):  # made again along all of such an operand (:mod:`.seams`)
                 run_tasks([lambda leaf=leaf: refined(leaf) for leaf in self._crossing], device)
                 return
             self._checked.set()
@@ -101,7 +104,20 @@ class EarlyJudge:
         except Exception:  # noqa: BLE001 (the kept surface judges again, and meets the error in its own thread)
             self._crossing = None
         finally:
+            self._looked.set()
             self._checked.set()
+
+    def crossed_ahead(self) -> bool:
+        """Whether a leaf of the boolean passes through itself, as found before its operands were refined: each such
+        leaf then built whole and marked (:func:`.ondemand.crosses_itself`), so that the boolean made along its
+        seams from here on is made about its crossings too."""
+        self._looked.wait()
+        return bool(self._ahead)
+
+    def about(self, crossing) -> bool:
+        """Whether the boolean was made about the crossings of every leaf of ``crossing`` (:meth:`crossed_ahead`)."""
+        ahead = {id(source) for leaf in self._ahead or () for source in leaf.sources.values()}
+        return all(id(source) in ahead for leaf in crossing or () for source in leaf.sources.values())
 
     def crossing(self) -> list | None:
         """:func:`crossing_leaves` of the boolean's expression, once the thread has found them (None: it failed)."""
@@ -119,6 +135,15 @@ class EarlyJudge:
         view, their_avoid, judged = found
         same = view.voxel_size == field.voxel_size and same_operands(view.expression, field.expression)
         return judged if same and np.array_equal(their_avoid, avoid) else None
+
+
+def _made_about_crossings(crossing: list, voxel: float, device) -> list:
+    """The leaves of ``crossing`` (they pass through themselves) built whole and marked as crossing about their own
+    regions (:func:`.keep.own_region`), as :func:`.seams.kept_along_seams` would after the boolean."""
+    run_tasks([lambda leaf=leaf: refined(leaf) for leaf in crossing], device)
+    for leaf in crossing:
+        crosses_itself(leaf, own_region(leaf, voxel), voxel)
+    return crossing
 
 
 def start_judge(expression, voxel: float, device) -> EarlyJudge | None:

@@ -33,11 +33,11 @@ def kept_along_seams(field, **options) -> dict:
     crossing = None if early is None else early.crossing()
     if crossing is None:
         crossing = crossing_leaves(field.expression, field.voxel_size, field.device)
-    for leaf in crossing:
-        refined(leaf)
-        crosses_itself(leaf, own_region(leaf, field.voxel_size), field.voxel_size)
-    if crossing:  # made again: the voxel surface also about where such an operand gives its faces up
-        field = field.refiner.along_seams()
+    if crossing and not (early is not None and early.about(crossing)):  # (unless the boolean was made so already)
+        for leaf in crossing:
+            refined(leaf)
+            crosses_itself(leaf, own_region(leaf, field.voxel_size), field.voxel_size)
+        field = field.refiner.along_seams()  # made again: the voxel surface also about where its faces are given up
     seams = _read_as_built(as_built(field))
     surface = kept_surface(seams, **options, whole=whole)
     if not surface["stats"]["kept_fallback"]:

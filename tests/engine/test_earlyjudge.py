@@ -68,14 +68,32 @@ def test_verdicts_for_other_points_or_operands_are_not_taken(pair, monkeypatch):
     assert calls == [1] and all(np.array_equal(with_early[k], alone[k]) for k in ("verts", "tris", "kept"))
 
 
-def test_no_early_verdicts_where_an_operand_passes_through_itself():
-    overlap = overlapping_boxes()
+def _through_itself(monkeypatch, ahead: bool) -> tuple:
+    """A box made of two overlapping boxes minus a ball, its kept surface, how often the boolean was made again and
+    how often the kept surface judged the triangles itself; ``ahead`` False: the crossings not looked for before the
+    boolean (it is made again about them afterwards)."""
+    if not ahead:
+        monkeypatch.setattr(earlyjudge, "_made_about_crossings", lambda crossing, voxel, device: [])
+    again, judged = [], []
+    made = boolean.BooleanRefiner.along_seams
+    monkeypatch.setattr(boolean.BooleanRefiner, "along_seams", lambda self: again.append(1) or made(self))
+    monkeypatch.setattr(hybrid, "kept_triangles", lambda *args, **kw: judged.append(1) or kept_triangles(*args, **kw))
     ball = normalised(uv_sphere(1.0, rings=32, segments=64), center=(0.3, 0.3, 0.3), diagonal=0.5)
-    a, b = engine.build_fields([overlap, ball], voxel_size=H, refine="none")
+    a, b = engine.build_fields([overlapping_boxes(), ball], voxel_size=H, refine="none")
     result = engine.difference(a, b, seams=True)
-    crossing = result.early_judge.crossing()
-    assert [leaf.sources for leaf in crossing] == [a.sources]
-    assert result.early_judge.take(_view(result), np.zeros((0, 3))) is None
+    assert [leaf.sources for leaf in result.early_judge.crossing()] == [a.sources]
+    return result, result.kept_surface(), len(again), len(judged)
+
+
+def test_an_operand_that_passes_through_itself_is_made_about_its_crossings_at_once(monkeypatch):
+    result, surface, again, judged = _through_itself(monkeypatch, ahead=True)
+    # made once, its verdicts the early judge's (the kept surface judged nothing itself)
+    assert again == 0 and judged == 0 and result.early_judge.about(result.early_judge.crossing())
+    # the same surface as the boolean made again about the crossings once it is found to cross itself, and judged
+    _, late, again, judged = _through_itself(monkeypatch, ahead=False)
+    assert again == 1 and judged == 1
+    assert all(np.array_equal(surface[k], late[k]) for k in ("verts", "tris", "kept", "triangle_id"))
+    assert surface["kept"].sum() > 100
 
 
 def test_a_boolean_refused_for_its_domain_stops_its_judge(monkeypatch):
