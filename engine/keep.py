@@ -133,7 +133,7 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     def sides(turn: int, rows) -> np.ndarray:  # (a gap's walls face away from it on a mesh inside out: ownside)
         reading = partial(side_at, rays=source.bvh(device), tiny=TINY_VOXELS * voxel, turn=turn)
         args = (leaf, centres[rows], normals[rows], offset)
-        return own_sides(*args, reading) if on_demand else reading(*args)
+        return own_sides(*args, reading, tris[rows]) if on_demand else reading(*args)
 
     side = sides(1, slice(None))
     # (from the faces not read internal: the same whichever way gaps are read)

@@ -31,6 +31,7 @@ ENGINE_MODULES = (
     "holes",
     "build",
     "field",
+    "meshsides",
     "ondemand",
     "closure",
     "sampling",

@@ -34,6 +34,7 @@ import warp as wp
 from . import parallel
 from .expression import OP_DIFFERENCE, OP_UNION, Operation
 from .geometry import near_cap
+from .meshsides import closed_sides
 from .octree import code_bits, morton_decode_np, morton_encode_np, node_center, parent_octets
 from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, level_spacing, locate_leaf, node_coords, node_proj
 from .signs import box_arrays
@@ -512,32 +513,39 @@ def _mesh_sides_kernel(f: WindingArg, front: wp.array[wp.vec3], back: wp.array[w
     out[i] = wp.int8(wp.where(ahead == behind, 0, wp.where(ahead > behind, 1, -1)))
 
 
-def own_sides(field, points: np.ndarray, normals: np.ndarray, offset: float, read) -> np.ndarray:
+def own_sides(field, points: np.ndarray, normals: np.ndarray, offset: float, read, tris=None) -> np.ndarray:
     """(N,) int8 the side of each (world) point's face on a mesh's field built on demand, as ``read(field, points,
     normals, offset)`` (:mod:`.keep`'s reading of its values) gives it on the full field: where the mesh's winding
     number (its BVH, kept with its source mesh) puts the points ``offset`` ahead and behind on either side, from it
     (the field's values there, within a tenth of a voxel of the distance, have those signs: the side it reads);
-    elsewhere (a narrow groove, an internal face) by ``read`` on the field with the octets there built."""
+    elsewhere (a narrow groove, an internal face) by ``read`` on the field with the octets there built. ``tris``:
+    the faces' corners (one face a point), for a closed mesh's winding numbers carried between neighbours
+    (:func:`.meshsides.closed_sides`)."""
     source = next(iter(field.sources.values()))
     ends = [np.asarray(points, np.float64) + sign * offset * np.asarray(normals, np.float64) for sign in (1.0, -1.0)]
     local = ends if field.placement is None else [field.placement.to_local(end) for end in ends]
-    front, back = (wp.array(end.astype(np.float32), dtype=wp.vec3, device=field.device) for end in local)
-    out = wp.empty(len(points), dtype=wp.int8, device=field.device)
-    if len(points):
-        f = source.refiner.levels.winding  # the build's (an open mesh's: exact near its holes)
-        parallel.launch_split(
-            _mesh_sides_kernel,
-            len(points),
-            lambda lo, k: [f, front[lo : lo + k], back[lo : lo + k], out[lo : lo + k]],
-            field.device,
-        )
-    side = out.numpy()
+    f = source.refiner.levels.winding  # the build's (an open mesh's: exact near its holes)
+    side = None if tris is None else closed_sides(f, tris, *local, field.device)
+    if side is None:
+        side = winding_sides(f, local, field.device)
     unsure = np.flatnonzero(side == 0)
     if len(unsure):
         asked = np.concatenate([local[0][unsure], local[1][unsure]])
         near = as_built(_as(field, source.refiner.asked(asked, None)))
         side[unsure] = read(near, points[unsure], normals[unsure], offset)
     return side
+
+
+def winding_sides(f, local: list, device) -> np.ndarray:
+    """:func:`_mesh_sides_kernel` at the points ``local`` (front, back) in the mesh's frame."""
+    front, back = (wp.array(end.astype(np.float32), dtype=wp.vec3, device=device) for end in local)
+    out = wp.empty(len(front), dtype=wp.int8, device=device)
+    if len(front):
+        parallel.launch_split(
+            _mesh_sides_kernel, len(front), lambda lo, k: [f, front[lo : lo + k], back[lo : lo + k], out[lo : lo + k]],
+            device,
+        )  # fmt: skip
+    return out.numpy()
 
 
 def built_on_demand(field) -> bool:
