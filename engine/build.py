@@ -33,6 +33,7 @@ from .meshcheck import edge_table, encloses_nothing, hole_boundary, problem_face
 from .octree import add_octets, code_bits, in_sorted, morton_encode
 from .ondemand import partial_build
 from .plan import byte_grid_fits, check_budget, checked_plans, plan_field, thick_plan, thicknesses
+from .selfcross import crossing_pairs
 from .winding import winding_arg
 
 # Finest octets search their candidate triangles in a box (instead of 8 BVH queries) when the mean triangle area is
@@ -260,7 +261,7 @@ def build_field(
         refine: ``"all"``: the finest level about every triangle; ``"none"``: every level above it, the finest
             octets built when a query, a surface or a boolean needs them (:mod:`.ondemand`; a mesh that encloses a
             volume, of three levels or more: others are built whole); ``"auto"``: on demand where the band is large
-            for the triangles (ON_DEMAND_NODES_PER_TRIANGLE).
+            for the triangles (ON_DEMAND_NODES_PER_TRIANGLE) and the mesh does not pass through itself.
     Returns:
         AdaptiveField, negative inside.
     Raises:
@@ -281,13 +282,17 @@ def _checked_refine(refine) -> str:
     return refine
 
 
-def _on_demand(refine: str, band, plan: dict) -> bool:
+def _on_demand(refine: str, band, plan: dict, device) -> bool:
     """Whether a mesh's field is built on demand: asked (``"none"``), or ``"auto"`` where its band holds at least
     ON_DEMAND_NODES_PER_TRIANGLE finest nodes per triangle (what it saves grows with the nodes, what it costs a kept
-    surface with the triangles: their sides off the mesh's winding number)."""
+    surface with the triangles: their sides off the mesh's winding number) and the mesh does not pass through itself
+    (a boolean that keeps faces reads such a mesh's own field everywhere: built whole at once, not refined whole
+    later; its crossing pairs cost about 1 us a triangle, a tenth of what it would save)."""
     if refine != "auto":
         return refine == "none"
-    return 8 * band.shape[0] >= ON_DEMAND_NODES_PER_TRIANGLE * len(plan["triangles"])
+    if 8 * band.shape[0] < ON_DEMAND_NODES_PER_TRIANGLE * len(plan["triangles"]):
+        return False
+    return not len(crossing_pairs(plan["vertices"], plan["triangles"], device))
 
 
 def _build_thick(plan: dict, *, device, field_id: int) -> AdaptiveField:
@@ -337,7 +342,7 @@ def _build_planned(plan: dict, *, device, field_id: int, refine: str = "all") ->
     winding = winding_arg(mesh, facts["boundary"], device, encloses=facts["encloses"])
     base_octets = _with_cap_sheets(plan, facts["caps"], winding, base_octets, device, timings)
     levels = LevelBuilder(plan, facts, mesh, search_mesh, winding, device, field_id, timings)
-    if _on_demand(refine, base_octets, plan) and facts["encloses"] and plan["levels"] > 2:  # (:mod:`.ondemand`)
+    if facts["encloses"] and plan["levels"] > 2 and _on_demand(refine, base_octets, plan, device):  # (ondemand)
         finish = lambda f, band: finished(f, plan, facts, mesh, field_id, band)  # noqa: E731
         across = (
             None if facts["clean"] else lambda f, octets: refined_across_holes(levels, f, octets, plan, facts, winding)

@@ -303,6 +303,15 @@ def test_auto_builds_on_demand_where_the_band_is_large_for_the_triangles(spot):
     assert fine.refiner is not None and fine.level_counts[0] == 0
 
 
+def test_auto_builds_a_mesh_that_passes_through_itself_whole():
+    # two boxes through each other: a boolean that keeps faces would refine it whole (its own field read everywhere)
+    boxes = normalised(overlapping_boxes())
+    assert engine.build_field(*boxes, voxel_size=H, refine="none").refiner is not None  # (its band is large)
+    whole = engine.build_field(*boxes, voxel_size=H, refine="auto")
+    assert whole.refiner is None and whole.level_counts[0] > 0
+    assert engine.build_field(*normalised(box_mesh()), voxel_size=H, refine="auto").refiner is not None
+
+
 def test_an_unknown_refine_is_refused_before_any_work(spot):
     with pytest.raises(ValueError, match="'refine' to be 'all', 'none' or 'auto'"):
         engine.build_field(*spot, voxel_size=H, refine="seams")
