@@ -107,17 +107,22 @@ def _pairs_kernel(
     count[i] = found
 
 
-def crossing_pairs(verts: np.ndarray, tris: np.ndarray, device, rows: np.ndarray | None = None) -> np.ndarray:
+def crossing_pairs(
+    verts: np.ndarray, tris: np.ndarray, device, rows: np.ndarray | None = None, mesh=None
+) -> np.ndarray:
     """(P, 2) int64 the pairs of triangles of a mesh ((V, 3), (T, 3) int) that pass through each other and share no
     corner (touching is no crossing), each pair once, in order of their first; with ``rows`` ((R,) ints), only the
-    pairs with a triangle among those rows (the second of each pair)."""
+    pairs with a triangle among those rows (the second of each pair). ``mesh``: Warp's mesh of all of them, where
+    built already (no ``rows``)."""
     rows = np.arange(len(tris)) if rows is None else np.asarray(rows, dtype=np.int64)
     if not len(rows):
         return np.zeros((0, 2), dtype=np.int64)
     flat = np.ascontiguousarray(tris, dtype=np.int32)
-    points_wp = wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device)
-    indices = wp.array(np.ascontiguousarray(flat[rows]).reshape(-1), dtype=wp.int32, device=device)
-    mesh = wp.Mesh(points=points_wp, indices=indices)
+    if mesh is None or len(rows) != len(tris):
+        points_wp = wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device)
+        indices = wp.array(np.ascontiguousarray(flat[rows]).reshape(-1), dtype=wp.int32, device=device)
+        mesh = wp.Mesh(points=points_wp, indices=indices)
+    points_wp = mesh.points
     member = np.zeros(len(flat), dtype=np.uint8)
     member[rows] = 1
     args = [
