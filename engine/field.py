@@ -296,6 +296,7 @@ class AdaptiveField:
         if f.inner_points and self.stats.get("lipschitz", 1.0) > 1.0:  # a chamfer's (:func:`.sampling.coarse_mls`)
             f.inner_points = 2
         f.lipschitz = float(self.stats.get("lipschitz", 1.0))
+        f.no_inside = int(not self.encloses_volume)
         f.mesh = wp.uint64(getattr(self.distance_mesh, "id", 0))
         return f
 

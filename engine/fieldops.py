@@ -362,6 +362,7 @@ def _empty_field_arg(device) -> FieldArg:
     f.exact = 0
     f.inner_points = 0
     f.lipschitz = 1.0
+    f.no_inside = 0
     f.moved = 0
     return f
 
