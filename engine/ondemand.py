@@ -392,19 +392,18 @@ _REGIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 def crosses_itself(field, region: tuple | None = None, voxel: float | None = None) -> None:
     """Mark ``field``'s mesh as passing through itself: booleans along their seams build all of its octets, or with
     ``region`` (``(points, tris)`` in the field's own frame, judged at the world ``voxel``) only those about it."""
+    if region is not None:  # (marked last: a boolean on another thread sees a region, or no crossing yet)
+        points, tris = region
+        scale, device = 1.0 if field.placement is None else field.placement.scale, field.device
+        mesh = None
+        if len(tris):
+            mesh = wp.Mesh(
+                points=wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device),
+                indices=wp.array(np.ascontiguousarray(tris, dtype=np.int32).reshape(-1), dtype=wp.int32, device=device),
+            )
+        for source in field.sources.values():
+            _REGIONS[source] = (float(voxel) / scale, mesh)
     _CROSSING.update(field.sources.values())
-    if region is None:
-        return
-    points, tris = region
-    scale, device = 1.0 if field.placement is None else field.placement.scale, field.device
-    mesh = None
-    if len(tris):
-        mesh = wp.Mesh(
-            points=wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device),
-            indices=wp.array(np.ascontiguousarray(tris, dtype=np.int32).reshape(-1), dtype=wp.int32, device=device),
-        )
-    for source in field.sources.values():
-        _REGIONS[source] = (float(voxel) / scale, mesh)
 
 
 def along_seams_only(field, beside) -> bool:
