@@ -296,9 +296,15 @@ class AdaptiveField:
         if f.inner_points and self.stats.get("lipschitz", 1.0) > 1.0:  # a chamfer's (:func:`.sampling.coarse_mls`)
             f.inner_points = 2
         f.lipschitz = float(self.stats.get("lipschitz", 1.0))
-        f.no_inside = int(not self.encloses_volume)
+        f.no_inside = int(self._no_inside())
         f.mesh = wp.uint64(getattr(self.distance_mesh, "id", 0))
         return f
+
+    def _no_inside(self) -> bool:
+        """Whether the field has no inside anywhere (read as an unsigned distance): a mesh that encloses nothing, or a
+        boolean result made whole with no node inside (one built on demand may yet refine nodes inside)."""
+        whole_result = getattr(self, "expression", None) is not None and self.refiner is None
+        return bool(self.stats.get("flat", False)) or (whole_result and not self.encloses_volume)
 
     @property
     def distance_mesh(self):
