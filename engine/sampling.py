@@ -56,7 +56,7 @@ class FieldArg:
     inner_points: int  # 1: a boolean's result: a node's closest point is its operand's, which may lie inside another
     # (2: a chamfered boolean's, whose closest points are not its surface's: read trilinearly, :func:`coarse_mls`)
     lipschitz: float  # a bound on |grad phi|: 1 for a distance, more for a chamfer (:func:`.blends.lipschitz`)
-    no_inside: int  # 1: no node inside (a sheet's unsigned distance, an empty result): read as |phi| (to_world_sample)
+    no_inside: int  # 1: no inside (a sheet's distance, a boolean made whole and empty): read as |phi| (to_world_sample)
     mesh: wp.uint64  # the BVH of the mesh whose signed distance the field is (``AdaptiveField.distance_mesh``); 0: none
     # world = scale * rotation @ frame + translation, when the field is placed (``moved`` 1)
     moved: int
@@ -106,7 +106,7 @@ def to_frame(f: FieldArg, x: wp.vec3) -> wp.vec3:
 @wp.func
 def to_world_sample(f: FieldArg, r: wp.vec4) -> wp.vec4:
     """(phi, grad) read in the field's own frame, as seen in the world (distances scale, directions turn). A field
-    with no node inside (``no_inside``) is read as its absolute value: a fit or a tangent plane carried across a
+    with no inside (``no_inside``) is read as its absolute value: a fit or a tangent plane carried across a
     sheet's kinked distance would read below 0 on its far side, an inside the field does not have."""
     if f.no_inside == 1 and r[0] < 0.0:
         r = -r
