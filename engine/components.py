@@ -79,3 +79,15 @@ def connected_components(n: int, a, b, device=None, *, rank=None, up_to: int = 0
 def _int32(values, device) -> wp.array:
     """``values`` as a Warp int32 array (on the CPU the int32 numpy array's own memory, not a copy)."""
     return wp.array(np.ascontiguousarray(values, dtype=np.int32), dtype=wp.int32, device=device, copy=False)
+
+
+def edge_neighbours(tris: np.ndarray, n_verts: int) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs of faces of ``tris`` ((F, 3) int, corners below ``n_verts``) that share an edge, by corner index (on
+    a non-manifold edge, its faces one after another)."""
+    tris = np.asarray(tris, dtype=np.int64)
+    a, b = tris.ravel(), tris[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * n_verts + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    same = key[order][1:] == key[order][:-1]
+    face = order // 3
+    return face[:-1][same], face[1:][same]

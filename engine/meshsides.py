@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .components import connected_components
+from .components import connected_components, edge_neighbours
 from .geometry import CROSSINGS_UNKNOWN, segment_crossings, winding_number
 from .parallel import launch_split
 from .winding import WINDING_ACCURACY, WINDING_CLOSED, WindingArg, exact_winding
@@ -54,7 +54,8 @@ def closed_sides(winding, tris: np.ndarray, front: np.ndarray, back: np.ndarray,
     if winding.mode != WINDING_CLOSED or not len(tris):
         return None
     front, back = (np.ascontiguousarray(x, dtype=np.float32) for x in (front, back))
-    a, b = _neighbours(np.asarray(tris, dtype=np.int64))
+    tris = np.asarray(tris, dtype=np.int64)
+    a, b = edge_neighbours(tris, int(tris.max()) + 1)
     same = _crossings(winding.mesh, front[a], front[b], device) == 0
     label = connected_components(len(tris), a[same], b[same], device)
     roots, at = np.unique(label, return_inverse=True)
@@ -65,17 +66,6 @@ def closed_sides(winding, tris: np.ndarray, front: np.ndarray, back: np.ndarray,
     behind[unknown] = _windings(winding, back[unknown], device)
     inside_ahead, inside_behind = ahead != 0, behind != 0
     return np.where(inside_ahead == inside_behind, 0, np.where(inside_behind, 1, -1)).astype(np.int8)
-
-
-def _neighbours(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The pairs of faces that share an edge (by corner index; on a non-manifold edge, its faces one after another)."""
-    n = int(tris.max()) + 1
-    lo, hi = np.minimum(tris, np.roll(tris, -1, axis=1)), np.maximum(tris, np.roll(tris, -1, axis=1))
-    keys = (lo * n + hi).ravel()
-    order = np.argsort(keys, kind="stable")
-    face = order // 3
-    shared = keys[order][1:] == keys[order][:-1]
-    return face[:-1][shared], face[1:][shared]
 
 
 def _crossings(mesh: wp.uint64, p: np.ndarray, q: np.ndarray, device) -> np.ndarray:

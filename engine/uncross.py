@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .components import connected_components
+from .components import connected_components, edge_neighbours
 from .geometry import closest_on_triangle, triangle_frame
 from .meshcheck import any_corner, compacted
 from .parallel import launch_split
@@ -155,12 +155,7 @@ def _face_components(tris: np.ndarray, n_verts: int, device) -> np.ndarray:
     """(F,) the connected piece (through shared edges) of each face, numbered 0 .. P - 1."""
     if not len(tris):
         return np.zeros(0, dtype=np.int64)
-    a, b = tris.ravel(), tris[:, [1, 2, 0]].ravel()
-    key = np.minimum(a, b) * n_verts + np.maximum(a, b)
-    order = np.argsort(key, kind="stable")
-    same = key[order][1:] == key[order][:-1]
-    face = np.repeat(np.arange(len(tris)), 3)[order]
-    root = connected_components(len(tris), face[:-1][same], face[1:][same], device)
+    root = connected_components(len(tris), *edge_neighbours(tris, n_verts), device)
     return np.unique(root, return_inverse=True)[1].reshape(-1)
 
 
