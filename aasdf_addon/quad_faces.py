@@ -28,7 +28,7 @@ def fans(faces, sizes) -> tuple[np.ndarray, int]:
     faces, sizes = np.asarray(faces, dtype=np.int32), np.asarray(sizes)
     count = int(np.count_nonzero(sizes == 4))
     quads = faces[: 4 * count].reshape(-1, 4)
-    halves = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+    halves = np.take(quads, [0, 1, 2, 0, 2, 3], axis=1).reshape(-1, 3)
     return np.concatenate([halves, faces[4 * count :].reshape(-1, 3)]), count
 
 
