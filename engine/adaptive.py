@@ -24,9 +24,9 @@ extracted polygons, as vertex clustering over the octree's blocks:
    split along the diagonal between two crease vertices, else the less folded one.
 4. The result is checked: every edge in exactly two faces, opposite ways, every vertex's faces one fan, no face
    repeating a corner, every merged face's centre within FACE_REACH tolerances of the field's surface and facing
-   the way its gradient does there (none turned over). The components at any failure drop one level and the check
-   runs again, until none fails (at worst every vertex is back at level 0: the surface as extracted), so the result
-   is closed and 2-manifold always.
+   the way its gradient does there (none turned over). The components at any failure (at a stray or turned face,
+   its corners of the highest level alone) drop one level and the check runs again, until none fails (at worst
+   every vertex is back at level 0: the surface as extracted), so the result is closed and 2-manifold always.
    A round samples the field only where the one before did not (clusters and triangles by their levels and ids).
 
 Self-intersection is not checked beyond that: a merged vertex lies within about the tolerance of its vertices' plane
