@@ -5,7 +5,9 @@ cylinders with n-gon, fan or no caps, cones, tori, Suzanne, planes and grids; tw
 extruded or not; a Bézier circle, bevelled, extruded or neither; an empty mesh), placed, turned and scaled at random
 (mirrored one time in eight), some with a subdivision, array, mirror or solidify modifier, a colour attribute, two
 materials or mixed shading. One operator runs on them with random options (keep faces, adaptivity, blend,
-thickness, resolution 48-128, inputs hidden or not). Printed per scene: the operator's outcome and, for a result,
+thickness, resolution 48-128, inputs hidden or not), or a CSG tree is made of them (``aasdf.tree_from_selection``,
+with keep faces and adaptivity set on its Output node), evaluated, its last input moved and the tree evaluated again,
+as a drag's step. Printed per scene: the operator's outcome and, for a result,
 its faces, whether every edge is in two faces opposite ways, and whether manifold3d takes it as a 2-manifold; a
 refusal's message (Blender raises it as a RuntimeError); and any input whose mesh, transform or modifiers changed.
 Then the sums: a scene that leaves a result open or not 2-manifold, or changes an input, is a bug.
@@ -168,7 +170,7 @@ def run_scene(rng) -> dict:
     objects = [random_object(i, rng) for i in range(int(rng.integers(2, 4)))]
     bpy.context.view_layer.update()
     before = {obj.name: digest(obj) for obj in bpy.data.objects}
-    which = str(rng.choice(["boolean", "boolean", "boolean", "offset", "shell"]))
+    which = str(rng.choice(["boolean", "boolean", "boolean", "offset", "shell", "tree"]))
     options = {
         "resolution": int(rng.choice([48, 64, 96, 128])),
         "adaptivity": float(rng.choice([0.0, 0.0, 0.3, 0.7])),
@@ -185,6 +187,8 @@ def run_scene(rng) -> dict:
                     bool(rng.integers(4)),
                 )
                 status = bpy.ops.aasdf.boolean(**options)
+            elif which == "tree":
+                return _tree_scene(objects, options, before, rng)
             elif which == "offset":
                 status = bpy.ops.aasdf.offset(distance=float(rng.uniform(-0.1, 0.2)), **options)
             else:
@@ -198,6 +202,39 @@ def run_scene(rng) -> dict:
     outcome["changed"] = [name for name in before if name in bpy.data.objects and digest(bpy.data.objects[name])
                           != before[name]]  # fmt: skip
     outcome["scene"] = f"{which} of {', '.join(obj.name for obj in objects)} {options}"
+    return outcome
+
+
+def _tree_scene(objects, options, before: dict, rng) -> dict:
+    """A CSG tree of ``objects`` (its Output node set as ``options`` say), evaluated; its last input moved by a tenth
+    of its size and the tree evaluated again. The outcome of the second evaluation, the first's where it failed."""
+    settings = bpy.context.scene.aasdf
+    settings.resolution, settings.hide_inputs = options["resolution"], options["hide_inputs"]
+    settings.thickness = options.get("thickness", 0.0)
+    operation = str(rng.choice(["UNION", "INTERSECT", "DIFFERENCE"]))
+    scene = f"tree {operation.lower()} of {', '.join(obj.name for obj in objects)} {options}"
+    status = bpy.ops.aasdf.tree_from_selection(operation=operation, evaluate=False, auto_update=False)
+    tree = settings.tree
+    output = next(node for node in tree.nodes if hasattr(node, "keep_faces"))
+    output.keep_faces, output.adaptivity = bool(rng.integers(4)), options["adaptivity"]
+    outcome = {"status": "".join(status), "scene": scene, "changed": []}
+    for step in range(2):
+        if step:  # a drag's step: the last input moved, its own change expected
+            objects[-1].location = tuple(np.add(objects[-1].location, 0.1 * np.asarray(objects[-1].dimensions)))
+            bpy.context.view_layer.update()
+            before[objects[-1].name] = digest(objects[-1])
+        try:
+            outcome["status"] = "".join(bpy.ops.aasdf.evaluate_tree(tree=tree.name))
+        except RuntimeError as err:
+            return {**outcome, "status": "REFUSED", "message": str(err).strip()}
+        result = bpy.data.objects.get(f"{objects[0].name}.csg")
+        if outcome["status"] != "FINISHED" or result is None:
+            return outcome
+        outcome["faces"] = len(result.data.polygons)
+        outcome["closed"], outcome["manifold"] = result_check(result)
+        if not (outcome["closed"] and outcome["manifold"]):
+            return outcome
+    outcome["changed"] = [name for name in before if digest(bpy.data.objects[name]) != before[name]]
     return outcome
 
 
