@@ -217,7 +217,7 @@ def _tree_scene(objects, options, before: dict, rng) -> dict:
     tree = settings.tree
     output = next(node for node in tree.nodes if hasattr(node, "keep_faces"))
     output.keep_faces, output.adaptivity = bool(rng.integers(4)), options["adaptivity"]
-    outcome = {"status": "".join(status), "scene": scene, "changed": []}
+    outcome = {"status": "".join(status), "scene": f"{scene} keep faces {output.keep_faces}", "changed": []}
     for step in range(2):
         if step:  # a drag's step: the last input moved, its own change expected
             objects[-1].location = tuple(np.add(objects[-1].location, 0.1 * np.asarray(objects[-1].dimensions)))
