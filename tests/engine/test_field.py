@@ -681,6 +681,20 @@ def test_morton_codes_match_between_host_and_device():
     np.testing.assert_array_equal(out.numpy(), coords)
 
 
+def test_long_morton_arrays_are_coded_on_the_host_as_numpy_codes_short_ones(monkeypatch):
+    from engine import octree
+
+    rng = np.random.default_rng(5)
+    n = 3 * octree.HOST_KERNEL_FROM
+    coords = np.concatenate([rng.integers(0, 2**21, size=(n, 3)), [[0, 0, 0], [2**21 - 1] * 3, [-1, 2**21, 2**22 + 3]]])
+    codes = np.concatenate([rng.integers(0, 2**63 - 1, size=n), [0, 2**63 - 1]])
+    by_kernel = octree.morton_encode_np(coords), octree.morton_decode_np(codes)
+    monkeypatch.setattr(octree, "HOST_KERNEL_FROM", 10**12)  # numpy's passes alone
+    np.testing.assert_array_equal(by_kernel[0], octree.morton_encode_np(coords))
+    np.testing.assert_array_equal(by_kernel[1], octree.morton_decode_np(codes))
+    np.testing.assert_array_equal(octree.morton_decode_np(by_kernel[0][:n]), coords[:n])
+
+
 def test_a_field_keeps_no_coordinates_and_decodes_them_from_its_codes():
     verts, tris = uv_sphere(1.0, rings=24, segments=48)
     field = engine.build_field(verts, tris, voxel_size=0.05)
