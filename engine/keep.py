@@ -55,7 +55,7 @@ from .orient import patch_flips
 from .otherleaves import leaf_bvh, leaf_jumps, leaf_margin, mesh_leaf
 from .ownside import THIN, TINY_VOXELS, outward, side_at
 from .parallel import run_tasks
-from .precut import cut_strips, fused_margins
+from .precut import cut_strips, predicted_margins
 from .refine import merge_kept, restore_whole, straighten_borders
 from .samples import edge_turns, per_triangle_min, triangle_samples
 from .slivers import Splitter, strip_parents
@@ -282,11 +282,8 @@ class _Judge:
         return np.maximum(longest / 8.0, self.spacing) * (SLACK_VOXELS / SAMPLE_VOXELS)
 
     def margins(self, points: np.ndarray, reach: float) -> np.ndarray:
-        """(N,) float32 how far the nearest of the other leaves' surfaces and the leaf's own defects is from each point
-        (N, 3) float32, up to ``reach``: the reading the judge's samples take, by either path."""
-        if self.fused is not None:
-            return fused_margins(self.fused, points, reach)
-        return self._readings(points, reach)[0]
+        """(N,) float32 about how far the other surfaces are from each point: :func:`.precut.predicted_margins`."""
+        return predicted_margins(self, points, reach)
 
     def _readings(self, points: np.ndarray, reach: float, planes=None) -> tuple[np.ndarray, list]:
         """The general path's reading at each point: ``(margin, signs)``, (N,) float32 as :meth:`margins` and per leaf

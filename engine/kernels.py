@@ -58,7 +58,6 @@ ENGINE_MODULES = (
     "selfcross",
     "tiling",
     "uncross",
-    "precut",
     "zipper",
     "slits",
     "coarsen",
