@@ -256,21 +256,19 @@ def _on_host(kernel, source: np.ndarray, out: np.ndarray) -> None:
 
 @wp.kernel(enable_backward=False)
 def _encode_host_kernel(coords: wp.array2d[wp.int64], offset: int, out: wp.array[wp.int64]):
+    """:func:`morton_encode` of each row (its low 21 bits an axis, as numpy's passes take them)."""
     i = wp.tid() + offset
-    out[i] = (
-        _spread_bits(coords[i, 0])
-        | (_spread_bits(coords[i, 1]) << wp.int64(1))
-        | (_spread_bits(coords[i, 2]) << wp.int64(2))
-    )
+    out[i] = morton_encode(wp.vec3i(wp.int32(coords[i, 0]), wp.int32(coords[i, 1]), wp.int32(coords[i, 2])))
 
 
 @wp.kernel(enable_backward=False)
 def _decode_host_kernel(codes: wp.array[wp.int64], offset: int, out: wp.array2d[wp.int64]):
+    """:func:`morton_decode` of each code."""
     i = wp.tid() + offset
-    m = codes[i]
-    out[i, 0] = _compact_bits(m)
-    out[i, 1] = _compact_bits(m >> wp.int64(1))
-    out[i, 2] = _compact_bits(m >> wp.int64(2))
+    c = morton_decode(codes[i])
+    out[i, 0] = wp.int64(c[0])
+    out[i, 1] = wp.int64(c[1])
+    out[i, 2] = wp.int64(c[2])
 
 
 def _step(x: np.ndarray, t: np.ndarray, shifted, shift: int, mask: int) -> None:
