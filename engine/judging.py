@@ -45,6 +45,9 @@ CENTRE_SAMPLES = 8
 # ... and whose corners lie within this many least spacings of its centre (the bound is that much looser, twice over:
 # a large face's read whole keeps its verdict over moves of a few voxels)
 CENTRE_SPREAD = 8.0
+# A piece's slack counts as larger than the least (keep's ``_Judge.partly_slack``) by more than this many least
+# spacings (float rounding of the same slack is far less).
+PARTLY_TIE = 1e-9
 # Verdict bits of :func:`judge_pieces`.
 KEPT_BIT, PARTLY_BIT, FLIP_BIT = 1, 2, 4
 # and, where distances are recorded: no sample where the expression crosses; a defect, or its own field crossing it
@@ -86,7 +89,7 @@ class JudgeArg:
     spacing: wp.float64  # the least spacing of samples
     slack_share: wp.float64  # a piece's slack per unit of its samples' spacing
     sample_share: wp.float64  # and its samples' spacing per unit of its slack
-    partly_at: wp.float64  # band + the least slack: a piece is partly keepable with a margin (+ its slack) above
+    partly_at: wp.float64  # band + least slack: a piece is partly keepable with a margin (+ a large one's slack) above
     pad: wp.float64  # a reach exceeds the distance it must tell apart by this much (float32 rounding is far less)
     corner_reach: float  # how far corners are read: a piece of the least slack's reach (a larger piece reads on)
     # a shell that crosses itself (``crossing`` 1): its own field is read at every sample, pulled ``pull`` towards the
@@ -283,7 +286,16 @@ def _keeps(judge: JudgeArg, same: bool, bounds: wp.vec2, slack: wp.float64, side
 def _partly(judge: JudgeArg, bounds: wp.vec2, slack: wp.float64, side: int, sides: int) -> bool:
     """Whether a piece is partly keepable (a margin above the partly keepable one, its own field crossing it
     somewhere): only ever turns true."""
-    return wp.float64(bounds[1]) + slack > judge.partly_at and (side != 0 or (sides & 2) != 0)
+    return wp.float64(bounds[1]) + _partly_slack(judge, slack) > judge.partly_at and (side != 0 or (sides & 2) != 0)
+
+
+@wp.func
+def _partly_slack(judge: JudgeArg, slack: wp.float64) -> wp.float64:
+    """What a piece's largest margin is raised by before it is compared with ``partly_at`` (keep's
+    ``_Judge.partly_slack``): its slack where larger than the least, else 0."""
+    return wp.where(
+        slack > judge.partly_at - judge.band + wp.float64(PARTLY_TIE) * judge.spacing, slack, wp.float64(0.0)
+    )
 
 
 @wp.kernel(enable_backward=False)
@@ -313,7 +325,7 @@ def _judge_pieces_kernel(
     t = wp.tid() + offset
     slack = wp.max(longest[t] / wp.float64(8.0), judge.spacing) * judge.slack_share
     keep_reach = wp.float32(judge.band + slack + judge.pad)
-    partly_reach = wp.float32(wp.max(judge.partly_at - slack, wp.float64(0.0)) + judge.pad)
+    partly_reach = wp.float32(wp.max(judge.partly_at - _partly_slack(judge, slack), wp.float64(0.0)) + judge.pad)
     full = full_reach > 0.0
     least = float(1.0e30)  # the least margin of the samples read as far as recorded
     first = codes[tris[t, 0]]

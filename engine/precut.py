@@ -95,7 +95,7 @@ def _cut_places(judge, verts: np.ndarray, corners, split_edge: float) -> tuple[n
         least, most = _range_extremes(margin, first[s] + a, z - a + 1)
         slack = judge.slack_of(size)
         keepable = least - blur[s] > judge.band + slack
-        partly = most + blur[s] + slack > partly_at
+        partly = most + blur[s] + judge.partly_slack(slack) > partly_at
         split = ~keepable & partly & (size > split_edge)
         mid = 0.5 * (lo + hi)
         cuts[0].append(s[split])

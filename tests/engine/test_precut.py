@@ -32,6 +32,7 @@ def test_a_wall_near_a_plane_is_cut_into_short_pieces_there_and_long_ones_away()
         spacing=spacing,
         slack=0.075,
         slack_of=lambda size: np.maximum(size / 8.0, spacing) * 0.75,
+        partly_slack=lambda slack: np.where(slack > 0.075 + 1e-9, slack, 0.0),
         margins=lambda points, reach: np.minimum(np.abs(points[:, 2] - 0.37), reach).astype(np.float32),
     )
     out = cut_strips(judge, splitter, verts, splitter.strip.copy(), split_edge)
