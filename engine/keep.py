@@ -58,6 +58,7 @@ from .ownside import THIN, TINY_VOXELS, outward, side_at
 from .parallel import run_tasks
 from .precut import cut_strips, predicted_margins
 from .refine import merge_kept, restore_whole, straighten_borders
+from .rounds import DROPPED, KEPT, UNKNOWN, judge_unknown, split_rounds
 from .samples import edge_turns, per_triangle_min, triangle_samples
 from .slivers import Splitter, strip_parents
 from .sources import mesh_distances
@@ -83,7 +84,6 @@ SIDE_VOXELS = 0.5
 # Points to keep clear of (where a join gave kept faces up) count as defects this many voxels across (octahedra).
 AVOID_VOXELS = 1.0
 
-UNKNOWN, KEPT, DROPPED = 0, 1, 2
 FOUND_FLAGS = ("signs_only", "own_only")  # what a judge finds for :mod:`.verdicts` besides each triangle's margin
 
 
@@ -538,16 +538,9 @@ def _judge_leaf(field, index: int, source, reads: tuple, fused: bool, avoid) -> 
     if cut is not None:  # slivers cut where the rounds would cut them, the pieces judged
         verts, tris, rows, ends = cut
         parent, flip, status = parent[rows], flip[rows], status[rows]
-        _judge_unknown(judge, verts, tris, parent, flip, status, split_edge)
-    for _ in range(MAX_SPLIT_ROUNDS - 1):
-        mark = status == UNKNOWN  # partly keepable and larger than the split size: split, the pieces judged
-        if not mark.any():
-            break
-        verts, tris, parent, flip, status, ends = splitter.split(
-            verts, tris, mark, parent, flip, status, ends, UNKNOWN, DROPPED
-        )
-        if not _judge_unknown(judge, verts, tris, parent, flip, status, split_edge):
-            break
+        judge_unknown(judge, verts, tris, parent, flip, status, split_edge)
+    pieces = (verts, tris, parent, flip, status, ends)
+    verts, tris, parent, flip, status, ends = split_rounds(judge, splitter, pieces, split_edge, MAX_SPLIT_ROUNDS - 1)
     status[status == UNKNOWN] = DROPPED
     tris, rows = merge_kept(verts, tris, status == KEPT, ends)
     parent, kept, flip = parent[rows], status[rows] == KEPT, flip[rows]
@@ -560,19 +553,6 @@ def _judge_leaf(field, index: int, source, reads: tuple, fused: bool, avoid) -> 
     parent, kept = parent[rows], kept[rows]
     flip = patch_flips(verts, tris, kept, flip_of[parent], field.device)  # turned as its patch is
     return {"verts": verts, "tris": tris, "parent": parent, "kept": kept, "flip": flip & kept}
-
-
-def _judge_unknown(judge: _Judge, verts, tris, parent, flip, status, split_edge: float) -> bool:
-    """Judge the pieces of status UNKNOWN: each becomes KEPT, DROPPED, or stays UNKNOWN (partly keepable and larger
-    than the split size: to be split); ``status`` and ``flip`` set in place. Returns whether there were any."""
-    todo = np.flatnonzero(status == UNKNOWN)
-    if not len(todo):
-        return False
-    longest, turn = edge_turns(verts, tris[todo])
-    kept, partly, flip[todo] = judge.judge(verts, tris[todo], parent[todo], longest, turn)
-    split = partly & ~kept & (longest > split_edge)
-    status[todo] = np.where(kept, KEPT, np.where(split, UNKNOWN, DROPPED))
-    return True
 
 
 def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndarray, np.ndarray]:
