@@ -422,7 +422,8 @@ class _Judge:
         least, most, nearest = per_triangle_min(bounds, local, len(used), first).T * np.array([[1.0], [-1.0], [1.0]])
         side, crossed, partly_crossed = self._own_sides(verts[used], local, points, first, parent)
         kept = same & crossed & (least > self.band + slack)
-        partly = partly_crossed & (most + self.partly_slack(slack) > self.band + self.slack) & ~self.defects[parent]
+        raised = slack if coplanar else self.partly_slack(slack)  # (readings in a plane jump where its faces end)
+        partly = partly_crossed & (most + raised > self.band + self.slack) & ~self.defects[parent]
         self.found = {
             "margin": nearest,
             "signs_only": most < 0.0,

@@ -24,6 +24,7 @@ import warp as wp
 
 from .components import connected_components
 from .edgehash import EdgeCounts, directed_edges
+from .geometry import closest_on_triangle, triangle_frame
 from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
 
 # A voxel-surface vertex is over the kept faces within this many voxels of them.
@@ -49,6 +50,26 @@ def _segment_distance(p: wp.vec3, a: wp.vec3, b: wp.vec3) -> float:
     return wp.length(p - (a + t * d))
 
 
+@wp.func
+def _facing_tie(kept: wp.uint64, p: wp.vec3, way: wp.vec3, u: float, margin: float) -> bool:
+    """Whether a kept face as near to ``p`` as ``u`` (within ``margin``) faces ``way``: where the nearest point lies on
+    an edge or a corner, the face the query returns among those that share it is the BVH's choice, and a point is over
+    the kept faces where any of them faces its way (the verdict the same whichever BVH holds them)."""
+    r = u + margin
+    query = wp.mesh_query_aabb(kept, p - wp.vec3(r), p + wp.vec3(r))
+    f = int(0)
+    while wp.mesh_query_aabb_next(query, f):
+        n = wp.mesh_eval_face_normal(kept, f)
+        if wp.dot(way, n) >= 0.0:
+            a = wp.mesh_eval_position(kept, f, 1.0, 0.0)
+            b = wp.mesh_eval_position(kept, f, 0.0, 1.0)
+            c = wp.mesh_eval_position(kept, f, 0.0, 0.0)
+            edges, inward, lengths, unit = triangle_frame(a, b, c)
+            if wp.length(p - closest_on_triangle(p, a, b, c, edges, inward, lengths, unit)) <= r:
+                return True
+    return False
+
+
 @wp.kernel(enable_backward=False)
 def _over_kernel(
     kept: wp.uint64,
@@ -70,10 +91,12 @@ def _over_kernel(
     q = wp.mesh_query_point_no_sign(kept, p, reach)
     if not q.result:
         return
-    if normals.shape[0] > 0:
-        if wp.dot(normals[i], wp.mesh_eval_face_normal(kept, q.face)) < 0.0:
-            return
     u = wp.length(p - wp.mesh_eval_position(kept, q.face, q.u, q.v))
+    if normals.shape[0] > 0:
+        if wp.dot(normals[i], wp.mesh_eval_face_normal(kept, q.face)) < 0.0 and not _facing_tie(
+            kept, p, normals[i], u, margin
+        ):
+            return
     r = u + margin
     query = wp.bvh_query_aabb(border, p - wp.vec3(r), p + wp.vec3(r))
     s = int(0)
