@@ -16,7 +16,7 @@ def _pieces(leaf) -> dict:
     """Each piece as its sorted corner positions, with its verdict bits (kept, flip)."""
     corners = np.sort(leaf["verts"][leaf["tris"]].reshape(len(leaf["tris"]), -1).astype(np.float64), axis=1)
     rows = np.lexsort(corners.T[::-1])
-    return {"corners": corners[rows], "kept": leaf["kept"][rows], "flip": leaf["flip"][rows], "parent": leaf["parent"]}
+    return {"corners": corners[rows], "kept": leaf["kept"][rows], "flip": leaf["flip"][rows]}
 
 
 @pytest.mark.parametrize("name", ["fandisk - cylinder", "hex prism & sphere"])

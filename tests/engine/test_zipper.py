@@ -78,6 +78,20 @@ def test_the_far_side_of_a_thin_part_is_not_over_the_near_sides_kept_faces():
     assert vertices_over(points, kept_tris, border, candidates, 1.0, device)[candidates].all()  # no ways: by distance
 
 
+def test_a_vertex_nearest_a_ridge_is_over_it_where_either_face_there_faces_its_way():
+    # kept faces: two slopes meeting at a ridge along x (normals (0, 1, 1) and (0, -1, 1)); a vertex above the ridge
+    # is as near to both, its nearest point on the ridge, and its surface's way faces the first slope's and not the
+    # second's: over the kept faces, whichever face the BVH's query returns (the faces listed either way round)
+    points = np.float32([[-8, 0, 0], [8, 0, 0], [0, 8, -8], [0, -8, -8], [0, 0, 0.5]])
+    device = wp.get_device("cpu")
+    for way, expected in (((0.0, 1.0, -0.2), True), ((0.0, 1.0, -2.0), False)):  # (the second faces neither slope)
+        normals = np.zeros((len(points), 3), np.float32)
+        normals[:] = way
+        for kept_tris in (np.array([[0, 1, 2], [1, 0, 3]]), np.array([[1, 0, 3], [0, 1, 2]])):
+            border = border_halves(kept_tris, len(points))
+            assert vertices_over(points, kept_tris, border, np.array([4]), 1.0, device, normals)[4] == expected
+
+
 def _directed_edges(tris) -> list:
     return sorted((int(t[k]), int(t[(k + 1) % 3])) for t in tris for k in range(3))
 
