@@ -33,12 +33,12 @@ import numpy as np
 
 from .expression import Operation, leaves
 from .ondemand import Refiner
+from .rounds import DROPPED, KEPT, UNKNOWN  # (a piece's status, as the judge's rounds set it)
 from .sources import distances_to_each, mesh_distances
 
 # Distances are found up to this many voxels beyond the band in a first round, so that a verdict survives moves of
 # this much less what it used (a drag's steps are a few voxels at the working resolution).
 REUSE_VOXELS = 8.0
-UNKNOWN, KEPT, DROPPED = 0, 1, 2
 # Avoided points this many voxels apart or less are the same (one point placed, then brought back to its leaf).
 SAME_VOXELS = 1e-3
 
