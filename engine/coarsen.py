@@ -26,6 +26,7 @@ import numpy as np
 import warp as wp
 
 from .adaptive import tolerance
+from .collapses import collapse_serial
 from .meshcheck import any_corner, compacted
 from .parallel import launch_split
 from .refine import position_hash
@@ -38,6 +39,7 @@ TOLERANCE_VOXELS = tolerance(0.0)
 MIN_QUALITY = 0.05
 # Only faces of at least this quality have planes that bound a collapse (a sliver's plane is ill-defined).
 PLANE_QUALITY = 0.2
+QUALITIES = (MIN_QUALITY, PLANE_QUALITY)
 # Rounds of collapses at most; they stop earlier when a round removes under MIN_ROUND_SHARE of the vertices left.
 MAX_ROUNDS = 48
 MIN_ROUND_SHARE = 0.01
@@ -287,7 +289,9 @@ def _claim_passes_kernel(
             return
 
 
-def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, tol: float, device):
+def collapse_flat(
+    points: np.ndarray, tris: np.ndarray, movable: np.ndarray, group: np.ndarray, tol: float, device, serial=None
+):
     """Remove ``movable`` vertices of a closed, oriented triangle surface where flat (module docstring).
 
     Args:
@@ -296,6 +300,8 @@ def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, gro
         movable: (V,) bool: the vertices that may be removed.
         group: (F,) int64: a vertex is removed only where all its faces share one group.
         tol: Distance (world units) a neighbour may lie off the planes of the faces around a removed vertex.
+        serial: The collapses made one after another in one thread (:mod:`.collapses`), not in rounds; None: on the
+            CPU.
     Returns:
         ``(tris, rows)``: the triangles left (on the same vertex indices) and which input face each one was.
     """
@@ -306,9 +312,12 @@ def collapse_flat(points: np.ndarray, tris: np.ndarray, movable: np.ndarray, gro
     # only the faces at a movable vertex or its neighbours are read (the fans of both ends of an edge)
     near = np.zeros(n, dtype=bool)
     near[tris[any_corner(movable, tris)].ravel()] = True
-    rows = np.flatnonzero(any_corner(near, tris))
-    rest = np.setdiff1d(np.arange(len(tris)), rows)
+    read = any_corner(near, tris)
+    rows, rest = np.flatnonzero(read), np.flatnonzero(~read)
     tris, rest_tris = np.ascontiguousarray(tris[rows]), tris[rest]
+    if wp.get_device(device).is_cpu if serial is None else serial:
+        out, alive = collapse_serial(points, tris, movable, group[rows], tol, device, quality=QUALITIES)
+        return np.concatenate([out, rest_tris]), np.concatenate([rows[alive], rest])
     pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
     place = position_hash(points)
     movable = movable.astype(np.int32)

@@ -61,6 +61,7 @@ ENGINE_MODULES = (
     "zipper",
     "slits",
     "coarsen",
+    "collapses",
     "edgehash",
     "jumps",
     "normalsums",
