@@ -175,7 +175,8 @@ def _tiled(
     inner, inner_sizes = _inner_vertices(tris[rows], piece, order, sizes, loop_piece, n)
     inner_starts = np.cumsum(inner_sizes) - inner_sizes
     plane, inner_plane = _in_plane(verts, order, starts, sizes, inner, inner_sizes, voxel)
-    local, done = tiled_polygons(plane, starts, sizes, _forbidden_chords(tris[~patch], order, starts, sizes, n), device)
+    outside = _beside(tris, patch, n)
+    local, done = tiled_polygons(plane, starts, sizes, _forbidden_chords(outside, order, starts, sizes, n), device)
     taken = inner_sizes if with_inner else inner_sizes * 0
     local, counts, inserted = with_points(plane, starts, sizes, local, done, inner_plane, inner_starts, taken, device)
     loop_of = lambda sizes_: np.repeat(np.arange(len(sizes)), sizes_)  # noqa: E731
@@ -186,7 +187,7 @@ def _tiled(
     tiles = points[(starts + inner_starts)[tile_loop][:, None] + local]
     lost = (inner[~inserted], loop_of(inner_sizes)[~inserted])
     done = (counts > 0) & _close_enough(
-        verts, tris[rows], piece, tris[~patch], tiles, tile_loop, lost, loop_piece, voxel, device
+        verts, tris[rows], piece, outside, tiles, tile_loop, lost, loop_piece, voxel, device
     )
     good = np.isin(piece, loop_piece[done])
     return rows[good], tiles[done[tile_loop]], int(done.sum())
@@ -218,15 +219,24 @@ def _fanned(verts, tris: np.ndarray, patch: np.ndarray, voxel: float, device) ->
     tiles, tile_loop = np.stack([order, order[step], centre[loop]], axis=1)[has], loop[has]
     lost = np.ones(len(inner), dtype=bool)
     lost[first] = False
+    outside, lost = _beside(tris, patch, n), (inner[lost], inner_loop[lost])
     done = (centre >= 0) & _close_enough(
-        verts, tris[rows], piece, tris[~patch], tiles, tile_loop, (inner[lost], inner_loop[lost]), loop_piece, voxel,
-        device, FAN_TOLERANCE_VOXELS,
-    )  # fmt: skip
+        verts, tris[rows], piece, outside, tiles, tile_loop, lost, loop_piece, voxel, device, FAN_TOLERANCE_VOXELS
+    )
     laid = done[tile_loop]
     gone = rows[np.isin(piece, loop_piece[done])]
     done[_crossing_loops(verts, tris, gone, tiles[laid], tile_loop[laid], device)] = False
     good = np.isin(piece, loop_piece[done])
     return rows[good], tiles[done[tile_loop]], int(done.sum())
+
+
+def _beside(tris: np.ndarray, patch: np.ndarray, n: int) -> np.ndarray:
+    """The faces outside the ``patch`` with a corner on it: the only ones its loops, tiles and inner vertices touch
+    (what :func:`_forbidden_chords` and :func:`_close_enough` read of the faces outside; the rest of a surface of tens
+    of thousands of faces is left unread, where a round often tiles nothing)."""
+    on = np.zeros(n, dtype=bool)
+    on[tris[patch]] = True
+    return tris[any_corner(on, tris) & ~patch]
 
 
 def _crossing_loops(verts, tris: np.ndarray, gone: np.ndarray, tiles: np.ndarray, tile_loop, device) -> np.ndarray:
