@@ -65,6 +65,7 @@ ENGINE_MODULES = (
     "edgehash",
     "jumps",
     "normalsums",
+    "quads",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.

@@ -21,14 +21,14 @@ and as 2-manifold as the triangles.
 from __future__ import annotations
 
 import numpy as np
+import warp as wp
+
+from .parallel import launch_split
 
 # Largest angle (degrees) between the two triangles of a quad, along either diagonal, for it to stay one polygon:
 # well below the crease angle (quadric.CREASE_ANGLE, 25), so no reconstructed crease runs through a polygon; above
 # the bend of a quad on a sphere of 4 voxels' radius.
 QUAD_ANGLE = 20.0
-# Where a whole quad's corners lie in its two rows (``a b c``, ``d e f``), by its ``whole`` flag: split along q0-q2
-# (``q0 q1 q2``, ``q0 q2 q3``: q0 q1 q2 q3) or along q1-q3 (``q0 q1 q3``, ``q1 q2 q3``: q1 q2 q3 q0).
-_QUAD_CORNERS = np.array([[0, 0, 0, 0], [0, 1, 2, 5], [3, 4, 5, 0]], dtype=np.intp)
 
 
 def merge_pairs(tris, whole) -> tuple[np.ndarray, np.ndarray]:
@@ -44,30 +44,99 @@ def merge_pairs(tris, whole) -> tuple[np.ndarray, np.ndarray]:
         ``faces`` (C,) int32 corner vertices, face after face, and ``sizes`` (P,) int32 corners per face (4 or 3).
         A quad starts at an end of its diagonal (``q0 q1 q2 q3`` or ``q1 q2 q3 q0``): its fan is its two rows.
     """
-    tris = np.asarray(tris, dtype=np.int32)
-    whole = np.asarray(whole)
-    pairs = tris[: 2 * len(whole)].reshape(-1, 6)
-    kept = np.flatnonzero(whole)  # each whole quad's four corners gathered once from its two rows
-    quads = pairs.reshape(-1)[(6 * kept)[:, None] + _QUAD_CORNERS[whole[kept]]]
-    split = pairs[whole == 0].reshape(-1, 3)
-    rest = tris[2 * len(whole) :]
-    faces = np.concatenate([quads.ravel(), split.ravel(), rest.ravel()])
-    sizes = np.full(len(quads) + len(split) + len(rest), 3, dtype=np.int32)
-    sizes[: len(quads)] = 4
+    tris = np.ascontiguousarray(tris, dtype=np.int32).reshape(-1, 3)
+    whole = np.ascontiguousarray(whole, dtype=np.uint8)
+    n_quads, rest = len(whole), len(tris) - 2 * len(whole)
+    kept = whole != 0
+    before = np.cumsum(kept, dtype=np.int32) - kept  # whole quads before each quad
+    n_whole = int(np.count_nonzero(kept))
+    faces = np.empty(4 * n_whole + 3 * (2 * (n_quads - n_whole) + rest), dtype=np.int32)
+    sizes = np.empty(n_whole + 2 * (n_quads - n_whole) + rest, dtype=np.int32)
+    if n_quads:
+        _on_host(_merge_pairs_kernel, n_quads, [tris.reshape(-1), whole, before], n_whole, [faces, sizes])
+    faces[len(faces) - 3 * rest :] = tris[2 * n_quads :].reshape(-1)
+    sizes[len(sizes) - rest :] = 3
     return faces, sizes
 
 
 def triangulate(faces, sizes) -> np.ndarray:
     """(T, 3) int32 fans of polygons (``faces`` (C,) corners, ``sizes`` (P,)): each polygon ``a b c ...`` as
     ``a b c``, ``a c d``, ... (a quad of :func:`merge_pairs` gives back its two rows)."""
-    faces = np.asarray(faces, dtype=np.int64)
-    sizes = np.asarray(sizes, dtype=np.int64)
-    start = np.cumsum(sizes) - sizes
+    faces = np.ascontiguousarray(faces, dtype=np.int32)
+    sizes = np.ascontiguousarray(sizes, dtype=np.int32)
     count = np.maximum(sizes - 2, 0)
-    poly = np.repeat(np.arange(len(sizes)), count)
-    k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-    first = start[poly]
-    return np.stack([faces[first], faces[first + k + 1], faces[first + k + 2]], axis=1).astype(np.int32)
+    tri_start = (np.cumsum(count) - count).astype(np.int32)
+    corner_start = (np.cumsum(sizes) - sizes).astype(np.int32)
+    out = np.empty((int(count.sum()), 3), dtype=np.int32)
+    if len(sizes):
+        _on_host(_fans_kernel, len(sizes), [faces, sizes, corner_start, tri_start], 0, [out.reshape(-1)])
+    return out
+
+
+def _on_host(kernel, n: int, inputs: list, value: int, outputs: list) -> None:
+    """Launch a host ``kernel`` over ``n`` rows of numpy arrays (read and written in place) on the CPU's cores: the
+    polygons are the extraction's host arrays whatever the field's device, and numpy's gathers of their corners took
+    5-10 ms on a 150 k-triangle surface (the kernels 0.6)."""
+    cpu = wp.get_device("cpu")
+    args = [wp.array(a, dtype=_WARP_TYPES[a.dtype], device=cpu, copy=False) for a in inputs + outputs]
+    k = len(inputs)
+    launch_split(kernel, n, lambda lo, _n: [*args[:k], value, lo, *args[k:]], cpu)
+
+
+_WARP_TYPES = {np.dtype(np.int32): wp.int32, np.dtype(np.uint8): wp.uint8}
+
+
+@wp.kernel(enable_backward=False)
+def _merge_pairs_kernel(
+    tris: wp.array[wp.int32],
+    whole: wp.array[wp.uint8],
+    before: wp.array[wp.int32],
+    n_whole: int,
+    offset: int,
+    faces: wp.array[wp.int32],
+    sizes: wp.array[wp.int32],
+):
+    """Quad ``q``'s polygon: whole at row ``before[q]``, else its two rows after all whole quads. A whole quad's
+    corners in its two rows ``a b c``, ``d e f``: split along q0-q2 (``q0 q1 q2``, ``q0 q2 q3``) ``a b c f``, along
+    q1-q3 (``q0 q1 q3``, ``q1 q2 q3``) ``d e f a``."""
+    q = wp.tid() + offset
+    r = 6 * q
+    k = before[q]
+    w = int(whole[q])
+    if w == 0:
+        s = q - k  # split quads before this one
+        o = 4 * n_whole + 6 * s
+        for j in range(6):
+            faces[o + j] = tris[r + j]
+        sizes[n_whole + 2 * s] = 3
+        sizes[n_whole + 2 * s + 1] = 3
+    else:
+        o = 4 * k
+        first = wp.where(w == 1, 0, 3)
+        for j in range(3):
+            faces[o + j] = tris[r + first + j]
+        faces[o + 3] = tris[r + wp.where(w == 1, 5, 0)]
+        sizes[k] = 4
+
+
+@wp.kernel(enable_backward=False)
+def _fans_kernel(
+    faces: wp.array[wp.int32],
+    sizes: wp.array[wp.int32],
+    corner_start: wp.array[wp.int32],
+    tri_start: wp.array[wp.int32],
+    unused: int,
+    offset: int,
+    out: wp.array[wp.int32],
+):
+    """Polygon ``p``'s fan about its first corner, from row ``tri_start[p]``."""
+    p = wp.tid() + offset
+    c = corner_start[p]
+    t = 3 * tri_start[p]
+    for k in range(sizes[p] - 2):
+        out[t + 3 * k] = faces[c]
+        out[t + 3 * k + 1] = faces[c + k + 1]
+        out[t + 3 * k + 2] = faces[c + k + 2]
 
 
 # A kept surface's per-face arrays (:func:`.hybrid.kept_surface`).
