@@ -167,10 +167,11 @@ def _best_target(
     """The nearest neighbour ``u`` may move onto (ties to the smaller ``place``), -1 for none (as
     :func:`.coarsen._candidate_kernel`); ``quality``: the least quality, and the least of a face whose plane counts."""
     degree = _degree(m, u)
-    if degree < 3 or not _one_group(m, group, u) or not _one_fan(m, u, degree):
+    if degree < 3 or not _one_group(m, group, u):
         return -1
     best = int(-1)
     length = float(3.0e38)
+    fan = int(-1)  # whether the faces at ``u`` are one fan: asked once a neighbour passes (most fail the planes first)
     c = m.head[u]
     while c >= 0:
         if m.alive[c // 3] == 1:
@@ -178,6 +179,10 @@ def _best_target(
             d = wp.length(m.points[v] - m.points[u])
             closer = d < length or (d == length and best >= 0 and place[v] < place[best])
             if closer and _collapse_ok(m, u, v, tol, quality[0], quality[1]):
+                if fan < 0:
+                    fan = wp.where(_one_fan(m, u, degree), 1, 0)
+                if fan == 0:
+                    return -1
                 best = v
                 length = d
         c = m.link[c]
