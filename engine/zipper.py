@@ -29,6 +29,8 @@ from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
 
 # A voxel-surface vertex is over the kept faces within this many voxels of them.
 OVER_VOXELS = 1.0
+# The grid that finds the kept faces near the voxel surface (:func:`faces_near`) has at most this many cells a side.
+NEAR_GRID = 32
 # Border loops are paired through vertices within this many voxels of each other.
 PAIR_VOXELS = 4.0
 # A strip stretches where the loops run farther apart than this many voxels.
@@ -123,9 +125,15 @@ def vertices_over(points, kept_tris, border, candidates, voxel: float, device, n
     if not len(kept_tris) or not len(candidates):
         return over_all
     kept_verts = points
+    reach, margin = OVER_VOXELS * voxel, 1e-3 * voxel
+    near = np.ascontiguousarray(kept_tris, dtype=np.int32)
+    if len(near) > len(candidates):  # a BVH of those near the points alone (fewer points: their grid costs more)
+        near = near[faces_near(kept_verts, near, points[candidates], reach)]
+    if not len(near):
+        return over_all
     mesh = wp.Mesh(
         points=wp.array(kept_verts, dtype=wp.vec3, device=device),
-        indices=wp.array(np.ascontiguousarray(kept_tris, dtype=np.int32).reshape(-1), dtype=wp.int32, device=device),
+        indices=wp.array(near.reshape(-1), dtype=wp.int32, device=device),
     )
     a = np.ascontiguousarray(kept_verts[border[:, 0]], dtype=np.float32)
     b = np.ascontiguousarray(kept_verts[border[:, 1]], dtype=np.float32)
@@ -138,7 +146,6 @@ def vertices_over(points, kept_tris, border, candidates, voxel: float, device, n
     )
     pts = wp.array(np.ascontiguousarray(points[candidates], dtype=np.float32), dtype=wp.vec3, device=device)
     over = wp.empty(len(candidates), dtype=wp.uint8, device=device)
-    reach, margin = OVER_VOXELS * voxel, 1e-3 * voxel
     ways = np.zeros((0, 3), np.float32) if normals is None else np.ascontiguousarray(normals[candidates], np.float32)
     ways = wp.array(ways, dtype=wp.vec3, device=device)
     launch_split(
@@ -153,6 +160,69 @@ def vertices_over(points, kept_tris, border, candidates, voxel: float, device, n
     )
     over_all[candidates] = over.numpy().astype(bool)
     return over_all
+
+
+@wp.kernel(enable_backward=False)
+def _near_faces_kernel(
+    verts: wp.array[wp.vec3],
+    tris: wp.array[wp.int32],
+    table: wp.array3d[wp.int32],
+    low: wp.vec3,
+    size: float,
+    reach: float,
+    offset: int,
+    near: wp.array[wp.uint8],
+):
+    """Whether triangle ``t``'s box, grown by ``reach``, meets a cell of the grid (``low``, cells of ``size``) that
+    holds a point: the count in its cells off the summed-volume ``table`` (dims + 1 a side, 0 first)."""
+    t = wp.tid() + offset
+    a = verts[tris[3 * t]]
+    b = verts[tris[3 * t + 1]]
+    c = verts[tris[3 * t + 2]]
+    lo = wp.min(wp.min(a, b), c) - wp.vec3(reach) - low
+    hi = wp.max(wp.max(a, b), c) + wp.vec3(reach) - low
+    first = wp.vec3i(0)
+    last = wp.vec3i(0)
+    for k in range(3):
+        n = table.shape[k] - 1
+        first[k] = wp.clamp(int(wp.floor(lo[k] / size)), 0, n)
+        last[k] = wp.clamp(int(wp.floor(hi[k] / size)) + 1, 0, n)
+    x0, y0, z0 = first[0], first[1], first[2]
+    x1, y1, z1 = last[0], last[1], last[2]
+    count = table[x1, y1, z1] - table[x0, y1, z1] - table[x1, y0, z1] - table[x1, y1, z0]
+    count += table[x0, y0, z1] + table[x0, y1, z0] + table[x1, y0, z0] - table[x0, y0, z0]
+    near[t] = wp.uint8(wp.where(count > 0, 1, 0))
+
+
+def faces_near(verts: np.ndarray, tris: np.ndarray, points: np.ndarray, reach: float) -> np.ndarray:
+    """(T,) bool a superset of the triangles ``tris`` ((T, 3) int32 of ``verts``) within ``reach`` of any of
+    ``points``: those whose box, grown by ``reach``, meets a cell of a coarse grid (at most NEAR_GRID cells a side)
+    that holds a point (:func:`_near_faces_kernel`, on the CPU's cores). A join's kept faces lie mostly far from the
+    seams' voxel surface, and Warp builds a mesh's BVH on one thread (0.3-0.4 us a triangle here): a BVH of those near
+    it alone is built in a fraction of the time."""
+    if not len(points) or not len(tris):
+        return np.zeros(len(tris), dtype=bool)
+    pts = np.asarray(points, dtype=np.float32)
+    low = pts.min(axis=0) - np.float32(reach)
+    size = max(2.0 * reach, float((pts.max(axis=0) - low).max()) / NEAR_GRID, 1e-30)
+    cell = np.floor((pts - low) / np.float32(size)).astype(np.int64)
+    dims = cell.max(axis=0) + 1
+    table = np.zeros(dims + 1, dtype=np.int32)
+    table[1:, 1:, 1:][cell[:, 0], cell[:, 1], cell[:, 2]] = 1
+    table = np.ascontiguousarray(table.cumsum(axis=0).cumsum(axis=1).cumsum(axis=2), dtype=np.int32)
+    cpu = wp.get_device("cpu")
+    near = np.zeros(len(tris), dtype=np.uint8)
+    args = [
+        wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=cpu),
+        wp.array(np.ascontiguousarray(tris, dtype=np.int32).reshape(-1), dtype=wp.int32, device=cpu),
+        wp.array(table, dtype=wp.int32, device=cpu),
+        wp.vec3(*low.tolist()),
+        float(size),
+        float(reach),
+    ]  # fmt: skip
+    out = wp.array(near, dtype=wp.uint8, device=cpu, copy=False)
+    launch_split(_near_faces_kernel, len(tris), lambda lo, _n: [*args, lo, out], cpu)
+    return near.view(bool)
 
 
 # ---- border loops ----

@@ -3,7 +3,7 @@
 import numpy as np
 import warp as wp
 
-from engine.zipper import border_halves, teeth, unfolded, vertices_over, zip_loops
+from engine.zipper import border_halves, faces_near, teeth, unfolded, vertices_over, zip_loops
 
 
 def _circles(spike: bool):
@@ -133,3 +133,25 @@ def test_a_tooth_of_the_voxel_border_is_found():
     assert np.flatnonzero(found).tolist() == [1, 10, 12]  # the first quad's second half, the last's first, the tooth
     alive[12] = False  # without the tooth, the third quad's top half has one edge on the border, as before
     assert np.flatnonzero(teeth(tris, alive, border_halves(tris[alive], 15), 15)).tolist() == [1, 10]
+
+
+def test_the_faces_near_the_points_hold_every_face_within_reach_and_leave_the_far_ones():
+    # random small triangles over a box, points in one corner of it: every triangle whose box grown by the reach holds
+    # a point (a superset of those within the reach) is found; none whose grown box lies farther than a grid cell (here
+    # twice the reach, 0.1) and a half from every point
+    rng = np.random.default_rng(3)
+    centres = rng.random((4000, 3)) * 10.0
+    verts = (centres[:, None, :] + rng.normal(scale=0.1, size=(4000, 3, 3))).reshape(-1, 3).astype(np.float32)
+    tris = np.arange(len(verts), dtype=np.int32).reshape(-1, 3)
+    points = (rng.random((500, 3)) * 3.0).astype(np.float32)
+    reach = 0.05
+    near = faces_near(verts, tris, points, reach)
+    corners = verts[tris]
+    lo, hi = corners.min(axis=1) - reach, corners.max(axis=1) + reach
+    inside = ((points[None] >= lo[:, None]) & (points[None] <= hi[:, None])).all(axis=2).any(axis=1)
+    assert inside.any() and near[inside].all()
+    gap = np.maximum(np.maximum(points.min(axis=0) - hi, lo - points.max(axis=0)), 0.0).max(axis=1)
+    far = gap > 1.5 * 2 * reach
+    # measured: 62 of 4,000 found (27 with a point in their grown box), none of the 3,863 far ones
+    assert far.sum() > 3000 and not near[far].any()
+    assert near.sum() < 190
