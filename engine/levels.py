@@ -205,9 +205,13 @@ def refined_across_holes(levels: LevelBuilder, field, base_octets, plan: dict, f
     return field
 
 
-def finished(field, plan: dict, facts: dict, mesh, field_id: int, band: int | None = None) -> AdaptiveField:
+def finished(
+    field, plan: dict, facts: dict, mesh, field_id: int, band: int | None = None, keep_mesh: bool = False
+) -> AdaptiveField:
     """``field`` with what its build found about its mesh (``stats``) and its source mesh. ``band``: the finest
-    octets of its whole band, where it holds a part of them (:mod:`.ondemand`)."""
+    octets of its whole band, where it holds a part of them (:mod:`.ondemand`). ``keep_mesh``: the source keeps the
+    build's ``mesh`` as its BVH (a field built for booleans that keep faces, whose judge reads its mesh: not built
+    again), as it does wherever the booleans read distances off the mesh."""
     clean, encloses, tris = facts["clean"], facts["encloses"], plan["triangles"]
     field.stats["clean_mesh"] = clean
     field.stats["flat"] = not encloses
@@ -222,7 +226,7 @@ def finished(field, plan: dict, facts: dict, mesh, field_id: int, band: int | No
     # it (its BVH kept, where that costs no more than the field)
     nodes = field.node_count if band is None else field.node_count - field.level_counts[0] + 8 * band
     field.stats["mesh_distance"] = clean and encloses and len(tris) * KEEP_BVH_NODES_PER_TRIANGLE <= nodes
-    if field.stats["mesh_distance"]:
+    if field.stats["mesh_distance"] or keep_mesh:
         source.adopt(mesh)
     field.sources = {field_id: source}
     return field
