@@ -350,7 +350,7 @@ def _build_planned(plan: dict, *, device, field_id: int, refine: str = "all") ->
         return partial_build(levels, base_octets, finish, across)
     field = levels.build(base_octets)
     field = refined_across_holes(levels, field, base_octets, plan, facts, winding)
-    return finished(field, plan, facts, mesh, field_id, keep_mesh=refine == "auto")  # ("auto": for kept faces)
+    return finished(field, plan, facts, mesh, field_id)
 
 
 class _MeshBuild:

@@ -20,10 +20,11 @@ from .sources import SourceMesh
 # Rounds of refining coarse leaves the zero set crosses (open meshes: the surface across a hole).
 MAX_SIGN_REFINEMENTS = 4
 
-# A closed mesh's field keeps the build's BVH of it, for exact values where booleans sample it
-# (``AdaptiveField.distance_mesh``), when the mesh has at most one triangle per this many nodes: the BVH with its
-# winding-number data, points and indices holds about 140 bytes a triangle (measured: 112-135 beside the arrays, on
-# spheres of 100 k and 500 k triangles), the field 18 a node, so the BVH stays within the field's own size.
+# A closed mesh's field is read off its mesh (its build's BVH, kept with its source: :func:`finished`) for exact values
+# where booleans sample it (``AdaptiveField.distance_mesh``), when the mesh has at most one triangle per this many
+# nodes: the BVH with its winding-number data, points and indices holds about 140 bytes a triangle (measured: 112-135
+# beside the arrays, on spheres of 100 k and 500 k triangles), the field 18 a node, so reading it costs no more memory
+# traffic than the field.
 KEEP_BVH_NODES_PER_TRIANGLE = 8
 
 
@@ -205,13 +206,11 @@ def refined_across_holes(levels: LevelBuilder, field, base_octets, plan: dict, f
     return field
 
 
-def finished(
-    field, plan: dict, facts: dict, mesh, field_id: int, band: int | None = None, keep_mesh: bool = False
-) -> AdaptiveField:
-    """``field`` with what its build found about its mesh (``stats``) and its source mesh. ``band``: the finest
-    octets of its whole band, where it holds a part of them (:mod:`.ondemand`). ``keep_mesh``: the source keeps the
-    build's ``mesh`` as its BVH (a field built for booleans that keep faces, whose judge reads its mesh: not built
-    again), as it does wherever the booleans read distances off the mesh."""
+def finished(field, plan: dict, facts: dict, mesh, field_id: int, band: int | None = None) -> AdaptiveField:
+    """``field`` with what its build found about its mesh (``stats``) and its source mesh, which keeps the build's
+    ``mesh`` as its BVH: what reads the mesh later (the kept faces' judge, the carried attributes' closest triangles,
+    the crease vertices pulled back) would build it again, 0.35-0.45 us a triangle on one thread (the cache counts
+    it). ``band``: the finest octets of its whole band, where it holds a part of them (:mod:`.ondemand`)."""
     clean, encloses, tris = facts["clean"], facts["encloses"], plan["triangles"]
     field.stats["clean_mesh"] = clean
     field.stats["flat"] = not encloses
@@ -223,10 +222,9 @@ def finished(
         field.stats["hole_caps"] = facts["caps"]
     source = SourceMesh(plan["vertices"], tris, plan["triangle_ids"])
     # a closed mesh's field is its signed distance everywhere: booleans read it from the mesh itself where they sample
-    # it (its BVH kept, where that costs no more than the field)
+    # it (where its BVH costs no more than the field)
     nodes = field.node_count if band is None else field.node_count - field.level_counts[0] + 8 * band
     field.stats["mesh_distance"] = clean and encloses and len(tris) * KEEP_BVH_NODES_PER_TRIANGLE <= nodes
-    if field.stats["mesh_distance"] or keep_mesh:
-        source.adopt(mesh)
+    source.adopt(mesh)
     field.sources = {field_id: source}
     return field
