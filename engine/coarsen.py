@@ -12,8 +12,10 @@ position is made) when
 - no face turns over or gets thinner than ``MIN_QUALITY`` (or than the thinnest face it replaces), its faces are one
   fan and the edge's ends share exactly two neighbours (the link condition: the surface stays closed and 2-manifold).
 
-Collapses run in rounds, each a set of vertices at least three edges apart (so one collapse never changes what
-another's checks read), the shortest edges first. Kept faces and their vertices never change.
+On the CPU the collapses are made one after another in one thread, each vertex's checks reading the mesh as the
+collapses before it left it (:mod:`.collapses`); on CUDA they run in rounds, each a set of vertices at least three
+edges apart (so one collapse never changes what another's checks read), the shortest edges first. Kept faces and
+their vertices never change.
 
 Written by hand: the one decimator in a user's Blender is its Decimate modifier (``bpy``, which the engine never
 imports), and general decimators (quadric edge collapse) move vertices and ignore the faces' sources; the checks here
@@ -39,6 +41,7 @@ TOLERANCE_VOXELS = tolerance(0.0)
 MIN_QUALITY = 0.05
 # Only faces of at least this quality have planes that bound a collapse (a sliver's plane is ill-defined).
 PLANE_QUALITY = 0.2
+# Both, as :func:`.collapses.collapse_serial` takes them.
 QUALITIES = (MIN_QUALITY, PLANE_QUALITY)
 # Rounds of collapses at most; they stop earlier when a round removes under MIN_ROUND_SHARE of the vertices left.
 MAX_ROUNDS = 48

@@ -22,9 +22,9 @@ MAX_SIGN_REFINEMENTS = 4
 
 # A closed mesh's field is read off its mesh (its build's BVH, kept with its source: :func:`finished`) for exact values
 # where booleans sample it (``AdaptiveField.distance_mesh``), when the mesh has at most one triangle per this many
-# nodes: the BVH with its winding-number data, points and indices holds about 140 bytes a triangle (measured: 112-135
-# beside the arrays, on spheres of 100 k and 500 k triangles), the field 18 a node, so reading it costs no more memory
-# traffic than the field.
+# nodes (the BVH with its winding-number data, points and indices holds about 140 bytes a triangle, measured 112-135
+# beside the arrays on spheres of 100 k and 500 k triangles; the field 18 a node): where the BVH is no larger than the
+# field, a query of it replaces the field's nodes.
 KEEP_BVH_NODES_PER_TRIANGLE = 8
 
 

@@ -20,7 +20,7 @@ import weakref
 import numpy as np
 import warp as wp
 
-from .geometry import closest_on_triangle, mesh_closest_face, triangle_frame
+from .geometry import mesh_closest_face
 from .parallel import EMIT_SPLIT_MIN_DIM, host_view, launch_split
 from .queries import face_nodes_kernel
 
@@ -330,70 +330,13 @@ def closest_triangles(source: SourceMesh, points, device) -> tuple[np.ndarray, n
 
 def closest_points(source: SourceMesh, points, device) -> np.ndarray:
     """(N, 3) float64 the closest point of ``source``'s triangles to each of ``points`` (:func:`closest_triangles`;
-    NaN where none was found). A few points of a mesh whose BVH is not at hand (no more than BRUTE_PAIRS point and
-    triangle pairs) are read against every triangle instead (:func:`_closest_by_brute_force`)."""
-    points = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
-    if source.kept_bvh(device) is None and 0 < len(points) * len(source.tris) <= BRUTE_PAIRS:
-        return _closest_by_brute_force(source, points)
+    NaN where none was found)."""
     tris, bary = closest_triangles(source, points, device)
     found = np.flatnonzero(tris >= 0)
     out = np.full((len(tris), 3), np.nan)
     corners = source.verts[source.tris[np.searchsorted(source.triangle_ids, tris[found])]].astype(np.float64)
     out[found] = np.einsum("nk,nkd->nd", bary[found].astype(np.float64), corners)
     return out
-
-
-# Point and triangle pairs read one by one at most, where a mesh's BVH is not at hand: building one takes 0.4 us a
-# triangle on one thread, a pair read 10 ns on either core (the crease vertices a sharp surface pulls back: 1-10 of
-# them, the bunny's 69 k triangles).
-BRUTE_PAIRS = 2_000_000
-
-
-@wp.kernel(enable_backward=False)
-def _pair_distances_kernel(
-    verts: wp.array[wp.vec3],
-    tris: wp.array[wp.int32],
-    points: wp.array[wp.vec3],
-    offset: int,
-    distance: wp.array2d[wp.float32],
-):
-    """Each point's distance to triangle ``t`` (``distance[p, t]``)."""
-    t = wp.tid() + offset
-    a = verts[tris[3 * t]]
-    b = verts[tris[3 * t + 1]]
-    c = verts[tris[3 * t + 2]]
-    edges, inward, lengths, n = triangle_frame(a, b, c)
-    for p in range(points.shape[0]):
-        x = points[p]
-        distance[p, t] = wp.length(x - closest_on_triangle(x, a, b, c, edges, inward, lengths, n))
-
-
-@wp.kernel(enable_backward=False)
-def _closest_on_kernel(
-    verts: wp.array[wp.vec3], tris: wp.array[wp.int32], points: wp.array[wp.vec3], which: wp.array[wp.int32],
-    out: wp.array[wp.vec3],
-):  # fmt: skip
-    """Point ``p``'s closest point on triangle ``which[p]``."""
-    p = wp.tid()
-    t = which[p]
-    a = verts[tris[3 * t]]
-    b = verts[tris[3 * t + 1]]
-    c = verts[tris[3 * t + 2]]
-    edges, inward, lengths, n = triangle_frame(a, b, c)
-    out[p] = closest_on_triangle(points[p], a, b, c, edges, inward, lengths, n)
-
-
-def _closest_by_brute_force(source: SourceMesh, points: np.ndarray) -> np.ndarray:
-    """:func:`closest_points` of a few ``points`` read against every triangle of ``source`` on the CPU's cores."""
-    cpu = wp.get_device("cpu")
-    verts, flat = source.arrays(cpu)
-    pts = wp.array(points, dtype=wp.vec3, device=cpu)
-    distance = wp.empty((len(points), len(source.tris)), dtype=wp.float32, device=cpu)
-    launch_split(_pair_distances_kernel, len(source.tris), lambda lo, _n: [verts, flat, pts, lo, distance], cpu)
-    which = wp.array(np.argmin(distance.numpy(), axis=1).astype(np.int32), dtype=wp.int32, device=cpu)
-    out = wp.empty(len(points), dtype=wp.vec3, device=cpu)
-    wp.launch(_closest_on_kernel, dim=len(points), inputs=[verts, flat, pts, which, out], device=cpu)
-    return out.numpy().astype(np.float64)
 
 
 @wp.kernel(enable_backward=False)

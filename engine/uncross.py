@@ -219,9 +219,9 @@ def _fanned(verts, tris: np.ndarray, patch: np.ndarray, voxel: float, device) ->
     tiles, tile_loop = np.stack([order, order[step], centre[loop]], axis=1)[has], loop[has]
     lost = np.ones(len(inner), dtype=bool)
     lost[first] = False
-    outside, lost = _beside(tris, patch, n), (inner[lost], inner_loop[lost])
+    outside, dropped = _beside(tris, patch, n), (inner[lost], inner_loop[lost])
     done = (centre >= 0) & _close_enough(
-        verts, tris[rows], piece, outside, tiles, tile_loop, lost, loop_piece, voxel, device, FAN_TOLERANCE_VOXELS
+        verts, tris[rows], piece, outside, tiles, tile_loop, dropped, loop_piece, voxel, device, FAN_TOLERANCE_VOXELS
     )
     laid = done[tile_loop]
     gone = rows[np.isin(piece, loop_piece[done])]
