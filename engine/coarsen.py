@@ -28,7 +28,7 @@ import numpy as np
 import warp as wp
 
 from .adaptive import tolerance
-from .collapses import collapse_serial
+from .collapses import collapse_serial, face_passes, next_corner
 from .meshcheck import any_corner, compacted
 from .parallel import launch_split
 from .refine import position_hash
@@ -51,31 +51,16 @@ CLAIM_PASSES = 3
 
 
 @wp.func
-def _next_corner(tris: wp.array[wp.int32], corner: int, step: int) -> int:
-    face = corner // 3
-    return tris[face * 3 + (corner % 3 + step) % 3]
-
-
-@wp.func
-def _quality(a: wp.vec3, b: wp.vec3, c: wp.vec3) -> float:
-    doubled = wp.length(wp.cross(b - a, c - a))
-    edges = wp.length_sq(b - a) + wp.length_sq(c - b) + wp.length_sq(a - c)
-    if edges <= 0.0:
-        return 0.0
-    return 1.7320508 * 2.0 * doubled / edges  # 4 sqrt(3) area / sum of squared edges
-
-
-@wp.func
 def _one_fan(tris: wp.array[wp.int32], corners: wp.array[wp.int32], lo: int, hi: int) -> bool:
     """Whether the faces at a vertex (its corners ``lo``..``hi``) form one closed fan: walked from the first face,
     each step to the face whose previous vertex is this one's next, the walk returns after all of them."""
     start = corners[lo]
     at = start
     for step in range(hi - lo):
-        target = _next_corner(tris, at, 1)
+        target = next_corner(tris, at, 1)
         found = int(-1)
         for c in range(lo, hi):
-            if _next_corner(tris, corners[c], 2) == target:
+            if next_corner(tris, corners[c], 2) == target:
                 found = corners[c]
         if found < 0:
             return False
@@ -103,34 +88,20 @@ def _collapse_ok(
     pv = points[v]
     vanish = int(0)
     for c in range(lo, hi):
-        a = _next_corner(tris, corners[c], 1)
-        b = _next_corner(tris, corners[c], 2)
-        pa = points[a]
-        pb = points[b]
-        n_old = wp.cross(pa - pu, pb - pu)
-        area = wp.length(n_old)
-        q_old = _quality(pu, pa, pb)
-        # a thin face's plane is ill-defined: only well-shaped faces' planes bound where ``v`` may lie
-        if q_old >= PLANE_QUALITY and wp.abs(wp.dot(n_old, pv - pu)) > tol * area:
+        a = next_corner(tris, corners[c], 1)
+        b = next_corner(tris, corners[c], 2)
+        on_edge = a == v or b == v
+        if not face_passes(pu, pv, points[a], points[b], on_edge, tol, wp.vec2(min_quality, PLANE_QUALITY)):
             return False
-        if a == v or b == v:
+        if on_edge:
             vanish += 1
-        else:
-            n_new = wp.cross(pa - pv, pb - pv)
-            if wp.dot(n_new, n_old) <= 0.5 * wp.length(n_new) * area:
-                return False
-            if _quality(pv, pa, pb) < wp.min(min_quality, q_old):
-                return False
-            # and ``u`` stays within the tolerance of the faces that take its place
-            if _quality(pv, pa, pb) >= PLANE_QUALITY and wp.abs(wp.dot(n_new, pu - pv)) > tol * wp.length(n_new):
-                return False
     if vanish != 2:
         return False
     common = int(0)
     for c in range(lo, hi):
-        x = _next_corner(tris, corners[c], 1)
+        x = next_corner(tris, corners[c], 1)
         for d in range(first[v], first[v + 1]):
-            if _next_corner(tris, corners[d], 1) == x:
+            if next_corner(tris, corners[d], 1) == x:
                 common += 1
     return common == 2
 
@@ -167,7 +138,7 @@ def _candidate_kernel(
     if not _one_fan(tris, corners, lo, hi):
         return
     for c in range(lo, hi):
-        v = _next_corner(tris, corners[c], 1)
+        v = next_corner(tris, corners[c], 1)
         d = wp.length(points[v] - points[u])
         closer = d < length[i] or (d == length[i] and place[v] < place[best[i]])
         if closer and _collapse_ok(points, tris, corners, first, u, v, tol, min_quality):
@@ -192,7 +163,7 @@ def _ring_vertex(
     """Vertex ``c`` of ``u``'s closed 1-ring, ``c`` from ``first[u] - 1`` (``u`` itself) to ``first[u + 1] - 1``."""
     if c < first[u]:
         return u
-    return _next_corner(tris, corners[c], 1)
+    return next_corner(tris, corners[c], 1)
 
 
 @wp.kernel(enable_backward=False)

@@ -49,6 +49,30 @@ def face_quality(a: wp.vec3, b: wp.vec3, c: wp.vec3) -> float:
     return 1.7320508 * 2.0 * doubled / edges
 
 
+@wp.func
+def face_passes(
+    pu: wp.vec3, pv: wp.vec3, pa: wp.vec3, pb: wp.vec3, on_edge: bool, tol: float, quality: wp.vec2
+) -> bool:
+    """Whether face ``u a b`` allows ``u`` to move onto ``v`` (``on_edge``: the face holds the edge u-v, and vanishes):
+    ``v`` within ``tol`` of its plane, and the face ``v a b`` that takes its place neither turned over, nor thinner
+    than ``quality[0]`` (or than the face was), nor with ``u`` farther than ``tol`` from its plane. Only faces of at
+    least ``quality[1]`` bound a plane (a thin face's plane is ill-defined)."""
+    n_old = wp.cross(pa - pu, pb - pu)
+    area = wp.length(n_old)
+    q_old = face_quality(pu, pa, pb)
+    if q_old >= quality[1] and wp.abs(wp.dot(n_old, pv - pu)) > tol * area:
+        return False
+    if on_edge:
+        return True
+    n_new = wp.cross(pa - pv, pb - pv)
+    if wp.dot(n_new, n_old) <= 0.5 * wp.length(n_new) * area:
+        return False
+    q_new = face_quality(pv, pa, pb)
+    if q_new < wp.min(quality[0], q_old):
+        return False
+    return not (q_new >= quality[1] and wp.abs(wp.dot(n_new, pu - pv)) > tol * wp.length(n_new))
+
+
 @wp.struct
 class ListedMeshArg:
     """A triangle mesh whose vertices' corners are linked lists: vertex ``v``'s from ``head[v]``, each corner's next
@@ -116,7 +140,8 @@ def _one_group(m: ListedMeshArg, group: wp.array[wp.int64], u: int) -> bool:
 
 @wp.func
 def _collapse_ok(m: ListedMeshArg, u: int, v: int, tol: float, min_quality: float, plane_quality: float) -> bool:
-    """Whether ``u`` may move onto its neighbour ``v`` (the checks of :func:`.coarsen._collapse_ok`)."""
+    """Whether ``u`` may move onto its neighbour ``v``: every live face at ``u`` passes (:func:`face_passes`), two of
+    them hold the edge, and ``u`` and ``v`` share exactly two neighbours (the link condition)."""
     pu = m.points[u]
     pv = m.points[v]
     vanish = int(0)
@@ -125,24 +150,11 @@ def _collapse_ok(m: ListedMeshArg, u: int, v: int, tol: float, min_quality: floa
         if m.alive[c // 3] == 1:
             a = next_corner(m.tris, c, 1)
             b = next_corner(m.tris, c, 2)
-            pa = m.points[a]
-            pb = m.points[b]
-            n_old = wp.cross(pa - pu, pb - pu)
-            area = wp.length(n_old)
-            q_old = face_quality(pu, pa, pb)
-            if q_old >= plane_quality and wp.abs(wp.dot(n_old, pv - pu)) > tol * area:
+            on_edge = a == v or b == v
+            if not face_passes(pu, pv, m.points[a], m.points[b], on_edge, tol, wp.vec2(min_quality, plane_quality)):
                 return False
-            if a == v or b == v:
+            if on_edge:
                 vanish += 1
-            else:
-                n_new = wp.cross(pa - pv, pb - pv)
-                if wp.dot(n_new, n_old) <= 0.5 * wp.length(n_new) * area:
-                    return False
-                q_new = face_quality(pv, pa, pb)
-                if q_new < wp.min(min_quality, q_old):
-                    return False
-                if q_new >= plane_quality and wp.abs(wp.dot(n_new, pu - pv)) > tol * wp.length(n_new):
-                    return False
         c = m.link[c]
     if vanish != 2:
         return False
