@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .parallel import launch_split
+from .parallel import host_view, launch_split
 
 # Largest angle (degrees) between the two triangles of a quad, along either diagonal, for it to stay one polygon:
 # well below the crease angle (quadric.CREASE_ANGLE, 25), so no reconstructed crease runs through a polygon; above
@@ -78,12 +78,9 @@ def _on_host(kernel, n: int, inputs: list, value: int, outputs: list) -> None:
     polygons are the extraction's host arrays whatever the field's device, and numpy's gathers of their corners took
     5-10 ms on a 150 k-triangle surface (the kernels 0.6)."""
     cpu = wp.get_device("cpu")
-    args = [wp.array(a, dtype=_WARP_TYPES[a.dtype], device=cpu, copy=False) for a in inputs + outputs]
+    args = [host_view(a, wp.dtype_from_numpy(a.dtype), cpu) for a in inputs + outputs]
     k = len(inputs)
     launch_split(kernel, n, lambda lo, _n: [*args[:k], value, lo, *args[k:]], cpu)
-
-
-_WARP_TYPES = {np.dtype(np.int32): wp.int32, np.dtype(np.uint8): wp.uint8}
 
 
 @wp.kernel(enable_backward=False)

@@ -25,7 +25,7 @@ import warp as wp
 from .components import connected_components
 from .edgehash import EdgeCounts, directed_edges
 from .geometry import closest_on_triangle, triangle_frame
-from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
+from .parallel import EMIT_SPLIT_MIN_DIM, host_view, launch_split
 
 # A voxel-surface vertex is over the kept faces within this many voxels of them.
 OVER_VOXELS = 1.0
@@ -212,15 +212,16 @@ def faces_near(verts: np.ndarray, tris: np.ndarray, points: np.ndarray, reach: f
     table = np.ascontiguousarray(table.cumsum(axis=0).cumsum(axis=1).cumsum(axis=2), dtype=np.int32)
     cpu = wp.get_device("cpu")
     near = np.zeros(len(tris), dtype=np.uint8)
+    verts, flat = np.ascontiguousarray(verts, dtype=np.float32), np.ascontiguousarray(tris, dtype=np.int32).reshape(-1)
     args = [
-        wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=cpu),
-        wp.array(np.ascontiguousarray(tris, dtype=np.int32).reshape(-1), dtype=wp.int32, device=cpu),
-        wp.array(table, dtype=wp.int32, device=cpu),
+        host_view(verts, wp.vec3, cpu),
+        host_view(flat, wp.int32, cpu),
+        host_view(table, wp.int32, cpu),
         wp.vec3(*low.tolist()),
         float(size),
         float(reach),
     ]  # fmt: skip
-    out = wp.array(near, dtype=wp.uint8, device=cpu, copy=False)
+    out = host_view(near, wp.uint8, cpu)
     launch_split(_near_faces_kernel, len(tris), lambda lo, _n: [*args, lo, out], cpu)
     return near.view(bool)
 
