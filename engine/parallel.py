@@ -37,12 +37,16 @@ BALANCE_MIN_PIECE = 1024
 THREADS_VARIABLE = "AASDF_THREADS"
 
 
+# The machine's cores, read once (``os.cpu_count`` reads a file each call, and every split launch asks).
+_CPU_COUNT = os.cpu_count() or 1
+
+
 def cores() -> int:
     """How many CPU threads work is split over: ``AASDF_THREADS`` when it is a positive integer, else the cores."""
     value = os.environ.get(THREADS_VARIABLE, "")
     if value.isdigit() and int(value) > 0:
         return int(value)
-    return os.cpu_count() or 1
+    return _CPU_COUNT
 
 
 _helpers = None
