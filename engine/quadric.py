@@ -433,6 +433,21 @@ def corner_plane(d: wp.vec3, corner: wp.vec3, value: float, iso: float, inv: flo
 
 
 @wp.func
+def opposed_planes(normals: wp.types.matrix(shape=(8, 3), dtype=float), state: vec8i, ends: int):
+    """The least cosine between the normals of two of the corners ``ends`` (bits) with planes (``state`` 1,
+    :func:`corner_plane`); 1 with fewer than two: near -1, the corners' closest points lie on both sides of a part
+    thinner than the cube."""
+    out = float(1.0)
+    for a in range(8):
+        if (ends >> a) & 1 == 1 and state[a] == 1:
+            n = wp.vec3(normals[a, 0], normals[a, 1], normals[a, 2])
+            for b in range(a + 1, 8):
+                if (ends >> b) & 1 == 1 and state[b] == 1:
+                    out = wp.min(out, wp.dot(n, wp.vec3(normals[b, 0], normals[b, 1], normals[b, 2])))
+    return out
+
+
+@wp.func
 def wide_box(
     below: wp.array[wp.uint8], cube_of_node: wp.array[wp.int32], ids: vec8i, lo: float, hi: float, reach: float
 ):
