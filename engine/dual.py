@@ -18,10 +18,10 @@ outside it is clipped to the cube, a corner outside it gives way to the crease t
 outside is clamped. A node's plane that misses the cube bounds the surface near that node only (a face that ends
 before the cube, beside a concave seam): the crease or corner of the planes through the cube is taken if in it.
 Where a part thinner than the lattice resolves passes (a cube with two patches, both its sides; or a patch whose
-corners' planes face each other, :data:`OPPOSED_COS`, and put its vertex away from its mass point), the vertex is its
-patch's mass point, where marching cubes' surface lies: placed by the planes of both sides, neighbouring vertices land
-on either side and their faces pass through each other (the beetle united with a ball: 55 crossing pairs, none so; a
-part thinner than a voxel loses no more than it does to the lattice's signs).
+corners' planes face each other, :data:`OPPOSED_COS`), the vertex is its patch's mass point, where marching cubes'
+surface lies: placed by the planes of both sides, neighbouring vertices land on either side and their faces pass
+through each other (the beetle united with a ball: 55 crossing pairs, none so; a part thinner than a voxel loses no
+more than it does to the lattice's signs).
 
 Each quad is split along the diagonal whose midpoint fits its two vertices' planes best, which keeps crease lines
 (both ends on the crease) as mesh edges. Vertices whose quadric has two or more significant eigenvalues lie on a
@@ -92,14 +92,14 @@ JUMP_RATIO = 1.5
 HERMITE_NEAR = 0.12
 
 # A patch two of whose corners' planes face each other within about 18 degrees (the cosine between their normals below
-# this) sees both sides of a thin part; its vertex is the mass point (module docstring) where its planes put it
-# THIN_AWAY_VOXELS or farther from there. Slabs 0.4-0.8 voxel thick at 4 turns: 25,398 crossing pairs; so 46 (36 at 0
-# voxel, 519 at 0.35). At -0.5 a wedge sharper than 60 degrees went too: three balls' difference, whose ring has a
-# 52-degree edge, Hausdorff p95 0.079 -> 0.388 voxel (0.084 now). Nearer than THIN_AWAY, the planes' vertex stays: a
-# gap narrower than a voxel between kept faces (the teapot's lid and rim) keeps its voxel surface where they are
-# (crossing pairs left in its kept surface: 1; 10 at 0, 3 at 0.2). The CAD pairs' surfaces are the same.
+# this) sees both sides of a thin part: its vertex is the mass point (module docstring). Slabs 0.4-0.8 voxel thick at 4
+# turns: 25,398 crossing pairs, 38 so. At -0.5 a wedge sharper than 60 degrees went too (three balls' difference,
+# whose ring has a 52-degree edge: Hausdorff p95 0.079 -> 0.388 voxel, 0.084 now), and a gap narrower than a voxel
+# between kept faces (the teapot's lid and rim) had its voxel surface moved off them (crossing pairs left in its kept
+# surface 1 -> 10; 0 now).
 OPPOSED_COS = -0.95
-THIN_AWAY_VOXELS = 0.2
+# Planes within this cosine of one are never OPPOSED_COS apart: a patch all of whose planes are is not compared.
+TURNED_COS = float(np.sqrt((1.0 + OPPOSED_COS) / 2.0)) + 1e-3
 
 
 # A crease or corner vertex whose planes meet outside its cube may go this many voxels past a face whose neighbouring
@@ -362,10 +362,10 @@ def _place_vertices_kernel(
                         rank = 1
                     else:
                         x, rank, own = solve_in_cube(ata, atb - ata * mass, mass, cutoff, lo, hi, wide_lo, wide_hi)
-            thin = n_patches > 1  # (the planes compared only where they moved the vertex off its mass point)
-            if not thin and wp.length(x - mass) > THIN_AWAY_VOXELS:
+            thin = n_patches > 1  # a thin part: see the module docstring
+            if not thin and (fallback > 0.0 or min_cos < TURNED_COS):  # (else no two corners' planes face apart)
                 thin = opposed_planes(normals, state, ends) < OPPOSED_COS
-            if thin:  # a part thinner than the lattice resolves: see the module docstring
+            if thin:
                 x = mass
                 rank = 1
             quadrics[vid] = vec10h(pack_quadric(ata, atb, btb, x, 1.0 / planes))

@@ -65,9 +65,8 @@ REJOINS = 3
 # A join is tried again where the large kept faces it gave up are at least this share of the area it kept, and
 # PER_POINT_VOXELS square voxels or more a point they were given up at (a second judge clears a disc of about 16 about
 # each): a low-polygon mesh's (Suzanne with a ball: 7 %, 40), a scan's larger faces near its holes (the beetle's
-# 1.3 %, 10: 0.986 -> 0.992 of what should be kept, for a judge and a join more; 0.24 %, 45 at two points since thin
-# parts' voxel faces lie at their mass points: 0.9947 -> 0.9985), not a scan's faces smaller than the disc (the cow's
-# 0.01 %, 6), and again while the last join gave up AGAIN_SHARE.
-REJOIN_SHARE = 0.002
+# 1.3 %, 10: 0.986 -> 0.992 of what should be kept, for a judge and a join more), not a scan's faces smaller than
+# the disc (the cow's 0.01 %, 6), and again while the last join gave up AGAIN_SHARE.
+REJOIN_SHARE = 0.01
 PER_POINT_VOXELS = 8.0
 AGAIN_SHARE = 0.003
