@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .meshcheck import any_corner
+from .meshcheck import any_corner, compacted
 
 
 # ---- splitting ----
@@ -370,9 +370,13 @@ def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: floa
     if not len(read):
         return tris, np.arange(len(tris), dtype=np.int64)
     aside = set_aside(tris, read)
-    tris, rows, keep, parent = tris[read], read, keep[read], parent[read]
-    v64 = verts.astype(np.float64)
-    ranks = position_ranks(verts)
+    # on the vertices the triangles read use (in the order of their indices: the source's first), so that a round's
+    # per-vertex arrays are as long as those, not as the leaf's every piece's (bunny with spot 7.7 -> 5.7 ms)
+    used, local = compacted(tris[read], len(verts))
+    tris, rows, keep, parent = local, read, keep[read], parent[read]
+    v64 = verts[used].astype(np.float64)
+    ranks = (position_hash(verts[used]).astype(np.int64) << 32) | used  # (:func:`position_ranks` of every vertex)
+    n_source = int(np.searchsorted(used, n_source))
     for _ in range(64):
         moves = _border_collapses(v64, tris, parent, n_source, (tolerance, longest), ranks)
         if moves is None:
@@ -382,7 +386,7 @@ def straighten_borders(verts, tris, keep, parent, n_source: int, tolerance: floa
         alive = np.ones(len(tris), dtype=bool)
         alive[face[drop]] = False
         tris, rows, parent = tris[alive], rows[alive], parent[alive]
-    return put_back(tris, rows, aside)
+    return put_back(used[tris], rows, aside)
 
 
 def _border_collapses(v64, tris, parent, n_source: int, bounds: tuple, ranks: np.ndarray):
