@@ -91,7 +91,7 @@ def padding_property(**overrides):
         "name": "Padding",
         "description": "Finest voxels kept around the surface on each side",
         "default": 1,
-        "min": 0,
+        "min": 1,
         "max": 32,
     }
     return _make(IntProperty, options, overrides)

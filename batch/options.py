@@ -144,3 +144,5 @@ def check_args(args):
         raise BatchError(f"--adaptivity must be from 0 to 1, not {args.adaptivity}")
     if args.resolution < 8 or args.voxel_size < 0.0:
         raise BatchError("--resolution must be at least 8 and --voxel-size not negative")
+    if args.levels < 1 or args.padding < 1:
+        raise BatchError(f"--levels and --padding must be at least 1, not {args.levels} and {args.padding}")

@@ -251,7 +251,7 @@ def build_field(
         voxel_size: Edge length of the finest cells.
         levels: Number of levels, finest to dense top (>= 1; from 2, raised while the dense top level would have
             more than ``plan.TOP_LEVEL_CELLS`` cells).
-        padding: Finest cells kept around each triangle (>= 0; 1 or more gives watertight surfaces).
+        padding: Finest cells kept around each triangle (1 or more: the surface's cubes need their nodes).
         device: Warp device (``None``: Warp's default).
         field_id: Integer id carried per node through booleans (see ``source_ids``).
         thickness: Give the surface this thickness (world units, at least two voxels): the field is the solid

@@ -129,8 +129,8 @@ def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
         raise AasdfError(f"The voxel size must be a positive number, but got {voxel_size}.")
     if int(levels) != levels or levels < 1:
         raise AasdfError(f"The number of levels must be an integer of at least 1, but got {levels}.")
-    if int(padding) != padding or padding < 0:
-        raise AasdfError(f"The padding must be a non-negative integer, but got {padding}.")
+    if int(padding) != padding or padding < 1:  # (with none, cubes the surface crosses lack nodes: it comes out open)
+        raise AasdfError(f"The padding must be an integer of at least 1, but got {padding}.")
     levels, padding = int(levels), int(padding)
     verts, tris, area, kept = checked_mesh(vertices, triangles)
     lo = np.array([verts[:, k].min() for k in range(3)])

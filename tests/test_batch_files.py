@@ -238,3 +238,15 @@ def test_adaptivity_is_a_job_option_checked_from_0_to_1(tmp_path):
     for bad in ("1.5", "-0.1", "nan"):
         with pytest.raises(options.BatchError, match="--adaptivity must be from 0 to 1"):
             options.check_args(parser.parse_args([*base, "--adaptivity", bad]))
+
+
+def test_levels_and_padding_under_1_are_refused_before_blender_starts(tmp_path):
+    # a padding of 0 leaves the surface's cubes without their nodes: the result would come out open
+    box, ball, out = tmp_path / "a.stl", tmp_path / "b.stl", tmp_path / "o.ply"
+    box.write_bytes(b""), ball.write_bytes(b"")
+    parser = options.command_line_parser("")
+    base = ["--operation", "union", "--inputs", str(box), str(ball), "--output", str(out)]
+    options.check_args(parser.parse_args([*base, "--padding", "1", "--levels", "1"]))
+    for bad in (["--padding", "0"], ["--levels", "0"], ["--padding", "-2"]):
+        with pytest.raises(options.BatchError, match="--levels and --padding must be at least 1"):
+            options.check_args(parser.parse_args([*base, *bad]))

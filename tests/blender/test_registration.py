@@ -52,6 +52,8 @@ def test_scene_settings_have_their_defaults_and_accept_values():
     assert (settings.hide_inputs, settings.debug_volume) == (True, False)
     settings.resolution = 3  # below the minimum: Blender clamps
     assert settings.resolution == 8
+    settings.padding = 0  # (no finest cells about the surface: it would come out open)
+    assert settings.padding == 1
     settings.blend = 0.25
     assert settings.blend == pytest.approx(0.25)
 
