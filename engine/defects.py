@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .meshcheck import defect_edges
+from .meshcheck import defect_edge_kinds
 from .selfcross import crossing_segments
 
 AXES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float32)
@@ -40,14 +40,15 @@ CROSSING_VOXELS = 2.0
 
 
 def own_defects(verts: np.ndarray, tris: np.ndarray, shortest: float | None, device) -> tuple:
-    """A mesh's defects (judged with vertices at one position merged): ``(repeated, points, parts)``: (T,) bool the
-    triangles repeating another triangle's corners (never kept), and the defects as triangles to measure distances
-    to: each open, non-manifold or inconsistently oriented edge and each segment along which the mesh passes through
-    itself (:func:`.selfcross.crossing_segments`, on curves at least ``shortest`` long; None: not looked for) as a
-    flat triangle ``a b b``, each repeated triangle as itself (``points`` (P, 3) float32, ``parts`` (D, 3) int32;
-    empty when the mesh has none). A triangle at a hole's edge keeps its parts farther than the band from that edge,
-    one the mesh passes through farther than the band from the crossing."""
-    welded_verts, welded, bad = defect_edges(verts, tris)
+    """A mesh's defects (judged with vertices at one position merged): ``(repeated, points, parts, beyond_holes)``:
+    (T,) bool the triangles repeating another triangle's corners (never kept), and the defects as triangles to measure
+    distances to: each open, non-manifold or inconsistently oriented edge and each segment along which the mesh passes
+    through itself (:func:`.selfcross.crossing_segments`, on curves at least ``shortest`` long; None: not looked for)
+    as a flat triangle ``a b b``, each repeated triangle as itself (``points`` (P, 3) float32, ``parts`` (D, 3) int32;
+    empty when the mesh has none); and whether it has a defect other than a hole's edge. A triangle at a hole's edge
+    keeps its parts farther than the band from that edge, one the mesh passes through farther than the band from the
+    crossing."""
+    welded_verts, welded, bad, open_edge = defect_edge_kinds(verts, tris)
     repeated = repeated_triangles(welded, len(welded_verts))
     points = np.asarray(welded_verts, dtype=np.float32)
     crossings = (
@@ -65,7 +66,8 @@ def own_defects(verts: np.ndarray, tris: np.ndarray, shortest: float | None, dev
     mids = np.arange(len(points), len(points) + len(segments))
     slivers = np.stack([segments[:, 0], segments[:, 1], mids], axis=1)
     parts = np.concatenate([slivers, welded[repeated]]).astype(np.int32)
-    return repeated, np.concatenate([points, (0.5 * (a + b) + off).astype(np.float32)]), parts
+    beyond_holes = bool(repeated.any() or not open_edge.all() or len(crossings))
+    return repeated, np.concatenate([points, (0.5 * (a + b) + off).astype(np.float32)]), parts, beyond_holes
 
 
 def octahedra(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:

@@ -28,19 +28,19 @@ import warp as wp
 
 from .carried import carried
 from .expression import Operation, leaves
-from .keep import internal_faces, kept_triangles, own_region
+from .keep import gives_own_faces_up, kept_triangles, own_region
 from .ondemand import along_seams_only, built_leaves, built_on_demand, crosses_itself, refined
 from .parallel import run_tasks
 
 
 def crossing_leaves(expression, voxel: float, device) -> list:
-    """The leaves of a boolean's ``expression`` that pass through themselves (:func:`.keep.internal_faces`), of those
-    that may hold a part of their finest octets (:func:`partly_built`); their own parts found side by side (each kept
-    with its mesh for the judge)."""
+    """The leaves of a boolean's ``expression`` that pass through themselves or have defects other than holes
+    (:func:`.keep.gives_own_faces_up`), of those that may hold a part of their finest octets (:func:`partly_built`);
+    their own parts found side by side (each kept with its mesh for the judge)."""
     pairs = list(zip(leaves(expression), leaves(built_leaves(expression)), strict=True))
     found = {}
     tasks = [
-        lambda k=k, view=view: found.update({k: internal_faces(view, voxel)})
+        lambda k=k, view=view: found.update({k: gives_own_faces_up(view, voxel)})
         for k, (_, view) in enumerate(pairs)
         if partly_built(view, expression)
     ]

@@ -104,6 +104,7 @@ class _Own:
     strips: tuple  # (strip, apex) per triangle
     thin: int  # the side of a part thinner than the field sees (:func:`.ownside.outward`)
     turns: tuple | None = None  # :func:`.samples.edge_turns` of its triangles where unplaced (a placed one's: found)
+    beyond_holes: bool = False  # a defect other than a hole's edge (:func:`.defects.own_defects`)
 
 
 # A leaf's own part, kept with its source mesh: an unplaced leaf's source is the same object at every boolean its
@@ -145,7 +146,7 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
     # where the mesh passes through itself, some triangle has its own inside on both sides (an internal face): only
     # then are its crossings looked for (the bunny's 69 k triangles take 0.07 s)
     shortest = CROSSING_VOXELS * voxel if (side == 0).any() else None
-    defects, points, parts = own_defects(verts, tris, shortest, device)
+    defects, points, parts, beyond_holes = own_defects(verts, tris, shortest, device)
     defect_mesh = None
     if len(parts) and not defects.all():
         defect_mesh = wp.Mesh(
@@ -154,24 +155,29 @@ def _own_part(leaf, source, voxel: float, device) -> _Own:
         )
     strips = strip_parents(verts, tris, SPLIT_VOXELS * voxel, measures)
     values = None if on_demand else leaf.values
-    own = _Own(values, offset, device, defects, side, defect_mesh, strips, thin, edge_turns(verts, tris))
+    own = _Own(values, offset, device, defects, side, defect_mesh, strips, thin, edge_turns(verts, tris), beyond_holes)
     _OWN[source] = own
     return own
 
 
-def internal_faces(leaf, voxel: float) -> bool:
-    """Whether some triangle of a (mesh) leaf has its own inside on both sides (it passes through itself)."""
-    return bool((_own_part(leaf, next(iter(leaf.world_sources().values())), voxel, leaf.device).side == 0).any())
+def gives_own_faces_up(leaf, voxel: float) -> bool:
+    """Whether a (mesh) leaf's faces are given up somewhere whatever the other leaves are, other than about its holes
+    (whose caps a field built on demand builds first): where some triangle has its own inside on both sides (it passes
+    through itself), or about a defect other than a hole's edge (a repeated triangle, an edge of more than two faces
+    or listed the same way by two); the voxel surface must be made there."""
+    own = _own_part(leaf, next(iter(leaf.world_sources().values())), voxel, leaf.device)
+    return bool((own.side == 0).any() or own.beyond_holes)
 
 
 def own_region(leaf, voxel: float) -> tuple[np.ndarray, np.ndarray]:
     """Where a (mesh) leaf's faces may be given up whatever the other leaves are, in its own frame: its defects as the
-    judge measures distances to them (crossings included) and its triangles that read internal, as ``(points (P, 3)
+    judge measures distances to them (crossings included) and its triangles that read internal or repeat another (a
+    mesh of nothing else has no defect mesh), as ``(points (P, 3)
     float32, tris (D, 3) int32)``."""
     frame = leaf.in_frame()
     source = next(iter(frame.world_sources().values()))
     own = _own_part(frame, source, voxel / (1.0 if leaf.placement is None else leaf.placement.scale), leaf.device)
-    points, tris = source.verts.astype(np.float32), source.tris[own.side == 0].astype(np.int32)
+    points, tris = source.verts.astype(np.float32), source.tris[(own.side == 0) | own.defects].astype(np.int32)
     if own.defect_mesh is None:
         return points, tris
     parts = own.defect_mesh.indices.numpy().reshape(-1, 3) + len(points)
@@ -190,7 +196,8 @@ def _placed_own(leaf, voxel: float, device) -> _Own | None:
     if defect_mesh is not None:
         points = placement.to_world(defect_mesh.points.numpy()).astype(np.float32)
         defect_mesh = wp.Mesh(points=wp.array(points, dtype=wp.vec3, device=device), indices=defect_mesh.indices)
-    return _Own(leaf.values, SIDE_VOXELS * voxel, device, own.defects, own.side, defect_mesh, own.strips, own.thin)
+    parts = (own.defects, own.side, defect_mesh, own.strips, own.thin)
+    return _Own(leaf.values, SIDE_VOXELS * voxel, device, *parts, beyond_holes=own.beyond_holes)
 
 
 class _Judge:

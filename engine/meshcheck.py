@@ -93,10 +93,17 @@ def all_corners(marked: np.ndarray, rows: np.ndarray) -> np.ndarray:
 def defect_edges(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A mesh with vertices at one position taken as one (:func:`weld_positions`) and its edges that are open,
     non-manifold or inconsistently oriented: ``(positions, triangles (T, 3) int32, edges (E, 2) int64)``."""
+    return defect_edge_kinds(vertices, triangles)[:3]
+
+
+def defect_edge_kinds(vertices: np.ndarray, triangles: np.ndarray) -> tuple:
+    """:func:`defect_edges`, and per defect edge whether it is open (one face: a hole's edge; else an edge of more than
+    two faces, or of two that list it the same way)."""
     verts, tris = weld_positions(vertices, triangles)
     tris = np.asarray(tris, dtype=np.int32)
     edges = edge_table(tris, len(verts))
-    return verts, tris, edges["pairs"][(edges["faces"] != 2) | (edges["forward"] != 1)].astype(np.int64)
+    bad = (edges["faces"] != 2) | (edges["forward"] != 1)
+    return verts, tris, edges["pairs"][bad].astype(np.int64), edges["faces"][bad] == 1
 
 
 def weld_positions(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -378,9 +378,10 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
     return wp.array(codes[keep], dtype=wp.int64, device=octets.device)
 
 
-# The source meshes a kept-faces judge found passing through themselves (:func:`.keep.internal_faces`): a boolean along
-# its seams builds every finest octet of such an operand, whose faces are given up about the crossings (only the voxel
-# surface is there, away from the seams), unless it knows where they may be given up (``_REGIONS``).
+# The source meshes a kept-faces judge found passing through themselves, or with defects other than holes
+# (:func:`.keep.gives_own_faces_up`): a boolean along its seams builds every finest octet of such an operand, whose
+# faces are given up about the crossings and defects (only the voxel surface is there, away from the seams), unless it
+# knows where they may be given up (``_REGIONS``).
 _CROSSING: weakref.WeakSet = weakref.WeakSet()
 # Per such source mesh: where its faces may be given up whatever the other operand is (:func:`.keep.own_region`: its
 # defects, crossings included, and its faces that read internal), as ``(voxel, BVH)`` in its own frame, at the voxel

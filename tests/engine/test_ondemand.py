@@ -282,6 +282,33 @@ def test_a_mesh_built_whole_that_passes_through_itself_is_made_along_its_seams_a
     assert again.refiner.whole is None and len(surface["tris"]) == len(want["tris"])
 
 
+def _enclosed(verts, tris) -> float:
+    v = np.asarray(verts, dtype=np.float64)
+    return float(np.einsum("ij,ij->i", v[tris[:, 0]], np.cross(v[tris[:, 1]], v[tris[:, 2]])).sum() / 6.0)
+
+
+@pytest.mark.parametrize("refine", ["none", "all"])
+def test_defects_other_than_holes_far_from_the_seams_keep_their_surface(refine):
+    # a closed unit box listing each face twice (every face repeated: none kept), and two boxes sharing an edge (an
+    # edge of four faces): their faces near the defects are given up, so the voxel surface must be made there too,
+    # though no seam is near; both vanished from the union with a ball beside them (the join gave every face up, and
+    # the ball alone was a closed surface)
+    box_v, box_t = box_mesh((0.5, 0.5, 0.5))
+    doubled = (box_v, np.concatenate([box_t, box_t]))
+    other = box_mesh((0.5, 0.5, 0.5), center=(1.0, 1.0, 0.0))
+    sharing = (np.concatenate([box_v, other[0]]), np.concatenate([box_t, other[1] + len(box_v)]))
+    ball = uv_sphere(0.5, rings=16, segments=32)
+    ball = (ball[0] + np.array([2.5, 0.5, 0.5], np.float32), ball[1])
+    for mesh, volume in ((doubled, 1.0), (sharing, 2.0)):
+        fields = engine.build_fields([mesh, ball], voxel_size=1.0 / 32, refine=refine)
+        kept = engine.union(*fields, seams=True).kept_surface()
+        assert is_watertight(kept["tris"]) and not kept["stats"]["kept_fallback"]
+        enclosed = _enclosed(kept["verts"], kept["tris"]) - _enclosed(*ball)
+        assert abs(enclosed - volume) < 0.01 * volume, enclosed  # (the boxes' faces are the lattice's planes)
+        from_box = kept["kept"] & (kept["field_id"] == 0)
+        assert from_box.any() != (mesh is doubled)  # (repeated faces are never kept)
+
+
 def test_an_open_mesh_built_on_demand_builds_about_its_holes_first_and_refines_to_the_full_build():
     bunny = normalised(load_mesh("stanford-bunny.obj"))  # open: its build refines across its holes
     full = engine.build_field(*bunny, voxel_size=H)
