@@ -165,8 +165,15 @@ def voxel_size_for(read, settings: FieldSettings) -> float:
     than asked) and held at the objects' previous step while the box changes little (``VOXEL_HOLD_STEPS``).
 
     Raises:
-        AasdfError: When the objects have no extent and no voxel size is set.
+        AasdfError: When the objects have no extent and no voxel size is set, or lie so far from the world origin that
+            float32 positions there cannot resolve the voxels (``engine.check_resolvable``; refused before any build).
     """
+    voxel = _voxel_size(read, settings)
+    runtime.engine().check_resolvable(*world_bounds(read), voxel)
+    return voxel
+
+
+def _voxel_size(read, settings: FieldSettings) -> float:
     if settings.voxel_size > 0.0:
         return float(np.float32(settings.voxel_size))
     lo, hi = world_bounds(read)
@@ -234,10 +241,20 @@ def operand_fields(
             placed[k] = field
     for k, field in enumerate(placed):
         if not field.encloses_volume:
-            raise runtime.engine().AasdfError(
-                f"'{operands[k].name}' encloses no volume: give it a thickness or close it"
-            )
+            raise runtime.engine().AasdfError(_no_volume(operands[k], voxel_size))
     return [field.relabel(k) for k, field in enumerate(placed)]
+
+
+def _no_volume(operand, voxel_size: float) -> str:
+    """Why an operand's field has no inside: it is thinner than two voxels (no node lies inside it), or a surface
+    that encloses nothing."""
+    lo, hi = world_bounds([operand])
+    if float(np.max(hi - lo)) < 2.0 * voxel_size:
+        return (
+            f"'{operand.name}' is smaller than two voxels ({float(np.max(hi - lo)):.3g} across, voxels of "
+            f"{voxel_size:.3g}): no voxel lies inside it; set a smaller Voxel Size or a higher Resolution"
+        )
+    return f"'{operand.name}' encloses no volume: give it a thickness or close it"
 
 
 def _placed_fields(context, operands, settings: FieldSettings, voxel_size: float, progress, thickness, refine) -> list:

@@ -14,7 +14,7 @@ from .errors import AasdfError
 from .field import AdaptiveField
 from .fieldops import offset, shell
 from .hostpool import pooled_bytes, release_memory
-from .plan import check_meshes, plan_field, tune_allocator
+from .plan import check_meshes, check_resolvable, plan_field, tune_allocator
 from .redistancing import redistance
 from .sources import interpolate_corners
 
@@ -27,6 +27,7 @@ __all__ = [
     "build_field",
     "build_fields",
     "check_meshes",
+    "check_resolvable",
     "connected_components",
     "fold_edges",
     "difference",

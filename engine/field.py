@@ -21,7 +21,7 @@ from .meshing import field_mesh
 from .octree import decode_codes
 from .ondemand import refined
 from .placement import Placement
-from .plan import available_memory
+from .plan import available_memory, check_resolvable
 from .queries import code_proj, sample_field_kernel, source_ids_kernel
 from .sampling import FieldArg
 from .seams import kept_along_seams
@@ -162,6 +162,8 @@ class AdaptiveField:
             The placed field (the field itself for the identity).
         Raises:
             ValueError: If ``matrix`` is not a finite (4, 4) similarity (uneven scales and shears need a new field).
+            AasdfError: If it would place the field so far from the world origin that float32 positions there cannot
+                resolve its voxels (:func:`.plan.check_resolvable`).
         """
         matrix = np.asarray(matrix, dtype=np.float64)
         placement = Placement(matrix) if self.placement is None else self.placement.then(matrix)
@@ -169,6 +171,7 @@ class AdaptiveField:
             return self
         moved = copy.copy(self)
         moved.placement = None if placement.is_identity else placement
+        check_resolvable(*moved.bounds, moved.world_voxel_size)
         return moved
 
     @property

@@ -13,9 +13,9 @@ import numpy as np
 import warp as wp
 import warp.geometry
 
-from .errors import AasdfError
 from .octree import morton_decode
 from .parallel import launch_split
+from .plan import check_resolvable
 
 try:  # the marching-cubes core of Warp's sparse_marching_cubes_from_cells, given already shared corners
     from warp._src.geometry import sparse_marching_cubes as _warp_mc
@@ -40,10 +40,6 @@ _ISO_NUDGE = 1.0e-3
 
 # ... and never less than this many float32 ulps of the largest world coordinate, for lattices far from the origin.
 _ISO_NUDGE_ULPS = 4.0
-
-
-# Refuse lattices so far from the world origin that float32 resolves less than this fraction of a cell there.
-_MIN_ULPS_PER_CELL = 32.0
 
 
 @wp.kernel(enable_backward=False)
@@ -293,16 +289,10 @@ def iso_nudge(origin: np.ndarray, lo: np.ndarray, hi: np.ndarray, spacing: float
     """How far samples are pushed off the level (see ``_ISO_NUDGE``) for a lattice spanning ``lo``..``hi``.
 
     Vertices are float32 world positions: their resolution where the lattice lies bounds the nudge from below, and
-    refuses (AasdfError) lattices so far from the origin that float32 cannot resolve a fraction of a cell there.
+    refuses (:func:`.plan.check_resolvable`) lattices so far from the origin that float32 cannot resolve a fraction
+    of a cell there.
     """
-    extent = float(np.abs([origin + (lo + 0.5) * spacing, origin + (hi + 1.5) * spacing]).max())
-    ulp = float(np.spacing(np.float32(extent)))
-    if ulp * _MIN_ULPS_PER_CELL > spacing:
-        raise AasdfError(
-            f"The surface lies too far from the world origin for its voxel size: float32 positions {extent:.4g} "
-            f"away resolve only {ulp:.3g}, more than 1/{_MIN_ULPS_PER_CELL:g} of the voxel size {spacing:.3g}. "
-            "Move the objects closer to the origin or use a coarser resolution."
-        )
+    ulp = check_resolvable(origin + (lo + 0.5) * spacing, origin + (hi + 1.5) * spacing, spacing)
     return max(_ISO_NUDGE * spacing, _ISO_NUDGE_ULPS * ulp)
 
 

@@ -25,6 +25,8 @@ from .octree import MAX_CELLS_PER_AXIS
 BUILD_BYTES_PER_NODE = 160
 
 
+# Surfaces are refused so far from the world origin that float32 resolves less than this fraction of a cell there.
+MIN_ULPS_PER_CELL = 32.0
 # Finest cells kept around the domain's content, as a build keeps them (padding 1 + 2).
 MARGIN_CELLS = 3
 
@@ -87,6 +89,20 @@ def plan_domain(lo, hi, voxel_size: float, levels: int, margin_cells: float):
     origin = np.floor((np.asarray(lo, np.float64) - margin) / top) * top
     dims = np.maximum(np.ceil((np.asarray(hi, np.float64) + margin - origin) / top).astype(np.int64), 1)
     return origin, dims
+
+
+def check_resolvable(lo, hi, spacing: float) -> float:
+    """The float32 resolution (ulp) of world positions in the box ``lo``..``hi``; refused (AasdfError) where it is
+    coarser than 1/MIN_ULPS_PER_CELL of ``spacing``: surfaces there would fall onto float32's grid."""
+    extent = float(np.abs([np.asarray(lo, np.float64), np.asarray(hi, np.float64)]).max())
+    ulp = float(np.spacing(np.float32(extent)))
+    if not np.isfinite(extent) or ulp * MIN_ULPS_PER_CELL > spacing:
+        raise AasdfError(
+            f"The surface lies too far from the world origin for its voxel size: float32 positions {extent:.4g} "
+            f"away resolve only {ulp:.3g}, more than 1/{MIN_ULPS_PER_CELL:g} of the voxel size {spacing:.3g}. "
+            "Move the objects closer to the origin or use a coarser resolution."
+        )
+    return ulp
 
 
 def check_budget(fine_dims, top_count, fine_nodes_estimate, pairs=0):

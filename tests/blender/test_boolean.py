@@ -305,6 +305,27 @@ def test_moving_turning_or_scaling_an_operand_builds_no_field(fresh_cache):
     assert boolean_op.last_run["fields_built"] == 2
 
 
+def test_cached_operands_moved_too_far_from_the_origin_are_refused_untouched(fresh_cache):
+    a = add_mesh_object("Cube", *box_mesh())
+    b = add_mesh_object("Ball", *uv_sphere(1.0, rings=12, segments=24))
+    b.location = (1.0, 0.3, 0.2)
+    bpy.context.view_layer.update()
+    select(a, b)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=64, hide_inputs=False)
+    # both moved 1e8 away, their fields cached: float32 positions there are 8 apart (the result fell onto that grid:
+    # 10 faces, no volume); now refused before any work, as operands built there are
+    for obj in (a, b):
+        obj.location.x += 1e8
+    bpy.context.view_layer.update()
+    before = [local_vertices(obj).copy() for obj in (a, b)]
+    objects = set(bpy.data.objects)
+    select(a, b)
+    with pytest.raises(RuntimeError, match="too far from the world origin for its voxel size"):
+        bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=64, hide_inputs=False)
+    assert set(bpy.data.objects) == objects and a.location.x == pytest.approx(1e8)
+    assert all(np.array_equal(v, local_vertices(obj)) for v, obj in zip(before, (a, b), strict=True))
+
+
 def test_duplicates_of_one_geometry_share_one_field(fresh_cache):
     spot = add_mesh_object("Spot", *load_mesh("spot.obj"))
     ball = add_mesh_object("Ball", *uv_sphere(0.15, rings=16, segments=32))

@@ -87,6 +87,19 @@ def test_a_plane_cutter_is_refused_until_it_has_a_thickness(fresh_cache):
     assert mesh_volume(verts, tris) == pytest.approx(8.0 - 4.0 * 0.2, rel=0.02)  # a slot 0.2 wide through it
 
 
+def test_an_operand_smaller_than_two_voxels_is_refused_as_such(fresh_cache):
+    # closed, but no voxel lies inside it: it read "encloses no volume: give it a thickness or close it"
+    block = add_mesh_object("Block", *box_mesh(half=(1.0, 1.0, 1.0)))
+    speck = add_mesh_object("Speck", *box_mesh(half=(1e-3, 1e-3, 1e-3)))
+    speck.location = (0.5, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    select(block, speck)
+    objects = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match=r"'Speck' is smaller than two voxels \(0.002 across, voxels of 0.05"):
+        bpy.ops.aasdf.boolean(operation="UNION", resolution=64)
+    assert len(bpy.data.objects) == objects and not block.hide_get()
+
+
 def test_the_tree_refuses_a_plane_and_takes_a_thickness_per_input(fresh_cache):
     block = add_mesh_object("Block", *box_mesh(half=(1.0, 1.0, 1.0)))
     cutter = plane()

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import engine
+from engine.errors import AasdfError
 from tests.metrics import exact_boolean, hausdorff, mesh_volume
 from tests.support import box_mesh, is_watertight, load_mesh, uv_sphere
 
@@ -82,3 +83,16 @@ def test_only_similarities_place_a_field():
         field.transformed(np.eye(3))
     with pytest.raises(ValueError, match="finite"):
         field.transformed(np.full((4, 4), np.nan))
+
+
+def test_a_field_moved_too_far_from_the_origin_is_refused_and_one_moved_near_it_is_not():
+    # a cached field moved 1e8 away: float32 positions there are 8 apart, its voxels 0.05 (its surface fell onto
+    # float32's grid: a boolean of two such fields came out with 10 faces and no volume)
+    field = engine.build_field(*box_mesh(), voxel_size=0.05)
+    far, near = np.eye(4), np.eye(4)
+    far[0, 3], near[0, 3] = 1e8, 1e4
+    with pytest.raises(AasdfError, match=r"too far from the world origin for its voxel size"):
+        field.transformed(far)
+    moved = field.transformed(near)  # float32 resolves 0.001 there: 1/50 of a voxel
+    verts, tris = moved.to_mesh()
+    assert is_watertight(tris) and abs(mesh_volume(verts.astype(np.float64) - (1e4, 0, 0), tris) - 8.0) < 0.01
