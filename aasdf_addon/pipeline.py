@@ -165,15 +165,8 @@ def voxel_size_for(read, settings: FieldSettings) -> float:
     than asked) and held at the objects' previous step while the box changes little (``VOXEL_HOLD_STEPS``).
 
     Raises:
-        AasdfError: When the objects have no extent and no voxel size is set, or lie so far from the world origin that
-            float32 positions there cannot resolve the voxels (``engine.check_resolvable``; refused before any build).
+        AasdfError: When the objects have no extent and no voxel size is set.
     """
-    voxel = _voxel_size(read, settings)
-    runtime.engine().check_resolvable(*world_bounds(read), voxel)
-    return voxel
-
-
-def _voxel_size(read, settings: FieldSettings) -> float:
     if settings.voxel_size > 0.0:
         return float(np.float32(settings.voxel_size))
     lo, hi = world_bounds(read)

@@ -156,14 +156,10 @@ class AdaptiveField:
         every array, nothing rebuilt. Queries, ``to_mesh`` and booleans see it in its new place; a boolean resamples
         it onto the result's lattice from its own cells.
 
-        Args:
-            matrix: (4, 4) array-like, applied after the field's current placement.
-        Returns:
-            The placed field (the field itself for the identity).
-        Raises:
-            ValueError: If ``matrix`` is not a finite (4, 4) similarity (uneven scales and shears need a new field).
-            AasdfError: If it would place the field so far from the world origin that float32 positions there cannot
-                resolve its voxels (:func:`.plan.check_resolvable`).
+        ``matrix``: (4, 4) array-like, applied after the field's current placement. Returns the placed field (the field
+        itself for the identity). Raises ValueError if ``matrix`` is not a finite (4, 4) similarity (uneven scales and
+        shears need a new field), AasdfError if float32 positions where it lands cannot resolve its voxels
+        (:func:`.plan.check_resolvable`).
         """
         matrix = np.asarray(matrix, dtype=np.float64)
         placement = Placement(matrix) if self.placement is None else self.placement.then(matrix)
