@@ -1,13 +1,25 @@
 """The parts of a kept surface as one surface: the kept faces, the voxel faces left and the strips joining them
 (:func:`assembled`), or the voxel surface alone where nothing is kept or the join fails (:func:`voxel_surface_only`),
-as :func:`.hybrid.hybrid_surface` returns them."""
+as :func:`.hybrid.hybrid_surface` returns them.
+
+A join along the seams alone (its voxel surface only there) may give up kept faces where no voxel surface lies under
+them: about a defect of an operand that no octet was built about, every face of a part given up round by round, the
+rest still a closed surface without it. Kept faces given up away from every kept face left must have surface within a
+voxel or two (:func:`_lost`), else the join is refused.
+"""
 
 from __future__ import annotations
 
 import numpy as np
+import warp as wp
 
 from .edges import surface_edges
-from .meshcheck import compacted
+from .meshcheck import any_corner, compacted
+from .sources import mesh_distances
+from .zipper import faces_near
+
+# A kept face given up (away from the kept faces left) must have surface within this many voxels of its centre.
+COVER_VOXELS = 2.0
 
 
 def voxel_surface_only(verts, tris, why: str, failed: bool = True) -> dict:
@@ -28,11 +40,18 @@ def voxel_surface_only(verts, tris, why: str, failed: bool = True) -> dict:
     }
 
 
-def assembled(points, kept, k_tris, k_alive, voxel, strips, voxel_verts, voxel_tris, device) -> dict:
+def assembled(points, kept, k_tris, k_alive, voxel, strips, voxel_verts, voxel_tris, device, given_up=None) -> dict:
     """The kept faces, the voxel faces left (``voxel``: all of them and which are left) and the strips as one
-    surface on the vertices they use, or the voxel surface alone if that is not closed and consistently oriented."""
+    surface on the vertices they use, or the voxel surface alone if that is not closed and consistently oriented, or
+    (``given_up``: the rows of ``k_tris`` the join gave up, with the voxel size, where its voxel surface is along the
+    seams alone) where kept faces given up have no new surface about them (:func:`_lost`)."""
     v_rows = np.flatnonzero(voxel[1])
-    tris = np.concatenate([k_tris[k_alive], voxel[0][v_rows], strips.astype(np.int64)])
+    new = np.concatenate([voxel[0][v_rows], strips.astype(np.int64)])
+    if given_up is not None and _lost(points, k_tris, k_alive, new, *given_up, device):
+        return voxel_surface_only(
+            voxel_verts, voxel_tris, "kept faces given up where the seams' surface does not reach"
+        )
+    tris = np.concatenate([k_tris[k_alive], new])
     used, local = compacted(tris, len(points))
     tris = local.astype(np.int32)
     if surface_edges(tris, len(used), device) is None:
@@ -57,3 +76,25 @@ def assembled(points, kept, k_tris, k_alive, voxel, strips, voxel_verts, voxel_t
         "stats": {"kept_faces": n_kept, "new_faces": n_new, "strip_faces": len(strips)}
         | {"kept_fallback": "", "join_failed": False},
     }
+
+
+def _lost(points, k_tris, k_alive, new, given_up, voxel: float, device) -> bool:
+    """Whether a kept face given up (rows ``given_up`` of ``k_tris``) that shares no corner with a kept face left has
+    no face of the joined surface (kept faces left, ``new`` faces) within COVER_VOXELS of its centre (where it borders
+    kept faces left, the join paired its loop; Suzanne with a ball gives up small faces a voxel from kept ones)."""
+    alive_corner = np.zeros(len(points), dtype=bool)
+    alive_corner[k_tris[k_alive]] = True
+    lone = given_up[~any_corner(alive_corner, k_tris[given_up])]
+    if not len(lone):
+        return False
+    centres = points[k_tris[lone]].astype(np.float64).mean(axis=1)
+    reach = COVER_VOXELS * voxel
+    joined = np.concatenate([k_tris[k_alive], new]).astype(np.int32)
+    near = np.ascontiguousarray(joined[faces_near(points, joined, centres, reach)])
+    if not len(near):
+        return True
+    mesh = wp.Mesh(
+        points=wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device),
+        indices=wp.array(near.reshape(-1), dtype=wp.int32, device=device),
+    )
+    return bool((mesh_distances(mesh, centres, reach, device) >= reach).any())

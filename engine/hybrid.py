@@ -245,7 +245,10 @@ def hybrid_surface(
         trouble.append(at)
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
-    surface = assembled(points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device)
+    given_up = (np.flatnonzero(judged_alive & ~k_alive), voxel) if partial else None
+    surface = assembled(
+        points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device, given_up
+    )
     return {**surface, "trouble": _trouble(points, k_tris[judged_alive & ~k_alive], trouble, voxel)}
 
 

@@ -309,6 +309,25 @@ def test_defects_other_than_holes_far_from_the_seams_keep_their_surface(refine):
         assert from_box.any() != (mesh is doubled)  # (repeated faces are never kept)
 
 
+def test_a_join_that_gives_up_faces_no_voxel_surface_lies_under_is_made_whole(monkeypatch):
+    # should a defect go unnoticed (two boxes sharing an edge taken for a clean mesh: no octet about it), the join
+    # along the seams alone gives every face of the boxes up, round by round; that is caught, and the whole result
+    # joined instead
+    import engine.earlyjudge
+
+    monkeypatch.setattr(engine.earlyjudge, "gives_own_faces_up", lambda leaf, voxel: False)
+    box_v, box_t = box_mesh((0.5, 0.5, 0.5))
+    other = box_mesh((0.5, 0.5, 0.5), center=(1.0, 1.0, 0.0))
+    sharing = (np.concatenate([box_v, other[0]]), np.concatenate([box_t, other[1] + len(box_v)]))
+    ball = uv_sphere(0.5, rings=16, segments=32)
+    ball = (ball[0] + np.array([2.5, 0.5, 0.5], np.float32), ball[1])
+    result = engine.union(*engine.build_fields([sharing, ball], voxel_size=1.0 / 32, refine="none"), seams=True)
+    kept = result.kept_surface()
+    assert result.refiner.whole is not None  # made whole
+    assert is_watertight(kept["tris"]) and (kept["kept"] & (kept["field_id"] == 0)).any()
+    assert abs(_enclosed(kept["verts"], kept["tris"]) - _enclosed(*ball) - 2.0) < 0.02
+
+
 def test_an_open_mesh_built_on_demand_builds_about_its_holes_first_and_refines_to_the_full_build():
     bunny = normalised(load_mesh("stanford-bunny.obj"))  # open: its build refines across its holes
     full = engine.build_field(*bunny, voxel_size=H)
