@@ -165,12 +165,18 @@ def voxel_size_for(read, settings: FieldSettings) -> float:
     than asked) and held at the objects' previous step while the box changes little (``VOXEL_HOLD_STEPS``).
 
     Raises:
-        AasdfError: When the objects have no extent and no voxel size is set.
+        AasdfError: When the objects have no extent and no voxel size is set, naming an object whose vertices are not
+            all numbers (NaN or infinite: the build refuses them too).
     """
     if settings.voxel_size > 0.0:
         return float(np.float32(settings.voxel_size))
     lo, hi = world_bounds(read)
     raw = float(np.linalg.norm(hi - lo)) / int(settings.resolution)
+    for operand in read if not np.isfinite(raw) else ():
+        if bad := int(np.count_nonzero(~np.isfinite(operand.verts).all(axis=1))):
+            raise runtime.engine().AasdfError(
+                f"{operand.name}: The mesh has {bad} vertices with NaN or infinite coordinates."
+            )
     if not raw > 0.0:
         raise runtime.engine().AasdfError("The inputs have no extent: set a Voxel Size")
     step = int(np.floor(np.log2(raw) * VOXEL_STEPS_PER_OCTAVE))

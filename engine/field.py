@@ -332,7 +332,7 @@ class AdaptiveField:
             that encloses no volume (``encloses_volume`` False) is an unsigned distance, kinked on its surface: "mls"
             there takes the nearest closest point of the neighbouring nodes instead of a fit.
         Raises:
-            ValueError: If ``points`` is not (N, 3) or ``method`` is unknown.
+            ValueError: If ``points`` is not (N, 3) of finite numbers or ``method`` is unknown.
         """
         if self.refiner is not None:  # the finest octets it reads built first (:mod:`.ondemand`)
             return self._asked(points).sample(points, method, return_gradient=return_gradient)
@@ -590,9 +590,7 @@ class AdaptiveField:
     def _frame_points(self, points) -> np.ndarray:
         """(N, 3) float32 points (validated) in the field's own frame."""
         pts = _as_points(points)
-        if self.placement is None:
-            return pts
-        return np.ascontiguousarray(self.placement.to_local(pts), dtype=np.float32)
+        return pts if self.placement is None else np.ascontiguousarray(self.placement.to_local(pts), dtype=np.float32)
 
     # -- booleans as operators --
     def __or__(self, other):
@@ -616,4 +614,6 @@ def _as_points(points) -> np.ndarray:
     pts = np.ascontiguousarray(points, dtype=np.float32)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"Expected 'points' of shape (N, 3), but got {pts.shape}.")
+    if not np.isfinite(pts).all():
+        raise ValueError(f"Expected finite 'points', but got {np.count_nonzero(~np.isfinite(pts))} NaN or inf values.")
     return pts

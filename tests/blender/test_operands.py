@@ -233,6 +233,12 @@ def nan_cutter():
     return obj
 
 
+def nan_vertex():  # (with the resolution's voxel size: it read "The inputs have no extent: set a Voxel Size")
+    verts, tris = uv_sphere(0.5, rings=8, segments=16)
+    verts[3] = (np.nan, 0.0, 0.0)
+    return add_mesh_object("Cutter", verts, tris)
+
+
 def parent_flattened():
     parent = bpy.data.objects.new("Parent", None)
     bpy.context.scene.collection.objects.link(parent)
@@ -250,6 +256,7 @@ TRANSFORMS = [
         "'Cutter' has no volume and no area: its scale is 0 along X and Z; give it a non-zero scale",
     ),
     (nan_cutter, r"'Cutter' has a transform that is not a number \(NaN or infinite"),
+    (nan_vertex, r"Cutter: The mesh has 1 vertices with NaN or infinite coordinates"),
     (parent_flattened, r"'Cutter' is flat: its transform \(with its parents'\) squashes it; give it a thickness"),
 ]
 

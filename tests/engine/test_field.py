@@ -834,6 +834,8 @@ def test_sample_validates_points_and_method():
     with pytest.raises(ValueError, match="'mls' or 'linear'"):
         field.sample(np.zeros((1, 3)), method="cubic")
     assert field.sample(np.zeros((0, 3))).shape == (0,)
+    with pytest.raises(ValueError, match="finite 'points', but got 2 NaN or inf values"):  # (read 0.2 at a NaN)
+        field.sample([[np.nan, 0.0, 0.0], [0.0, np.inf, 0.0], [0.5, 0.0, 0.0]])
 
 
 @pytest.mark.parametrize("sequential", [False, True])
