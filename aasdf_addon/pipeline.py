@@ -172,11 +172,12 @@ def voxel_size_for(read, settings: FieldSettings) -> float:
         return float(np.float32(settings.voxel_size))
     lo, hi = world_bounds(read)
     raw = float(np.linalg.norm(hi - lo)) / int(settings.resolution)
-    for operand in read if not np.isfinite(raw) else ():
-        if bad := int(np.count_nonzero(~np.isfinite(operand.verts).all(axis=1))):
-            raise runtime.engine().AasdfError(
-                f"{operand.name}: The mesh has {bad} vertices with NaN or infinite coordinates."
-            )
+    if not np.isfinite(raw):  # a vertex that is not a number, named as the build names it
+        for operand in read:
+            if bad := int(np.count_nonzero(~np.isfinite(operand.verts).all(axis=1))):
+                raise runtime.engine().AasdfError(
+                    f"{operand.name}: The mesh has {bad} vertices with NaN or infinite coordinates."
+                )
     if not raw > 0.0:
         raise runtime.engine().AasdfError("The inputs have no extent: set a Voxel Size")
     step = int(np.floor(np.log2(raw) * VOXEL_STEPS_PER_OCTAVE))

@@ -245,11 +245,9 @@ def hybrid_surface(
         trouble.append(at)
     else:
         return voxel_surface_only(voxel_verts, voxel_tris, "loops left unpaired")
-    given_up = (np.flatnonzero(judged_alive & ~k_alive), voxel) if partial else None
-    surface = assembled(
-        points, kept, k_tris, k_alive, (v_tris, v_alive), strips, voxel_verts, voxel_tris, device, given_up
-    )
-    return {**surface, "trouble": _trouble(points, k_tris[judged_alive & ~k_alive], trouble, voxel)}
+    given_up, parts = np.flatnonzero(judged_alive & ~k_alive), (k_tris, k_alive, (v_tris, v_alive), strips)
+    surface = assembled(points, kept, *parts, voxel_verts, voxel_tris, device, (given_up, voxel) if partial else None)
+    return {**surface, "trouble": _trouble(points, k_tris[given_up], trouble, voxel)}
 
 
 def _voxel_left(v_tris, alive, n: int, was) -> tuple:

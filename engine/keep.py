@@ -172,8 +172,7 @@ def gives_own_faces_up(leaf, voxel: float) -> bool:
 def own_region(leaf, voxel: float) -> tuple[np.ndarray, np.ndarray]:
     """Where a (mesh) leaf's faces may be given up whatever the other leaves are, in its own frame: its defects as the
     judge measures distances to them (crossings included) and its triangles that read internal or repeat another (a
-    mesh of nothing else has no defect mesh), as ``(points (P, 3)
-    float32, tris (D, 3) int32)``."""
+    mesh of nothing else has no defect mesh), as ``(points (P, 3) float32, tris (D, 3) int32)``."""
     frame = leaf.in_frame()
     source = next(iter(frame.world_sources().values()))
     own = _own_part(frame, source, voxel / (1.0 if leaf.placement is None else leaf.placement.scale), leaf.device)
