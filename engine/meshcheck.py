@@ -54,6 +54,8 @@ def checked_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray, np.ndarra
         raise AasdfError("The mesh is empty: it has no vertices or no triangles.")
     if not np.issubdtype(tris.dtype, np.integer):
         raise ValueError(f"Expected integer 'triangles', but got dtype {tris.dtype}.")
+    if not (np.issubdtype(verts.dtype, np.floating) or np.issubdtype(verts.dtype, np.integer)):
+        raise ValueError(f"Expected real 'vertices', but got dtype {verts.dtype}.")  # (complex parts were dropped)
     verts64 = verts.astype(np.float64)
     if not np.all(np.isfinite(verts64)):
         bad = int(np.count_nonzero(~np.isfinite(verts64).all(axis=1)))

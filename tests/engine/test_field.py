@@ -808,6 +808,8 @@ def test_degenerate_triangles_and_duplicate_vertices_are_handled():
         (np.zeros(3), np.array([[0, 1, 2]]), {}, ValueError, r"'vertices' of shape \(V, 3\)"),
         (np.eye(3), np.array([0, 1, 2]), {}, ValueError, r"'triangles' of shape \(T, 3\)"),
         (np.eye(3), np.array([[0.0, 1.0, 2.0]]), {}, ValueError, "integer 'triangles'"),
+        (np.eye(3) + 1j, np.array([[0, 1, 2]]), {}, ValueError, "real 'vertices', but got dtype complex128"),
+        (np.eye(3).astype(str), np.array([[0, 1, 2]]), {}, ValueError, "real 'vertices', but got dtype <U32"),
     ],
 )
 def test_bad_input_is_refused_before_any_kernel_runs(verts, tris, kwargs, error, match, monkeypatch):
