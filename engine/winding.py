@@ -244,14 +244,32 @@ def _nearest_integer(f: WindingArg, x: wp.vec3, fast: float, shift: float) -> fl
 
 
 @wp.func
+def _off_cones(f: WindingArg, x: wp.vec3, fast: float, cones: float) -> float:
+    """w = k - ``cones`` (the cones' winding number mod 1 at ``x``), k the integer nearest ``fast`` + ``cones``, from
+    an accurate re-evaluation when that is not within INTEGER_SLACK of one. Where even that is not, ``x`` lies on a
+    cone (a node in a planar hole, on the edge between two of its cone's triangles: their solid angles' signs are
+    either side's, and the cones read 0 for 1/2: w came out 1 at the middle of an open box's missing face, inside, and
+    Taylor's theorem spread that to the nodes about it): the accurate winding number itself."""
+    s = fast + cones
+    k = wp.floor(s + 0.5)
+    if wp.abs(s - k) <= INTEGER_SLACK:
+        return k - cones
+    accurate = winding_number(f.mesh, x, ACCURATE_WINDING_ACCURACY)
+    s = accurate + cones
+    k = wp.floor(s + 0.5)
+    if wp.abs(s - k) <= INTEGER_SLACK:
+        return k - cones
+    return accurate
+
+
+@wp.func
 def exact_winding(f: WindingArg, x: wp.vec3, fast: float) -> float:
     """The winding number at ``x`` (``fast``: its fast value there), exact up to float rounding (approximate in mode
-    WINDING_APPROXIMATE)."""
+    WINDING_APPROXIMATE, and on an open mesh's cones: :func:`_off_cones`)."""
     if f.mode == WINDING_CLOSED:
         return _nearest_integer(f, x, fast, 0.0)
     if f.mode == WINDING_EXACT:
-        cones = _cone_winding(f, x)
-        return _nearest_integer(f, x, fast, cones) - cones
+        return _off_cones(f, x, fast, _cone_winding(f, x))
     return winding_number(f.mesh, x, ACCURATE_WINDING_ACCURACY)
 
 
@@ -346,8 +364,7 @@ def winding_expansion(f: WindingArg, x: wp.vec3, near: float, far: float):
         il1 = il2
     hess += wp.mat33(0.0, -spin[2], spin[1], spin[2], 0.0, -spin[0], -spin[1], spin[0], 0.0)
     cones = wp.atan2(im, re) / (2.0 * wp.pi)
-    fast = winding_number(f.mesh, x, WINDING_ACCURACY)
-    w = _nearest_integer(f, x, fast, cones) - cones
+    w = _off_cones(f, x, winding_number(f.mesh, x, WINDING_ACCURACY), cones)
     scale = 1.0 / _FOUR_PI
     return w, scale * grad, scale * hess, 6.0 * scale * d3_near, 6.0 * scale * d3_far
 
