@@ -27,9 +27,10 @@ from .blends import BLEND_MODES, chamfer_needs, lipschitz, sdf_combine
 from .blendzone import blend_octets
 from .closure import closed, needs_closure
 from .earlyjudge import start_judge
+from .errors import AasdfError
 from .expression import OP_DIFFERENCE, OP_INTERSECTION, OP_UNION, combined
 from .layout import level_layout
-from .octree import code_bits, morton_decode, node_center
+from .octree import MAX_CELLS_PER_AXIS, code_bits, morton_decode, node_center
 from .ondemand import along_seams_only, for_boolean, seam_octets
 from .operands import (
     blend_sample,
@@ -372,6 +373,12 @@ def _domain(a, b, h: float, levels: int, mode: int, blend: float) -> tuple:
     (a_lo, a_hi), (b_lo, b_hi) = a.bounds, b.bounds
     lo, hi = np.minimum(a_lo, b_lo), np.maximum(a_hi, b_hi)
     reach = (0.5 if mode == 1 else 0.25) * blend
+    span = float(np.max(hi - lo) + 2.0 * reach) / h
+    if blend > 0.0 and not span < MAX_CELLS_PER_AXIS - 1:  # (Blender's largest float as a blend: no plan at all)
+        raise AasdfError(
+            f"A blend of {blend:g} needs a domain of {span:.4g} finest cells along an axis, more than the "
+            f"{MAX_CELLS_PER_AXIS - 1} the octree can address; use a smaller blend or a larger voxel size."
+        )
     origin, top_dims = plan_domain(lo, hi, h, levels, reach / h + 1.0 if blend > 0.0 else 0.0)
     check_budget(top_dims * 2 ** (levels - 1), int(np.prod(top_dims)), 8 * (a.level_counts[0] + b.level_counts[0]))
     return origin, top_dims

@@ -285,6 +285,9 @@ def test_boolean_arguments_are_checked():
         engine.union(a, "sphere")
     with pytest.raises(ValueError, match="non-negative 'blend'"):
         engine.union(a, a, blend=-1.0)
+    # Blender's largest float (what it keeps of an infinite blend): its domain has no plan (a crash in Blender)
+    with pytest.raises(engine.AasdfError, match=r"A blend of 3.40282e\+38 needs a domain of .* use a smaller blend"):
+        engine.union(a, a, blend=float(np.finfo(np.float32).max))
     with pytest.raises(ValueError, match="'spacing' to be one of"):
         engine.union(a, a, spacing="finest")
 
