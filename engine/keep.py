@@ -235,7 +235,9 @@ class _Judge:
         """(T,) bool the triangles in another leaf's plane (:func:`.coplanar.coplanar_triangles`) where the
         expression can cross with both: faces that may be kept there once (a union's facing one way, a difference's
         touching); None where there is none (faces that can only be internal there are judged as any), or where the
-        expression blends (a blend of two coinciding surfaces moves off both: none of their faces is the result's)."""
+        expression blends (a blend of two coinciding surfaces moves off both: none of their faces is the result's).
+        With more than MAX_TABLE_LEAVES other leaves, every such triangle (their 3^n sign patterns are not listed: 16
+        cubes in a row, face to face, took over 4 GB)."""
         if widest_blend(self.expression) > 0.0:
             return None
         meshes = [None if j == self.index else b for j, b in enumerate(self.bvhs)]
@@ -243,6 +245,9 @@ class _Judge:
         for j, bits in enumerate(coplanar_triangles(source.verts, self.tris, meshes, self.voxel, self.device)):
             for bit, tie in TIES if bits is not None else ():
                 others = [k for k in range(len(self.leaves)) if k not in (j, self.index)]
+                if len(others) > MAX_TABLE_LEAVES:
+                    flagged |= (bits & bit) > 0
+                    continue
                 patterns = sign_patterns(len(others))
                 signs = [np.full(len(patterns), tie if k == j else -1, np.int8) for k in range(len(self.leaves))]
                 for col, k in enumerate(others):

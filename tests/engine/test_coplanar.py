@@ -125,3 +125,21 @@ def test_a_blend_over_coinciding_faces_keeps_none_of_them():
         assert is_watertight(s["tris"])
         d = hausdorff(s["verts"], s["tris"], *field.to_mesh(), n=50_000)
         assert d["max"] <= 1.0 * h, d  # measured 0.14 and 0.69 voxel: both the blend's voxel surface
+
+
+def test_many_leaves_in_each_others_planes_flag_their_faces_without_listing_every_sign_pattern(monkeypatch):
+    # which coplanar faces may be kept once was found over every sign pattern of the other leaves, 3^(n - 2) rows:
+    # 16 cubes in a row, face to face, took over 4 GB (20 were killed for memory). Past MAX_TABLE_LEAVES other leaves
+    # every such face is judged in its planes; here the cap is lowered to reach that with four cubes
+    import engine.judging as judging
+    import engine.keep as keep
+
+    listed = []
+    monkeypatch.setattr(keep, "MAX_TABLE_LEAVES", 1)
+    monkeypatch.setattr(keep, "sign_patterns", lambda n: listed.append(n) or judging.sign_patterns(n))
+    cubes = [box_mesh((0.5, 0.5, 0.5), center=(float(i), 0.0, 0.0)) for i in range(4)]
+    a, b, c, d = engine.build_fields(cubes, voxel_size=1.0 / 8)
+    kept = engine.union(engine.union(a, b), engine.union(c, d)).kept_surface()
+    assert all(n <= 1 for n in listed)  # (without the cap: 2 other leaves listed)
+    assert is_watertight(kept["tris"]) and mesh_volume(kept["verts"], kept["tris"]) == pytest.approx(4.0, rel=0.01)
+    assert kept["kept"].any()
