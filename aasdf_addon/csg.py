@@ -111,11 +111,32 @@ def plan_tree(tree) -> list[OutputPlan]:
         collection = first.users_collection[0] if first is not None and first.users_collection else None
         plans.append(OutputPlan(out.name, out.object_name, operands, steps, collection))
 
+    plans = _in_order(plans, errors)
     _set_messages(tree, errors)
     if errors:
         tree.message = f"{len(errors)} node(s) need attention"
         raise engine.AasdfError("; ".join(f"{name}: {message}" for name, message in errors.items()))
     return plans
+
+
+def _in_order(plans: list, errors: dict) -> list:
+    """The plans ordered so that an Output reading another's result object comes after it (evaluated in the nodes'
+    order, it read the result as it was before this evaluation); Outputs whose results feed each other round a loop
+    get a message instead (each evaluation would change the others')."""
+    writer = {item.object_name: k for k, item in enumerate(plans)}
+    needs = [
+        {writer[op.obj.name] for op in item.operands if writer.get(op.obj.name, k) != k} for k, item in enumerate(plans)
+    ]
+    order, done = [], set()
+    while len(order) < len(plans):
+        ready = [k for k in range(len(plans)) if k not in done and needs[k] <= done]
+        if not ready:
+            for k in set(range(len(plans))) - done:
+                errors[plans[k].node_name] = "Its result feeds another Output whose result feeds it: break the loop"
+            return plans
+        order += ready
+        done |= set(ready)
+    return [plans[k] for k in order]
 
 
 def _operand(obj, thickness, operands) -> tuple:
@@ -125,9 +146,14 @@ def _operand(obj, thickness, operands) -> tuple:
     return ("field", operands.index(item))
 
 
-def _plan_node(node, operands, errors, exclude):
-    """The plan of the field a node outputs, adding its mesh objects to ``operands``; ``None`` on a problem."""
+def _plan_node(node, operands, errors, exclude, path=()):
+    """The plan of the field a node outputs, adding its mesh objects to ``operands``; ``None`` on a problem (a node
+    on ``path``, the nodes it feeds, feeds itself: Blender keeps a node's link to itself valid)."""
     kind = node.bl_idname
+    if node.name in path:
+        errors[node.name] = "Its output comes back to its own input: remove the loop of links"
+        return None
+    path = (*path, node.name)
     if kind == nodes.OBJECT:
         obj = node.object
         if obj is None:
@@ -153,7 +179,7 @@ def _plan_node(node, operands, errors, exclude):
             linked = _linked_nodes(socket)
             if not linked:
                 errors[node.name] = f"Connect the '{socket.name}' input"
-            children += [_plan_node(child, operands, errors, exclude) for child in linked]
+            children += [_plan_node(child, operands, errors, exclude, path) for child in linked]
         if node.name in errors or None in children:
             return None
         return ("boolean", nodes.BOOLEAN_NODES[kind], float(node.blend), node.blend_mode, children)
@@ -162,11 +188,14 @@ def _plan_node(node, operands, errors, exclude):
         if not linked:
             errors[node.name] = "Connect the 'Field' input"
             return None
-        child = _plan_node(linked[0], operands, errors, exclude)
+        child = _plan_node(linked[0], operands, errors, exclude, path)
         if child is None:
             return None
         if kind == nodes.OFFSET:
             return ("offset", float(node.distance), child)
+        if not node.wall > 0.0:
+            errors[node.name] = "Set a Wall thicker than 0"
+            return None
         return ("shell", float(node.wall), node.side, child)
     errors[node.name] = f"A {node.bl_label} node cannot feed an SDF input"
     return None

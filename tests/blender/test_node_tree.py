@@ -8,7 +8,7 @@ import pytest
 from aasdf.aasdf_addon import autoupdate, cache, csg, nodes, pipeline
 from aasdf.ui import node_editor
 from tests.blender.scene import add_mesh_object, select, world_arrays
-from tests.metrics import mesh_volume
+from tests.metrics import mesh_area, mesh_volume
 from tests.support import is_watertight, uv_sphere
 
 VOXEL = 0.04  # explicit: the combined bounding box must not change the spacing when an input moves
@@ -201,6 +201,33 @@ def test_two_outputs_write_two_objects_from_shared_fields(evaluated):
     assert mesh_volume(*united) > mesh_volume(*world_arrays(bpy.data.objects["Result"]))
 
 
+def test_an_output_reading_anothers_result_is_evaluated_after_it(evaluated):
+    # created first, it was evaluated first: it read the other's result as it was before (stale, and "unchanged")
+    tree, _, (a, b, *_) = evaluated
+    reader = tree.nodes.new(nodes.OUTPUT)
+    reader.object_name = "Grown"
+    source = tree.nodes.new(nodes.OBJECT)
+    source.object = bpy.data.objects["Result"]
+    offset = tree.nodes.new(nodes.OFFSET)
+    offset.distance = 0.1
+    tree.links.new(source.outputs[0], offset.inputs[0])
+    tree.links.new(offset.outputs[0], reader.inputs[0])
+    tree.nodes.remove(tree.nodes["Output"])  # the writer made again after the reader: after it in the nodes' order
+    writer = tree.nodes.new(nodes.OUTPUT)
+    writer.object_name = "Result"
+    tree.links.new(tree.nodes["Difference"].outputs[0], writer.inputs[0])
+    assert [run["object"] for run in csg.evaluate_tree(bpy.context, tree)] == ["Result", "Grown"]
+    before = mesh_volume(*world_arrays(bpy.data.objects["Result"]))
+    b.location.x += 0.3
+    bpy.context.view_layer.update()
+    csg.evaluate_tree(bpy.context, tree)
+    result, grown = (mesh_volume(*world_arrays(bpy.data.objects[name])) for name in ("Result", "Grown"))
+    area = mesh_area(*world_arrays(bpy.data.objects["Result"]))
+    assert result - before > 0.5  # (the move changed the result: 6.34 -> 7.05)
+    # grown by 0.1 from the moved result (measured 1.07 times area x 0.1, curved; from the one before: 0.75)
+    assert abs((grown - result) / (0.1 * area) - 1.0) < 0.15
+
+
 # ---- invalid trees ----
 
 
@@ -235,8 +262,38 @@ def break_same_output_name(tree, objects):
     return "Output.001", "Another Output node also writes 'Result'"
 
 
+def break_loop_of_links(tree, objects):  # (Blender keeps a node's link to itself valid: a RecursionError before)
+    offset = tree.nodes.new(nodes.OFFSET)
+    tree.links.new(offset.outputs[0], offset.inputs[0])
+    tree.links.new(offset.outputs[0], tree.nodes["Union"].inputs["Fields"])
+    return "Offset", "Its output comes back to its own input: remove the loop of links"
+
+
+def break_shell_wall_0(tree, objects):  # (the property allows 0: a ValueError from the engine before)
+    shell = tree.nodes.new(nodes.SHELL)
+    shell.wall = 0.0
+    tree.links.new(tree.nodes["Object B"].outputs[0], shell.inputs[0])
+    tree.links.new(shell.outputs[0], tree.nodes["Union"].inputs["Fields"])
+    return "Shell", "Set a Wall thicker than 0"
+
+
+def break_outputs_feeding_each_other(tree, objects):  # (each evaluation changed the other's result)
+    second = tree.nodes.new(nodes.OUTPUT)
+    second.object_name = "Loop"
+    source = tree.nodes.new(nodes.OBJECT)
+    source.object = bpy.data.objects["Result"]
+    tree.links.new(source.outputs[0], second.inputs[0])
+    bpy.ops.aasdf.evaluate_tree(tree=tree.name)
+    tree.nodes["Object A"].object = bpy.data.objects["Loop"]
+    return "Output", "Its result feeds another Output whose result feeds it: break the loop"
+
+
 @pytest.mark.parametrize(
-    "breaker", [break_unlinked, break_no_object, break_non_mesh, break_empty_collection, break_same_output_name]
+    "breaker",
+    [
+        *(break_unlinked, break_no_object, break_non_mesh, break_empty_collection, break_same_output_name),
+        *(break_loop_of_links, break_shell_wall_0, break_outputs_feeding_each_other),
+    ],
 )
 def test_invalid_tree_shows_its_message_and_keeps_the_previous_result(evaluated, breaker):
     tree, result, objects = evaluated
