@@ -464,6 +464,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
     runtime.engine()  # imported first (Warp configured before anything loads it)
     inputs = [item if isinstance(item, plan.Input) else plan.Input(item) for item in inputs]
     objects = [item.obj for item in inputs]
+    plan.check_numbers(steps)
     timer = Timer()
     progress = Progress(context, len(objects) + 5)
     try:

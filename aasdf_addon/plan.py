@@ -14,6 +14,7 @@ A plan is nested tuples over the operands (operand ``k`` is field ``k``):
 (``aasdf_addon.csg``). Plans are plain tuples, so equal plans over equal fields are the same result (the cache's).
 """
 
+import math
 from dataclasses import dataclass
 
 from . import runtime
@@ -35,6 +36,28 @@ def boolean_plan(operation: str, count: int, blend: float = 0.0, blend_mode: str
     if operation not in OPERATIONS:
         raise ValueError(f"Expected 'operation' in {OPERATIONS}, but got {operation!r}.")
     return ("boolean", operation, float(blend), blend_mode, [("field", k) for k in range(count)])
+
+
+def check_numbers(plan: tuple) -> None:
+    """Refuse, before any work, a plan whose numbers the engine would refuse halfway (a script can set a property to
+    NaN or infinity, which Blender keeps as its largest float): blends of 0 or more, finite offsets, walls above 0.
+
+    Raises:
+        AasdfError: Naming the setting and its value.
+    """
+    kind = plan[0]
+    if kind == "field":
+        return
+    value = float(plan[2] if kind == "boolean" else plan[1])
+    name, fine, rule = {
+        "offset": ("Distance", math.isfinite(value), "a finite number"),
+        "shell": ("Wall", math.isfinite(value) and value > 0.0, "a finite number above 0"),
+        "boolean": ("Blend", math.isfinite(value) and value >= 0.0, "a finite number of 0 or more"),
+    }[kind]
+    if not fine:
+        raise runtime.engine().AasdfError(f"The {name} must be {rule}, not {value}")
+    for child in plan[4] if kind == "boolean" else [plan[-1]]:
+        check_numbers(child)
 
 
 def evaluate(plan: tuple, fields: list, progress=None, *, seams: bool = False):

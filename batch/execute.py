@@ -67,7 +67,7 @@ def boolean_to_file(addon, args) -> dict:
     scene.clear_scene()
     scene.check_debug_volume(args, addon)
     if args.blend is not None:  # reading a file empties the field cache: such jobs share nothing
-        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
+        scene.open_blend(args.blend)
     pipeline, plan = addon.aasdf_addon.pipeline, addon.aasdf_addon.plan
     operands = scene.gather_operands(args)
     settings, output = scene.run_settings(pipeline, args, operands)

@@ -49,7 +49,10 @@ def option_argv(key: str, value, folder: str, *, from_csv: bool) -> list:
             return [FLAG_OPTIONS[name][0 if value is True or text in TRUE else 1]]
         raise BatchError(f"{name!r} must be true or false, not {value!r}")
     if name in LIST_OPTIONS:
-        values = value if isinstance(value, list) else shlex.split(value) if from_csv else [value]
+        try:
+            values = value if isinstance(value, list) else shlex.split(value) if from_csv else [value]
+        except ValueError as err:  # (an unbalanced quote: this line fails, the others run)
+            raise BatchError(f"{name!r}: {err}") from None
     elif isinstance(value, list | dict):
         raise BatchError(f"{name!r} takes one value, not {value!r}")
     else:

@@ -13,6 +13,8 @@ OPERATIONS = {"union": "UNION", "intersect": "INTERSECT", "intersection": "INTER
 
 # Options naming files: a job file's relative paths are relative to its folder, the command line's to the working one.
 PATH_OPTIONS = ("inputs", "output", "blend", "debug_volume")
+# The add-on's Levels and Padding settings' ranges (a padding of 1,000 kept a kernel busy for minutes).
+MAX_LEVELS, MAX_PADDING = 12, 32
 # Options of the run as a whole, not of a job: a job file may not set them.
 RUN_OPTIONS = ("jobs", "report", "workers", "timeout", "force", "shard", "scheduler", "verbose", "quiet")
 
@@ -144,5 +146,23 @@ def check_args(args):
         raise BatchError(f"--adaptivity must be from 0 to 1, not {args.adaptivity}")
     if args.resolution < 8 or args.voxel_size < 0.0:
         raise BatchError("--resolution must be at least 8 and --voxel-size not negative")
-    if args.levels < 1 or args.padding < 1:
-        raise BatchError(f"--levels and --padding must be at least 1, not {args.levels} and {args.padding}")
+    if not (1 <= args.levels <= MAX_LEVELS and 1 <= args.padding <= MAX_PADDING):
+        raise BatchError(
+            f"--levels must be from 1 to {MAX_LEVELS} and --padding from 1 to {MAX_PADDING} (as in the add-on), not "
+            f"{args.levels} and {args.padding}"
+        )
+    if args.blend_radius < 0.0:
+        raise BatchError(f"--blend-radius must not be negative, not {args.blend_radius}")
+    check_writable(args.output)
+
+
+def check_writable(path) -> None:
+    """Refuse an output (or report) path that is a folder, or whose nearest existing folder cannot be written to."""
+    target = Path(os.path.abspath(path))
+    if target.is_dir():
+        raise BatchError(f"cannot write {path}: it is a folder")
+    folder = target.parent
+    while not folder.exists():
+        folder = folder.parent
+    if not folder.is_dir() or not os.access(folder, os.W_OK):
+        raise BatchError(f"cannot write {path}: {folder} is not a folder this process may write in")

@@ -7,7 +7,7 @@ import sys
 from . import jobs as joblist
 from . import report, shutdown
 from . import workers as workers_module
-from .options import BatchError, job_defaults
+from .options import BatchError, check_writable, job_defaults
 
 
 def inside_blender() -> bool:
@@ -33,6 +33,10 @@ def worker_count(asked) -> int:
 def run_job_file(args, out, err) -> int:
     """``--jobs FILE``: every job of the file (or of its shard); exit status 1 when any failed."""
     count = worker_count(args.workers)
+    if args.timeout is not None and not args.timeout > 0.0:
+        raise BatchError(f"--timeout must be a number of seconds above 0, not {args.timeout}")
+    if args.report is not None:  # (written as the jobs end: refused before the first, not after the last)
+        check_writable(args.report)
     if args.timeout is not None and count == 0 and args.scheduler is None:
         raise BatchError("--timeout needs worker processes (--workers 1 or more): this process cannot stop a job")
     client = None

@@ -38,7 +38,10 @@ def ensure_addon():
 def import_operand(path):
     """Import one mesh file; several meshes in it are joined into one object."""
     before = set(bpy.data.objects)
-    getattr(bpy.ops.wm, IMPORTERS[Path(path).suffix.lower()])(filepath=os.path.abspath(path))
+    try:
+        getattr(bpy.ops.wm, IMPORTERS[Path(path).suffix.lower()])(filepath=os.path.abspath(path))
+    except RuntimeError as err:  # (Blender's importer refuses a file it cannot read)
+        raise BatchError(f"cannot read {path}: {str(err).strip().splitlines()[-1]}") from None
     meshes = [obj for obj in bpy.data.objects if obj not in before and obj.type == "MESH"]
     if not meshes:
         raise BatchError(f"{path} holds no mesh")
@@ -48,6 +51,14 @@ def import_operand(path):
         ):
             bpy.ops.object.join()
     return meshes[0]
+
+
+def open_blend(path) -> None:
+    """Open the .blend file ``path`` (refused by name where Blender cannot read it)."""
+    try:
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
+    except RuntimeError as err:
+        raise BatchError(f"cannot open {path}: {str(err).strip().splitlines()[-1]}") from None
 
 
 def scene_operand(name):
@@ -70,16 +81,21 @@ def select_only(objects, active):
 def export_result(path):
     """Write the selected result object to ``path`` (``.ply``, ``.obj``, ``.stl``; ``.blend``: the whole file)."""
     path = os.path.abspath(path)
-    os.makedirs(os.path.dirname(path), exist_ok=True)
     suffix = Path(path).suffix.lower()
-    if suffix == ".blend":
-        bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
-    else:
-        # what each format can hold of what the result carries: UVs and materials in .obj, UVs and colours in .ply
-        options = {".obj": {"export_uv": True, "export_materials": True}, ".ply": {"export_uv": True}}
-        if suffix == ".ply":
-            options[".ply"]["export_colors"] = "SRGB"
-        getattr(bpy.ops.wm, EXPORTERS[suffix])(filepath=path, export_selected_objects=True, **options.get(suffix, {}))
+    # what each format can hold of what the result carries: UVs and materials in .obj, UVs and colours in .ply
+    options = {
+        ".obj": {"export_uv": True, "export_materials": True},
+        ".ply": {"export_uv": True, "export_colors": "SRGB"},
+    }
+    try:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        if suffix == ".blend":
+            bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+        else:
+            exporter = getattr(bpy.ops.wm, EXPORTERS[suffix])
+            exporter(filepath=path, export_selected_objects=True, **options.get(suffix, {}))
+    except (OSError, RuntimeError) as err:  # (checked before any work; the folder may have changed since)
+        raise BatchError(f"cannot write {path}: {str(err).strip().splitlines()[-1]}") from None
     return path
 
 

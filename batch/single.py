@@ -40,7 +40,7 @@ def run(args, out, err) -> int:
     """
     check_args(args)
     if args.blend is not None:
-        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
+        scene.open_blend(args.blend)
     package = scene.ensure_addon()
     scene.check_debug_volume(args, package)
     pipeline, plan = package.aasdf_addon.pipeline, package.aasdf_addon.plan

@@ -94,12 +94,14 @@ def test_a_bad_line_fails_alone_with_its_reason(folder, line, message):
 
 def test_csv_row_with_too_many_cells_and_a_shared_output_fail(folder):
     (folder / "jobs.csv").write_text(
-        "inputs,output\na.obj b.stl,x.ply\na.obj b.stl,y.ply,extra\na.obj b.stl,x.ply\n", encoding="utf-8"
+        "inputs,output\na.obj b.stl,x.ply\na.obj b.stl,y.ply,extra\na.obj b.stl,x.ply\n'a.obj b.stl,z.ply\n",
+        encoding="utf-8",
     )
     found = jobs.read_jobs(folder / "jobs.csv", defaults(operation="union"))
     assert found[0].error == ""
     assert "more cells than the header has columns" in found[1].error
     assert found[2].error.startswith("the same output as jobs.csv:2")
+    assert found[3].error == "'inputs': No closing quotation"  # (the whole run stopped with a traceback)
 
 
 def test_an_unreadable_job_file_is_a_batch_error(tmp_path):
@@ -186,6 +188,10 @@ def test_worker_counts_and_a_timeout_without_workers_are_checked():
     args = options.command_line_parser("").parse_args(["--jobs", "j.jsonl", "--workers", "0", "--timeout", "5"])
     with pytest.raises(options.BatchError, match="--timeout needs worker processes"):
         runner.run_job_file(args, io.StringIO(), io.StringIO())
+    for timeout in ("0", "-1"):  # (every job was "stopped after the timeout of -1 s")
+        args = options.command_line_parser("").parse_args(["--jobs", "j.jsonl", "--timeout", timeout])
+        with pytest.raises(options.BatchError, match="--timeout must be a number of seconds above 0"):
+            runner.run_job_file(args, io.StringIO(), io.StringIO())
 
 
 def test_progress_falls_back_to_plain_lines_without_tqdm(monkeypatch):
@@ -247,6 +253,17 @@ def test_levels_and_padding_under_1_are_refused_before_blender_starts(tmp_path):
     parser = options.command_line_parser("")
     base = ["--operation", "union", "--inputs", str(box), str(ball), "--output", str(out)]
     options.check_args(parser.parse_args([*base, "--padding", "1", "--levels", "1"]))
-    for bad in (["--padding", "0"], ["--levels", "0"], ["--padding", "-2"]):
-        with pytest.raises(options.BatchError, match="--levels and --padding must be at least 1"):
+    options.check_args(parser.parse_args([*base, "--padding", "32", "--levels", "12"]))
+    # (a padding of 1,000 kept a kernel busy for minutes: the add-on's ranges)
+    for bad in (["--padding", "0"], ["--levels", "0"], ["--padding", "-2"], ["--padding", "33"], ["--levels", "13"]):
+        with pytest.raises(options.BatchError, match="--levels must be from 1 to 12 and --padding from 1 to 32"):
             options.check_args(parser.parse_args([*base, *bad]))
+    with pytest.raises(options.BatchError, match="--blend-radius must not be negative, not -1.0"):  # (a traceback)
+        options.check_args(parser.parse_args([*base, "--blend-radius", "-1"]))
+    # an output under a file, or a folder, refused before any work (a traceback after the boolean before)
+    (tmp_path / "f").write_bytes(b"")
+    (tmp_path / "o.ply").mkdir()
+    cases = {tmp_path / "f" / "out.ply": "f is not a folder this process may write in", tmp_path / "o.ply": "a folder"}
+    for output, why in cases.items():
+        with pytest.raises(options.BatchError, match=f"cannot write {output}: .*{why}"):
+            options.check_args(parser.parse_args([*base[:-1], str(output)]))

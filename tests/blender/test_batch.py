@@ -139,6 +139,10 @@ def test_objects_of_a_blend_in_blend_out(scene_blend, tmp_path):
         (["--inputs", "missing.obj", "{spot}"], "input file not found: missing.obj"),
         (["--inputs", "{spot}"], "give at least two operands"),
         (["--inputs", "{spot}", "{spot}", "--output", "out.fbx"], "cannot write out.fbx"),
+        # (Blender's importer refusing a file, a file in the output's path, an unreadable .blend: tracebacks before)
+        (["--inputs", "{spot}", "{garbage}"], "cannot read {garbage}: "),
+        (["--inputs", "{spot}", "{spot}", "--output", "{file}/out.ply"], "cannot write {file}/out.ply: "),
+        (["--blend", "{garbage_blend}", "--objects", "A", "B"], "cannot open {garbage_blend}: "),
         # the objects' checks read a .blend as test_objects_of_a_blend_in_blend_out does on every Blender, and refuse
         # as the operator does (tests/blender/test_boolean.py): on the newest Blender only
         pytest.param(
@@ -150,10 +154,18 @@ def test_objects_of_a_blend_in_blend_out(scene_blend, tmp_path):
             marks=pytest.mark.newest_blender,
         ),
     ],
-    ids=["missing-file", "one-operand", "bad-output", "unknown-object", "no-geometry"],
+    ids=[
+        *("missing-file", "one-operand", "bad-output", "unreadable-input", "output-under-a-file", "unreadable-blend"),
+        *("unknown-object", "no-geometry"),
+    ],
 )
 def test_bad_input_exits_with_a_clear_message(args, message, scene_blend, tmp_path):
-    args = [arg.format(spot=mesh_path("spot.obj"), blend=scene_blend) for arg in args]
+    names = {"garbage": tmp_path / "garbage.stl", "garbage_blend": tmp_path / "garbage.blend", "file": tmp_path / "f"}
+    for key, path in names.items():  # (an empty .stl: Blender's importer fails to read it)
+        path.write_bytes(b"" if key == "garbage" else b"not what it says it is\n" * 4)
+    names = {key: str(path) for key, path in names.items()}
+    args = [arg.format(spot=mesh_path("spot.obj"), blend=scene_blend, **names) for arg in args]
+    message = message.format(**names)
     if "--output" not in args:
         args += ["--output", str(tmp_path / "out.ply")]
     done = run_batch("--operation", "union", *args)
