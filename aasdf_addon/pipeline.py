@@ -254,7 +254,10 @@ def _no_volume(operand, voxel_size: float) -> str:
             f"'{operand.name}' is smaller than two voxels ({float(np.max(hi - lo)):.3g} across, voxels of "
             f"{voxel_size:.3g}): no voxel lies inside it; set a smaller Voxel Size or a higher Resolution"
         )
-    return f"'{operand.name}' encloses no volume: give it a thickness or close it"
+    return (
+        f"'{operand.name}' encloses no volume: give it a thickness or close it (where its walls are thinner than two "
+        f"voxels of {voxel_size:.3g}, set a smaller Voxel Size or a higher Resolution)"
+    )
 
 
 def _placed_fields(context, operands, settings: FieldSettings, voxel_size: float, progress, thickness, refine) -> list:
