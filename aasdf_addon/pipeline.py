@@ -475,6 +475,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             progress.step(f"reading {len(objects)} objects")
             read = read_checked(inputs, output, context.evaluated_depsgraph_get())
             voxel_size = voxel_size_for(read, settings)
+            plan.check_reach(steps, *world_bounds(read), voxel_size)
         with timer.stage("key"):
             keyed = result_key(context, read, inputs, steps, settings, voxel_size, output)
             current = keyed is not None and unchanged.is_current(output.target, keyed)

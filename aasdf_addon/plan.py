@@ -60,6 +60,41 @@ def check_numbers(plan: tuple) -> None:
         check_numbers(child)
 
 
+def check_reach(plan: tuple, lo, hi, voxel: float) -> None:
+    """Refuse, before any field is read or built, a plan whose blends, offsets and walls grow the operands' box
+    (``lo``, ``hi``) past the finest cells the octree addresses at ``voxel`` (the engine refuses it too, but only once
+    the fields are there). The growth counted is the least the engine's domains take, so nothing it accepts is refused.
+
+    Raises:
+        AasdfError: Naming the setting that grows the box most, and its value.
+    """
+    grown, name, value = _growth(plan)
+    span = (max(float(top - low) for low, top in zip(lo, hi, strict=True)) + 2.0 * grown) / voxel
+    cells = runtime.engine().octree.MAX_CELLS_PER_AXIS - 1
+    if grown > 0.0 and not span < cells:
+        raise runtime.engine().AasdfError(
+            f"The {name} of {value:g} needs a domain of {span:.4g} finest cells along an axis, more than the {cells} "
+            f"the octree can address; use a smaller {name} or a larger voxel size"
+        )
+
+
+def _growth(plan: tuple) -> tuple[float, str, float]:
+    """(how far a plan's result may reach past its operands, the setting that adds most, its value)."""
+    kind = plan[0]
+    if kind == "field":
+        return 0.0, "", 0.0
+    if kind == "boolean":
+        below = max((_growth(child) for child in plan[4]), key=lambda found: found[0])
+        own = plan[2] * (0.5 if plan[3] == "CHAMFER" else 0.25)  # (as the engine's boolean grows its domain)
+        return below[0] + own, *(below[1:] if below[0] > own else ("Blend", plan[2]))
+    below = _growth(plan[-1])
+    if kind == "offset":
+        own, name = max(plan[1], 0.0), "Distance"
+    else:
+        own, name = {"OUTSIDE": 1.0, "CENTER": 0.5}.get(plan[2], 0.0) * plan[1], "Wall"
+    return below[0] + own, *(below[1:] if below[0] > own else (name, plan[1]))
+
+
 def evaluate(plan: tuple, fields: list, progress=None, *, seams: bool = False):
     """The field of a plan over ``fields`` (the combine stage). ``seams``: its last boolean made along its seams
     (the engine's ``seams``: for kept faces; the booleans under it whole, as the last one reads them).

@@ -305,13 +305,16 @@ def test_moving_turning_or_scaling_an_operand_builds_no_field(fresh_cache):
     assert boolean_op.last_run["fields_built"] == 2
 
 
-def test_a_blend_that_is_not_a_number_is_refused_before_any_work(fresh_cache):
+def test_a_blend_that_is_not_a_number_or_too_wide_is_refused_before_any_work(fresh_cache):
     # a script may set NaN (a ValueError traceback from the engine, after the fields were built)
     a = add_mesh_object("Cube", *box_mesh())
     b = add_mesh_object("Ball", *uv_sphere(1.0, rings=12, segments=24))
     select(a, b)
     with pytest.raises(RuntimeError, match="The Blend must be a finite number of 0 or more, not nan"):
         bpy.ops.aasdf.boolean(operation="UNION", resolution=64, blend=float("nan"), hide_inputs=False)
+    # ... and one wider than the octree reaches (an infinite one is Blender's largest float: a crash before)
+    with pytest.raises(RuntimeError, match=r"The Blend of 3.40282e\+38 needs a domain of .* use a smaller Blend"):
+        bpy.ops.aasdf.boolean(operation="UNION", resolution=64, blend=float("inf"), hide_inputs=False)
     assert cache.stats()["builds"] == 0
 
 
