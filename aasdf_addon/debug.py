@@ -77,7 +77,8 @@ def write_vdb(field, filepath, *, spacing=None) -> str:
     Returns:
         ``filepath``.
     Raises:
-        AasdfError: If the dense block would not fit in memory, or this Blender has no OpenVDB module.
+        AasdfError: If the dense block would not fit in memory, this Blender has no OpenVDB module, or the file cannot
+            be written.
     """
     openvdb = openvdb_module()
     dense = field.to_dense(spacing=spacing or dense_spacing(field))
@@ -90,7 +91,10 @@ def write_vdb(field, filepath, *, spacing=None) -> str:
     grid.transform = openvdb.createLinearTransform(matrix)
     grid.gridClass = openvdb.GridClass.LEVEL_SET
     grid.name = "sdf"
-    openvdb.write(str(filepath), grids=[grid])
+    try:
+        openvdb.write(str(filepath), grids=[grid])
+    except OSError as err:  # (a folder that cannot be written: said, not a traceback after the result is written)
+        raise runtime.engine().AasdfError(f"cannot write the debug volume: {err}") from None
     return str(filepath)
 
 

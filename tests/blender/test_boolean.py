@@ -634,6 +634,22 @@ def test_debug_volume_loads_back_with_an_sdf_grid(fresh_cache):
     assert sdf.min() < 0.0 < sdf.max()
 
 
+def test_a_debug_volume_that_cannot_be_written_is_a_warning_and_the_result_stays(fresh_cache, monkeypatch, tmp_path):
+    # (an OSError traceback after the result was written: the run not recorded, the inputs not hidden)
+    from aasdf.aasdf_addon import debug
+
+    (tmp_path / "file").write_bytes(b"")
+    monkeypatch.setattr(debug, "debug_dir", lambda: str(tmp_path / "file"))  # a file where the folder should be
+    a = add_mesh_object("A", *uv_sphere(1.0, rings=16, segments=32))
+    b = add_mesh_object("B", *uv_sphere(1.0, rings=16, segments=32), location=(0.8, 0.0, 0.0))
+    select(a, b)
+    assert bpy.ops.aasdf.boolean(operation="UNION", resolution=32, debug_volume=True) == {"FINISHED"}
+    (warning,) = boolean_op.last_run["warnings"]
+    why = "cannot write the debug volume: " if SHIPS_OPENVDB else NO_OPENVDB  # (Blender 4.2: no OpenVDB at all)
+    assert re.match(f"No debug volume: {why}", warning)
+    assert boolean_op.last_run["object"] == "A.aasdf" and a.hide_get() and b.hide_get()
+
+
 def test_debug_volume_operator_shows_the_active_mesh_field(fresh_cache):
     obj = add_mesh_object("Ball", *uv_sphere(1.0, rings=16, segments=32), location=(2.0, 0.0, 0.0))
     select(obj)
