@@ -95,7 +95,10 @@ def instance_pieces(evaluated, matrix, depsgraph) -> list:
 
 def joined(operand, pieces):
     """``operand`` with the geometry of ``pieces`` (operands already in its space) appended: vertices, triangles,
-    corners and faces renumbered; UV maps, colours and other attributes kept where every part has them."""
+    corners and faces renumbered; the operand's UV maps, colours, custom normals and other attributes kept, zeros for a
+    part that lacks one (zero custom normals: Blender's own there), as Blender's Join does. (Kept only where every part
+    had them, a geometry-nodes instance dropped the base mesh's second UV map and its colours, and its custom normals
+    ran past their corners: an IndexError.)"""
     parts = [operand, *pieces]
     vert_offsets = np.cumsum([0] + [len(p.verts) for p in parts])[:-1]
     corner_offsets = np.cumsum([0] + [p.corner_count for p in parts])[:-1]
@@ -114,22 +117,43 @@ def joined(operand, pieces):
         name: np.concatenate([p.edge_attributes.get(name, np.zeros(len(p.edge_verts), values.dtype)) for p in parts])
         for name, values in operand.edge_attributes.items()
     }
-    operand.uv_maps = {
-        name: np.concatenate([p.uv_maps[name] for p in parts])
-        for name in operand.uv_maps
-        if all(name in p.uv_maps for p in parts)
-    }
+    corners = lambda p: p.corner_count  # noqa: E731
+    operand.uv_maps = {name: _filled(parts, lambda p, n=name: p.uv_maps.get(n), corners) for name in operand.uv_maps}
     operand.colors = {
-        name: (kind, data_type, np.concatenate([p.colors[name][2] for p in parts]))
-        for name, (kind, data_type, _values) in operand.colors.items()
-        if all(name in p.colors and p.colors[name][0] == kind for p in parts)
+        name: (domain, data_type, _filled(parts, lambda p, n=name, d=domain: _of(p.colors, n, d), _count(domain)))
+        for name, (domain, data_type, _values) in operand.colors.items()
     }
     operand.generic = {
-        name: (domain, kind, np.concatenate([p.generic[name][2] for p in parts]))
+        name: (domain, kind, _filled(parts, lambda p, n=name, d=(domain, kind): _of(p.generic, n, *d), _count(domain)))
         for name, (domain, kind, _values) in operand.generic.items()
-        if all(p.generic.get(name, (None, None))[:2] == (domain, kind) for p in parts)
     }
+    if operand.custom_normals is not None:
+        operand.custom_normals = _filled(parts, lambda p: p.custom_normals, corners)
     return operand
+
+
+def _of(attributes: dict, name: str, *kind):
+    """An attribute's values where it is of ``kind`` (its leading entries: domain, data type), else None."""
+    found = attributes.get(name)
+    return found[-1] if found is not None and tuple(found[: len(kind)]) == kind else None
+
+
+def _count(domain: str):
+    """The number of a part's elements in ``domain``."""
+    return lambda p: {"POINT": len(p.verts), "EDGE": len(p.edge_verts), "FACE": len(p.face_material)}.get(
+        domain, p.corner_count
+    )
+
+
+def _filled(parts, values_of, count_of) -> np.ndarray:
+    """Each part's values (``values_of``), zeros shaped as the first's for a part without them."""
+    first = values_of(parts[0])
+    return np.concatenate(
+        [
+            found if (found := values_of(p)) is not None else np.zeros((count_of(p), *first.shape[1:]), first.dtype)
+            for p in parts
+        ]
+    )
 
 
 def _renumbered(arrays, offsets) -> np.ndarray:

@@ -175,6 +175,32 @@ def test_instances_made_by_geometry_nodes_are_realized(fresh_cache):
     assert len(scatter.data.vertices) == 8 and len(scatter.modifiers) == 1
 
 
+def test_a_mesh_with_instances_keeps_its_own_uv_maps_colours_and_custom_normals(fresh_cache):
+    # the instances lack the mesh's second UV map, colour and custom normals: those were dropped from the whole
+    # operand (its own faces too), and the custom normals ran past the corners (an IndexError where a face was kept)
+    scatter = instancer()
+    mesh = scatter.data
+    mesh.uv_layers.new(name="Second")
+    mesh.color_attributes.new("Paint", "FLOAT_COLOR", "CORNER")
+    mesh.polygons.foreach_set("use_smooth", [True] * len(mesh.polygons))
+    mesh.normals_split_custom_set([tuple(p.normal) for p in mesh.polygons for _ in range(p.loop_total)])
+    scatter.modifiers["Scatter"].node_group.nodes.new("GeometryNodeJoinGeometry")
+    tree = scatter.modifiers["Scatter"].node_group
+    join, group_in, group_out = (tree.nodes[name] for name in ("Join Geometry", "Group Input", "Group Output"))
+    tree.links.new(tree.nodes["Instance on Points"].outputs[0], join.inputs[0])
+    tree.links.new(group_in.outputs[0], join.inputs[0])  # the cube itself too
+    tree.links.new(join.outputs[0], group_out.inputs[0])
+    bpy.context.view_layer.update()
+    ball = add_mesh_object("Ball", *uv_sphere(0.6, rings=16, segments=32), location=(0.0, 0.0, 1.2))
+    select(scatter, ball, active=scatter)
+    assert bpy.ops.aasdf.boolean(operation="UNION", resolution=64, hide_inputs=False) == {"FINISHED"}
+    result = bpy.context.active_object.data
+    assert {layer.name for layer in result.uv_layers} >= {"UVMap", "Second"} and "Paint" in result.color_attributes
+    normals = np.empty(len(result.loops) * 3, dtype=np.float32)
+    result.corner_normals.foreach_get("vector", normals)
+    assert np.abs(np.linalg.norm(normals.reshape(-1, 3), axis=1) - 1.0).max() < 1e-3  # (36 zero-length before)
+
+
 def test_surfaces_that_enclose_nothing_and_objects_without_geometry_are_refused_by_name(fresh_cache):
     block = add_mesh_object("Block", *BLOCK)
     flat = text_object("Label", extrude=0.0, location=(-1.0, -0.3, 0.0))
