@@ -86,10 +86,14 @@ def kept_corner_normals(operands, verts, tris, kept: dict, sources) -> np.ndarra
 
 def whole_face_normals(operands, corner_operand, loops, flip_per_corner) -> np.ndarray:
     """(C, 3) float32 normals of whole faces' corners (operand and own corner of each), copied from the operands'
-    custom normals (zeros for an operand without), turned over where the face is (``flip_per_corner``)."""
+    custom normals (zeros for an operand without), turned over where the face is (``flip_per_corner``: its corners
+    run against its source's; a mirrored operand's run so unturned, its normals placed by the mirror already: they
+    came back inverted)."""
     out = np.zeros((len(loops), 3), dtype=np.float32)
+    mirrored = np.array([np.linalg.det(np.asarray(op.matrix, np.float64)[:3, :3]) < 0.0 for op in operands])
     for k, world in enumerate(_world(operands)):
         rows = np.flatnonzero(corner_operand == k)
         if len(rows) and operands[k].custom_normals is not None:
             out[rows] = world[loops[rows]]
-    return np.where(np.asarray(flip_per_corner, dtype=bool)[:, None], -out, out)
+    turned = np.asarray(flip_per_corner, dtype=bool) != mirrored[np.asarray(corner_operand, dtype=np.int64)]
+    return np.where(turned[:, None], -out, out)

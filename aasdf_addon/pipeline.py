@@ -375,7 +375,7 @@ def carry_over(field, surface: dict, operands) -> dict:
     if not len(tris):
         return {}
     if "sources" not in surface:  # every corner on its face's source triangle, so the source's seams stay seams
-        surface["sources"] = _face_sources(field, surface)
+        surface["sources"] = _in_corner_order(field, operands, _face_sources(field, surface))
     attributes = transfer.face_attributes(operands, *surface["sources"])
     sources, n_verts = surface["sources"], len(surface["verts"])
     attributes["generic"] = generic_attributes.carried(operands, sources, tris, n_verts, surface.get("kept"))
@@ -417,6 +417,28 @@ def quads_back(result: dict, output: Output) -> dict:
     if output.target is not None and np.linalg.det(output.target.matrix_world) < 0:
         return result
     return quad_faces.quads_back(result, result["quads"])
+
+
+def _in_corner_order(field, operands, sources) -> tuple:
+    """``sources`` with each face's corner weights in its operand's own corner order: a field built under a mirroring
+    matrix holds its triangles turned (``bridge.to_world``) and the weights follow them (a mirrored operand's split and
+    new faces took their UVs, colours and normals from the wrong corners: custom normals 15 degrees off)."""
+    ids, tri_ids, bary = sources
+    turned = [k for k, operand in enumerate(operands) if _turned(field.sources.get(k), operand)]
+    if not turned:
+        return sources
+    rows = np.isin(ids, turned)
+    bary = bary.copy()
+    bary[rows] = bary[rows][:, :, ::-1]
+    return ids, tri_ids, bary
+
+
+def _turned(source, operand) -> bool:
+    """Whether a field's ``source`` triangles run against its operand's own (one compared: all are, or none)."""
+    if source is None or not len(source.tris):
+        return False
+    own = np.asarray(operand.tris)[source.triangle_ids[0]]
+    return bool(np.array_equal(source.tris[0], own[::-1]) and not np.array_equal(source.tris[0], own))
 
 
 def _face_sources(field, surface: dict) -> tuple:

@@ -174,8 +174,12 @@ def attribute_of(collection, prop, width):
     return values.reshape(-1, width)
 
 
-def test_kept_faces_keep_their_custom_normals_turned_as_their_faces(fresh_cache):
+@pytest.mark.parametrize("mirrored", [False, True])
+def test_kept_faces_keep_their_custom_normals_turned_as_their_faces(mirrored, fresh_cache):
     box, cutter = scene()
+    if mirrored:  # both mirrored about their own centres: the same shapes where they were (inverted before)
+        box.scale.x = cutter.scale.x = -1.0
+        bpy.context.view_layer.update()
     # the box shaded as a ball (each corner's normal along its position), the cylinder's sides radially
     corner_co = attribute(box.data, "position", "vector", 3)[attribute(box.data, ".corner_vert", "value", 1, np.int32)]
     box.data.normals_split_custom_set(corner_co / np.linalg.norm(corner_co, axis=1, keepdims=True))
