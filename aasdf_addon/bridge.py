@@ -13,7 +13,7 @@ import bpy
 import numpy as np
 
 from . import generic_attributes
-from .edge_attributes import EDGE_ATTRIBUTES, kept_edge_values, known_columns
+from .edge_attributes import EDGE_ATTRIBUTES, kept_edge_values, known_columns, source_edges
 from .transfer import OPERAND_ATTRIBUTE
 
 # Attributes carried by name (or written by the add-on itself), never as generic ones (:mod:`.generic_attributes`).
@@ -347,10 +347,14 @@ def _mark_sharp_edges(mesh, creases, vertex_count):
 
 
 def _carry_edge_attributes(mesh, kept, operands):
-    """The operands' UV seams, sharp edges and edge creases on the result's edges that are theirs (a sharp edge
-    stays sharp where the surface folds too), and their other edge attributes (bevel weights), written whatever
-    their values."""
+    """The operands' UV seams, sharp edges and edge creases on the result's edges that are theirs (sharp where their
+    source's is, not where they fold: :mod:`.edge_attributes`), and their other edge attributes (bevel weights),
+    written whatever their values."""
     pairs = _get(mesh.attributes[".edge_verts"].data, "value", np.int32, 2)
+    if "sharp_edge" in mesh.attributes:  # the folds marked (``_mark_sharp_edges``): not on the operands' own edges
+        folded = _get(mesh.attributes["sharp_edge"].data, "value", bool)
+        folded[source_edges(kept, operands, pairs)[0]] = False
+        mesh.attributes["sharp_edge"].data.foreach_set("value", folded)
     generic = generic_attributes.edge_columns(operands)
     columns = {name: (generic_attributes.TYPES[kind][1], parts) for name, (kind, parts) in generic.items()}
     for name, values in kept_edge_values(kept, operands, pairs, {**known_columns(operands), **columns}).items():

@@ -2,9 +2,10 @@
 their own edges.
 
 An edge of the result whose two ends are vertices of one operand's kept faces, and which that operand has as an edge,
-takes the operand's values of ``uv_seam``, ``sharp_edge`` and ``crease_edge`` (a sharp edge stays sharp as well where
-the surface folds), and of any other edge attribute it has (bevel weights: :mod:`.generic_attributes`). Arrays only:
-``bridge`` reads the operands' edges and writes the result's.
+takes the operand's values of ``uv_seam``, ``sharp_edge`` and ``crease_edge``, and of any other edge attribute it has
+(bevel weights: :mod:`.generic_attributes`). Such an edge is sharp where its source's is, whatever its fold (every
+fold past 30 degrees was marked sharp too, and a smooth-shaded low-polygon cylinder came back flat); the other edges
+are sharp where the surface folds. Arrays only: ``bridge`` reads the operands' edges and writes the result's.
 """
 
 import numpy as np
@@ -35,20 +36,7 @@ def kept_edge_values(kept: dict, operands, edge_verts: np.ndarray, columns: dict
     columns = known_columns(operands) if columns is None else columns
     if not columns or not len(edge_verts):
         return {}
-    field, vertex = kept["vertex_field"].astype(np.int64), kept["vertex_id"].astype(np.int64)
-    a, b = edge_verts[:, 0].astype(np.int64), edge_verts[:, 1].astype(np.int64)
-    rows = np.flatnonzero((field[a] == field[b]) & (field[a] >= 0) & (vertex[a] >= 0) & (vertex[b] >= 0))
-    rows = rows[field[a[rows]] < len(operands)]
-    width = 1 + max(len(op.verts) for op in operands)
-    source_keys = np.concatenate(
-        [_keys(k, op.edge_verts[:, 0], op.edge_verts[:, 1], width) for k, op in enumerate(operands)]
-    )
-    order = np.argsort(source_keys)
-    wanted = _keys(field[a[rows]], vertex[a[rows]], vertex[b[rows]], width)
-    at = np.minimum(np.searchsorted(source_keys[order], wanted), max(len(order) - 1, 0))
-    found = len(order) > 0
-    hit = (source_keys[order][at] == wanted) if found else np.zeros(len(rows), dtype=bool)
-    rows, source_edge = rows[hit], order[at[hit]]
+    rows, source_edge = source_edges(kept, operands, edge_verts)
     out = {}
     for name, (dtype, parts) in columns.items():
         shape = next((np.shape(p)[1:] for p in parts if p is not None), ())
@@ -62,6 +50,27 @@ def kept_edge_values(kept: dict, operands, edge_verts: np.ndarray, columns: dict
         values[rows] = stacked[source_edge]
         out[name] = values
     return out
+
+
+def source_edges(kept: dict, operands, edge_verts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(rows, source_edge)``: the result edges (rows of ``edge_verts``) that are an operand's own edge between two
+    of its kept vertices, and that edge's row among all the operands' edges, stacked in order."""
+    if not len(edge_verts) or not operands:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    field, vertex = kept["vertex_field"].astype(np.int64), kept["vertex_id"].astype(np.int64)
+    a, b = edge_verts[:, 0].astype(np.int64), edge_verts[:, 1].astype(np.int64)
+    rows = np.flatnonzero((field[a] == field[b]) & (field[a] >= 0) & (vertex[a] >= 0) & (vertex[b] >= 0))
+    rows = rows[field[a[rows]] < len(operands)]
+    width = 1 + max(len(op.verts) for op in operands)
+    source_keys = np.concatenate(
+        [_keys(k, op.edge_verts[:, 0], op.edge_verts[:, 1], width) for k, op in enumerate(operands)]
+    )
+    order = np.argsort(source_keys)
+    wanted = _keys(field[a[rows]], vertex[a[rows]], vertex[b[rows]], width)
+    at = np.minimum(np.searchsorted(source_keys[order], wanted), max(len(order) - 1, 0))
+    found = len(order) > 0
+    hit = (source_keys[order][at] == wanted) if found else np.zeros(len(rows), dtype=bool)
+    return rows[hit], order[at[hit]]
 
 
 def _keys(operand, u, v, width: int) -> np.ndarray:

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from aasdf.aasdf_addon import pipeline
-from tests.blender.scene import quad_box, select, world_arrays
+from tests.blender.scene import add_mesh_object, quad_box, select, world_arrays
 from tests.metrics import exact_boolean, hausdorff, mesh_volume
-from tests.support import is_watertight
+from tests.support import is_watertight, uv_sphere
 
 RESOLUTION = 128
 
@@ -235,3 +235,28 @@ def test_an_adaptivity_merges_the_seams_new_faces_and_the_result_stays_exact(fre
             bpy.data.objects.remove(obj)
     # measured: 1,282 faces at 0, 855 at 1
     assert counts[1] < 0.9 * counts[0], counts
+
+
+def test_kept_edges_are_sharp_where_their_source_edges_are_not_where_they_fold(fresh_cache):
+    # every kept edge folding past 30 degrees was marked sharp: a smooth-shaded 8-sided cylinder came back flat
+    bpy.ops.mesh.primitive_cylinder_add(vertices=8, radius=1.0, depth=2.0)  # 45 degrees between wall faces
+    cylinder = bpy.context.active_object
+    cylinder.data.shade_smooth()
+    sharp_in = np.zeros(len(cylinder.data.edges), dtype=bool)
+    ends = attribute(cylinder.data, ".edge_verts", "value", 2, np.int32)
+    co = attribute(cylinder.data, "position", "vector", 3)
+    vertical = np.abs(co[ends[:, 0], 2] - co[ends[:, 1], 2]) > 1.9
+    sharp_in[np.flatnonzero(vertical)[0]] = True  # one wall edge marked sharp by the user
+    cylinder.data.attributes.new("sharp_edge", "BOOLEAN", "EDGE").data.foreach_set("value", sharp_in)
+    ball = add_mesh_object("Ball", *uv_sphere(0.3, rings=12, segments=24), location=(0.0, 0.0, 1.0))
+    select(cylinder, ball)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96, hide_inputs=False) == {"FINISHED"}
+    result = bpy.context.active_object.data
+    ends = attribute(result, ".edge_verts", "value", 2, np.int32)
+    co = attribute(result, "position", "vector", 3)
+    walls = np.abs(co[ends[:, 0], 2] - co[ends[:, 1], 2]) > 1.9  # the 8 wall edges, kept far from the dimple
+    sharp = attribute(result, "sharp_edge", "value", 1, bool).ravel()
+    assert walls.sum() == 8 and (sharp & walls).sum() == 1
+    # the dimple's rim, where the surface folds into the new faces, is sharp
+    rim = (np.abs(co[ends[:, 0], 2] - 1.0) < 1e-4) & (np.linalg.norm(co[ends[:, 0], :2], axis=1) < 0.35)
+    assert (sharp & rim).sum() >= 8
