@@ -33,6 +33,7 @@ TYPES = {
     "INT": ("value", np.int32, 1, False),
     "INT8": ("value", np.int8, 1, False),
     "INT32_2D": ("value", np.int32, 2, False),
+    "INT16_2D": ("value", np.int16, 2, False),
     "BOOLEAN": ("value", bool, 1, False),
 }
 DOMAINS = ("POINT", "EDGE", "FACE", "CORNER")

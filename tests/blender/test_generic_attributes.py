@@ -45,6 +45,7 @@ def scene():
     put(mesh, "Tone", "FLOAT_COLOR", "FACE", rng.random((n_f, 4)).astype(np.float32), "color")
     put(mesh, "Offset", "FLOAT_VECTOR", "CORNER", rng.random((n_c, 3)).astype(np.float32), "vector")
     put(mesh, "Pair", "INT32_2D", "EDGE", rng.integers(0, 9, (n_e, 2)).astype(np.int32))
+    put(mesh, "Short", "INT16_2D", "FACE", rng.integers(-300, 300, (n_f, 2)).astype(np.int16))  # (dropped before)
     put(mesh, ".sculpt_face_set", "INT", "FACE", (np.arange(n_f) % 3 + 1).astype(np.int32))  # sculpting's, hidden
     put(mesh, ".sculpt_mask", "FLOAT", "POINT", rng.random(n_v).astype(np.float32))
     bpy.ops.mesh.primitive_cylinder_add(vertices=12, radius=0.3, depth=3.0, location=(0.55, 0.55, 0.0))
@@ -84,6 +85,7 @@ def test_attributes_come_back_under_their_name_domain_and_type(result):
         "Weight",
         "Flag",
         "Part",
+        "Short",
         "Tag",
         "Tone",
         "Offset",
@@ -112,6 +114,8 @@ def test_kept_faces_vertices_and_edges_keep_their_values_bit_for_bit(fresh_cache
     mine, theirs = np.array(pairs).T
     np.testing.assert_array_equal(read(dst, "Part", dtype=np.int32)[mine], read(src, "Part", dtype=np.int32)[theirs])
     np.testing.assert_array_equal(read(dst, "Tag", dtype=bool)[mine], read(src, "Tag", dtype=bool)[theirs])
+    short = read(dst, "Short", "value", 2, np.int16)[mine]
+    np.testing.assert_array_equal(short, read(src, "Short", "value", 2, np.int16)[theirs])
     sets = read(dst, ".sculpt_face_set", dtype=np.int32)
     np.testing.assert_array_equal(sets[mine], read(src, ".sculpt_face_set", dtype=np.int32)[theirs])
     np.testing.assert_array_equal(read(dst, "Tone", "color", 4)[mine], read(src, "Tone", "color", 4)[theirs])
