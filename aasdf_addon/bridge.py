@@ -46,6 +46,7 @@ class Operand:
     edge_verts: np.ndarray = None  # (E, 2) int32 vertices of each edge
     edge_attributes: dict = field(default_factory=dict)  # name -> (E,) values (``edge_attributes.EDGE_ATTRIBUTES``)
     custom_normals: np.ndarray = None  # (L, 3) float32 per corner, local space, where the mesh has custom normals
+    shown: dict = field(default_factory=dict)  # "uv_render", "uv_active", "color_render", "color_active": names
     generic: dict = field(default_factory=dict)  # name -> (domain, data type, values): ``generic_attributes``
 
     @property
@@ -94,6 +95,7 @@ def read_mesh_operand(evaluated, matrix) -> Operand:
                 operand.edge_attributes[name] = _attribute(mesh, name, "value", dtype, len(mesh.edges))
         for layer in mesh.uv_layers:
             operand.uv_maps[layer.name] = _attribute(mesh, layer.name, "vector", np.float32, len(mesh.loops), 2)
+        operand.shown = _shown(mesh)
         for attr in mesh.color_attributes:
             if attr.domain in ("POINT", "CORNER"):
                 values = _get(attr.data, "color", np.float32, 4)
@@ -321,10 +323,34 @@ def _write_attributes(mesh, attributes: dict, faces: int, vertex_count: int) -> 
     for name, (domain, kind, values) in attributes.get("generic", {}).items():
         prop, dtype, _width, _ = generic_attributes.TYPES[kind]
         _new_attribute(mesh, name, kind, domain, prop, values, dtype)
-    if len(mesh.color_attributes):  # what exporters and the viewport show: the first one
-        mesh.color_attributes.active_color_index = mesh.color_attributes.render_color_index = 0
+    _show(mesh, attributes.get("shown", {}))
     if attributes.get("custom_normals") is not None:  # zero vectors: Blender's own normal there
         mesh.normals_split_custom_set(np.ascontiguousarray(attributes["custom_normals"], dtype=np.float32))
+
+
+def _shown(mesh) -> dict:
+    """The names of a mesh's rendered and active UV maps and colour attributes."""
+    shown = {"uv_render": next((layer.name for layer in mesh.uv_layers if layer.active_render), None)}
+    shown["uv_active"] = mesh.uv_layers.active.name if mesh.uv_layers.active is not None else None
+    colors = mesh.color_attributes
+    shown["color_active"] = colors.active_color_name or None
+    render = colors.render_color_index
+    shown["color_render"] = colors[render].name if 0 <= render < len(colors) else None
+    return shown
+
+
+def _show(mesh, shown: dict) -> None:
+    """Render and make active the UV map and colour attribute ``shown`` names (:func:`_shown`), where the mesh has
+    them; else its first ones (what exporters and the viewport show)."""
+    uv, colors = mesh.uv_layers, mesh.color_attributes
+    if len(uv):
+        uv[shown.get("uv_render") if shown.get("uv_render") in uv else 0].active_render = True
+        uv.active = uv[shown.get("uv_active") if shown.get("uv_active") in uv else 0]
+    if len(colors):
+        names = [attribute.name for attribute in colors]
+        render, active = shown.get("color_render"), shown.get("color_active")
+        colors.render_color_index = names.index(render) if render in names else 0
+        colors.active_color_index = names.index(active) if active in names else 0
 
 
 def _mark_sharp_edges(mesh, creases, vertex_count):

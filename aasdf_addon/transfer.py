@@ -43,7 +43,8 @@ def face_attributes(operands, field_ids, triangle_ids, corner_bary) -> dict:
         corner_bary: (F, 3, 3) float barycentric coordinates of each face's corners on that triangle.
     Returns:
         ``{"materials": slots, "material_index": (F,) int32, "smooth": (F,) bool, "operand": (F,) int32,
-        "uv_maps": {name: (3F, 2) float32 per corner}, "colors": {name: (data type, (3F, 4) float32 per corner)}}``.
+        "uv_maps": {name: (3F, 2) float32 per corner}, "colors": {name: (data type, (3F, 4) float32 per corner)},
+        "shown": the base operand's rendered and active UV map and colour names (``bridge.Operand.shown``)}``.
         An operand without a UV map or colour attribute some other has gives zeros there.
     """
     field_ids = np.asarray(field_ids, dtype=np.int64)
@@ -63,8 +64,11 @@ def face_attributes(operands, field_ids, triangle_ids, corner_bary) -> dict:
     # operand it came from (no rows selected and scattered back per operand)
     first = np.cumsum([0] + [len(operand.tris) for operand in operands])
     has = (field_ids >= 0) & (field_ids < len(operands)) & (triangle_ids >= 0)
-    uv_names = sorted({name for operand in operands for name in operand.uv_maps})
-    color_names = sorted({name for operand in operands for name in operand.colors})
+    # in the operands' own order, the base's first (its first map the one Blender shows first); which are rendered
+    # and active, as the first operand with such a map has them (name order made the render map another)
+    uv_names = list(dict.fromkeys(name for operand in operands for name in operand.uv_maps))
+    color_names = list(dict.fromkeys(name for operand in operands for name in operand.colors))
+    out["shown"] = next((op.shown for op in operands if op.uv_maps or op.colors), {})
     if has.any():
         stacked = np.where(has, first[np.where(has, field_ids, 0)] + triangle_ids, 0)
         weights = corner_bary if has.all() else np.where(has[:, None, None], corner_bary, np.float32(0.0))

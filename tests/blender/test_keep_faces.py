@@ -260,3 +260,28 @@ def test_kept_edges_are_sharp_where_their_source_edges_are_not_where_they_fold(f
     # the dimple's rim, where the surface folds into the new faces, is sharp
     rim = (np.abs(co[ends[:, 0], 2] - 1.0) < 1e-4) & (np.linalg.norm(co[ends[:, 0], :2], axis=1) < 0.35)
     assert (sharp & rim).sum() >= 8
+
+
+@pytest.mark.parametrize("keep", [True, False], ids=["kept", "remeshed"])
+def test_the_rendered_and_active_uv_map_and_colour_stay_as_they_were(keep, fresh_cache):
+    # written in name order, the first made active and rendered: a material on the default map showed the lightmap
+    box = quad_box("Box")
+    mesh = box.data
+    mesh.uv_layers[0].name = "Texture"
+    mesh.uv_layers.new(name="Lightmap")
+    for name in ("Wear", "Base"):
+        mesh.color_attributes.new(name, "FLOAT_COLOR", "CORNER")
+    mesh.color_attributes.active_color_name = "Wear"
+    mesh.color_attributes.render_color_index = 0
+    mesh.uv_layers.active = mesh.uv_layers["Lightmap"]  # edited, rendered another
+    ball = add_mesh_object("Ball", *uv_sphere(0.5, rings=12, segments=24), location=(1.0, 1.0, 1.0))
+    select(box, ball)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=48, hide_inputs=False, keep_faces=keep) == {
+        "FINISHED"
+    }
+    result = bpy.context.active_object.data
+    assert [layer.name for layer in result.uv_layers][:2] == ["Texture", "Lightmap"]
+    assert next(layer.name for layer in result.uv_layers if layer.active_render) == "Texture"
+    assert result.uv_layers.active.name == "Lightmap"
+    colours = result.color_attributes
+    assert colours.active_color_name == "Wear" and colours[colours.render_color_index].name == "Wear"
