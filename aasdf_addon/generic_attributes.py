@@ -21,7 +21,7 @@ reads the operands' attributes (``Operand.generic``: name -> (domain, data type,
 
 import numpy as np
 
-from . import runtime
+from . import runtime, transfer
 
 # Blender data type -> (the ``foreach_get`` property, numpy dtype, values per item, interpolated between corners)
 TYPES = {
@@ -120,6 +120,7 @@ def _at_corners(kind, own, index, stacked, weights, has) -> np.ndarray:
         return _zeros(3 * len(stacked), kind)
     if smooth:
         found = runtime.engine().interpolate_corners(values.astype(np.float32), rows, stacked, weights)
+        found = transfer.within_sources(found, values.astype(np.float32))
     else:
         nearest = np.argmax(weights, axis=2)  # (F, 3) the source corner each result corner is nearest
         found = values[rows[stacked][np.arange(len(stacked))[:, None], nearest]].reshape(-1, width)

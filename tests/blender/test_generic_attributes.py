@@ -97,6 +97,12 @@ def test_attributes_come_back_under_their_name_domain_and_type(result):
         assert (dst.domain, dst.data_type) == (src.domain, src.data_type), name
     for name in ("bevel_weight_edge", "Pair"):  # an operand's own edges: only where faces are kept
         assert (name in out.data.attributes) == keep
+    # new faces' values within what the sources hold (read past their source triangles, a weight in [0, 1] went to
+    # -0.42 and 1.17; a random one per vertex here)
+    source, carried = read(box.data, "bevel_weight_vert"), read(out.data, "bevel_weight_vert")
+    assert carried.min() >= 0.0 and carried.max() <= source.max()  # (0: the cutter's, which has none)
+    tone = read(out.data, "Tone", "color", 4)
+    assert tone.min() >= 0.0 and tone.max() <= 1.0
 
 
 def test_kept_faces_vertices_and_edges_keep_their_values_bit_for_bit(fresh_cache):
