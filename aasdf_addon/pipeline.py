@@ -529,6 +529,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
         with timer.stage("write"):
             obj = _written(context, result, output, keyed, field, progress)
             warnings = result["warnings"] + (debug_volume(context, field, obj, output) if output.debug_volume else [])
+            warnings += [found] if (found := runtime.device_fallback(context)) else []
             _hide_inputs(objects, output)
     finally:
         progress.end()

@@ -117,6 +117,15 @@ def pooled_bytes() -> int:
     return _engine.pooled_bytes() if _engine is not None else 0
 
 
+def device_fallback(context=None) -> str | None:
+    """What to tell when the preferred device is a GPU this machine cannot use (the run goes on the CPU), else None."""
+    prefs = preferences.get(context)
+    choice = prefs.device if prefs is not None else "CPU"
+    if choice.startswith("CUDA") and device(context) == "cpu":
+        return f"The preferred device {choice.replace('_', ' ')} cannot be used here: this ran on the CPU"
+    return None
+
+
 def device(context=None) -> str:
     """Warp device for the preferred device: ``"cuda:<n>"`` when ``CUDA_<n>`` is chosen and present, else ``"cpu"``."""
     prefs = preferences.get(context)

@@ -137,6 +137,9 @@ def test_device_follows_preferences(monkeypatch):
     prefs.device = "CUDA_0"
     try:
         assert runtime.device() == ("cuda:0" if warp.is_cuda_available() else "cpu")
+        # a GPU that cannot be used: the run goes on the CPU and says so (it did silently)
+        fallback = runtime.device_fallback()
+        assert (fallback is None) if warp.is_cuda_available() else fallback.startswith("The preferred device CUDA 0")
     finally:
         prefs.device = "CPU"
         monkeypatch.undo()
