@@ -107,20 +107,13 @@ def carried(operands, sources, tris, n_verts: int, kept=None) -> dict:
 def _at_corners(kind, own, index, stacked, weights, has) -> np.ndarray:
     """(3F, ...) one attribute at the result's corners, read off each face's source triangle (``index``: per operand
     its triangles' indices into its values): interpolated (``transfer``'s kernel), else the nearest corner's."""
-    _prop, _dtype, width, smooth = TYPES[kind]
-    values, rows, offset = [], [], 0
-    for v, idx in zip(own, index, strict=True):
-        if v is None:  # one zero row, which all its triangles' corners read
-            v, idx = _zeros(1, kind), np.zeros_like(idx)
-        values.append(v.reshape(len(v), width))
-        rows.append(np.asarray(idx, dtype=np.int64) + offset)
-        offset += len(v)
-    values, rows = np.concatenate(values), np.concatenate(rows)
+    _prop, dtype, width, smooth = TYPES[kind]
+    values, rows = transfer.stacked_parts(list(zip(index, own, strict=True)), width, dtype)
     if not len(rows) or not len(stacked):
         return _zeros(3 * len(stacked), kind)
     if smooth:
-        found = runtime.engine().interpolate_corners(values.astype(np.float32), rows, stacked, weights)
-        found = transfer.within_sources(found, values.astype(np.float32))
+        values = values.astype(np.float32)
+        found = transfer.within_sources(runtime.engine().interpolate_corners(values, rows, stacked, weights), values)
     else:
         nearest = np.argmax(weights, axis=2)  # (F, 3) the source corner each result corner is nearest
         found = values[rows[stacked][np.arange(len(stacked))[:, None], nearest]].reshape(-1, width)

@@ -82,10 +82,10 @@ def face_attributes(operands, field_ids, triangle_ids, corner_bary) -> dict:
         out["material_index"] = np.where(has, slot[stacked], 0).astype(np.int32)
         out["smooth"] = np.where(has, smooth[stacked], False)
 
-    def interpolated(parts, width):
+    def interpolated(parts, width, held=False):
         if not has.any():  # no face has a source (nor, maybe, any operand a triangle to gather from)
             return np.zeros((3 * count, width), dtype=np.float32)
-        return _interpolate(parts, width, stacked, weights)
+        return _interpolate(parts, width, stacked, weights, held)
 
     for name in uv_names:  # (extrapolated past the source triangle's corners: a UV layout goes on linearly)
         out["uv_maps"][name] = interpolated([(operand.corners, operand.uv_maps.get(name)) for operand in operands], 2)
@@ -94,10 +94,7 @@ def face_attributes(operands, field_ids, triangle_ids, corner_bary) -> dict:
         for operand in operands:
             domain, _kind, values = operand.colors.get(name, ("CORNER", None, None))
             parts.append((operand.corners if domain == "CORNER" else operand.tris, values))
-        values = interpolated(parts, 4)
-        if has.any():
-            values = within_sources(values, _stacked(parts, 4)[0])
-        out["colors"][name] = (_color_kind(operands, name), values)
+        out["colors"][name] = (_color_kind(operands, name), interpolated(parts, 4, held=True))
     return out
 
 
@@ -113,13 +110,14 @@ def within_sources(found, values) -> np.ndarray:
     return np.clip(found.reshape(len(found), -1), low, high).reshape(found.shape)
 
 
-def _stacked(parts, width) -> tuple[np.ndarray, np.ndarray]:
-    """``(values (N, width), rows (T, 3))`` of :func:`_interpolate`'s ``parts`` stacked as the kernel reads them."""
+def stacked_parts(parts, width: int, dtype=np.float32) -> tuple[np.ndarray, np.ndarray]:
+    """``(values (N, width), rows (T, 3) int64)``: per operand ``(corners, values)`` (its triangles' indices into its
+    values, or values None: one zero row, which all its triangles' corners read) stacked as the kernel reads them."""
     values, index, offset = [], [], 0
     for corners, own in parts:
         if own is None:
-            own, corners = np.zeros((1, width), np.float32), np.zeros_like(corners)
-        values.append(np.asarray(own, dtype=np.float32).reshape(-1, width))
+            own, corners = np.zeros((1, width), dtype), np.zeros_like(corners)
+        values.append(np.asarray(own, dtype=dtype).reshape(-1, width))
         index.append(np.asarray(corners, dtype=np.int64) + offset)
         offset += len(values[-1])
     return np.concatenate(values), np.concatenate(index)
@@ -131,10 +129,10 @@ def _color_kind(operands, name) -> str:
     return "FLOAT_COLOR" if "FLOAT_COLOR" in kinds else "BYTE_COLOR"
 
 
-def _interpolate(parts, width, stacked, weights) -> np.ndarray:
-    """One attribute at the result's corners: ``parts`` per operand (its (T, 3) indices of each triangle's corners
-    into its values; its (N, ``width``) values, or None where it lacks the attribute: zeros), stacked as the
+def _interpolate(parts, width, stacked, weights, held: bool = False) -> np.ndarray:
+    """One attribute at the result's corners: ``parts`` per operand (:func:`stacked_parts`), stacked as the
     triangles are; each face's corners weighted by (F, 3, 3) ``weights`` on its stacked source triangle ``stacked``:
-    (3F, ``width``) float32, from the engine's kernel."""
-    values, index = _stacked(parts, width)  # (an operand without it: one zero row, which its corners all read)
-    return runtime.engine().interpolate_corners(values, index.astype(np.int32), stacked, weights)
+    (3F, ``width``) float32, from the engine's kernel; ``held`` within the operands' range (:func:`within_sources`)."""
+    values, index = stacked_parts(parts, width)
+    found = runtime.engine().interpolate_corners(values, index.astype(np.int32), stacked, weights)
+    return within_sources(found, values) if held else found
