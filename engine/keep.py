@@ -53,7 +53,7 @@ from .judging import MAX_TABLE_LEAVES, PARTLY_TIE, FusedJudge, sign_patterns
 from .jumps import clear_of
 from .ondemand import built_on_demand, own_sides
 from .orient import patch_flips
-from .otherleaves import leaf_bvh, leaf_jumps, leaf_margin, mesh_leaf
+from .otherleaves import NEAR_BOX_VOXELS, leaf_bvh, leaf_jumps, leaf_margin, mesh_leaf, near_rows
 from .ownside import THIN, TINY_VOXELS, outward, side_at
 from .parallel import run_tasks
 from .precut import cut_strips, predicted_margins
@@ -230,6 +230,7 @@ class _Judge:
         self.coplanar = self._coplanar_faces(source)  # (T,) bool or None: sample by sample with their planes
         self.normals = None if self.coplanar is None else unit_normals(source.verts, self.tris)
         self.flush = {}  # (other leaf, whose): :meth:`_flush`
+        self.boxes = {}  # other leaf: its mesh's bounding box (:func:`.otherleaves.near_rows`)
 
     def _coplanar_faces(self, source) -> np.ndarray | None:
         """(T,) bool the triangles in another leaf's plane (:func:`.coplanar.coplanar_triangles`) where the
@@ -313,16 +314,19 @@ class _Judge:
             if j == self.index:
                 signs.append(np.full(len(points), -1, np.int8))
                 continue
-            bvh = self.bvhs[j]
-            if planes is None or bvh is None:
-                near, sign = leaf_margin(other, bvh, self.jumps[j], points, self.band, reach, self.device)
+            bvh, near, sign = self.bvhs[j], np.full(len(points), reach, np.float32), np.ones(len(points), np.int8)
+            at = near_rows(bvh, self.jumps[j], points, reach + NEAR_BOX_VOXELS * self.voxel, self.boxes, j)
+            if not len(at):  # (none near: its surface farther than the reach, and outside it)
+                pass
+            elif planes is None or bvh is None:
+                near[at], sign[at] = leaf_margin(other, bvh, self.jumps[j], points[at], self.band, reach, self.device)
             else:  # where tied, its sign is the tie's: its field is read at the other points alone
-                near, tie = self._coplanar(j, points, *planes)
-                sign = (2 * tie).astype(np.int8)
-                rows = np.flatnonzero(tie == 0)
-                near[rows], sign[rows] = leaf_margin(
-                    other, bvh, self.jumps[j], points[rows], self.band, reach, self.device, near[rows]
+                d, tie = self._coplanar(j, points[at], planes[0][at], planes[1][at])
+                s, rows = (2 * tie).astype(np.int8), np.flatnonzero(tie == 0)
+                d[rows], s[rows] = leaf_margin(
+                    other, bvh, self.jumps[j], points[at[rows]], self.band, reach, self.device, d[rows]
                 )
+                near[at], sign[at] = d, s
             margin = np.minimum(margin, near)
             signs.append(sign)
         if self.defect_mesh is not None:

@@ -79,6 +79,7 @@ class Refiner:
         self.latest = field
         self.built = np.isin(band, _finest_octets(field), assume_unique=True)  # (the band's octets built so far)
         self.centres = None  # the band's octets' centres (unplaced), found on first use
+        self.box = (None, None)  # (the ``built`` it was found for, :meth:`unbuilt_box`)
         self.lock = threading.Lock()
 
     @property
@@ -98,8 +99,23 @@ class Refiner:
         within it, L-inf, of them)."""
         if points is None:
             return self.refined(None)
-        octets = _read_octets(self.latest, points) if reach is None else octets_near(self.latest, points, reach)
-        return self.refined(octets)
+        field, box = self.latest, self.unbuilt_box()
+        if box is None:  # (every octet of the band built)
+            return field
+        if reach is None:
+            return self.refined(_read_octets(field, points, box))
+        return self.refined(octets_near(field, points[_touching(field, points, reach, box)], reach))
+
+    def unbuilt_box(self) -> tuple | None:
+        """The least and greatest octet coordinates (3,) of the band's octets not built yet (None: all are), found
+        once for each state of the band. A query whose octets all lie outside the box asks for nothing new: sorting
+        its octets is skipped (a row of cubes' judge reads each cube's samples in every other cube's field)."""
+        built = self.built
+        if self.box[0] is not built:
+            codes = self.band[~built]
+            coords = morton_decode_np(codes) if len(codes) else None
+            self.box = (built, None if coords is None else (coords.min(axis=0), coords.max(axis=0)))
+        return self.box[1]
 
     def refined(self, octets: np.ndarray | None):
         """The field with the band's finest octets among ``octets`` (sorted unique codes; None: all) added."""
@@ -203,31 +219,52 @@ def refined(field, points=None, reach: float | None = None, *, view: bool = Fals
 
 
 @wp.kernel(enable_backward=False)
-def _leaf_cells_kernel(f: FieldArg, points: wp.array[wp.vec3], centres: wp.array[wp.vec3], spacing: wp.array[float]):
-    """The centre and spacing of the leaf holding each point."""
+def _leaf_cells_kernel(
+    f: FieldArg,
+    points: wp.array[wp.vec3],
+    leaves: wp.array[wp.int32],
+    centres: wp.array[wp.vec3],
+    spacing: wp.array[float],
+):
+    """The leaf holding each point, its centre and its spacing."""
     i = wp.tid()
     leaf = locate_leaf(f, points[i])
     s = level_spacing(f, leaf[1])
+    leaves[i] = leaf[0]
     centres[i] = node_center(f.origin, s, node_coords(f, leaf[0]))
     spacing[i] = s
 
 
-def _read_octets(field, points: np.ndarray) -> np.ndarray:
+def _read_octets(field, points: np.ndarray, box: tuple) -> np.ndarray:
     """Sorted codes of the finest octets an MLS sample at each unplaced point may read in the full field: those
     within SAMPLE_REACH_VOXELS of it (where its leaf is a finest node there), and those holding the centres of the
     27 cells about its leaf in ``field`` as it stands (the leaves a fit reads, :func:`.sampling.leaf_neighbours`,
-    where its leaf is coarse there; the levels above the finest are the full field's)."""
+    where its leaf is coarse there: each such leaf once; the levels above the finest are the full field's); those
+    within the octets ``box`` (:meth:`Refiner.unbuilt_box`) alone: the rest are built, or not in the band."""
     n, device = len(points), field.device
+    leaves = wp.empty(n, dtype=wp.int32, device=device)
     centres = wp.empty(n, dtype=wp.vec3, device=device)
     spacing = wp.empty(n, dtype=wp.float32, device=device)
     if n:
         pts = wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device)
-        wp.launch(_leaf_cells_kernel, dim=n, inputs=[field.arg(), pts, centres, spacing], device=device)
-    coarse = spacing.numpy() > 1.5 * field.voxel_size
+        wp.launch(_leaf_cells_kernel, dim=n, inputs=[field.arg(), pts, leaves, centres, spacing], device=device)
+    coarse = np.flatnonzero(spacing.numpy() > 1.5 * field.voxel_size)
+    coarse = coarse[np.unique(leaves.numpy()[coarse], return_index=True)[1]]
     steps = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
     cells = centres.numpy()[coarse, None, :] + spacing.numpy()[coarse, None, None] * steps[None]
-    near = octets_near(field, points, SAMPLE_REACH_VOXELS * field.voxel_size)
-    return np.union1d(near, octets_near(field, cells.reshape(-1, 3).astype(np.float64), 0.0))
+    reach, cells = SAMPLE_REACH_VOXELS * field.voxel_size, cells.reshape(-1, 3).astype(np.float64)
+    near = octets_near(field, points[_touching(field, points, reach, box)], reach)
+    return np.union1d(near, octets_near(field, cells[_touching(field, cells, 0.0, box)], 0.0))
+
+
+def _touching(field, points: np.ndarray, reach: float, box: tuple) -> np.ndarray:
+    """(N,) bool the unplaced ``points`` whose octets within ``reach`` (as :func:`octets_near` finds them) reach into
+    the octets ``box`` (least and greatest coordinates)."""
+    octet = 2.0 * field.voxel_size
+    dims = np.asarray(field.fine_dims, dtype=np.int64) // 2
+    lo = np.clip(np.floor((points - field.origin - reach) / octet).astype(np.int64), 0, dims - 1)
+    hi = np.clip(np.floor((points - field.origin + reach) / octet).astype(np.int64), 0, dims - 1)
+    return (hi >= box[0]).all(axis=1) & (lo <= box[1]).all(axis=1)
 
 
 def _as(field, out):
@@ -243,17 +280,18 @@ def _as(field, out):
 
 def octets_near(field, points: np.ndarray, reach: float) -> np.ndarray:
     """Sorted unique codes of the finest octets (of ``field``'s lattice) within ``reach`` (L-inf) of the unplaced
-    ``points``."""
+    ``points``. The points' lowest octets are told apart by one integer each (a sort of N keys, where rows of three
+    sort several times slower), and only the distinct ones are grown by the span."""
     octet = 2.0 * field.voxel_size
-    dims = field.fine_dims // 2
+    dims = np.asarray(field.fine_dims, dtype=np.int64) // 2
     lo = np.floor((points - field.origin - reach) / octet).astype(np.int64)
     hi = np.floor((points - field.origin + reach) / octet).astype(np.int64)
     lo, hi = np.clip(lo, 0, dims - 1), np.clip(hi, 0, dims - 1)
     span = int((hi - lo).max(initial=0)) + 1
+    key = np.unique((lo[:, 0] * dims[1] + lo[:, 1]) * dims[2] + lo[:, 2])
+    corner = np.stack([key // (dims[1] * dims[2]), (key // dims[2]) % dims[1], key % dims[2]], axis=1)
     steps = np.stack(np.meshgrid(*[np.arange(span)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
-    corner = np.unique(lo, axis=0) if span == 1 else lo
-    cells = (corner[:, None, :] + steps[None]).reshape(-1, 3)
-    cells = np.unique(np.minimum(cells, dims - 1), axis=0)
+    cells = np.minimum(corner[:, None, :] + steps[None], dims - 1).reshape(-1, 3)
     return np.unique(morton_encode_np(cells))
 
 

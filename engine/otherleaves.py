@@ -11,6 +11,10 @@ from .defects import AXES
 from .jumps import JumpSpheres, jump_spheres
 from .sources import mesh_distances
 
+# A closed clean mesh's leaf is read only at samples within the judge's reach and this many voxels more of its mesh's
+# bounding box (:func:`near_rows`).
+NEAR_BOX_VOXELS = 2.0
+
 
 def mesh_leaf(field) -> bool:
     """Whether a leaf field's surface is its source mesh's triangles (a field built from a mesh that encloses a
@@ -67,3 +71,17 @@ def leaf_margin(field, bvh, jumps, points, band: float, reach: float, device, di
         signs = np.sign(field.sample(around, method="linear")).reshape(-1, 6)
         margin[rows[~(signs == np.sign(values[rows])[:, None]).all(axis=1)]] = 0.0
     return margin, np.sign(values).astype(np.int8)
+
+
+def near_rows(bvh, jumps, points: np.ndarray, pad: float, boxes: dict, key) -> np.ndarray:
+    """The rows of ``points`` a leaf (its :func:`leaf_bvh` and :func:`leaf_jumps`) must be read at: all, but for a
+    closed clean mesh's leaf only those within ``pad`` of its mesh's bounding box (kept in ``boxes`` under ``key``).
+    Farther out its surface is farther than the pad and its field outside it (positive), whatever it reads there: a
+    row of coplanar cubes' judge reads each cube's samples in its neighbours' fields alone, not in every cube's."""
+    if bvh is None or jumps is not None:
+        return np.arange(len(points))
+    if key not in boxes:
+        corners = bvh.points.numpy()
+        boxes[key] = (corners.min(axis=0), corners.max(axis=0))
+    lo, hi = boxes[key]
+    return np.flatnonzero(((points >= lo - pad) & (points <= hi + pad)).all(axis=1))

@@ -143,3 +143,32 @@ def test_many_leaves_in_each_others_planes_flag_their_faces_without_listing_ever
     assert all(n <= 1 for n in listed)  # (without the cap: 2 other leaves listed)
     assert is_watertight(kept["tris"]) and mesh_volume(kept["verts"], kept["tris"]) == pytest.approx(4.0, rel=0.01)
     assert kept["kept"].any()
+
+
+def test_a_row_of_cubes_reads_each_cube_only_near_it_and_keeps_what_reading_every_cube_keeps(monkeypatch):
+    # each cube's faces lie in its neighbours' planes, so they are judged sample by sample; every other cube was read
+    # at every sample (six cubes: 15 s, eight: 52 s). A closed clean mesh's leaf is now read only near its bounding box
+    import engine.keep as keep
+    import engine.otherleaves as otherleaves
+
+    cubes = [box_mesh((0.5, 0.5, 0.5), center=(float(i), 0.1 * (i % 3), 0.0)) for i in range(5)]
+    fields = engine.build_fields(cubes, voxel_size=1.0 / 8)
+    read = []
+
+    def leaf_margin(other, bvh, jumps, points, *args):
+        read.append(len(points))
+        return otherleaves.leaf_margin(other, bvh, jumps, points, *args)
+
+    def united():
+        read.clear()
+        tree = engine.union(engine.union(*fields[:2]), engine.union(fields[2], engine.union(*fields[3:])))
+        return tree.kept_surface(), sum(read)
+
+    monkeypatch.setattr(keep, "leaf_margin", leaf_margin)
+    near, near_reads = united()
+    monkeypatch.setattr(keep, "near_rows", lambda bvh, jumps, points, *a: np.arange(len(points)))
+    every, every_reads = united()
+    assert near_reads < 0.5 * every_reads, (near_reads, every_reads)  # measured 6,517 of 28,249
+    for key in ("verts", "tris", "kept", "triangle_id"):
+        assert np.array_equal(near[key], every[key])
+    assert is_watertight(near["tris"]) and mesh_volume(near["verts"], near["tris"]) == pytest.approx(5.0, rel=0.01)

@@ -76,6 +76,55 @@ def test_samples_of_a_field_built_on_demand_equal_the_full_fields_and_build_only
     assert np.array_equal(ids, full.source_ids(points))
 
 
+def test_a_query_reaching_only_built_octets_sorts_none_and_reads_the_full_fields_values(spot, monkeypatch):
+    full = engine.build_field(*spot, voxel_size=H)
+    part = engine.build_field(*spot, voxel_size=H, refine="none")
+    refiner = part.refiner
+    centres = ondemand.band_centres(part)
+    x = spot[0][:, 0]
+    low, mid, high = np.quantile(x, [0.1, 0.5, 0.9])
+    refiner.refined_where(centres[:, 0] < mid)  # all but the band's octets beyond the middle
+    lo, hi = refiner.unbuilt_box()
+    unbuilt = morton_decode_np(refiner.band[~refiner.built])
+    assert np.array_equal(lo, unbuilt.min(axis=0)) and np.array_equal(hi, unbuilt.max(axis=0))
+    asked = []
+    near = ondemand.octets_near
+    monkeypatch.setattr(
+        ondemand, "octets_near", lambda f, points, reach: asked.append(len(points)) or near(f, points, reach)
+    )
+    rng = np.random.default_rng(5)
+    verts = spot[0][x < low]
+    points = verts[rng.choice(len(verts), 100, replace=False)] + rng.normal(scale=H, size=(100, 3))
+    before = refiner.latest
+    values = part.sample(points)
+    assert refiner.latest is before and sum(asked) == 0  # nothing near the unbuilt octets: nothing sorted, none built
+    assert np.abs(values - full.sample(points)).max() < 1e-5 * H
+    other = spot[0][x > high][:50]
+    assert np.abs(part.sample(other) - full.sample(other)).max() < 1e-5 * H
+    assert refiner.latest is not before and sum(asked) > 0
+
+
+def test_octets_near_points_are_every_octet_within_the_reach():
+    field = engine.build_field(*box_mesh((0.5, 0.5, 0.5)), voxel_size=0.1, refine="none")
+    rng = np.random.default_rng(2)
+    points = field.origin + rng.uniform(-0.3, 1.3, size=(500, 3)) * (field.fine_dims * field.voxel_size)
+    octet, dims = 2.0 * field.voxel_size, field.fine_dims // 2
+    for reach in (0.0, 0.07, 0.25):
+        got = {tuple(c) for c in morton_decode_np(ondemand.octets_near(field, points, reach))}
+        lo = np.clip(np.floor((points - field.origin - reach) / octet).astype(int), 0, dims - 1)
+        hi = np.clip(np.floor((points - field.origin + reach) / octet).astype(int), 0, dims - 1)
+        want = {
+            (x, y, z)
+            for a, b in zip(lo, hi, strict=True)
+            for x in range(a[0], b[0] + 1)
+            for y in range(a[1], b[1] + 1)
+            for z in range(a[2], b[2] + 1)
+        }
+        assert want <= got  # every octet reached; beyond them, only octets of a point's first one and the span
+        span = int((hi - lo).max()) + 1
+        assert all(any(((np.array(c) >= a) & (np.array(c) < a + span)).all() for a in lo) for c in got - want)
+
+
 def _finest(field):
     n0 = field.level_counts[0]
     return field.codes.numpy()[:n0], field.values.numpy()[:n0]
