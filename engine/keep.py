@@ -53,7 +53,7 @@ from .judging import MAX_TABLE_LEAVES, PARTLY_TIE, FusedJudge, sign_patterns
 from .jumps import clear_of
 from .ondemand import built_on_demand, own_sides
 from .orient import patch_flips
-from .otherleaves import NEAR_BOX_VOXELS, leaf_bvh, leaf_jumps, leaf_margin, mesh_leaf, near_rows
+from .otherleaves import NEAR_BOX_VOXELS, NearRows, leaf_bvh, leaf_jumps, leaf_margin, mesh_leaf
 from .ownside import THIN, TINY_VOXELS, outward, side_at
 from .parallel import run_tasks
 from .precut import cut_strips, predicted_margins
@@ -230,7 +230,7 @@ class _Judge:
         self.coplanar = self._coplanar_faces(source)  # (T,) bool or None: sample by sample with their planes
         self.normals = None if self.coplanar is None else unit_normals(source.verts, self.tris)
         self.flush = {}  # (other leaf, whose): :meth:`_flush`
-        self.boxes = {}  # other leaf: its mesh's bounding box (:func:`.otherleaves.near_rows`)
+        self.near = NearRows(self.bvhs, self.jumps)  # where each other leaf is read
 
     def _coplanar_faces(self, source) -> np.ndarray | None:
         """(T,) bool the triangles in another leaf's plane (:func:`.coplanar.coplanar_triangles`) where the
@@ -309,13 +309,13 @@ class _Judge:
         :func:`.coplanar.coplanar_readings` reads them: no surface, and where the point lies on one, the leaf's sign
         tied to the face's (+2 / -2)."""
         margin = np.full(len(points), reach, dtype=np.float32)
-        signs = []
+        signs, indexed = [], self.near.index(points)
         for j, other in enumerate(self.leaves):
             if j == self.index:
                 signs.append(np.full(len(points), -1, np.int8))
                 continue
             bvh, near, sign = self.bvhs[j], np.full(len(points), reach, np.float32), np.ones(len(points), np.int8)
-            at = near_rows(bvh, self.jumps[j], points, reach + NEAR_BOX_VOXELS * self.voxel, self.boxes, j)
+            at = self.near.rows(j, indexed, reach + NEAR_BOX_VOXELS * self.voxel)
             if not len(at):  # (none near: its surface farther than the reach, and outside it)
                 pass
             elif planes is None or bvh is None:
@@ -429,6 +429,8 @@ class _Judge:
         # the other leaves' signs the same all over each triangle; in other leaves' planes, where a face there begins
         # (tied) and the wall it begins at is no surface (it lies inside), the way the expression crosses
         for sign in [flips.astype(np.int8)] if coplanar else [s for j, s in enumerate(signs) if j != self.index]:
+            if not len(sign) or sign.min() == sign.max():  # (the same everywhere: a leaf far from every sample)
+                continue
             low, minus_high = per_triangle_min(np.stack([sign, -sign], axis=1), local, len(used), first).T
             same &= low == -minus_high
         if coplanar:  # a face in an earlier leaf's plane, both crossing there: that leaf's to keep

@@ -12,7 +12,7 @@ from .jumps import JumpSpheres, jump_spheres
 from .sources import mesh_distances
 
 # A closed clean mesh's leaf is read only at samples within the judge's reach and this many voxels more of its mesh's
-# bounding box (:func:`near_rows`).
+# bounding box (:class:`NearRows`).
 NEAR_BOX_VOXELS = 2.0
 
 
@@ -73,15 +73,35 @@ def leaf_margin(field, bvh, jumps, points, band: float, reach: float, device, di
     return margin, np.sign(values).astype(np.int8)
 
 
-def near_rows(bvh, jumps, points: np.ndarray, pad: float, boxes: dict, key) -> np.ndarray:
-    """The rows of ``points`` a leaf (its :func:`leaf_bvh` and :func:`leaf_jumps`) must be read at: all, but for a
-    closed clean mesh's leaf only those within ``pad`` of its mesh's bounding box (kept in ``boxes`` under ``key``).
-    Farther out its surface is farther than the pad and its field outside it (positive), whatever it reads there: a
-    row of coplanar cubes' judge reads each cube's samples in its neighbours' fields alone, not in every cube's."""
-    if bvh is None or jumps is not None:
-        return np.arange(len(points))
-    if key not in boxes:
-        corners = bvh.points.numpy()
-        boxes[key] = (corners.min(axis=0), corners.max(axis=0))
-    lo, hi = boxes[key]
-    return np.flatnonzero(((points >= lo - pad) & (points <= hi + pad)).all(axis=1))
+class NearRows:
+    """The rows of a judge's samples each other leaf must be read at: all, but for a closed clean mesh's leaf (no
+    jumps) only those within a pad of its mesh's bounding box. Farther out its surface is farther than the pad and its
+    field outside it (positive), whatever it reads there: a row of coplanar cubes' judge reads each cube's samples in
+    its neighbours' fields alone, a plate's judge each of 36 bores' fields about the bore alone. The samples are
+    sorted along x once a set (:meth:`index`), and each box finds its rows in that order by two binary searches."""
+
+    def __init__(self, bvhs: list, jumps: list):
+        self.bvhs, self.jumps, self.boxes = bvhs, jumps, {}
+
+    @staticmethod
+    def index(points: np.ndarray) -> dict:
+        """``points`` to find rows of (sorted when first needed)."""
+        return {"points": points}
+
+    def rows(self, j: int, indexed: dict, pad: float) -> np.ndarray:
+        """The rows of the :meth:`index`-ed points leaf ``j`` must be read at (sorted)."""
+        points = indexed["points"]
+        if self.bvhs[j] is None or self.jumps[j] is not None:
+            return np.arange(len(points))
+        if j not in self.boxes:
+            corners = self.bvhs[j].points.numpy()
+            self.boxes[j] = (corners.min(axis=0), corners.max(axis=0))
+        if "order" not in indexed:
+            indexed["order"] = np.argsort(points[:, 0], kind="stable")
+            indexed["x"] = points[indexed["order"], 0]
+        lo, hi = self.boxes[j]
+        start = np.searchsorted(indexed["x"], lo[0] - pad, side="left")
+        end = np.searchsorted(indexed["x"], hi[0] + pad, side="right")
+        rows = indexed["order"][start:end]
+        yz = points[rows, 1:]
+        return np.sort(rows[((yz >= lo[1:] - pad) & (yz <= hi[1:] + pad)).all(axis=1)])

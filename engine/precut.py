@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .otherleaves import NEAR_BOX_VOXELS
 from .slivers import FIRST, SECOND, zip_points
 from .sources import mesh_distances
 
@@ -108,10 +109,11 @@ def predicted_margins(judge, points: np.ndarray, reach: float) -> np.ndarray:
     """(N,) float32 about how far the nearest of the other leaves' surfaces and the leaf's own defects is from each
     point (N, 3) float32, up to ``reach``: the other leaves' values read off their fields (linear), its defects' mesh
     distances (module docstring: a prediction, the same whichever path the judge takes)."""
-    margin = np.full(len(points), reach, dtype=np.float32)
+    margin, indexed = np.full(len(points), reach, dtype=np.float32), judge.near.index(points)
     for j, other in enumerate(judge.leaves):
-        if j != judge.index:
-            margin = np.minimum(margin, np.abs(other.sample(points, method="linear")))
+        if j != judge.index:  # (a closed clean mesh's leaf near its box alone: :class:`.otherleaves.NearRows`)
+            at = judge.near.rows(j, indexed, reach + NEAR_BOX_VOXELS * judge.voxel)
+            margin[at] = np.minimum(margin[at], np.abs(other.sample(points[at], method="linear")))
     if judge.defect_mesh is not None:
         margin = np.minimum(margin, mesh_distances(judge.defect_mesh, points, reach, judge.device))
     return margin

@@ -523,3 +523,18 @@ def test_a_bore_keeps_its_sliver_wall_at_coarser_voxels(resolution):
     assert _new_faces_off_the_seam(s, a, b, h) <= 20  # measured 0
     d = hausdorff(s["verts"], s["tris"], *exact, n=50_000)
     assert d["max"] < 1.0 * h and d["p95"] < 0.05 * h, d  # measured max 0.36-0.37 voxel, p95 0.002
+
+
+def test_a_closed_clean_leaf_is_read_at_the_samples_near_its_box_and_others_everywhere():
+    from engine.otherleaves import NearRows, leaf_bvh, leaf_jumps
+
+    cube = box_mesh((0.5, 0.5, 0.5), center=(1.0, 0.0, 0.0))
+    hole = (cube[0], cube[1][2:])  # open: its field may jump, read everywhere
+    fields = engine.build_fields([cube, hole], voxel_size=0.1)
+    near = NearRows([leaf_bvh(f, "cpu") for f in fields], [leaf_jumps(f, "cpu") for f in fields])
+    points = np.random.default_rng(4).uniform(-2.0, 3.0, size=(5000, 3)).astype(np.float32)
+    indexed = near.index(points)
+    rows = near.rows(0, indexed, 0.3)
+    want = np.flatnonzero((np.abs(points - (1.0, 0.0, 0.0)) <= 0.5 + 0.3).all(axis=1))
+    assert np.array_equal(rows, want) and 0 < len(rows) < len(points)
+    assert np.array_equal(near.rows(1, indexed, 0.3), np.arange(len(points)))
