@@ -428,11 +428,12 @@ class _Judge:
         crosses, flips = self._crossing(signs)
         # the other leaves' signs the same all over each triangle; in other leaves' planes, where a face there begins
         # (tied) and the wall it begins at is no surface (it lies inside), the way the expression crosses
-        for sign in [flips.astype(np.int8)] if coplanar else [s for j, s in enumerate(signs) if j != self.index]:
-            if not len(sign) or sign.min() == sign.max():  # (the same everywhere: a leaf far from every sample)
-                continue
-            low, minus_high = per_triangle_min(np.stack([sign, -sign], axis=1), local, len(used), first).T
-            same &= low == -minus_high
+        varied = [flips.astype(np.int8)] if coplanar else signs[: self.index] + signs[self.index + 1 :]
+        varied = [s for s in varied if len(s) and s.min() != s.max()]  # (the rest: leaves far from every sample)
+        if varied:  # (one reduction for all of them)
+            columns = np.stack(varied + [-s for s in varied], axis=1)
+            low, minus_high = np.split(per_triangle_min(columns, local, len(used), first), 2, axis=1)
+            same &= (low == -minus_high).all(axis=1)
         if coplanar:  # a face in an earlier leaf's plane, both crossing there: that leaf's to keep
             margin = np.where(tied_to_earlier(signs, self.index) & crosses, 0.0, margin)
         bounds = np.stack([np.where(crosses, margin, -1.0), np.where(crosses, -margin, 1.0), margin], axis=1)
