@@ -34,6 +34,7 @@ from . import (
     cache,
     custom_normals,
     generic_attributes,
+    novolume,
     placement,
     plan,
     polygons,
@@ -241,23 +242,8 @@ def operand_fields(
             placed[k] = field
     for k, field in enumerate(placed):
         if not field.encloses_volume:
-            raise runtime.engine().AasdfError(_no_volume(operands[k], voxel_size))
+            raise runtime.engine().AasdfError(novolume.reason(operands[k], voxel_size))
     return [field.relabel(k) for k, field in enumerate(placed)]
-
-
-def _no_volume(operand, voxel_size: float) -> str:
-    """Why an operand's field has no inside: it is thinner than two voxels (no node lies inside it), or a surface
-    that encloses nothing."""
-    lo, hi = world_bounds([operand])
-    if float(np.max(hi - lo)) < 2.0 * voxel_size:
-        return (
-            f"'{operand.name}' is smaller than two voxels ({float(np.max(hi - lo)):.3g} across, voxels of "
-            f"{voxel_size:.3g}): no voxel lies inside it; set a smaller Voxel Size or a higher Resolution"
-        )
-    return (
-        f"'{operand.name}' encloses no volume: give it a thickness or close it (where its walls are thinner than two "
-        f"voxels of {voxel_size:.3g}, set a smaller Voxel Size or a higher Resolution)"
-    )
 
 
 def _placed_fields(context, operands, settings: FieldSettings, voxel_size: float, progress, thickness, refine) -> list:

@@ -100,6 +100,25 @@ def test_an_operand_smaller_than_two_voxels_is_refused_as_such(fresh_cache):
     assert len(bpy.data.objects) == objects and not block.hide_get()
 
 
+def test_a_closed_operand_with_walls_thinner_than_two_voxels_is_refused_as_such(fresh_cache):
+    # a closed sheet (2 x 2 x 0.01) and a hollow box (walls 0.01) read "encloses no volume: give it a thickness or
+    # close it" though both are closed
+    block = add_mesh_object("Block", *box_mesh(half=(1.0, 1.0, 1.0)))
+    panel = add_mesh_object("Panel", *box_mesh(half=(1.0, 1.0, 0.005)))
+    outer, inner = box_mesh(half=(0.5, 0.5, 0.5)), box_mesh(half=(0.49, 0.49, 0.49))
+    hollow = add_mesh_object(
+        "Hollow", np.concatenate([outer[0], inner[0]]), np.concatenate([outer[1], inner[1][:, ::-1] + len(outer[0])])
+    )
+    objects = len(bpy.data.objects)
+    select(block, panel)
+    with pytest.raises(RuntimeError, match=r"'Panel' is thinner than two voxels \(0.01 thick, voxels of 0.0"):
+        bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96)
+    select(block, hollow)
+    with pytest.raises(RuntimeError, match="'Hollow' is closed, but no voxel lies inside it: its walls are thinner"):
+        bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=96)
+    assert len(bpy.data.objects) == objects and not block.hide_get()
+
+
 def test_the_tree_refuses_a_plane_and_takes_a_thickness_per_input(fresh_cache):
     block = add_mesh_object("Block", *box_mesh(half=(1.0, 1.0, 1.0)))
     cutter = plane()
