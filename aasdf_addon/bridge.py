@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import generic_attributes
+from . import generic_attributes, repeats
 from .edge_attributes import EDGE_ATTRIBUTES, kept_edge_values, known_columns, source_edges
 from .transfer import OPERAND_ATTRIBUTE
 
@@ -74,6 +74,11 @@ def read_mesh_operand(evaluated, matrix) -> Operand:
     mesh = evaluated.to_mesh()
     try:
         verts, tris, corners, faces = _triangles(mesh)
+        corner_vert = _attribute(mesh, ".corner_vert", "value", np.int32, len(mesh.loops))
+        repeated = repeats.repeated_faces(verts, corner_vert, _get(mesh.polygons, "loop_start", np.int32))
+        if repeated.any():  # (a face laid on an earlier one: left out, :mod:`.repeats`)
+            keep = ~repeated[faces]
+            tris, corners, faces = tris[keep], corners[keep], faces[keep]
         operand = Operand(
             obj,
             obj.session_uid,
@@ -87,7 +92,7 @@ def read_mesh_operand(evaluated, matrix) -> Operand:
             materials=[slot.material for slot in obj.material_slots],
             corner_count=len(mesh.loops),
             loop_start=_get(mesh.polygons, "loop_start", np.int32),
-            corner_vert=_attribute(mesh, ".corner_vert", "value", np.int32, len(mesh.loops)),
+            corner_vert=corner_vert,
             edge_verts=_attribute(mesh, ".edge_verts", "value", np.int32, len(mesh.edges), 2),
         )
         for name, (_, dtype) in EDGE_ATTRIBUTES.items():
