@@ -1,8 +1,9 @@
 """Which objects are operands, and their evaluated geometry read whatever their type.
 
 Every object with geometry takes part by what Blender evaluates it to: a mesh, a text, a curve (its extrusion or
-bevel), a surface or a metaball (``evaluated_get(depsgraph).to_mesh()``), plus the instances its modifiers or
-geometry nodes make, realized into the same local space. ``read_operands`` gives one ``bridge.Operand`` per object,
+bevel), a surface or a metaball (``evaluated_get(depsgraph).to_mesh()``), plus the instances its modifiers, geometry
+nodes or instancing (on its vertices or faces) make, realized into the same local space; an empty that instances a
+collection takes part by its instances. ``read_operands`` gives one ``bridge.Operand`` per object,
 so the cache keys fields by this evaluated geometry and places them by the object's transform, as for meshes. Objects
 without geometry (empties, cameras, lights) are refused by name, as is a text or curve that evaluates to no faces.
 """
@@ -26,8 +27,13 @@ OPERAND_TYPES_TEXT = "mesh, text, curve, surface or metaball"
 
 
 def is_operand(obj) -> bool:
-    """Whether ``obj`` is an object whose geometry can take part (whatever its data holds right now)."""
-    return obj is not None and obj.type in GEOMETRY_TYPES
+    """Whether ``obj`` is an object whose geometry can take part (whatever its data holds right now): one with
+    geometry, or an empty that instances a collection (a linked asset)."""
+    return obj is not None and (obj.type in GEOMETRY_TYPES or _instances_collection(obj))
+
+
+def _instances_collection(obj) -> bool:
+    return obj.type == "EMPTY" and obj.instance_type == "COLLECTION" and obj.instance_collection is not None
 
 
 def refusal(obj) -> str:
@@ -58,8 +64,13 @@ def read_operands(objects, depsgraph) -> list:
     for obj in objects:
         evaluated = obj.evaluated_get(depsgraph)
         matrix = np.array(evaluated.matrix_world, dtype=np.float64)
-        operand = bridge.read_mesh_operand(evaluated, matrix)
         pieces = instance_pieces(evaluated, matrix, depsgraph)
+        operand = None if obj.type == "EMPTY" else bridge.read_mesh_operand(evaluated, matrix)
+        if pieces and (operand is None or not len(operand.tris)):  # (instances alone: the first stands for it)
+            operand = pieces.pop(0)
+            operand.obj, operand.uid, operand.matrix = obj, obj.session_uid, matrix
+        if operand is None:
+            raise engine.AasdfError(f"'{obj.name}' instances no geometry: its collection has no {OPERAND_TYPES_TEXT}")
         if pieces:
             operand = joined(operand, pieces)
         if obj.type != "MESH" and not len(operand.tris):
@@ -71,9 +82,11 @@ def read_operands(objects, depsgraph) -> list:
 
 
 def instance_pieces(evaluated, matrix, depsgraph) -> list:
-    """The instances ``evaluated`` makes (geometry nodes, instancing modifiers), each read as an operand in the
-    object's own space; empty when it makes none or its matrix has no inverse (refused later by ``transforms``)."""
-    if not any(modifier.type == "NODES" for modifier in evaluated.modifiers) and not evaluated.particle_systems:
+    """The instances ``evaluated`` makes (geometry nodes, instancing modifiers, instancing on its vertices or faces,
+    a collection it instances), each with geometry read as an operand in the object's own space; empty when it makes
+    none or its matrix has no inverse (refused later by ``transforms``)."""
+    nodes = any(modifier.type == "NODES" for modifier in evaluated.modifiers)
+    if not nodes and not evaluated.particle_systems and evaluated.instance_type == "NONE":
         return []
     try:
         to_local = np.linalg.inv(matrix)
@@ -84,6 +97,8 @@ def instance_pieces(evaluated, matrix, depsgraph) -> list:
     pieces = []
     for instance in depsgraph.object_instances:
         if not instance.is_instance or instance.parent is None or instance.parent.original != evaluated.original:
+            continue
+        if instance.object.type not in GEOMETRY_TYPES:  # (a light or an empty in an instanced collection)
             continue
         placed = to_local @ np.array(instance.matrix_world, dtype=np.float64)
         piece = bridge.read_mesh_operand(instance.object, placed)

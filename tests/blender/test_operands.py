@@ -472,3 +472,40 @@ def test_the_poll_and_a_tree_from_the_selection_take_a_text(fresh_cache):
     tree = next(tree for tree in bpy.data.node_groups if tree.bl_idname == nodes.TREE)
     assert sorted(node.object.name for node in tree.nodes if node.bl_idname == nodes.OBJECT) == ["Block", "Text"]
     assert "Block.csg" in bpy.data.objects
+
+
+def _cube(name, size, location=(0.0, 0.0, 0.0), collection=None):
+    obj = add_mesh_object(name, *box_mesh(half=(size / 2,) * 3), location=location, collection=collection)
+    bpy.context.view_layer.update()
+    return obj
+
+
+def test_instancing_on_vertices_and_a_collection_instance_take_part_by_their_instances(fresh_cache):
+    # the instances were dropped (a mesh instancing rivets on its vertices cut as its own mesh alone; points alone were
+    # "The mesh is empty"), and an empty instancing a collection was refused as "an empty and has no geometry"
+    block = _cube("Block", 2.0)
+    rivets = add_mesh_object("Rivets", [(0.5, 0.5, 1.0), (-0.5, 0.5, 1.0), (0.5, -0.5, 1.0), (-0.5, -0.5, 1.0)], [])
+    rivets.instance_type = "VERTS"
+    _cube("Rivet", 0.4).parent = rivets
+    bpy.context.view_layer.update()
+    select(block, rivets)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=128, hide_inputs=False) == {"FINISHED"}
+    assert mesh_volume(*world_arrays(bpy.context.active_object)) == pytest.approx(8.0 - 4 * 0.4 * 0.4 * 0.2, abs=2e-3)
+    asset = bpy.data.collections.new("Bolt")
+    _cube("Bolt", 0.5, collection=asset)
+    asset.objects.link(bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT")))  # (no geometry: left out)
+    instance = bpy.data.objects.new("BoltInstance", None)
+    instance.instance_type, instance.instance_collection = "COLLECTION", asset
+    bpy.context.scene.collection.objects.link(instance)
+    instance.location = (1.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    select(block, instance)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=128, hide_inputs=False) == {"FINISHED"}
+    assert mesh_volume(*world_arrays(bpy.context.active_object)) == pytest.approx(8.0 - 0.25**3, abs=2e-3)
+    empty = bpy.data.collections.new("Lights")
+    empty.objects.link(bpy.data.objects.new("Lamp2", bpy.data.lights.new("Lamp2", "POINT")))
+    instance.instance_collection = empty
+    bpy.context.view_layer.update()
+    select(block, instance)
+    with pytest.raises(RuntimeError, match="'BoltInstance' instances no geometry"):
+        bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=128, hide_inputs=False)
