@@ -5,7 +5,8 @@ bevel), a surface or a metaball (``evaluated_get(depsgraph).to_mesh()``), plus t
 nodes or instancing (on its vertices or faces) make, realized into the same local space; an empty that instances a
 collection takes part by its instances. ``read_operands`` gives one ``bridge.Operand`` per object,
 so the cache keys fields by this evaluated geometry and places them by the object's transform, as for meshes. Objects
-without geometry (empties, cameras, lights) are refused by name, as is a text or curve that evaluates to no faces.
+without geometry (other empties, cameras, lights) are refused by name, as is a text or curve that evaluates to no
+faces.
 """
 
 import numpy as np
@@ -33,6 +34,7 @@ def is_operand(obj) -> bool:
 
 
 def _instances_collection(obj) -> bool:
+    """Whether ``obj`` is an empty instancing a collection."""
     return obj.type == "EMPTY" and obj.instance_type == "COLLECTION" and obj.instance_collection is not None
 
 
