@@ -85,8 +85,10 @@ def _over_kernel(
     over: wp.array[wp.uint8],
 ):
     """Whether each point lies over the kept faces: within ``reach`` of them, its closest point not on their border
-    (every border segment farther than that closest point by ``margin``), and its surface facing the way the kept face
-    there does (``normals``, when given: another sheet a voxel off, the far side of a thin part, is not over it)."""
+    (every border segment farther than that closest point by ``margin``) unless it lies exactly on them (faces on the
+    lattice's planes put voxel vertices on the border's corners: their faces stayed, doubling kept ones), and its
+    surface facing the way the kept face there does (``normals``, when given: another sheet a voxel off, the far side
+    of a thin part, is not over it)."""
     i = wp.tid()
     p = points[i]
     over[i] = wp.uint8(0)
@@ -99,6 +101,9 @@ def _over_kernel(
             kept, p, normals[i], u, margin
         ):
             return
+    if u == 0.0:  # (exactly on a kept face: over it, border or not)
+        over[i] = wp.uint8(1)
+        return
     r = u + margin
     query = wp.bvh_query_aabb(border, p - wp.vec3(r), p + wp.vec3(r))
     s = int(0)
