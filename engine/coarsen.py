@@ -29,6 +29,7 @@ import warp as wp
 
 from .adaptive import tolerance
 from .collapses import collapse_serial, face_passes, next_corner
+from .defects import repeated_triangles
 from .meshcheck import any_corner, compacted
 from .parallel import launch_split
 from .refine import position_hash
@@ -451,6 +452,7 @@ def coarsened(field, surface: dict, adaptivity: float = 0.0, regions: dict | Non
     movable = surface["vertex_id"] < 0  # new vertices and midpoints of split sources
     tol = tolerance(adaptivity) * field.voxel_size
     out_tris, rows = collapse_flat(surface["verts"], tris, movable, group, tol, field.device)
+    out_tris, rows = _without_twins(out_tris, rows, len(surface["verts"]))
     used, local = compacted(out_tris, len(surface["verts"]))
     out = dict(surface)
     out["verts"] = surface["verts"][used]
@@ -471,6 +473,14 @@ def coarsened(field, surface: dict, adaptivity: float = 0.0, regions: dict | Non
         "coarsened": len(tris) - len(rows),
     }
     return out
+
+
+def _without_twins(tris: np.ndarray, rows: np.ndarray, n_verts: int) -> tuple[np.ndarray, np.ndarray]:
+    """``tris`` (and their ``rows``) without the pairs of faces on the same three vertices (turned opposite ways: on a
+    closed 2-manifold surface such a pair shares each of its edges with nothing else, a part of its own that encloses
+    nothing; collapses along a thin part of the beetle's band left one)."""
+    twin = repeated_triangles(tris, n_verts)
+    return (tris, rows) if not twin.any() else (tris[~twin], rows[~twin])
 
 
 def _groups(field, surface: dict, adaptivity: float, regions) -> np.ndarray:
