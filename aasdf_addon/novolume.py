@@ -3,6 +3,8 @@ surface that encloses nothing, or closed but thinner than two voxels (as a whole
 
 import numpy as np
 
+from . import runtime
+
 FINER = "set a smaller Voxel Size or a higher Resolution"
 
 
@@ -14,7 +16,7 @@ def reason(operand, voxel_size: float) -> str:
             f"'{operand.name}' is smaller than two voxels ({float(size.max()):.3g} across, voxels of "
             f"{voxel_size:.3g}): no voxel lies inside it; {FINER}"
         )
-    if not _closed(operand.tris):
+    if runtime.engine().surface_edges(operand.tris, len(operand.verts)) is None:  # (not closed)
         return (
             f"'{operand.name}' encloses no volume: give it a thickness or close it (where its walls are thinner than "
             f"two voxels of {voxel_size:.3g}, {FINER})"
@@ -36,10 +38,3 @@ def _extents(operand) -> np.ndarray:
         return np.zeros(3)
     local = operand.verts.max(axis=0).astype(np.float64) - operand.verts.min(axis=0)
     return local * np.linalg.norm(np.asarray(operand.matrix, dtype=np.float64)[:3, :3], axis=0)
-
-
-def _closed(tris) -> bool:
-    """Whether every edge of the triangles is in two of them (and there are some)."""
-    edges = np.sort(np.asarray(tris, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    _, counts = np.unique(edges, axis=0, return_counts=True)
-    return bool(len(counts)) and bool((counts == 2).all())
