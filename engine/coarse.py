@@ -10,11 +10,13 @@ on the CAD pairs at /256 against 0.009-0.010 at the finest), and :func:`.adaptiv
 cells (a level fewer: the same blocks in voxels).
 
 The coarse surface is taken only where it is as good: closed (level 1 is a band of octets built around the finest
-one, and a boolean prunes those farther than 2.5 voxels from its surface: a level-1 cube near a seam may miss a
-corner, and the surface is open there until the nodes missing about it are added from the operands' closest points,
-:func:`_with_missing_nodes`), and crossing every finest octet the finest surface crosses (an octet whose eight nodes
-change sign, and no active coarse cube has it as a corner: a fin, a bump or a hole thinner than the coarse cells,
-gone). Otherwise :func:`coarse_surface` returns None and the finest level is contoured as at lower adaptivities.
+one, and a boolean prunes those farther than :data:`.prune.KEEP_BAND` voxels from its surface, which keeps every
+corner of a level-1 cube the surface crosses where the values are distances; a chamfer's change faster, so a
+level-1 cube near its seam may miss a corner, and the surface is open there until the nodes missing about it are
+added from the operands' closest points, :func:`_with_missing_nodes`), and crossing every finest octet the finest
+surface crosses (an octet whose eight nodes change sign, and no active coarse cube has it as a corner: a fin, a bump
+or a hole thinner than the coarse cells, gone). Otherwise :func:`coarse_surface` returns None and the finest level
+is contoured as at lower adaptivities.
 """
 
 from __future__ import annotations
@@ -91,9 +93,10 @@ def coarse_surface(field, iso: float) -> dict | None:
 def _with_missing_nodes(field, coarse, samples, points) -> tuple:
     """``samples`` (coords, values, codes, proj of the ``coarse`` level's nodes and of nodes added before; None: the
     level's own) with the nodes missing around the cubes of ``points`` added: the 4 x 4 x 4 nodes about each cube.
-    A boolean prunes its finest octets farther than 2.5 voxels from its surface, so a level-1 cube near a seam can
-    miss a corner (measured 3.3-3.8 voxels off the surface); its value is the distance to the closest point of the
-    operand deciding there (:func:`.sources.closest_points`), signed as the field's (the field sampled)."""
+    A boolean prunes its finest octets farther than KEEP_BAND voxels from its surface, so a level-1 cube near a
+    chamfered seam can miss a corner (with a band of 2.5, by plain booleans too: 3.3-3.8 voxels off the surface); its
+    value is the distance to the closest point of the operand deciding there (:func:`.sources.closest_points`), signed
+    as the field's (the field sampled)."""
     if samples is None:
         n1 = coarse.level_counts[0]
         codes = coarse.codes[:n1].numpy()

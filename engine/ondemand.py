@@ -45,9 +45,9 @@ from .winding import WindingArg, inside_sign
 FOUND = ("clean_mesh", "flat", "surface_points", "problem_faces", "mesh_distance", "hole_caps")
 
 # A boolean's operand gets the finest octets of its band within this many voxels of where the result's surface may
-# be: the boolean keeps its finest octets within KEEP_BAND (2.5) voxels of it, an octet's centre lies up to sqrt(3)
-# voxels from its nodes, and an MLS sample reads nodes up to 1.5 voxels away (3 voxels to spare).
-BOOLEAN_REACH_VOXELS = 2.5 + 1.75 + 1.5 + 3.0
+# be: the boolean keeps its finest octets within KEEP_BAND (2.6) voxels of it, an octet's centre lies up to sqrt(3)
+# voxels from its nodes, and an MLS sample reads nodes up to 1.5 voxels away (2.9 voxels to spare).
+BOOLEAN_REACH_VOXELS = 2.6 + 1.75 + 1.5 + 2.9
 
 # With ``seams``, the octets within this many voxels of the other operand's surface: the kept faces end about 2
 # voxels from a seam (the judge's band and slack), and the voxel surface must reach under them (measured on the CAD
