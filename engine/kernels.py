@@ -66,6 +66,7 @@ ENGINE_MODULES = (
     "jumps",
     "normalsums",
     "quads",
+    "coarse",
 )
 WARP_MODULES = ("warp._src.geometry.sparse_marching_cubes",)
 # Prebuilt files name engine modules with this placeholder package.
