@@ -23,6 +23,9 @@ from .preferences import ADDON_ID
 COLLECTION = "AASDF Debug"
 # Dense samples of a debug volume at most; coarser spacings (powers of two of the voxel size) keep below it.
 MAX_DENSE_SAMPLES = 2**22
+# Bytes of .vdb files the debug folder keeps at most: each new file there removes the oldest that no volume of the open
+# file reads (up to 16 MB each; a removed one is made again by asking for it).
+DEBUG_FOLDER_BYTES = 1 << 30
 
 
 def debug_dir() -> str:
@@ -154,8 +157,45 @@ def add_debug_objects(context, field, name, *, filepath=None):
     Raises:
         AasdfError: If the dense block would not fit in memory.
     """
+    folder = None
     if filepath is None:
         safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
-        filepath = os.path.join(debug_dir(), f"{safe}-{uuid.uuid4().hex[:8]}.vdb")
+        folder = debug_dir()
+        filepath = os.path.join(folder, f"{safe}-{uuid.uuid4().hex[:8]}.vdb")
     write_vdb(field, filepath)
-    return add_volume_object(context, f"{name}.sdf", filepath), add_cells_object(context, f"{name}.cells", field)
+    objects = add_volume_object(context, f"{name}.sdf", filepath), add_cells_object(context, f"{name}.cells", field)
+    if folder is not None:
+        pruned_debug_files(folder)
+    return objects
+
+
+def pruned_debug_files(folder: str, limit: int | None = None) -> list:
+    """Remove the oldest ``.vdb`` files of ``folder`` that no Volume of the open file reads until its ``.vdb`` files
+    take at most ``limit`` bytes (default ``DEBUG_FOLDER_BYTES``); a file that cannot be removed is left. Returns the
+    paths removed."""
+    limit = DEBUG_FOLDER_BYTES if limit is None else limit
+    used = {_same_path(bpy.path.abspath(volume.filepath)) for volume in bpy.data.volumes if volume.filepath}
+    files = []
+    with os.scandir(folder) as entries:
+        for entry in entries:
+            if entry.name.endswith(".vdb") and entry.is_file():
+                info = entry.stat()
+                files.append((info.st_mtime, info.st_size, entry.path))
+    total = sum(size for _, size, _ in files)
+    removed = []
+    for _, size, path in sorted(files):
+        if total <= limit:
+            break
+        if _same_path(path) in used:
+            continue
+        try:
+            os.remove(path)
+        except OSError:
+            continue
+        total -= size
+        removed.append(path)
+    return removed
+
+
+def _same_path(path: str) -> str:
+    return os.path.normcase(os.path.realpath(path))

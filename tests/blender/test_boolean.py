@@ -1,6 +1,7 @@
 """``aasdf.boolean`` and ``aasdf.clear_cache`` on real meshes, headless: results against exact booleans, the field
 cache, undo, materials, poll messages, error reports and debug volumes."""
 
+import os
 import re
 from types import SimpleNamespace
 
@@ -673,6 +674,38 @@ def test_debug_volume_operator_shows_the_active_mesh_field(fresh_cache):
     assert cache.stats()["builds"] == 1
     bpy.ops.aasdf.debug_volume(resolution=64)  # the field comes from the cache the second time
     assert cache.stats()["builds"] == 1 and cache.stats()["hits"] == 1
+
+
+def test_the_debug_folder_keeps_under_its_limit_and_every_file_a_volume_reads(fresh_cache, monkeypatch, tmp_path):
+    # (each debug volume wrote a new file of up to 16 MB into the extension's user folder, and none was ever removed)
+    from aasdf.aasdf_addon import debug
+
+    paths = [tmp_path / f"v{k}.vdb" for k in range(4)]
+    for k, path in enumerate(paths):
+        path.write_bytes(bytes(1000))
+        os.utime(path, (1000 + k, 1000 + k))  # v0 the oldest
+    (tmp_path / "notes.txt").write_bytes(bytes(5000))  # not a debug file
+    volume = bpy.data.volumes.new("reads v0")
+    volume.filepath = str(paths[0])
+    try:
+        removed = debug.pruned_debug_files(str(tmp_path), limit=2500)
+    finally:
+        bpy.data.volumes.remove(volume)
+    assert removed == [str(paths[1]), str(paths[2])]  # the oldest no volume reads, until 2,000 bytes are left
+    assert [path.exists() for path in paths] == [True, False, False, True] and (tmp_path / "notes.txt").exists()
+    if not SHIPS_OPENVDB:  # Blender 4.2 writes no debug volume (refused with a sentence, above)
+        return
+    folder = tmp_path / "debug"
+    folder.mkdir()
+    monkeypatch.setattr(debug, "debug_dir", lambda: str(folder))
+    monkeypatch.setattr(debug, "DEBUG_FOLDER_BYTES", 1)
+    select(add_mesh_object("Ball", *uv_sphere(1.0, rings=16, segments=32)))
+    assert bpy.ops.aasdf.debug_volume(resolution=32) == {"FINISHED"}
+    (first,) = folder.glob("*.vdb")  # read by its volume: kept, however small the limit
+    bpy.data.volumes.remove(bpy.data.objects["Ball.sdf"].data)
+    assert bpy.ops.aasdf.debug_volume(resolution=32) == {"FINISHED"}
+    (second,) = folder.glob("*.vdb")
+    assert second != first and bpy.data.objects["Ball.sdf"].data.filepath == str(second)
 
 
 def test_debug_volume_operator_polls_and_reports():
