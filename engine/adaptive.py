@@ -42,7 +42,7 @@ from .components import connected_components
 from .flatness import far_components
 from .normalsums import quad_normal_sums
 from .quadric import CREASE_ANGLE
-from .quads import QUAD_ANGLE, polygon_edges
+from .quads import QUAD_ANGLE
 
 # A merged surface's faces keep their centres within this many times the tolerance of the field's surface (else
 # their vertices' components drop a level, as at a manifold failure).
@@ -211,7 +211,8 @@ def _strays(lattice, clusters, faces, sizes, merged, reach: float, key, known: d
     than lower ones, the plate 770 at 0.85 against 670 at 0.75). The triangles' results are ``known`` (``tris``: sorted
     keys of their corners' clusters, ``far``) for the next round, and taken from there."""
     tris = _fans(faces, sizes)
-    tris = tris[merged[tris].any(axis=1)]
+    touched = merged[tris]
+    tris = tris.take(np.flatnonzero(touched[:, 0] | touched[:, 1] | touched[:, 2]), axis=0)
     far = np.zeros(len(tris), dtype=bool)
     if len(key) and int(key.max()) < 1 << 21:  # a triangle's clusters' keys in one integer
         tri_key = (key[tris[:, 0]] << 42) | (key[tris[:, 1]] << 21) | key[tris[:, 2]]
@@ -235,7 +236,7 @@ def _strays(lattice, clusters, faces, sizes, merged, reach: float, key, known: d
         known["tris"] = np.concatenate([known["tris"], tri_key[new]])[order]
         known["far"] = np.concatenate([known["far"], far[new]])[order]
     bad = np.zeros(len(position), dtype=bool)
-    strays = tris[far]
+    strays = tris.take(np.flatnonzero(far), axis=0)
     top = levels[strays]
     bad[strays[top == top.max(axis=1)[:, None]]] = True
     return bad
@@ -266,7 +267,12 @@ def _onto_surface(lattice, clusters, moved, tol: float, key, known) -> np.ndarra
 
 
 def _fans(faces, sizes) -> np.ndarray:
-    """(T, 3) the fans of polygons."""
+    """(T, 3) the fans of polygons (quads first, then triangles: by rows; others one by one)."""
+    quads = np.count_nonzero(sizes == 4)
+    if quads == len(sizes) or (sizes[quads:] == 3).all() and (not quads or sizes[quads - 1] == 4):
+        square = faces[: 4 * quads].reshape(-1, 4)
+        halves = np.stack([square[:, :3], square[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+        return np.concatenate([halves, faces[4 * quads :].reshape(-1, 3)])
     start = np.cumsum(sizes) - sizes
     count = sizes - 2
     poly = np.repeat(np.arange(len(sizes)), count)
@@ -488,11 +494,13 @@ def _collapse(corners, inner, cluster, level):
     first: all their corners one cluster); then the corners at a vertex left in two faces only (a fin:
     two faces folded onto each other, where a lone vertex sits between two merged ones) dropped the same way, the
     vertex gone. Returns faces, sizes."""
-    corners = cluster[corners[level[corners[:, 0]] < inner]]  # the others vanish
-    repeats = corners == corners[:, [3, 0, 1, 2]]  # a corner equal to the one before it
-    sizes = 4 - repeats.view(np.int8) @ np.ones(4, dtype=np.int8)
+    rows = np.flatnonzero(level[corners[:, 0]] < inner)  # the others vanish
+    corners = cluster.take(corners.take(rows, axis=0))  # (take and compress: boolean rows index 5-10x slower)
+    keep = corners != corners[:, [3, 0, 1, 2]]  # not a corner equal to the one before it
+    sizes = keep.view(np.int8) @ np.ones(4, dtype=np.int8)
     alive = sizes >= 3
-    faces, sizes = corners[alive][~repeats[alive]], sizes[alive]
+    keep &= alive[:, None]
+    faces, sizes = corners.ravel().compress(keep.ravel()), sizes.compress(alive)
     for _ in range(2):
         fin = np.bincount(faces, minlength=len(cluster)) == 2
         if not fin.any():
@@ -528,11 +536,13 @@ def _failures(n_verts, faces, sizes) -> np.ndarray:
     quad = sizes == 4
     repeated = (c0 == c1) | (c0 == c2) | (c1 == c2) | (quad & ((c0 == c3) | (c1 == c3) | (c2 == c3)))
     bad[corners[repeated].ravel()] = True
-    # each undirected edge (with the bit of its direction) exactly twice, once each way: sorted, two in a row
-    edges = polygon_edges(faces, sizes)
+    # each undirected edge (with the bit of its direction) exactly twice, once each way: sorted, two in a row; the
+    # edges of the padded rows (a triangle's third c2 -> c2 left out)
+    tail = np.concatenate([c0, c1, c2.compress(quad), c3]).astype(np.int64)
+    head = np.concatenate([c1, c2, c3.compress(quad), c0]).astype(np.int64)
     n = np.int64(n_verts)
-    low, high = np.minimum(edges[:, 0], edges[:, 1]), np.maximum(edges[:, 0], edges[:, 1])
-    keys = np.sort(2 * (low * n + high) + (edges[:, 0] > edges[:, 1]))
+    low, high = np.minimum(tail, head), np.maximum(tail, head)
+    keys = np.sort(2 * (low * n + high) + (tail > head))
     undirected = keys >> 1
     start = np.flatnonzero(np.r_[True, undirected[1:] != undirected[:-1]])
     paired = np.diff(np.r_[start, len(keys)]) == 2
@@ -574,7 +584,7 @@ def _split_bent_quads(position, feature, merged, faces, sizes, tol):
         np.stack([bent[:, [0, 1, 2]], bent[:, [0, 2, 3]]], axis=1),
         np.stack([bent[:, [1, 2, 3]], bent[:, [1, 3, 0]]], axis=1),
     ).reshape(-1, 3)
-    keep = quads[flat]
+    keep = quads.take(np.flatnonzero(flat), axis=0)
     out_faces = np.concatenate([keep.ravel(), halves.ravel(), tris.ravel()])
     out_sizes = np.r_[np.full(len(keep), 4), np.full(len(halves) + len(tris), 3)]
     return out_faces, out_sizes
