@@ -469,10 +469,10 @@ def _keys(level, ids, rows) -> np.ndarray:
 
 def _clusters(vertices, code, keys: int, cls, known):
     """Each vertex's cluster (by its key ``code``, :func:`_keys`, of ``keys``), the clusters' positions (voxels: the
-    mean of their vertices) and normals (the sum of their vertices' ``vertices`` = (positions, normals) (V, 6)),
-    whether each is a crease or corner vertex, whether it merged vertices, and its key (the means and normals
-    ``known`` (keys, 6) by key, NaN where not yet, are taken from there and added to: a key's vertices are the same in
-    every round)."""
+    mean of their vertices') and normals (the sum of their vertices'), from ``vertices`` (V, 6): each vertex's
+    position and normal; whether each cluster is a crease or corner vertex, whether it merged vertices, and its key.
+    The means and normals ``known`` (keys, 6) by key (NaN where not yet) are taken from there and added to: a key's
+    vertices are the same in every round."""
     n = len(vertices)
     cluster, k = _numbered(code, keys)
     first = np.empty(k, dtype=np.int64)
