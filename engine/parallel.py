@@ -133,13 +133,26 @@ def run_split(
 
 
 def run_tasks(tasks, device) -> None:
-    """Call each of ``tasks`` (callables without arguments that launch independent work) from a Python thread of its
-    own on the CPU, one after the other on CUDA. The first error is re-raised in the caller."""
+    """Call ``tasks`` (callables without arguments that launch independent work) from as many Python threads as the
+    CPU has cores, each taking the next task as it finishes one; one after the other on CUDA. A thread per task made
+    the judges of 37 operands (a plate minus 36 bores) take turns with Python's lock and the page pool's 37 ways:
+    their kept surface 1.6-1.8 s. The first error is re-raised in the caller."""
     if wp.get_device(device).is_cuda or len(tasks) < 2 or cores() < 2:
         for task in tasks:
             task()
         return
-    run_split(lambda k, _n: tasks[k](), len(tasks), device, parts=len(tasks), min_dim=0, own_threads=True)
+    workers = min(len(tasks), cores())
+    taken, lock = iter(range(len(tasks))), threading.Lock()
+
+    def work(_k, _n):
+        while True:
+            with lock:
+                k = next(taken, None)
+            if k is None:
+                return
+            tasks[k]()
+
+    run_split(work, workers, device, parts=workers, min_dim=0, own_threads=True)
 
 
 def load_modules(modules, device) -> None:
