@@ -17,6 +17,8 @@ A plan is nested tuples over the operands (operand ``k`` is field ``k``):
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from . import runtime
 
 OPERATIONS = ("UNION", "INTERSECT", "DIFFERENCE")
@@ -62,13 +64,15 @@ def check_numbers(plan: tuple) -> None:
 
 def check_reach(plan: tuple, lo, hi, voxel: float) -> None:
     """Refuse, before any field is read or built, a plan whose blends, offsets and walls grow the operands' box
-    (``lo``, ``hi``) past the finest cells the octree addresses at ``voxel`` (the engine refuses it too, but only once
-    the fields are there). The growth counted is the least the engine's domains take, so nothing it accepts is refused.
+    (``lo``, ``hi``) past the finest cells the octree addresses at ``voxel``, or whose box lies so far from the world
+    origin that float32 positions cannot resolve the voxels (the engine refuses both too, but only once the fields
+    are there). The growth counted is the least the engine's domains take, so nothing it accepts is refused.
 
     Raises:
-        AasdfError: Naming the setting that grows the box most, and its value.
+        AasdfError: Naming the setting that grows the box most, and its value; or how far the box lies.
     """
     grown, name, value = _growth(plan)
+    runtime.engine().check_resolvable(np.asarray(lo) - grown, np.asarray(hi) + grown, voxel)
     span = (max(float(top - low) for low, top in zip(lo, hi, strict=True)) + 2.0 * grown) / voxel
     cells = runtime.engine().octree.MAX_CELLS_PER_AXIS - 1
     if grown > 0.0 and not span < cells:

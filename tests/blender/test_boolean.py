@@ -340,6 +340,19 @@ def test_cached_operands_moved_too_far_from_the_origin_are_refused_untouched(fre
     assert all(np.array_equal(v, local_vertices(obj)) for v, obj in zip(before, (a, b), strict=True))
 
 
+def test_operands_built_too_far_from_the_origin_are_refused_before_any_field(fresh_cache):
+    # a 2 m block minus a bore 100 km away at voxel 5 mm (float32 resolves 7.8 mm there): remeshed, refused once both
+    # fields were built (2 s); with kept faces the judge went on splitting pieces float32 could not tell apart
+    a = add_mesh_object("Block", *box_mesh(), location=(1e5, 1e5, 1e5))
+    b = add_mesh_object("Bore", *uv_sphere(0.3, rings=8, segments=16), location=(1e5 + 0.4, 1e5, 1e5))
+    objects = set(bpy.data.objects)
+    for keep in (False, True):
+        select(a, b)
+        with pytest.raises(RuntimeError, match="too far from the world origin for its voxel size"):
+            bpy.ops.aasdf.boolean(operation="DIFFERENCE", voxel_size=0.005, keep_faces=keep, hide_inputs=False)
+        assert cache.stats()["builds"] == 0 and set(bpy.data.objects) == objects
+
+
 def test_duplicates_of_one_geometry_share_one_field(fresh_cache):
     spot = add_mesh_object("Spot", *load_mesh("spot.obj"))
     ball = add_mesh_object("Ball", *uv_sphere(0.15, rings=16, segments=32))
