@@ -72,7 +72,6 @@ def check_reach(plan: tuple, lo, hi, voxel: float) -> None:
         AasdfError: Naming the setting that grows the box most, and its value; or how far the box lies.
     """
     grown, name, value = _growth(plan)
-    runtime.engine().check_resolvable(np.asarray(lo) - grown, np.asarray(hi) + grown, voxel)
     span = (max(float(top - low) for low, top in zip(lo, hi, strict=True)) + 2.0 * grown) / voxel
     cells = runtime.engine().octree.MAX_CELLS_PER_AXIS - 1
     if grown > 0.0 and not span < cells:
@@ -80,6 +79,12 @@ def check_reach(plan: tuple, lo, hi, voxel: float) -> None:
             f"The {name} of {value:g} needs a domain of {span:.4g} finest cells along an axis, more than the {cells} "
             f"the octree can address; use a smaller {name} or a larger voxel size"
         )
+    lo, hi = np.asarray(lo, np.float64) - grown, np.asarray(hi, np.float64) + grown
+    # where the same box about the origin would be resolved (else the voxel is too fine anywhere: the fields' memory
+    # check says so, naming the object)
+    engine = runtime.engine()
+    if float(np.spacing(np.float32(np.max(hi - lo)))) * engine.plan.MIN_ULPS_PER_CELL <= voxel:
+        engine.check_resolvable(lo, hi, voxel)
 
 
 def _growth(plan: tuple) -> tuple[float, str, float]:

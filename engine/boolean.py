@@ -313,7 +313,7 @@ def combine(
     """
     blend, mode, h = _options(a, b, blend, blend_mode, spacing)
     # refused before any work (the kept faces' judge split pieces float32 cannot tell apart, round after round)
-    check_resolvable(np.minimum(a.bounds[0], b.bounds[0]) - blend, np.maximum(a.bounds[1], b.bounds[1]) + blend, h)
+    check_resolvable(np.minimum(a.bounds[0], b.bounds[0]), np.maximum(a.bounds[1], b.bounds[1]), h)
     asked = (a, b, op, {"blend": blend, "spacing": spacing, "blend_mode": blend_mode})
     early = start_judge(combined(op, blend, a, b), h, a.device) if seams else None  # its kept faces' judge, beside
     expression = None
