@@ -410,7 +410,7 @@ def write_result_object(context, name, verts, tris, attributes=None, *, collecti
     """Create a mesh object from arrays, linked next to the active object, made active and the only selection.
 
     Args:
-        context: The operator's context (its active object's first collection receives the result).
+        context: The operator's context (the result goes beside its active object: :func:`result_collection`).
         name: Name of the new object and mesh.
         verts: (V, 3) float32 world-space vertices (the object gets the identity transform).
         tris: (F, 3) int32 triangles.
@@ -424,8 +424,7 @@ def write_result_object(context, name, verts, tris, attributes=None, *, collecti
     mesh = result_mesh(name, verts, tris, attributes, edge_cache)
     obj = bpy.data.objects.new(name, mesh)
     if collection is None:
-        active = context.active_object
-        collection = active.users_collection[0] if active is not None and active.users_collection else None
+        collection = result_collection(context.active_object, context.view_layer)
     (collection or context.scene.collection).objects.link(obj)
     if select:
         for other in context.selected_objects:
@@ -433,6 +432,25 @@ def write_result_object(context, name, verts, tris, attributes=None, *, collecti
         obj.select_set(True)
         context.view_layer.objects.active = obj
     return obj
+
+
+def result_collection(obj, view_layer):
+    """The collection a result written beside ``obj`` goes to: ``obj``'s first collection that this file owns (not
+    linked from a library: it takes no object) and that ``view_layer`` shows (not excluded nor disabled, and none of
+    its parents: a result there is neither seen nor selectable); None (the scene's collection) where none is."""
+    if obj is None:
+        return None
+    shown, todo = [], [view_layer.layer_collection]
+    while todo:  # the layer collections not excluded nor hidden, their children looked at in turn
+        layer = todo.pop()
+        if layer.exclude or layer.hide_viewport or layer.collection.hide_viewport:
+            continue
+        shown.append(layer.collection)
+        todo.extend(layer.children)
+    for collection in obj.users_collection:
+        if collection.library is None and any(collection == other for other in shown):
+            return collection
+    return None
 
 
 def update_result_object(obj, verts, tris, attributes=None, edge_cache=None):

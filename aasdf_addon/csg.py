@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import bpy
 
 from . import nodes, pipeline, plan, runtime
+from .bridge import result_collection
 from .operands import is_operand, refusal
 
 
@@ -108,7 +109,7 @@ def plan_tree(tree) -> list[OutputPlan]:
         elif target is not None and target in [item.obj for item in operands]:
             errors[out.name] = f"'{target.name}' is also an input of this output"
         first = operands[0].obj if operands else None
-        collection = first.users_collection[0] if first is not None and first.users_collection else None
+        collection = result_collection(first, bpy.context.view_layer)
         plans.append(OutputPlan(out.name, out.object_name, operands, steps, collection))
 
     plans = _in_order(plans, errors)

@@ -353,6 +353,36 @@ def test_operands_built_too_far_from_the_origin_are_refused_before_any_field(fre
         assert cache.stats()["builds"] == 0 and set(bpy.data.objects) == objects
 
 
+def test_a_result_goes_to_a_collection_of_the_file_the_view_layer_shows(fresh_cache, tmp_path):
+    # the active object's first collection received the result: one linked from a library refused it (a traceback
+    # after the work, an unlinked result object left behind), one excluded from the view layer hid it (and selecting it
+    # raised)
+    parts = bpy.data.collections.new("Parts")
+    add_mesh_object("Part", *box_mesh(), collection=parts)
+    bpy.data.libraries.write(str(tmp_path / "parts.blend"), {parts}, fake_user=True)
+    bpy.data.objects.remove(parts.objects[0])
+    bpy.data.collections.remove(parts)
+    with bpy.data.libraries.load(str(tmp_path / "parts.blend"), link=True) as (_, linked):
+        linked.collections = ["Parts"]
+    (parts,) = linked.collections
+    bpy.context.scene.collection.children.link(parts)
+    hidden = bpy.data.collections.new("Hidden")
+    bpy.context.scene.collection.children.link(hidden)
+    cutter = add_mesh_object("Cut", *box_mesh(half=(0.5, 0.5, 0.5)), location=(0.8, 0.8, 0.8), collection=hidden)
+    bpy.context.scene.collection.objects.link(cutter)  # (first in Hidden, then in the scene's collection)
+    bpy.context.view_layer.layer_collection.children["Hidden"].exclude = True
+    block = add_mesh_object("Block", *box_mesh(), location=(-0.8, 0.0, 0.0))
+    for base, keep in ((parts.objects[0], True), (cutter, False)):
+        select(base, block)
+        assert bpy.ops.aasdf.boolean(operation="UNION", resolution=48, keep_faces=keep, hide_inputs=False) == {
+            "FINISHED"
+        }
+        result = bpy.data.objects[boolean_op.last_run["object"]]
+        assert [c.name for c in result.users_collection] == ["Scene Collection"]
+        assert result.name in bpy.context.view_layer.objects and result.select_get()
+    assert all(obj.users_collection for obj in bpy.data.objects)  # no object left unlinked
+
+
 def test_duplicates_of_one_geometry_share_one_field(fresh_cache):
     spot = add_mesh_object("Spot", *load_mesh("spot.obj"))
     ball = add_mesh_object("Ball", *uv_sphere(0.15, rings=16, segments=32))
