@@ -89,7 +89,8 @@ def read_mesh_operand(evaluated, matrix) -> Operand:
             faces=faces,
             face_material=_attribute(mesh, "material_index", "value", np.int32, len(mesh.polygons)),
             face_smooth=~_attribute(mesh, "sharp_face", "value", bool, len(mesh.polygons)),
-            materials=[slot.material for slot in obj.material_slots],
+            # as the evaluated object shows them (a Set Material node's too), each the file's own material
+            materials=[None if slot.material is None else slot.material.original for slot in evaluated.material_slots],
             corner_count=len(mesh.loops),
             loop_start=_get(mesh.polygons, "loop_start", np.int32),
             corner_vert=corner_vert,

@@ -383,6 +383,36 @@ def test_a_result_goes_to_a_collection_of_the_file_the_view_layer_shows(fresh_ca
     assert all(obj.users_collection for obj in bpy.data.objects)  # no object left unlinked
 
 
+def test_a_material_set_by_geometry_nodes_reaches_the_result(fresh_cache):
+    # the operand's materials were its object's slots, not the evaluated ones: a cutter whose nodes set its material
+    # came out with an empty slot (or its object's own slot's material)
+    wood, steel = bpy.data.materials.new("Wood"), bpy.data.materials.new("Steel")
+    block = add_mesh_object("Block", *box_mesh(), materials=[wood])
+    cutter = add_mesh_object("Bore", np.zeros((0, 3)), np.zeros((0, 3), np.int32), location=(0.3, 0.2, 0.0))
+    cutter.data.materials.append(bpy.data.materials.new("Red"))  # the object's own slot, overridden by the nodes
+    group = bpy.data.node_groups.new("Bore", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    cylinder, paint = group.nodes.new("GeometryNodeMeshCylinder"), group.nodes.new("GeometryNodeSetMaterial")
+    cylinder.inputs["Radius"].default_value, cylinder.inputs["Depth"].default_value = 0.4, 3.0
+    paint.inputs["Material"].default_value = steel
+    group.links.new(cylinder.outputs["Mesh"], paint.inputs["Geometry"])
+    group.links.new(paint.outputs["Geometry"], group.nodes.new("NodeGroupOutput").inputs[0])
+    cutter.modifiers.new("Bore", "NODES").node_group = group
+    bpy.context.view_layer.update()
+    for keep in (True, False):
+        select(block, cutter)
+        assert bpy.ops.aasdf.boolean(operation="UNION", resolution=64, keep_faces=keep, hide_inputs=False) == {
+            "FINISHED"
+        }
+        mesh = bpy.data.objects[boolean_op.last_run["object"]].data
+        slots = np.empty(len(mesh.polygons), dtype=np.int32)
+        mesh.polygons.foreach_get("material_index", slots)
+        operand = np.empty(len(mesh.polygons), dtype=np.int32)
+        mesh.attributes["aasdf_operand"].data.foreach_get("value", operand)
+        shown = {mesh.materials[k] for k in np.unique(slots[operand == 1])}
+        assert shown == {steel} and {mesh.materials[k] for k in np.unique(slots[operand == 0])} == {wood}
+
+
 def test_duplicates_of_one_geometry_share_one_field(fresh_cache):
     spot = add_mesh_object("Spot", *load_mesh("spot.obj"))
     ball = add_mesh_object("Ball", *uv_sphere(0.15, rings=16, segments=32))
