@@ -44,6 +44,23 @@ def refusal(obj) -> str:
     return f"'{obj.name}' is {kind} and has no geometry: use a {OPERAND_TYPES_TEXT} object"
 
 
+def not_evaluated(obj, depsgraph) -> bool:
+    """Whether Blender leaves ``obj`` unevaluated (disabled in viewports, or in a collection excluded from the view
+    layer or disabled) while its geometry needs evaluating: a metaball, or an object with modifiers shown in the
+    viewport (read as it is, it lost them: an Array's copies, a Geometry Nodes mesh)."""
+    if obj.evaluated_get(depsgraph).is_evaluated:
+        return False
+    return obj.type == "META" or any(modifier.show_viewport for modifier in getattr(obj, "modifiers", ()))
+
+
+def unevaluated(obj) -> str:
+    """The sentence refusing an object Blender does not evaluate (:func:`not_evaluated`)."""
+    return (
+        f"'{obj.name}' is not evaluated (it is disabled in viewports, or its collection is excluded or disabled), "
+        "so its modifiers would be left out: enable it (hide it with H instead)"
+    )
+
+
 def selected_operands(context) -> list:
     """The active object (selected or not) when it has geometry, followed by the other selected objects."""
     active = context.active_object
@@ -56,10 +73,12 @@ def read_operands(objects, depsgraph) -> list:
     its world matrix and what its faces carry.
 
     Raises:
-        AasdfError: Naming the objects that have no geometry, or a text or curve that evaluates to no faces.
+        AasdfError: Naming the objects that have no geometry or that Blender does not evaluate (:func:`not_evaluated`),
+            or a text or curve that evaluates to no faces.
     """
     engine = runtime.engine()
     refused = [refusal(obj) for obj in objects if not is_operand(obj)]
+    refused += [unevaluated(obj) for obj in objects if is_operand(obj) and not_evaluated(obj, depsgraph)]
     if refused:
         raise engine.AasdfError("; ".join(refused))
     operands = []

@@ -69,6 +69,21 @@ def evaluated(fresh_cache):
 # ---- evaluation ----
 
 
+def test_an_input_blender_does_not_evaluate_is_refused_unless_it_has_nothing_to_evaluate(fresh_cache):
+    # cutters in a collection excluded from the view layer (or disabled in viewports) are not evaluated: read as they
+    # were, one with an Array modifier lost its copies, a Geometry Nodes cutter was "empty"
+    a, b, cutters, c1, _ = scene()
+    c1.modifiers.new("Array", "ARRAY").relative_offset_displace = (1.0, 0.0, 0.0)
+    bpy.context.view_layer.layer_collection.children["Cutters"].exclude = True
+    tree = build_tree(a, b, cutters)
+    with pytest.raises(RuntimeError, match=r"'C1' is not evaluated .* enable it \(hide it with H instead\)"):
+        bpy.ops.aasdf.evaluate_tree(tree=tree.name)
+    assert "Result" not in bpy.data.objects and cache.stats()["builds"] == 0
+    c1.modifiers["Array"].show_viewport = False  # nothing of its own to evaluate: read as it is
+    assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
+    assert is_watertight(world_arrays(bpy.data.objects["Result"])[1])
+
+
 def test_tree_equals_the_chain_of_boolean_operators(evaluated):
     tree, result, (a, b, _, c1, c2) = evaluated
     verts, tris = world_arrays(result)
