@@ -9,6 +9,7 @@ without geometry (other empties, cameras, lights) are refused by name, as is a t
 faces.
 """
 
+import bpy
 import numpy as np
 
 from . import bridge, runtime
@@ -95,11 +96,26 @@ def read_operands(objects, depsgraph) -> list:
         if pieces:
             operand = joined(operand, pieces)
         if obj.type != "MESH" and not len(operand.tris):
-            raise engine.AasdfError(
-                f"'{obj.name}' has no faces: give it an extrusion or a bevel (its Geometry settings) or fill it"
-            )
+            raise engine.AasdfError(no_faces(obj))
         operands.append(operand)
     return operands
+
+
+def no_faces(obj) -> str:
+    """The sentence refusing a text, curve, surface or metaball that evaluates to no faces, saying why where it can:
+    a metaball whose surface its family's base makes (Blender meshes a family as its base object, the one named
+    without a number), a text without characters, a curve without splines."""
+    name = obj.name
+    if obj.type == "META":
+        base = bpy.data.objects.get(name.rsplit(".", 1)[0])
+        if base is not None and base is not obj and base.type == "META":
+            family = base.name
+            return f"'{name}' is part of the metaball '{family}', whose object makes their surface: use '{family}'"
+    if obj.type == "FONT" and not obj.data.body.strip():
+        return f"'{name}' has no characters: type some text into it"
+    if obj.type in ("CURVE", "SURFACE") and not len(obj.data.splines):
+        return f"'{name}' has no splines: draw one into it"
+    return f"'{name}' has no faces: give it an extrusion or a bevel (its Geometry settings) or fill it"
 
 
 def instance_pieces(evaluated, matrix, depsgraph) -> list:

@@ -208,11 +208,25 @@ def test_surfaces_that_enclose_nothing_and_objects_without_geometry_are_refused_
     ring.data.bevel_depth = 0.0
     camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     bpy.context.scene.collection.objects.link(camera)
+    # why there are no faces, where it can be told: each was "has no faces: give it an extrusion or a bevel"
+    blank = text_object("Blank", extrude=0.2)
+    blank.data.body = "  "
+    bare = bpy.data.objects.new("Bare", bpy.data.curves.new("Bare", "CURVE"))
+    bare.data.bevel_depth = 0.1
+    balls = [bpy.data.objects.new(name, bpy.data.metaballs.new(name)) for name in ("Blob", "Blob.001")]
+    for k, ball in enumerate(balls):
+        ball.data.elements.new().co = (1.0 + 0.8 * k, 0.0, 0.0)
+    for obj in (bare, *balls):
+        bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.update()
     objects = len(bpy.data.objects)
     cases = {
         flat: "'Label' encloses no volume: give it a thickness or close it",
         ring: "'Wire' has no faces: give it an extrusion or a bevel",
         camera: "'Camera' is a camera and has no geometry: use a mesh, text, curve, surface or metaball object",
+        blank: "'Blank' has no characters: type some text into it",
+        bare: "'Bare' has no splines: draw one into it",
+        balls[1]: "'Blob.001' is part of the metaball 'Blob', whose object makes their surface: use 'Blob'",
     }
     for cutter, message in cases.items():
         select(block, cutter, active=block)
