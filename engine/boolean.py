@@ -43,7 +43,7 @@ from .operands import (
     mesh_sample,
     octet_leaf,
 )
-from .plan import byte_grid_fits, check_budget, check_resolvable, plan_domain
+from .plan import byte_grid_fits, check_budget, check_resolvable, check_voxel_size, plan_domain
 from .prune import KEEP_BAND, offset_to, operand_octets, prune_octets
 from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_source, to_frame, vec27i
 
@@ -309,10 +309,12 @@ def combine(
     Raises:
         TypeError, ValueError: On wrong operands or options.
         AasdfError: If the combined domain would not fit in memory, or lies so far from the world origin that float32
-            cannot resolve its voxels (:func:`.plan.check_resolvable`).
+            cannot resolve its voxels (:func:`.plan.check_resolvable`), or its voxels are below
+            :data:`.plan.MIN_VOXEL_SIZE`.
     """
     blend, mode, h = _options(a, b, blend, blend_mode, spacing)
     # refused before any work (the kept faces' judge split pieces float32 cannot tell apart, round after round)
+    check_voxel_size(h)
     check_resolvable(np.minimum(a.bounds[0], b.bounds[0]), np.maximum(a.bounds[1], b.bounds[1]), h)
     asked = (a, b, op, {"blend": blend, "spacing": spacing, "blend_mode": blend_mode})
     early = start_judge(combined(op, blend, a, b), h, a.device) if seams else None  # its kept faces' judge, beside

@@ -21,7 +21,7 @@ from .meshing import field_mesh
 from .octree import decode_codes
 from .ondemand import refined
 from .placement import Placement
-from .plan import available_memory, check_resolvable
+from .plan import available_memory, check_resolvable, check_voxel_size
 from .queries import code_proj, sample_field_kernel, source_ids_kernel
 from .sampling import FieldArg
 from .seams import kept_along_seams
@@ -159,7 +159,7 @@ class AdaptiveField:
         ``matrix``: (4, 4) array-like, applied after the field's current placement. Returns the placed field (the field
         itself for the identity). Raises ValueError if ``matrix`` is not a finite (4, 4) similarity (uneven scales and
         shears need a new field), AasdfError if float32 positions where it lands cannot resolve its voxels
-        (:func:`.plan.check_resolvable`).
+        (:func:`.plan.check_resolvable`) or it scales them below :data:`.plan.MIN_VOXEL_SIZE`.
         """
         matrix = np.asarray(matrix, dtype=np.float64)
         placement = Placement(matrix) if self.placement is None else self.placement.then(matrix)
@@ -167,6 +167,7 @@ class AdaptiveField:
             return self
         moved = copy.copy(self)
         moved.placement = None if placement.is_identity else placement
+        check_voxel_size(moved.world_voxel_size)
         check_resolvable(*moved.bounds, moved.world_voxel_size)
         return moved
 

@@ -27,6 +27,10 @@ BUILD_BYTES_PER_NODE = 160
 
 # Surfaces are refused so far from the world origin that float32 resolves less than this fraction of a cell there.
 MIN_ULPS_PER_CELL = 32.0
+
+# Voxels smaller than this (world units) are refused: the kernels' float32 products of several lengths underflow
+# (a 2e-7 block minus a bore at voxel 6.4e-9 came out open, at 1.6e-8 closed but no quad kept whole; 6.4e-8 as at 1).
+MIN_VOXEL_SIZE = 5e-8
 # Finest cells kept around the domain's content, as a build keeps them (padding 1 + 2).
 MARGIN_CELLS = 3
 
@@ -91,6 +95,16 @@ def plan_domain(lo, hi, voxel_size: float, levels: int, margin_cells: float):
     return origin, dims
 
 
+def check_voxel_size(spacing: float) -> None:
+    """Refuse (AasdfError) a finest spacing below MIN_VOXEL_SIZE world units."""
+    if spacing < MIN_VOXEL_SIZE:
+        raise AasdfError(
+            f"The voxel size {spacing:.3g} is below {MIN_VOXEL_SIZE:g}, where float32 products of lengths underflow "
+            "and surfaces come out open. Scale the objects up (Scene Units' Unit Scale keeps their displayed size) "
+            "or use a coarser resolution."
+        )
+
+
 def check_resolvable(lo, hi, spacing: float) -> float:
     """The float32 resolution (ulp) of world positions in the box ``lo``..``hi``; refused (AasdfError) where it is
     coarser than 1/MIN_ULPS_PER_CELL of ``spacing``: surfaces there would fall onto float32's grid."""
@@ -143,6 +157,7 @@ def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
     voxel_size = float(voxel_size)
     if not np.isfinite(voxel_size) or voxel_size <= 0.0:
         raise AasdfError(f"The voxel size must be a positive number, but got {voxel_size}.")
+    check_voxel_size(voxel_size)
     if int(levels) != levels or levels < 1:
         raise AasdfError(f"The number of levels must be an integer of at least 1, but got {levels}.")
     if int(padding) != padding or padding < 1:  # (with none, cubes the surface crosses lack nodes: it comes out open)
