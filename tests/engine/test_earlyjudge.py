@@ -97,15 +97,16 @@ def test_an_operand_that_passes_through_itself_is_made_about_its_crossings_at_on
 
 
 def test_a_boolean_refused_for_its_domain_stops_its_judge(monkeypatch):
-    # two small boxes far apart: each field is small, their boolean's domain more than the octree can address
+    # two small boxes side by side blended 1e4 wide: each field is small, their boolean's domain more than the octree
+    # can address (boxes 1e4 apart are refused before the judge starts: float32 cannot resolve their voxels there)
     started = []
     start = boolean.start_judge
     monkeypatch.setattr(boolean, "start_judge", lambda *args: started.append(start(*args)) or started[-1])
     near = normalised(box_mesh(), diagonal=0.1)
-    far = normalised(box_mesh(), center=(1e4, 0.0, 0.0), diagonal=0.1)
-    a, b = engine.build_fields([near, far], voxel_size=H / 8, refine="auto")
+    beside = normalised(box_mesh(), center=(0.05, 0.0, 0.0), diagonal=0.1)
+    a, b = engine.build_fields([near, beside], voxel_size=H / 8, refine="auto")
     with pytest.raises(engine.AasdfError, match="octree can address"):
-        engine.union(a, b, seams=True)
+        engine.union(a, b, blend=1e4, seams=True)
     waiting = threading.Thread(target=started[0].crossing)  # ends once the judge's thread has stopped
     waiting.start()
     waiting.join(timeout=30)
