@@ -46,19 +46,38 @@ def refusal(obj) -> str:
 
 
 def not_evaluated(obj, depsgraph) -> bool:
-    """Whether Blender leaves ``obj`` unevaluated (disabled in viewports, or in a collection excluded from the view
-    layer or disabled) while its geometry needs evaluating: a metaball, or an object with modifiers shown in the
-    viewport (read as it is, it lost them: an Array's copies, a Geometry Nodes mesh)."""
+    """Whether Blender leaves ``obj`` unevaluated (disabled in viewports, in a collection excluded from the view layer
+    or disabled, or not in the view layer at all) while it has something to evaluate: a metaball, modifiers shown in
+    the viewport, shape keys, constraints, a parent or animation (read as it is, it lost them: an Array's copies, a
+    Geometry Nodes mesh, a cutter where it was before its parent moved). A static mesh of its own is read as it is."""
     if obj.evaluated_get(depsgraph).is_evaluated:
         return False
-    return obj.type == "META" or any(modifier.show_viewport for modifier in getattr(obj, "modifiers", ()))
+    data = obj.data
+    return (
+        obj.type == "META"
+        or any(modifier.show_viewport for modifier in obj.modifiers)
+        or getattr(data, "shape_keys", None) is not None
+        or len(obj.constraints) > 0
+        or obj.parent is not None
+        or _animated(obj)
+        or _animated(data)
+    )
+
+
+def _animated(block) -> bool:
+    """Whether an object's or its data's animation (an action, drivers or NLA tracks) may move or change it."""
+    animation = getattr(block, "animation_data", None)
+    return animation is not None and (
+        animation.action is not None or len(animation.drivers) > 0 or len(animation.nla_tracks) > 0
+    )
 
 
 def unevaluated(obj) -> str:
     """The sentence refusing an object Blender does not evaluate (:func:`not_evaluated`)."""
     return (
-        f"'{obj.name}' is not evaluated (it is disabled in viewports, or its collection is excluded or disabled), "
-        "so its modifiers would be left out: enable it (hide it with H instead)"
+        f"'{obj.name}' is not evaluated (it is disabled in viewports, its collection is excluded or disabled, or it is "
+        "not in this view layer), so its modifiers, shape keys, constraints, parent or animation would be left out: "
+        "enable it (hide it with H instead) or link it into the scene"
     )
 
 

@@ -101,7 +101,7 @@ def check_voxel_size(spacing: float) -> None:
         raise AasdfError(
             f"The voxel size {spacing:.3g} is below {MIN_VOXEL_SIZE:g}, where float32 products of lengths underflow "
             "and surfaces come out open. Scale the objects up (Scene Units' Unit Scale keeps their displayed size) "
-            "or use a coarser resolution."
+            "or use a coarser resolution (a larger voxel size)."
         )
 
 
@@ -114,7 +114,7 @@ def check_resolvable(lo, hi, spacing: float) -> float:
         raise AasdfError(
             f"The surface lies too far from the world origin for its voxel size: float32 positions {extent:.4g} "
             f"away resolve only {ulp:.3g}, more than 1/{MIN_ULPS_PER_CELL:g} of the voxel size {spacing:.3g}. "
-            "Move the objects closer to the origin or use a coarser resolution."
+            "Move the objects closer to the origin or use a coarser resolution (a larger voxel size)."
         )
     return ulp
 

@@ -82,6 +82,11 @@ def test_an_input_blender_does_not_evaluate_is_refused_unless_it_has_nothing_to_
     c1.modifiers["Array"].show_viewport = False  # nothing of its own to evaluate: read as it is
     assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
     assert is_watertight(world_arrays(bpy.data.objects["Result"])[1])
+    holder = bpy.data.objects.new("Holder", None)
+    bpy.context.scene.collection.objects.link(holder)
+    c1.parent = holder  # read as it is, it would stay where it was when its parent moves
+    with pytest.raises(RuntimeError, match=r"'C1' is not evaluated .* parent or animation would be left out"):
+        bpy.ops.aasdf.evaluate_tree(tree=tree.name)
 
 
 def test_tree_equals_the_chain_of_boolean_operators(evaluated):
