@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import numbers
 import os
 import sys
 
@@ -309,6 +310,8 @@ def thick_plan(plan: dict, thickness) -> dict:
 def checked_plans(meshes, *, voxel_size, levels, padding, thickness=None) -> list[dict]:
     """:func:`check_meshes`, returning each mesh's :func:`plan_field` (:func:`thick_plan` where it has a thickness)."""
     meshes = list(meshes)
+    if isinstance(voxel_size, numbers.Real) and voxel_size > 0.0:  # (the voxel's fault: said before a mesh is named)
+        check_voxel_size(float(voxel_size))
     walls = thicknesses(thickness, len(meshes), voxel_size)
     plans = []
     for k, (verts, tris) in enumerate(meshes):

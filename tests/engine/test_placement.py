@@ -101,6 +101,8 @@ def test_voxels_too_small_for_float32_products_are_refused_built_or_placed():
     tiny = box_mesh(half=(1e-7, 1e-7, 1e-7))
     with pytest.raises(AasdfError, match=r"The voxel size 1e-08 is below 5e-08, .* Scale the objects up"):
         engine.build_field(*tiny, voxel_size=1e-8)
+    with pytest.raises(AasdfError, match=r"^The voxel size 1e-08 is below"):  # (not a mesh's fault: none named)
+        engine.build_fields([tiny, tiny], voxel_size=1e-8)
     field = engine.build_field(*box_mesh(), voxel_size=0.05)
     with pytest.raises(AasdfError, match=r"The voxel size 4.5e-08 is below 5e-08"):
         field.transformed(np.diag([9e-7, 9e-7, 9e-7, 1.0]))  # its voxels 0.05 x 9e-7
