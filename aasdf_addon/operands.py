@@ -111,13 +111,25 @@ def read_operands(objects, depsgraph) -> list:
             operand = pieces.pop(0)
             operand.obj, operand.uid, operand.matrix = obj, obj.session_uid, matrix
         if operand is None:
-            raise engine.AasdfError(f"'{obj.name}' instances no geometry: its collection has no {OPERAND_TYPES_TEXT}")
+            raise engine.AasdfError(no_instances(obj))
         if pieces:
             operand = joined(operand, pieces)
         if obj.type != "MESH" and not len(operand.tris):
             raise engine.AasdfError(no_faces(obj))
         operands.append(operand)
     return operands
+
+
+def no_instances(obj) -> str:
+    """The sentence refusing an empty that instances nothing: its collection has no geometry, or is disabled in
+    viewports (Blender instances nothing of it there)."""
+    collection = obj.instance_collection
+    if collection is not None and collection.hide_viewport and any(map(is_operand, collection.all_objects)):
+        return (
+            f"'{obj.name}' instances the collection '{collection.name}', which is disabled in viewports, so Blender "
+            "instances nothing of it: enable it in viewports"
+        )
+    return f"'{obj.name}' instances no geometry: its collection has no {OPERAND_TYPES_TEXT}"
 
 
 def no_faces(obj) -> str:

@@ -523,3 +523,9 @@ def test_instancing_on_vertices_and_a_collection_instance_take_part_by_their_ins
     select(block, instance)
     with pytest.raises(RuntimeError, match="'BoltInstance' instances no geometry"):
         bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=128, hide_inputs=False)
+    # a collection disabled in viewports is instanced as nothing: said so (it was "its collection has no mesh ...")
+    instance.instance_collection, asset.hide_viewport = asset, True
+    bpy.context.view_layer.update()
+    select(block, instance)
+    with pytest.raises(RuntimeError, match="'BoltInstance' instances the collection 'Bolt', which is disabled in vi"):
+        bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=128, hide_inputs=False)
