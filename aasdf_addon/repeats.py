@@ -9,6 +9,8 @@ and its reverse (opposite turns) both stay: together they are a wall of no thick
 
 import numpy as np
 
+from . import runtime
+
 # An odd multiplier for the faces' hashes (a 64-bit prime's digits); hashes that agree are checked corner by corner.
 _MIX = np.uint64(0x9E3779B97F4A7C15)
 
@@ -19,7 +21,8 @@ def repeated_faces(verts: np.ndarray, corner_vert: np.ndarray, loop_start: np.nd
     count = len(loop_start)
     if count < 2:
         return np.zeros(count, dtype=bool)
-    position = _welded(verts)[corner_vert].astype(np.int64)  # one id per distinct position
+    groups = runtime.engine().meshcheck.position_groups(verts)[1]  # one id per distinct position
+    position = groups[corner_vert]
     sizes = np.diff(np.r_[loop_start, len(corner_vert)])
     face = np.repeat(np.arange(count), sizes)
     k = np.arange(len(corner_vert)) - loop_start[face]
@@ -46,13 +49,3 @@ def repeated_faces(verts: np.ndarray, corner_vert: np.ndarray, loop_start: np.nd
     out[:] = False
     out[rows[same]] = True
     return out
-
-
-def _welded(verts: np.ndarray) -> np.ndarray:
-    """(V,) one id per distinct position."""
-    order = np.lexsort((verts[:, 2], verts[:, 1], verts[:, 0]))
-    rows = verts[order]
-    first = np.r_[True, (rows[1:] != rows[:-1]).any(axis=1)]
-    ids = np.empty(len(verts), dtype=np.int64)
-    ids[order] = np.cumsum(first) - 1
-    return ids
