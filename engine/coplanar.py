@@ -323,14 +323,17 @@ def tied_values(signs: list, index: int, own: float) -> list:
     """The leaves' values for evaluating an expression at samples of leaf ``index`` whose value is ``own``: each other
     leaf's sign (-1, 0, +1), or where it is tied to the leaf (+2 / -2: its face in the plane, one way or the other,
     :func:`coplanar_readings`), ``own`` / ``-own``."""
-    values = []
+    values, done = [], {}  # (one array may stand for many leaves: those outside everywhere, converted once)
     for j, s in enumerate(signs):
-        s = s.astype(np.float32)
         if j == index:
             values.append(np.full(len(s), own, np.float32))
+        elif id(s) in done:
+            values.append(done[id(s)])
         else:
-            tied = np.abs(s) == 2.0
-            values.append(np.where(tied, 0.5 * s * own, s).astype(np.float32) if tied.any() else s)
+            f = s.astype(np.float32)
+            tied = np.abs(f) == 2.0
+            done[id(s)] = np.where(tied, 0.5 * f * own, f).astype(np.float32) if tied.any() else f
+            values.append(done[id(s)])
     return values
 
 

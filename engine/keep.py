@@ -37,6 +37,7 @@ import warp as wp
 
 from . import verdicts
 from .coplanar import (
+    COPLANAR_VOXELS,
     TIES,
     coplanar_readings,
     coplanar_triangles,
@@ -51,9 +52,19 @@ from .defects import CROSSING_VOXELS, defects_and, own_defects
 from .expression import evaluate_signs, leaves, widest_blend
 from .judging import MAX_TABLE_LEAVES, PARTLY_TIE, FusedJudge, sign_patterns
 from .jumps import clear_of
+from .leafreads import LeafReads
 from .ondemand import built_on_demand, own_sides
 from .orient import patch_flips
-from .otherleaves import NEAR_BOX_VOXELS, NearRows, leaf_bvh, leaf_jumps, leaf_margin, mesh_leaf
+from .otherleaves import (
+    NEAR_BOX_VOXELS,
+    NearRows,
+    boxes_meet,
+    leaf_boxes,
+    leaf_bvh,
+    leaf_jumps,
+    leaf_margin,
+    mesh_leaf,
+)
 from .ownside import THIN, TINY_VOXELS, outward, side_at
 from .parallel import run_tasks
 from .precut import cut_strips, predicted_margins
@@ -212,7 +223,8 @@ class _Judge:
         self.spacing, self.slack = SAMPLE_VOXELS * voxel, SLACK_VOXELS * voxel
         self.ray_start = TINY_VOXELS * voxel  # (a gap's wall: :mod:`.ownside`)
         self.tiny = 1e-3 * voxel
-        self.bvhs, self.jumps = reads  # per leaf, :func:`leaf_bvh` and :func:`leaf_jumps`
+        # per leaf :func:`leaf_bvh`, :func:`leaf_jumps`, :func:`leaf_boxes`; and all read together (:mod:`.leafreads`)
+        self.bvhs, self.jumps, self.boxes, self.reads = reads
         own = _own_part(self.leaves[index], source, voxel, self.device)
         self.tris, self.defects, self.defect_mesh = source.tris.astype(np.int64), own.defects, own.defect_mesh
         self.avoid, self.avoiding = avoid, avoid is not None and len(avoid) > 0
@@ -230,7 +242,7 @@ class _Judge:
         self.coplanar = self._coplanar_faces(source)  # (T,) bool or None: sample by sample with their planes
         self.normals = None if self.coplanar is None else unit_normals(source.verts, self.tris)
         self.flush = {}  # (other leaf, whose): :meth:`_flush`
-        self.near = NearRows(self.bvhs, self.jumps)  # where each other leaf is read
+        self.near = NearRows(self.bvhs, self.jumps, self.boxes)  # where each other leaf is read
 
     def _coplanar_faces(self, source) -> np.ndarray | None:
         """(T,) bool the triangles in another leaf's plane (:func:`.coplanar.coplanar_triangles`) where the
@@ -241,7 +253,11 @@ class _Judge:
         cubes in a row, face to face, took over 4 GB)."""
         if widest_blend(self.expression) > 0.0:
             return None
-        meshes = [None if j == self.index else b for j, b in enumerate(self.bvhs)]
+        if not len(source.verts):
+            return None
+        low, high = source.verts.min(axis=0), source.verts.max(axis=0)
+        meets = boxes_meet(self.boxes, low, high, 2.0 * COPLANAR_VOXELS * self.voxel)  # (the others: none in a plane)
+        meshes = [None if j == self.index or not meets[j] else b for j, b in enumerate(self.bvhs)]
         flagged = np.zeros(len(self.tris), dtype=bool)
         for j, bits in enumerate(coplanar_triangles(source.verts, self.tris, meshes, self.voxel, self.device)):
             for bit, tie in TIES if bits is not None else ():
@@ -310,16 +326,25 @@ class _Judge:
         tied to the face's (+2 / -2)."""
         margin = np.full(len(points), reach, dtype=np.float32)
         signs, indexed = [], self.near.index(points)
+        pad = reach + NEAR_BOX_VOXELS * self.voxel
+        near_leaf, outside = self.near.near(indexed, pad), None
+        plain = [j for j in np.flatnonzero(near_leaf) if j != self.index and (planes is None or self.bvhs[j] is None)]
+        read = self.near.read_together(self.reads, indexed, plain, pad, reach)
         for j, other in enumerate(self.leaves):
             if j == self.index:
                 signs.append(np.full(len(points), -1, np.int8))
                 continue
+            if not near_leaf[j]:  # (no row near its box: outside it everywhere, one array for all such leaves)
+                outside = np.ones(len(points), np.int8) if outside is None else outside
+                signs.append(outside)
+                continue
             bvh, near, sign = self.bvhs[j], np.full(len(points), reach, np.float32), np.ones(len(points), np.int8)
-            at = self.near.rows(j, indexed, reach + NEAR_BOX_VOXELS * self.voxel)
+            at, values, distance = read.get(j) or (self.near.rows(j, indexed, pad), None, None)
             if not len(at):  # (none near: its surface farther than the reach, and outside it)
                 pass
             elif planes is None or bvh is None:
-                near[at], sign[at] = leaf_margin(other, bvh, self.jumps[j], points[at], self.band, reach, self.device)
+                reading = (self.band, reach, self.device, distance, values)
+                near[at], sign[at] = leaf_margin(other, bvh, self.jumps[j], points[at], *reading)
             else:  # where tied, its sign is the tie's: its field is read at the other points alone
                 d, tie = self._coplanar(j, points[at], planes[0][at], planes[1][at])
                 s, rows = (2 * tie).astype(np.int8), np.flatnonzero(tie == 0)
@@ -429,7 +454,8 @@ class _Judge:
         # the other leaves' signs the same all over each triangle; in other leaves' planes, where a face there begins
         # (tied) and the wall it begins at is no surface (it lies inside), the way the expression crosses
         varied = [flips.astype(np.int8)] if coplanar else signs[: self.index] + signs[self.index + 1 :]
-        varied = [s for s in varied if len(s) and s.min() != s.max()]  # (the rest: leaves far from every sample)
+        varied = list({id(s): s for s in varied if len(s)}.values())  # (one array may stand for many leaves)
+        varied = [s for s in varied if s.min() != s.max()]  # (the rest: leaves far from every sample)
         if varied:  # (one reduction for all of them)
             columns = np.stack(varied + [-s for s in varied], axis=1)
             low, minus_high = np.split(per_triangle_min(columns, local, len(used), first), 2, axis=1)
@@ -511,7 +537,9 @@ def kept_triangles(field, *, fused: bool = True, avoid=None, previous: list | No
         return []
     every = leaves(expression)
     # built once, before the leaves are judged side by side
-    reads = ([leaf_bvh(leaf, field.device) for leaf in every], [leaf_jumps(leaf, field.device) for leaf in every])
+    bvhs = [leaf_bvh(leaf, field.device) for leaf in every]
+    reads = (bvhs, [leaf_jumps(leaf, field.device) for leaf in every], leaf_boxes(bvhs))
+    reads += (LeafReads(every, bvhs, field.device),)
     judged = [
         (i, *next(iter(leaf.world_sources().items())))
         for i, leaf in enumerate(every)

@@ -51,6 +51,7 @@ ENGINE_MODULES = (
     "redistancing",
     "fieldops",
     "keep",
+    "leafreads",
     "coplanar",
     "judging",
     "samples",

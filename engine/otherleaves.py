@@ -37,10 +37,12 @@ def leaf_bvh(field, device):
     return next(iter(field.world_sources().values())).bvh(device)
 
 
-def leaf_values(field, bvh, points: np.ndarray, reach: float, device, distance=None) -> np.ndarray:
+def leaf_values(field, bvh, points: np.ndarray, reach: float, device, distance=None, values=None) -> np.ndarray:
     """(N,) float32 how far the leaf's surface is from each point (up to ``reach``), negative inside it: from its
-    mesh's ``bvh`` (:func:`leaf_bvh`) where it has one (or the unsigned ``distance`` given), else from its field."""
-    values = field.sample(points, method="linear")  # a tenth of MLS's time: signs, and distances within the slack
+    mesh's ``bvh`` (:func:`leaf_bvh`) where it has one (or the unsigned ``distance`` given), else from its field (or
+    its linear ``values`` given: :mod:`.leafreads`)."""
+    if values is None:  # a tenth of MLS's time: signs, and distances within the slack
+        values = field.sample(points, method="linear")
     if bvh is None:
         return np.clip(values, -reach, reach).astype(np.float32)
     distance = mesh_distances(bvh, points, reach, device) if distance is None else distance
@@ -57,12 +59,12 @@ def leaf_jumps(field, device):
     return JumpSpheres(jump_spheres(next(iter(field.world_sources().values()))), device)
 
 
-def leaf_margin(field, bvh, jumps, points, band: float, reach: float, device, distance=None) -> tuple:
-    """Per sample: how far the leaf's surface is (up to ``reach``; or ``distance``), and the leaf's sign there. A
-    field with jumps (an open mesh's, across its holes; :func:`leaf_jumps`) counts as near (0) wherever its sign
-    changes a band away along an axis, read near its defects, and where its value (read off its field) is below two
-    bands."""
-    values = leaf_values(field, bvh, points, reach, device, distance)
+def leaf_margin(field, bvh, jumps, points, band: float, reach: float, device, distance=None, values=None) -> tuple:
+    """Per sample: how far the leaf's surface is (up to ``reach``; or ``distance``), and the leaf's sign there
+    (``values``: :func:`leaf_values`'). A field with jumps (an open mesh's, across its holes; :func:`leaf_jumps`)
+    counts as near (0) wherever its sign changes a band away along an axis, read near its defects, and where its value
+    (read off its field) is below two bands."""
+    values = leaf_values(field, bvh, points, reach, device, distance, values)
     margin = np.abs(values)
     if jumps is not None:
         rows = np.flatnonzero(margin > band)  # (a value read off the field overstates a distance a little)
@@ -73,29 +75,67 @@ def leaf_margin(field, bvh, jumps, points, band: float, reach: float, device, di
     return margin, np.sign(values).astype(np.int8)
 
 
+def leaf_boxes(bvhs: list) -> list:
+    """Per leaf the bounding box of its mesh's triangles where placed, ``(low, high)`` float32 (3,) each, or None for a
+    leaf without a BVH (:func:`leaf_bvh`): found once a boolean, for every leaf's judge."""
+    out = []
+    for bvh in bvhs:
+        corners = None if bvh is None else bvh.points.numpy()
+        out.append(None if corners is None or not len(corners) else (corners.min(axis=0), corners.max(axis=0)))
+    return out
+
+
+def boxes_meet(boxes: list, low: np.ndarray, high: np.ndarray, pad: float) -> np.ndarray:
+    """(L,) bool the ``boxes`` (:func:`leaf_boxes`; None counts as everywhere) that come within ``pad`` of the box
+    ``low``-``high``, with a relative margin to spare: one test for all leaves before any is read row by row (a
+    plate's judge with 100 bores read each bore's rows a round, every bore's judge each of the 100 others')."""
+    lows = np.array([(-np.inf,) * 3 if b is None else b[0] for b in boxes], dtype=np.float64).reshape(-1, 3)
+    highs = np.array([(np.inf,) * 3 if b is None else b[1] for b in boxes], dtype=np.float64).reshape(-1, 3)
+    spare = float(pad) + 1e-5 * (float(np.abs(low).max(initial=0.0)) + float(np.abs(high).max(initial=0.0)) + pad)
+    return ((lows - spare <= high) & (highs + spare >= low)).all(axis=1)
+
+
 class NearRows:
     """The rows of a judge's samples each other leaf must be read at: all, but for a closed clean mesh's leaf (no
     jumps) only those within a pad of its mesh's bounding box. Farther out its surface is farther than the pad and its
     field outside it (positive), whatever it reads there: a row of coplanar cubes' judge reads each cube's samples in
     its neighbours' fields alone, a plate's judge each of 36 bores' fields about the bore alone. The samples are
-    sorted along x once a set (:meth:`index`), and each box finds its rows in that order by two binary searches."""
+    sorted along x once a set (:meth:`index`), and each box finds its rows in that order by two binary searches;
+    :meth:`near` first finds the leaves whose box comes near the samples' at all (``boxes``: :func:`leaf_boxes`)."""
 
-    def __init__(self, bvhs: list, jumps: list):
-        self.bvhs, self.jumps, self.boxes = bvhs, jumps, {}
+    def __init__(self, bvhs: list, jumps: list, boxes: list):
+        self.bvhs, self.jumps = bvhs, jumps
+        self.boxes = [None if j is not None else b for b, j in zip(boxes, jumps, strict=True)]
 
     @staticmethod
     def index(points: np.ndarray) -> dict:
         """``points`` to find rows of (sorted when first needed)."""
         return {"points": points}
 
+    def near(self, indexed: dict, pad: float) -> np.ndarray:
+        """(L,) bool the leaves that may have rows to read within ``pad`` (:meth:`rows` finds none for the others)."""
+        points = indexed["points"]
+        if not len(points):
+            return np.zeros(len(self.boxes), dtype=bool)
+        return boxes_meet(self.boxes, points.min(axis=0), points.max(axis=0), pad)
+
+    def read_together(self, reads, indexed: dict, leaves, pad: float, reach: float, distances: bool = True) -> dict:
+        """{j: (rows, values, distance)}: each of ``leaves`` (indices) that ``reads`` (:class:`.leafreads.LeafReads`)
+        reads together, at its :meth:`rows`, in one launch for all: its linear values and (with ``distances``) its
+        mesh's distances (None, None where it has no row)."""
+        rows = {j: self.rows(j, indexed, pad) for j in leaves if reads.batched[j]}
+        together = [j for j, at in rows.items() if len(at)]
+        points = indexed["points"]
+        found = reads.read([(j, points[rows[j]]) for j in together], reach, distances)
+        out = {j: (at, None, None) for j, at in rows.items()}
+        out.update({j: (rows[j], *read) for j, read in zip(together, found, strict=True)})
+        return out
+
     def rows(self, j: int, indexed: dict, pad: float) -> np.ndarray:
         """The rows of the :meth:`index`-ed points leaf ``j`` must be read at (sorted)."""
         points = indexed["points"]
-        if self.bvhs[j] is None or self.jumps[j] is not None:
+        if self.boxes[j] is None:
             return np.arange(len(points))
-        if j not in self.boxes:
-            corners = self.bvhs[j].points.numpy()
-            self.boxes[j] = (corners.min(axis=0), corners.max(axis=0))
         if "order" not in indexed:
             indexed["order"] = np.argsort(points[:, 0], kind="stable")
             indexed["x"] = points[indexed["order"], 0]

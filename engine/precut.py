@@ -110,10 +110,16 @@ def predicted_margins(judge, points: np.ndarray, reach: float) -> np.ndarray:
     point (N, 3) float32, up to ``reach``: the other leaves' values read off their fields (linear), its defects' mesh
     distances (module docstring: a prediction, the same whichever path the judge takes)."""
     margin, indexed = np.full(len(points), reach, dtype=np.float32), judge.near.index(points)
-    for j, other in enumerate(judge.leaves):
-        if j != judge.index:  # (a closed clean mesh's leaf near its box alone: :class:`.otherleaves.NearRows`)
-            at = judge.near.rows(j, indexed, reach + NEAR_BOX_VOXELS * judge.voxel)
-            margin[at] = np.minimum(margin[at], np.abs(other.sample(points[at], method="linear")))
+    pad = reach + NEAR_BOX_VOXELS * judge.voxel
+    near = judge.near.near(
+        indexed, pad
+    )  # (a closed clean mesh's leaf near its box alone: :class:`.otherleaves.NearRows`)
+    others = [j for j in np.flatnonzero(near) if j != judge.index]
+    read = judge.near.read_together(judge.reads, indexed, others, pad, reach, distances=False)
+    for j in others:
+        at, values, _ = read.get(j) or (judge.near.rows(j, indexed, pad), None, None)
+        values = judge.leaves[j].sample(points[at], method="linear") if values is None else values
+        margin[at] = np.minimum(margin[at], np.abs(values))
     if judge.defect_mesh is not None:
         margin = np.minimum(margin, mesh_distances(judge.defect_mesh, points, reach, judge.device))
     return margin

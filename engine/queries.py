@@ -24,6 +24,28 @@ from .sampling import (
 )
 
 
+@wp.func
+def beyond_domain(f: FieldArg, x: wp.vec3, xc: wp.vec3, out: float, phi: float) -> float:
+    """The value at a point ``x`` ``out`` outside the domain box, from ``phi`` read at its clamped point ``xc``. Both
+    are upper bounds of the distance and neither is below the distance to the domain box: the bound through the
+    clamped point, and the distance to the closest surface point stored at its leaf."""
+    through = wp.max(phi, 0.0) + out
+    at = locate_leaf(f, xc)
+    direct = wp.length(x - node_proj(f, at[0], at[1]))
+    return wp.max(wp.min(through, direct), out)
+
+
+@wp.func
+def linear_value(f: FieldArg, x: wp.vec3) -> float:
+    """The linear value at a point of the field's own frame, as :func:`sample_field_kernel` reads it (method 1)."""
+    xc = clamp_to_domain(f, x)
+    out = wp.length(x - xc)
+    phi = sample_linear(f, xc)
+    if out > 0.0:
+        phi = beyond_domain(f, x, xc, out, phi)
+    return phi
+
+
 @wp.kernel(enable_backward=False)
 def sample_field_kernel(
     f: FieldArg, points: wp.array[wp.vec3], method: int, values: wp.array[wp.float32], grads: wp.array[wp.vec3]
@@ -61,12 +83,7 @@ def sample_field_kernel(
         phi = sample_linear(f, xc)
         g = wp.vec3(0.0)
     if out > 0.0:
-        # Both are upper bounds of the distance and neither is below the distance to the domain box: the bound
-        # through the clamped point, and the distance to the closest surface point stored at its leaf.
-        through = wp.max(phi, 0.0) + out
-        at = locate_leaf(f, xc)
-        direct = wp.length(x - node_proj(f, at[0], at[1]))
-        phi = wp.max(wp.min(through, direct), out)
+        phi = beyond_domain(f, x, xc, out, phi)
         g = (x - xc) / out
     values[i] = phi
     grads[i] = g
