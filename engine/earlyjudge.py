@@ -28,14 +28,15 @@ import warp as wp
 
 from .carried import carried
 from .expression import Operation, leaves
-from .keep import gives_own_faces_up, kept_triangles, own_region
+from .keep import kept_triangles
 from .ondemand import along_seams_only, built_leaves, built_on_demand, crosses_itself, refined
+from .ownpart import gives_own_faces_up, own_region
 from .parallel import run_tasks
 
 
 def crossing_leaves(expression, voxel: float, device) -> list:
     """The leaves of a boolean's ``expression`` that pass through themselves or have defects other than holes
-    (:func:`.keep.gives_own_faces_up`), of those that may hold a part of their finest octets (:func:`partly_built`);
+    (:func:`.ownpart.gives_own_faces_up`), of those that may hold a part of their finest octets (:func:`partly_built`);
     their own parts found side by side (each kept with its mesh for the judge)."""
     pairs = list(zip(leaves(expression), leaves(built_leaves(expression)), strict=True))
     found = {}
@@ -139,7 +140,7 @@ class EarlyJudge:
 
 def _made_about_crossings(crossing: list, voxel: float, device) -> list:
     """The leaves of ``crossing`` (they pass through themselves) built whole and marked as crossing about their own
-    regions (:func:`.keep.own_region`), as :func:`.seams.kept_along_seams` would after the boolean."""
+    regions (:func:`.ownpart.own_region`), as :func:`.seams.kept_along_seams` would after the boolean."""
     run_tasks([lambda leaf=leaf: refined(leaf) for leaf in crossing], device)
     for leaf in crossing:
         crosses_itself(leaf, own_region(leaf, voxel), voxel)

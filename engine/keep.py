@@ -28,10 +28,6 @@ blend. A round's checks run in two kernel launches (:mod:`.judging`), sample by 
 
 from __future__ import annotations
 
-import weakref
-from dataclasses import dataclass
-from functools import partial
-
 import numpy as np
 import warp as wp
 
@@ -48,12 +44,11 @@ from .coplanar import (
     tied_values,
     unflushed,
 )
-from .defects import CROSSING_VOXELS, defects_and, own_defects
+from .defects import defects_and
 from .expression import evaluate_signs, leaves, widest_blend
 from .judging import MAX_TABLE_LEAVES, PARTLY_TIE, FusedJudge, sign_patterns
 from .jumps import clear_of
 from .leafreads import LeafReads
-from .ondemand import built_on_demand, own_sides
 from .orient import patch_flips
 from .otherleaves import (
     NEAR_BOX_VOXELS,
@@ -65,15 +60,16 @@ from .otherleaves import (
     leaf_margin,
     mesh_leaf,
 )
-from .ownside import THIN, TINY_VOXELS, outward, side_at
+from .ownpart import SPLIT_VOXELS, own_part
+from .ownside import THIN, TINY_VOXELS, side_at
 from .parallel import run_tasks
 from .precut import cut_strips, predicted_margins
 from .refine import merge_kept, restore_whole, straighten_borders
 from .rounds import DROPPED, KEPT, UNKNOWN, judge_unknown, split_rounds
-from .samples import edge_turns, per_triangle_min, triangle_samples
-from .slivers import Splitter, strip_parents
+from .samples import edge_turns, per_triangle_min, same_all_over, triangle_samples
+from .slivers import Splitter
 from .sources import mesh_distances
-from .trimeasures import triangle_measures, unit_normals
+from .trimeasures import unit_normals
 
 # Kept faces stay this many result voxels from any other surface and from their mesh's defects: the voxel surface of
 # the seams is joined to them there (the join takes about a voxel of it).
@@ -81,8 +77,6 @@ BAND_VOXELS = 1.0
 # Samples are this many voxels apart; a point of a triangle lies within SLACK of one of its samples.
 SAMPLE_VOXELS = 1.0
 SLACK_VOXELS = 0.75
-# A triangle partly keepable is split while its longest edge is above this many voxels.
-SPLIT_VOXELS = 1.5
 MAX_SPLIT_ROUNDS = 24
 # A kept border vertex this many voxels or less off the line through its neighbours on the border is collapsed, into
 # a border edge of at most STRAIGHT_RUN_VOXELS: a longer one is the apex of a fan of strip triangles as long, which
@@ -90,124 +84,10 @@ MAX_SPLIT_ROUNDS = 24
 # as long as the source triangles, 22 with runs of 4 voxels, 186 of 16).
 STRAIGHT_VOXELS = 1e-4
 STRAIGHT_RUN_VOXELS = 4.0
-# A triangle's own field is read this many voxels in front of and behind it (its sign must change there).
-SIDE_VOXELS = 0.5
 # Points to keep clear of (where a join gave kept faces up) count as defects this many voxels across (octahedra).
 AVOID_VOXELS = 1.0
 
 FOUND_FLAGS = ("signs_only", "own_only")  # what a judge finds for :mod:`.verdicts` besides each triangle's margin
-
-
-# ---- the leaf's own part ----
-@dataclass
-class _Own:
-    """What a leaf's own triangles give whatever the other leaves are: their defects (:func:`.defects.own_defects`: the
-    repeated triangles, and a mesh of every defect to measure distances to), each one's side of the leaf's own field
-    (:func:`.ownside.side_at`, half a voxel out), and which are slivers to split as strips
-    (:func:`.slivers.strip_parents`)."""
-
-    values: object  # the leaf field's values array it was read from (the same field: the same array); None: its mesh
-    offset: float
-    device: object
-    defects: np.ndarray  # (T,) bool: repeated triangles
-    side: np.ndarray  # (T,) int8
-    defect_mesh: object  # wp.Mesh or None
-    strips: tuple  # (strip, apex) per triangle
-    thin: int  # the side of a part thinner than the field sees (:func:`.ownside.outward`)
-    turns: tuple | None = None  # :func:`.samples.edge_turns` of its triangles where unplaced (a placed one's: found)
-    beyond_holes: bool = False  # a defect other than a hole's edge (:func:`.defects.own_defects`)
-
-
-# A leaf's own part, kept with its source mesh: an unplaced leaf's source is the same object at every boolean its
-# cached field enters (a drag's every move judges the unmoved operand's triangles against the moved one), a placed
-# leaf's is made anew (nothing kept). Entries go with their sources.
-_OWN: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def _own_part(leaf, source, voxel: float, device) -> _Own:
-    """The :class:`_Own` of a leaf and its (world) ``source``, from the last boolean that judged that source with the
-    same field and voxel size, else found."""
-    offset = SIDE_VOXELS * voxel
-    own = _OWN.get(source)
-    # (a field built on demand reads its sides off its mesh: the same however far it is refined)
-    same = own is not None and (own.values is leaf.values or own.values is None and built_on_demand(leaf))
-    if same and own.offset == offset and own.device == device:
-        return own
-    own = _placed_own(leaf, voxel, device)
-    if own is not None:
-        return own
-    verts, tris = source.verts, source.tris.astype(np.int64)
-    measures = triangle_measures(verts, tris)
-    centres, normals = measures.centres, measures.normals
-    # a field built on demand: off its mesh, or where that is not clear off its field with the octets there built
-    on_demand = built_on_demand(leaf)
-
-    def sides(turn: int, rows) -> np.ndarray:  # (a gap's walls face away from it on a mesh inside out: ownside)
-        reading = partial(side_at, rays=source.bvh(device), tiny=TINY_VOXELS * voxel, turn=turn)
-        args = (leaf, centres[rows], normals[rows], offset)
-        return own_sides(*args, reading, tris[rows]) if on_demand else reading(*args)
-
-    side = sides(1, slice(None))
-    # (from the faces not read internal: the same whichever way gaps are read)
-    thin = outward(side, measures.doubled_areas)
-    internal = np.flatnonzero(side == 0)
-    if thin < 0 and len(internal):  # inside out: the faces read internal read again, a gap's walls turned
-        side[internal] = sides(-1, internal)
-    side = np.where(side == THIN, thin, side).astype(np.int8)
-    # where the mesh passes through itself, some triangle has its own inside on both sides (an internal face): only
-    # then are its crossings looked for (the bunny's 69 k triangles take 0.07 s)
-    shortest = CROSSING_VOXELS * voxel if (side == 0).any() else None
-    defects, points, parts, beyond_holes = own_defects(verts, tris, shortest, device)
-    defect_mesh = None
-    if len(parts) and not defects.all():
-        defect_mesh = wp.Mesh(
-            points=wp.array(points, dtype=wp.vec3, device=device),
-            indices=wp.array(parts.reshape(-1), dtype=wp.int32, device=device),
-        )
-    strips = strip_parents(verts, tris, SPLIT_VOXELS * voxel, measures)
-    values = None if on_demand else leaf.values
-    own = _Own(values, offset, device, defects, side, defect_mesh, strips, thin, edge_turns(verts, tris), beyond_holes)
-    _OWN[source] = own
-    return own
-
-
-def gives_own_faces_up(leaf, voxel: float) -> bool:
-    """Whether a (mesh) leaf's faces are given up somewhere whatever the other leaves are, other than about its holes
-    (whose caps a field built on demand builds first): where some triangle has its own inside on both sides (it passes
-    through itself), or about a defect other than a hole's edge (a repeated triangle, an edge of more than two faces
-    or listed the same way by two); the voxel surface must be made there."""
-    own = _own_part(leaf, next(iter(leaf.world_sources().values())), voxel, leaf.device)
-    return bool((own.side == 0).any() or own.beyond_holes)
-
-
-def own_region(leaf, voxel: float) -> tuple[np.ndarray, np.ndarray]:
-    """Where a (mesh) leaf's faces may be given up whatever the other leaves are, in its own frame: its defects as the
-    judge measures distances to them (crossings included) and its triangles that read internal or repeat another (a
-    mesh of nothing else has no defect mesh), as ``(points (P, 3) float32, tris (D, 3) int32)``."""
-    frame = leaf.in_frame()
-    source = next(iter(frame.world_sources().values()))
-    own = _own_part(frame, source, voxel / (1.0 if leaf.placement is None else leaf.placement.scale), leaf.device)
-    points, tris = source.verts.astype(np.float32), source.tris[(own.side == 0) | own.defects].astype(np.int32)
-    if own.defect_mesh is None:
-        return points, tris
-    parts = own.defect_mesh.indices.numpy().reshape(-1, 3) + len(points)
-    return np.concatenate([points, own.defect_mesh.points.numpy()]), np.concatenate([tris, parts])
-
-
-def _placed_own(leaf, voxel: float, device) -> _Own | None:
-    """A placed leaf's :class:`_Own` from its unplaced source's (kept with it from move to move): a placement turns,
-    moves and scales it alike on every axis, so the sides and slivers are the same and the defects' mesh is placed.
-    None for an unplaced leaf, or a placement that mirrors (its triangles turn over: found afresh)."""
-    placement = leaf.placement
-    if placement is None or placement.mirrors or len(leaf.sources) != 1:
-        return None
-    own = _own_part(leaf.in_frame(), next(iter(leaf.sources.values())), voxel / placement.scale, device)
-    defect_mesh = own.defect_mesh
-    if defect_mesh is not None:
-        points = placement.to_world(defect_mesh.points.numpy()).astype(np.float32)
-        defect_mesh = wp.Mesh(points=wp.array(points, dtype=wp.vec3, device=device), indices=defect_mesh.indices)
-    parts = (own.defects, own.side, defect_mesh, own.strips, own.thin)
-    return _Own(leaf.values, SIDE_VOXELS * voxel, device, *parts, beyond_holes=own.beyond_holes)
 
 
 class _Judge:
@@ -225,7 +105,7 @@ class _Judge:
         self.tiny = 1e-3 * voxel
         # per leaf :func:`leaf_bvh`, :func:`leaf_jumps`, :func:`leaf_boxes`; and all read together (:mod:`.leafreads`)
         self.bvhs, self.jumps, self.boxes, self.reads = reads
-        own = _own_part(self.leaves[index], source, voxel, self.device)
+        own = own_part(self.leaves[index], source, voxel, self.device)
         self.tris, self.defects, self.defect_mesh = source.tris.astype(np.int64), own.defects, own.defect_mesh
         self.avoid, self.avoiding = avoid, avoid is not None and len(avoid) > 0
         if self.avoiding:
@@ -457,9 +337,7 @@ class _Judge:
         varied = list({id(s): s for s in varied if len(s)}.values())  # (one array may stand for many leaves)
         varied = [s for s in varied if s.min() != s.max()]  # (the rest: leaves far from every sample)
         if varied:  # (one reduction for all of them)
-            columns = np.stack(varied + [-s for s in varied], axis=1)
-            low, minus_high = np.split(per_triangle_min(columns, local, len(used), first), 2, axis=1)
-            same &= (low == -minus_high).all(axis=1)
+            same &= same_all_over(varied, local, len(used), first)
         if coplanar:  # a face in an earlier leaf's plane, both crossing there: that leaf's to keep
             margin = np.where(tied_to_earlier(signs, self.index) & crosses, 0.0, margin)
         bounds = np.stack([np.where(crosses, margin, -1.0), np.where(crosses, -margin, 1.0), margin], axis=1)

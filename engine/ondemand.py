@@ -417,11 +417,11 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
 
 
 # The source meshes a kept-faces judge found passing through themselves, or with defects other than holes
-# (:func:`.keep.gives_own_faces_up`): a boolean along its seams builds every finest octet of such an operand, whose
+# (:func:`.ownpart.gives_own_faces_up`): a boolean along its seams builds every finest octet of such an operand, whose
 # faces are given up about the crossings and defects (only the voxel surface is there, away from the seams), unless it
 # knows where they may be given up (``_REGIONS``).
 _CROSSING: weakref.WeakSet = weakref.WeakSet()
-# Per such source mesh: where its faces may be given up whatever the other operand is (:func:`.keep.own_region`: its
+# Per such source mesh: where its faces may be given up whatever the other operand is (:func:`.ownpart.own_region`: its
 # defects, crossings included, and its faces that read internal), as ``(voxel, BVH)`` in its own frame, at the voxel
 # size it was judged at. A boolean along its seams at that voxel size keeps the finest octets about it too, of both
 # operands (:func:`seam_octets`), instead of all of them: the voxel surface reaches under every face given up there.

@@ -127,3 +127,24 @@ def per_triangle_min(values: np.ndarray, tris: np.ndarray, n_verts: int, first: 
         lows = np.minimum.reduceat(values[n_verts:], first[own], axis=0)
         least[own] = np.minimum(least[own], lows)
     return least
+
+
+# From this many sign columns on, a triangle's samples are compared by one hash of all the columns (each sample's signs
+# weighted by odd 64-bit numbers and summed with wrap-around: equal signs give equal sums, different ones the same sum
+# with odds of about 2^-62) instead of column by column (a plate's judge with 100 bores reduced 200 columns a round).
+HASHED_FROM = 8
+_WEIGHTS = np.random.default_rng(20261206).integers(-(2**62), 2**62, 4096, dtype=np.int64) | 1
+
+
+def same_all_over(columns: list, tris: np.ndarray, n_verts: int, first: np.ndarray) -> np.ndarray:
+    """(T,) bool whether each triangle's samples (:func:`triangle_samples`) hold one value in every one of
+    ``columns`` ((N,) int8 each)."""
+    if len(columns) < HASHED_FROM or len(columns) > len(_WEIGHTS):
+        stacked = np.stack(columns + [-s for s in columns], axis=1)
+        low, minus_high = np.split(per_triangle_min(stacked, tris, n_verts, first), 2, axis=1)
+        return (low == -minus_high).all(axis=1)
+    hashed = np.zeros(len(columns[0]), dtype=np.int64)
+    for column, weight in zip(columns, _WEIGHTS, strict=False):
+        hashed += column.astype(np.int64) * weight  # (wraps around)
+    low, not_high = per_triangle_min(np.stack([hashed, ~hashed], axis=1), tris, n_verts, first).T
+    return low == ~not_high

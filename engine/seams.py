@@ -5,8 +5,8 @@ A boolean of fields built on demand (or of meshes' fields built whole, closed or
 (:func:`.hybrid.kept_surface`) joins the kept faces to the voxel surface there, the operands read as built. An
 operand with internal faces (that passes through itself) is read at every sample: it is built whole first, and the
 voxel surface made about where its faces may be given up too (its defects, crossings included, and its faces that
-read internal: :func:`.keep.own_region`). Where the voxel surface ends short of the kept faces (the judge gave up faces
-away from the seams), the whole result is made and joined instead.
+read internal: :func:`.ownpart.own_region`). Where the voxel surface ends short of the kept faces (the judge gave up
+faces away from the seams), the whole result is made and joined instead.
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import numpy as np
 
 from .earlyjudge import crossing_leaves
 from .hybrid import kept_surface
-from .keep import own_region
 from .ondemand import as_built, built_leaves, crosses_itself, refined
+from .ownpart import own_region
 
 
 def kept_along_seams(field, **options) -> dict:

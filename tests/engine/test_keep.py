@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 import engine
-from engine import carried, keep
+from engine import carried, keep, ownpart
 from tests.metrics import (
     distance_within,
     exact_boolean,
@@ -424,7 +424,7 @@ def test_a_placed_operand_is_judged_with_its_unplaced_sources_own_part(monkeypat
     matrix[:3, 3] = (0.01, -0.02, 0.0)
     placed = fa.transformed(matrix)
     reused = (fb | placed).kept_surface()
-    assert keep._OWN.get(next(iter(fa.sources.values()))) is not None  # found on the unplaced source
+    assert ownpart._OWN.get(next(iter(fa.sources.values()))) is not None  # found on the unplaced source
     monkeypatch.setattr(keep, "_placed_own", lambda leaf, voxel, device: None)
     carried.forget()  # (the points the first join gave faces up at would be kept clear of from the first)
     afresh = (fb | placed).kept_surface()
