@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 import engine
-from engine import carried, keep, ownpart
+from engine import carried, ownpart
 from tests.metrics import (
     distance_within,
     exact_boolean,
@@ -425,7 +425,7 @@ def test_a_placed_operand_is_judged_with_its_unplaced_sources_own_part(monkeypat
     placed = fa.transformed(matrix)
     reused = (fb | placed).kept_surface()
     assert ownpart._OWN.get(next(iter(fa.sources.values()))) is not None  # found on the unplaced source
-    monkeypatch.setattr(keep, "_placed_own", lambda leaf, voxel, device: None)
+    monkeypatch.setattr(ownpart, "_placed_own", lambda leaf, voxel, device: None)
     carried.forget()  # (the points the first join gave faces up at would be kept clear of from the first)
     afresh = (fb | placed).kept_surface()
     assert reused["kept"].sum() > 1000
@@ -526,15 +526,22 @@ def test_a_bore_keeps_its_sliver_wall_at_coarser_voxels(resolution):
 
 
 def test_a_closed_clean_leaf_is_read_at_the_samples_near_its_box_and_others_everywhere():
-    from engine.otherleaves import NearRows, leaf_bvh, leaf_jumps
+    from engine.otherleaves import NearRows, leaf_boxes, leaf_bvh, leaf_jumps
 
     cube = box_mesh((0.5, 0.5, 0.5), center=(1.0, 0.0, 0.0))
     hole = (cube[0], cube[1][2:])  # open: its field may jump, read everywhere
-    fields = engine.build_fields([cube, hole], voxel_size=0.1)
-    near = NearRows([leaf_bvh(f, "cpu") for f in fields], [leaf_jumps(f, "cpu") for f in fields])
+    far = box_mesh((0.5, 0.5, 0.5), center=(9.0, 0.0, 0.0))
+    fields = engine.build_fields([cube, hole, far], voxel_size=0.1)
+    bvhs = [leaf_bvh(f, "cpu") for f in fields]
+    near = NearRows(bvhs, [leaf_jumps(f, "cpu") for f in fields], leaf_boxes(bvhs))
     points = np.random.default_rng(4).uniform(-2.0, 3.0, size=(5000, 3)).astype(np.float32)
     indexed = near.index(points)
     rows = near.rows(0, indexed, 0.3)
     want = np.flatnonzero((np.abs(points - (1.0, 0.0, 0.0)) <= 0.5 + 0.3).all(axis=1))
     assert np.array_equal(rows, want) and 0 < len(rows) < len(points)
     assert np.array_equal(near.rows(1, indexed, 0.3), np.arange(len(points)))
+    assert len(near.rows(2, indexed, 0.3)) == 0
+    # the leaves whose box comes near the points' at all, and all their rows found together, the same rows
+    assert near.near(indexed, 0.3).tolist() == [True, True, False]
+    together = near.rows_of([0, 1, 2], indexed, 0.3)
+    assert all(np.array_equal(together[j], near.rows(j, indexed, 0.3)) for j in range(3))
