@@ -134,6 +134,35 @@ def evaluate(plan: tuple, fields: list, progress=None, *, seams: bool = False):
     return _fold(getattr(engine, _ENGINE_OPS[operation]), items, options, progress, seams)
 
 
+def read_whole(plan: tuple) -> set:
+    """The operands (field indices) a plan's booleans read whole: every one but the operands its last boolean reads
+    directly, which that boolean (made along its seams, for kept faces) reads only about them; a union of cutters, an
+    offset or a shell reads its operands' whole surface (their fields are best built whole, not refined on demand)."""
+    kind = plan[0]
+    if kind == "field":
+        return set()
+    if kind != "boolean":
+        return _fields(plan)
+    children = plan[4]
+    if plan[1] == "DIFFERENCE" and len(children) > 2:  # the first minus the cutters' union
+        direct = [0]
+    else:
+        direct = list(range(len(children)))
+        while len(direct) > 2:  # the pairs :func:`_fold` makes, level by level; an odd one out goes up a level
+            direct = [None if i + 1 < len(direct) else direct[i] for i in range(0, len(direct), 2)]
+    whole = set()
+    for k, child in enumerate(children):
+        whole |= _fields(child) if k not in direct or child[0] != "field" else set()
+    return whole
+
+
+def _fields(plan: tuple) -> set:
+    """Every operand (field index) in ``plan``."""
+    if plan[0] == "field":
+        return {plan[1]}
+    return set().union(*(_fields(child) for child in (plan[4] if plan[0] == "boolean" else [plan[-1]])))
+
+
 def _fold(op, items, options, progress, seams: bool = False):
     """``items`` combined pairwise, level by level: a balanced binary tree of ``op`` (the last one with ``seams``)."""
     items = list(items)

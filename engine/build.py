@@ -189,7 +189,8 @@ def build_fields(
 
     Args:
         meshes: Sequence of (vertices, triangles) pairs, as for :func:`build_field`.
-        voxel_size, levels, padding, device, refine: As for :func:`build_field`.
+        voxel_size, levels, padding, device: As for :func:`build_field`.
+        refine: As for :func:`build_field`: one value for every mesh, or one per mesh.
         field_ids: One id per mesh (default 0, 1, 2, ...).
         thickness: As for :func:`build_field`: one value for every mesh, or one per mesh (None: none).
     Returns:
@@ -198,17 +199,21 @@ def build_fields(
         ValueError, AasdfError: As :func:`check_meshes` and :func:`build_field`; messages about one mesh start with
             "Mesh <k>: ".
     """
-    meshes, refine = list(meshes), _checked_refine(refine)
+    meshes = list(meshes)
+    refine = list(refine) if isinstance(refine, (list, tuple)) else [refine] * len(meshes)
+    refine = [_checked_refine(r) for r in refine]
     field_ids = list(range(len(meshes))) if field_ids is None else [int(k) for k in field_ids]
-    if len(field_ids) != len(meshes):
-        raise ValueError(f"build_fields got {len(field_ids)} field ids for {len(meshes)} meshes")
+    if len(field_ids) != len(meshes) or len(refine) != len(meshes):
+        raise ValueError(
+            f"build_fields got {len(field_ids)} field ids and {len(refine)} refine values for {len(meshes)} meshes"
+        )
     plans = checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding, thickness=thickness)
     device, fields = _device(device), [None] * len(meshes)
     errors: dict = {}
 
     def build(k):
         try:
-            fields[k] = _build_planned(plans[k], device=device, field_id=field_ids[k], refine=refine)
+            fields[k] = _build_planned(plans[k], device=device, field_id=field_ids[k], refine=refine[k])
         except AasdfError as err:
             errors[k] = AasdfError(f"Mesh {k}: {err}")
             errors[k].__cause__ = err

@@ -332,3 +332,46 @@ def test_repeated_faces_are_the_same_corners_in_the_same_turn():
     loop_start = np.cumsum([0] + [len(f) for f in faces[:-1]]).astype(np.int32)
     corner_vert = np.concatenate(faces).astype(np.int32)
     assert repeated_faces(verts, corner_vert, loop_start).tolist() == [False, True, False, False, True, False]
+
+
+def test_the_last_boolean_reads_its_own_operands_about_its_seams_and_the_cutters_union_whole():
+    from aasdf.aasdf_addon.plan import boolean_plan, read_whole
+
+    assert read_whole(("field", 0)) == set()
+    assert read_whole(boolean_plan("UNION", 2)) == set()
+    assert read_whole(boolean_plan("DIFFERENCE", 2)) == set()
+    assert read_whole(boolean_plan("DIFFERENCE", 4)) == {1, 2, 3}  # the first minus the cutters' union
+    assert read_whole(boolean_plan("UNION", 3)) == {0, 1}  # (0 | 1) | 2: the odd one out goes up a level
+    assert read_whole(boolean_plan("INTERSECT", 4)) == {0, 1, 2, 3}  # (0 & 1) & (2 & 3)
+    nested = ("boolean", "UNION", 0.0, "ROUND", [("offset", 0.1, ("field", 0)), ("field", 1)])
+    assert read_whole(nested) == {0}  # an offset reads its operand's whole surface
+    assert read_whole(("shell", 0.1, "INSIDE", boolean_plan("UNION", 2))) == {0, 1}
+
+
+def test_a_block_minus_three_cutters_builds_the_cutters_whole_and_the_block_on_demand(fresh_cache, monkeypatch):
+    from aasdf.aasdf_addon import runtime
+
+    asked = []
+    engine = runtime.engine()
+    build_fields = engine.build_fields
+    monkeypatch.setattr(
+        engine, "build_fields", lambda meshes, **k: asked.append(k["refine"]) or build_fields(meshes, **k)
+    )
+    box = quad_box("Block")
+    cutters = []
+    for k in range(3):  # three shapes: three fields (duplicates would share one)
+        radius, x = 0.2 + 0.05 * k, 0.6 * k - 0.6
+        bpy.ops.mesh.primitive_cylinder_add(vertices=12, radius=radius, depth=3.0, location=(x, 0.2, 0.0))
+        cutters.append(bpy.context.active_object)
+    select(box, *cutters)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=RESOLUTION, hide_inputs=False) == {"FINISHED"}
+    assert asked == [["auto", "all", "all", "all"]]
+    kept = bpy.context.active_object
+    verts, tris = world_arrays(kept)
+    exact = 8.0 - 2.0 * 3.0 * (0.2**2 + 0.25**2 + 0.3**2)  # 12-sided bores 2 deep: 3 r^2 each a unit of depth
+    assert is_watertight(tris) and abs(mesh_volume(verts, tris) / exact - 1.0) < 1e-4  # measured 2.6e-5
+    asked.clear()
+    fresh_cache.clear()
+    select(box, *cutters)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=RESOLUTION, hide_inputs=False, keep_faces=False)
+    assert asked == [["all", "all", "all", "all"]]

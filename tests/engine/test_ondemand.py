@@ -407,6 +407,17 @@ def test_auto_builds_a_mesh_that_passes_through_itself_whole():
     assert engine.build_field(*normalised(box_mesh()), voxel_size=H, refine="auto").refiner is not None
 
 
+def test_build_fields_takes_one_refine_per_mesh(spot):
+    box = normalised(box_mesh())
+    whole, part = engine.build_fields([spot, box], voxel_size=H, refine=["all", "none"])
+    assert whole.refiner is None and whole.level_counts[0] > 0
+    assert part.refiner is not None and part.level_counts[0] == 0
+    with pytest.raises(ValueError, match="2 field ids and 1 refine values for 2 meshes"):
+        engine.build_fields([spot, box], voxel_size=H, refine=["all"])
+    with pytest.raises(ValueError, match="'refine' to be 'all', 'none' or 'auto'"):
+        engine.build_fields([spot, box], voxel_size=H, refine=["all", "some"])
+
+
 def test_an_unknown_refine_is_refused_before_any_work(spot):
     with pytest.raises(ValueError, match="'refine' to be 'all', 'none' or 'auto'"):
         engine.build_field(*spot, voxel_size=H, refine="seams")
