@@ -132,26 +132,60 @@ class NearRows:
         return out
 
     def rows_of(self, leaves, indexed: dict, pad: float) -> dict:
-        """{j: :meth:`rows`} for each of ``leaves``, the boxed ones found together: each box's slab of the points
-        sorted along x, all slabs filtered along y and z at once (a plate's judge read 100 bores' rows a round)."""
+        """{j: :meth:`rows`} for each of ``leaves``, the boxed ones found together: the points binned once into
+        squares in x and y about as wide as the boxes (their median padded width), each box's squares' points taken
+        and filtered as :meth:`rows` filters them (a plate's judge read 100 bores' rows a round, each in its own
+        slab of the points sorted along x)."""
         points = indexed["points"]
         out = {j: np.arange(len(points)) for j in leaves if self.boxes[j] is None}
         boxed = [j for j in leaves if self.boxes[j] is not None]
-        if not boxed:
+        if not boxed or not len(points):
+            out.update({j: np.zeros(0, np.int64) for j in boxed})
             return out
-        x = self._sorted(indexed)
         lo, hi = np.stack([self.boxes[j][0] for j in boxed]), np.stack([self.boxes[j][1] for j in boxed])
-        start = np.searchsorted(x, lo[:, 0].astype(np.float64) - pad, side="left")  # (as :meth:`rows`' scalars)
-        count = np.maximum(np.searchsorted(x, hi[:, 0].astype(np.float64) + pad, side="right") - start, 0)
-        box = np.repeat(np.arange(len(boxed)), count)
-        rows = indexed["order"][np.repeat(start - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))]
-        yz = points[rows, 1:]
-        inside = ((yz >= (lo[:, 1:] - pad)[box]) & (yz <= (hi[:, 1:] + pad)[box])).all(axis=1)
+        # the bounds as :meth:`rows` takes them: along x in float64 (its scalars), along y and z in float32
+        x_lo, x_hi = lo[:, 0].astype(np.float64) - pad, hi[:, 0].astype(np.float64) + pad
+        yz_lo, yz_hi = lo[:, 1:] - pad, hi[:, 1:] + pad
+        cell = max(float(np.median((hi - lo)[:, :2].max(axis=1))) + 2.0 * pad, 1e-30)
+        order, keys, origin, columns = self._binned(indexed, cell)
+        first = np.maximum(self._square(x_lo, origin[0], cell, columns[0]), 0)
+        last = np.minimum(self._square(x_hi, origin[0], cell, columns[0]), columns[0] - 1)
+        y_first = np.maximum(self._square(yz_lo[:, 0].astype(np.float64), origin[1], cell, columns[1]), 0)
+        y_last = np.minimum(self._square(yz_hi[:, 0].astype(np.float64), origin[1], cell, columns[1]), columns[1] - 1)
+        spans = np.maximum(last - first + 1, 0)
+        box = np.repeat(np.arange(len(boxed)), spans)  # one (box, column of squares) pair a row
+        column = first[box] + np.arange(int(spans.sum())) - np.repeat(np.cumsum(spans) - spans, spans)
+        start = np.searchsorted(keys, column * columns[1] + y_first[box], side="left")
+        count = np.maximum(np.searchsorted(keys, column * columns[1] + y_last[box], side="right") - start, 0)
+        box = np.repeat(box, count)
+        rows = order[np.repeat(start - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))]
+        x, yz = points[rows, 0], points[rows, 1:]
+        inside = (x >= x_lo[box]) & (x <= x_hi[box]) & ((yz >= yz_lo[box]) & (yz <= yz_hi[box])).all(axis=1)
         rows, box = rows[inside], box[inside]
         order = np.lexsort((rows, box))
         parts = np.split(rows[order], np.cumsum(np.bincount(box, minlength=len(boxed)))[:-1])
         out.update(zip(boxed, parts, strict=True))
         return out
+
+    @staticmethod
+    def _square(values: np.ndarray, origin: float, cell: float, count: int) -> np.ndarray:
+        """The column (or row) of squares each float64 coordinate falls in, clipped to the ``count`` there are."""
+        return np.clip(np.floor((values - origin) / cell), -1, count).astype(np.int64)
+
+    def _binned(self, indexed: dict, cell: float) -> tuple:
+        """The points binned into squares ``cell`` wide in x and y (found once a set and size): the rows in the order
+        of their squares' keys (column x rows + row), the keys so sorted, the squares' origin and their counts."""
+        found = indexed.get(("binned", cell))
+        if found is None:
+            points = indexed["points"]
+            origin = points[:, :2].min(axis=0).astype(np.float64)
+            top = points[:, :2].max(axis=0).astype(np.float64)
+            columns = (np.floor((top - origin) / cell).astype(np.int64) + 1).tolist()
+            square = [self._square(points[:, k].astype(np.float64), origin[k], cell, columns[k]) for k in range(2)]
+            keys = square[0] * columns[1] + square[1]
+            order = np.argsort(keys, kind="stable")
+            found = indexed[("binned", cell)] = (order, keys[order], origin, columns)
+        return found
 
     @staticmethod
     def _sorted(indexed: dict) -> np.ndarray:
