@@ -200,13 +200,13 @@ def build_fields(
             "Mesh <k>: ".
     """
     meshes = list(meshes)
-    refine = list(refine) if isinstance(refine, (list, tuple)) else [refine] * len(meshes)
+    refine = list(refine) if isinstance(refine, list | tuple) else [refine] * len(meshes)
     refine = [_checked_refine(r) for r in refine]
     field_ids = list(range(len(meshes))) if field_ids is None else [int(k) for k in field_ids]
-    if len(field_ids) != len(meshes) or len(refine) != len(meshes):
-        raise ValueError(
-            f"build_fields got {len(field_ids)} field ids and {len(refine)} refine values for {len(meshes)} meshes"
-        )
+    if len(field_ids) != len(meshes):
+        raise ValueError(f"build_fields got {len(field_ids)} field ids for {len(meshes)} meshes")
+    if len(refine) != len(meshes):
+        raise ValueError(f"build_fields got {len(refine)} refine values for {len(meshes)} meshes")
     plans = checked_plans(meshes, voxel_size=voxel_size, levels=levels, padding=padding, thickness=thickness)
     device, fields = _device(device), [None] * len(meshes)
     errors: dict = {}
