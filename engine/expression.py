@@ -13,6 +13,7 @@ not held.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -29,6 +30,16 @@ class Operation:
     a: object  # Operation or a leaf field
     b: object
 
+    @cached_property
+    def leaf_list(self) -> tuple:
+        """The leaves, left to right (found once: a judge of each of 100 leaves asked for them a few times a round)."""
+        return tuple(leaves(self.a) + leaves(self.b))
+
+    @cached_property
+    def widest(self) -> float:
+        """The largest blend radius in the tree (found once)."""
+        return max(self.blend, widest_blend(self.a), widest_blend(self.b))
+
 
 def expression_of(field):
     """The expression a field stands for: its own when it is a boolean, else the field itself (a leaf)."""
@@ -43,14 +54,14 @@ def combined(op: int, blend: float, a, b) -> Operation:
 def leaves(expression) -> list:
     """The leaf fields of an expression, left to right (a field used twice is listed twice)."""
     if isinstance(expression, Operation):
-        return leaves(expression.a) + leaves(expression.b)
+        return list(expression.leaf_list)
     return [expression]
 
 
 def widest_blend(expression) -> float:
     """The largest blend radius anywhere in the tree (0 for hard booleans and leaves)."""
     if isinstance(expression, Operation):
-        return max(expression.blend, widest_blend(expression.a), widest_blend(expression.b))
+        return expression.widest
     return 0.0
 
 

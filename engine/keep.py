@@ -53,6 +53,7 @@ from .orient import patch_flips
 from .otherleaves import (
     NEAR_BOX_VOXELS,
     NearRows,
+    box_arrays,
     boxes_meet,
     leaf_boxes,
     leaf_bvh,
@@ -136,7 +137,7 @@ class _Judge:
         if not len(source.verts):
             return None
         low, high = source.verts.min(axis=0), source.verts.max(axis=0)
-        meets = boxes_meet(self.boxes, low, high, 2.0 * COPLANAR_VOXELS * self.voxel)  # (the others: none in a plane)
+        meets = boxes_meet(box_arrays(self.boxes), low, high, 2.0 * COPLANAR_VOXELS * self.voxel)  # (others: no plane)
         meshes = [None if j == self.index or not meets[j] else b for j, b in enumerate(self.bvhs)]
         flagged = np.zeros(len(self.tris), dtype=bool)
         for j, bits in enumerate(coplanar_triangles(source.verts, self.tris, meshes, self.voxel, self.device)):
@@ -485,7 +486,7 @@ def _first_round(field, index: int, judge: _Judge, verts, tris) -> tuple[np.ndar
     and flip: the verdicts the last boolean over the same fields found, where its distances bound them
     (:mod:`.verdicts`), the rest judged whole, with distances read far enough for the next boolean to reuse where
     the leaves were judged before elsewhere (:func:`.verdicts.worth_recording`: a drag)."""
-    unplaced = next(iter(leaves(field.expression)[index].sources.values()))
+    unplaced = next(iter(judge.leaves[index].sources.values()))
     longest, turn = edge_turns(verts, tris) if judge.turns is None else judge.turns
     slack = judge.slack_of(longest)
     # moves are bounded by a leaf's distances read off its mesh (and where its sign may jump, by its jump spheres)

@@ -85,12 +85,18 @@ def leaf_boxes(bvhs: list) -> list:
     return out
 
 
-def boxes_meet(boxes: list, low: np.ndarray, high: np.ndarray, pad: float) -> np.ndarray:
-    """(L,) bool the ``boxes`` (:func:`leaf_boxes`; None counts as everywhere) that come within ``pad`` of the box
-    ``low``-``high``, with a relative margin to spare: one test for all leaves before any is read row by row (a
-    plate's judge with 100 bores read each bore's rows a round, every bore's judge each of the 100 others')."""
+def box_arrays(boxes: list) -> tuple[np.ndarray, np.ndarray]:
+    """(L, 3) float64 lows and highs of ``boxes`` (:func:`leaf_boxes`; None: everywhere), for :func:`boxes_meet`."""
     lows = np.array([(-np.inf,) * 3 if b is None else b[0] for b in boxes], dtype=np.float64).reshape(-1, 3)
     highs = np.array([(np.inf,) * 3 if b is None else b[1] for b in boxes], dtype=np.float64).reshape(-1, 3)
+    return lows, highs
+
+
+def boxes_meet(boxes, low: np.ndarray, high: np.ndarray, pad: float) -> np.ndarray:
+    """(L,) bool the ``boxes`` (:func:`box_arrays`) that come within ``pad`` of the box ``low``-``high``, with a
+    relative margin to spare: one test for all leaves before any is read row by row (a plate's judge with 100 bores
+    read each bore's rows a round, every bore's judge each of the 100 others')."""
+    lows, highs = boxes
     spare = float(pad) + 1e-5 * (float(np.abs(low).max(initial=0.0)) + float(np.abs(high).max(initial=0.0)) + pad)
     return ((lows - spare <= high) & (highs + spare >= low)).all(axis=1)
 
@@ -106,6 +112,7 @@ class NearRows:
     def __init__(self, bvhs: list, jumps: list, boxes: list):
         self.bvhs, self.jumps = bvhs, jumps
         self.boxes = [None if j is not None else b for b, j in zip(boxes, jumps, strict=True)]
+        self.arrays = box_arrays(self.boxes)
 
     @staticmethod
     def index(points: np.ndarray) -> dict:
@@ -117,7 +124,7 @@ class NearRows:
         points = indexed["points"]
         if not len(points):
             return np.zeros(len(self.boxes), dtype=bool)
-        return boxes_meet(self.boxes, points.min(axis=0), points.max(axis=0), pad)
+        return boxes_meet(self.arrays, points.min(axis=0), points.max(axis=0), pad)
 
     def read_together(self, reads, indexed: dict, leaves, pad: float, reach: float, distances: bool = True) -> dict:
         """{j: (rows, values, distance)}: each of ``leaves`` (indices) that ``reads`` (:class:`.leafreads.LeafReads`)

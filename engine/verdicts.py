@@ -85,8 +85,12 @@ def _setting(expression, index: int, voxel: float, band: float) -> tuple:
     return (_structure(expression), index, float(voxel), float(band))
 
 
+_IDENTITY = np.eye(4)
+_IDENTITY.flags.writeable = False
+
+
 def _frame(leaf) -> np.ndarray:
-    return np.eye(4) if leaf.placement is None else leaf.placement.matrix
+    return _IDENTITY if leaf.placement is None else leaf.placement.matrix
 
 
 def _corners(leaf) -> np.ndarray:
