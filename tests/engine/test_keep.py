@@ -531,7 +531,8 @@ def test_a_closed_clean_leaf_is_read_at_the_samples_near_its_box_and_others_ever
     cube = box_mesh((0.5, 0.5, 0.5), center=(1.0, 0.0, 0.0))
     hole = (cube[0], cube[1][2:])  # open: its field may jump, read everywhere
     far = box_mesh((0.5, 0.5, 0.5), center=(9.0, 0.0, 0.0))
-    fields = engine.build_fields([cube, hole, far], voxel_size=0.1)
+    around = box_mesh((2.6, 2.6, 2.6), center=(0.5, 0.5, 0.5))  # its box holds every point
+    fields = engine.build_fields([cube, hole, far, around], voxel_size=0.1)
     bvhs = [leaf_bvh(f, "cpu") for f in fields]
     near = NearRows(bvhs, [leaf_jumps(f, "cpu") for f in fields], leaf_boxes(bvhs))
     points = np.random.default_rng(4).uniform(-2.0, 3.0, size=(5000, 3)).astype(np.float32)
@@ -542,6 +543,10 @@ def test_a_closed_clean_leaf_is_read_at_the_samples_near_its_box_and_others_ever
     assert np.array_equal(near.rows(1, indexed, 0.3), np.arange(len(points)))
     assert len(near.rows(2, indexed, 0.3)) == 0
     # the leaves whose box comes near the points' at all, and all their rows found together, the same rows
-    assert near.near(indexed, 0.3).tolist() == [True, True, False]
-    together = near.rows_of([0, 1, 2], indexed, 0.3)
-    assert all(np.array_equal(together[j], near.rows(j, indexed, 0.3)) for j in range(3))
+    assert np.array_equal(near.rows(3, indexed, 0.0), np.arange(len(points)))
+    assert near.near(indexed, 0.3).tolist() == [True, True, False, True]
+    together = near.rows_of([0, 1, 2, 3], indexed, 0.3)
+    assert all(np.array_equal(together[j], near.rows(j, indexed, 0.3)) for j in range(4))
+    # a box that holds all but a few points: every row but theirs
+    inside = np.flatnonzero((np.abs(points - 0.5) <= 2.4).all(axis=1))
+    assert np.array_equal(near.rows(3, indexed, -0.2), inside) and 0 < len(inside) < len(points)
