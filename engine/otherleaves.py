@@ -153,7 +153,9 @@ class NearRows:
         # the bounds as :meth:`rows` takes them: along x in float64 (its scalars), along y and z in float32
         x_lo, x_hi = lo[:, 0].astype(np.float64) - pad, hi[:, 0].astype(np.float64) + pad
         yz_lo, yz_hi = lo[:, 1:] - pad, hi[:, 1:] + pad
-        cell = max(float(np.median((hi - lo)[:, :2].max(axis=1))) + 2.0 * pad, 1e-30)
+        least, most = self._bounds(indexed)  # (at most 4,096 squares a side: keys fit in an int64)
+        spread = float(np.max(most[:2].astype(np.float64) - least[:2].astype(np.float64)))
+        cell = max(float(np.median((hi - lo)[:, :2].max(axis=1))) + 2.0 * pad, spread / 4096.0, 1e-30)
         order, keys, origin, columns = self._binned(indexed, cell)
         first = np.maximum(self._square(x_lo, origin[0], cell, columns[0]), 0)
         last = np.minimum(self._square(x_hi, origin[0], cell, columns[0]), columns[0] - 1)

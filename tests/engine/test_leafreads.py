@@ -90,3 +90,27 @@ def _one_by_one(init):
         self.batched = [False] * len(leaves)  # each leaf read in launches of its own, as before
 
     return one_by_one
+
+
+def test_rows_found_together_are_the_rows_box_by_box():
+    from engine.otherleaves import NearRows
+
+    rng = np.random.default_rng(7)
+    partial = 0
+    for trial in range(24):  # thin, far, tiny, huge and everywhere boxes about clouds of every spread
+        points = rng.random((int(rng.integers(1, 3000)), 3)) * rng.choice([1e-3, 1.0, 1e6]) + rng.choice([-100.0, 3.0])
+        points[:, trial % 3] *= rng.choice([1.0, 1e-4])
+        points = points.astype(np.float32 if trial % 2 else np.float64)
+        low, high = points.min(axis=0), points.max(axis=0)
+        boxes = []
+        for k in range(20):
+            centre = (low + (high - low) * rng.uniform(-0.3, 1.3, 3)).astype(np.float32)
+            half = ((high - low) * rng.choice([0.0, 0.01, 0.1, 2.0]) * rng.random(3)).astype(np.float32)
+            boxes.append(None if k % 9 == 0 else (centre - half, centre + half))
+        near = NearRows([None] * 20, [None] * 20, boxes)
+        pad = float((high - low).max() * rng.choice([0.0, 0.01, 0.1]))
+        together = near.rows_of(list(range(20)), NearRows.index(points), pad)
+        for j in range(20):
+            assert np.array_equal(together[j], near.rows(j, NearRows.index(points), pad)), (trial, j)
+            partial += 0 < len(together[j]) < len(points)
+    assert partial > 60  # boxes that hold some of the points, not none or all (measured 135 of 480)
