@@ -415,6 +415,7 @@ def kept_triangles(field, *, fused: bool = True, avoid=None, previous: list | No
     if expression is None:
         return []
     every = leaves(expression)
+    _check_distinct_ids(every)
     # built once, before the leaves are judged side by side
     bvhs = [leaf_bvh(leaf, field.device) for leaf in every]
     reads = (bvhs, [leaf_jumps(leaf, field.device) for leaf in every], leaf_boxes(bvhs))
@@ -435,6 +436,21 @@ def kept_triangles(field, *, fused: bool = True, avoid=None, previous: list | No
 
     run_tasks([lambda k=k: task(k) for k in range(len(judged))], field.device)
     return out
+
+
+def _check_distinct_ids(every: list) -> None:
+    """Refuse leaves that share a field id but are different meshes: their faces could not be told apart (a kept
+    face's source triangle is looked up by id; two fields built by separate ``build_field`` calls both have id 0).
+    Copies of one field (placed, relabelled) share their mesh and may share the id."""
+    seen = {}
+    for leaf in every:
+        for field_id, source in leaf.sources.items():
+            if seen.setdefault(field_id, source).tris is not source.tris:
+                raise ValueError(
+                    f"Two operands of this boolean are different meshes with the same field id {field_id}: their "
+                    "kept faces cannot be told apart. Build them with engine.build_fields (ids 0, 1, ...), or give "
+                    "each its own id (build_field(..., field_id=k), or field.relabel(k))."
+                )
 
 
 def _avoid_reaches(field, source, avoid) -> bool:

@@ -550,3 +550,17 @@ def test_a_closed_clean_leaf_is_read_at_the_samples_near_its_box_and_others_ever
     # a box that holds all but a few points: every row but theirs
     inside = np.flatnonzero((np.abs(points - 0.5) <= 2.4).all(axis=1))
     assert np.array_equal(near.rows(3, indexed, -0.2), inside) and 0 < len(inside) < len(points)
+
+
+def test_different_meshes_with_one_field_id_are_refused_with_what_to_do_and_copies_of_one_field_keep():
+    plate, slot = box_mesh((1.0, 1.0, 0.2)), box_mesh((0.5, 0.1, 0.5), center=(0.3, 0.2, 0.0))
+    fp, fs = engine.build_field(*plate, voxel_size=0.04), engine.build_field(*slot, voxel_size=0.04)  # both id 0
+    with pytest.raises(ValueError, match="different meshes with the same field id 0.*engine.build_fields"):
+        engine.difference(fp, fs, seams=True).kept_surface()
+    kept = engine.difference(fp, fs.relabel(1), seams=True).kept_surface()
+    assert is_watertight(kept["tris"]) and kept["kept"].sum() > 0
+    moved = np.eye(4)
+    moved[:3, 3] = (-0.6, -0.5, 0.0)
+    copies = engine.difference(fp, engine.union(fs.relabel(1), fs.relabel(1).transformed(moved)), seams=True)
+    twice = copies.kept_surface()  # one mesh placed twice under one id: its faces are the same triangles
+    assert is_watertight(twice["tris"]) and twice["kept"].sum() > kept["kept"].sum()
