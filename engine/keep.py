@@ -136,8 +136,7 @@ class _Judge:
             return None
         if not len(source.verts):
             return None
-        low, high = source.verts.min(axis=0), source.verts.max(axis=0)
-        meets = boxes_meet(box_arrays(self.boxes), low, high, 2.0 * COPLANAR_VOXELS * self.voxel)  # (others: no plane)
+        meets = boxes_meet(box_arrays(self.boxes), *source.box(), 2.0 * COPLANAR_VOXELS * self.voxel)  # (others: none)
         meshes = [None if j == self.index or not meets[j] else b for j, b in enumerate(self.bvhs)]
         flagged = np.zeros(len(self.tris), dtype=bool)
         for j, bits in enumerate(coplanar_triangles(source.verts, self.tris, meshes, self.voxel, self.device)):
@@ -418,7 +417,7 @@ def kept_triangles(field, *, fused: bool = True, avoid=None, previous: list | No
     _check_distinct_ids(every)
     # built once, before the leaves are judged side by side
     bvhs = [leaf_bvh(leaf, field.device) for leaf in every]
-    reads = (bvhs, [leaf_jumps(leaf, field.device) for leaf in every], leaf_boxes(bvhs))
+    reads = (bvhs, [leaf_jumps(leaf, field.device) for leaf in every], leaf_boxes(every))
     reads += (LeafReads(every, bvhs, field.device),)
     judged = [
         (i, *next(iter(leaf.world_sources().items())))

@@ -75,13 +75,13 @@ def leaf_margin(field, bvh, jumps, points, band: float, reach: float, device, di
     return margin, np.sign(values).astype(np.int8)
 
 
-def leaf_boxes(bvhs: list) -> list:
-    """Per leaf the bounding box of its mesh's triangles where placed, ``(low, high)`` float32 (3,) each, or None for a
-    leaf without a BVH (:func:`leaf_bvh`): found once a boolean, for every leaf's judge."""
+def leaf_boxes(leaves: list) -> list:
+    """Per leaf the bounding box of its mesh's triangles where placed (:meth:`.sources.SourceMesh.box`, the vertices
+    its BVH holds: :func:`leaf_bvh`), ``(low, high)`` float32 (3,) each, or None for a leaf without one."""
     out = []
-    for bvh in bvhs:
-        corners = None if bvh is None else bvh.points.numpy()
-        out.append(None if corners is None or not len(corners) else (corners.min(axis=0), corners.max(axis=0)))
+    for leaf in leaves:
+        source = next(iter(leaf.world_sources().values())) if mesh_leaf(leaf) else None
+        out.append(None if source is None or not len(source.verts) else source.box())
     return out
 
 
@@ -121,10 +121,10 @@ class NearRows:
 
     def near(self, indexed: dict, pad: float) -> np.ndarray:
         """(L,) bool the leaves that may have rows to read within ``pad`` (:meth:`rows` finds none for the others)."""
-        points = indexed["points"]
-        if not len(points):
+        bounds = self._bounds(indexed)
+        if bounds is None:
             return np.zeros(len(self.boxes), dtype=bool)
-        return boxes_meet(self.arrays, points.min(axis=0), points.max(axis=0), pad)
+        return boxes_meet(self.arrays, *bounds, pad)
 
     def read_together(self, reads, indexed: dict, leaves, pad: float, reach: float, distances: bool = True) -> dict:
         """{j: (rows, values, distance)}: each of ``leaves`` (indices) that ``reads`` (:class:`.leafreads.LeafReads`)
@@ -186,9 +186,8 @@ class NearRows:
         of their squares' keys (column x rows + row), the keys so sorted, the squares' origin and their counts."""
         found = indexed.get(("binned", cell))
         if found is None:
-            points = indexed["points"]
-            origin = points[:, :2].min(axis=0).astype(np.float64)
-            top = points[:, :2].max(axis=0).astype(np.float64)
+            points, (least, most) = indexed["points"], self._bounds(indexed)
+            origin, top = least[:2].astype(np.float64), most[:2].astype(np.float64)
             columns = (np.floor((top - origin) / cell).astype(np.int64) + 1).tolist()
             square = [self._square(points[:, k].astype(np.float64), origin[k], cell, columns[k]) for k in range(2)]
             keys = square[0] * columns[1] + square[1]

@@ -166,7 +166,7 @@ def test_a_row_of_cubes_reads_each_cube_only_near_it_and_keeps_what_reading_ever
 
     monkeypatch.setattr(keep, "leaf_margin", leaf_margin)
     near, near_reads = united()
-    monkeypatch.setattr(keep, "leaf_boxes", lambda bvhs: [None] * len(bvhs))  # every leaf read everywhere
+    monkeypatch.setattr(keep, "leaf_boxes", lambda leaves: [None] * len(leaves))  # every leaf read everywhere
     every, every_reads = united()
     assert near_reads < 0.5 * every_reads, (near_reads, every_reads)  # measured 6,517 of 28,249
     for key in ("verts", "tris", "kept", "triangle_id"):

@@ -534,7 +534,7 @@ def test_a_closed_clean_leaf_is_read_at_the_samples_near_its_box_and_others_ever
     around = box_mesh((2.6, 2.6, 2.6), center=(0.5, 0.5, 0.5))  # its box holds every point
     fields = engine.build_fields([cube, hole, far, around], voxel_size=0.1)
     bvhs = [leaf_bvh(f, "cpu") for f in fields]
-    near = NearRows(bvhs, [leaf_jumps(f, "cpu") for f in fields], leaf_boxes(bvhs))
+    near = NearRows(bvhs, [leaf_jumps(f, "cpu") for f in fields], leaf_boxes(fields))
     points = np.random.default_rng(4).uniform(-2.0, 3.0, size=(5000, 3)).astype(np.float32)
     indexed = near.index(points)
     rows = near.rows(0, indexed, 0.3)
