@@ -27,6 +27,7 @@ from .sampling import (
     inside_domain,
     leaf_neighbours,
     level_spacing,
+    locate_below,
     locate_leaf,
     locate_node,
     node_coords,
@@ -204,28 +205,56 @@ def blend_sample(
 
 
 @wp.func
-def extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
-    """(phi, grad) from the operand's node containing ``x`` with the given spacing, or the coarser leaf containing it:
-    its value carried along its exact gradient (the direction from its closest point), i.e. the distance to its
-    tangent plane — exactly its own value where a node of the operand sits at ``x``. Cheap; used for the coarse levels
-    of a result (``spacing``: theirs). Also returns that node."""
-    xf = to_frame(f, x)
-    xc = clamp_to_domain(f, xf)
-    leaf = locate_node(f, xc, wp.max(int(wp.round(wp.log2(spacing / (f.voxel_size * f.scale)))), 0))
-    s = level_spacing(f, leaf[1])
-    centre = node_center(f.origin, s, node_coords(f, leaf[0]))
-    phi = f.values[leaf[0]]
-    n = -wp.vec3(f.proj[leaf[0]])  # from its closest point to the node
+def _tangent_plane(f: FieldArg, xc: wp.vec3, node: wp.vec2i):
+    """(phi, grad, sure) at ``xc`` (the field's frame, in its domain) from node ``node`` (index, level): its value
+    carried along its exact gradient (the direction from its closest point), i.e. the distance to its tangent plane,
+    and whether that keeps the node's side: it does where the node's value is farther from zero than ``xc`` is from
+    the node (the field is 1-Lipschitz). Nearer, the plane can cross to the other side (beside an edge of a box, the
+    plane of a node off the edge runs into the outside along the face). A coarse leaf holds no surface, so it is sure
+    of its side all over: where its plane crosses, the distance to its closest point (the edge's, there)."""
+    s = level_spacing(f, node[1])
+    centre = node_center(f.origin, s, node_coords(f, node[0]))
+    phi = f.values[node[0]]
+    side = wp.where(phi < 0.0, -1.0, 1.0)
+    n = -wp.vec3(f.proj[node[0]])  # from its closest point to the node
     ln = wp.length(n)
     g = wp.vec3(0.0)
     if ln > 0.0:
-        g = wp.where(phi < 0.0, -1.0, 1.0) * n / ln
-    phi = phi + wp.dot(g, xc - centre)
+        g = side * n / ln
+    plane = phi + wp.dot(g, xc - centre)
+    if wp.abs(phi) >= f.lipschitz * wp.length(xc - centre) + LEAF_SLACK * wp.abs(phi):
+        return plane, g, True
+    if node[1] == 0 or plane * side > 0.0:
+        return plane, g, node[1] > 0 and f.child[node[0] - f.fine_count] < 0
+    if f.child[node[0] - f.fine_count] >= 0:
+        return plane, g, False
+    d = xc - stored_proj(f, node[0], centre, s)
+    ld = wp.length(d)
+    if ld > 0.0:
+        g = side * d / ld
+    return side * ld, g, True
+
+
+@wp.func
+def extrapolate(f: FieldArg, x: wp.vec3, spacing: float):
+    """(phi, grad) from the operand's node containing ``x`` with the given spacing, or the coarser leaf containing it:
+    the distance to its tangent plane (:func:`_tangent_plane`), exactly its own value where a node of the operand sits
+    at ``x``. Cheap; used for the coarse levels of a result (``spacing``: theirs). Where that plane may read the wrong
+    side, the plane of the leaf containing ``x``: a finest node's is off by less than its distance to ``x`` (within a
+    voxel's half-diagonal). Also returns the node."""
+    xf = to_frame(f, x)
+    xc = clamp_to_domain(f, xf)
+    node = locate_node(f, xc, wp.max(int(wp.round(wp.log2(spacing / (f.voxel_size * f.scale)))), 0))
+    phi, g, sure = _tangent_plane(f, xc, node)
+    if not sure:
+        leaf = locate_below(f, xc, node, 0)
+        if leaf[0] != node[0]:
+            phi, g, sure = _tangent_plane(f, xc, leaf)
     out = wp.length(xf - xc)
     if out > 0.0:
         g = (xf - xc) / out
         phi = wp.max(phi, 0.0) + out
-    return to_world_sample(f, wp.vec4(phi, g[0], g[1], g[2])), leaf[0]
+    return to_world_sample(f, wp.vec4(phi, g[0], g[1], g[2])), node[0]
 
 
 @wp.func

@@ -162,9 +162,23 @@ def locate_node(f: FieldArg, x: wp.vec3, lowest: int) -> wp.vec2i:
     """(node index, level) of the node containing ``x`` (clamped into the domain) on level ``lowest``, or of the
     coarser leaf containing it: a descent from the dense top level through the child links."""
     level = f.levels - 1
-    s = level_spacing(f, level)
     pc = _top_cell_coords(f, x)  # the node's coordinates, followed down (not decoded from its code)
     node = f.top_offset + pc[0] + f.top_dims[0] * (pc[1] + f.top_dims[1] * pc[2])
+    return _descend(f, x, node, level, pc, lowest)
+
+
+@wp.func
+def locate_below(f: FieldArg, x: wp.vec3, node: wp.vec2i, lowest: int) -> wp.vec2i:
+    """:func:`locate_node` continued from node ``node`` (index, level), known to contain ``x``."""
+    if node[1] <= lowest:
+        return node
+    return _descend(f, x, node[0], node[1], node_coords(f, node[0]), lowest)
+
+
+@wp.func
+def _descend(f: FieldArg, x: wp.vec3, node: int, level: int, pc: wp.vec3i, lowest: int) -> wp.vec2i:
+    """The descent of :func:`locate_node` from node ``node`` on level ``level`` at coordinates ``pc``."""
+    s = level_spacing(f, level)
     while level > lowest and f.child[node - f.fine_count] >= 0:
         level = level - 1
         s = s * 0.5
