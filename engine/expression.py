@@ -42,13 +42,34 @@ class Operation:
 
 
 def expression_of(field):
-    """The expression a field stands for: its own when it is a boolean, else the field itself (a leaf)."""
-    return getattr(field, "expression", None) or field
+    """The expression a field stands for where it is: its own when it is a boolean (kept in its own frame: placed as
+    the field is, :func:`placed`), else the field itself (a leaf)."""
+    tree = getattr(field, "expression", None)
+    if tree is None:
+        return field
+    where = getattr(field, "placement", None)
+    return tree if where is None else placed(tree, where.matrix, where.scale)
 
 
 def combined(op: int, blend: float, a, b) -> Operation:
     """The expression of ``op`` applied to fields ``a`` and ``b`` (booleans contribute their own trees)."""
     return Operation(int(op), float(blend), expression_of(a), expression_of(b))
+
+
+def placed(expression, matrix, scale: float):
+    """``expression`` moved by ``matrix`` (a similarity of ``scale``): every leaf placed there
+    (``AdaptiveField.transformed``; a leaf used twice, once) and every blend scaled: a placed boolean's operands where
+    it is, for the faces a boolean over it keeps."""
+    moved = {}
+
+    def walk(node):
+        if isinstance(node, Operation):
+            return Operation(node.op, node.blend * scale, walk(node.a), walk(node.b))
+        if id(node) not in moved:
+            moved[id(node)] = node.transformed(matrix)
+        return moved[id(node)]
+
+    return walk(expression)
 
 
 def leaves(expression) -> list:

@@ -37,7 +37,8 @@ def kept_along_seams(field, **options) -> dict:
         for leaf in crossing:
             refined(leaf)
             crosses_itself(leaf, own_region(leaf, field.voxel_size), field.voxel_size)
-        field = field.refiner.along_seams()  # made again: the voxel surface also about where its faces are given up
+        again = field.refiner.along_seams()  # made again: the voxel surface also about where its faces are given up
+        field = again if field.placement is None else again.transformed(field.placement.matrix)
     seams = _read_as_built(as_built(field))
     surface = kept_surface(seams, **options, whole=whole)
     if not surface["stats"]["kept_fallback"]:
