@@ -34,6 +34,8 @@ import warp as wp
 from . import verdicts
 from .coplanar import (
     COPLANAR_VOXELS,
+    TIED_OPPOSITE,
+    TIED_SAME,
     TIES,
     coplanar_readings,
     coplanar_triangles,
@@ -140,6 +142,8 @@ class _Judge:
         meshes = [None if j == self.index or not meets[j] else b for j, b in enumerate(self.bvhs)]
         flagged = np.zeros(len(self.tris), dtype=bool)
         for j, bits in enumerate(coplanar_triangles(source.verts, self.tris, meshes, self.voxel, self.device)):
+            if bits is not None and self._facing(j) < 0:  # one way is the other's other way
+                bits = ((bits & TIED_SAME) << 1) | ((bits & TIED_OPPOSITE) >> 1)
             for bit, tie in TIES if bits is not None else ():
                 others = [k for k in range(len(self.leaves)) if k not in (j, self.index)]
                 if len(others) > MAX_TABLE_LEAVES:
@@ -256,7 +260,13 @@ class _Judge:
                 surface=our_surface,
             )  # fmt: skip
             distance[tied] = np.minimum(distance[tied], ends)
-        return distance, tie
+        return distance, tie * np.int8(self._facing(j))
+
+    def _facing(self, j: int) -> int:
+        """-1 where exactly one of this leaf and leaf ``j`` is placed by a reflection: its triangles, turned with
+        it, face inwards, so a face of one facing the other's way does so the other way round; else 1."""
+        mirrors = [getattr(self.leaves[k].placement, "mirrors", False) for k in (self.index, j)]
+        return -1 if mirrors[0] != mirrors[1] else 1
 
     def _flush(self, j: int, whose: str) -> tuple:
         """(flags as a Warp array, :func:`.coplanar.unflushed` BVH) of leaf ``j``'s triangles flush with this leaf's

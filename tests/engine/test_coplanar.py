@@ -16,8 +16,10 @@ OPS = {"UNION": engine.union, "INTERSECT": engine.intersection, "DIFFERENCE": en
 BOX = box_mesh(half=(1.0, 0.5, 0.5))
 
 
-def _kept(op: str, a, b, matrix=None) -> tuple[dict, float]:
-    v = np.concatenate([a[0], b[0]])
+def _kept(op: str, a, b, matrix=None, *, placed=None) -> tuple[dict, float]:
+    """The kept surface of ``a`` op ``b`` (``b`` placed by ``matrix``) at 1/256 of the diagonal of ``a`` and ``b``
+    (or of ``a`` and ``placed``: ``b`` where it is placed)."""
+    v = np.concatenate([a[0], (b if placed is None else placed)[0]])
     h = float(np.linalg.norm(v.max(0) - v.min(0))) / 256
     fa, fb = engine.build_fields([a, b], voxel_size=h, field_ids=[0, 1])
     if matrix is not None:
@@ -76,6 +78,25 @@ def test_coplanar_pairs_keep_their_faces_once_closed_and_exact(name):
     if len(second):
         points = sample_surface(s["verts"], second, 20_000, seed=1)
         assert (distance_within(s["verts"], first, points, h) > 1e-4 * h).mean() > 0.999
+
+
+@pytest.mark.parametrize("name", list(PAIRS))
+def test_a_mirrored_operand_keeps_its_coinciding_faces_as_an_unmirrored_one(name):
+    """The second box built about the origin and placed by a reflection (its triangles, turned with it, face in):
+    the same shape, so the same faces are kept. Its faces' ways were read turned: a box minus its mirrored copy came
+    out whole, the two intersected were remeshed."""
+    op, a, b, least = PAIRS[name]
+    centre = b[0].mean(axis=0)
+    matrix = np.diag([-1.0, 1.0, 1.0, 1.0])
+    matrix[:3, 3] = centre
+    s, h = _kept(op, a, ((b[0] - centre).astype(np.float32), b[1]), matrix, placed=b)
+    exact = exact_boolean(op, *a, *b)
+    assert is_watertight(s["tris"]) and abs(mesh_volume(s["verts"], s["tris"]) / mesh_volume(*exact) - 1.0) < 1e-3
+    assert mesh_area(s["verts"], s["tris"][s["kept"]]) >= least * mesh_area(*exact)
+    mirror = np.diag([-1.0, 1.0, 1.0, 1.0])
+    assert not len(_kept("DIFFERENCE", BOX, BOX, mirror)[0]["tris"])  # (the whole box before)
+    same = _kept("INTERSECT", BOX, BOX, mirror)[0]
+    assert len(same["tris"]) == 12 and same["kept"].all()  # (4,184 new triangles before)
 
 
 def test_coplanar_readings_skip_the_faces_in_a_points_plane_and_tie_its_sign():
