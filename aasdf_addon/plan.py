@@ -68,9 +68,14 @@ def check_reach(plan: tuple, lo, hi, voxel: float) -> None:
     origin that float32 positions cannot resolve the voxels (the engine refuses both too, but only once the fields
     are there). The growth counted is the least the engine's domains take, so nothing it accepts is refused.
 
+    Walls thinner than two voxels are refused as well.
+
     Raises:
-        AasdfError: Naming the setting that grows the box most, and its value; or how far the box lies.
+        AasdfError: Naming the setting that grows the box most, and its value; or how far the box lies; or a wall
+            too thin and the least one.
     """
+    for wall in _walls(plan):  # (named as the setting is: the engine's says "thickness")
+        runtime.engine().plan.checked_wall("Wall", wall, voxel)
     grown, name, value = _growth(plan)
     span = (max(float(top - low) for low, top in zip(lo, hi, strict=True)) + 2.0 * grown) / voxel
     cells = runtime.engine().octree.MAX_CELLS_PER_AXIS - 1
@@ -85,6 +90,14 @@ def check_reach(plan: tuple, lo, hi, voxel: float) -> None:
     engine = runtime.engine()
     if float(np.spacing(np.float32(np.max(hi - lo)))) * engine.plan.MIN_ULPS_PER_CELL <= voxel:
         engine.check_resolvable(lo, hi, voxel)
+
+
+def _walls(plan: tuple) -> list:
+    """The walls of a plan's shells."""
+    if plan[0] == "field":
+        return []
+    below = [w for child in (plan[4] if plan[0] == "boolean" else [plan[-1]]) for w in _walls(child)]
+    return below + ([float(plan[1])] if plan[0] == "shell" else [])
 
 
 def _growth(plan: tuple) -> tuple[float, str, float]:

@@ -64,9 +64,12 @@ def test_offsets_and_shells_that_cannot_work_are_refused_or_warned(fresh_cache):
     assert len(bpy.data.objects) == objects
     with pytest.raises(RuntimeError, match="finite number"):
         bpy.ops.aasdf.offset(distance=float("nan"))
-    with pytest.raises(RuntimeError, match="Error: .*"):  # a wall under two voxels: refused by the engine
+    # a wall under two voxels: refused before any field is built, named as the setting is
+    built = fresh_cache.stats()["builds"]
+    with pytest.raises(RuntimeError, match=r"A Wall of 0\.001 is thinner than two voxels .* use a Wall of at least"):
         bpy.ops.aasdf.shell(wall=0.001, resolution=64)
     assert len(bpy.data.objects) == objects
+    assert fresh_cache.stats()["builds"] == built
 
 
 # ---- thickness and surfaces that enclose nothing ----
