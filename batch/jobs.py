@@ -123,7 +123,7 @@ def read_jobs(path, defaults: dict) -> list:
         except BatchError as err:
             job.error = str(err)
         jobs.append(job)
-    return jobs
+    return _outputs_read_elsewhere(jobs)
 
 
 def jobs_from_dicts(entries, defaults: dict, folder: str = ".") -> list:
@@ -137,6 +137,22 @@ def jobs_from_dicts(entries, defaults: dict, folder: str = ".") -> list:
         except BatchError as err:
             job.error = str(err)
         jobs.append(job)
+    return _outputs_read_elsewhere(jobs)
+
+
+def _outputs_read_elsewhere(jobs: list) -> list:
+    """``jobs`` with those whose output another job reads refused: it would overwrite that job's input, before or
+    after it ran (jobs run in any order)."""
+    read = {}
+    for job in jobs:
+        if not job.error:
+            for path in [*job.options.get("inputs", []), *([job.options["blend"]] if job.options.get("blend") else [])]:
+                read.setdefault(os.path.normcase(os.path.abspath(path)), job.where)
+    for job in jobs:
+        if not job.error and job.output:
+            reader = read.get(os.path.normcase(os.path.abspath(job.output)))
+            if reader is not None:
+                job.error = f"{job.output} is an input of {reader}: write the result to another file"
     return jobs
 
 

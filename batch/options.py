@@ -154,6 +154,17 @@ def check_args(args):
     if args.blend_radius < 0.0:
         raise BatchError(f"--blend-radius must not be negative, not {args.blend_radius}")
     check_writable(args.output)
+    read = [*args.inputs, *([args.blend] if args.blend is not None else [])]
+    for written in (args.output, args.debug_volume):
+        if written is not None and any(same_file(written, path) for path in read):
+            raise BatchError(f"{written} is also an input: write the result to another file")
+
+
+def same_file(a, b) -> bool:
+    """Whether paths ``a`` and ``b`` name one file (the same path, or one file under two names)."""
+    if os.path.normcase(os.path.abspath(a)) == os.path.normcase(os.path.abspath(b)):
+        return True
+    return os.path.exists(a) and os.path.exists(b) and os.path.samefile(a, b)
 
 
 def check_writable(path) -> None:

@@ -1,5 +1,6 @@
 """``aasdf_batch.py`` run as a subprocess with the ``bpy`` module: outputs written, bad input refused cleanly."""
 
+import json
 import re
 import subprocess
 import sys
@@ -10,6 +11,7 @@ import numpy as np
 import pytest
 
 from aasdf.aasdf_addon import bridge
+from batch.jobs import read_jobs
 from tests.blender.scene import NO_OPENVDB, SHIPS_OPENVDB
 from tests.metrics import exact_boolean, hausdorff, merge_vertices, mesh_volume, unsigned_distance
 from tests.support import is_watertight, load_mesh, mesh_path
@@ -173,6 +175,32 @@ def test_bad_input_exits_with_a_clear_message(args, message, scene_blend, tmp_pa
     assert f"aasdf_batch: error: {message}" in done.stderr
     assert "Traceback" not in done.stderr
     assert not (tmp_path / "out.ply").exists()
+
+
+def test_an_output_that_is_an_input_is_refused_and_the_input_kept(tmp_path):
+    """Written over an input, a file was replaced by the result, and the jobs after it that read it gave wrong
+    results (an intersection of 0.72 where 0.28 is exact): refused before any work, in a job file the job that would
+    write over another's input."""
+    cutter = tmp_path / "cutter.obj"
+    cutter.write_bytes(Path(mesh_path("spot.obj")).read_bytes())
+    before = cutter.read_bytes()
+    done = run_batch("--operation", "difference", "--inputs", mesh_path("spot.obj"), cutter, "--output", cutter)
+    assert done.returncode == 2 and f"aasdf_batch: error: {cutter} is also an input" in done.stderr, done.stderr
+    assert cutter.read_bytes() == before
+    jobs = tmp_path / "jobs.jsonl"
+    entries = [
+        {"inputs": [str(mesh_path("spot.obj")), "cutter.obj"], "operation": "difference", "output": "cutter.obj"},
+        {"inputs": [str(mesh_path("spot.obj")), "cutter.obj"], "operation": "union", "output": "other.obj"},
+        {"inputs": [str(mesh_path("spot.obj")), "cutter.obj"], "operation": "intersect", "output": "both.ply"},
+    ]
+    jobs.write_text("\n".join(json.dumps(entry) for entry in entries) + "\n", encoding="utf-8")
+    read = read_jobs(jobs, {})
+    assert read[0].error == f"{cutter} is also an input: write the result to another file"
+    entries[0]["inputs"][1] = str(mesh_path("spot.obj"))  # another job's input, not its own
+    jobs.write_text("\n".join(json.dumps(entry) for entry in entries) + "\n", encoding="utf-8")
+    read = read_jobs(jobs, {})
+    assert read[0].error == f"{cutter} is an input of jobs.jsonl:2: write the result to another file"
+    assert not read[1].error and not read[2].error
 
 
 def test_unknown_operation_is_an_argument_error():
