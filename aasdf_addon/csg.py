@@ -34,7 +34,9 @@ class OutputPlan:
 
 
 def _linked_nodes(socket) -> list:
-    """The nodes feeding an input socket, first linked first, through reroutes; muted or invalid links do not count."""
+    """The nodes feeding an input socket, first linked first, through reroutes and muted nodes (what Blender passes
+    through them: their internal links, none for a muted node without inputs); muted or invalid links do not
+    count."""
     found = []
     for link in sorted(socket.links, key=lambda link: link.multi_input_sort_id):
         if link.is_muted or not link.is_valid:
@@ -42,6 +44,10 @@ def _linked_nodes(socket) -> list:
         node = link.from_node
         if node.bl_idname == "NodeReroute":
             found += _linked_nodes(node.inputs[0])
+        elif node.mute:
+            for inner in node.internal_links:
+                if inner.to_socket == link.from_socket:
+                    found += _linked_nodes(inner.from_socket)
         else:
             found.append(node)
     return found
@@ -50,6 +56,29 @@ def _linked_nodes(socket) -> list:
 def result_names(tree) -> set:
     """Names of the objects the tree's Output nodes write."""
     return {node.object_name for node in tree.nodes if node.bl_idname == nodes.OUTPUT and node.object_name}
+
+
+def _written_by_other_trees(tree) -> dict:
+    """{result object name: tree name} of the other CSG trees' Output nodes (two trees writing one object would
+    overwrite each other's result in turn)."""
+    return {
+        name.strip(): other.name
+        for other in bpy.data.node_groups
+        if other.bl_idname == nodes.TREE and other != tree
+        for name in result_names(other)
+    }
+
+
+def free_result_name(name: str) -> str:
+    """``name``, or ``name.001``, ``name.002``... where a CSG tree writes it already (a second tree from the same
+    selection)."""
+    taken = {result.strip() for other in bpy.data.node_groups if other.bl_idname == nodes.TREE for result in
+             result_names(other)}  # fmt: skip
+    found, k = name, 0
+    while found in taken:
+        k += 1
+        found = f"{name}.{k:03d}"
+    return found
 
 
 def collection_meshes(collection, exclude=()) -> list:
@@ -84,13 +113,15 @@ def plan_tree(tree) -> list[OutputPlan]:
     if not outputs:
         tree.message = "Add an Output node"
         raise engine.AasdfError(f"{tree.name}: add an Output node")
-    seen = {}
+    seen, elsewhere = {}, _written_by_other_trees(tree)
     for node in outputs:
         name = node.object_name.strip()
         if not name:
             errors[node.name] = "Name the result object"
         elif name in seen:
             errors[node.name] = errors[seen[name]] = f"Another Output node also writes '{name}'"
+        elif name in elsewhere:
+            errors[node.name] = f"The tree '{elsewhere[name]}' also writes '{name}': name another result object"
         else:
             seen[name] = node.name
 

@@ -9,7 +9,7 @@ error report and writes nothing.
 import bpy
 from bpy.props import BoolProperty, StringProperty
 
-from ..aasdf_addon import autoupdate, nodes, operands, runtime
+from ..aasdf_addon import autoupdate, csg, nodes, operands, runtime
 from ..aasdf_addon.properties import auto_update_property, operation_property
 from .boolean import selected_operands
 
@@ -104,9 +104,8 @@ class AASDF_OT_tree_from_selection(bpy.types.Operator):
         objects = _geometry_selection(context)
         active = objects[0]
         settings = context.scene.aasdf
-        tree = build_tree(
-            f"{active.name} CSG", objects, self.operation, settings.blend, result_name=f"{active.name}.csg"
-        )
+        result = csg.free_result_name(f"{active.name}.csg")
+        tree = build_tree(f"{active.name} CSG", objects, self.operation, settings.blend, result_name=result)
         tree.voxel_size, tree.resolution = settings.voxel_size, settings.resolution
         tree.levels, tree.padding, tree.hide_inputs = settings.levels, settings.padding, settings.hide_inputs
         tree.sharp_edges = settings.sharp_edges

@@ -114,6 +114,39 @@ def test_tree_equals_the_chain_of_boolean_operators(evaluated):
     assert cache.stats()["builds"] == 3
 
 
+def test_a_muted_node_passes_on_what_blender_passes_through_it(evaluated):
+    """A muted node (M in the editor) was evaluated as if it were not: muted, the Difference passes its Base on (its
+    internal link, as Blender draws it), the result is the union alone; a muted Union passes its first field on."""
+    tree, result, _ = evaluated
+    difference = next(node for node in tree.nodes if node.bl_idname == nodes.DIFFERENCE)
+    union = next(node for node in tree.nodes if node.bl_idname == nodes.UNION)
+    with_cutters = mesh_volume(*world_arrays(result))
+    difference.mute = True
+    assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
+    united = mesh_volume(*world_arrays(result))
+    assert united > 1.04 * with_cutters  # measured 1.108x: the cutters' holes gone
+    union.mute = True
+    assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
+    alone = mesh_volume(*world_arrays(result))  # sphere A alone
+    assert alone == pytest.approx(mesh_volume(*world_arrays(bpy.data.objects["A"])), rel=0.01)
+    assert alone < 0.8 * united  # measured 0.59
+
+
+def test_a_second_tree_may_not_write_the_first_ones_result(evaluated):
+    """Two trees writing one object overwrote each other's result in turn (volumes 8.71 and 7.29 by turns), silently:
+    the second is refused, its Output node saying which tree writes the object."""
+    tree, result, (a, b, cutters, _, _) = evaluated
+    before = mesh_volume(*world_arrays(result))
+    other = build_tree(a, b, cutters, name="Other")
+    with pytest.raises(RuntimeError, match="The tree 'Tree' also writes 'Result'"):
+        bpy.ops.aasdf.evaluate_tree(tree=other.name)
+    output = next(node for node in other.nodes if node.bl_idname == nodes.OUTPUT)
+    assert output.message == "The tree 'Tree' also writes 'Result': name another result object"
+    assert mesh_volume(*world_arrays(result)) == before
+    output.object_name = "Other result"
+    assert bpy.ops.aasdf.evaluate_tree(tree=other.name) == {"FINISHED"}
+
+
 def test_result_faces_take_the_material_of_their_operand(evaluated):
     _, result, _ = evaluated
     assert [slot.material.name for slot in result.material_slots] == ["Red", "Blue", "Green"]
@@ -539,6 +572,10 @@ def test_tree_from_selection_matches_the_boolean_operator(fresh_cache):
     from_operator = world_arrays(bpy.context.active_object)
     assert len(from_tree[1]) == len(from_operator[1])
     assert mesh_volume(*from_tree) == pytest.approx(mesh_volume(*from_operator), rel=1e-6)
+    select(a, b)  # a second tree from the same selection writes an object of its own
+    assert bpy.ops.aasdf.tree_from_selection(operation="UNION") == {"FINISHED"}
+    assert mesh_volume(*world_arrays(bpy.data.objects["A.csg.001"])) > mesh_volume(*from_tree)
+    assert mesh_volume(*world_arrays(bpy.data.objects["A.csg"])) == mesh_volume(*from_tree)
 
 
 def test_tree_from_selection_needs_two_meshes():
