@@ -69,6 +69,42 @@ def _written_by_other_trees(tree) -> dict:
     }
 
 
+def _loop_through_trees(tree) -> list:
+    """The names of the other trees through which ``tree`` reads its own results back (one reads an object another
+    writes, and so on round to ``tree``: Auto Update would evaluate them by turns without end), in order; empty
+    where there is no such loop. (Within one tree an Output may read another's result: they are ordered.)"""
+    writes = {}
+    for other in bpy.data.node_groups:
+        if other.bl_idname == nodes.TREE:
+            for name in result_names(other):
+                writes.setdefault(name.strip(), other)
+
+    def read_by(current) -> set:
+        names = {node.object.name for node in current.nodes if node.bl_idname == nodes.OBJECT and node.object}
+        for node in current.nodes:
+            if node.bl_idname == nodes.COLLECTION and node.collection is not None:
+                names |= {obj.name for obj in collection_meshes(node.collection, result_names(current))}
+        return names
+
+    visited = set()
+
+    def back_to_tree(current) -> list | None:
+        for name in sorted(read_by(current)):
+            writer = writes.get(name)
+            if writer is None or writer == current:
+                continue
+            if writer == tree:
+                return []
+            if writer.name not in visited:
+                visited.add(writer.name)
+                found = back_to_tree(writer)
+                if found is not None:
+                    return [writer.name, *found]
+        return None
+
+    return back_to_tree(tree) or []
+
+
 def free_result_name(name: str) -> str:
     """``name``, or ``name.001``, ``name.002``... where a CSG tree writes it already (a second tree from the same
     selection)."""
@@ -113,6 +149,13 @@ def plan_tree(tree) -> list[OutputPlan]:
     if not outputs:
         tree.message = "Add an Output node"
         raise engine.AasdfError(f"{tree.name}: add an Output node")
+    loop = _loop_through_trees(tree)
+    if loop:
+        tree.message = f"Reads its own results through {', '.join(repr(name) for name in loop)}: a loop"
+        raise engine.AasdfError(
+            f"{tree.name}: the trees {', '.join(repr(name) for name in [tree.name, *loop])} read each other's "
+            "results: a loop that would be evaluated without end; take one of those inputs out"
+        )
     seen, elsewhere = {}, _written_by_other_trees(tree)
     for node in outputs:
         name = node.object_name.strip()

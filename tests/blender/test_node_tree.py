@@ -147,6 +147,29 @@ def test_a_second_tree_may_not_write_the_first_ones_result(evaluated):
     assert bpy.ops.aasdf.evaluate_tree(tree=other.name) == {"FINISHED"}
 
 
+def test_trees_reading_each_others_results_are_refused_as_a_loop(evaluated):
+    """Tree reads A, B and the cutters, writes Result; Other grows Result into Grown. Tree reading Grown for A closes a
+    loop that Auto Update evaluated by turns without end, the results growing each round: refused on both trees, the
+    results left as they were, until the loop is taken out."""
+    tree, result, (a, *_) = evaluated
+    other = bpy.data.node_groups.new("Other", nodes.TREE)
+    other.voxel_size = tree.voxel_size
+    read, offset, output = (other.nodes.new(kind) for kind in (nodes.OBJECT, nodes.OFFSET, nodes.OUTPUT))
+    read.object, offset.distance, output.object_name = result, 0.05, "Grown"
+    other.links.new(read.outputs[0], offset.inputs[0])
+    other.links.new(offset.outputs[0], output.inputs[0])
+    assert bpy.ops.aasdf.evaluate_tree(tree=other.name) == {"FINISHED"}
+    before = mesh_volume(*world_arrays(result))
+    tree.nodes["Object A"].object = bpy.data.objects["Grown"]
+    for name in ("Tree", "Other"):
+        with pytest.raises(RuntimeError, match="read each other's results: a loop"):
+            bpy.ops.aasdf.evaluate_tree(tree=name)
+    assert tree.message == "Reads its own results through 'Other': a loop"
+    assert mesh_volume(*world_arrays(result)) == before
+    tree.nodes["Object A"].object = a
+    assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"} and tree.message == ""
+
+
 def test_result_faces_take_the_material_of_their_operand(evaluated):
     _, result, _ = evaluated
     assert [slot.material.name for slot in result.material_slots] == ["Red", "Blue", "Green"]
