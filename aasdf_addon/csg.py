@@ -148,12 +148,12 @@ def plan_tree(tree) -> list[OutputPlan]:
     exclude = result_names(tree)
     if not outputs:
         tree.message = "Add an Output node"
-        raise engine.AasdfError(f"{tree.name}: add an Output node")
+        raise engine.AasdfError("add an Output node")  # (the caller names the tree)
     loop = _loop_through_trees(tree)
     if loop:
         tree.message = f"Reads its own results through {', '.join(repr(name) for name in loop)}: a loop"
         raise engine.AasdfError(
-            f"{tree.name}: the trees {', '.join(repr(name) for name in [tree.name, *loop])} read each other's "
+            f"the trees {', '.join(repr(name) for name in [tree.name, *loop])} read each other's "
             "results: a loop that would be evaluated without end; take one of those inputs out"
         )
     seen, elsewhere = {}, _written_by_other_trees(tree)

@@ -15,7 +15,11 @@ from pathlib import Path
 from .options import PATH_OPTIONS, RUN_OPTIONS, BatchError, check_args, job_parser
 
 LIST_OPTIONS = ("inputs", "objects")
-FLAG_OPTIONS = {"sharp_edges": ("--sharp-edges", "--no-sharp-edges"), "keep_faces": ("--keep-faces", "--no-keep-faces")}
+FLAG_OPTIONS = {
+    "sharp_edges": ("--sharp-edges", "--no-sharp-edges"),
+    "keep_faces": ("--keep-faces", "--no-keep-faces"),
+    "remesh": ("--remesh", "--keep-faces"),  # (the command line's --remesh: keep_faces false)
+}
 TRUE, FALSE = {"1", "true", "yes", "on"}, {"0", "false", "no", "off"}
 # Options that do not change what a job writes: left out of its settings' hash.
 UNHASHED = ("output",)
@@ -39,7 +43,7 @@ class Job:
 def option_argv(key: str, value, folder: str, *, from_csv: bool) -> list:
     """The command-line words of one job key; relative paths made relative to ``folder``."""
     name = str(key).strip().replace("-", "_")
-    if name in RUN_OPTIONS or name not in JOB_KEYS:
+    if name in RUN_OPTIONS or (name not in JOB_KEYS and name not in FLAG_OPTIONS):
         raise BatchError(f"unknown key {str(key).strip()!r}")
     if value is None or (from_csv and str(value).strip() == ""):
         return []

@@ -203,6 +203,16 @@ def test_an_output_that_is_an_input_is_refused_and_the_input_kept(tmp_path):
     assert not read[1].error and not read[2].error
 
 
+def test_a_job_file_takes_remesh_as_the_command_line_does(tmp_path):
+    """Job keys are the long options without dashes: "remesh" was refused as an unknown key."""
+    spot = str(mesh_path("spot.obj"))
+    jobs = tmp_path / "jobs.jsonl"
+    entries = [{"inputs": [spot, spot], "operation": "union", "output": f"{k}.ply", "remesh": v} for k, v in
+               enumerate([True, False, "yes"])]  # fmt: skip
+    jobs.write_text("\n".join(json.dumps(entry) for entry in entries) + "\n", encoding="utf-8")
+    assert [job.error or job.options["keep_faces"] for job in read_jobs(jobs, {})] == [False, True, False]
+
+
 def test_unknown_operation_is_an_argument_error():
     done = run_batch("--operation", "xor", "--inputs", "a.obj", "b.obj", "--output", "out.ply")
     assert done.returncode == 2 and "invalid choice: 'xor'" in done.stderr
