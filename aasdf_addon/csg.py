@@ -58,13 +58,12 @@ def result_names(tree) -> set:
     return {node.object_name for node in tree.nodes if node.bl_idname == nodes.OUTPUT and node.object_name}
 
 
-def _written_by_other_trees(tree) -> dict:
-    """{result object name: tree name} of the other CSG trees' Output nodes (two trees writing one object would
-    overwrite each other's result in turn)."""
+def _tree_results(skip=None) -> dict:
+    """{result object name: the CSG tree whose Output node writes it} over every tree but ``skip``."""
     return {
-        name.strip(): other.name
+        name.strip(): other
         for other in bpy.data.node_groups
-        if other.bl_idname == nodes.TREE and other != tree
+        if other.bl_idname == nodes.TREE and other != skip
         for name in result_names(other)
     }
 
@@ -73,11 +72,7 @@ def _loop_through_trees(tree) -> list:
     """The names of the other trees through which ``tree`` reads its own results back (one reads an object another
     writes, and so on round to ``tree``: Auto Update would evaluate them by turns without end), in order; empty
     where there is no such loop. (Within one tree an Output may read another's result: they are ordered.)"""
-    writes = {}
-    for other in bpy.data.node_groups:
-        if other.bl_idname == nodes.TREE:
-            for name in result_names(other):
-                writes.setdefault(name.strip(), other)
+    writes = _tree_results()
 
     def read_by(current) -> set:
         names = {node.object.name for node in current.nodes if node.bl_idname == nodes.OBJECT and node.object}
@@ -108,8 +103,7 @@ def _loop_through_trees(tree) -> list:
 def free_result_name(name: str) -> str:
     """``name``, or ``name.001``, ``name.002``... where a CSG tree writes it already (a second tree from the same
     selection)."""
-    taken = {result.strip() for other in bpy.data.node_groups if other.bl_idname == nodes.TREE for result in
-             result_names(other)}  # fmt: skip
+    taken = _tree_results()
     found, k = name, 0
     while found in taken:
         k += 1
@@ -156,7 +150,7 @@ def plan_tree(tree) -> list[OutputPlan]:
             f"the trees {', '.join(repr(name) for name in [tree.name, *loop])} read each other's "
             "results: a loop that would be evaluated without end; take one of those inputs out"
         )
-    seen, elsewhere = {}, _written_by_other_trees(tree)
+    seen, elsewhere = {}, _tree_results(skip=tree)
     for node in outputs:
         name = node.object_name.strip()
         if not name:
@@ -164,7 +158,7 @@ def plan_tree(tree) -> list[OutputPlan]:
         elif name in seen:
             errors[node.name] = errors[seen[name]] = f"Another Output node also writes '{name}'"
         elif name in elsewhere:
-            errors[node.name] = f"The tree '{elsewhere[name]}' also writes '{name}': name another result object"
+            errors[node.name] = f"The tree '{elsewhere[name].name}' also writes '{name}': name another result object"
         else:
             seen[name] = node.name
 
