@@ -126,6 +126,10 @@ def _octet_distance_kernel(coarse: bool, reuse: bool):
         closest-point queries. Octets far from the mesh (no triangle within ``max_dist`` of the centre, added where
         an open mesh's surface crosses a hole) do the same after a wider centre query: their balls are large, but
         the boxes' distances still skip most candidates (beetle /256: their 8 node queries took twice as long).
+        A node as near two triangles takes the lower-numbered one, and the bounds let a triangle as near as the best
+        through: which triangle a node takes does not depend on the octet before it, so a field built on demand and
+        refined in steps is bit for bit the field refined at once (its nodes beside two overlapping boxes' coinciding
+        faces took either, by the order the octets were built in).
         Every octet queries node by node when ``box_search`` is 0 (a mesh whose triangles are much smaller than a
         cell would put hundreds in each box). The centre's exact closest point (the octet's parent node's) goes to
         ``octet_dist``/``octet_proj`` at ``base // 8 - octet_first`` (UNSET_DISTANCE when not found). On the
@@ -266,7 +270,7 @@ def _octet_distance_kernel(coarse: bool, reuse: bool):
                     tri_lo = wp.min(a, wp.min(b, cc))
                     tri_hi = wp.max(a, wp.max(b, cc))
                     gap = wp.max(wp.max(tri_lo - node_hi, node_lo - tri_hi), wp.vec3(0.0))
-                    near_box = wp.length_sq(gap) < worst
+                    near_box = wp.length_sq(gap) <= worst
                     if near_box:
                         # nor nearer than its plane, which bounds all 8 nodes at once where the boxes of long slanted
                         # triangles (a cylinder's sides) meet the nodes' box without coming near it
@@ -274,12 +278,12 @@ def _octet_distance_kernel(coarse: bool, reuse: bool):
                         off = wp.abs(wp.dot(normal, c - a)) - 0.5 * spacing * (
                             wp.abs(normal[0]) + wp.abs(normal[1]) + wp.abs(normal[2])
                         )
-                        near_box = off <= 0.0 or off * off < worst * wp.length_sq(normal)
+                        near_box = off <= 0.0 or off * off <= worst * wp.length_sq(normal)
                     if near_box and slivers.shape[0] > 0 and slivers[f] == wp.uint8(1):
                         # nor nearer than its longest edge less its height (less half a diagonal): slivers beside
                         # the nearest one (a cylinder's sides around the nodes) share its plane nearly, not its place
                         beyond = _capsule_gap(c, a, b, cc, normal, 4.0 * spacing) - 0.8660254 * spacing
-                        near_box = beyond <= 0.0 or beyond * beyond < worst
+                        near_box = beyond <= 0.0 or beyond * beyond <= worst
                     if near_box:
                         worst = float(0.0)
                         edges, inward, lengths, n = triangle_frame(a, b, cc)
@@ -302,10 +306,10 @@ def _octet_distance_kernel(coarse: bool, reuse: bool):
                             )
                             gap = wp.max(wp.max(tri_lo - x, x - tri_hi), wp.vec3(0.0))
                             plane = wp.dot(n, x - a)  # nor nearer than its plane (0 for a degenerate triangle)
-                            if wp.length_sq(gap) < best[k] and plane * plane < best[k]:
+                            if wp.length_sq(gap) <= best[k] and plane * plane <= best[k]:
                                 p = closest_on_triangle(x, a, b, cc, edges, inward, lengths, n)
                                 d = wp.length_sq(x - p)
-                                if d < best[k]:
+                                if d < best[k] or (d == best[k] and f < face[k]):  # (a tie: the lower number)
                                     best[k] = d
                                     foot[k] = p
                                     face[k] = f
