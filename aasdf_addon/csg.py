@@ -295,6 +295,7 @@ def evaluate_tree(context, tree) -> list[dict]:
             are written, this one keeps its previous result).
     """
     engine = runtime.engine()
+    follow_renames(tree)
     plans = plan_tree(tree)
     settings = pipeline.FieldSettings.of(tree)
     runs = []
@@ -319,9 +320,29 @@ def evaluate_tree(context, tree) -> list[dict]:
             out.message = str(err)
             tree.message = f"{out.name}: {err}"
             raise engine.AasdfError(f"{out.name}: {err}") from err
+        written = bpy.data.objects.get(numbers["object"])
+        if written is not None and not numbers.get("empty"):
+            out.result, out.written = written, written.name
         if numbers.get("empty"):
             out.message = "The result is empty: the previous result is kept"
         elif numbers.get("warnings"):
             out.message = "; ".join(numbers["warnings"])
         runs.append(numbers)
     return runs
+
+
+def follow_renames(tree) -> None:
+    """Keep each Output node and the object it wrote last naming each other: the object renamed (in the Outliner) is
+    followed by the node; the node's name changed is taken by the object, unless another object has that name (then
+    the output writes into that one, as asked). Otherwise a new object would take the name and the renamed or old one
+    stay behind, no longer updated."""
+    for node in tree.nodes:
+        if node.bl_idname != nodes.OUTPUT or node.result is None or not node.written:
+            continue
+        obj, name = node.result, node.object_name.strip()
+        if name == node.written and obj.name != name:
+            node.object_name = obj.name
+        elif name and name != node.written and obj.name == node.written and name not in bpy.data.objects:
+            obj.name = name
+        if obj.name == node.object_name.strip():  # (in step again, should the evaluation fail)
+            node.written = obj.name

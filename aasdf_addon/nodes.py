@@ -231,7 +231,8 @@ class AASDF_N_shell(CsgNode, bpy.types.Node):
 
 
 class AASDF_N_output(CsgNode, bpy.types.Node):
-    """Writes the connected field's surface into the named mesh object (created when missing, else updated in place)"""
+    """Writes the connected field's surface into the named mesh object (created when missing, else updated in place;
+    a rename of either the object or the name here renames the other)"""
 
     bl_idname, bl_label, bl_icon = OUTPUT, "Output", "OUTPUT"
 
@@ -243,6 +244,9 @@ class AASDF_N_output(CsgNode, bpy.types.Node):
     )
     keep_faces: keep_faces_property(update=_changed)
     adaptivity: adaptivity_property(update=_changed)
+    # the object written last and its name then: a rename of either is followed by the other (``csg.follow_renames``)
+    result: PointerProperty(type=bpy.types.Object, options={"HIDDEN"})
+    written: StringProperty(options={"HIDDEN"})
 
     def init(self, context):
         self.inputs.new(SOCKET, "Field")

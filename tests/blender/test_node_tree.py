@@ -201,6 +201,36 @@ def test_output_updates_its_object_in_place_and_moved_inputs_build_nothing(evalu
     assert pipeline.last_run["fields_built"] == 0 and pipeline.last_run["cache_hits"] == 4
 
 
+def test_a_renamed_result_object_is_followed_by_its_output(evaluated):
+    tree, result, (_, b, *_rest) = evaluated
+    pointer, objects = result.as_pointer(), len(bpy.data.objects)
+    before = world_arrays(result)[0][:, 0].max()
+    result.name = "Bracket"  # renamed in the Outliner
+    b.location.x += 0.2
+    bpy.context.view_layer.update()
+    assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
+    assert "Result" not in bpy.data.objects and len(bpy.data.objects) == objects
+    assert tree.nodes["Output"].object_name == "Bracket"
+    bracket = bpy.data.objects["Bracket"]
+    assert bracket.as_pointer() == pointer  # updated, not left behind
+    assert world_arrays(bracket)[0][:, 0].max() == pytest.approx(before + 0.2, abs=VOXEL)
+
+
+def test_an_output_given_a_new_name_renames_its_result_object(evaluated):
+    tree, result, (a, *_rest) = evaluated
+    pointer, objects = result.as_pointer(), len(bpy.data.objects)
+    tree.nodes["Output"].object_name = "Part"
+    assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
+    assert "Result" not in bpy.data.objects and len(bpy.data.objects) == objects
+    assert bpy.data.objects["Part"].as_pointer() == pointer
+    # a name another object has: the output writes into that one, as asked, and the old result stays
+    other = add_mesh_object("Other", *SMALL, location=(4.0, 0.0, 0.0))
+    tree.nodes["Output"].object_name = "Other"
+    assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
+    assert bpy.data.objects["Part"].as_pointer() == pointer
+    assert len(other.data.vertices) == len(bpy.data.objects["Part"].data.vertices)
+
+
 def test_moved_result_object_still_shows_the_boolean_in_place(evaluated):
     tree, result, _ = evaluated
     before = world_arrays(result)[0]
