@@ -18,7 +18,9 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
    consistently oriented; where the join cannot be made, the voxel surface alone (``stats["kept_fallback"]``);
 5. where the join gave up large kept faces (a low-polygon mesh's), the triangles judged again clear of the places it
    failed and joined again (:mod:`.rejoin`);
-6. after the new faces are made coarse where flat, those that pass through other faces tiled again (:mod:`.uncross`).
+6. after the new faces are made coarse where flat, those that pass through other faces tiled again (:mod:`.uncross`);
+7. where many still do (``CROSSED_SHARE``: a kept sliver given up whole left its neighbour's long edge to a fan of
+   strips), the triangles judged again clear of those faces and joined again; else the voxel surface.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from .normalsums import triangle_normal_sums
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .rejoin import joined_again
+from .selfcross import crossing_pairs
 from .slits import fill_slits
 from .sources import mesh_distances
 from .twins import zip_twins
@@ -528,15 +531,34 @@ def _strips(points, k_loops, v_loops, pairs, reach: float, n_kept: int, device):
 
 
 # A kept surface of clean meshes with more pairs of faces passing through each other than this share of its new
-# faces left is given up for the voxel surface (the join broke down along a seam: 347-1,915 pairs, 7-20 % of the new
-# faces, where a turned cylinder of 40 long thin sides crosses a box; a few pairs where kept faces meet at a corner of
-# the voxel surface, 0.02-0.2 %, are left as they are).
+# faces left is judged again clear of them, else given up for the voxel surface (the join broke down along a seam:
+# 347-1,915 pairs, 7-20 % of the new faces, where a turned cylinder of 40 long thin sides crosses a box, none judged
+# again; a few pairs where kept faces meet at a corner of the voxel surface, 0.02-0.2 %, are left as they are).
 CROSSED_SHARE = 0.02
 
 
 def _crossed_through(surface: dict) -> bool:
     """Whether more pairs of faces pass through each other than CROSSED_SHARE of the new faces."""
     return surface["stats"]["crossing_left"] > CROSSED_SHARE * max(int(np.count_nonzero(~surface["kept"])), 1)
+
+
+def _clear_of_crossings(field, join, surface: dict, avoid: np.ndarray, coarse: tuple) -> dict:
+    """The surface ``join`` makes of the triangles judged again clear of the faces of ``surface`` that pass through
+    others (and of ``avoid``), coarsened (``coarse``: adaptivity, regions) and tiled again as it was, where its faces
+    no longer do; else ``surface``."""
+    clear = np.concatenate([avoid, _crossings(surface, field.device)])
+    again = _joined(field, join, kept_triangles(field, avoid=clear), clear)
+    if again["stats"]["kept_fallback"]:
+        return surface
+    again = uncrossed(coarsened(field, again, *coarse), field.voxel_size, field.device)
+    return surface if _crossed_through(again) else again
+
+
+def _crossings(surface: dict, device) -> np.ndarray:
+    """(P, 3) float32 the centres of the faces that pass through other faces (a new face in each pair)."""
+    verts, tris = surface["verts"], np.asarray(surface["tris"], dtype=np.int64)
+    pairs = crossing_pairs(verts, tris, device, np.flatnonzero(~surface["kept"]))
+    return verts[tris[np.unique(pairs)]].mean(axis=1).astype(np.float32)
 
 
 def _clean(field) -> bool:
@@ -587,6 +609,8 @@ def kept_surface(
         if whole is not None and surface["stats"]["kept_fallback"]:  # along the seams alone: the whole result's
             return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
         surface = uncrossed(coarsened(field, surface, adaptivity, regions), field.voxel_size, field.device)
+        if _crossed_through(surface) and _clean(field):  # judged again clear of where faces pass through others
+            surface = _clear_of_crossings(field, join, surface, avoid, (adaptivity, regions))
         if _crossed_through(surface) and _clean(field):  # the join failed where it must not: remeshed
             if whole is not None:
                 return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
