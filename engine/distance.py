@@ -73,6 +73,11 @@ OCTET_GROUP = 16
 
 OCTET_REUSE_MIN_AREA = 3.0
 
+# The octet kernel's bounds let through a triangle up to this factor (squared distances) beyond the best so far: its
+# bounds and its distances round differently, and a triangle as near as the best but for rounding must be tested for
+# the tie to go the same way whichever triangle came first.
+TIE_SLACK = wp.constant(1.0001)
+
 
 # A sparse level above the finest searches boxes only where the triangles' mean area is at least this many of its cell
 # faces, else node by node from its octet centre's closest point (its cells are 2^k voxels: a mesh boxed on the finest
@@ -270,7 +275,7 @@ def _octet_distance_kernel(coarse: bool, reuse: bool):
                     tri_lo = wp.min(a, wp.min(b, cc))
                     tri_hi = wp.max(a, wp.max(b, cc))
                     gap = wp.max(wp.max(tri_lo - node_hi, node_lo - tri_hi), wp.vec3(0.0))
-                    near_box = wp.length_sq(gap) <= worst
+                    near_box = wp.length_sq(gap) <= worst * TIE_SLACK
                     if near_box:
                         # nor nearer than its plane, which bounds all 8 nodes at once where the boxes of long slanted
                         # triangles (a cylinder's sides) meet the nodes' box without coming near it
@@ -278,12 +283,12 @@ def _octet_distance_kernel(coarse: bool, reuse: bool):
                         off = wp.abs(wp.dot(normal, c - a)) - 0.5 * spacing * (
                             wp.abs(normal[0]) + wp.abs(normal[1]) + wp.abs(normal[2])
                         )
-                        near_box = off <= 0.0 or off * off <= worst * wp.length_sq(normal)
+                        near_box = off <= 0.0 or off * off <= worst * TIE_SLACK * wp.length_sq(normal)
                     if near_box and slivers.shape[0] > 0 and slivers[f] == wp.uint8(1):
                         # nor nearer than its longest edge less its height (less half a diagonal): slivers beside
                         # the nearest one (a cylinder's sides around the nodes) share its plane nearly, not its place
                         beyond = _capsule_gap(c, a, b, cc, normal, 4.0 * spacing) - 0.8660254 * spacing
-                        near_box = beyond <= 0.0 or beyond * beyond <= worst
+                        near_box = beyond <= 0.0 or beyond * beyond <= worst * TIE_SLACK
                     if near_box:
                         worst = float(0.0)
                         edges, inward, lengths, n = triangle_frame(a, b, cc)
@@ -306,7 +311,7 @@ def _octet_distance_kernel(coarse: bool, reuse: bool):
                             )
                             gap = wp.max(wp.max(tri_lo - x, x - tri_hi), wp.vec3(0.0))
                             plane = wp.dot(n, x - a)  # nor nearer than its plane (0 for a degenerate triangle)
-                            if wp.length_sq(gap) <= best[k] and plane * plane <= best[k]:
+                            if wp.length_sq(gap) <= best[k] * TIE_SLACK and plane * plane <= best[k] * TIE_SLACK:
                                 p = closest_on_triangle(x, a, b, cc, edges, inward, lengths, n)
                                 d = wp.length_sq(x - p)
                                 if d < best[k] or (d == best[k] and f < face[k]):  # (a tie: the lower number)

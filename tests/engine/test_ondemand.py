@@ -76,6 +76,21 @@ def test_a_field_refined_in_steps_is_the_field_refined_at_once_to_the_bit():
         assert np.array_equal(getattr(steps, key).numpy(), getattr(once, key).numpy()), key
 
 
+def test_a_field_refined_about_points_in_steps_is_the_field_refined_at_once_to_the_bit(spot):
+    # spot's nodes as near two triangles but for rounding took either, by the octets built before them (950 of them
+    # over these steps; the distances of a few differed in the last bit). At /200 its triangles are large enough for
+    # an octet to take the triangles of the octet before it (OCTET_REUSE_MIN_AREA); at /128 they are not.
+    rng, h = np.random.default_rng(5), 1.0 / 200
+    once = ondemand.refined(engine.build_field(*spot, voxel_size=h, refine="none"))
+    field = engine.build_field(*spot, voxel_size=h, refine="none")
+    for _ in range(3):
+        field = ondemand.refined(field, rng.uniform(-0.5, 0.5, (20, 3)), 0.1)
+    assert 0.2 < field.refiner.share < 0.9  # measured 0.63
+    steps = ondemand.refined(field)
+    for key in ("codes", "values", "tri", "closest_points", "source"):
+        assert np.array_equal(getattr(steps, key).numpy(), getattr(once, key).numpy()), key
+
+
 def test_samples_of_a_field_built_on_demand_equal_the_full_fields_and_build_only_near_them(spot):
     full = engine.build_field(*spot, voxel_size=H)
     part = engine.build_field(*spot, voxel_size=H, refine="none")
