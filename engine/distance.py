@@ -132,9 +132,9 @@ def _octet_distance_kernel(coarse: bool, reuse: bool):
         an open mesh's surface crosses a hole) do the same after a wider centre query: their balls are large, but
         the boxes' distances still skip most candidates (beetle /256: their 8 node queries took twice as long).
         A node as near two triangles takes the lower-numbered one, and the bounds let a triangle as near as the best
-        through: which triangle a node takes does not depend on the octet before it, so a field built on demand and
-        refined in steps is bit for bit the field refined at once (its nodes beside two overlapping boxes' coinciding
-        faces took either, by the order the octets were built in).
+        (but for rounding: TIE_SLACK) through: which triangle a node takes does not depend on the octet before it, so
+        a field built on demand and refined in steps is bit for bit the field refined at once (its nodes beside two
+        overlapping boxes' coinciding faces took either, by the order the octets were built in).
         Every octet queries node by node when ``box_search`` is 0 (a mesh whose triangles are much smaller than a
         cell would put hundreds in each box). The centre's exact closest point (the octet's parent node's) goes to
         ``octet_dist``/``octet_proj`` at ``base // 8 - octet_first`` (UNSET_DISTANCE when not found). On the

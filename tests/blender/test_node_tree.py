@@ -214,6 +214,10 @@ def test_a_renamed_result_object_is_followed_by_its_output(evaluated):
     bracket = bpy.data.objects["Bracket"]
     assert bracket.as_pointer() == pointer  # updated, not left behind
     assert world_arrays(bracket)[0][:, 0].max() == pytest.approx(before + 0.2, abs=VOXEL)
+    bracket.name = "Bracket 2"  # renamed again, nothing else changed: followed, nothing done
+    assert bpy.ops.aasdf.evaluate_tree(tree=tree.name) == {"FINISHED"}
+    assert pipeline.last_run.get("unchanged") and tree.nodes["Output"].object_name == "Bracket 2"
+    assert "Bracket" not in bpy.data.objects and len(bpy.data.objects) == objects
 
 
 def test_an_output_given_a_new_name_renames_its_result_object(evaluated):
