@@ -45,7 +45,7 @@ from .marching import (
 )
 from .meshcheck import open_tunnels
 from .octree import morton_decode
-from .parallel import launch_split
+from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
 from .quadric import (
     clamp_box,
     corner_plane,
@@ -594,15 +594,15 @@ def _placed_vertices(nodes, starts, tables, origin, spacing: float, iso: float) 
     """``_place_vertices_kernel`` over the active cubes (``nodes``: their corners, the nodes' values, codes, closest
     points and each node's cube; ``starts``: each cube's first vertex, the below flags, the vertex count): the
     vertices, their ranks, cells, half-float quadrics and each cube's (first vertex, case)."""
-    cube_corners, values, codes, proj, cube_of_node = nodes
-    vertex_start, below, n = starts
+    (cube_corners, values, codes, proj, cube_of_node), (vertex_start, below, n) = nodes, starts
     device, m = cube_corners.device, cube_corners.shape[0]
     out = [wp.empty(n, dtype=t, device=device) for t in (wp.vec3, wp.int32, wp.int32, vec10h)]
     out.append(wp.empty(m, dtype=wp.vec2i, device=device))  # (quadrics only to choose each quad's diagonal)
     fixed = [tables["edge_mask"], tables["end_mask"], tables["spans"], vertex_start, cube_of_node, below]
     fixed += [EMPTY_REACH, EIGEN_CUTOFF, SMOOTH_COS, HERMITE_TOLERANCE, HERMITE_NEAR, CELL_MARGIN]
     head = [cube_corners, values, codes, proj, origin, float(spacing), float(iso)]
-    launch_split(_place_vertices_kernel, m, lambda s, c: [s, *head, *fixed, *out], device, balance=True)
+    args = lambda s, c: [s, *head, *fixed, *out]  # noqa: E731 (a minimiser each: worth two cores from a few thousand)
+    launch_split(_place_vertices_kernel, m, args, device, balance=True, min_dim=EMIT_SPLIT_MIN_DIM)
     return tuple(out)
 
 
