@@ -42,6 +42,7 @@ ENGINE_MODULES = (
     "marching",
     "extract",
     "sources",
+    "facing",
     "dual",
     "flatness",
     "components",

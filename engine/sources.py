@@ -20,6 +20,7 @@ import weakref
 import numpy as np
 import warp as wp
 
+from .facing import facing_sources
 from .geometry import mesh_closest_face
 from .parallel import EMIT_SPLIT_MIN_DIM, host_view, launch_split
 from .queries import face_nodes_kernel
@@ -442,6 +443,7 @@ def face_sources_of(field, verts, tris):
         arg = field.arg()
         launch_split(face_nodes_kernel, n, lambda lo, k: [arg, lo, verts_wp, tris_wp, ids, node_tri], field.device)
     ids, node_tri = ids.numpy(), node_tri.numpy()
+    facing_sources(field, verts, tris, ids, node_tri)  # along creases: the triangle the face lies on
     tri_ids = np.full(n, -1, dtype=np.int32)
     unknown_rows = []
     for field_id in np.flatnonzero(np.bincount(ids[ids >= 0])):  # the ids present (a sort of F ids: 7 ms)

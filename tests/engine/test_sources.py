@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import engine
-from tests.support import box_mesh, uv_sphere
+from tests.support import box_mesh, cylinder_mesh, rotation, uv_sphere
 
 
 def _surface_points(verts, tris, n, seed=0):
@@ -114,3 +114,47 @@ def test_a_field_keeps_its_builds_bvh_and_a_bvh_is_built_once_for_two_threads():
         with ThreadPoolExecutor(2) as pool:
             first, second = pool.map(lambda _, fresh=fresh: fresh.bvh("cpu"), range(2))
         assert first is second
+
+
+@pytest.mark.parametrize("turn", [0.0, 17.0])
+def test_remeshed_faces_along_a_crease_take_a_triangle_of_the_side_they_lie_on(turn):
+    """A remeshed box, square to the lattice and turned (/128): every face lying flat on a side takes a triangle of
+    that side. The nodes about an edge lie as near both sides, and 1,760 and 505 faces (2.7 and 0.6 %) took the other
+    side's triangle, along every edge, when the node's triangle was taken as it was (a material per side: a jagged
+    stripe of the wrong one)."""
+    turned = rotation(2, turn) @ rotation(0, 0.7 * turn)
+    verts, tris = box_mesh()
+    verts = (verts @ turned.T).astype(np.float32)
+    field = engine.build_field(verts, tris, voxel_size=2.0 * np.sqrt(3.0) / 128)
+    v, t = field.to_mesh()
+    _, got, _ = field.face_sources(v, t)
+    normals = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]) @ turned  # in the box's frame
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    flat = np.abs(normals).max(axis=1) > 0.999  # on one side's plane
+    side = np.argmax(np.abs(normals), axis=1)
+    source = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]]) @ turned
+    assert flat.mean() > 0.95 and np.all(got >= 0)
+    assert np.array_equal(np.argmax(np.abs(source), axis=1)[got[flat]], side[flat])  # measured: all
+
+
+def test_remeshed_faces_on_an_operands_plane_take_that_operands_triangles():
+    """A cube minus a turned bore, remeshed (/128): the faces on the cube's planes take the cube's triangles and those
+    on the bore's wall the bore's (156 and 11 did not: the nodes along the rim lie as near both operands)."""
+    box = box_mesh()
+    turned = rotation(0, 20.0) @ rotation(1, 10.0)
+    bore = cylinder_mesh(0.5, 3.0, 64)
+    bore = ((bore[0] @ turned.T + (0.1, 0.05, 0.0)).astype(np.float32), bore[1])
+    fa, fb = engine.build_fields([box, bore], voxel_size=2.0 * np.sqrt(3.0) / 128)
+    result = engine.difference(fa, fb)
+    v, t = result.to_mesh()
+    ids, _, _ = result.face_sources(v, t)
+    normals = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    centres = v[t].mean(axis=1)
+    on_box = (np.abs(np.abs(centres).max(axis=1) - 1.0) < 1e-3) & (np.abs(normals).max(axis=1) > 0.999)
+    off_axis = centres - (0.1, 0.05, 0.0)
+    axis = turned[:, 2]
+    radius = np.linalg.norm(off_axis - np.outer(off_axis @ axis, axis), axis=1)
+    on_bore = (np.abs(radius - 0.5) < 1e-3) & (np.abs(normals @ axis) < 0.05)
+    assert on_box.sum() > 50_000 and on_bore.sum() > 20_000
+    assert np.all(ids[on_box] == 0) and np.all(ids[on_bore] == 1)  # measured: all
