@@ -9,8 +9,8 @@ face whose normal lies farther than FACING_DEGREES from its triangle's plane is 
 operand nearest its centre (a face on a side's plane lies on that side's triangles, and a crease's other side is a
 fraction of a voxel away at least), the node's where it is as near.
 
-Written by hand where numpy and one BVH query per face and operand do it: the faces read again are those along the
-creases alone.
+Written by hand: one kernel flags the faces, and Warp's BVH finds the nearest triangles of those alone (the faces
+along the creases: 0.5-3.3 % of the remeshed bench pairs' faces).
 """
 
 from __future__ import annotations
@@ -125,7 +125,6 @@ def _doubtful(field, verts, tris, ids, node_tri) -> np.ndarray:
 
 def _nearest(source, points: wp.array, reach: float, device) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_nearest_kernel` of ``source``'s triangles at ``points``: (N,) local triangle (-1: none), distance."""
-    device = points.device if device is None else device
     n = points.shape[0]
     face = wp.empty(n, dtype=wp.int32, device=device)
     distance = wp.empty(n, dtype=wp.float32, device=device)
