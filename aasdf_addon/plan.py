@@ -138,9 +138,11 @@ def evaluate(plan: tuple, fields: list, progress=None, *, seams: bool = False):
         return result
     _, operation, blend, mode, children = plan
     items = [evaluate(child, fields, progress) for child in children]
-    options = {"blend": blend, "blend_mode": mode.lower()}
+    # every field is built at the voxel size asked, one placed at another scale resampled at it (``spacing``): at a
+    # placed one's finer spacing, every other would be resampled, losing its sharp edges by up to 0.3 voxel
+    options = {"blend": blend, "blend_mode": mode.lower(), "spacing": "built"}
     if operation == "DIFFERENCE" and len(items) > 1:
-        cutter = _fold(engine.union, items[1:], {"blend": 0.0}, progress)
+        cutter = _fold(engine.union, items[1:], {"blend": 0.0, "spacing": "built"}, progress)
         result = engine.difference(items[0], cutter, **options, seams=seams)
         _step(progress, "combining fields")
         return result

@@ -300,7 +300,9 @@ def combine(
         blend_mode: ``"round"`` (a polynomial smooth minimum / maximum of radius ``blend``) or ``"chamfer"`` (a flat
             bevel meeting each face ``blend`` from the seam where the faces meet at a right angle).
         spacing: ``"finer"`` (default), ``"coarser"``, ``"a"`` or ``"b"``: whose finest spacing the result takes
-            (where the operands are placed: ``world_voxel_size``).
+            (where the operands are placed: ``world_voxel_size``); ``"built"``: the finer of the spacings they were
+            built at, a placed one's unscaled (fields built at one voxel size and placed at scales about 1 give the
+            result that size, each one in place keeping its nodes; the finer placed one's would resample them all).
         seams: Where an operand was built on demand (``build_field(refine=...)``), build the result's finest
             octets along its seams alone (:func:`.ondemand.for_boolean`), as kept faces read them; it keeps a
             :class:`BooleanRefiner` to give any other query the whole result.
@@ -363,6 +365,7 @@ def _options(a, b, blend, blend_mode, spacing) -> tuple:
     mode = BLEND_MODES[blend_mode] if blend > 0.0 else 0  # no blend: the hard min / max either way
     choices = {
         "finer": min(a.world_voxel_size, b.world_voxel_size),
+        "built": min(a.voxel_size, b.voxel_size),
         "coarser": max(a.world_voxel_size, b.world_voxel_size),
         "a": a.world_voxel_size,
         "b": b.world_voxel_size,

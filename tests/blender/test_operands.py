@@ -13,7 +13,7 @@ import pytest
 
 from aasdf.aasdf_addon import cache, nodes, pipeline
 from tests.blender.scene import add_mesh_object, select, world_arrays
-from tests.metrics import exact_boolean, hausdorff, merge_vertices, mesh_area, mesh_volume
+from tests.metrics import exact_boolean, hausdorff, merge_vertices, mesh_area, mesh_volume, unsigned_distance
 from tests.support import box_mesh, is_watertight, uv_sphere
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -470,6 +470,32 @@ def test_duplicates_at_ten_scales_build_a_field_per_ladder_step(fresh_cache):
     verts, tris = world_arrays(bpy.context.active_object)
     # measured within 1.6e-5 of the exact volume (at voxel 0.02)
     assert mesh_volume(verts, tris) == pytest.approx(mesh_volume(*exact_ring(cube, balls)), rel=5e-5)
+
+
+def test_a_cutter_scaled_off_the_voxel_ladder_leaves_the_result_at_the_voxel_size_asked(fresh_cache):
+    """A cube minus a block, then the block scaled by 0.95 (its cached field placed there: within half a ladder step),
+    remeshed: the result's lattice is the voxel size asked, the cube's nodes its own. The block's finer spacing was
+    the result's: the cube was resampled at it, with 2.2 times the nodes and 10 % more faces (a move of the block:
+    0.43-0.53 s against 0.26-0.29 now)."""
+    cube = add_mesh_object("Cube", *box_mesh(half=(1.0, 1.0, 1.0)))
+    block = add_mesh_object("Block", *box_mesh(half=(0.4, 0.3, 0.5)), location=(0.1, 0.05, 0.9))
+    voxel = 0.0135
+    select(cube, block)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", voxel_size=voxel, hide_inputs=False, keep_faces=False)
+    nodes, faces = pipeline.last_run["nodes"], len(bpy.context.active_object.data.polygons)
+    block.scale = (0.95,) * 3
+    bpy.context.view_layer.update()
+    select(cube, block)
+    bpy.ops.aasdf.boolean(operation="DIFFERENCE", voxel_size=voxel, hide_inputs=False, keep_faces=False)
+    assert pipeline.last_run["fields_built"] == 0  # the block's field placed at its new scale
+    ratios = pipeline.last_run["nodes"] / nodes, len(bpy.context.active_object.data.polygons) / faces
+    assert ratios[0] < 1.2 and ratios[1] < 1.05, ratios  # measured 1.061 and 0.995 (2.24 and 1.105 before)
+    verts, tris = world_arrays(bpy.context.active_object)
+    exact = exact_boolean("DIFFERENCE", *world_arrays(cube), *world_arrays(block))
+    corner = np.abs(verts - block.location) - 0.5 * np.asarray(block.dimensions)
+    away = np.linalg.norm(np.maximum(corner, 0.0), axis=1) > 3 * voxel  # farther than 3 voxels from the block
+    off = unsigned_distance(*exact, verts[away])
+    assert away.sum() > 100_000 and off.max() < 0.1 * voxel, off.max() / voxel  # measured 0.057 (the cube's corners)
 
 
 def test_the_poll_and_a_tree_from_the_selection_take_a_text(fresh_cache):
