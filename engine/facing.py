@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .geometry import mesh_closest_face
 from .parallel import EMIT_SPLIT_MIN_DIM, host_view, launch_split
 
 # A face whose normal is farther than this (degrees) from its source triangle's, either way, is read again (under
@@ -41,12 +42,9 @@ def _nearest_kernel(
 ):
     """The mesh's triangle nearest each point within ``reach`` (-1 where none) and how far it is."""
     i = wp.tid() + offset
-    q = wp.mesh_query_point_no_sign(mesh, points[i], reach)
-    face[i] = -1
-    distance[i] = reach
-    if q.result:
-        face[i] = q.face
-        distance[i] = wp.length(points[i] - wp.mesh_eval_position(mesh, q.face, q.u, q.v))
+    foot, t = mesh_closest_face(mesh, points[i], reach)
+    face[i] = t
+    distance[i] = wp.where(t >= 0, wp.length(points[i] - foot), reach)
 
 
 def facing_sources(field, verts: np.ndarray, tris: np.ndarray, ids: np.ndarray, node_tri: np.ndarray) -> None:
