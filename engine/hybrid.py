@@ -8,19 +8,18 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
 1. :func:`.keep.kept_triangles`: which triangles of which operand are the surface, facing which way;
 2. the voxel surface less its faces with a corner over the kept ones (:func:`.zipper.vertices_over`), and less the
    teeth of its border left (faces with two edges on it, which the strips beside them would fold over);
-3. the border loops of both (kept vertices at one position welded), paired; a failing kept loop that is a slit
-   closed by itself (:func:`.slits.fill_slits`), unpaired kept loops facing each other zipped to each other
-   (:func:`.twins.zip_twins`), and the loops that still cannot be paired given up (kept faces or voxel faces at
-   them; where a strip stretches at a few steps, or a loop crowds another, first only the kept faces there), until
-   all pair;
+3. the border loops of both (kept vertices at one position welded), paired; a failing kept loop that is a slit closed by
+   itself (:func:`.slits.fill_slits`), unpaired kept loops facing each other zipped to each other
+   (:func:`.twins.zip_twins`), and the loops that still cannot be paired given up (kept faces or voxel faces at them;
+   where a strip stretches at a few steps, or a loop crowds another, first only the kept faces there), until all pair;
 4. a strip between each pair (:func:`.zipper.zip_loops`; two steps folding over each other flipped,
-   :func:`.zipper.unfolded`), and the three parts as one surface, checked closed and
-   consistently oriented; where the join cannot be made, the voxel surface alone (``stats["kept_fallback"]``);
+   :func:`.zipper.unfolded`), and the three parts as one surface, checked closed and consistently oriented; where the
+   join cannot be made, the voxel surface alone (``stats["kept_fallback"]``);
 5. where the join gave up large kept faces (a low-polygon mesh's), the triangles judged again clear of the places it
    failed and joined again (:mod:`.rejoin`);
 6. after the new faces are made coarse where flat, those that pass through other faces tiled again (:mod:`.uncross`);
 7. where many still do (``CROSSED_SHARE``: a kept sliver given up whole left its neighbour's long edge to a fan of
-   strips), the triangles judged again clear of those faces and joined again; else the voxel surface.
+   strips), the triangles judged again clear of those faces and joined again; else the voxel surface, coarse where flat.
 """
 
 from __future__ import annotations
@@ -614,7 +613,8 @@ def kept_surface(
         if _crossed_through(surface) and _clean(field):  # the join failed where it must not: remeshed
             if whole is not None:
                 return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
-            surface = voxel_surface_only(verts, tris, "kept faces and new ones left passing through each other")
+            remeshed = voxel_surface_only(verts, tris, "kept faces and new ones left passing through each other")
+            surface = uncrossed(coarsened(field, remeshed, adaptivity, regions), field.voxel_size, field.device)
     quads = int(np.count_nonzero(np.asarray(sizes) == 4))  # the first, rows 2q and 2q + 1 of ``tris``
     surface["voxel_face"] = np.where(surface["voxel_face"] < 2 * quads, surface["voxel_face"], -1)
     return quad_halves_first(surface)

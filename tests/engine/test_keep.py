@@ -578,8 +578,8 @@ def test_a_closed_clean_leaf_is_read_at_the_samples_near_its_box_and_others_ever
 def test_a_join_left_passing_through_itself_along_a_bore_under_a_face_gives_the_voxel_surface():
     """A block minus a cylinder of 64 long thin sides, tilted a degree, half a voxel under the block's top face (/256):
     the join along the sides broke down and, judged again, still left 186 pairs of faces passing through each other
-    (1.7 % of its new faces), under the share then refused (2 %). The share is 0.5 % now: the voxel surface, saying
-    why, and no face passes through another."""
+    (1.7 % of its new faces), under the share then refused (2 %). The share is 0.5 % now: the voxel surface (coarse
+    where flat, as new faces are), saying why, and no face passes through another."""
     from engine import hybrid
     from engine.selfcross import crossing_pairs
 
@@ -593,7 +593,7 @@ def test_a_join_left_passing_through_itself_along_a_bore_under_a_face_gives_the_
     _check_closed(s)
     assert not len(crossing_pairs(s["verts"], s["tris"].astype(np.int64), "cpu"))
     assert not s["kept"].any() and "passing through each other" in s["stats"]["kept_fallback"]
-    assert hybrid.CROSSED_SHARE <= 0.005
+    assert hybrid.CROSSED_SHARE <= 0.005 and len(s["tris"]) < 60_000  # measured 45,454: coarse where flat (166,768)
     exact = to_manifold(*block) - to_manifold(*cylinder)
     assert mesh_volume(s["verts"], s["tris"]) == pytest.approx(exact.volume(), rel=1e-3)  # measured -0.034 %
 
