@@ -541,15 +541,15 @@ def _crossed_through(surface: dict) -> bool:
     return surface["stats"]["crossing_left"] > CROSSED_SHARE * max(int(np.count_nonzero(~surface["kept"])), 1)
 
 
-def _clear_of_crossings(field, join, surface: dict, avoid: np.ndarray, coarse: tuple) -> dict:
+def _clear_of_crossings(field, join, surface: dict, avoid: np.ndarray, finish) -> dict:
     """The surface ``join`` makes of the triangles judged again clear of the faces of ``surface`` that pass through
-    others (and of ``avoid``), coarsened (``coarse``: adaptivity, regions) and tiled again as it was, where its faces
-    no longer do; else ``surface``."""
+    others (and of ``avoid``), made coarse and tiled again by ``finish`` as it was, where its faces no longer do; else
+    ``surface``."""
     clear = np.concatenate([avoid, _crossings(surface, field.device)])
     again = _joined(field, join, kept_triangles(field, avoid=clear), clear)
     if again["stats"]["kept_fallback"]:
         return surface
-    again = uncrossed(coarsened(field, again, *coarse), field.voxel_size, field.device)
+    again = finish(again)
     return surface if _crossed_through(again) else again
 
 
@@ -607,14 +607,14 @@ def kept_surface(
         surface = _joined(field, join, found["judged"], avoid)
         if whole is not None and surface["stats"]["kept_fallback"]:  # along the seams alone: the whole result's
             return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
-        surface = uncrossed(coarsened(field, surface, adaptivity, regions), field.voxel_size, field.device)
+        finish = lambda s: uncrossed(coarsened(field, s, adaptivity, regions), field.voxel_size, field.device)  # noqa: E731
+        surface = finish(surface)
         if _crossed_through(surface) and _clean(field):  # judged again clear of where faces pass through others
-            surface = _clear_of_crossings(field, join, surface, avoid, (adaptivity, regions))
+            surface = _clear_of_crossings(field, join, surface, avoid, finish)
         if _crossed_through(surface) and _clean(field):  # the join failed where it must not: remeshed
             if whole is not None:
                 return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
-            remeshed = voxel_surface_only(verts, tris, "kept faces and new ones left passing through each other")
-            surface = uncrossed(coarsened(field, remeshed, adaptivity, regions), field.voxel_size, field.device)
+            surface = finish(voxel_surface_only(verts, tris, "kept faces and new ones left passing through each other"))
     quads = int(np.count_nonzero(np.asarray(sizes) == 4))  # the first, rows 2q and 2q + 1 of ``tris``
     surface["voxel_face"] = np.where(surface["voxel_face"] < 2 * quads, surface["voxel_face"], -1)
     return quad_halves_first(surface)

@@ -443,7 +443,7 @@ def face_sources_of(field, verts, tris):
         arg = field.arg()
         launch_split(face_nodes_kernel, n, lambda lo, k: [arg, lo, verts_wp, tris_wp, ids, node_tri], field.device)
     ids, node_tri = ids.numpy(), node_tri.numpy()
-    facing_sources(field, verts, tris, ids, node_tri)  # along creases: the triangle the face lies on
+    facing_sources(field, verts, flat.reshape(-1, 3), ids, node_tri)  # along creases: the triangle the face lies on
     tri_ids = np.full(n, -1, dtype=np.int32)
     unknown_rows = []
     for field_id in np.flatnonzero(np.bincount(ids[ids >= 0])):  # the ids present (a sort of F ids: 7 ms)
