@@ -203,15 +203,41 @@ def _best_target(
 
 
 @wp.func
+def _unlink_dead(m: ListedMeshArg, x: int):
+    """``x``'s corners of faces no longer alive taken out of its list (the others keep their order)."""
+    last = int(-1)
+    c = m.head[x]
+    while c >= 0:
+        after = m.link[c]
+        if m.alive[c // 3] == 1:
+            if last < 0:
+                m.head[x] = c
+            else:
+                m.link[last] = c
+            last = c
+        c = after
+    if last < 0:
+        m.head[x] = -1
+    else:
+        m.link[last] = -1
+
+
+@wp.func
 def _collapse(m: ListedMeshArg, u: int, v: int):
-    """``u`` moved onto ``v``: the faces on their edge die, ``u``'s other corners become ``v``'s."""
+    """``u`` moved onto ``v``: the faces on their edge die, ``u``'s other corners become ``v``'s. The dead faces'
+    corners leave the lists of ``v`` and of the two faces' third corners: a list walked later holds live corners only
+    (kept, a flat region's last vertices walked the dead corners of every collapse onto them: boxes side by side,
+    moved, 16 k movable vertices in 85 ms)."""
     c = m.head[u]
     tail = int(-1)
     while c >= 0:
         face = c // 3
         if m.alive[face] == 1:
-            if next_corner(m.tris, c, 1) == v or next_corner(m.tris, c, 2) == v:
+            a = next_corner(m.tris, c, 1)
+            b = next_corner(m.tris, c, 2)
+            if a == v or b == v:
                 m.alive[face] = 0
+                _unlink_dead(m, wp.where(a == v, b, a))
             else:
                 m.tris[c] = v
         tail = c
@@ -220,6 +246,7 @@ def _collapse(m: ListedMeshArg, u: int, v: int):
         m.link[tail] = m.head[v]
         m.head[v] = m.head[u]
     m.head[u] = -1
+    _unlink_dead(m, v)
 
 
 @wp.func
