@@ -17,7 +17,9 @@ overlap within a few degrees of one plane and pass through each other. Each such
 5. the crossing pairs found again where tiles were laid and where tiling failed, for the next round (``ROUNDS``);
 6. last, a place no plane tiles (a patch folded across a sharp crease, a crumpled corner where three surfaces meet)
    made a fan about one of its own vertices, where the fan stays within ``FAN_TOLERANCE_VOXELS`` of it and none of
-   its faces passes through another.
+   its faces passes through another;
+7. the places still crossing after every round relaxed where that uncrosses them (:mod:`.relax`: their free vertices
+   smoothed within a third of a voxel of where they were).
 
 Kept faces that stay keep their positions and sources bit for bit; tiles are new faces.
 """
@@ -31,6 +33,7 @@ from .components import connected_components, edge_neighbours
 from .geometry import closest_on_triangle, triangle_frame
 from .meshcheck import any_corner, compacted
 from .parallel import launch_split
+from .relax import relaxed
 from .selfcross import crossing_pairs
 from .tiling import tiled_polygons, with_points
 from .zipper import loop_labels
@@ -92,7 +95,8 @@ def _nearest_in_range_kernel(
 def uncrossed(surface: dict, voxel: float, device) -> dict:
     """A kept surface (:func:`.hybrid.kept_surface`'s dict) with its faces tiled again where they pass through
     other faces (the module's steps); every per-face and per-vertex array follows, a tile is a new face of no voxel
-    face. ``stats["uncrossed"]``: places tiled; ``stats["crossing_left"]``: the crossing pairs with a new face left."""
+    face. ``stats["uncrossed"]``: places tiled; ``stats["relaxed"]``: places relaxed; ``stats["crossing_left"]``: the
+    crossing pairs with a new face left."""
     tris, kept = surface["tris"].astype(np.int64), surface["kept"]
     origin = np.arange(len(tris))
     pairs, places = crossing_pairs(surface["verts"], tris, device, np.flatnonzero(~kept)), 0
@@ -115,7 +119,9 @@ def uncrossed(surface: dict, voxel: float, device) -> dict:
         origin = np.r_[origin[alive], np.full(len(tiles), -1)]
         rows = np.r_[(np.cumsum(alive) - 1)[still[alive[still]]], np.arange(len(tiles)) + int(alive.sum())]
         pairs = crossing_pairs(surface["verts"], tris, device, rows)  # where tiles were laid, and where none were
-    return _rebuilt(surface, tris, origin, {"uncrossed": places, "crossing_left": len(pairs)})
+    verts, pairs, loose = relaxed(surface["verts"], tris, kept, pairs, voxel, device)
+    stats = {"uncrossed": places, "relaxed": loose, "crossing_left": len(pairs)}
+    return _rebuilt({**surface, "verts": verts}, tris, origin, stats)
 
 
 def _sound(tris: np.ndarray, tiles: int, n_verts: int) -> bool:
