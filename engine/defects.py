@@ -11,6 +11,7 @@ import warp as wp
 
 from .meshcheck import defect_edge_kinds
 from .selfcross import crossing_segments
+from .sources import mesh_distances
 
 AXES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float32)
 
@@ -39,22 +40,23 @@ def repeated_triangles(tris: np.ndarray, n_verts: int) -> np.ndarray:
 CROSSING_VOXELS = 2.0
 
 
-def own_defects(verts: np.ndarray, tris: np.ndarray, shortest: float | None, device) -> tuple:
+def own_defects(verts: np.ndarray, tris: np.ndarray, shortest: float | None, device, near=None) -> tuple:
     """A mesh's defects (judged with vertices at one position merged): ``(repeated, points, parts, beyond_holes)``:
     (T,) bool the triangles repeating another triangle's corners (never kept), and the defects as triangles to measure
     distances to: each open, non-manifold or inconsistently oriented edge and each segment along which the mesh passes
-    through itself (:func:`.selfcross.crossing_segments`, on curves at least ``shortest`` long; None: not looked for)
-    as a flat triangle ``a b b``, each repeated triangle as itself (``points`` (P, 3) float32, ``parts`` (D, 3) int32;
-    empty when the mesh has none); and whether it has a defect other than a hole's edge. A triangle at a hole's edge
-    keeps its parts farther than the band from that edge, one the mesh passes through farther than the band from the
-    crossing."""
+    through itself (:func:`.selfcross.crossing_segments`, on curves at least ``shortest`` long, with a triangle of
+    ``near`` ((T,) bool, :func:`near_internal`; None: any); ``shortest`` None: not looked for) as a flat triangle
+    ``a b b``, each repeated triangle as itself (``points`` (P, 3) float32, ``parts`` (D, 3) int32; empty when the mesh
+    has none); and whether it has a defect other than a hole's edge. A triangle at a hole's edge keeps its parts
+    farther than the band from that edge, one the mesh passes through farther than the band from the crossing."""
     welded_verts, welded, bad, open_edge = defect_edge_kinds(verts, tris)
     repeated = repeated_triangles(welded, len(welded_verts))
     points = np.asarray(welded_verts, dtype=np.float32)
+    rows = None if near is None else np.flatnonzero(near[~repeated])
     crossings = (
         np.zeros((0, 2, 3), np.float32)
         if shortest is None
-        else crossing_segments(points, welded[~repeated], device, shortest)
+        else crossing_segments(points, welded[~repeated], device, shortest, rows)
     )
     ends = np.arange(len(points), len(points) + 2 * len(crossings)).reshape(-1, 2)
     points = np.concatenate([points, crossings.reshape(-1, 3)])
@@ -68,6 +70,22 @@ def own_defects(verts: np.ndarray, tris: np.ndarray, shortest: float | None, dev
     parts = np.concatenate([slivers, welded[repeated]]).astype(np.int32)
     beyond_holes = bool(repeated.any() or not open_edge.all() or len(crossings))
     return repeated, np.concatenate([points, (0.5 * (a + b) + off).astype(np.float32)]), parts, beyond_holes
+
+
+def near_internal(verts: np.ndarray, tris: np.ndarray, measures, internal: np.ndarray, shortest: float, device):
+    """(T,) bool the triangles a crossing curve at least ``shortest`` long may pass through, given the ``internal``
+    ones ((T,) bool: their own inside on both sides, :mod:`.ownside`): those whose centre lies within two of the
+    mesh's longest edges and ``shortest`` of an internal triangle. A mesh passes through itself only where some part
+    of it lies inside the rest: along such a curve the triangles past it read internal, and the ones across it touch
+    them. (Searched over the whole mesh, a scan of 278 k triangles with one triangle misread internal took 0.33 s.)
+
+    ``measures``: the triangles' :class:`.trimeasures.TriangleMeasures`."""
+    reach = 2.0 * float(measures.lengths.max()) + shortest
+    mesh = wp.Mesh(
+        points=wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device),
+        indices=wp.array(np.ascontiguousarray(tris[internal], dtype=np.int32).ravel(), dtype=wp.int32, device=device),
+    )
+    return mesh_distances(mesh, measures.centres, 2.0 * reach, device) <= reach
 
 
 def octahedra(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:

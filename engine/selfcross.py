@@ -167,12 +167,12 @@ def _pairs_found(args: list, which: np.ndarray, room: int, device) -> tuple[np.n
     return count.numpy(), pairs.numpy()
 
 
-def crossing_segments(verts: np.ndarray, tris: np.ndarray, device, shortest: float = 0.0) -> np.ndarray:
+def crossing_segments(verts: np.ndarray, tris: np.ndarray, device, shortest: float = 0.0, rows=None) -> np.ndarray:
     """(S, 2, 3) float32 the segments along which the triangles of a mesh ((V, 3), (T, 3) int; vertices at one
     position merged by the caller) pass through one another, one per crossing pair, those of crossing curves (the
     segments joined where they share an end: an edge of one triangle through another) at least ``shortest`` long
-    (empty where none is)."""
-    pairs = crossing_pairs(verts, tris, device)
+    (empty where none is); with ``rows``, only the pairs with a triangle among those rows (:func:`crossing_pairs`)."""
+    pairs = crossing_pairs(verts, tris, device, rows)
     if not len(pairs):
         return np.zeros((0, 2, 3), dtype=np.float32)
     segments, ends = _segments(np.asarray(verts, dtype=np.float64), np.asarray(tris, dtype=np.int64), pairs)

@@ -58,3 +58,30 @@ def test_crossing_pairs_are_each_found_once_however_many_there_are(monkeypatch):
     # a triangle crossing more than its slots hold is searched again, with room for all
     monkeypatch.setattr(selfcross, "PAIRS_ROOM", 1)
     assert np.array_equal(crossing_pairs(verts, tris, "cpu"), pairs)
+
+
+def test_crossings_looked_for_near_the_internal_triangles_are_those_of_the_whole_mesh():
+    """Two finely cut boxes given as one mesh (a mesh passing through itself): its triangles inside the other box read
+    internal. The crossings looked for near those alone are the whole mesh's, and the search reads a part of it."""
+    from engine.defects import CROSSING_VOXELS, near_internal, own_defects
+    from engine.trimeasures import triangle_measures
+
+    a = box_mesh(subdivisions=12)
+    b = box_mesh(half=(0.5, 0.5, 0.5), center=(1.2, 0.4, 0.3), subdivisions=6)
+    verts = np.concatenate([a[0], b[0]]).astype(np.float32)
+    tris = np.concatenate([a[1], b[1] + len(a[0])]).astype(np.int64)
+    centres = verts[tris].mean(axis=1)
+    inside_b = np.all(np.abs(centres - (1.2, 0.4, 0.3)) < 0.5 - 1e-6, axis=1)
+    inside_a = np.all(np.abs(centres) < 1.0 - 1e-6, axis=1)
+    internal = np.r_[inside_b[: len(a[1])], inside_a[len(a[1]) :]]
+    assert 0 < internal.sum() < 0.2 * len(tris)
+    voxel = 0.02
+    near = near_internal(verts, tris, triangle_measures(verts, tris), internal, CROSSING_VOXELS * voxel, "cpu")
+    assert near[internal].all() and near.sum() < 0.5 * len(tris)  # measured: 688 of 2,160 (240 internal)
+    found, whole = (own_defects(verts, tris, CROSSING_VOXELS * voxel, "cpu", rows) for rows in (near, None))
+
+    def segments(defects):
+        points, parts = defects[1], defects[2]
+        return np.sort(np.sort(points[parts].reshape(len(parts), -1).round(6), axis=0), axis=0)
+
+    assert len(whole[2]) > 48 and np.array_equal(segments(found), segments(whole))  # measured 96 segments
