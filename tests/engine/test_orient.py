@@ -55,3 +55,28 @@ def test_a_shell_that_crosses_itself_keeps_its_thin_parts_faces():
         t[leaf["flip"][leaf["kept"]]] = t[leaf["flip"][leaf["kept"]]][:, [0, 2, 1]]
         _, _, keys, _ = engine.edgehash.directed_edges(t, len(leaf["verts"]))
         assert len(np.unique(keys)) == len(keys)  # no directed edge listed twice: neighbours turned alike
+
+
+def test_patches_read_about_the_fewer_turn_give_the_turns_every_patch_gives(monkeypatch):
+    """A long strip with three pieces turned (the rings about each hold 12 pieces of the other turn, more than the 10
+    turned in all: decided there) and a short strip apart with 7 of its 10 pieces turned (found whole there): the turns
+    every kept piece's patch gives. With 12 more turned on a third strip, the rings about the long strip's turned
+    pieces no longer outweigh all that is turned: undecided there, every patch is found."""
+    from engine import orient
+
+    long, short, mixed = _strip(400), _strip(5), _strip(12)
+    points = np.concatenate([long[0], short[0] + [0.0, 0.0, 5.0], mixed[0] + [0.0, 0.0, 9.0]]).astype(np.float32)
+    tris = np.concatenate([long[1], short[1] + len(long[0]), mixed[1] + len(long[0]) + len(short[0])])
+    kept = np.ones(len(tris), dtype=bool)
+    flip = np.zeros(len(tris), dtype=bool)
+    flip[[3, 250, 400 + 77]] = True  # three of the long strip's 800 pieces
+    flip[800 : 800 + 7] = True  # seven of the short strip's ten
+    t, turned = tris[kept].astype(np.int64), flip[kept]
+    every = orient._all_patches(points, t, turned, "cpu")
+    about = orient._about_fewer(points, t, turned, "cpu")
+    assert about is not None and np.array_equal(about, every)
+    assert not every[:800].any() and every[800:810].all()  # each strip as its larger area
+    flip[810:834:2] = True  # half the third strip
+    turned = flip[kept]
+    assert orient._about_fewer(points, t, turned, "cpu") is None
+    assert np.array_equal(patch_flips(points, tris, kept, flip), orient._all_patches(points, t, turned, "cpu"))
