@@ -439,7 +439,8 @@ def coarsened(field, surface: dict, adaptivity: float = 0.0, regions: dict | Non
     """A kept surface (:func:`.hybrid.kept_surface`'s dict) with its new faces collapsed where flat, and the split
     pieces of each kept source triangle collapsed at the midpoints inside them (module docstring): kept faces stay on
     their source triangles' planes and keep every source vertex; every per-face and per-vertex array follows (a kept
-    face's corner weights are its corners' own). ``stats["coarsened"]``: how many faces went.
+    face's corner weights are its corners' own). ``stats["coarsened"]``: how many faces went; ``stats["tolerance"]``:
+    the tolerance they went within (voxels).
 
     ``adaptivity`` (0 to 1) widens the tolerance as :func:`.adaptive.tolerance` (curved parts of the band merge too)
     and lets new faces merge across source triangles within a region: ``regions`` ({field id: (T,) label per source
@@ -471,6 +472,7 @@ def coarsened(field, surface: dict, adaptivity: float = 0.0, regions: dict | Non
         "kept_faces": stats["kept_faces"] - gone_kept,
         "new_faces": stats["new_faces"] - (len(tris) - len(rows) - gone_kept),
         "coarsened": len(tris) - len(rows),
+        "tolerance": tolerance(adaptivity),
     }
     return out
 

@@ -34,10 +34,10 @@ RELAX_VOXELS = 0.3
 ATTEMPTS = ((1, 1), (2, 1), (2, 2))
 
 
-def relaxed(verts: np.ndarray, tris: np.ndarray, kept: np.ndarray, pairs: np.ndarray, voxel: float, device):
+def relaxed(verts, tris: np.ndarray, kept: np.ndarray, pairs: np.ndarray, voxel: float, device, reach=RELAX_VOXELS):
     """The vertices (V, 3) of a surface (``tris`` (T, 3) int64, ``kept`` (T,) bool) with the places of its crossing
-    ``pairs`` ((P, 2) face rows) relaxed where that uncrosses them (module steps); the pairs left, and how many places
-    were relaxed."""
+    ``pairs`` ((P, 2) face rows) relaxed where that uncrosses them (module steps; a moved vertex within ``reach``
+    voxels of the faces as they were); the pairs left, and how many places were relaxed."""
     verts = np.asarray(verts, dtype=np.float32).copy()
     free = np.ones(len(verts), dtype=bool)
     free[tris[kept]] = False
@@ -58,7 +58,7 @@ def relaxed(verts: np.ndarray, tris: np.ndarray, kept: np.ndarray, pairs: np.nda
             break
         place = _places(tris[touched], len(verts), device)
         moved = _umbrella(verts, tris[touched], moving, steps)
-        bad = _failed(verts, moved, tris, touched, place, voxel, device)
+        bad = _failed(verts, moved, tris, touched, place, reach * voxel, device)
         take = moving & ~np.isin(place, bad)
         if not take.any():
             continue  # the same pairs for the next attempt
@@ -97,9 +97,9 @@ def _umbrella(verts: np.ndarray, faces: np.ndarray, moving: np.ndarray, steps: i
     return out.astype(np.float32)
 
 
-def _failed(verts, moved, tris, touched, place, voxel: float, device) -> np.ndarray:
+def _failed(verts, moved, tris, touched, place, reach: float, device) -> np.ndarray:
     """The places (ids of ``place``) where the ``moved`` vertices leave a face of ``touched`` passing through another
-    face, turned over, or a moved vertex farther than RELAX_VOXELS from the ``touched`` faces as they were."""
+    face, turned over, or a moved vertex farther than ``reach`` from the ``touched`` faces as they were."""
     faces = tris[touched]
     crossing = crossing_pairs(moved, tris, device, touched)
     hit = np.zeros(len(tris), dtype=bool)
@@ -112,7 +112,7 @@ def _failed(verts, moved, tris, touched, place, voxel: float, device) -> np.ndar
         points=wp.array(np.ascontiguousarray(verts), dtype=wp.vec3, device=device),
         indices=wp.array(np.ascontiguousarray(faces, dtype=np.int32).ravel(), dtype=wp.int32, device=device),
     )
-    far = mesh_distances(mesh, moved[shifted], 2.0 * RELAX_VOXELS * voxel, device) > RELAX_VOXELS * voxel
+    far = mesh_distances(mesh, moved[shifted], 2.0 * reach, device) > reach
     return np.union1d(place[faces[bad, 0]], place[shifted[far]])
 
 

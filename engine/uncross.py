@@ -19,7 +19,8 @@ overlap within a few degrees of one plane and pass through each other. Each such
    made a fan about one of its own vertices, where the fan stays within ``FAN_TOLERANCE_VOXELS`` of it and none of
    its faces passes through another;
 7. the places still crossing after every round relaxed where that uncrosses them (:mod:`.relax`: their free vertices
-   smoothed within a third of a voxel of where they were).
+   smoothed within a third of a voxel of where they were, or within the reach an adaptivity gives new faces:
+   ``stats["tolerance"]`` of :func:`.coarsen.coarsened`, as :data:`.adaptive.FACE_REACH` tolerances).
 
 Kept faces that stay keep their positions and sources bit for bit; tiles are new faces.
 """
@@ -29,11 +30,12 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .adaptive import FACE_REACH
 from .components import connected_components, edge_neighbours
 from .geometry import closest_on_triangle, triangle_frame
 from .meshcheck import any_corner, compacted
 from .parallel import launch_split
-from .relax import relaxed
+from .relax import RELAX_VOXELS, relaxed
 from .selfcross import crossing_pairs
 from .tiling import tiled_polygons, with_points
 from .zipper import loop_labels
@@ -119,7 +121,8 @@ def uncrossed(surface: dict, voxel: float, device) -> dict:
         origin = np.r_[origin[alive], np.full(len(tiles), -1)]
         rows = np.r_[(np.cumsum(alive) - 1)[still[alive[still]]], np.arange(len(tiles)) + int(alive.sum())]
         pairs = crossing_pairs(surface["verts"], tris, device, rows)  # where tiles were laid, and where none were
-    verts, pairs, loose = relaxed(surface["verts"], tris, kept, pairs, voxel, device)
+    reach = max(RELAX_VOXELS, FACE_REACH * surface["stats"].get("tolerance", 0.0))  # an adaptive surface's own
+    verts, pairs, loose = relaxed(surface["verts"], tris, kept, pairs, voxel, device, reach)
     stats = {"uncrossed": places, "relaxed": loose, "crossing_left": len(pairs)}
     return _rebuilt({**surface, "verts": verts}, tris, origin, stats)
 

@@ -202,7 +202,7 @@ def test_a_crumpled_crease_the_rounds_leave_is_relaxed_and_every_other_vertex_st
     normals = [np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]) for p in (after, grid)]
     assert (np.einsum("ij,ij->i", *normals) > 0).all()
     # a place whose relaxed vertices would leave the surface as it was is left as it is
-    monkeypatch.setattr(relax, "RELAX_VOXELS", 0.01)
+    monkeypatch.setattr(uncross, "RELAX_VOXELS", 0.01)
     left = uncrossed(dict(s), 1.0, "cpu")
     assert left["stats"]["relaxed"] == 0 and left["stats"]["crossing_left"] > 0
 
@@ -240,3 +240,45 @@ def test_a_fold_along_a_shallow_cut_of_a_turned_bore_is_relaxed_and_the_kept_fac
     moved = np.flatnonzero(np.any(before["verts"] != s["verts"], axis=1))
     assert 0 < len(moved) <= 60 and not np.isin(moved, s["tris"][s["kept"]]).any()  # measured 21
     assert np.linalg.norm(s["verts"][moved] - before["verts"][moved], axis=1).max() < 0.5 * voxel  # measured 0.44
+
+
+def test_an_adaptive_surfaces_places_relax_within_its_own_tolerance(monkeypatch):
+    """(box ∩ box) ∪ a mirrored hexagonal prism, all turned, at adaptivity 0.5 (/256): the rounds left 4 pairs of
+    faces passing through each other, which relax within 0.6 voxel, more than the 0.3 of a surface at adaptivity 0
+    but within the reach its merged faces have (3 tolerances of 0.22 voxel)."""
+    import engine.uncross as uncross
+
+    def turned(mesh, angles, shift):
+        m = rotation(0, angles[0]) @ rotation(1, angles[1]) @ rotation(2, angles[2])
+        return (mesh[0] @ m.T + shift).astype(np.float32), mesh[1]
+
+    meshes = [
+        turned(
+            box_mesh(half=(0.7780392788118843, 0.4723145617418206, 0.7503501302455537)),
+            (135.58410326430146, 229.37886733964217, 92.92855682795266),
+            0.0,
+        ),
+        turned(
+            box_mesh(half=(0.6335759158022398, 0.6672723173241413, 0.7417092277015561)),
+            (73.14042296707386, 346.3383870728967, 104.08970726760833),
+            (-0.1939798682325199, -0.24368761683985407, -0.43252373943190625),
+        ),
+        turned(
+            cylinder_mesh(0.608734524526686, 1.5643504050272727, 6),
+            (70.4060830945138, 49.29548491199975, 115.7140585445653),
+            (0.2682551533900728, -0.01192186414777463, 0.423184182440686),
+        ),
+    ]
+    verts = np.concatenate([m[0] for m in meshes])
+    voxel = float(np.linalg.norm(verts.max(0) - verts.min(0))) / 256
+
+    fields = engine.build_fields(meshes, voxel_size=voxel, refine="auto")
+    prism = fields[2].transformed(np.diag([-1.0, 1.0, 1.0, 1.0]))
+    kept = lambda: engine.union(engine.intersection(*fields[:2]), prism, seams=True).kept_surface(adaptivity=0.5)  # noqa: E731
+
+    s = kept()
+    assert s["stats"]["relaxed"] >= 1 and s["stats"]["crossing_left"] == 0
+    assert self_intersections(s["verts"], s["tris"]) == 0
+    to_manifold(s["verts"], s["tris"], "relaxed adaptive surface")
+    monkeypatch.setattr(uncross, "FACE_REACH", 0.0)  # within 0.3 voxel alone: left as they were
+    assert kept()["stats"]["crossing_left"] >= 2  # measured 4
