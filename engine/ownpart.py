@@ -84,9 +84,9 @@ def own_part(leaf, source, voxel: float, device) -> _Own:
     side = np.where(side == THIN, thin, side).astype(np.int8)
     # where the mesh passes through itself, some triangle has its own inside on both sides (an internal face): only
     # then are its crossings looked for, and only near those (the bunny's 69 k triangles take 0.07 s)
-    shortest, internal = CROSSING_VOXELS * voxel, side == 0
-    near = near_internal(verts, tris, measures, internal, shortest, device) if internal.any() else None
-    defects, points, parts, beyond_holes = own_defects(verts, tris, shortest if internal.any() else None, device, near)
+    shortest = CROSSING_VOXELS * voxel if (side == 0).any() else None
+    near = None if shortest is None else near_internal(verts, tris, measures, side == 0, shortest, device)
+    defects, points, parts, beyond_holes = own_defects(verts, tris, shortest, device, near)
     defect_mesh = None
     if len(parts) and not defects.all():
         defect_mesh = wp.Mesh(

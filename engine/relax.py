@@ -10,8 +10,8 @@ lie over their neighbours within a few degrees of one plane. Here each place lef
    unfolds a face lying over its neighbours;
 3. the place is taken where no face about its moved vertices passes through another face any more, none is turned
    over or against the faces about it that was not so before (a folded face turns back), and every moved vertex lies
-   within ``RELAX_VOXELS`` of the faces about it as they were; else it stays as it was, for the next attempt (more
-   rings, more steps: ``ATTEMPTS``).
+   within ``RELAX_VOXELS`` (or the reach the caller gives: an adaptive surface's own) of the faces about it as they
+   were; else it stays as it was, for the next attempt (more rings, more steps: ``ATTEMPTS``).
 
 Written by hand: a few vertices smoothed under these checks (no library smooths a handful of vertices of a mesh and
 keeps the rest to the bit).
