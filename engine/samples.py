@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .trimeasures import CHUNK_ROWS
+
 
 @wp.func
 def row_grid(a: wp.vec3, b: wp.vec3, c: wp.vec3, spacing: float) -> wp.vec2:
@@ -82,7 +84,15 @@ def _row_samples_kernel(
 
 
 def edge_turns(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(T,) float64 each triangle's longest edge, (T,) int64 the corner it starts at (edge k: corner k to k + 1)."""
+    """(T,) float64 each triangle's longest edge, (T,) int64 the corner it starts at (edge k: corner k to k + 1);
+    :data:`.trimeasures.CHUNK_ROWS` triangles at a time (the passes' temporaries stay in the cache)."""
+    if len(tris) <= CHUNK_ROWS:
+        return _edge_turns(verts, tris)
+    parts = [_edge_turns(verts, tris[k : k + CHUNK_ROWS]) for k in range(0, len(tris), CHUNK_ROWS)]
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def _edge_turns(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     at = [[verts[tris[:, k], j].astype(np.float64) for j in range(3)] for k in range(3)]
     d = [[at[(k + 1) % 3][j] - at[k][j] for j in range(3)] for k in range(3)]
     s = [(x * x + y * y) + z * z for x, y, z in d]  # as numpy adds a 3-long axis, which it reduces slowly

@@ -26,11 +26,25 @@ class TriangleMeasures:
     doubled_areas: np.ndarray
 
 
+# Triangles measured at a time: each pass's temporaries stay in the cache (a scan of 1.1 M triangles in one go
+# took 0.27-0.74 s, the first call in a process the most; in pieces 0.20-0.23 s, the same values).
+CHUNK_ROWS = 65_536
+
+
 def triangle_measures(verts: np.ndarray, tris: np.ndarray) -> TriangleMeasures:
-    """The :class:`TriangleMeasures` of ``tris`` over ``verts`` ((V, 3) float32)."""
+    """The :class:`TriangleMeasures` of ``tris`` over ``verts`` ((V, 3) float32), CHUNK_ROWS triangles at a time."""
     v = np.asarray(verts, dtype=np.float32)
     t = np.asarray(tris, dtype=np.int64)
     columns = [np.ascontiguousarray(v[:, k]) for k in range(3)]
+    if len(t) <= CHUNK_ROWS:
+        return _measures(columns, t)
+    parts = [_measures(columns, t[k : k + CHUNK_ROWS]) for k in range(0, len(t), CHUNK_ROWS)]
+    fields = ("centres", "normals", "lengths", "doubled_areas")
+    return TriangleMeasures(*(np.concatenate([getattr(part, name) for part in parts]) for name in fields))
+
+
+def _measures(columns: list, t: np.ndarray) -> TriangleMeasures:
+    """The measures of the triangles ``t`` over the vertices' coordinate ``columns``."""
     corners = [[c[t[:, k]] for c in columns] for k in range(3)]  # corners[k][d]: coordinate d of corner k, float32
     a, b, c = corners
     centres = np.stack([(a[d] + b[d] + c[d]) / np.float32(3.0) for d in range(3)], axis=1)

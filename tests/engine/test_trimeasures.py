@@ -53,3 +53,18 @@ def test_welded_positions_are_sorted_as_their_float_values(seed):
     # a float64 mesh takes the sort of its values
     welded64, indices64 = weld_positions(verts.astype(np.float64), tris)
     assert np.array_equal(welded64, as_values.astype(np.float64)) and np.array_equal(indices64, indices)
+
+
+def test_measures_taken_in_pieces_are_those_taken_at_once(monkeypatch):
+    from engine import samples, trimeasures
+
+    verts, tris = load_mesh("stanford-bunny.obj")
+    for module in (trimeasures, samples):
+        monkeypatch.setattr(module, "CHUNK_ROWS", len(tris))
+    whole = trimeasures.triangle_measures(verts, tris), samples.edge_turns(verts, tris)
+    for module in (trimeasures, samples):
+        monkeypatch.setattr(module, "CHUNK_ROWS", 1000)  # 70 pieces, the last one short
+    measures, turns = trimeasures.triangle_measures(verts, tris), samples.edge_turns(verts, tris)
+    for name in ("centres", "normals", "lengths", "doubled_areas"):
+        assert np.array_equal(getattr(measures, name), getattr(whole[0], name)), name
+    assert all(np.array_equal(a, b) for a, b in zip(turns, whole[1], strict=True))
