@@ -337,28 +337,25 @@ def hole_caps(vertices: np.ndarray, triangles: np.ndarray, edges: dict | None = 
     return None if boundary is None else boundary["caps"]
 
 
-# The most boundary edges for which a flat mesh is checked to enclose nothing (the check compares every pair).
-MAX_FLAT_BOUNDARY = 2048
-
-
 # Vertices within this share of the mesh's extent of one plane make a flat mesh (float32 rounding: 6e-8).
 FLAT_TOLERANCE = 1.0e-6
 
 
 def encloses_nothing(vertices: np.ndarray, boundary) -> bool:
-    """Whether a mesh surely encloses no volume because it is flat: its vertices on one plane (within
-    ``FLAT_TOLERANCE``), and its boundary (:func:`hole_boundary`) winding at most once around any point of that plane.
+    """Whether an open mesh encloses no volume because it is flat: its vertices on one plane (within
+    ``FLAT_TOLERANCE``), however often its triangles cover that plane.
 
     Off the plane, w(x) = +-1/4pi times the integral over the plane of c dOmega_x, c the number of times the triangles
-    cover a point (with their orientations): the winding number of the boundary around it. The plane subtends 2 pi, so
-    |w| < max |c| / 2 <= 1/2 everywhere off it. When no two boundary edges meet (but consecutive ones at their common
-    end), the boundary's cycles are simple closed curves, every face of their arrangement borders a cycle, and c is
-    checked on both sides of one edge of each cycle. False (not proven) for a mesh that is not flat, whose boundary
-    meets itself, or has more than ``MAX_FLAT_BOUNDARY`` edges.
+    cover a point (with their orientations). Where c is 0 or +-1 everywhere, |w| < 1/2 off the plane: nothing is inside.
+    Where the sheet covers part of its plane twice (a plane arrayed over itself, two faces on one square), |w| comes
+    near 1 beside that part, and the winding number would make a lens of it whose surface touches the sheet, not a
+    2-manifold (a shell of it came out open). A flat mesh encloses no volume however it covers its plane: it is
+    outside everywhere, and refused or given a wall as any sheet is.
 
     Args:
         vertices: (V, 3) float positions.
-        boundary: :func:`hole_boundary` of the mesh (None: closed).
+        boundary: :func:`hole_boundary` of the mesh (None: closed, never taken as flat here: a closed flat mesh's
+            winding number is 0 off it).
     Returns:
         bool.
     """
@@ -366,74 +363,10 @@ def encloses_nothing(vertices: np.ndarray, boundary) -> bool:
     centre = verts.mean(axis=0)
     offsets = verts - centre
     extent = float(np.abs(offsets).max())
-    if boundary is None or extent == 0.0 or len(boundary["start"]) > MAX_FLAT_BOUNDARY:
+    if boundary is None or extent == 0.0:
         return False
-    axes = np.linalg.eigh(offsets.T @ offsets)[1]  # ascending: the last two span the plane, the first is its normal
-    if np.abs(offsets @ axes[:, 0]).max() > FLAT_TOLERANCE * extent:
-        return False
-    a = (np.asarray(boundary["start"], np.float64) - centre) @ axes[:, 1:]
-    b = (np.asarray(boundary["end"], np.float64) - centre) @ axes[:, 1:]
-    if _edges_meet(a, b):
-        return False
-    first = np.flatnonzero((np.asarray(boundary["links"]) & 1) == 0)  # an edge of each cycle
-    along = b[first] - a[first]
-    side = np.stack([-along[:, 1], along[:, 0]], axis=1) * 1.0e-4
-    mid = 0.5 * (a[first] + b[first])
-    return bool(np.abs(_winding_2d(np.concatenate([mid + side, mid - side]), a, b)).max() <= 1.5)
-
-
-def _point_segment_distance(px, py, ax, ay, dx, dy):
-    """Distance from points (px, py) to segments from (ax, ay) along (dx, dy), all broadcast together."""
-    t = np.clip(((px - ax) * dx + (py - ay) * dy) / np.maximum(dx * dx + dy * dy, 1e-300), 0.0, 1.0)
-    return np.hypot(px - ax - t * dx, py - ay - t * dy)
-
-
-def _edges_meet(a: np.ndarray, b: np.ndarray) -> bool:
-    """Whether two of the 2D segments a[i] b[i] that share no end come within 1e-3 of the longest one's length of
-    each other (crossing, touching, or so near that the side test of :func:`encloses_nothing` could land beside the
-    wrong face). Pairs are found by a sweep along x (sorted starts, ranges by binary search), then tested."""
-    n = len(a)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    margin = 1.0e-3 * float(np.linalg.norm(b - a, axis=1).max())
-    order = np.argsort(lo[:, 0], kind="stable")
-    starts = lo[order, 0]
-    ends = np.searchsorted(starts, hi[order, 0] + margin, side="right")
-    counts = np.maximum(ends - np.arange(n) - 1, 0)
-    i = np.repeat(np.arange(n), counts)
-    j = i + 1 + np.arange(len(i)) - np.repeat(np.cumsum(counts) - counts, counts)
-    i, j = order[i], order[j]
-    keep = (lo[i, 1] <= hi[j, 1] + margin) & (lo[j, 1] <= hi[i, 1] + margin)
-    i, j = i[keep], j[keep]
-    _, ids = np.unique(np.concatenate([a, b]), axis=0, return_inverse=True)
-    ids = ids.reshape(2, -1)
-    shared = (ids[0][i] == ids[0][j]) | (ids[0][i] == ids[1][j]) | (ids[1][i] == ids[0][j]) | (ids[1][i] == ids[1][j])
-    i, j = i[~shared], j[~shared]
-    d = b - a
-    seg_i = (a[i, 0], a[i, 1], d[i, 0], d[i, 1])
-    seg_j = (a[j, 0], a[j, 1], d[j, 0], d[j, 1])
-    gap = np.minimum(
-        np.minimum(
-            _point_segment_distance(a[i, 0], a[i, 1], *seg_j), _point_segment_distance(b[i, 0], b[i, 1], *seg_j)
-        ),
-        np.minimum(
-            _point_segment_distance(a[j, 0], a[j, 1], *seg_i), _point_segment_distance(b[j, 0], b[j, 1], *seg_i)
-        ),
-    )
-    # proper crossings: each segment's ends on strictly opposite sides of the other's line
-    side = lambda s, p: s[2] * (p[1] - s[1]) - s[3] * (p[0] - s[0])  # noqa: E731
-    crossing = (side(seg_i, a[j].T) * side(seg_i, b[j].T) < 0) & (side(seg_j, a[i].T) * side(seg_j, b[i].T) < 0)
-    return bool(np.any((gap < margin) | crossing))
-
-
-def _winding_2d(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(P,) winding numbers of the closed 2D edge cycles a -> b around each point: the sum of the angles the edges
-    subtend, over 2 pi."""
-    total = np.zeros(len(points))
-    for lo in range(0, len(points), 512):
-        ux, uy = a[None, :, 0] - points[lo : lo + 512, 0, None], a[None, :, 1] - points[lo : lo + 512, 1, None]
-        vx, vy = b[None, :, 0] - points[lo : lo + 512, 0, None], b[None, :, 1] - points[lo : lo + 512, 1, None]
-        total[lo : lo + 512] = np.arctan2(ux * vy - uy * vx, ux * vx + uy * vy).sum(axis=1)
-    return total / (2.0 * np.pi)
+    normal = np.linalg.eigh(offsets.T @ offsets)[1][:, 0]  # (ascending: the first axis is the plane's normal)
+    return bool(np.abs(offsets @ normal).max() <= FLAT_TOLERANCE * extent)
 
 
 def open_tunnels(surface: dict, quads: np.ndarray, sides: np.ndarray, points: np.ndarray) -> None:

@@ -22,8 +22,8 @@ sum over the edges of min(L / d^4, pi / (2 d^3)) (L an edge's length, d its dist
 line integral of 6 / |y - x|^4). A node's expansion decides the points near it by Taylor's theorem, along segments
 that cross no triangle, and certifies its whole cell when w keeps to one side of +-1/2 over it (:class:`ExpansionArg`,
 :func:`sign_from_parent`). A boundary too long to sum at every such node (``MAX_BOUNDARY_EDGES``) leaves the open
-mesh to the accurate fast winding number (mode ``WINDING_APPROXIMATE``); a flat mesh that covers its plane once
-(:func:`.meshcheck.encloses_nothing`) is outside everywhere (mode ``WINDING_NONE``).
+mesh to the accurate fast winding number (mode ``WINDING_APPROXIMATE``); a flat open mesh, however often it covers
+its plane (:func:`.meshcheck.encloses_nothing`), is outside everywhere (mode ``WINDING_NONE``).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ import pytest
 
 from aasdf.aasdf_addon import cache, nodes, pipeline
 from tests.blender.scene import add_mesh_object, select, world_arrays
-from tests.metrics import merge_vertices, mesh_volume
+from tests.metrics import merge_vertices, mesh_volume, to_manifold
 from tests.support import box_mesh, is_watertight, uv_sphere
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -88,6 +88,25 @@ def test_a_plane_cutter_is_refused_until_it_has_a_thickness(fresh_cache):
     verts, tris = world_arrays(bpy.context.active_object)
     assert is_watertight(tris)
     assert mesh_volume(verts, tris) == pytest.approx(8.0 - 4.0 * 0.2, rel=0.02)  # a slot 0.2 wide through it
+
+
+def test_a_plane_arrayed_over_itself_is_refused_as_a_plane_and_shelled_with_a_thickness(fresh_cache):
+    # two copies of a plane overlapping on one plane (an Array modifier): the part covered twice read as a lens-shaped
+    # solid whose surface touched the sheet, and its shell came out open; a flat mesh encloses no volume
+    sheet = plane()
+    modifier = sheet.modifiers.new("Array", "ARRAY")
+    modifier.count, modifier.relative_offset_displace = 2, (0.47, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    select(sheet)
+    objects = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match="'Plane' encloses no volume: give it a thickness or close it"):
+        bpy.ops.aasdf.shell(wall=0.15, resolution=64)
+    assert len(bpy.data.objects) == objects
+    select(sheet)
+    assert bpy.ops.aasdf.shell(wall=0.15, resolution=64, thickness=0.6) == {"FINISHED"}
+    verts, tris = world_arrays(bpy.context.active_object)
+    assert is_watertight(tris)
+    to_manifold(verts, tris, "shell of an arrayed plane given a thickness")
 
 
 def test_an_operand_smaller_than_two_voxels_is_refused_as_such(fresh_cache):
