@@ -542,15 +542,15 @@ def _crossed_through(surface: dict) -> bool:
 
 
 def _clear_of_crossings(field, join, surface: dict, avoid: np.ndarray, finish) -> dict:
-    """The surface ``join`` makes of the triangles judged again clear of the faces of ``surface`` that pass through
-    others (and of ``avoid``), made coarse and tiled again by ``finish`` as it was, where its faces no longer do; else
-    ``surface``."""
+    """The surface ``join`` makes of the triangles judged again clear of ``surface``'s faces that pass through others
+    (and of ``avoid``), made coarse and tiled again by ``finish``, where fewer of its faces do (or few); else it."""
     clear = np.concatenate([avoid, _crossings(surface, field.device)])
     again = _joined(field, join, kept_triangles(field, avoid=clear), clear)
     if again["stats"]["kept_fallback"]:
         return surface
     again = finish(again)
-    return surface if _crossed_through(again) else again
+    fewer = again["stats"]["crossing_left"] < surface["stats"]["crossing_left"]
+    return again if fewer or not _crossed_through(again) else surface
 
 
 def _crossings(surface: dict, device) -> np.ndarray:
@@ -609,7 +609,7 @@ def kept_surface(
             return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
         finish = lambda s: uncrossed(coarsened(field, s, adaptivity, regions), field.voxel_size, field.device)  # noqa: E731
         surface = finish(surface)
-        if _crossed_through(surface) and _clean(field):  # judged again clear of where faces pass through others
+        if _crossed_through(surface):  # judged again clear of where faces pass through others
             surface = _clear_of_crossings(field, join, surface, avoid, finish)
         if _crossed_through(surface) and _clean(field):  # the join failed where it must not: remeshed
             if whole is not None:
