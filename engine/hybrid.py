@@ -542,15 +542,15 @@ def _crossed_through(surface: dict, share: float | None = None) -> bool:
 
 
 def _clear_of_crossings(field, join, surface: dict, avoid: np.ndarray, finish) -> dict:
-    """The surface ``join`` makes of the triangles judged again clear of ``surface``'s faces that pass through others
-    (and of ``avoid``), made coarse and tiled again by ``finish``, where fewer of its faces do (or few); else it."""
+    """The surface ``join`` makes of the triangles judged again clear of ``surface``'s crossing faces (and ``avoid``),
+    made coarse and tiled again by ``finish``, where fewer of its faces cross (or few where many did); else it."""
     clear = np.concatenate([avoid, _crossings(surface, field.device)])
     again = _joined(field, join, kept_triangles(field, avoid=clear), clear)
     if again["stats"]["kept_fallback"]:
         return surface
     again = finish(again)
     fewer = again["stats"]["crossing_left"] < surface["stats"]["crossing_left"]
-    return again if fewer or not _crossed_through(again) else surface
+    return again if fewer or _crossed_through(surface) and not _crossed_through(again) else surface
 
 
 def _crossings(surface: dict, device) -> np.ndarray:
