@@ -288,20 +288,24 @@ def test_an_adaptive_surfaces_places_relax_within_its_own_tolerance(monkeypatch)
     assert kept()["stats"]["crossing_left"] >= 2  # measured 4
 
 
-def test_a_mesh_that_passes_through_itself_is_judged_again_clear_of_where_its_join_left_faces_crossing(monkeypatch):
-    """Suzanne (her eyes pass through her head) minus a turned box at /128: the seam's new faces fold about a kept
-    face, a place no tiling, fan or relaxation mends, and 49 pairs of faces were left crossing (2.1 % of the new
-    faces). Judged again clear of them, as a clean mesh's join is, none is left, and the join keeps as much."""
-    from tests.support import load_mesh
-
-    w, x, y, z = 0.5068, -0.6184, -0.4648, -0.3805  # a random turn (bench/stress.py, seed 3, case 10)
-    turn = np.array(
+def _turn(w: float, x: float, y: float, z: float) -> np.ndarray:
+    """The rotation of the unit quaternion ``w + xi + yj + zk`` (as the random sweeps draw them)."""
+    return np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
             [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+def test_a_mesh_that_passes_through_itself_is_judged_again_clear_of_where_its_join_left_faces_crossing(monkeypatch):
+    """Suzanne (her eyes pass through her head) minus a turned box at /128: the seam's new faces fold about a kept
+    face, a place no tiling, fan or relaxation mends, and 49 pairs of faces were left crossing (2.1 % of the new
+    faces). Judged again clear of them, as a clean mesh's join is, none is left, and the join keeps as much."""
+    from tests.support import load_mesh
+
+    turn = _turn(0.5068, -0.6184, -0.4648, -0.3805)  # a random turn (bench/stress.py, seed 3, case 10)
     centre = np.array([-2.3515, 1.8042, 5.1168])
     box = box_mesh(half=(0.3795, 0.7561, 1.0674), center=centre)
     box = ((box[0] - centre) @ turn.T + centre, box[1])
@@ -327,19 +331,7 @@ def test_clean_meshes_are_judged_again_clear_of_any_pair_of_faces_their_join_lef
     """(A six-sided prism of a cylinder ∩ a turned ball) ∪ a box at /192: kept faces met at a corner of the voxel
     surface and left 14 pairs of faces crossing, 0.2 % of the new faces (under the share at which a join counts as
     broken). On clean meshes any pair left is judged again clear of: none is left, the volume stays the exact one's."""
-    w, x, y, z = (
-        0.54616964,
-        -0.672342416,
-        -0.070501163,
-        -0.494655422,
-    )  # a random turn (three-operand chains, seed 22, case 28)
-    turn = np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    turn = _turn(0.54616964, -0.672342416, -0.070501163, -0.494655422)  # random (chains, seed 22, case 28)
     prism = cylinder_mesh(0.23183567, 0.69550702, 6)
     prism = ((prism[0] + (-0.22823135, -0.11332653, -0.17421467)).astype(np.float32), prism[1])
     ball = uv_sphere(0.34665181, rings=12, segments=24)
