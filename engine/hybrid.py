@@ -541,10 +541,10 @@ def _crossed_through(surface: dict, share: float | None = None) -> bool:
     return surface["stats"]["crossing_left"] > share * max(int(np.count_nonzero(~surface["kept"])), 1)
 
 
-def _clear_of_crossings(field, join, surface: dict, avoid: np.ndarray, finish) -> dict:
-    """The surface ``join`` makes of the triangles judged again clear of ``surface``'s crossing faces (and ``avoid``),
-    made coarse and tiled again by ``finish``, where fewer of its faces cross (or few where many did); else it."""
-    clear = np.concatenate([avoid, _crossings(surface, field.device)])
+def _clear_of_crossings(field, join, surface: dict, finish) -> dict:
+    """The surface ``join`` makes of the triangles judged again clear of ``surface``'s crossing faces and its join's
+    points (:mod:`.carried`), made by ``finish``, where fewer of its faces cross (or few where many did); else it."""
+    clear = np.concatenate([carried(field), _crossings(surface, field.device)])
     again = _joined(field, join, kept_triangles(field, avoid=clear), clear)
     if again["stats"]["kept_fallback"]:
         return surface
@@ -610,7 +610,7 @@ def kept_surface(
         finish = lambda s: uncrossed(coarsened(field, s, adaptivity, regions), field.voxel_size, field.device)  # noqa: E731
         surface = finish(surface)
         if _crossed_through(surface, 0.0 if _clean(field) else CROSSED_SHARE):  # judged again clear of where they cross
-            surface = _clear_of_crossings(field, join, surface, avoid, finish)
+            surface = _clear_of_crossings(field, join, surface, finish)
         if _crossed_through(surface) and _clean(field):  # the join failed where it must not: remeshed
             if whole is not None:
                 return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)

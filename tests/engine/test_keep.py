@@ -645,6 +645,6 @@ def test_a_join_that_leaves_faces_passing_through_each_other_is_judged_again_cle
     _check_closed(s)
     assert not len(crossing_pairs(s["verts"], s["tris"].astype(np.int64), "cpu"))
     monkeypatch.setattr(hybrid, "CROSSED_SHARE", 1.0)  # what was given before (not judged again, not given up)
-    monkeypatch.setattr(hybrid, "_clear_of_crossings", lambda field, join, surface, avoid, finish: surface)
+    monkeypatch.setattr(hybrid, "_clear_of_crossings", lambda field, join, surface, finish: surface)
     before = kept()
     assert before["stats"]["crossing_left"] > 0.05 * np.count_nonzero(~before["kept"])  # measured 16 %

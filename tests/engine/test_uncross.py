@@ -236,7 +236,7 @@ def test_a_fold_along_a_shallow_cut_of_a_turned_bore_is_relaxed_and_the_kept_fac
     # unrelaxed (and not judged again): the same faces, the pairs left; relaxing moved a few new vertices only, under
     # a third of a voxel
     monkeypatch.setattr(relax, "ATTEMPTS", ())
-    monkeypatch.setattr(hybrid, "_clear_of_crossings", lambda field, join, surface, avoid, finish: surface)
+    monkeypatch.setattr(hybrid, "_clear_of_crossings", lambda field, join, surface, finish: surface)
     before = engine.difference(fc, fb, seams=True).kept_surface()
     assert before["stats"]["crossing_left"] >= 3  # measured 6
     assert np.array_equal(before["tris"], s["tris"]) and np.array_equal(before["kept"], s["kept"])
@@ -284,7 +284,7 @@ def test_an_adaptive_surfaces_places_relax_within_its_own_tolerance(monkeypatch)
     assert self_intersections(s["verts"], s["tris"]) == 0
     to_manifold(s["verts"], s["tris"], "relaxed adaptive surface")
     monkeypatch.setattr(uncross, "FACE_REACH", 0.0)  # within 0.3 voxel alone (not judged again): left as they were
-    monkeypatch.setattr(hybrid, "_clear_of_crossings", lambda field, join, surface, avoid, finish: surface)
+    monkeypatch.setattr(hybrid, "_clear_of_crossings", lambda field, join, surface, finish: surface)
     assert kept()["stats"]["crossing_left"] >= 2  # measured 4
 
 
