@@ -529,16 +529,15 @@ def _strips(points, k_loops, v_loops, pairs, reach: float, n_kept: int, device):
     return strips, pairs[np.maximum.reduceat(gaps, first) > reach, 0], far[far < n_kept].astype(np.int64)
 
 
-# Faces left crossing are judged again clear of: on clean meshes any (kept faces meeting at a corner of the voxel
-# surface: up to 0.06 % of the new faces), on messy ones over this share; more still crossing on clean meshes give the
-# voxel surface (the join broke down: a turned 40-sided cylinder through a box, 7-20 % of the new faces crossing).
+# Faces left crossing are judged again clear of; more than this share of the new faces still crossing on clean meshes
+# gives the voxel surface (the join broke down: a turned 40-sided cylinder through a box, 7-20 %; kept faces meeting
+# at a corner of the voxel surface leave up to 0.2 %; messy meshes' thin parts may keep a few).
 CROSSED_SHARE = 0.005
 
 
-def _crossed_through(surface: dict, share: float | None = None) -> bool:
-    """Whether more pairs of faces pass through each other than ``share`` (CROSSED_SHARE) of the new faces."""
-    share = CROSSED_SHARE if share is None else share
-    return surface["stats"]["crossing_left"] > share * max(int(np.count_nonzero(~surface["kept"])), 1)
+def _crossed_through(surface: dict) -> bool:
+    """Whether more pairs of faces pass through each other than CROSSED_SHARE of the new faces."""
+    return surface["stats"]["crossing_left"] > CROSSED_SHARE * max(int(np.count_nonzero(~surface["kept"])), 1)
 
 
 def _clear_of_crossings(field, join, surface: dict, finish) -> dict:
@@ -609,7 +608,7 @@ def kept_surface(
             return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
         finish = lambda s: uncrossed(coarsened(field, s, adaptivity, regions), field.voxel_size, field.device)  # noqa: E731
         surface = finish(surface)
-        if _crossed_through(surface, 0.0 if _clean(field) else CROSSED_SHARE):  # judged again clear of where they cross
+        if surface["stats"]["crossing_left"]:  # judged again clear of where faces pass through others
             surface = _clear_of_crossings(field, join, surface, finish)
         if _crossed_through(surface) and _clean(field):  # the join failed where it must not: remeshed
             if whole is not None:

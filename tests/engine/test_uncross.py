@@ -302,7 +302,7 @@ def _turn(w: float, x: float, y: float, z: float) -> np.ndarray:
 def test_a_mesh_that_passes_through_itself_is_judged_again_clear_of_where_its_join_left_faces_crossing(monkeypatch):
     """Suzanne (her eyes pass through her head) minus a turned box at /128: the seam's new faces fold about a kept
     face, a place no tiling, fan or relaxation mends, and 49 pairs of faces were left crossing (2.1 % of the new
-    faces). Judged again clear of them, as a clean mesh's join is, none is left, and the join keeps as much."""
+    faces). Judged again clear of them, none is left, and the join keeps as much."""
     from tests.support import load_mesh
 
     turn = _turn(0.5068, -0.6184, -0.4648, -0.3805)  # a random turn (bench/stress.py, seed 3, case 10)
@@ -321,16 +321,16 @@ def test_a_mesh_that_passes_through_itself_is_judged_again_clear_of_where_its_jo
     assert not s["stats"]["kept_fallback"] and s["stats"]["rejoined"] > 0  # judged clear of the crossing faces
     assert s["stats"]["crossing_left"] == 0 and self_intersections(s["verts"], s["tris"]) == 0
     assert to_manifold(s["verts"], s["tris"]) is not None
-    monkeypatch.setattr(hybrid, "CROSSED_SHARE", 1.0)  # what was given before
+    monkeypatch.setattr(hybrid, "_clear_of_crossings", lambda field, join, surface, finish: surface)  # as before
     before = kept()
     assert before["stats"]["crossing_left"] > 0.01 * np.count_nonzero(~before["kept"])  # measured 2.1 %
     assert np.count_nonzero(s["kept"]) >= 0.98 * np.count_nonzero(before["kept"])  # measured 1.04x
 
 
-def test_clean_meshes_are_judged_again_clear_of_any_pair_of_faces_their_join_left_crossing(monkeypatch):
+def test_a_join_is_judged_again_clear_of_any_pair_of_faces_it_left_crossing(monkeypatch):
     """(A six-sided prism of a cylinder ∩ a turned ball) ∪ a box at /192: kept faces met at a corner of the voxel
     surface and left 14 pairs of faces crossing, 0.2 % of the new faces (under the share at which a join counts as
-    broken). On clean meshes any pair left is judged again clear of: none is left, the volume stays the exact one's."""
+    broken). Any pair left is judged again clear of: none is left, the volume stays the exact one's."""
     turn = _turn(0.54616964, -0.672342416, -0.070501163, -0.494655422)  # random (chains, seed 22, case 28)
     prism = cylinder_mesh(0.23183567, 0.69550702, 6)
     prism = ((prism[0] + (-0.22823135, -0.11332653, -0.17421467)).astype(np.float32), prism[1])
@@ -349,6 +349,6 @@ def test_clean_meshes_are_judged_again_clear_of_any_pair_of_faces_their_join_lef
     assert self_intersections(s["verts"], s["tris"]) == 0
     exact = (to_manifold(*prism) ^ to_manifold(*ball)) + to_manifold(*box)
     assert mesh_volume(s["verts"], s["tris"]) == pytest.approx(exact.volume(), rel=1e-4)
-    monkeypatch.setattr(hybrid, "_clean", lambda field: False)  # judged again only past the share, as before
+    monkeypatch.setattr(hybrid, "_clear_of_crossings", lambda field, join, surface, finish: surface)  # as before
     before = kept()
     assert 0 < before["stats"]["crossing_left"] <= hybrid.CROSSED_SHARE * np.count_nonzero(~before["kept"])
