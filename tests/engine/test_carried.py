@@ -60,7 +60,7 @@ def _fingerprint(surface) -> str:
     return digest.hexdigest()
 
 
-def test_a_cutter_moved_beside_a_mesh_whose_join_gave_faces_up_joins_once_and_keeps_as_much(fresh, joins):
+def test_a_cutter_moved_beside_a_mesh_whose_join_gave_faces_up_needs_no_rejoin_and_keeps_as_much(fresh, joins):
     (fa, fb), h = _beetle_and_ball()
     first = engine.union(fa, fb, seams=True).kept_surface(sharp=True)
     # joined, joined again clear of the faces given up, and once more clear of where faces were left crossing
@@ -77,7 +77,7 @@ def test_a_cutter_moved_beside_a_mesh_whose_join_gave_faces_up_joins_once_and_ke
         assert moved["stats"]["kept_fallback"] == ""
         assert engine.surface_edges(moved["tris"], len(moved["verts"])) is not None  # closed, oriented
         assert to_manifold(moved["verts"], moved["tris"]).status().name == "NoError"
-        carried.forget()  # the same boolean as a first one: two joins, no more faces kept
+        carried.forget()  # the same boolean as a first one: three joins, no more faces kept
         joins[0] = 0
         alone = engine.union(fa, _moved(fb, h, step), seams=True).kept_surface(sharp=True)
         assert joins[0] == 3
