@@ -20,7 +20,7 @@ from .errors import AasdfError
 AREA_CHUNK = 1 << 18
 
 
-def _triangle_areas(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
+def triangle_areas(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
     """(T,) areas, component by component (numpy's cross and norm over (T, 3) arrays are several times slower), a
     piece of ``AREA_CHUNK`` triangles at a time."""
     out = np.empty(len(tris), dtype=np.float64)
@@ -66,7 +66,7 @@ def checked_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray, np.ndarra
             f"[{int(tris.min())}, {int(tris.max())}]."
         )
     tris = tris.astype(np.int32)
-    area2 = 2.0 * _triangle_areas(verts64, tris)
+    area2 = 2.0 * triangle_areas(verts64, tris)
     extent = float(max(np.ptp(verts64[:, k]) for k in range(3)))
     keep = area2 > (1e-12 * extent * extent)
     if not np.any(keep):

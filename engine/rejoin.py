@@ -17,14 +17,13 @@ from __future__ import annotations
 import numpy as np
 
 from .keep import kept_triangles
+from .meshcheck import triangle_areas
 
 
 def kept_area(surface: dict) -> float:
     """The area of a joined surface's kept faces."""
     verts = np.asarray(surface["verts"], dtype=np.float64)
-    tris = np.asarray(surface["tris"])[surface["kept"]]
-    a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
-    return 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    return float(triangle_areas(verts, np.asarray(surface["tris"])[surface["kept"]]).sum())
 
 
 def joined_again(field, surface: dict, join, judged: list, avoid=None) -> tuple[dict, np.ndarray]:

@@ -1,0 +1,80 @@
+"""Booleans whose operands' faces are the result's surface almost nowhere are remeshed, not joined
+(engine/littlekept.py): a ball united with its own copy moved by a voxel, at 1/128 of a unit."""
+
+import numpy as np
+import pytest
+
+import engine
+from engine import hybrid, littlekept
+from engine.meshcheck import triangle_areas
+from tests.metrics import mesh_volume, to_manifold
+from tests.support import is_watertight, uv_sphere
+
+H = 1.0 / 128
+BALL = uv_sphere(0.5, rings=24, segments=48)
+
+
+def _with_copy(voxels: float, seams: bool):
+    """The ball united with its copy moved ``voxels`` along a slanted direction, and the copy's placement."""
+    direction = np.array([1.0, 0.7, -0.4]) / np.linalg.norm([1.0, 0.7, -0.4])
+    move = np.eye(4)
+    move[:3, 3] = direction * voxels * H
+    a, b = engine.build_fields([BALL, BALL], voxel_size=H)
+    return engine.union(a, b.transformed(move), seams=seams), move
+
+
+def _kept_share(surface: dict) -> float:
+    area = triangle_areas(surface["verts"].astype(np.float64), surface["tris"])
+    return float(area[surface["kept"]].sum() / area.sum())
+
+
+@pytest.mark.parametrize("seams", [False, True])
+def test_a_copy_moved_by_a_voxel_is_remeshed_without_a_join_closed_and_exact(monkeypatch, seams):
+    field, move = _with_copy(1.0, seams)
+    joined = []
+    real_join = hybrid.hybrid_surface
+    monkeypatch.setattr(hybrid, "hybrid_surface", lambda *a, **k: joined.append(1) or real_join(*a, **k))
+    s = field.kept_surface()
+    assert not joined
+    assert s["stats"]["kept_fallback"] == littlekept.LITTLE_KEPT and not s["stats"]["join_failed"]
+    assert not s["kept"].any()
+    assert is_watertight(s["tris"]) and to_manifold(s["verts"], s["tris"]) is not None
+    moved = ((BALL[0] @ move[:3, :3].T + move[:3, 3]).astype(np.float32), BALL[1])
+    exact = (to_manifold(*BALL) + to_manifold(*moved)).volume()
+    assert abs(mesh_volume(s["verts"], s["tris"]) - exact) < 2e-4 * exact  # measured 7e-5
+
+
+def test_joined_anyway_the_copy_would_keep_under_the_share_in_islands():
+    field, _ = _with_copy(1.0, False)
+    before = littlekept.MIN_KEPT_SHARE
+    try:
+        littlekept.MIN_KEPT_SHARE = 0.0
+        s = field.kept_surface()
+    finally:
+        littlekept.MIN_KEPT_SHARE = before
+    assert s["stats"]["kept_fallback"] == "" and _kept_share(s) < before  # measured 0.000 (nothing to join)
+
+
+@pytest.mark.parametrize("voxels, least", [(2.0, 0.06), (5.0, 0.33)])  # measured 0.119 and 0.653
+def test_a_copy_moved_farther_keeps_its_faces_joined(voxels, least):
+    field, _ = _with_copy(voxels, True)
+    s = field.kept_surface()
+    assert s["stats"]["kept_fallback"] == "" and _kept_share(s) > least
+    assert is_watertight(s["tris"]) and to_manifold(s["verts"], s["tris"]) is not None
+
+
+def test_a_thin_lens_two_large_balls_share_keeps_its_faces_little_of_theirs_as_they_are():
+    a, b = engine.build_fields([BALL, BALL], voxel_size=H)
+    apart = np.eye(4)
+    apart[0, 3] = 0.95  # a lens 0.05 (6.4 voxels) thick: 2.5 % of each ball's area
+    s = engine.intersection(a, b.transformed(apart)).kept_surface()
+    assert s["stats"]["kept_fallback"] == "" and _kept_share(s) > 0.3  # measured 0.70
+    assert is_watertight(s["tris"]) and to_manifold(s["verts"], s["tris"]) is not None
+
+
+def test_an_empty_boolean_says_its_result_is_empty():
+    a, b = engine.build_fields([BALL, BALL], voxel_size=H)
+    away = np.eye(4)
+    away[0, 3] = 2.0
+    s = engine.intersection(a, b.transformed(away)).kept_surface()
+    assert len(s["tris"]) == 0 and s["stats"]["kept_fallback"] == "the result is empty"
