@@ -343,7 +343,7 @@ def _face_sources(field, surface: dict) -> tuple:
     """Each face's (field id, source triangle, corner weights): a kept face's are its own, a new face's found by the
     field (``AdaptiveField.face_sources``)."""
     verts, tris, kept = surface["verts"], surface["tris"], surface.get("kept")
-    if kept is None or not kept["kept"].any():
+    if kept is None or not kept["kept"].any() and "new_sources" not in kept:
         return field.face_sources(verts, tris)
     ids, tri_ids, bary = kept["field_id"].copy(), kept["triangle_id"].copy(), kept["corner_bary"].copy()
     if "new_sources" in kept:  # found where a boolean made along its seams made them

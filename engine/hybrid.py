@@ -546,6 +546,7 @@ def kept_surface(
         if whole is not None and len(open_vertices(tris, len(verts))):
             return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
         surface = finish(voxel_surface_only(verts, tris, LITTLE_KEPT, failed=False))
+        surface["stats"]["along_seams"] = whole is not None  # (the seams' surface: its sources read there)
     else:
         join = lambda judged: hybrid_surface(field, verts, tris, judged, whole is not None)  # noqa: E731
         surface = _joined(field, join, found["judged"], avoid)

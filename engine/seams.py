@@ -41,7 +41,7 @@ def kept_along_seams(field, **options) -> dict:
         field = again if field.placement is None else again.transformed(field.placement.matrix)
     seams = _read_as_built(as_built(field))
     surface = kept_surface(seams, **options, whole=whole)
-    if not surface["stats"]["kept_fallback"]:
+    if not surface["stats"]["kept_fallback"] or surface["stats"].get("along_seams"):  # (made of the seams' surface)
         new = np.flatnonzero(~surface["kept"])
         surface["new_sources"] = (new, *seams.face_sources(surface["verts"], surface["tris"][new]))
     return surface
