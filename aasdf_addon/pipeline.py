@@ -245,6 +245,10 @@ def extract(
             why = kept["stats"]["kept_fallback"]
             surface["warnings"] = [f"Keep Original Faces: the seams could not be joined to the kept faces ({why}); "
                                    "the whole result is remeshed"]  # fmt: skip
+        elif kept["stats"]["kept_fallback"] == runtime.engine().littlekept.LITTLE_KEPT:
+            surface["warnings"] = ["Keep Original Faces: the inputs' faces lie within a few voxels of each other "
+                                   "almost everywhere; the whole result is remeshed (a smaller Voxel Size keeps "
+                                   "more)"]  # fmt: skip
         folds = runtime.engine().fold_edges(kept["verts"], kept["tris"]) if sharp else None
         surface["creases"] = np.zeros((0, 2), dtype=np.int32) if folds is None else folds
         surface["kept"] = kept

@@ -124,6 +124,23 @@ def test_keep_faces_off_remeshes(fresh_cache):
     assert bpy.context.scene.aasdf.keep_faces  # on by default
 
 
+def test_a_copy_moved_by_a_voxel_is_reported_and_the_result_remeshed(fresh_cache):
+    # its faces lie within the band of the original's nearly everywhere: nothing worth joining (engine/littlekept.py)
+    from aasdf.operators import boolean as boolean_op
+
+    verts, tris = uv_sphere(0.5, rings=24, segments=48)
+    voxel = float(np.linalg.norm(np.ptp(verts, axis=0))) / RESOLUTION
+    ball = add_mesh_object("Ball", verts, tris)
+    copy = add_mesh_object("Copy", verts, tris, location=tuple(voxel * np.array([0.8, 0.56, -0.32])))
+    select(ball, copy)
+    assert bpy.ops.aasdf.boolean(operation="UNION", resolution=RESOLUTION, hide_inputs=False) == {"FINISHED"}
+    (warning,) = boolean_op.last_run["warnings"]
+    assert warning.startswith("Keep Original Faces: the inputs' faces lie within a few voxels")
+    assert "remeshed" in warning
+    result = bpy.context.active_object
+    assert len(result.data.polygons) > 5 * len(tris) and is_watertight(world_arrays(result)[1])
+
+
 def test_kept_faces_that_cannot_be_joined_are_reported_and_the_result_remeshed(fresh_cache, monkeypatch):
     # a join allowed no rounds cannot pair its loops: the user is told, and gets the closed remeshed surface
     from aasdf.aasdf_addon import runtime
