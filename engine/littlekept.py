@@ -7,7 +7,8 @@ tiled again and the faces judged again clear of those left (rocker arm ∪ its c
 against 0.32 s for the remeshed surface, for 2.3 % of the area kept in islands of a few faces, which carry no UV
 layout or topology worth the cost). Where the faces judged kept are under MIN_KEPT_SHARE of the operands' area and
 of the result's, :func:`.hybrid.kept_surface` takes the voxel surface instead, coarse where flat as a join's would be,
-and says so in ``stats["kept_fallback"]`` (a fallback chosen, not a join failed: the add-on does not warn).
+and says so in ``stats["kept_fallback"]`` (a fallback chosen, not a join failed: ``join_failed`` stays False; the
+add-on tells the user why nothing was kept).
 """
 
 from __future__ import annotations
