@@ -42,7 +42,6 @@ from .normalsums import triangle_normal_sums
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .rejoin import joined_again
-from .selfcross import crossing_pairs
 from .slits import fill_slits
 from .sources import mesh_distances
 from .twins import zip_twins
@@ -482,20 +481,13 @@ def _crossed_through(surface: dict) -> bool:
 def _clear_of_crossings(field, join, surface: dict, finish) -> dict:
     """The surface ``join`` makes of the triangles judged again clear of ``surface``'s crossing faces and its join's
     points (:mod:`.carried`), made by ``finish``, where fewer of its faces cross (or few where many did); else it."""
-    clear = np.concatenate([carried(field), _crossings(surface, field.device)])
+    clear = np.concatenate([carried(field), surface["stats"]["crossing_at"]])
     again = _joined(field, join, kept_triangles(field, avoid=clear), clear)
     if again["stats"]["kept_fallback"]:
         return surface
     again = finish(again)
     fewer = again["stats"]["crossing_left"] < surface["stats"]["crossing_left"]
     return again if fewer or _crossed_through(surface) and not _crossed_through(again) else surface
-
-
-def _crossings(surface: dict, device) -> np.ndarray:
-    """(P, 3) float32 the centres of the faces that pass through other faces (a new face in each pair)."""
-    verts, tris = surface["verts"], np.asarray(surface["tris"], dtype=np.int64)
-    pairs = crossing_pairs(verts, tris, device, np.flatnonzero(~surface["kept"]))
-    return verts[tris[np.unique(pairs)]].mean(axis=1).astype(np.float32)
 
 
 def _clean(field) -> bool:

@@ -98,7 +98,7 @@ def uncrossed(surface: dict, voxel: float, device) -> dict:
     """A kept surface (:func:`.hybrid.kept_surface`'s dict) with its faces tiled again where they pass through
     other faces (the module's steps); every per-face and per-vertex array follows, a tile is a new face of no voxel
     face. ``stats["uncrossed"]``: places tiled; ``stats["relaxed"]``: places relaxed; ``stats["crossing_left"]``: the
-    crossing pairs with a new face left."""
+    crossing pairs with a new face left; ``stats["crossing_at"]``: (P, 3) float32 the centres of their faces."""
     tris, kept = surface["tris"].astype(np.int64), surface["kept"]
     origin = np.arange(len(tris))
     pairs, places = crossing_pairs(surface["verts"], tris, device, np.flatnonzero(~kept)), 0
@@ -123,7 +123,8 @@ def uncrossed(surface: dict, voxel: float, device) -> dict:
         pairs = crossing_pairs(surface["verts"], tris, device, rows)  # where tiles were laid, and where none were
     reach = max(RELAX_VOXELS, FACE_REACH * surface["stats"].get("tolerance", 0.0))  # an adaptive surface's own
     verts, pairs, loose = relaxed(surface["verts"], tris, kept, pairs, voxel, device, reach)
-    stats = {"uncrossed": places, "relaxed": loose, "crossing_left": len(pairs)}
+    at = verts[tris[np.unique(pairs)]].mean(axis=1).astype(np.float32)  # (where the faces left crossing lie)
+    stats = {"uncrossed": places, "relaxed": loose, "crossing_left": len(pairs), "crossing_at": at}
     return _rebuilt({**surface, "verts": verts}, tris, origin, stats)
 
 
