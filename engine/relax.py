@@ -6,8 +6,8 @@ lie over their neighbours within a few degrees of one plane. Here each place lef
 
 1. a place: the faces of the crossing pairs and ``rings - 1`` rings of faces about them; its free vertices (those of
    no kept face) move, the rest stay (kept faces keep their vertices bit for bit);
-2. each free vertex takes ``steps`` umbrella steps (half way to the mean of its neighbours, all at once), which
-   unfolds a face lying over its neighbours;
+2. each free vertex takes ``steps`` umbrella steps (half way to the mean of its neighbours, all at once; a quarter of
+   the way in the last attempts), which unfolds a face lying over its neighbours;
 3. the place is taken where no face about its moved vertices passes through another face any more, none is turned
    over or against the faces about it that was not so before (a folded face turns back), and every moved vertex lies
    within ``RELAX_VOXELS`` (or the reach the caller gives: an adaptive surface's own) of the faces about it as they
@@ -30,8 +30,10 @@ from .sources import mesh_distances
 # A relaxed vertex stays within this many voxels of the faces about it as they were (measured on three-operand
 # booleans at /256: the places left relax within 0.06-0.15 voxel of their surface at adaptivity 0).
 RELAX_VOXELS = 0.3
-# (rings of faces about the crossing ones, umbrella steps) tried one after another on the places still crossing.
-ATTEMPTS = ((1, 1), (2, 1), (2, 2))
+# (rings of faces about the crossing ones, umbrella steps, the share of the way each step goes) tried one after another
+# on the places still crossing. The quarter steps last: a fold of the voxel surface where three surfaces meet, which
+# half steps uncross but turn a face over (a three-operand chain at /192: 3 pairs left, none with them).
+ATTEMPTS = ((1, 1, 0.5), (2, 1, 0.5), (2, 2, 0.5), (1, 1, 0.25), (2, 1, 0.25))
 
 
 def relaxed(verts, tris: np.ndarray, kept: np.ndarray, pairs: np.ndarray, voxel: float, device, reach=RELAX_VOXELS):
@@ -42,7 +44,7 @@ def relaxed(verts, tris: np.ndarray, kept: np.ndarray, pairs: np.ndarray, voxel:
     free = np.ones(len(verts), dtype=bool)
     free[tris[kept]] = False
     places = 0
-    for rings, steps in ATTEMPTS:
+    for rings, steps, share in ATTEMPTS:
         if not len(pairs):
             break
         seeds = np.unique(pairs)
@@ -57,7 +59,7 @@ def relaxed(verts, tris: np.ndarray, kept: np.ndarray, pairs: np.ndarray, voxel:
         if not len(touched):
             break
         place = _places(tris[touched], len(verts), device)
-        moved = _umbrella(verts, tris[touched], moving, steps)
+        moved = _umbrella(verts, tris[touched], moving, steps, share)
         bad = _failed(verts, moved, tris, touched, place, reach * voxel, device)
         take = moving & ~np.isin(place, bad)
         if not take.any():
@@ -83,9 +85,10 @@ def _places(faces: np.ndarray, n: int, device) -> np.ndarray:
     return connected_components(n, a, b, device)
 
 
-def _umbrella(verts: np.ndarray, faces: np.ndarray, moving: np.ndarray, steps: int) -> np.ndarray:
+def _umbrella(verts: np.ndarray, faces: np.ndarray, moving: np.ndarray, steps: int, share: float) -> np.ndarray:
     """(V, 3) float32 the vertices after ``steps`` umbrella steps of the ``moving`` ones over the edges of ``faces``
-    (every face about a moving vertex: each neighbour once along a closed surface's directed edges)."""
+    (every face about a moving vertex: each neighbour once along a closed surface's directed edges), each going
+    ``share`` of the way to the mean of its neighbours."""
     a, b = faces.ravel(), faces[:, [1, 2, 0]].ravel()
     rows = np.flatnonzero(moving[a])
     a, b = a[rows], b[rows]
@@ -93,7 +96,7 @@ def _umbrella(verts: np.ndarray, faces: np.ndarray, moving: np.ndarray, steps: i
     out = verts.astype(np.float64)
     for _ in range(steps):
         mean = np.stack([np.bincount(a, out[b, k], len(verts))[moving] for k in range(3)], axis=1)
-        out[moving] = 0.5 * out[moving] + 0.5 * mean / np.maximum(count, 1.0)[:, None]
+        out[moving] = (1.0 - share) * out[moving] + share * mean / np.maximum(count, 1.0)[:, None]
     return out.astype(np.float32)
 
 
