@@ -301,6 +301,19 @@ def _turn(w: float, x: float, y: float, z: float) -> np.ndarray:
     )
 
 
+def _placed(mesh, turn: np.ndarray, shift) -> tuple:
+    """``mesh`` turned by ``turn`` (3, 3) about the origin, then moved by ``shift``."""
+    return (mesh[0] @ turn.T + shift).astype(np.float32), mesh[1]
+
+
+def _kept_at_192(meshes: list, combine) -> dict:
+    """The kept surface of ``combine`` (of the three fields, built on demand, made along their seams) at /192."""
+    verts = np.concatenate([m[0] for m in meshes])
+    voxel = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0))) / 192
+    fields = engine.build_fields(meshes, voxel_size=voxel, refine="auto")
+    return combine(*fields).kept_surface()
+
+
 def test_a_mesh_that_passes_through_itself_is_judged_again_clear_of_where_its_join_left_faces_crossing(monkeypatch):
     """Suzanne (her eyes pass through her head) minus a turned box at /128: the seam's new faces fold about a kept
     face, a place no tiling, fan or relaxation mends, and 49 pairs of faces were left crossing (2.1 % of the new
@@ -334,17 +347,13 @@ def test_a_join_is_judged_again_clear_of_any_pair_of_faces_it_left_crossing(monk
     surface and left 14 pairs of faces crossing, 0.2 % of the new faces (under the share at which a join counts as
     broken). Any pair left is judged again clear of: none is left, the volume stays the exact one's."""
     turn = _turn(0.54616964, -0.672342416, -0.070501163, -0.494655422)  # random (chains, seed 22, case 28)
-    prism = cylinder_mesh(0.23183567, 0.69550702, 6)
-    prism = ((prism[0] + (-0.22823135, -0.11332653, -0.17421467)).astype(np.float32), prism[1])
-    ball = uv_sphere(0.34665181, rings=12, segments=24)
-    ball = ((ball[0] @ turn.T + (-0.03534701, -0.09816916, -0.21150334)).astype(np.float32), ball[1])
+    prism = _placed(cylinder_mesh(0.23183567, 0.69550702, 6), np.eye(3), (-0.22823135, -0.11332653, -0.17421467))
+    ball = _placed(uv_sphere(0.34665181, rings=12, segments=24), turn, (-0.03534701, -0.09816916, -0.21150334))
     box = box_mesh(half=(0.48083641, 0.22697038, 0.26577881), center=(0.10084746, 0.21755987, -0.08204033))
 
     def kept():
-        verts = np.concatenate([prism[0], ball[0], box[0]])
-        voxel = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0))) / 192
-        fa, fb, fc = engine.build_fields([prism, ball, box], voxel_size=voxel, refine="auto")
-        return engine.union(engine.intersection(fa, fb, seams=True), fc, seams=True).kept_surface()
+        both = lambda a, b, c: engine.union(engine.intersection(a, b, seams=True), c, seams=True)  # noqa: E731
+        return _kept_at_192([prism, ball, box], both)
 
     s = kept()
     assert s["stats"]["crossing_left"] == 0 and s["stats"]["rejoined"] > 0
@@ -360,21 +369,16 @@ def test_a_fold_where_three_surfaces_meet_is_relaxed_by_quarter_steps(monkeypatc
     """(A turned 24-sided cylinder ∪ a turned box) - a turned ball at /192: the voxel surface folds where the three
     meet, and half umbrella steps uncross it but turn a face over: 3 pairs of new faces were left crossing. Quarter
     steps, tried last, relax it: none is left, the volume stays the exact one's."""
-    cylinder = cylinder_mesh(0.25353666, 0.76060998, 24)  # random (chains, seed 22, case 32)
-    turn = _turn(0.62434910, -0.28450463, -0.67703884, 0.26620241)
-    cylinder = ((cylinder[0] @ turn.T + (-0.10024950, -0.13837068, -0.26108659)).astype(np.float32), cylinder[1])
-    box = box_mesh(half=(0.52368738, 0.56045327, 0.59923789))
+    turn = _turn(0.62434910, -0.28450463, -0.67703884, 0.26620241)  # random (chains, seed 22, case 32)
+    cylinder = _placed(cylinder_mesh(0.25353666, 0.76060998, 24), turn, (-0.10024950, -0.13837068, -0.26108659))
     turn = _turn(0.30108434, -0.37701118, 0.71310461, 0.50861833)
-    box = ((box[0] @ turn.T + (0.13168879, -0.18905148, 0.25357137)).astype(np.float32), box[1])
-    ball = uv_sphere(0.35136841, rings=12, segments=24)
+    box = _placed(box_mesh(half=(0.52368738, 0.56045327, 0.59923789)), turn, (0.13168879, -0.18905148, 0.25357137))
     turn = _turn(0.03053508, -0.19034617, -0.81413548, -0.54774024)
-    ball = ((ball[0] @ turn.T + (-0.06699402, 0.20878196, 0.20614873)).astype(np.float32), ball[1])
+    ball = _placed(uv_sphere(0.35136841, rings=12, segments=24), turn, (-0.06699402, 0.20878196, 0.20614873))
 
     def kept():
-        verts = np.concatenate([cylinder[0], box[0], ball[0]])
-        voxel = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0))) / 192
-        fa, fb, fc = engine.build_fields([cylinder, box, ball], voxel_size=voxel, refine="auto")
-        return engine.difference(engine.union(fa, fb, seams=True), fc, seams=True).kept_surface()
+        both = lambda a, b, c: engine.difference(engine.union(a, b, seams=True), c, seams=True)  # noqa: E731
+        return _kept_at_192([cylinder, box, ball], both)
 
     s = kept()
     assert s["stats"]["crossing_left"] == 0 and s["stats"]["relaxed"] >= 1
