@@ -88,13 +88,18 @@ def _lost(points, k_tris, k_alive, new, given_up, voxel: float, device) -> bool:
     if not len(lone):
         return False
     centres = points[k_tris[lone]].astype(np.float64).mean(axis=1)
+    return uncovered(points, np.concatenate([k_tris[k_alive], new]), centres, voxel, device)
+
+
+def uncovered(verts, tris, points, voxel: float, device) -> bool:
+    """Whether a point of ``points`` (P, 3) has no triangle of ``tris`` (of ``verts``) within COVER_VOXELS."""
     reach = COVER_VOXELS * voxel
-    joined = np.concatenate([k_tris[k_alive], new]).astype(np.int32)
-    near = np.ascontiguousarray(joined[faces_near(points, joined, centres, reach)])
+    tris = np.asarray(tris, dtype=np.int32)
+    near = np.ascontiguousarray(tris[faces_near(verts, tris, points, reach)])
     if not len(near):
-        return True
+        return bool(len(points))
     mesh = wp.Mesh(
-        points=wp.array(np.ascontiguousarray(points, dtype=np.float32), dtype=wp.vec3, device=device),
+        points=wp.array(np.ascontiguousarray(verts, dtype=np.float32), dtype=wp.vec3, device=device),
         indices=wp.array(near.reshape(-1), dtype=wp.int32, device=device),
     )
-    return bool((mesh_distances(mesh, centres, reach, device) >= reach).any())
+    return bool((mesh_distances(mesh, points, reach, device) >= reach).any())

@@ -36,8 +36,8 @@ from .edgehash import EdgeCounts, directed_edges
 from .expression import leaves
 from .keep import kept_triangles
 from .keptmesh import kept_mesh
-from .littlekept import LITTLE_KEPT, little_kept
-from .meshcheck import all_corners, any_corner, open_vertices
+from .littlekept import LITTLE_KEPT, little_kept, whole_along_seams
+from .meshcheck import all_corners, any_corner
 from .normalsums import triangle_normal_sums
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
@@ -535,7 +535,7 @@ def kept_surface(
         why = "not a boolean of meshes" if field.expression is None else "the result is empty"
         surface = voxel_surface_only(verts, tris, why, failed=False)
     elif little_kept(found["judged"], verts, tris):  # remeshed (:mod:`.littlekept`); along the seams: the whole's
-        if whole is not None and len(open_vertices(tris, len(verts))):
+        if whole is not None and not whole_along_seams(found["judged"], verts, tris, field.voxel_size, field.device):
             return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
         surface = finish(voxel_surface_only(verts, tris, LITTLE_KEPT, failed=False))
         surface["stats"]["along_seams"] = whole is not None  # (the seams' surface: its sources read there)

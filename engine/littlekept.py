@@ -13,7 +13,10 @@ add-on tells the user why nothing was kept).
 
 from __future__ import annotations
 
-from .meshcheck import triangle_areas
+import numpy as np
+
+from .assembly import uncovered
+from .meshcheck import open_vertices, triangle_areas
 
 # The share of the judged meshes' area, and of the result's, under which the judged faces are not joined.
 MIN_KEPT_SHARE = 0.05
@@ -30,3 +33,14 @@ def little_kept(judged: list, verts, tris) -> bool:
     kept = sum(float(triangle_areas(leaf["verts"], leaf["tris"][leaf["kept"]]).sum()) for leaf in judged)
     meshes = sum(float(triangle_areas(leaf["verts"], leaf["tris"]).sum()) for leaf in judged)
     return kept < MIN_KEPT_SHARE * min(kept + float(triangle_areas(verts, tris).sum()), meshes)
+
+
+def whole_along_seams(judged: list, verts, tris, voxel: float, device) -> bool:
+    """Whether a voxel surface made along the seams alone (``verts``, ``tris``) is the whole result's: closed, and
+    about every triangle ``judged`` kept (a part of the result far from every seam, an operand apart from the
+    others, has no voxel surface made there, and the surface about the others is closed without it)."""
+    if len(open_vertices(tris, len(verts))):
+        return False
+    kept = [leaf["verts"][leaf["tris"][leaf["kept"]]].astype(np.float64).mean(axis=1) for leaf in judged]
+    centres = np.concatenate(kept) if kept else np.zeros((0, 3))
+    return not uncovered(verts, tris, centres, voxel, device)
