@@ -5,8 +5,8 @@ surface is theirs, and new surface is made only in a band along the intersection
 field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives it), so whatever the field decides
 (open meshes capped across their holes, self-intersecting or inside-out shells, blends) holds there as everywhere:
 
-1. :func:`.keep.kept_triangles`: which triangles of which operand are the surface, facing which way (where they
-   are under 5 % of it, the voxel surface instead: :mod:`.littlekept`);
+1. :func:`.keep.kept_triangles`: which triangles of which operand are the surface, facing which way (where those
+   kept are under 5 % of the operands' area and of the result's, the voxel surface instead: :mod:`.littlekept`);
 2. the voxel surface less its faces with a corner over the kept ones (:func:`.zipper.vertices_over`), and less the
    teeth of its border left (faces with two edges on it, which the strips beside them would fold over);
 3. the border loops of both (kept vertices at one position welded), paired; a failing kept loop that is a slit closed by

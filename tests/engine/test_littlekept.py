@@ -59,15 +59,12 @@ def test_along_the_seams_an_operand_apart_from_them_is_not_lost():
     assert abs(mesh_volume(s["verts"], s["tris"]) - exact) < 3e-4 * exact
 
 
-def test_joined_anyway_the_copy_would_keep_under_the_share_in_islands():
+def test_joined_anyway_the_copy_would_keep_under_the_share_in_islands(monkeypatch):
     field, _ = _with_copy(1.0, False)
-    before = littlekept.MIN_KEPT_SHARE
-    try:
-        littlekept.MIN_KEPT_SHARE = 0.0
-        s = field.kept_surface()
-    finally:
-        littlekept.MIN_KEPT_SHARE = before
-    assert s["stats"]["kept_fallback"] == "" and _kept_share(s) < before  # measured 0.000 (nothing to join)
+    share = littlekept.MIN_KEPT_SHARE
+    monkeypatch.setattr(littlekept, "MIN_KEPT_SHARE", 0.0)
+    s = field.kept_surface()
+    assert s["stats"]["kept_fallback"] == "" and _kept_share(s) < share  # measured 0.000 (nothing to join)
 
 
 @pytest.mark.parametrize("voxels, least", [(2.0, 0.06), (5.0, 0.33)])  # measured 0.119 and 0.653
