@@ -435,7 +435,7 @@ def _keys(places: np.ndarray, length: np.ndarray, salt: int) -> np.ndarray:
     return keys
 
 
-def coarsened(field, surface: dict, adaptivity: float = 0.0, regions: dict | None = None) -> dict:
+def coarsened(field, surface: dict, adaptivity: float = 0.0, regions: dict | None = None, held=None) -> dict:
     """A kept surface (:func:`.hybrid.kept_surface`'s dict) with its new faces collapsed where flat, and the split
     pieces of each kept source triangle collapsed at the midpoints inside them (module docstring): kept faces stay on
     their source triangles' planes and keep every source vertex; every per-face and per-vertex array follows (a kept
@@ -444,13 +444,13 @@ def coarsened(field, surface: dict, adaptivity: float = 0.0, regions: dict | Non
 
     ``adaptivity`` (0 to 1) widens the tolerance as :func:`.adaptive.tolerance` (curved parts of the band merge too)
     and lets new faces merge across source triangles within a region: ``regions`` ({field id: (T,) label per source
-    triangle}: materials, UV islands), else within an operand.
+    triangle}: materials, UV islands), else within an operand. ``held``: (V,) bool vertices that stay (none goes).
     """
     tris, kept = surface["tris"], surface["kept"]
     if not len(tris):
         return surface
     group = _groups(field, surface, adaptivity, regions)
-    movable = surface["vertex_id"] < 0  # new vertices and midpoints of split sources
+    movable = (surface["vertex_id"] < 0) & (True if held is None else ~held)  # new vertices, split sources' midpoints
     tol = tolerance(adaptivity) * field.voxel_size
     out_tris, rows = collapse_flat(surface["verts"], tris, movable, group, tol, field.device)
     out_tris, rows = _without_twins(out_tris, rows, len(surface["verts"]))

@@ -18,7 +18,8 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
    join cannot be made, the voxel surface alone (``stats["kept_fallback"]``);
 5. where the join gave up large kept faces (a low-polygon mesh's), the triangles judged again clear of the places it
    failed and joined again (:mod:`.rejoin`);
-6. after the new faces are made coarse where flat, those that pass through other faces tiled again (:mod:`.uncross`);
+6. after the new faces are made coarse where flat, those that pass through other faces tiled again (:mod:`.uncross`;
+   at an adaptivity, where pairs are left, made again with the merges about them held back: :mod:`.heldback`);
 7. where many still do (``CROSSED_SHARE``: a kept sliver given up whole left its neighbour's long edge to a fan of
    strips), the triangles judged again clear of those faces and joined again; else the voxel surface, coarse where flat.
 """
@@ -30,10 +31,10 @@ import warp as wp
 
 from .assembly import assembled, voxel_surface_only
 from .carried import carried, remember
-from .coarsen import coarsened
 from .earlyjudge import early_verdicts
 from .edgehash import EdgeCounts, directed_edges
 from .expression import leaves
+from .heldback import finished
 from .keep import kept_triangles
 from .keptmesh import kept_mesh
 from .littlekept import LITTLE_KEPT, little_kept, whole_along_seams
@@ -45,7 +46,6 @@ from .rejoin import joined_again
 from .slits import fill_slits
 from .sources import mesh_distances
 from .twins import zip_twins
-from .uncross import uncrossed
 from .zipper import (
     LOCAL_ROUNDS,
     MAX_ROUNDS,
@@ -530,7 +530,7 @@ def kept_surface(
     )
     verts, faces, sizes = found["mesh"]
     tris = triangulate(faces, sizes)
-    finish = lambda s: uncrossed(coarsened(field, s, adaptivity, regions), field.voxel_size, field.device)  # noqa: E731
+    finish = lambda s: finished(field, s, adaptivity, regions)  # noqa: E731
     if field.expression is None or not (len(tris) or whole):  # (along the seams alone: there may be none)
         why = "not a boolean of meshes" if field.expression is None else "the result is empty"
         surface = voxel_surface_only(verts, tris, why, failed=False)

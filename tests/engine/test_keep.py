@@ -639,13 +639,13 @@ def test_a_join_that_leaves_faces_passing_through_each_other_is_judged_again_cle
     assert mesh_volume(s["verts"], s["tris"]) == pytest.approx(exact.volume(), rel=2e-4)  # measured -0.005 %
     assert mesh_area(s["verts"], s["tris"][s["kept"]]) > 0.9 * exact.surface_area()  # measured 0.969
     # judged again clear of nothing: the same join, and the voxel surface, saying why
-    uncrossed = hybrid.uncrossed
+    finished = hybrid.finished
 
     def nowhere(*args):  # the faces left crossing said to lie nowhere
-        out = uncrossed(*args)
+        out = finished(*args)
         return {**out, "stats": {**out["stats"], "crossing_at": np.zeros((0, 3), np.float32)}}
 
-    monkeypatch.setattr(hybrid, "uncrossed", nowhere)
+    monkeypatch.setattr(hybrid, "finished", nowhere)
     s = kept()
     assert "passing through each other" in s["stats"]["kept_fallback"] and not s["kept"].any()
     _check_closed(s)
