@@ -24,13 +24,14 @@ extracted polygons, as vertex clustering over the octree's blocks:
    split along the diagonal between two crease vertices, else the less folded one.
 4. The result is checked: every edge in exactly two faces, opposite ways, every vertex's faces one fan, no face
    repeating a corner, every merged face's centre within FACE_REACH tolerances of the field's surface and facing
-   the way its gradient does there (none turned over). The components at any failure (at a stray or turned face,
+   the way its gradient does there (none turned over), then no face with a merged corner passing through another
+   face (:mod:`.mergecross`). The components at any failure (at a stray, turned or crossing face,
    its corners of the highest level alone) drop one level and the check runs again, until none fails (at worst
    every vertex is back at level 0: the surface as extracted), so the result is closed and 2-manifold always.
    A round samples the field only where the one before did not (clusters and triangles by their levels and ids).
 
-Self-intersection is not checked beyond that: a merged vertex lies within about the tolerance of its vertices' plane
-and the faces' centres near the surface, facing out.
+Folds of the surface as extracted (dual contouring's, where a crease vertex is pulled onto its crease) are left as
+they are: no merge made them.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ import numpy as np
 from .blockedges import edge_levels
 from .components import connected_components
 from .flatness import far_components
+from .mergecross import crossing_corners
 from .normalsums import quad_normal_sums
 from .quadric import CREASE_ANGLE
 from .quads import QUAD_ANGLE
@@ -157,6 +159,8 @@ def _checked(lattice, local, faces, cls, level, ids, tol) -> dict:
         levels[cluster] = level  # each cluster's (its vertices share it)
         clusters = (position, normals, levels)
         bad |= _strays(lattice, clusters, new_faces, new_sizes, merged, FACE_REACH * tol, key, known)
+        if not bad.any():  # (a round that passed the rest: merged faces through others, :mod:`.mergecross`)
+            bad = crossing_corners(position, new_faces, new_sizes, merged, levels, lattice[0].device)
         if not bad.any() or not (level > 0).any():
             break
         drop = bad[cluster] & (level > 0)

@@ -178,6 +178,22 @@ def rotation(axis: int, degrees: float) -> np.ndarray:
     return m
 
 
+def quaternion_turn(w: float, x: float, y: float, z: float) -> np.ndarray:
+    """(3, 3) the rotation of the unit quaternion ``w + xi + yj + zk`` (as the random sweeps draw them)."""
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def placed(mesh, turn: np.ndarray, shift) -> tuple:
+    """``mesh`` (verts, tris) turned by ``turn`` (3, 3) about the origin, then moved by ``shift``: float32 vertices."""
+    return (np.asarray(mesh[0], dtype=np.float64) @ turn.T + shift).astype(np.float32), mesh[1]
+
+
 def normalised(mesh, center=(0.0, 0.0, 0.0), diagonal: float = 1.0, matrix=None):
     """``mesh`` (verts, tris) moved so its bounding box is centred at ``center`` with diagonal ``diagonal``, after
     the (3, 3) ``matrix`` (applied about the box centre) when given."""

@@ -11,7 +11,7 @@ from engine import heldback, hybrid, relax
 from engine.tiling import tiled_polygons, with_points
 from engine.uncross import TOLERANCE_VOXELS, uncrossed
 from tests.metrics import mesh_volume, self_intersections, to_manifold
-from tests.support import box_mesh, cylinder_mesh, rotation, uv_sphere
+from tests.support import box_mesh, cylinder_mesh, placed, quaternion_turn, rotation, uv_sphere
 
 
 def _tile(polygons, forbid=()):
@@ -291,22 +291,6 @@ def test_an_adaptive_surfaces_places_relax_within_its_own_tolerance(monkeypatch)
     assert kept()["stats"]["crossing_left"] >= 2  # measured 4
 
 
-def _turn(w: float, x: float, y: float, z: float) -> np.ndarray:
-    """The rotation of the unit quaternion ``w + xi + yj + zk`` (as the random sweeps draw them)."""
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def _placed(mesh, turn: np.ndarray, shift) -> tuple:
-    """``mesh`` turned by ``turn`` (3, 3) about the origin, then moved by ``shift``."""
-    return (mesh[0] @ turn.T + shift).astype(np.float32), mesh[1]
-
-
 def _kept_at_192(meshes: list, combine) -> dict:
     """The kept surface of ``combine`` (of the three fields, built on demand, made along their seams) at /192."""
     verts = np.concatenate([m[0] for m in meshes])
@@ -321,7 +305,7 @@ def test_a_mesh_that_passes_through_itself_is_judged_again_clear_of_where_its_jo
     faces). Judged again clear of them, none is left, and the join keeps as much."""
     from tests.support import load_mesh
 
-    turn = _turn(0.5068, -0.6184, -0.4648, -0.3805)  # a random turn (bench/stress.py, seed 3, case 10)
+    turn = quaternion_turn(0.5068, -0.6184, -0.4648, -0.3805)  # a random turn (bench/stress.py, seed 3, case 10)
     centre = np.array([-2.3515, 1.8042, 5.1168])
     box = box_mesh(half=(0.3795, 0.7561, 1.0674), center=centre)
     box = ((box[0] - centre) @ turn.T + centre, box[1])
@@ -347,9 +331,9 @@ def test_a_join_is_judged_again_clear_of_any_pair_of_faces_it_left_crossing(monk
     """(A six-sided prism of a cylinder ∩ a turned ball) ∪ a box at /192: kept faces met at a corner of the voxel
     surface and left 14 pairs of faces crossing, 0.2 % of the new faces (under the share at which a join counts as
     broken). Any pair left is judged again clear of: none is left, the volume stays the exact one's."""
-    turn = _turn(0.54616964, -0.672342416, -0.070501163, -0.494655422)  # random (chains, seed 22, case 28)
-    prism = _placed(cylinder_mesh(0.23183567, 0.69550702, 6), np.eye(3), (-0.22823135, -0.11332653, -0.17421467))
-    ball = _placed(uv_sphere(0.34665181, rings=12, segments=24), turn, (-0.03534701, -0.09816916, -0.21150334))
+    turn = quaternion_turn(0.54616964, -0.672342416, -0.070501163, -0.494655422)  # random (chains, seed 22, case 28)
+    prism = placed(cylinder_mesh(0.23183567, 0.69550702, 6), np.eye(3), (-0.22823135, -0.11332653, -0.17421467))
+    ball = placed(uv_sphere(0.34665181, rings=12, segments=24), turn, (-0.03534701, -0.09816916, -0.21150334))
     box = box_mesh(half=(0.48083641, 0.22697038, 0.26577881), center=(0.10084746, 0.21755987, -0.08204033))
 
     def kept():
@@ -370,12 +354,12 @@ def test_a_fold_where_three_surfaces_meet_is_relaxed_by_quarter_steps(monkeypatc
     """(A turned 24-sided cylinder ∪ a turned box) - a turned ball at /192: the voxel surface folds where the three
     meet, and half umbrella steps uncross it but turn a face over: 3 pairs of new faces were left crossing. Quarter
     steps, tried last, relax it: none is left, the volume stays the exact one's."""
-    turn = _turn(0.62434910, -0.28450463, -0.67703884, 0.26620241)  # random (chains, seed 22, case 32)
-    cylinder = _placed(cylinder_mesh(0.25353666, 0.76060998, 24), turn, (-0.10024950, -0.13837068, -0.26108659))
-    turn = _turn(0.30108434, -0.37701118, 0.71310461, 0.50861833)
-    box = _placed(box_mesh(half=(0.52368738, 0.56045327, 0.59923789)), turn, (0.13168879, -0.18905148, 0.25357137))
-    turn = _turn(0.03053508, -0.19034617, -0.81413548, -0.54774024)
-    ball = _placed(uv_sphere(0.35136841, rings=12, segments=24), turn, (-0.06699402, 0.20878196, 0.20614873))
+    turn = quaternion_turn(0.62434910, -0.28450463, -0.67703884, 0.26620241)  # random (chains, seed 22, case 32)
+    cylinder = placed(cylinder_mesh(0.25353666, 0.76060998, 24), turn, (-0.10024950, -0.13837068, -0.26108659))
+    turn = quaternion_turn(0.30108434, -0.37701118, 0.71310461, 0.50861833)
+    box = placed(box_mesh(half=(0.52368738, 0.56045327, 0.59923789)), turn, (0.13168879, -0.18905148, 0.25357137))
+    turn = quaternion_turn(0.03053508, -0.19034617, -0.81413548, -0.54774024)
+    ball = placed(uv_sphere(0.35136841, rings=12, segments=24), turn, (-0.06699402, 0.20878196, 0.20614873))
 
     def kept():
         both = lambda a, b, c: engine.difference(engine.union(a, b, seams=True), c, seams=True)  # noqa: E731
@@ -394,12 +378,12 @@ def test_merged_faces_left_crossing_on_an_adaptive_band_are_made_again_with_thei
     """(A ball - a 12-sided cylinder) - a box, all turned, at /256 and adaptivity 1: the band's faces merged within 1.5
     voxels pass through each other where the three surfaces meet, 5 pairs of faces 1-4 voxels long that no tiling and
     no relaxation mends. Made again with the vertices within 4 voxels of them held, none is left."""
-    turn = _turn(-0.16095490, -0.96691588, 0.17420413, -0.09391550)  # random (chains, seed 25, case 17)
-    ball = _placed(uv_sphere(0.43186523, rings=12, segments=24), turn, (-0.11123574, -0.27229059, -0.00579765))
-    turn = _turn(-0.67709694, 0.16987108, -0.09201587, 0.71008213)
-    cylinder = _placed(cylinder_mesh(0.30615634, 0.91846901, 12), turn, (0.24625982, 0.17237875, -0.23055031))
-    turn = _turn(0.21508886, 0.29556508, 0.04421068, 0.92974377)
-    box = _placed(box_mesh(half=(0.32612728, 0.45764783, 0.56514342)), turn, (-0.26264675, -0.08205170, 0.17777727))
+    turn = quaternion_turn(-0.16095490, -0.96691588, 0.17420413, -0.09391550)  # random (chains, seed 25, case 17)
+    ball = placed(uv_sphere(0.43186523, rings=12, segments=24), turn, (-0.11123574, -0.27229059, -0.00579765))
+    turn = quaternion_turn(-0.67709694, 0.16987108, -0.09201587, 0.71008213)
+    cylinder = placed(cylinder_mesh(0.30615634, 0.91846901, 12), turn, (0.24625982, 0.17237875, -0.23055031))
+    turn = quaternion_turn(0.21508886, 0.29556508, 0.04421068, 0.92974377)
+    box = placed(box_mesh(half=(0.32612728, 0.45764783, 0.56514342)), turn, (-0.26264675, -0.08205170, 0.17777727))
     meshes = [ball, cylinder, box]
     verts = np.concatenate([m[0] for m in meshes])
     voxel = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0))) / 256
