@@ -3,7 +3,8 @@
 :func:`.adaptive.simplify` merges a block's vertices into one where they lie within a tolerance of a plane, and checks
 the result closed, 2-manifold, near the field's surface and facing out; where a thin part or a tight corner brings
 two sheets within a few voxels, a merged face can still pass through a face of the other sheet (three-operand chains
-at /192: 9 pairs at adaptivity 0.5 and 17 at 1 over 40 chains, against 7 and 4 from the same surfaces' own folds).
+at /192: 9 pairs at adaptivity 0.5 and 17 at 1 over 40 chains; 7 and 6 are left with this check, folds of the level
+contoured).
 Here the triangles with a merged corner are searched against every face (:func:`.selfcross.crossing_pairs`, once a
 round has passed every other test); the corners of the highest level of each face of a pair fail, so their
 components drop a level as at any failure. Pairs of faces none of whose corners merged (a fold of the surface as
