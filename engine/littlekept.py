@@ -30,9 +30,11 @@ def little_kept(judged: list, verts, tris) -> bool:
     of the operands is kept, and it is little of the result (a small intersection of large meshes keeps little of them
     but is mostly their faces; an offset less a ball keeps much of the ball in a surface mostly the offset's). Along the
     seams alone the voxel surface is the seams' only: the kept share of the result is then the larger."""
-    kept = sum(float(triangle_areas(leaf["verts"], leaf["tris"][leaf["kept"]]).sum()) for leaf in judged)
-    meshes = sum(float(triangle_areas(leaf["verts"], leaf["tris"]).sum()) for leaf in judged)
-    return kept < MIN_KEPT_SHARE * min(kept + float(triangle_areas(verts, tris).sum()), meshes)
+    areas = [triangle_areas(leaf["verts"], leaf["tris"]) for leaf in judged]  # (each piece's, once)
+    kept = sum(float(area[leaf["kept"]].sum()) for area, leaf in zip(areas, judged, strict=True))
+    if kept >= MIN_KEPT_SHARE * sum(float(area.sum()) for area in areas):
+        return False  # (much of the operands kept: the voxel surface's area is not needed)
+    return kept < MIN_KEPT_SHARE * (kept + float(triangle_areas(verts, tris).sum()))
 
 
 def whole_along_seams(judged: list, verts, tris, voxel: float, device) -> bool:
