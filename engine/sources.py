@@ -28,6 +28,8 @@ from .queries import face_nodes_kernel
 # Placement -> {id(source): (source, the source placed)}: a placed field's sources made once for its placement and
 # shared by its copies (refined, relabelled, read as built: they share the placement); entries go with it.
 _PLACED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# BVHs of placed copies that are gone kept per source and device, for the next copy to refit (:meth:`SourceMesh.bvh`).
+SPARE_BVHS = 1
 
 
 def placed_sources(sources: dict, placement) -> dict:
@@ -61,18 +63,23 @@ class SourceMesh:
         self._arrays = {}  # device -> (points, flat indices) as Warp arrays
         self._box = None  # (lowest, highest) corner of the vertices, found on first use
         self.refiner = None  # what builds its field's finest octets when asked (:mod:`.ondemand`); None: built whole
+        self._unplaced = None  # the source this is a placed copy of (:meth:`placed`)
+        self._spares = {}  # device -> BVHs of placed copies of this source that are gone (:meth:`bvh`)
 
     @property
     def nbytes(self) -> int:
-        """Bytes held: the arrays, and the BVHs built or adopted so far (estimated at the larger, a winding-number
-        BVH's)."""
+        """Bytes held: the arrays, and the BVHs built, adopted or kept spare so far (estimated at the larger, a
+        winding-number BVH's)."""
         held = self.verts.nbytes + self.tris.nbytes + self.triangle_ids.nbytes
         held += len(self._arrays) * (self.verts.nbytes + self.tris.nbytes)
-        return held + len(self._bvh) * (self.verts.nbytes + self.tris.nbytes + 130 * len(self.tris))
+        bvhs = len(self._bvh) + sum(len(spares) for spares in self._spares.values())
+        return held + bvhs * (self.verts.nbytes + self.tris.nbytes + 130 * len(self.tris))
 
     def placed(self, to_world) -> SourceMesh:
         """These triangles with their vertices moved by ``to_world`` ((N, 3) -> (N, 3)): a placed field's source."""
-        return SourceMesh(to_world(self.verts), self.tris, self.triangle_ids)
+        out = SourceMesh(to_world(self.verts), self.tris, self.triangle_ids)
+        out._unplaced = self
+        return out
 
     def arrays(self, device) -> tuple:
         """(points (V,) vec3, flat indices (3T,) int32) on ``device``, made on first use."""
@@ -100,15 +107,41 @@ class SourceMesh:
 
     def bvh(self, device) -> wp.Mesh:
         """Warp's mesh (with its BVH) of these triangles on ``device``, built on first use, once: a kept-faces judge's
-        thread and its boolean ask for it at the same time (a scan's 69 k triangles: 28 ms of one core each)."""
+        thread and its boolean ask for it at the same time (a scan's 69 k triangles: 28 ms of one core each). A placed
+        copy takes the BVH of an earlier copy that is gone where there is one, its points moved and its boxes refitted
+        (a drag places its operand anew on every move: the bunny's 1 ms against 25)."""
         device = wp.get_device(device)
         with self._building:
             if device.alias not in self._bvh:
-                self._bvh[device.alias] = wp.Mesh(
-                    points=wp.array(self.verts, dtype=wp.vec3, device=device),
-                    indices=wp.array(self.tris.reshape(-1), dtype=wp.int32, device=device),
-                )
+                mesh = self._refitted(device)
+                if mesh is None:
+                    mesh = wp.Mesh(
+                        points=wp.array(self.verts, dtype=wp.vec3, device=device),
+                        indices=wp.array(self.tris.reshape(-1), dtype=wp.int32, device=device),
+                    )
+                if self._unplaced is not None:  # given back when this copy goes
+                    weakref.finalize(self, self._unplaced._spare, device.alias, mesh)
+                self._bvh[device.alias] = mesh
             return self._bvh[device.alias]
+
+    def _refitted(self, device) -> wp.Mesh | None:
+        """A spare BVH of the source this is a placed copy of, its points moved here and its boxes refitted."""
+        unplaced = self._unplaced
+        if unplaced is None:
+            return None
+        try:  # (a list's pop and append are atomic: no lock, which a copy going at any allocation could wait on)
+            mesh = unplaced._spares.get(device.alias, []).pop()
+        except IndexError:
+            return None
+        mesh.points.assign(self.verts)
+        mesh.refit()
+        return mesh
+
+    def _spare(self, alias: str, mesh: wp.Mesh) -> None:
+        """Keep ``mesh``, the BVH of a placed copy that is gone, for the next copy (one a device)."""
+        spares = self._spares.setdefault(alias, [])
+        if len(spares) < SPARE_BVHS:
+            spares.append(mesh)
 
 
 @wp.kernel(enable_backward=False)
