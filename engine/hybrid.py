@@ -537,7 +537,9 @@ def kept_surface(
     elif little_kept(found["judged"], verts, tris):  # remeshed (:mod:`.littlekept`); along the seams: the whole's
         if whole is not None and not whole_along_seams(found["judged"], verts, tris, field.voxel_size, field.device):
             return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
-        surface = finish(voxel_surface_only(verts, tris, LITTLE_KEPT, failed=False))
+        surface = voxel_surface_only(verts, tris, LITTLE_KEPT, failed=False)
+        if adaptivity > 0.0:  # (at 0 the remeshed surface as it is: what Keep Original Faces off gives)
+            surface = finish(surface)
         surface["stats"]["along_seams"] = whole is not None  # (the seams' surface: its sources read there)
     else:
         join = lambda judged: hybrid_surface(field, verts, tris, judged, whole is not None)  # noqa: E731

@@ -101,3 +101,18 @@ def test_along_the_seams_every_face_has_its_source_read_where_it_was_made():
     assert np.array_equal(rows, np.arange(len(s["tris"])))
     whole_ids, whole_tris, _ = _with_copy(1.0, False)[0].face_sources(s["verts"], s["tris"])
     assert np.array_equal(ids, whole_ids) and (tri_ids == whole_tris).mean() > 0.999  # measured: all the same
+
+
+def test_the_remeshed_surface_is_given_as_it_is_and_at_an_adaptivity_coarse_where_flat():
+    # what Keep Original Faces off gives at adaptivity 0 (not made coarse, nothing tiled: its cost); at an adaptivity,
+    # merged where flat as a join's new faces are
+    from engine.quads import triangulate
+
+    field, _ = _with_copy(1.0, False)
+    s = field.kept_surface()
+    verts, faces, sizes = field.to_mesh(quads=True)
+    assert len(s["tris"]) == len(triangulate(faces, sizes))
+    np.testing.assert_array_equal(np.unique(s["verts"], axis=0), np.unique(verts, axis=0))
+    coarse = field.kept_surface(adaptivity=0.5)
+    assert coarse["stats"]["kept_fallback"] == littlekept.LITTLE_KEPT and is_watertight(coarse["tris"])
+    assert len(coarse["tris"]) < 0.1 * len(s["tris"])  # measured 4,566 of 155,112
