@@ -6,11 +6,11 @@ join costs where much is kept: the strips, the coarsening of the whole voxel sur
 tiled again and the faces judged again clear of those left (rocker arm ∪ its copy moved by 1.9 voxels at /256: 2.1 s
 against 0.32 s for the remeshed surface, for 2.3 % of the area kept in islands of a few faces, which carry no UV
 layout or topology worth the cost). Where the faces judged kept are under MIN_KEPT_SHARE of the operands' area and
-of the result's, :func:`.hybrid.kept_surface` takes the voxel surface instead, as the remeshed result has it (at an
-adaptivity, made coarse where flat as a join's new faces are; at 0 as it is: made coarse and its crossings tiled, the
-rocker arm's copy moved a voxel or two took 240-260 ms more than the remeshed surface's 32-43 ms), and says so in
-``stats["kept_fallback"]`` (a fallback chosen, not a join failed: ``join_failed`` stays False; the add-on tells the
-user why nothing was kept).
+of the result's, :func:`.hybrid.kept_surface` takes the voxel surface instead, as the remeshed result has it: at
+adaptivity 0 as it is (made coarse where flat and its crossings tiled, the rocker arm's copy moved a voxel or two took
+240-260 ms more than the remeshed surface's 32-43 ms), at an adaptivity coarse where flat as a join's new faces are.
+It says so in ``stats["kept_fallback"]`` (a fallback chosen, not a join failed: ``join_failed`` stays False; the
+add-on tells the user why nothing was kept).
 """
 
 from __future__ import annotations
