@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 
 import engine  # noqa: E402
 from tests.metrics import self_intersections, to_manifold  # noqa: E402
-from tests.support import box_mesh, is_watertight, load_mesh, uv_sphere  # noqa: E402
+from tests.support import box_mesh, is_watertight, load_mesh, quaternion_turn, uv_sphere  # noqa: E402
 
 MESHES = ("stanford-bunny", "spot", "cow", "suzanne", "teapot", "homer", "alligator", "beetle", "fandisk", "rocker-arm")
 OPS = {"union": engine.union, "intersection": engine.intersection, "difference": engine.difference}
@@ -36,14 +36,8 @@ OPS = {"union": engine.union, "intersection": engine.intersection, "difference":
 
 def turn(rng) -> np.ndarray:
     """A random rotation (a unit quaternion's matrix)."""
-    w, x, y, z = (q := rng.normal(size=4)) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    q = rng.normal(size=4)
+    return quaternion_turn(*(q / np.linalg.norm(q)))
 
 
 def pair(rng) -> tuple:
