@@ -8,9 +8,9 @@ import pytest
 import warp as wp
 
 import engine
-from engine.coplanar import coplanar_readings, flush_triangles, unflushed
+from engine.coplanar import coplanar_readings, flush_triangles, triangles_near, unflushed
 from tests.metrics import distance_within, exact_boolean, hausdorff, mesh_area, mesh_volume, sample_surface, to_manifold
-from tests.support import box_mesh, is_watertight
+from tests.support import box_mesh, is_watertight, uv_sphere
 
 OPS = {"UNION": engine.union, "INTERSECT": engine.intersection, "DIFFERENCE": engine.difference}
 BOX = box_mesh(half=(1.0, 0.5, 0.5))
@@ -130,6 +130,40 @@ def test_coplanar_readings_skip_the_faces_in_a_points_plane_and_tie_its_sign():
         distance, tie, live = coplanar_readings(mesh, None, skip, points, normals, 5.0, 0.01, "cpu", surface=given)
         np.testing.assert_array_equal(tie, [1, -1, 1, 0])
         np.testing.assert_allclose(distance[:3], [0.7, 0.7, 1.0], atol=1e-6)
+
+
+def test_flush_walls_are_looked_for_near_the_faces_in_a_plane_and_few_skipped_by_their_flags():
+    """A mesh with a few faces in another's planes (a copy moved by a voxel) has its flush and internal walls looked
+    for about those faces only, and skips the few it flags by their flags instead of building a BVH without them."""
+    verts, tris = uv_sphere(1.0, rings=24, segments=48)
+    mesh = wp.Mesh(points=wp.array(verts, dtype=wp.vec3), indices=wp.array(tris.reshape(-1).astype(np.int32)))
+    corners = verts[tris[[5, 600]]]  # two faces near the poles' ends of a band
+    near = triangles_near(mesh, corners, 0.1, "cpu")
+    lo, hi = verts[tris].min(axis=1), verts[tris].max(axis=1)
+    meets = np.zeros(len(tris), dtype=bool)
+    for c in corners:  # (by brute force: boxes within the reach of each other)
+        meets |= ((lo <= c.max(axis=0) + 0.1) & (hi >= c.min(axis=0) - 0.1)).all(axis=1)
+    np.testing.assert_array_equal(near, meets)
+    assert 40 < near.sum() < len(tris) // 8  # measured: 123 of 2,208
+    # flush on a copy: only the triangles looked at, each as when all are
+    copy = wp.Mesh(points=wp.array(verts + np.float32(1e-7), dtype=wp.vec3), indices=mesh.indices)
+    every = flush_triangles(mesh, copy, 0.01, "cpu")
+    assert every.all()
+    np.testing.assert_array_equal(flush_triangles(mesh, copy, 0.01, "cpu", near), near.astype(np.uint8))
+    # three skipped of 2,208: the mesh itself, its readings skipping them; the same as over a BVH built without them
+    skip = np.zeros(len(tris), dtype=np.uint8)
+    skip[[5, 6, 7]] = 1
+    assert unflushed(mesh, skip, "cpu") is mesh
+    built = wp.Mesh(points=mesh.points, indices=wp.array(tris[skip == 0].reshape(-1).astype(np.int32)))
+    points = (corners.mean(axis=1) * 1.02).astype(np.float32)
+    points = np.concatenate([points, verts[tris[[5, 6, 7]]].mean(axis=1) * np.float32(1.05)])
+    normals = np.float32([[0, 0, 1]] * len(points))
+    ours = coplanar_readings(mesh, None, skip, points, normals, 0.5, 0.01, "cpu", surface=mesh)
+    theirs = coplanar_readings(mesh, None, skip, points, normals, 0.5, 0.01, "cpu", surface=built)
+    for a, b in zip(ours, theirs, strict=True):
+        np.testing.assert_array_equal(a, b)
+    alone = coplanar_readings(mesh, None, np.zeros_like(skip), points, normals, 0.5, 0.01, "cpu", surface=mesh)
+    assert (ours[0][2:] > alone[0][2:]).all()  # (the skipped faces were the nearest to the last three points)
 
 
 def test_a_blend_over_coinciding_faces_keeps_none_of_them():
