@@ -145,6 +145,8 @@ def quad_halves_first(surface: dict) -> dict:
     2q + 1) first, each pair as rows ``a b c``, ``a c d`` (so a writer can join them as :func:`triangulate` split
     them); ``quads``: how many pairs."""
     voxel_face = surface["voxel_face"]
+    if _in_order(surface["tris"], voxel_face):  # (a voxel surface as extracted: its rows as they are)
+        return {**surface, "quads": len(voxel_face[voxel_face >= 0]) // 2}
     rows = np.flatnonzero(voxel_face >= 0)
     rows = rows[np.argsort(voxel_face[rows], kind="stable")]
     quad = voxel_face[rows] // 2
@@ -166,6 +168,18 @@ def quad_halves_first(surface: dict) -> dict:
     out["corner_bary"][:pairs] = np.take_along_axis(out["corner_bary"][:pairs], corners[:, :, None], axis=1)
     out["quads"] = len(first)
     return out
+
+
+def _in_order(tris: np.ndarray, voxel_face: np.ndarray) -> bool:
+    """Whether the rows of a surface are already as :func:`quad_halves_first` orders them: rows 2q and 2q + 1 the
+    halves ``a b c``, ``a c d`` of quad q (four corners apart) up to some 2Q, no other row a quad's half (a voxel
+    surface as :func:`triangulate` splits its quads, where nothing was kept: 48 ms to gather again 167 k rows in the
+    order they have)."""
+    halves = int(np.count_nonzero(voxel_face >= 0))
+    if halves % 2 or not np.array_equal(voxel_face[:halves], np.arange(halves)):
+        return False
+    (a, b, c), (a2, c2, d) = tris[0:halves:2].T, tris[1:halves:2].T
+    return bool(((a == a2) & (c == c2) & (a != b) & (a != c) & (b != c) & (d != a) & (d != b) & (d != c)).all())
 
 
 def _quad_turns(t1: np.ndarray, t2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -10,8 +10,9 @@ import warp as wp
 
 import engine
 from engine import dual, extract
+from engine.assembly import voxel_surface_only
 from engine.octree import morton_encode_np
-from engine.quads import QUAD_ANGLE, merge_pairs, polygon_edges, triangulate
+from engine.quads import QUAD_ANGLE, merge_pairs, polygon_edges, quad_halves_first, triangulate
 from tests.support import cad_pairs, normalised, uv_sphere
 
 H = 1.0 / 256.0
@@ -131,6 +132,25 @@ def test_triangulate_and_merge_pairs_by_hand():
     faces, sizes = merge_pairs(tris, np.array([0, 2], dtype=np.uint8))
     assert sizes.tolist() == [4, 3, 3, 3]
     assert faces.tolist() == [5, 6, 7, 4, 0, 1, 2, 0, 2, 3, 8, 9, 10]
+
+
+def test_a_voxel_surface_in_quad_order_is_given_as_it_is_and_as_a_reordered_one_comes_back(case):
+    """A kept surface that is the voxel surface (nothing kept) has its quads' halves first already: given as it is,
+    with as many quads as the same rows shuffled within each quad are put back to."""
+    verts, faces, sizes = case["polygons"]
+    surface = voxel_surface_only(verts, triangulate(faces, sizes), "nothing kept", failed=False)
+    quads = int(np.count_nonzero(sizes == 4))
+    surface["voxel_face"] = np.where(surface["voxel_face"] < 2 * quads, surface["voxel_face"], -1)
+    given = quad_halves_first(surface)
+    assert given["quads"] == quads > 0 and given["tris"] is surface["tris"]
+    swapped = np.arange(len(surface["tris"]))
+    swapped[: 2 * quads] = swapped[: 2 * quads].reshape(-1, 2)[:, ::-1].ravel()  # each quad's halves the other way
+    shuffled = {**surface, **{k: surface[k][swapped] for k in ("tris", "kept", "field_id", "triangle_id")}}
+    shuffled.update(corner_bary=surface["corner_bary"][swapped], voxel_face=surface["voxel_face"][swapped])
+    back = quad_halves_first(shuffled)
+    assert back["quads"] == quads
+    np.testing.assert_array_equal(back["tris"], given["tris"])
+    np.testing.assert_array_equal(back["voxel_face"], given["voxel_face"])
 
 
 @pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan")])
