@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from .assembly import uncovered
-from .meshcheck import open_vertices, triangle_areas
+from .edges import surface_edges
+from .meshcheck import triangle_areas
 
 # The share of the judged meshes' area, and of the result's, under which the judged faces are not joined.
 MIN_KEPT_SHARE = 0.05
@@ -43,7 +44,7 @@ def whole_along_seams(judged: list, verts, tris, voxel: float, device) -> bool:
     """Whether a voxel surface made along the seams alone (``verts``, ``tris``) is the whole result's: closed, and
     about every triangle ``judged`` kept (a part of the result far from every seam, an operand apart from the
     others, has no voxel surface made there, and the surface about the others is closed without it)."""
-    if len(open_vertices(tris, len(verts))):
+    if surface_edges(tris, len(verts), device) is None:  # (not closed: 6 ms where the edges' sort took 35)
         return False
     kept = [leaf["verts"][leaf["tris"][leaf["kept"]]].astype(np.float64).mean(axis=1) for leaf in judged]
     centres = np.concatenate(kept) if kept else np.zeros((0, 3))

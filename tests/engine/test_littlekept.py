@@ -59,6 +59,19 @@ def test_along_the_seams_an_operand_apart_from_them_is_not_lost():
     assert abs(mesh_volume(s["verts"], s["tris"]) - exact) < 3e-4 * exact
 
 
+def test_a_seams_surface_with_a_hole_or_far_from_a_kept_face_is_not_the_whole_result():
+    """The seams' surface stands for the whole result only where it is closed and lies about every face kept."""
+    verts, tris = BALL
+    judged = [{"verts": verts, "tris": tris.astype(np.int64), "kept": np.arange(len(tris)) < 10}]
+    assert littlekept.whole_along_seams(judged, verts, tris, H, "cpu")
+    assert not littlekept.whole_along_seams(judged, verts, tris[1:], H, "cpu")  # (a face missing: open)
+    turned = tris.copy()
+    turned[5] = turned[5, ::-1]
+    assert not littlekept.whole_along_seams(judged, verts, turned, H, "cpu")  # (a face turned against its neighbours)
+    far = [{**judged[0], "verts": verts + np.float32(0.3)}]  # the kept faces 0.52 away (66 voxels)
+    assert not littlekept.whole_along_seams(far, verts, tris, H, "cpu")
+
+
 def test_joined_anyway_the_copy_would_keep_under_the_share_in_islands(monkeypatch):
     field, _ = _with_copy(1.0, False)
     share = littlekept.MIN_KEPT_SHARE
