@@ -34,7 +34,6 @@ import warp as wp
 from . import verdicts
 from .coplanar import (
     COPLANAR_VOXELS,
-    FEW_SKIPPED,
     TIED_OPPOSITE,
     TIED_SAME,
     TIES,
@@ -91,6 +90,9 @@ STRAIGHT_VOXELS = 1e-4
 STRAIGHT_RUN_VOXELS = 4.0
 # Points to keep clear of (where a join gave kept faces up) count as defects this many voxels across (octahedra).
 AVOID_VOXELS = 1.0
+# Where under one in this many of a leaf's triangles lie in another leaf's planes, the other leaf's flush and inside
+# walls are looked for about those alone (:meth:`_Judge._near_coplanar`).
+FEW_COPLANAR = 16
 
 FOUND_FLAGS = ("signs_only", "own_only")  # what a judge finds for :mod:`.verdicts` besides each triangle's margin
 
@@ -292,9 +294,9 @@ class _Judge:
         coplanar readings' (the band, a face's slack and spacing) or, where more, four bands (an internal wall counts
         that far), and a voxel. Found here alone, the flush and internal walls of a mesh with a few faces in another's
         planes are looked for about those (rocker arm ∪ its copy moved by a voxel: 14 of 20,088; 100 -> 14 ms a judge);
-        where one in FEW_SKIPPED or more are, every triangle (the copy in place: 20 k queries of a thousand triangles
+        where one in FEW_COPLANAR or more are, every triangle (the copy in place: 20 k queries of a thousand triangles
         each took 27 ms, for all)."""
-        if FEW_SKIPPED * int(np.count_nonzero(self.coplanar)) > len(self.coplanar):
+        if FEW_COPLANAR * int(np.count_nonzero(self.coplanar)) > len(self.coplanar):
             return np.ones(mesh.indices.shape[0] // 3, dtype=bool)
         corners = source_verts_near(self.leaves[self.index], np.flatnonzero(self.coplanar)).astype(np.float64)
         longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
