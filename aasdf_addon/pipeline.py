@@ -249,7 +249,14 @@ def extract(
             surface["warnings"] = ["Keep Original Faces: the inputs' faces lie within a few voxels of each other "
                                    "almost everywhere; the whole result is remeshed (a smaller Voxel Size keeps "
                                    "more)"]  # fmt: skip
-        folds = runtime.engine().fold_edges(kept["verts"], kept["tris"]) if sharp else None
+        found = runtime.engine().surface_edges(kept["tris"], len(kept["verts"])) if len(kept["tris"]) else None
+        if found is not None:  # (the edges the write needs, and the folds' faces)
+            surface["edges"] = {"edge_verts": found[0].ravel(), "corner_edge": found[1]}
+        folds = (
+            None
+            if not sharp or found is None
+            else runtime.engine().fold_edges(kept["verts"], kept["tris"], edges=found)
+        )
         surface["creases"] = np.zeros((0, 2), dtype=np.int32) if folds is None else folds
         surface["kept"] = kept
     elif "verts" not in surface:
