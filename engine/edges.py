@@ -149,6 +149,7 @@ def _edge_faces_kernel(tris: wp.array2d[wp.int32], corner_edge: wp.array[wp.int3
 
 @wp.func
 def _unit_normal(points: wp.array[wp.vec3d], tris: wp.array2d[wp.int32], t: int) -> wp.vec3d:
+    """Triangle ``t``'s unit normal, as numpy finds it (the cross product's terms and the squares summed in order)."""
     a = points[tris[t, 0]]
     e = points[tris[t, 1]] - a
     f = points[tris[t, 2]] - a
