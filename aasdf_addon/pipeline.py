@@ -249,15 +249,6 @@ def extract(
             surface["warnings"] = ["Keep Original Faces: the inputs' faces lie within a few voxels of each other "
                                    "almost everywhere; the whole result is remeshed (a smaller Voxel Size keeps "
                                    "more)"]  # fmt: skip
-        found = runtime.engine().surface_edges(kept["tris"], len(kept["verts"])) if len(kept["tris"]) else None
-        if found is not None:  # (the edges the write needs, and the folds' faces)
-            surface["edges"] = {"edge_verts": found[0].ravel(), "corner_edge": found[1]}
-        folds = (
-            None
-            if not sharp or found is None
-            else runtime.engine().fold_edges(kept["verts"], kept["tris"], edges=found)
-        )
-        surface["creases"] = np.zeros((0, 2), dtype=np.int32) if folds is None else folds
         surface["kept"] = kept
     elif "verts" not in surface:
         adaptivity = adaptivity if sharp else 0.0
@@ -273,6 +264,10 @@ def extract(
         found = runtime.engine().surface_edges(surface["tris"], len(surface["verts"]))
         if found is not None:
             edges["edge_verts"], edges["corner_edge"] = found[0].ravel(), found[1]
+    if "creases" not in surface:  # kept faces: the edges where the surface folds, found on those edges
+        found = (edges["edge_verts"], edges["corner_edge"]) if "edge_verts" in edges else None
+        folds = runtime.engine().fold_edges(surface["verts"], surface["tris"], edges=found) if sharp and found else None
+        surface["creases"] = np.zeros((0, 2), dtype=np.int32) if folds is None else folds
     result = {"verts": surface["verts"], "tris": surface["tris"], "creases": surface["creases"], "edges": edges}
     return {**result, "quads": surface.get("quads", 0), "warnings": list(surface.get("warnings", []))}
 
