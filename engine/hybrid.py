@@ -20,8 +20,9 @@ field's own voxel surface (sharp, as :meth:`.field.AdaptiveField.to_mesh` gives 
    failed and joined again (:mod:`.rejoin`);
 6. after the new faces are made coarse where flat, those that pass through other faces tiled again (:mod:`.uncross`;
    at an adaptivity, where pairs are left, made again with the merges about them held back: :mod:`.heldback`);
-7. where many still do (``CROSSED_SHARE``: a kept sliver given up whole left its neighbour's long edge to a fan of
-   strips), the triangles judged again clear of those faces and joined again; else the voxel surface, coarse where flat.
+7. where some still do, the triangles judged again clear of those faces and joined again, round after round while
+   fewer are left (:mod:`.clearing`); where many still do (``CROSSED_SHARE``: a kept sliver given up whole left its
+   neighbour's long edge to a fan of strips) on clean meshes, the voxel surface, coarse where flat.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import warp as wp
 
 from .assembly import assembled, voxel_surface_only
 from .carried import carried, remember
+from .clearing import cleared
 from .earlyjudge import early_verdicts
 from .edgehash import EdgeCounts, directed_edges
 from .expression import leaves
@@ -479,15 +481,10 @@ def _crossed_through(surface: dict) -> bool:
 
 
 def _clear_of_crossings(field, join, surface: dict, finish) -> dict:
-    """The surface ``join`` makes of the triangles judged again clear of ``surface``'s crossing faces and its join's
-    points (:mod:`.carried`), made by ``finish``, where fewer of its faces cross (or few where many did); else it."""
-    clear = np.concatenate([carried(field), surface["stats"]["crossing_at"]])
-    again = _joined(field, join, kept_triangles(field, avoid=clear), clear)
-    if again["stats"]["kept_fallback"]:
-        return surface
-    again = finish(again)
-    fewer = again["stats"]["crossing_left"] < surface["stats"]["crossing_left"]
-    return again if fewer or _crossed_through(surface) and not _crossed_through(again) else surface
+    """``surface`` made again clear of its faces left crossing, round after round while fewer are (:mod:`.clearing`):
+    the surface ``join`` makes of the triangles judged again (:func:`_joined`), made by ``finish``."""
+    joined = lambda judged, avoid: _joined(field, join, judged, avoid)  # noqa: E731
+    return cleared(field, joined, surface, finish, _crossed_through)
 
 
 def _clean(field) -> bool:
