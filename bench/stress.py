@@ -6,7 +6,10 @@ centre (half the time as a turned mesh, half the time as its field placed by ``A
 intersection or difference, at diagonal / 64, 128, 256 or 384, with the fields built on demand and the boolean made
 along its seams as the add-on makes it. Printed per case: seconds, triangles, faces kept, the join's fallback if it
 gave the kept faces up, whether the result is closed and consistently oriented, whether manifold3d takes it as a
-2-manifold, and how many pairs of its faces pass through each other; then the sums. A flat mesh (the alligator)
+2-manifold, how many pairs of its faces pass through each other (``tests.metrics.self_intersections``: faces touching
+within float rounding count too), and of those how many the engine finds with a new face among them (its own
+``selfcross.crossing_pairs``, as the tiling looks for them: the rest are a mesh's own faces, kept as they are); then
+the sums. A flat mesh (the alligator)
 encloses nothing: its results are empty, as they should be.
 
     .venv/bin/python bench/stress.py [--seed 1] [--count 30]
@@ -27,6 +30,7 @@ os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp-cache"))
 import numpy as np  # noqa: E402
 
 import engine  # noqa: E402
+from engine.selfcross import crossing_pairs  # noqa: E402
 from tests.metrics import self_intersections, to_manifold  # noqa: E402
 from tests.support import box_mesh, is_watertight, load_mesh, quaternion_turn, uv_sphere  # noqa: E402
 
@@ -92,6 +96,7 @@ def run_case(a, b, matrix, op: str, resolution: int) -> dict:
         "closed": bool(len(t)) and is_watertight(t),
         "manifold": manifold,
         "crossings": self_intersections(v, t) if len(t) else 0,
+        "new crossings": len(crossing_pairs(v, t, "cpu", np.flatnonzero(~surface["kept"]))) if len(t) else 0,
     }
 
 
@@ -101,9 +106,10 @@ def main(argv=None):
     parser.add_argument("--count", type=int, default=30)
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
-    totals = {"cases": 0, "empty": 0, "fallbacks": 0, "not closed": 0, "not 2-manifold": 0, "crossings": 0, "kept": 0}
-    print("| case | seconds | triangles | kept | join | closed | 2-manifold | crossing pairs |")
-    print("|---|---|---|---|---|---|---|---|")
+    totals = {"cases": 0, "empty": 0, "fallbacks": 0, "not closed": 0, "not 2-manifold": 0, "crossings": 0}
+    totals.update({"new crossings": 0, "kept": 0})
+    print("| case | seconds | triangles | kept | join | closed | 2-manifold | crossing pairs | with a new face |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for k in range(args.count):
         name, a, b, matrix = pair(rng)
         op = tuple(OPS)[rng.integers(3)]
@@ -112,13 +118,15 @@ def main(argv=None):
         label = f"{k} {name.format(op)} /{resolution}" + (" placed" if matrix is not None else "")
         join = out["fallback"] or "made"
         cells = [f"{out['seconds']:.2f}", f"{out['tris']:,}", f"{out['kept']:,}", join, out["closed"], out["manifold"]]
-        print(f"| {label} | " + " | ".join(map(str, cells)) + f" | {out['crossings']} |", flush=True)
+        crossings = f"{out['crossings']} | {out['new crossings']}"
+        print(f"| {label} | " + " | ".join(map(str, cells)) + f" | {crossings} |", flush=True)
         totals["cases"] += 1
         totals["empty"] += not out["tris"]
         totals["fallbacks"] += bool(out["fallback"])
         totals["not closed"] += bool(out["tris"]) and not out["closed"]
         totals["not 2-manifold"] += bool(out["tris"]) and not out["manifold"]
         totals["crossings"] += out["crossings"]
+        totals["new crossings"] += out["new crossings"]
         totals["kept"] += out["kept"]
     print("\n" + ", ".join(f"{key} {value:,}" for key, value in totals.items()))
 
