@@ -9,8 +9,7 @@ gave the kept faces up, whether the result is closed and consistently oriented, 
 2-manifold, how many pairs of its faces pass through each other (``tests.metrics.self_intersections``: faces touching
 within float rounding count too), and of those how many the engine finds with a new face among them (its own
 ``selfcross.crossing_pairs``, as the tiling looks for them: the rest are a mesh's own faces, kept as they are); then
-the sums. A flat mesh (the alligator)
-encloses nothing: its results are empty, as they should be.
+the sums. A flat mesh (the alligator) encloses nothing: its results are empty, as they should be.
 
     .venv/bin/python bench/stress.py [--seed 1] [--count 30]
 """

@@ -76,8 +76,8 @@ def test_messy_meshes_keep_most_of_what_should_be_kept(name, least):
 # pairs of faces passing through each other with a new face among them (engine/uncross.py), measured: teapot 0 (78
 # before faces crossing others were tiled again, 5 before places no plane tiles were fanned, 1 before thin parts' voxel
 # vertices lay at their mass points), cow 0 (37, 7: a crumpled corner where the cow's and the ball's surfaces meet),
-# beetle 0 (267, 100, 82; 63 while its voxel surface passed through itself at parts thinner than a voxel, 31 before its
-# triangles were judged again clear of the places left), Suzanne 0 (51)
+# beetle 0 (267, 100, 82 and 31 at earlier stops; 63 while its voxel surface passed through itself at parts thinner
+# than a voxel), Suzanne 0 (51)
 CROSSINGS_LEFT = {"teapot": 0, "cow": 0, "beetle": 0, "suzanne": 0}
 
 
