@@ -16,6 +16,22 @@ ADDON_PACKAGE = "aasdf"
 
 os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp-cache"))
 
+
+def _pinned_blas_kernels() -> None:
+    """numpy's OpenBLAS picks its kernels by the CPU (SkylakeX where AVX-512 is, Haswell where only AVX2 is), and
+    their sums round differently: the golden fingerprints (tests/engine/test_golden.py) of fields built on two
+    x86-64 machines differed in every level. The tests take the Haswell kernels on every x86-64 CPU with AVX2 (set
+    before numpy loads; the test processes inherit it)."""
+    try:
+        flags = Path("/proc/cpuinfo").read_text().split()
+    except OSError:
+        return
+    if "avx2" in flags and "fma" in flags:
+        os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
+
+
+_pinned_blas_kernels()
+
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 

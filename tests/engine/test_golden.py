@@ -10,11 +10,12 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-import pytest
+if __name__ == "__main__":  # run as a script: the repository root on the path and BLAS's kernels pinned, as the
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # test harness does (tests/conftest.py)
+    import tests.conftest  # noqa: F401
 
-if __name__ == "__main__":  # run as a script: the repository root on the path, as the test harness does
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 import engine
 from tests.support import load_mesh
