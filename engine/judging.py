@@ -30,8 +30,10 @@ import numpy as np
 import warp as wp
 
 from .jumps import JumpSpheres, near_sphere
+from .otherleaves import sign_check
 from .ownside import gap_side
 from .parallel import host_view, launch_split
+from .queries import mls_value
 from .samples import row_grid, row_point, row_steps
 from .sampling import FieldArg, clamp_to_domain, locate_leaf, node_proj, sample_linear
 
@@ -74,6 +76,7 @@ class LeafArg:
     jump_spheres: wp.array[wp.vec4]
     jumps_anywhere: int
     weight: int  # its sign's place in a sign pattern: 3^(its rank among the other leaves)
+    sign_check: float  # a linear value this far below its mesh's distance is read again by MLS (:mod:`.otherleaves`)
 
 
 @wp.struct
@@ -105,13 +108,29 @@ class JudgeArg:
 
 
 @wp.func
-def _field_value(leaf: LeafArg, x: wp.vec3) -> float:
-    """The leaf's field at world point ``x``, linear, as ``field.sample(x, method="linear")`` reads it."""
+def _in_frame(leaf: LeafArg, x: wp.vec3) -> wp.vec3:
+    """World point ``x`` in the leaf's own frame, as ``Placement.to_local`` takes it."""
     p = x
     if leaf.placed != 0:
         d = wp.vec3d(wp.float64(x[0]), wp.float64(x[1]), wp.float64(x[2])) - leaf.translation
         q = (wp.transpose(leaf.rotation) @ d) / leaf.scale
         p = wp.vec3(wp.float32(q[0]), wp.float32(q[1]), wp.float32(q[2]))
+    return p
+
+
+@wp.func
+def _mls_value(leaf: LeafArg, x: wp.vec3) -> float:
+    """The leaf's field at world point ``x`` by MLS, as ``field.sample(x)`` reads it."""
+    phi = mls_value(leaf.field, _in_frame(leaf, x))
+    if leaf.placed != 0:
+        phi = phi * leaf.value_scale
+    return phi
+
+
+@wp.func
+def _field_value(leaf: LeafArg, x: wp.vec3) -> float:
+    """The leaf's field at world point ``x``, linear, as ``field.sample(x, method="linear")`` reads it."""
+    p = _in_frame(leaf, x)
     f = leaf.field
     xc = clamp_to_domain(f, p)
     out = wp.length(p - xc)
@@ -179,6 +198,8 @@ def reading(judge: JudgeArg, x: wp.vec3, reach: float) -> wp.vec2:
         sign = int(1)
         if leaf.mesh != wp.uint64(0):
             near = _mesh_distance(leaf.mesh, x, far)
+            if wp.abs(value) < wp.min(near, float(judge.partly_at)) - leaf.sign_check:  # (:func:`.signed_again`)
+                value = _mls_value(leaf, x)
             sign = wp.where(near == 0.0, 1, wp.where(value < 0.0, 0, 2))
         else:
             near = wp.abs(wp.clamp(value, -far, far))
@@ -425,6 +446,7 @@ def leaf_arg(field, bvh, rank: int, jumps=None) -> LeafArg:
     spheres = jumps if jumps is not None else JumpSpheres(np.zeros((0, 4), np.float32), field.device)
     arg.jump_bvh, arg.jump_spheres, arg.jumps_anywhere = spheres.bvh_id, spheres.spheres, int(spheres.anywhere)
     arg.weight = 3**rank
+    arg.sign_check = sign_check(field)
     return arg
 
 

@@ -231,7 +231,7 @@ class _Judge:
             if not len(at):  # (none near: its surface farther than the reach, and outside it)
                 pass
             elif planes is None or bvh is None:
-                reading = (self.band, reach, self.device, distance, values)
+                reading = (self.band, reach, self.device, distance, values, self.band + self.slack)
                 near[at], sign[at] = leaf_margin(other, bvh, self.jumps[j], points[at], *reading)
             else:  # where tied, its sign is the tie's: its field is read at the other points alone
                 d, tie = self._coplanar(j, points[at], planes[0][at], planes[1][at])

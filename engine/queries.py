@@ -36,6 +36,20 @@ def beyond_domain(f: FieldArg, x: wp.vec3, xc: wp.vec3, out: float, phi: float) 
 
 
 @wp.func
+def mls_value(f: FieldArg, x: wp.vec3) -> float:
+    """The MLS value at a point of the field's own frame, as :func:`sample_field_kernel` reads it (method 0)."""
+    xc = clamp_to_domain(f, x)
+    out = wp.length(x - xc)
+    leaf = locate_leaf(f, xc)
+    if f.exact == 1 and leaf[1] > 0:
+        return closest_sample(f, x, leaf)[0]
+    phi = sample_mls(f, xc)[0]
+    if out > 0.0:
+        phi = beyond_domain(f, x, xc, out, phi)
+    return phi
+
+
+@wp.func
 def linear_value(f: FieldArg, x: wp.vec3) -> float:
     """The linear value at a point of the field's own frame, as :func:`sample_field_kernel` reads it (method 1)."""
     xc = clamp_to_domain(f, x)
