@@ -35,7 +35,7 @@ from . import parallel
 from .expression import OP_DIFFERENCE, OP_UNION, Operation
 from .geometry import near_cap
 from .meshsides import closed_sides
-from .octree import code_bits, morton_decode_np, morton_encode_np, node_center, parent_octets
+from .octree import code_bits, filled_notches, morton_decode_np, morton_encode_np, node_center, parent_octets
 from .sampling import LEAF_TOLERANCE, FieldArg, clamp_to_domain, level_spacing, locate_leaf, node_coords, node_proj
 from .signs import box_arrays
 from .sources import mesh_distances
@@ -394,13 +394,13 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
     along its seams: within SEAM_REACH_VOXELS (and the ``blend``) of the ``other`` operand's surface
     (:func:`surface_within`), or about ``x``'s holes' caps (built first, :func:`partial_build`: the result's surface
     there is its own), or about where a mesh of either that passes through itself may give its faces up
-    (:func:`crosses_itself`). Elsewhere ``x`` may have octets built for another boolean (its refiner keeps them), at
-    whose edges it is read off coarser nodes; along the seams it is built SEAM_READ_VOXELS farther
-    (:func:`for_boolean`): the result's values there are the full boolean's."""
+    (:func:`crosses_itself`), pinholes and notches closed (:func:`.octree.filled_notches`). Elsewhere ``x`` may have
+    octets built for another boolean (its refiner keeps them), at whose edges it is read off coarser nodes; along the
+    seams it is built SEAM_READ_VOXELS farther (:func:`for_boolean`): the values there are the full boolean's."""
     codes = octets.numpy()
     if not len(codes):
         return octets
-    centres = np.asarray(origin, dtype=np.float64) + (morton_decode_np(codes) + 0.5) * (2.0 * h)
+    centres = np.asarray(origin, dtype=np.float64) + ((coords := morton_decode_np(codes)) + 0.5) * (2.0 * h)
     keep = surface_within(other, centres, SEAM_REACH_VOXELS * h + float(blend))
     for f in (x, other):  # about where a mesh that passes through itself may give its faces up
         near = _near_region(f, centres, SEAM_REACH_VOXELS * h + float(blend), h)
@@ -413,7 +413,7 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
         local = centres if x.placement is None else x.placement.to_local(centres)
         reach = CAP_REACH_OCTETS * 2.0 * plan["voxel_size"] + _sign_check_reach(plan)
         keep |= _near_caps(caps, local, reach, octets.device)
-    return wp.array(codes[keep], dtype=wp.int64, device=octets.device)
+    return wp.array(codes[filled_notches(codes, coords, keep)], dtype=wp.int64, device=octets.device)
 
 
 # The source meshes a kept-faces judge found passing through themselves, or with defects other than holes
