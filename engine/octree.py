@@ -506,7 +506,7 @@ NOTCH_NEIGHBOURS = 3
 
 
 def filled_notches(codes: np.ndarray, coords: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """``keep`` (N,) bool over sorted octet ``codes`` (their ``coords`` (N, 3)) with the octets it leaves out that
+    """``keep`` (N,) bool over octet ``codes`` (their ``coords`` (N, 3)) with the octets it leaves out that
     have NOTCH_NEIGHBOURS or more of their six face neighbours kept taken too (one pass): a region of octets kept by a
     distance test closed at its pinholes and at notches an octet wide along its edge (a boolean along its seams kept
     the rocker arm's octets within 6 voxels of its copy placed 5.12 voxels off, and the surface made there had a hole
@@ -515,7 +515,7 @@ def filled_notches(codes: np.ndarray, coords: np.ndarray, keep: np.ndarray) -> n
     rows = np.flatnonzero(~keep)
     if not len(rows) or not keep.any():
         return out
-    kept, count = codes[keep], np.zeros(len(rows), dtype=np.int64)
+    kept, count = np.sort(codes[keep]), np.zeros(len(rows), dtype=np.int64)
     for step in FACE_STEPS:
         near = coords[rows] + step
         inside = (near >= 0).all(axis=1)
