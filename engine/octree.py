@@ -510,11 +510,19 @@ def filled_notches(codes: np.ndarray, coords: np.ndarray, keep: np.ndarray) -> n
     have NOTCH_NEIGHBOURS or more of their six face neighbours kept taken too (one pass): a region of octets kept by a
     distance test closed at its pinholes and at notches an octet wide along its edge (a boolean along its seams kept
     the rocker arm's octets within 6 voxels of its copy placed 5.12 voxels off, and the surface made there had a hole
-    a voxel across, which no kept face bordered: its join ran out of rounds)."""
+    a voxel across, which no kept face bordered: its join ran out of rounds). Counted from the fewer of the two: the
+    octets left out (their neighbours looked up among those kept), or those kept (their neighbours' codes, each as
+    often as kept octets border it): a dense operand's octets along the seams are a few of its own (the rocker arm's
+    1,773 of 26,149: 32 -> 3 ms)."""
     out = keep.copy()
-    rows = np.flatnonzero(~keep)
-    if not len(rows) or not keep.any():
+    kept = int(np.count_nonzero(keep))
+    if not kept or kept == len(keep):
         return out
+    if kept < len(keep) - kept:  # from the kept octets out
+        near = (coords[keep][:, None, :] + FACE_STEPS[None]).reshape(-1, 3)
+        around, count = np.unique(morton_encode_np(near[(near >= 0).all(axis=1)]), return_counts=True)
+        return out | in_sorted(around[count >= NOTCH_NEIGHBOURS], codes)
+    rows = np.flatnonzero(~keep)
     kept, count = np.sort(codes[keep]), np.zeros(len(rows), dtype=np.int64)
     for step in FACE_STEPS:
         near = coords[rows] + step

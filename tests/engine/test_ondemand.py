@@ -341,14 +341,16 @@ def test_meshes_built_whole_closed_or_open_are_made_along_their_seams(spot, cutt
     assert np.abs(np.sort(kept["verts"], axis=0) - np.sort(want["verts"], axis=0)).max() < 1e-3 * H
 
 
-def test_pinholes_and_notches_an_octet_wide_are_closed_and_nothing_else():
+@pytest.mark.parametrize("depth", [3, 1])  # the slab a third of the octets (counted from those kept), or all
+def test_pinholes_and_notches_an_octet_wide_are_closed_and_nothing_else(depth):
     from engine.octree import filled_notches, morton_encode_np
 
-    grid = np.stack(np.meshgrid(np.arange(6), np.arange(6), np.arange(3), indexing="ij"), axis=-1).reshape(-1, 3)
+    grid = np.stack(np.meshgrid(np.arange(6), np.arange(6), np.arange(depth), indexing="ij"), axis=-1).reshape(-1, 3)
     codes = np.sort(morton_encode_np(grid))
     coords = morton_decode_np(codes)
-    keep = coords[:, 2] == 1  # a slab one octet thick
-    pinhole, notch, corner = (coords == (2, 3, 1)).all(axis=1), (coords == (0, 2, 1)).all(axis=1), (coords == (0, 0, 1))
+    z = depth // 2
+    keep = coords[:, 2] == z  # a slab one octet thick
+    pinhole, notch, corner = (coords == (2, 3, z)).all(axis=1), (coords == (0, 2, z)).all(axis=1), (coords == (0, 0, z))
     keep &= ~pinhole & ~notch & ~corner.all(axis=1)  # its hole (4 kept neighbours), edge notch (3), corner (2)
     out = filled_notches(codes, coords, keep)
     assert out[pinhole].all() and out[notch].all() and not out[corner.all(axis=1)].any()
