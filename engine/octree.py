@@ -513,12 +513,12 @@ def filled_notches(codes: np.ndarray, coords: np.ndarray, keep: np.ndarray) -> n
     a voxel across, which no kept face bordered: its join ran out of rounds). Counted from the fewer of the two: the
     octets left out (their neighbours looked up among those kept), or those kept (their neighbours' codes, each as
     often as kept octets border it): a dense operand's octets along the seams are a few of its own (the rocker arm's
-    1,773 of 26,149: 32 -> 3 ms)."""
+    1,773 of 26,149: 10 -> 1.2 ms)."""
     out = keep.copy()
-    kept = int(np.count_nonzero(keep))
-    if not kept or kept == len(keep):
+    n_kept = int(np.count_nonzero(keep))
+    if not n_kept or n_kept == len(keep):
         return out
-    if kept < len(keep) - kept:  # from the kept octets out
+    if n_kept < len(keep) - n_kept:  # from the kept octets out
         near = (coords[keep][:, None, :] + FACE_STEPS[None]).reshape(-1, 3)
         around, count = np.unique(morton_encode_np(near[(near >= 0).all(axis=1)]), return_counts=True)
         return out | in_sorted(around[count >= NOTCH_NEIGHBOURS], codes)

@@ -341,7 +341,7 @@ def test_meshes_built_whole_closed_or_open_are_made_along_their_seams(spot, cutt
     assert np.abs(np.sort(kept["verts"], axis=0) - np.sort(want["verts"], axis=0)).max() < 1e-3 * H
 
 
-@pytest.mark.parametrize("depth", [3, 1])  # the slab a third of the octets (counted from those kept), or all
+@pytest.mark.parametrize("depth", [3, 1])  # the slab a third of the octets (counted from those kept), or most of them
 def test_pinholes_and_notches_an_octet_wide_are_closed_and_nothing_else(depth):
     from engine.octree import filled_notches, morton_encode_np
 
