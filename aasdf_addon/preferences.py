@@ -1,4 +1,4 @@
-"""Add-on preferences: the compute device and the field cache's memory limit.
+"""Add-on preferences: the compute device, the field cache's memory limit and the engine's start-up warm-up.
 
 ``ADDON_ID`` is the add-on's package name: ``bl_ext.<repo>.aasdf`` when installed as an extension, ``aasdf`` when the
 repository is loaded as a plain package (tests). Warp is not imported here: the device list is filled the first time
@@ -10,7 +10,7 @@ import ctypes
 import sys
 
 import bpy
-from bpy.props import EnumProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 ADDON_ID = __package__.rpartition(".")[0]
 
@@ -85,6 +85,14 @@ class AASDF_AddonPreferences(bpy.types.AddonPreferences):
         min=0,
         soft_max=16384,
     )
+    warm_up: BoolProperty(
+        name="Load Engine at Start-Up",
+        description=(
+            "Load the engine in the background a few seconds after Blender starts, so that the first boolean of a "
+            "session does not wait for it (about a second; the engine takes about 170 MB of memory once loaded)"
+        ),
+        default=True,
+    )
 
     def draw(self, context):
         draw_preferences(self.layout, self)
@@ -97,6 +105,7 @@ def draw_preferences(layout, prefs):
     if _cuda_devices == []:
         layout.label(text="No CUDA device found: the engine runs on the CPU", icon="INFO")
     layout.prop(prefs, "cache_limit_mb")
+    layout.prop(prefs, "warm_up")
 
 
 def get(context=None):

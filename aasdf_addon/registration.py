@@ -9,7 +9,7 @@ functions and a place in ``_modules()``.
 import bpy
 
 from .. import operators, ui
-from . import autoupdate, cache, nodes, preferences, properties
+from . import autoupdate, cache, nodes, preferences, properties, warmup
 
 
 def _classes():
@@ -28,7 +28,7 @@ def _modules():
 
     Their ``unregister()`` must be harmless when ``register()`` did not run (it is also used to roll back).
     """
-    return (properties, cache, autoupdate, ui)
+    return (properties, cache, autoupdate, ui, warmup)
 
 
 def register():

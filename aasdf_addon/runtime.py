@@ -2,11 +2,13 @@
 
 ``import warp`` costs about a second, so nothing imports the engine at registration. ``engine()`` imports it on
 first use, after pointing Warp's kernel cache at a folder the extension owns, exactly once and before any kernel
-is launched.
+is launched; a few seconds after Blender starts, :mod:`.warmup` does so in a thread of its own (``warm``), and a first
+use meanwhile waits for it.
 """
 
 import os
 import tempfile
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -16,6 +18,7 @@ from . import preferences
 from .preferences import ADDON_ID
 
 _engine = None
+_lock = threading.RLock()  # one import, one Warp start-up and one kernel check at a time, from any thread
 # Shipped in the zip by ``make extension`` (absent in a source checkout: kernels then compile on first use).
 PREBUILT_KERNELS = Path(__file__).resolve().parents[1] / "kernels"
 
@@ -62,30 +65,39 @@ def _native_stderr_silenced(active: bool):
         os.close(fd)
 
 
-def engine():
-    """The engine package (``<addon>.engine``), imported on first call.
+def engine(cache_dir: str | None = None):
+    """The engine package (``<addon>.engine``), imported on first call (from any thread: the others wait).
 
-    Before the import, ``warp.config.kernel_cache_dir`` is set to ``kernel_cache_dir()`` unless Warp was already
-    configured or initialised by someone else in this Blender session (another add-on sharing the same Warp); Warp
-    then keeps the folder it has. Unless ``verbose()``, Warp logs warnings only.
+    Before the import, ``warp.config.kernel_cache_dir`` is set to ``cache_dir`` or ``kernel_cache_dir()`` (which asks
+    Blender: a thread other than Blender's passes it) unless Warp was already configured or initialised by someone
+    else in this Blender session (another add-on sharing the same Warp); Warp then keeps the folder it has. Unless
+    ``verbose()``, Warp logs warnings only.
     """
     global _engine
-    if _engine is None:
-        import warp
+    if _engine is not None:
+        return _engine
+    with _lock:
+        if _engine is None:
+            import warp
 
-        if warp.config.kernel_cache_dir is None:  # None until warp.init() or a user sets it
-            warp.config.kernel_cache_dir = kernel_cache_dir()
-        quiet = not verbose()
-        if quiet and warp.config.log_level == warp.LOG_INFO:  # Warp's default: nobody chose another
-            warp.config.log_level = warp.LOG_WARNING
-        from .. import engine as module
+            if warp.config.kernel_cache_dir is None:  # None until warp.init() or a user sets it
+                warp.config.kernel_cache_dir = cache_dir or kernel_cache_dir()
+            quiet = not verbose()
+            if quiet and warp.config.log_level == warp.LOG_INFO:  # Warp's default: nobody chose another
+                warp.config.log_level = warp.LOG_WARNING
+            from .. import engine as module
 
-        # Kernels compiled when the zip was built, so that the first boolean loads them instead of compiling.
-        with _native_stderr_silenced(quiet):
-            warp.init()
-        module.kernels.install_prebuilt(PREBUILT_KERNELS, warp.config.kernel_cache_dir, module.__name__)
-        _engine = module
+            # Kernels compiled when the zip was built, so that the first boolean loads them instead of compiling.
+            with _native_stderr_silenced(quiet):
+                warp.init()
+            module.kernels.install_prebuilt(PREBUILT_KERNELS, warp.config.kernel_cache_dir, module.__name__)
+            _engine = module
     return _engine
+
+
+def loaded() -> bool:
+    """Whether the engine was imported in this process (by a run or a warm-up)."""
+    return _engine is not None
 
 
 _kernels_ready: set = set()  # devices whose engine kernels were checked (and compiled if need be) in this process
@@ -99,11 +111,30 @@ def prepare_kernels(device: str, report=None) -> int:
     if device in _kernels_ready:
         return 0
     module = engine()
-    missing = module.kernels.modules_to_compile(module.__name__, device)
-    if missing:
-        module.kernels.compile_modules(missing, device, report)
-    _kernels_ready.add(device)
+    with _lock:
+        if device in _kernels_ready:  # (checked by another thread meanwhile)
+            return 0
+        missing = module.kernels.modules_to_compile(module.__name__, device)
+        if missing:
+            module.kernels.compile_modules(missing, device, report)
+        _kernels_ready.add(device)
     return len(missing)
+
+
+def warm(choice: str, cache_dir: str) -> bool:
+    """What a session's first boolean would wait for, done beforehand (from a thread other than Blender's): the engine
+    imported (``cache_dir``: :func:`kernel_cache_dir`, asked of Blender by the caller), its kernels checked for the
+    device ``choice`` names (the preferences' ``device``) and loaded, its tables built. Kernels still to compile are
+    left to the first run, which shows their progress. Returns whether the kernels were ready."""
+    module = engine(cache_dir)
+    device = device_of(choice)
+    with _lock:
+        if device not in _kernels_ready:
+            if module.kernels.modules_to_compile(module.__name__, device):
+                return False
+            _kernels_ready.add(device)
+    module.kernels.warm_up(module.__name__, device)
+    return True
 
 
 def release_memory(keep: int = 0) -> int:
@@ -129,7 +160,11 @@ def device_fallback(context=None) -> str | None:
 def device(context=None) -> str:
     """Warp device for the preferred device: ``"cuda:<n>"`` when ``CUDA_<n>`` is chosen and present, else ``"cpu"``."""
     prefs = preferences.get(context)
-    choice = prefs.device if prefs is not None else "CPU"
+    return device_of(prefs.device if prefs is not None else "CPU")
+
+
+def device_of(choice: str) -> str:
+    """Warp device for a choice of the preferences' ``device`` (``"CPU"``, ``"CUDA_<n>"``); asks nothing of Blender."""
     if choice.startswith("CUDA"):
         ordinal = int(choice.partition("_")[2] or 0)
         engine()  # configures the kernel cache before Warp initialises

@@ -123,7 +123,7 @@ CELL_MARGIN = 1.0e-3
 _TABLE_CACHE: dict = {}
 
 
-def _tables(device) -> dict:
+def lookup_tables(device) -> dict:
     """Warp arrays of the dual tables on ``device`` (built once per device)."""
     key = str(device)
     if key not in _TABLE_CACHE:
@@ -529,7 +529,7 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         ``closed``: whether every crossed lattice edge of an active cube has its quad (no hole at a missing cube).
     """
     device = cube_corners.device
-    tables = _tables(device)
+    tables = lookup_tables(device)
     m, n = cube_corners.shape[0], values.shape[0]
     counts = wp.empty(m, dtype=wp.int32, device=device)
     quad_counts = wp.empty(m, dtype=wp.int32, device=device)
