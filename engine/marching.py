@@ -372,30 +372,29 @@ def tunnel_tables() -> tuple[np.ndarray, np.ndarray]:
     )
     patch, _ = patch_tables()
     off = CORNER_OFFSETS
-
-    def on_face(e, f):
-        a, side = divmod(f, 2)
-        return axis[e] != a and off[owner[e]][a] == side and off[upper[e]][a] == side
-
+    faces = np.arange(6)
+    # (12, 6) whether each local edge lies on each cube face (side 0: the minimum along the face's axis)
+    on = (
+        (axis[:, None] != faces // 2)
+        & (off[owner][:, faces // 2] == faces % 2)
+        & (off[upper][:, faces // 2] == faces % 2)
+    )
     spans = np.zeros(256, dtype=np.int32)
     second = np.zeros((256, 12, 6), dtype=np.int32)
     for case in range(256):  # a one-off walk over the 256 table entries
         tris = local[ranges[case] : ranges[case + 1]].reshape(-1, 3)
         sides = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
-        pairs, uses = np.unique(sides, axis=0, return_counts=True)
-        segments = pairs[uses == 1]  # polygon sides (fan diagonals are used twice): the face segments
-        for f in range(6):
-            edges = [e for e in range(12) if on_face(e, f) and patch[case, e] >= 0]
-            if len(edges) != 4:
-                continue
+        keys, uses = np.unique(sides[:, 0] * 12 + sides[:, 1], return_counts=True)
+        segments = np.stack([keys[uses == 1] // 12, keys[uses == 1] % 12], axis=1)  # polygon sides: face segments
+        crossed = patch[case] >= 0
+        for f in np.flatnonzero((on & crossed[:, None]).sum(axis=0) == 4):
+            edges = np.flatnonzero(on[:, f] & crossed)
             if len(set(patch[case, edges])) == 1:
-                spans[case] |= 1 << f
+                spans[case] |= 1 << int(f)
             u = min(a for a in range(3) if a != f // 2)
             v = 3 - f // 2 - u
             first = next(e for e in edges if axis[e] == u and off[owner[e]][v] == 0)
-            mate = next(
-                int(b if a == first else a) for a, b in segments if first in (a, b) and on_face(a, f) and on_face(b, f)
-            )
+            mate = next(int(b if a == first else a) for a, b in segments if first in (a, b) and on[a, f] and on[b, f])
             for e in edges:
                 second[case, e, f] = int(e not in (first, mate))
     return spans, second
