@@ -1,14 +1,15 @@
 """The engine loaded in the background a few seconds after Blender starts, so that a session's first boolean does not
 wait for it.
 
-Importing Warp and the engine, checking Warp's kernel cache and loading the compiled kernels take about a second here
-(a first boolean of the fandisk less a cylinder at /256: 1.25 s, the next ones 0.28 s) and raise the process's memory by
-about 170 MB. With the preference *Load Engine at Start-Up* (on by default), a one-shot timer START_DELAY seconds after
-registration, on Blender's thread, reads what only Blender can tell (the preferred device, the kernel cache's folder),
-then starts a daemon thread that does the rest (:func:`.runtime.warm`). A boolean started meanwhile waits for the
-thread's import or check (:mod:`.runtime` holds a lock) rather than doing them again. Nothing is warmed in background
-mode (``blender -b``: a batch job imports the engine when it needs it, a render never) nor when a run loaded the engine
-first; kernels still to compile (a first run in a checkout) are left to the first run, which shows their progress.
+Importing Warp and the engine, checking Warp's kernel cache and loading the compiled kernels take over a second here (a
+session's first boolean of the fandisk less a cylinder at /256: 1.6-2.1 s, the next ones 0.3-0.4 s; after the warm-up,
+the first 0.3-0.4 s) and raise the process's memory by about 170 MB. With the preference *Load Engine at Start-Up* (on
+by default), a one-shot timer START_DELAY seconds after registration, on Blender's thread, reads what only Blender can
+tell (the preferred device, the kernel cache's folder), then starts a daemon thread that does the rest
+(:func:`.runtime.warm`). A boolean started meanwhile waits for the thread's import or check (:mod:`.runtime` holds a
+lock) rather than doing them again. Nothing is warmed in background mode (``blender -b``: a batch job imports the engine
+when it needs it, a render never) nor when a run loaded the engine first; kernels still to compile (a first run in a
+checkout) are left to the first run, which shows their progress.
 """
 
 import threading
