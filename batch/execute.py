@@ -3,7 +3,6 @@ are built once), the operands imported, the add-on's pipeline run, and the resul
 beside the output, then moved into place (``os.replace``), so a killed job never leaves a half-written output.
 Returns what the report says of the job; nothing raises past ``run_job``."""
 
-import importlib
 import os
 import shutil
 import time
@@ -19,17 +18,13 @@ _addon = None  # the add-on's package, registered once per process
 
 
 def prepare():
-    """Register the add-on, import the engine and load its kernels, once for the process's jobs: a job's time (and
-    its timeout) is then its own work."""
+    """Register the add-on, import the engine, load its kernels and build its tables, once for the process's jobs: a
+    job's time (and its timeout) is then its own work."""
     global _addon
     if _addon is None:
         _addon = scene.ensure_addon()
         engine = _addon.aasdf_addon.runtime.engine()
-        import warp
-
-        kernels = importlib.import_module(f"{engine.__name__}.kernels")
-        for module in kernels.warp_modules(engine.__name__):
-            warp.load_module(module, device=_addon.aasdf_addon.runtime.device())
+        engine.kernels.warm_up(engine.__name__, _addon.aasdf_addon.runtime.device())
     return _addon
 
 
