@@ -109,6 +109,25 @@ def check_union_of_two_cubes(bpy, report):
     report["union_volume"] = float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
 
 
+def check_warm_up(bpy, report):
+    """What the warm-up after Blender's start does (``runtime.warm``, here from this thread) in the installed extension:
+    the kernels found ready, every engine module loaded by the package's name, none compiled."""
+    import contextlib
+    import io
+
+    import warp
+
+    runtime = importlib.import_module(f"{MODULE}.aasdf_addon.runtime")
+    warp.config.log_level = warp.LOG_INFO
+    log = io.StringIO()
+    with contextlib.redirect_stdout(log):
+        report["warm_up_ready"] = runtime.warm("CPU", runtime.kernel_cache_dir())
+    warp.config.log_level = warp.LOG_WARNING
+    loads = [line for line in log.getvalue().splitlines() if line.startswith("Module ")]
+    report["warm_up_loaded"] = sorted(line.split()[1] for line in loads)
+    report["warm_up_compiled"] = sorted(line.split()[1] for line in loads if "(compiled)" in line)
+
+
 def check_uninstalled(bpy, report, repo_dir):
     """After uninstalling: no add-on entry, classes, scene pointer, package folder or bundled Warp."""
     report["after_uninstall"] = {
@@ -142,6 +161,7 @@ def main():
     check_registered(bpy, report)
     check_engine(bpy, report)
     check_union_of_two_cubes(bpy, report)
+    check_warm_up(bpy, report)
 
     report["uninstall"] = sorted(bpy.ops.extensions.package_uninstall(repo_index=repo_index, pkg_id=PKG_ID))
     check_uninstalled(bpy, report, repo_dir)

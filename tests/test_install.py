@@ -157,6 +157,13 @@ def test_first_boolean_loads_prebuilt_kernels_instead_of_compiling(report):
     assert report["modules_compiled"] == []
 
 
+def test_the_warm_up_loads_every_other_engine_module_from_the_zips_kernels(report):
+    assert report["warm_up_ready"] is True
+    loaded = {m.removeprefix(f"{MODULE}.engine.") for m in report["modules_loaded"] + report["warm_up_loaded"]}
+    assert loaded == set(ENGINE_MODULES), sorted(set(ENGINE_MODULES) ^ loaded)
+    assert report["warm_up_compiled"] == []
+
+
 def test_uninstall_removes_everything(report):
     assert report["uninstall"] == ["FINISHED"]
     assert report["after_uninstall"] == {
