@@ -390,7 +390,8 @@ def _carry_edge_attributes(mesh, kept, operands):
         mesh.attributes["sharp_edge"].data.foreach_set("value", folded)
     generic = generic_attributes.edge_columns(operands)
     columns = {name: (generic_attributes.TYPES[kind][1], parts) for name, (kind, parts) in generic.items()}
-    for name, values in kept_edge_values(kept, operands, pairs, {**known_columns(operands), **columns}).items():
+    fill = generic_attributes.edge_fill(generic)
+    for name, values in kept_edge_values(kept, operands, pairs, {**known_columns(operands), **columns}, fill).items():
         if name in generic:
             prop, dtype, _width, _ = generic_attributes.TYPES[generic[name][0]]
             _new_attribute(mesh, name, generic[name][0], "EDGE", prop, values, dtype)

@@ -21,7 +21,9 @@ def known_columns(operands) -> dict:
     return {name: (EDGE_ATTRIBUTES[name][1], [op.edge_attributes.get(name) for op in operands]) for name in names}
 
 
-def kept_edge_values(kept: dict, operands, edge_verts: np.ndarray, columns: dict | None = None) -> dict:
+def kept_edge_values(
+    kept: dict, operands, edge_verts: np.ndarray, columns: dict | None = None, fill: dict | None = None
+) -> dict:
     """Per result edge, its source edge's attribute values.
 
     Args:
@@ -30,8 +32,9 @@ def kept_edge_values(kept: dict, operands, edge_verts: np.ndarray, columns: dict
         edge_verts: (E, 2) int result vertex pairs.
         columns: name -> (numpy dtype, per operand its (E_k, ...) edge values or None: zeros); default: the
             operands' ``edge_attributes`` (:func:`known_columns`).
+        fill: name -> the value of an edge that is no operand's, where it is not zero.
     Returns:
-        name -> (E, ...) values (zeros where the edge is no operand's) for each attribute of ``columns``.
+        name -> (E, ...) values (``fill``'s or zeros where the edge is no operand's) for each attribute of ``columns``.
     """
     columns = known_columns(operands) if columns is None else columns
     if not columns or not len(edge_verts):
@@ -47,6 +50,8 @@ def kept_edge_values(kept: dict, operands, edge_verts: np.ndarray, columns: dict
             ]
         )
         values = np.zeros((len(edge_verts), *shape), dtype=dtype)
+        if fill is not None and name in fill:
+            values[:] = fill[name]
         values[rows] = stacked[source_edge]
         out[name] = values
     return out

@@ -2,20 +2,23 @@
 
 The attributes the add-on knows by name (materials, shading, UV maps, colours, seams, sharp edges, edge creases,
 custom normals) are carried by ``transfer``, ``polygons`` and ``edge_attributes``. Here is everything else an operand's
-mesh holds that Blender lets a user make: a float, float2, vector, colour, integer, 8-bit integer, 2D integer or
-boolean attribute on points, edges, faces or face corners (:data:`TYPES`), and sculpting's face sets and mask (hidden:
-``bridge.SCULPT_ATTRIBUTES``). Each comes back on the result under its own name, domain and type:
+mesh holds that Blender lets a user make: a float, float2, vector, colour, integer, 8-bit integer, 2D integer, boolean,
+quaternion (rotation) or 4x4 matrix attribute on points, edges, faces or face corners (:data:`TYPES`), and sculpting's
+face sets and mask (hidden: ``bridge.SCULPT_ATTRIBUTES``). Each comes back on the result under its own name, domain and
+type:
 
 - a face takes its source face's value (a kept face its own, a new face the face of the operand it came from), as the
   material does;
 - a face corner and a point take the value at that point of its face's source triangle: floats interpolated by the
-  corner's weights on that triangle, integers and booleans the value of the triangle's nearest corner (a kept face's
-  corners and a kept vertex: their own values, bit for bit);
+  corner's weights on that triangle, integers, booleans, rotations and matrices the value of the triangle's nearest
+  corner (a blend of rotations is no rotation; a kept face's corners and a kept vertex: their own values, bit for
+  bit);
 - an edge of the result that is one of an operand's own edges (both ends its kept vertices) takes that edge's value,
   other edges zero, as seams and creases do (:func:`.edge_attributes.kept_edge_values`; a remeshed result has none).
 
 An attribute some operands lack (or hold on another domain or of another type than the first operand that has it)
-reads zero (False) on their faces. Quaternion, matrix and string attributes are not carried. Arrays only: ``bridge``
+reads Blender's default on their faces: zero (False), the identity rotation or matrix (:data:`IDENTITY`). String
+attributes are not carried. Arrays only: ``bridge``
 reads the operands' attributes (``Operand.generic``: name -> (domain, data type, values)) and writes the result's.
 """
 
@@ -35,7 +38,11 @@ TYPES = {
     "INT32_2D": ("value", np.int32, 2, False),
     "INT16_2D": ("value", np.int16, 2, False),
     "BOOLEAN": ("value", bool, 1, False),
+    "QUATERNION": ("value", np.float32, 4, False),
+    "FLOAT4X4": ("value", np.float32, 16, False),
 }
+# The value Blender gives a new element of these types (w x y z; a matrix column after column), where zero is not.
+IDENTITY = {"QUATERNION": np.array([1, 0, 0, 0], np.float32), "FLOAT4X4": np.eye(4, dtype=np.float32).ravel()}
 DOMAINS = ("POINT", "EDGE", "FACE", "CORNER")
 # Corner values of two quad halves agree within this share of the attribute's range over the result (plus 1e-6).
 FLOAT_TOLERANCE = 1e-3
@@ -59,9 +66,13 @@ def _own(op, name, domain, kind):
     return found[2] if found is not None and found[:2] == (domain, kind) else None
 
 
-def _zeros(count: int, kind: str) -> np.ndarray:
+def defaults(count: int, kind: str) -> np.ndarray:
+    """``count`` elements of Blender's default value of data type ``kind``: zero, or the identity (:data:`IDENTITY`)."""
     _prop, dtype, width, _ = TYPES[kind]
-    return np.zeros((count, width) if width > 1 else count, dtype=dtype)
+    out = np.zeros((count, width) if width > 1 else count, dtype=dtype)
+    if kind in IDENTITY:
+        out[:] = IDENTITY[kind]
+    return out
 
 
 def carried(operands, sources, tris, n_verts: int, kept=None) -> dict:
@@ -90,9 +101,9 @@ def carried(operands, sources, tris, n_verts: int, kept=None) -> dict:
         own = [_own(op, name, domain, kind) for op in operands]
         if domain == "FACE":
             per_tri = [
-                _zeros(len(op.faces), kind) if v is None else v[op.faces] for op, v in zip(operands, own, strict=True)
+                defaults(len(op.faces), kind) if v is None else v[op.faces] for op, v in zip(operands, own, strict=True)
             ]
-            per_tri, values = np.concatenate(per_tri), _zeros(len(has), kind)
+            per_tri, values = np.concatenate(per_tri), defaults(len(has), kind)
             values[has] = per_tri[stacked[has]]
         else:
             index = [op.corners if domain == "CORNER" else op.tris for op in operands]
@@ -108,16 +119,19 @@ def _at_corners(kind, own, index, stacked, weights, has) -> np.ndarray:
     """(3F, ...) one attribute at the result's corners, read off each face's source triangle (``index``: per operand
     its triangles' indices into its values): interpolated (``transfer``'s kernel), else the nearest corner's."""
     _prop, dtype, width, smooth = TYPES[kind]
-    values, rows = transfer.stacked_parts(list(zip(index, own, strict=True)), width, dtype)
+    parts = [
+        (ix, v) if v is not None else (np.zeros_like(ix), defaults(1, kind)) for ix, v in zip(index, own, strict=True)
+    ]
+    values, rows = transfer.stacked_parts(parts, width, dtype)
     if not len(rows) or not len(stacked):
-        return _zeros(3 * len(stacked), kind)
+        return defaults(3 * len(stacked), kind)
     if smooth:
         values = values.astype(np.float32)
         found = transfer.within_sources(runtime.engine().interpolate_corners(values, rows, stacked, weights), values)
     else:
         nearest = np.argmax(weights, axis=2)  # (F, 3) the source corner each result corner is nearest
         found = values[rows[stacked][np.arange(len(stacked))[:, None], nearest]].reshape(-1, width)
-        found[np.repeat(~has, 3)] = 0
+        found[np.repeat(~has, 3)] = defaults(1, kind).reshape(-1, width)
     return found if width > 1 else found[:, 0]
 
 
@@ -126,7 +140,7 @@ def _at_points(corner_values, holds, own, surface, kind) -> np.ndarray:
     sources or None): a corner's value at each (its corners read one source point), a corner whose face's operand
     ``holds`` the attribute where there is one (a vertex on a seam is in both operands' faces), a kept vertex's own."""
     tris, n_verts, kept = surface
-    out = _zeros(n_verts, kind)
+    out = defaults(n_verts, kind)
     vertex = np.asarray(tris, dtype=np.int64).ravel()
     out[vertex] = corner_values
     out[vertex[holds]] = corner_values[holds]
@@ -141,12 +155,23 @@ def _at_points(corner_values, holds, own, surface, kind) -> np.ndarray:
 
 
 def edge_columns(operands) -> dict:
-    """name -> (data type, per operand its (E,) edge values or None) of the edge attributes carried."""
-    return {
-        name: (kind, [_own(op, name, domain, kind) for op in operands])
-        for name, (domain, kind) in carried_names(operands).items()
-        if domain == "EDGE"
-    }
+    """name -> (data type, per operand its (E,) edge values: Blender's default where it lacks them) of the edge
+    attributes carried."""
+    out = {}
+    for name, (domain, kind) in carried_names(operands).items():
+        if domain == "EDGE":
+            own = [_own(op, name, domain, kind) for op in operands]
+            parts = [
+                defaults(len(op.edge_verts), kind) if v is None else v for op, v in zip(operands, own, strict=True)
+            ]
+            out[name] = (kind, parts)
+    return out
+
+
+def edge_fill(columns: dict) -> dict:
+    """name -> the value of a result edge that is no operand's, for the attributes of ``columns``
+    (:func:`edge_columns`) whose default is not zero."""
+    return {name: IDENTITY[kind] for name, (kind, _parts) in columns.items() if kind in IDENTITY}
 
 
 def whole_faces(values: dict, operands, whole: dict, rest, corner_rest) -> dict:
@@ -160,11 +185,13 @@ def whole_faces(values: dict, operands, whole: dict, rest, corner_rest) -> dict:
     for name, (domain, kind, v) in values.items():
         own = [_own(op, name, domain, kind) for op in operands]
         if domain == "FACE":
-            parts = [_zeros(len(op.loop_start), kind) if p is None else p for op, p in zip(operands, own, strict=True)]
+            parts = [
+                defaults(len(op.loop_start), kind) if p is None else p for op, p in zip(operands, own, strict=True)
+            ]
             first = np.cumsum([0] + [len(p) for p in parts])
             v = np.concatenate([np.concatenate(parts)[first[whole["field"]] + whole["face"]], v[rest]])
         elif domain == "CORNER":
-            copied = _zeros(len(whole["loops"]), kind)
+            copied = defaults(len(whole["loops"]), kind)
             for rows, values_k in zip(corners, own, strict=True):
                 if values_k is not None and len(rows):
                     copied[rows] = values_k[whole["loops"][rows]]

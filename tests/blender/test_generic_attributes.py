@@ -1,8 +1,9 @@
 """Every other attribute an operand holds comes back under its name, domain and type (aasdf_addon/generic_attributes):
 bevel weights, a float weight linear in position, integer, boolean and colour face attributes, a vector per corner,
-8-bit and 2D integers, sculpting's face sets and mask. Checked on a quad box holding them minus a cylinder holding a
-face attribute of its own: kept faces, vertices and edges bit for bit, new faces from their source faces, new
-vertices read off their source."""
+8-bit and 2D integers, rotations and matrices, sculpting's face sets and mask. Checked on a quad box holding them minus
+a cylinder holding a face attribute of its own: kept faces, vertices and edges bit for bit, new faces from their source
+faces, new vertices read off their source (rotations and matrices never blended: a source's value, or the identity
+where the cutter has none)."""
 
 import bpy
 import numpy as np
@@ -33,6 +34,17 @@ def weight(points) -> np.ndarray:
     return (np.asarray(points, dtype=np.float64) @ GRADIENT + 1.0).astype(np.float32)
 
 
+def unit_quaternions(rng, n) -> np.ndarray:
+    q = rng.normal(size=(n, 4))
+    return (q / np.linalg.norm(q, axis=1, keepdims=True)).astype(np.float32)
+
+
+def rows_of(values, allowed) -> np.ndarray:
+    """Whether each row of ``values`` is one of the rows of ``allowed``, bit for bit."""
+    known = {row.tobytes() for row in np.ascontiguousarray(allowed)}
+    return np.array([row.tobytes() in known for row in np.ascontiguousarray(values)], dtype=bool)
+
+
 def scene():
     """The box (2 x 2 x 2, three cuts a side: 96 quads) holding an attribute of each kind, and a 12-sided cylinder
     through a corner of its top with a "Part" of its own (7 on every face)."""
@@ -48,6 +60,9 @@ def scene():
     put(mesh, "Tone", "FLOAT_COLOR", "FACE", rng.random((n_f, 4)).astype(np.float32), "color")
     put(mesh, "Offset", "FLOAT_VECTOR", "CORNER", rng.random((n_c, 3)).astype(np.float32), "vector")
     put(mesh, "Pair", "INT32_2D", "EDGE", rng.integers(0, 9, (n_e, 2)).astype(np.int32))
+    put(mesh, "Turn", "QUATERNION", "POINT", unit_quaternions(rng, n_v))
+    put(mesh, "Spin", "QUATERNION", "EDGE", unit_quaternions(rng, n_e))
+    put(mesh, "Frame", "FLOAT4X4", "FACE", rng.normal(size=(n_f, 16)).astype(np.float32))
     if HAS_INT16_2D:  # (dropped before; Blender 4.2 has no such type)
         put(mesh, "Short", "INT16_2D", "FACE", rng.integers(-300, 300, (n_f, 2)).astype(np.int16))
     put(mesh, ".sculpt_face_set", "INT", "FACE", (np.arange(n_f) % 3 + 1).astype(np.int32))  # sculpting's, hidden
@@ -93,13 +108,15 @@ def test_attributes_come_back_under_their_name_domain_and_type(result):
         "Tag",
         "Tone",
         "Offset",
+        "Turn",
+        "Frame",
         ".sculpt_face_set",
         ".sculpt_mask",
     ):
         src, dst = box.data.attributes[name], out.data.attributes.get(name)
         assert dst is not None, name
         assert (dst.domain, dst.data_type) == (src.domain, src.data_type), name
-    for name in ("bevel_weight_edge", "Pair"):  # an operand's own edges: only where faces are kept
+    for name in ("bevel_weight_edge", "Pair", "Spin"):  # an operand's own edges: only where faces are kept
         assert (name in out.data.attributes) == keep
     # new faces' values within what the sources hold (read past their source triangles, a weight in [0, 1] went to
     # -0.42 and 1.17; a random one per vertex here)
@@ -130,6 +147,7 @@ def test_kept_faces_vertices_and_edges_keep_their_values_bit_for_bit(fresh_cache
     sets = read(dst, ".sculpt_face_set", dtype=np.int32)
     np.testing.assert_array_equal(sets[mine], read(src, ".sculpt_face_set", dtype=np.int32)[theirs])
     np.testing.assert_array_equal(read(dst, "Tone", "color", 4)[mine], read(src, "Tone", "color", 4)[theirs])
+    np.testing.assert_array_equal(read(dst, "Frame", width=16)[mine], read(src, "Frame", width=16)[theirs])
     d_loops = (d_start[mine][:, None] + np.arange(4)).ravel()
     s_loops = (s_start[theirs][:, None] + np.arange(4)).ravel()
     np.testing.assert_array_equal(read(dst, "Offset", "vector", 3)[d_loops], read(src, "Offset", "vector", 3)[s_loops])
@@ -137,6 +155,7 @@ def test_kept_faces_vertices_and_edges_keep_their_values_bit_for_bit(fresh_cache
     at = {tuple(p): k for k, p in enumerate(s_co)}
     verts = np.array([(k, at[tuple(p)]) for k, p in enumerate(d_co) if tuple(p) in at])
     assert len(verts) > 80
+    np.testing.assert_array_equal(read(dst, "Turn", width=4)[verts[:, 0]], read(src, "Turn", width=4)[verts[:, 1]])
     for name, dtype in (
         ("bevel_weight_vert", np.float32),
         ("Weight", np.float32),
@@ -161,8 +180,11 @@ def test_kept_faces_vertices_and_edges_keep_their_values_bit_for_bit(fresh_cache
     np.testing.assert_array_equal(
         read(dst, "Pair", width=2, dtype=np.int32)[edges[:, 0]], read(src, "Pair", width=2, dtype=np.int32)[edges[:, 1]]
     )
+    d_spin = read(dst, "Spin", width=4)
+    np.testing.assert_array_equal(d_spin[edges[:, 0]], read(src, "Spin", width=4)[edges[:, 1]])
     new_edges = np.setdiff1d(np.arange(len(d_edges)), edges[:, 0])
     assert not d_bevel[new_edges].any()  # an edge that is no edge of the box has none
+    assert (d_spin[new_edges] == [1.0, 0.0, 0.0, 0.0]).all()  # and Blender's default rotation, the identity
 
 
 def test_new_faces_take_their_source_face_and_vertices_read_off_it(result):
@@ -185,6 +207,10 @@ def test_new_faces_take_their_source_face_and_vertices_read_off_it(result):
     ok = part[near_box] == expected
     # every one (0.989 while faces along the box's edges took the triangle of their node, as near both sides)
     assert near_box.sum() > 50 and ok.all(), ok.mean()
+    # a matrix per face: the box face's under it, the identity on the bore's wall (the cutter has none)
+    frame = read(dst, "Frame", width=16)
+    np.testing.assert_array_equal(frame[near_box], read(box.data, "Frame", width=16)[polygon[tri]])
+    assert (frame[wall] == np.eye(4, dtype=np.float32).ravel()).all()
     # every vertex on the box in a face of the box reads the box's weight at its point of the face's source triangle:
     # linear, so what it is where the vertex is, or where the triangle ends nearest it (a corner of a face across two
     # of the box's triangles); a vertex on the bore's rim whose faces are all the cutter's reads the cutter's: none, 0
@@ -195,3 +221,9 @@ def test_new_faces_take_their_source_face_and_vertices_read_off_it(result):
     exact = np.mean(error < 1e-5)
     assert on_box.sum() > 100 and exact > 0.99, exact  # measured 1.0 kept, 0.997 remeshed
     assert error.max() < np.linalg.norm(GRADIENT) * 2 * h, error.max()  # measured 0.58 h (in weight) remeshed
+    # a rotation per point, never blended: a vertex of the box's faces takes one of the box's corners' rotations
+    turn, identity = read(dst, "Turn", width=4), np.array([[1.0, 0.0, 0.0, 0.0]], np.float32)
+    of_box_only = of_box.copy()
+    of_box_only[corner[np.repeat(part == 7, total)]] = False
+    assert of_box_only.sum() > 100 and rows_of(turn[of_box_only], read(box.data, "Turn", width=4)).all()
+    assert rows_of(turn, np.concatenate([read(box.data, "Turn", width=4), identity])).all()
