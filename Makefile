@@ -4,6 +4,9 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.requirements-dev.stamp
 PYTEST_ARGS ?=
+# Warp's compiled kernels for every target here, the tests', the demo's and the benchmarks' alike (git-ignored): a
+# checkout compiles them once.
+export WARP_CACHE_PATH ?= $(CURDIR)/.warp-cache
 
 # The older Blenders the manifest names (blender_version_min = 4.2): 4.2 LTS and 4.5 LTS, each in .venv-blender-<v>
 # with the pinned bpy of requirements-blender-<v>.txt and the same warp-lang as .venv (so they share .warp-cache/).
