@@ -103,11 +103,12 @@ def loaded() -> bool:
 _kernels_ready: set = set()  # devices whose engine kernels were checked (and compiled if need be) in this process
 
 
-def prepare_kernels(device: str, report=None) -> int:
+def prepare_kernels(device: str, report=None, *, compile_missing: bool = True) -> int:
     """Compile the engine's kernels that Warp's kernel cache lacks for ``device`` (a first run in a checkout, or after
     an update; about two minutes for all of them on a CPU here), a module per core at a time, calling
     ``report(done, count, name)`` as each is done (``engine.kernels.compile_modules``); checked once per device and
-    process. Returns the modules compiled."""
+    process, from any thread. Returns the modules compiled; with ``compile_missing`` False, -1 where some are missing
+    (left to compile, the device not marked ready)."""
     if device in _kernels_ready:
         return 0
     module = engine()
@@ -115,6 +116,8 @@ def prepare_kernels(device: str, report=None) -> int:
         if device in _kernels_ready:  # (checked by another thread meanwhile)
             return 0
         missing = module.kernels.modules_to_compile(module.__name__, device)
+        if missing and not compile_missing:
+            return -1
         if missing:
             module.kernels.compile_modules(missing, device, report)
         _kernels_ready.add(device)
@@ -128,11 +131,8 @@ def warm(choice: str, cache_dir: str) -> bool:
     left to the first run, which shows their progress. Returns whether the kernels were ready."""
     module = engine(cache_dir)
     device = device_of(choice)
-    with _lock:
-        if device not in _kernels_ready:
-            if module.kernels.modules_to_compile(module.__name__, device):
-                return False
-            _kernels_ready.add(device)
+    if prepare_kernels(device, compile_missing=False) < 0:
+        return False
     module.kernels.warm_up(module.__name__, device)
     return True
 
