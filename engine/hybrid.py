@@ -42,6 +42,7 @@ from .keptmesh import kept_mesh
 from .littlekept import LITTLE_KEPT, little_kept, whole_along_seams
 from .meshcheck import all_corners, any_corner
 from .normalsums import triangle_normal_sums
+from .ownpart import gives_own_faces_up
 from .parallel import run_tasks
 from .quads import quad_halves_first, triangulate
 from .rejoin import joined_again
@@ -488,9 +489,14 @@ def _clear_of_crossings(field, join, surface: dict, finish) -> dict:
 
 
 def _clean(field) -> bool:
-    """Whether every leaf of a boolean is a closed, clean mesh's field (or no mesh's: an offset, a shell): where the
-    kept surface never passes through itself (a messy mesh's thin parts may, a few faces)."""
-    return all(leaf.stats.get("clean_mesh", True) for leaf in leaves(field.expression))
+    """Whether every leaf of a boolean is a closed, clean mesh's field that does not pass through itself (or no
+    mesh's: an offset, a shell): where the kept surface never passes through itself (a messy mesh's thin parts may, a
+    few faces; a mesh that passes through itself keeps faces about its crossings, closed as cow.obj is)."""
+    voxel = field.voxel_size
+    return all(
+        leaf.stats.get("clean_mesh", True) and not (leaf.sources and gives_own_faces_up(leaf, voxel))
+        for leaf in leaves(field.expression)
+    )
 
 
 def kept_surface(
