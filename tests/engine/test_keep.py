@@ -578,11 +578,12 @@ def test_a_closed_clean_leaf_is_read_at_the_samples_near_its_box_and_others_ever
 def test_a_bore_half_a_voxel_under_a_face_is_judged_by_the_cylinders_mls_signs_and_joined(monkeypatch):
     """A block minus a cylinder of 64 long thin sides, tilted a degree, half a voxel under the block's top face (/256).
     Past its finest band the cylinder's linear values read the wrong sign about its thin wall: the judge kept pieces
-    inside it, and the join left 186 pairs of faces passing through each other; the voxel surface was given instead
-    (as it still is with those signs: the re-read turned off). Their signs read again by MLS where they miss the mesh's
-    distance (engine/otherleaves.py), the join holds: the block's faces kept but along the cut, as close to the exact
-    difference as the voxel surface is (the 0.57-voxel skin over the bore opens in both)."""
-    from engine import otherleaves
+    inside it, and the join left 186 pairs of faces passing through each other; the voxel surface was given instead.
+    Their signs read again by MLS where they miss the mesh's distance (engine/otherleaves.py), the join holds: the
+    block's faces kept but along the cut, as close to the exact difference as the voxel surface is (the 0.57-voxel
+    skin over the bore opens in both). With the linear signs alone (the re-read turned off), the triangles judged
+    again clear of the faces left crossing, round after round (engine/clearing.py), give a surface as good."""
+    from engine import clearing, otherleaves
     from engine.selfcross import crossing_pairs
 
     voxel = 2.0 * np.sqrt(3.0) / 256
@@ -591,24 +592,28 @@ def test_a_bore_half_a_voxel_under_a_face_is_judged_by_the_cylinders_mls_signs_a
     cylinder = ((cylinder[0] @ turn.T + (0.0, 0.0, 0.6 - 0.57079917786366 * voxel)).astype(np.float32), cylinder[1])
     block = box_mesh(half=(0.6, 0.6, 1.0))
 
-    def kept():
-        fa, fb = engine.build_fields([block, cylinder], voxel_size=voxel, refine="auto")
-        return engine.difference(fa, fb, seams=True).kept_surface(sharp=True)
-
-    s = kept()
-    assert s["stats"]["kept_fallback"] == ""
-    _check_closed(s)
-    assert not len(crossing_pairs(s["verts"], s["tris"].astype(np.int64), "cpu"))
+    judged, rounds = clearing.kept_triangles, []
+    monkeypatch.setattr(clearing, "kept_triangles", lambda *args, **kwargs: rounds.append(1) or judged(*args, **kwargs))
     exact = to_manifold(*block) - to_manifold(*cylinder)
-    assert mesh_area(s["verts"], s["tris"][s["kept"]]) > 0.8 * exact.surface_area()  # measured 0.926
-    assert mesh_volume(s["verts"], s["tris"]) == pytest.approx(exact.volume(), rel=1e-3)  # measured -0.029 %
-    d = hausdorff(s["verts"], s["tris"], *exact_boolean("DIFFERENCE", *block, *cylinder), n=100_000)
-    # measured: max 4.73 voxels where the skin opens (the remeshed surface's too), p95 0.0017 (remeshed 0.0091)
-    assert d["max"] < 5.0 * voxel and d["p95"] < 0.005 * voxel, d
-    monkeypatch.setattr(otherleaves, "SIGN_CHECK_VOXELS", np.inf)  # the linear signs alone: given up, saying why
-    s = kept()
-    assert not s["kept"].any() and "passing through each other" in s["stats"]["kept_fallback"]
-    _check_closed(s)
+    near = exact_boolean("DIFFERENCE", *block, *cylinder)
+
+    def kept():
+        rounds.clear()
+        fa, fb = engine.build_fields([block, cylinder], voxel_size=voxel, refine="auto")
+        s = engine.difference(fa, fb, seams=True).kept_surface(sharp=True)
+        assert s["stats"]["kept_fallback"] == ""
+        _check_closed(s)
+        assert not len(crossing_pairs(s["verts"], s["tris"].astype(np.int64), "cpu"))
+        assert mesh_volume(s["verts"], s["tris"]) == pytest.approx(exact.volume(), rel=1e-3)  # measured -0.029 %
+        d = hausdorff(s["verts"], s["tris"], *near, n=100_000)
+        # measured: max 4.73 voxels where the skin opens (the remeshed surface's too), p95 0.0017-0.0028 (remeshed
+        # 0.0091)
+        assert d["max"] < 5.0 * voxel and d["p95"] < 0.008 * voxel, d
+        return mesh_area(s["verts"], s["tris"][s["kept"]]) / exact.surface_area()
+
+    assert kept() > 0.8 and not rounds  # measured 0.926, joined once
+    monkeypatch.setattr(otherleaves, "SIGN_CHECK_VOXELS", np.inf)  # the linear signs alone
+    assert kept() > 0.8 and rounds  # measured 0.916, after two rounds
 
 
 def test_different_meshes_with_one_field_id_are_refused_with_what_to_do_and_copies_of_one_field_keep():
