@@ -491,7 +491,7 @@ def _clear_of_crossings(field, join, surface: dict, finish) -> dict:
 def _clean(field) -> bool:
     """Whether every leaf of a boolean is a closed, clean mesh's field that does not pass through itself (or no
     mesh's: an offset, a shell): where the kept surface never passes through itself (a messy mesh's thin parts may, a
-    few faces; a mesh that passes through itself keeps faces about its crossings, closed as cow.obj is)."""
+    few faces, and so may a closed mesh that passes through itself about its crossings: the cow at its head)."""
     voxel = field.voxel_size
     return all(
         leaf.stats.get("clean_mesh", True) and not (leaf.sources and gives_own_faces_up(leaf, voxel))

@@ -597,7 +597,7 @@ def test_a_bore_half_a_voxel_under_a_face_is_judged_by_the_cylinders_mls_signs_a
     exact = to_manifold(*block) - to_manifold(*cylinder)
     near = exact_boolean("DIFFERENCE", *block, *cylinder)
 
-    def kept():
+    def kept(p95: float):
         rounds.clear()
         fa, fb = engine.build_fields([block, cylinder], voxel_size=voxel, refine="auto")
         s = engine.difference(fa, fb, seams=True).kept_surface(sharp=True)
@@ -606,14 +606,13 @@ def test_a_bore_half_a_voxel_under_a_face_is_judged_by_the_cylinders_mls_signs_a
         assert not len(crossing_pairs(s["verts"], s["tris"].astype(np.int64), "cpu"))
         assert mesh_volume(s["verts"], s["tris"]) == pytest.approx(exact.volume(), rel=1e-3)  # measured -0.029 %
         d = hausdorff(s["verts"], s["tris"], *near, n=100_000)
-        # measured: max 4.73 voxels where the skin opens (the remeshed surface's too), p95 0.0017-0.0028 (remeshed
-        # 0.0091)
-        assert d["max"] < 5.0 * voxel and d["p95"] < 0.008 * voxel, d
+        # measured: max 4.73 voxels where the skin opens (the remeshed surface's too)
+        assert d["max"] < 5.0 * voxel and d["p95"] < p95 * voxel, d
         return mesh_area(s["verts"], s["tris"][s["kept"]]) / exact.surface_area()
 
-    assert kept() > 0.8 and not rounds  # measured 0.926, joined once
+    assert kept(0.005) > 0.8 and not rounds  # measured 0.926, joined once; p95 0.0017 voxel (remeshed 0.0091)
     monkeypatch.setattr(otherleaves, "SIGN_CHECK_VOXELS", np.inf)  # the linear signs alone
-    assert kept() > 0.8 and rounds  # measured 0.916, after two rounds
+    assert kept(0.008) > 0.8 and rounds  # measured 0.916, after two rounds; p95 0.0028 voxel
 
 
 def test_different_meshes_with_one_field_id_are_refused_with_what_to_do_and_copies_of_one_field_keep():
