@@ -57,10 +57,12 @@ def test_places_left_crossing_after_one_round_are_cleared_in_the_next(monkeypatc
 
 
 def _surface(left: int, points: int) -> dict:
-    return {"stats": {"crossing_left": left, "crossing_at": np.zeros((points, 3), np.float32), "kept_fallback": ""}}
+    """A surface with ``left`` pairs crossing at ``points`` places, the same places for the same ``left``."""
+    at = (1000.0 * left + np.arange(3 * points, dtype=np.float32)).reshape(-1, 3)
+    return {"stats": {"crossing_left": left, "crossing_at": at, "kept_fallback": ""}}
 
 
-def test_rounds_stop_when_none_is_left_or_after_clear_rounds_and_the_fewest_left_is_kept(monkeypatch):
+def test_rounds_stop_when_none_or_only_places_seen_are_left_or_after_clear_rounds_keeping_the_fewest(monkeypatch):
     monkeypatch.setattr(clearing, "carried", lambda field: np.zeros((2, 3), np.float32))
     avoided = []
     monkeypatch.setattr(clearing, "kept_triangles", lambda field, avoid: avoided.append(len(avoid)) or len(avoided))
@@ -76,6 +78,8 @@ def test_rounds_stop_when_none_is_left_or_after_clear_rounds_and_the_fewest_left
     assert out["stats"]["crossing_left"] == 1 and avoided == [42, 52, 64]
     out = run([10, 12, 11])  # none leaves fewer than the first: the first's kept
     assert out["stats"]["crossing_left"] == 10 and avoided == [42, 52, 64]
+    out = run([10, 10, 1])  # the second leaves the places the first did: the third would judge as it did
+    assert out["stats"]["crossing_left"] == 10 and avoided == [42, 52]
     out = run([30, 20, 10, 5])  # at most CLEAR_ROUNDS
     assert out["stats"]["crossing_left"] == 10 and len(avoided) == clearing.CLEAR_ROUNDS == 3
     # more pairs, but no longer crossed through (a share of the new faces) where the surface was
