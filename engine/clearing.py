@@ -30,12 +30,14 @@ def cleared(field, joined, surface: dict, finish, crossed) -> dict:
     left, or a round that leaves only places judged clear of already (the next would be the same): the one that leaves
     the fewest pairs crossing (or, with more, no longer ``crossed`` where the best before was). A round may leave more
     than the one before, at places of its new band, which the next clears (cow ∪ a large box turned about it at /384:
-    88 pairs at the cow's head, where it passes through itself; 96 after a round, none after two)."""
+    88 pairs at the cow's head, where it passes through itself; 96 after a round, none after two). A round whose join
+    falls back ends the rounds, its reason in the surface's ``stats["clearing_ended"]``."""
     best = surface
     avoid = np.concatenate([carried(field), surface["stats"]["crossing_at"]])
     for _ in range(CLEAR_ROUNDS):
         again = joined(kept_triangles(field, avoid=avoid), avoid)
-        if again["stats"]["kept_fallback"]:
+        if again["stats"]["kept_fallback"]:  # (the surface kept says why: ``clearing_ended``)
+            best["stats"]["clearing_ended"] = again["stats"]["kept_fallback"]
             break
         again = finish(again)
         left, found = again["stats"]["crossing_left"], again["stats"]["crossing_at"]

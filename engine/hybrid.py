@@ -164,7 +164,7 @@ def hybrid_surface(
     over = vertices_over(points, k_tris[k_alive], k_border, np.arange(n_k, n), voxel, device, ways)
     trouble = []
     if partial and not _edges_covered(voxel_tris, len(voxel_verts), over[n_k:]):
-        return voxel_surface_only(voxel_verts, voxel_tris, "the seams' surface ends short of the kept faces")
+        return voxel_surface_only(voxel_verts, voxel_tris, ENDS_SHORT)
     was = (closed, np.zeros((0, 2), np.int64))
     for rounds in range(MAX_ROUNDS):
         v_alive, v_border = _voxel_left(v_tris, ~v_gone & ~any_corner(over, v_tris), n, was)
@@ -208,12 +208,15 @@ def _judged(field, avoid: np.ndarray) -> list:
     return kept_triangles(field, avoid=avoid) if early is None else early
 
 
-def _joined(field, join, judged: list, avoid: np.ndarray) -> dict:
+def _joined(field, join, judged: list, avoid: np.ndarray, retry: bool = True) -> dict:
     """The surface ``join`` makes of the ``judged`` triangles (judged clear of the points ``avoid`` carried from the
     last boolean over the leaves, :mod:`.carried`), joined again where it gave large faces up (:mod:`.rejoin`); the
     points its judge kept clear of remembered for the next. Should the join fall back with points carried, it is made
-    as a first boolean's (their judge clear of nothing)."""
+    as a first boolean's (their judge clear of nothing), with ``retry``; without, the fallback is returned (and what
+    was remembered stays)."""
     surface, avoided = joined_again(field, join(judged), join, judged, avoid)
+    if surface["stats"]["kept_fallback"] and len(avoid) and not retry:
+        return surface
     if surface["stats"]["kept_fallback"] and len(avoid):
         judged = kept_triangles(field)
         surface, avoided = joined_again(field, join(judged), join, judged)
@@ -470,6 +473,11 @@ def _strips(points, k_loops, v_loops, pairs, reach: float, n_kept: int, device):
     return strips, pairs[np.maximum.reduceat(gaps, first) > reach, 0], far[far < n_kept].astype(np.int64)
 
 
+# A join along the seams alone falls back where the kept faces given up reach past their voxel surface; where the
+# faces given up about places left crossing do (:mod:`.clearing`), the whole result is made and joined instead (bunny
+# ∩ cow at /256: 9 pairs left crossing along the seams, none made whole; cow ∩ a placed box: 10 and none).
+ENDS_SHORT = "the seams' surface ends short of the kept faces"
+
 # Faces left crossing are judged again clear of; more than this share of the new faces still crossing on clean meshes
 # gives the voxel surface (the join broke down: a turned 40-sided cylinder through a box, 7-20 %; kept faces meeting
 # at a corner of the voxel surface leave up to 0.2 %; messy meshes' thin parts may keep a few).
@@ -483,9 +491,34 @@ def _crossed_through(surface: dict) -> bool:
 
 def _clear_of_crossings(field, join, surface: dict, finish) -> dict:
     """``surface`` made again clear of its faces left crossing, round after round while fewer are (:mod:`.clearing`):
-    the surface ``join`` makes of the triangles judged again (:func:`_joined`), made by ``finish``."""
-    joined = lambda judged, avoid: _joined(field, join, judged, avoid)  # noqa: E731
+    the surface ``join`` makes of the triangles judged again (:func:`_joined`, a join that falls back ends the rounds),
+    made by ``finish``."""
+    joined = lambda judged, avoid: _joined(field, join, judged, avoid, retry=False)  # noqa: E731
     return cleared(field, joined, surface, finish, _crossed_through)
+
+
+def _kept_and_new(field, voxel_surface: tuple, judged: tuple, finish, partial: bool) -> dict | None:
+    """The kept faces (``judged``: the operands' triangles judged, and the points they were judged clear of) joined to
+    the ``voxel_surface`` (verts, tris), made by ``finish``, judged again clear of where faces are left passing through
+    others (:func:`_clear_of_crossings`); the voxel surface alone where that leaves a clean boolean crossed through.
+    ``partial``: the voxel surface is a boolean's along its seams alone; None where its whole result should be joined
+    instead: its join fell back, its clearing gave up kept faces past the seams' surface (``ENDS_SHORT``), or it was
+    left crossed through."""
+    verts, tris = voxel_surface
+    join = lambda triangles: hybrid_surface(field, verts, tris, triangles, partial)  # noqa: E731
+    surface = _joined(field, join, *judged)
+    if partial and surface["stats"]["kept_fallback"]:
+        return None
+    surface = finish(surface)
+    if surface["stats"]["crossing_left"]:
+        surface = _clear_of_crossings(field, join, surface, finish)
+        if partial and surface["stats"].get("clearing_ended") == ENDS_SHORT:
+            return None
+    if _crossed_through(surface) and _clean(field):  # the join failed where it must not: remeshed
+        if partial:
+            return None
+        surface = finish(voxel_surface_only(verts, tris, "kept faces and new ones left passing through each other"))
+    return surface
 
 
 def _clean(field) -> bool:
@@ -545,17 +578,9 @@ def kept_surface(
             surface = finish(surface)
         surface["stats"]["along_seams"] = whole is not None  # (the seams' surface: its sources read there)
     else:
-        join = lambda judged: hybrid_surface(field, verts, tris, judged, whole is not None)  # noqa: E731
-        surface = _joined(field, join, found["judged"], avoid)
-        if whole is not None and surface["stats"]["kept_fallback"]:  # along the seams alone: the whole result's
+        surface = _kept_and_new(field, (verts, tris), (found["judged"], avoid), finish, whole is not None)
+        if surface is None:  # along the seams alone, where they could not be joined there: the whole result's
             return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
-        surface = finish(surface)
-        if surface["stats"]["crossing_left"]:  # judged again clear of where faces pass through others
-            surface = _clear_of_crossings(field, join, surface, finish)
-        if _crossed_through(surface) and _clean(field):  # the join failed where it must not: remeshed
-            if whole is not None:
-                return kept_surface(whole(), sharp=sharp, adaptivity=adaptivity, regions=regions)
-            surface = finish(voxel_surface_only(verts, tris, "kept faces and new ones left passing through each other"))
     quads = int(np.count_nonzero(np.asarray(sizes) == 4))  # the first, rows 2q and 2q + 1 of ``tris``
     surface["voxel_face"] = np.where(surface["voxel_face"] < 2 * quads, surface["voxel_face"], -1)
     return quad_halves_first(surface)
