@@ -394,14 +394,20 @@ def _border_collapses(v64, tris, parent, n_source: int, bounds: tuple, ranks: np
     None when no vertex can go."""
     n = len(v64)
     a, b = tris.ravel(), tris[:, [1, 2, 0]].ravel()
-    keys = a * n + b
-    sorted_keys = np.sort(keys)
-    at = np.minimum(np.searchsorted(sorted_keys, b * n + a), len(keys) - 1)
-    border = sorted_keys[at] != b * n + a
-    out_count, in_count = np.bincount(a[border], minlength=n), np.bincount(b[border], minlength=n)
+    # each edge once, undirected, with its way as the lowest bit, in one sort: a border edge is one whose key's run
+    # holds one way only (its twin, the other way, is no triangle's); the runs' keys are the undirected edges
+    keys = np.sort(2 * (np.minimum(a, b) * n + np.maximum(a, b)) + (a > b))
+    undirected = keys >> 1
+    start = np.flatnonzero(np.r_[True, undirected[1:] != undirected[:-1]])
+    last = np.r_[start[1:], len(keys)] - 1
+    both = (keys[start] & 1) != (keys[last] & 1)
+    border = ~np.repeat(both, last - start + 1)
+    low, high, way = undirected[border] // n, undirected[border] % n, keys[border] & 1
+    tail, head = np.where(way == 1, high, low), np.where(way == 1, low, high)  # (way 1: the edge runs high -> low)
+    out_count, in_count = np.bincount(tail, minlength=n), np.bincount(head, minlength=n)
     prev = np.full(n, -1, dtype=np.int64)
     nxt = np.full(n, -1, dtype=np.int64)
-    prev[b[border]], nxt[a[border]] = a[border], b[border]
+    prev[head], nxt[tail] = tail, head
     flat, owner = tris.ravel(), np.repeat(parent, 3)
     some = np.full(n, -1, dtype=np.int64)  # one source triangle of each vertex's pieces; any other marks it
     some[flat] = owner
@@ -429,12 +435,15 @@ def _border_collapses(v64, tris, parent, n_source: int, bounds: tuple, ranks: np
     bad = ~drop & turned_over(v64, tris[face], target)
     # the link condition: a moved face's other corners must not be joined to the target already (but through the
     # dropped face)
-    edge_keys = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
+    edge_keys = undirected[start]
+    dropped = np.full((n, 3), -1, dtype=np.int64)  # the corners of the face each vertex drops
+    dropped[vert[drop]] = tris[face[drop]]
+    dropped = dropped[vert]
     for k in range(3):
         other = target[:, k]
         key = np.minimum(other, into[vert]) * n + np.maximum(other, into[vert])
         found = edge_keys[np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)] == key
-        in_dropped = _in_dropped_face(tris, face, drop, vert, other, n)
+        in_dropped = (dropped == other[:, None]).any(axis=1)  # joined to the target through that face
         bad |= ~drop & found & (other != into[vert]) & ~in_dropped
     ok = np.bincount(vert[drop], minlength=n) == 1  # one face dropped: the border edge's own
     ok[vert[bad]] = False
@@ -442,10 +451,3 @@ def _border_collapses(v64, tris, parent, n_source: int, bounds: tuple, ranks: np
     if not win.any():
         return None
     return face[win], target[win], drop[win]
-
-
-def _in_dropped_face(tris, face, drop, vert, other, n: int) -> np.ndarray:
-    """Per moved face: whether ``other`` is a corner of the face its vertex drops (joined to the target through it)."""
-    dropped_corners = np.full((n, 3), -1, dtype=np.int64)
-    dropped_corners[vert[drop]] = tris[face[drop]]
-    return (dropped_corners[vert] == other[:, None]).any(axis=1)
