@@ -134,12 +134,14 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
     """
     tris = np.array(tris, dtype=np.int64)
     keep = np.asarray(keep, dtype=bool)
-    # only the triangles at a midpoint of a kept triangle are read: a collapse takes a midpoint all of whose triangles
-    # are kept and changes only triangles at it (its valence counts them), into one of its edge's ends, a midpoint
-    # again or a source vertex; the rest, unchanged, are set aside
+    # only the triangles at a midpoint all of whose triangles are kept are read: a collapse takes such a midpoint and
+    # changes only triangles at it (its valence counts them), into one of its edge's ends, a midpoint again (one of
+    # those: it holds the two triangles the collapse drops) or a source vertex; the rest, unchanged, are set aside
     near = np.zeros(len(ends), dtype=bool)
     near[tris[keep].ravel()] = True
-    near &= ends[:, 0] >= 0
+    blocked = np.zeros(len(ends), dtype=bool)  # a midpoint with a triangle not kept never collapses (that one stays)
+    blocked[tris[~keep].ravel()] = True
+    near &= (ends[:, 0] >= 0) & ~blocked
     rows = np.flatnonzero(any_corner(near, tris))
     tris, keep, aside = tris[rows], keep[rows], set_aside(tris, rows)
     v64 = verts.astype(np.float64)
@@ -150,7 +152,7 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
             flat = tris.ravel()
             valence = np.bincount(flat, minlength=len(ends))
             kept_valence = np.bincount(flat[np.repeat(keep, 3)], minlength=len(ends))
-            candidate = (ends[:, 0] >= 0) & (valence == kept_valence) & (valence >= 4)
+            candidate = (ends[:, 0] >= 0) & (valence == kept_valence) & (valence >= 4) & ~blocked
             at = np.flatnonzero(candidate[flat])
             if not len(at):
                 continue
