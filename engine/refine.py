@@ -142,17 +142,15 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
     blocked = np.zeros(len(ends), dtype=bool)  # a midpoint with a triangle not kept never collapses (that one stays)
     blocked[tris[~keep].ravel()] = True
     near &= (ends[:, 0] >= 0) & ~blocked
-    rows = np.flatnonzero(any_corner(near, tris))
-    tris, keep, aside = tris[rows], keep[rows], set_aside(tris, rows)
+    rows = np.flatnonzero(any_corner(near, tris))  # (all kept: a triangle at such a midpoint is)
+    tris, aside = tris[rows], set_aside(tris, rows)
     v64 = verts.astype(np.float64)
     ranks = position_ranks(verts)
     for _ in range(256):
         merged = False
         for side in (0, 1):
             flat = tris.ravel()
-            valence = np.bincount(flat, minlength=len(ends))
-            kept_valence = np.bincount(flat[np.repeat(keep, 3)], minlength=len(ends))
-            candidate = (ends[:, 0] >= 0) & (valence == kept_valence) & (valence >= 4) & ~blocked
+            candidate = near & (np.bincount(flat, minlength=len(ends)) >= 4)  # (no other vertex has triangles left)
             at = np.flatnonzero(candidate[flat])
             if not len(at):
                 continue
@@ -175,7 +173,7 @@ def merge_kept(verts: np.ndarray, tris: np.ndarray, keep: np.ndarray, ends: np.n
             tris[face[live[stay]]] = moved[stay]
             alive = np.ones(len(tris), dtype=bool)
             alive[face[win & drop]] = False
-            tris, rows, keep = tris[alive], rows[alive], keep[alive]
+            tris, rows = tris[alive], rows[alive]
         if not merged:
             break
     return put_back(tris, rows, aside)
