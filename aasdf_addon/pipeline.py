@@ -192,6 +192,39 @@ def voxel_size_for(read, settings: FieldSettings) -> float:
     return float(np.float32(2.0 ** (step / VOXEL_STEPS_PER_OCTAVE)))
 
 
+def read_stage(context, inputs, steps, settings: FieldSettings, output: Output) -> tuple:
+    """The read stage: the operands read and checked (:func:`read_checked`), the voxel size (:func:`voxel_size_for`),
+    the plan's reach checked (``plan.check_reach``); and what the user is told of the voxel size
+    (:func:`coarser_than_asked`). Returns ``(read, voxel_size, warnings)``."""
+    read = read_checked(inputs, output, context.evaluated_depsgraph_get())
+    voxel_size = voxel_size_for(read, settings)
+    plan.check_reach(steps, *world_bounds(read), voxel_size)
+    return read, voxel_size, coarser_than_asked(read, steps, settings, voxel_size)
+
+
+# A voxel size from a resolution that is this many times coarser than the resolution would give along the result's
+# own box is told (a large box that halves a part: the part gets as many times fewer voxels).
+COARSER_TOLD = 2.0
+
+
+def coarser_than_asked(read, steps, settings: FieldSettings, voxel_size: float) -> list:
+    """A warning where **Resolution** (counted along all the inputs' box) gives voxels COARSER_TOLD times or more as
+    coarse as it would along the box the result lies in (``plan.result_box``: a difference's first operand's, an
+    intersection's common box), with the **Voxel Size** that would give the result its resolution; else none."""
+    if settings.voxel_size > 0.0 or not read:
+        return []
+    box = plan.result_box(steps, [world_bounds([operand]) for operand in read])
+    lo, hi = world_bounds(read)
+    whole, own = float(np.linalg.norm(hi - lo)), 0.0 if box is None else float(np.linalg.norm(box[1] - box[0]))
+    if not own > 0.0 or whole < COARSER_TOLD * own:
+        return []
+    return [
+        f"Resolution counts voxels along all the inputs' box, {whole / own:.0f}x the result's: its voxels are "
+        f"{voxel_size:.3g}. A Voxel Size of {own / settings.resolution:.3g} gives the result {settings.resolution} "
+        "along its own box"
+    ]
+
+
 def world_bounds(read) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) float64 (3,) world corners of the read operands' boxes (their local boxes' corners placed)."""
     corners = [np.zeros((1, 3))]
@@ -399,9 +432,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
     try:
         with timer.stage("read"):
             progress.step(f"reading {len(objects)} objects")
-            read = read_checked(inputs, output, context.evaluated_depsgraph_get())
-            voxel_size = voxel_size_for(read, settings)
-            plan.check_reach(steps, *world_bounds(read), voxel_size)
+            read, voxel_size, notes = read_stage(context, inputs, steps, settings, output)
         with timer.stage("key"):
             keyed = result_key(context, read, inputs, steps, settings, voxel_size, output)
             current = keyed is not None and unchanged.is_current(output.target, keyed)
@@ -432,7 +463,8 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             result = quads_back(whole_faces_back(result, surface, read, output), output)
         with timer.stage("write"):
             obj = _written(context, result, output, keyed, field, progress)
-            warnings = result["warnings"] + (debug_volume(context, field, obj, output) if output.debug_volume else [])
+            warnings = notes + result["warnings"]
+            warnings += debug_volume(context, field, obj, output) if output.debug_volume else []
             warnings += [found] if (found := runtime.device_fallback(context)) else []
             _hide_inputs(objects, output)
     finally:

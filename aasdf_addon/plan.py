@@ -92,6 +92,36 @@ def check_reach(plan: tuple, lo, hi, voxel: float) -> None:
         engine.check_resolvable(lo, hi, voxel)
 
 
+def result_box(plan: tuple, boxes: list):
+    """(lo, hi) world box a plan's result lies in, from its operands' ``boxes`` ((lo, hi) each): a union's holds its
+    children's, an intersection's is theirs in common, a difference's is its first child's; grown by what blends,
+    offsets and walls may add (:func:`_growth`). None where an intersection's children share no box (an empty
+    result)."""
+    box = _box(plan, boxes)
+    if box is None:
+        return None
+    grown = _growth(plan)[0]
+    return np.asarray(box[0], np.float64) - grown, np.asarray(box[1], np.float64) + grown
+
+
+def _box(plan: tuple, boxes: list):
+    kind = plan[0]
+    if kind == "field":
+        return boxes[plan[1]]
+    if kind != "boolean":
+        return _box(plan[-1], boxes)
+    found = [_box(child, boxes) for child in plan[4]]
+    if plan[1] == "DIFFERENCE":
+        return found[0]
+    if plan[1] == "UNION":
+        found = [box for box in found if box is not None]
+        return (np.min([b[0] for b in found], axis=0), np.max([b[1] for b in found], axis=0)) if found else None
+    if any(box is None for box in found):
+        return None
+    lo, hi = np.max([b[0] for b in found], axis=0), np.min([b[1] for b in found], axis=0)
+    return (lo, hi) if (hi >= lo).all() else None
+
+
 def _walls(plan: tuple) -> list:
     """The walls of a plan's shells."""
     if plan[0] == "field":

@@ -92,6 +92,49 @@ def test_operator_result_equals_direct_engine_call(fresh_cache):
     assert 0.84 * raw < voxel_size <= raw
 
 
+def test_a_cutter_much_larger_than_the_part_is_told_with_the_voxel_size_the_part_would_take(fresh_cache):
+    """Resolution counts along all the inputs' box: a box ten times a cube's size that halves it makes the cube's
+    voxels about ten times coarser than the resolution asks; the run says so, naming the Voxel Size that gives the
+    result its resolution along its own box. A cutter no larger than the part is not told of."""
+    part = add_mesh_object("Part", *box_mesh((0.5, 0.5, 0.5)))
+    big = add_mesh_object("Big", *box_mesh((5.0, 5.0, 5.0)), location=(5.0, 0.0, 0.0))  # x from 0: half the cube
+    select(part, big, active=part)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=128, hide_inputs=False) == {"FINISHED"}
+    (warning,) = boolean_op.last_run["warnings"]
+    assert warning.startswith("Resolution counts voxels along all the inputs' box, 10x the result's"), warning
+    named = float(re.search(r"A Voxel Size of ([0-9.e+-]+) gives", warning).group(1))
+    assert named == pytest.approx(np.sqrt(3.0) / 128, rel=1e-2)  # the cube's own diagonal over the resolution
+    assert boolean_op.last_run["voxel_size"] > 8 * named
+    # the same cut in the intersection's common box, and a cutter within the cube: nothing told
+    select(part, big, active=part)
+    assert bpy.ops.aasdf.boolean(operation="INTERSECT", resolution=128, hide_inputs=False) == {"FINISHED"}
+    assert len(boolean_op.last_run["warnings"]) == 1
+    ball = add_mesh_object("Ball", *uv_sphere(0.3, rings=16, segments=32), location=(0.5, 0.0, 0.0))
+    select(part, ball, active=part)
+    assert bpy.ops.aasdf.boolean(operation="DIFFERENCE", resolution=64, hide_inputs=False) == {"FINISHED"}
+    assert boolean_op.last_run["warnings"] == []
+
+
+def test_a_plans_result_box_is_a_unions_whole_an_intersections_common_part_and_a_differences_first():
+    from aasdf.aasdf_addon import plan
+
+    boxes = [(np.zeros(3), np.ones(3)), (np.full(3, 0.5), np.full(3, 3.0)), (np.full(3, 5.0), np.full(3, 6.0))]
+    leaf = [("field", k) for k in range(3)]
+    cases = {
+        ("UNION", 0, 1): ([0, 0, 0], [3, 3, 3]),
+        ("INTERSECT", 0, 1): ([0.5] * 3, [1, 1, 1]),
+        ("DIFFERENCE", 1, 0, 2): ([0.5] * 3, [3, 3, 3]),
+    }
+    for (operation, *ks), (lo, hi) in cases.items():
+        found = plan.result_box(("boolean", operation, 0.0, "ROUND", [leaf[k] for k in ks]), boxes)
+        np.testing.assert_allclose(found[0], lo)
+        np.testing.assert_allclose(found[1], hi)
+    assert plan.result_box(("boolean", "INTERSECT", 0.0, "ROUND", [leaf[0], leaf[2]]), boxes) is None  # apart
+    grown = plan.result_box(("offset", 0.25, ("boolean", "INTERSECT", 0.0, "ROUND", leaf[:2])), boxes)
+    np.testing.assert_allclose(grown[0], [0.25] * 3)  # an outward offset grows it by its distance
+    np.testing.assert_allclose(grown[1], [1.25] * 3)
+
+
 def test_difference_is_active_minus_all_others_and_union_is_n_ary(fresh_cache):
     spheres = [uv_sphere(1.0, center=c, rings=24, segments=48) for c in ((0, 0, 0), (0.9, 0, 0), (-0.9, 0, 0))]
     objects = [add_mesh_object(f"S{k}", *sphere) for k, sphere in enumerate(spheres)]
