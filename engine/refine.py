@@ -393,6 +393,8 @@ def _border_collapses(v64, tris, parent, n_source: int, bounds: tuple, ranks: np
     """One round of :func:`straighten_borders` over the kept triangles: ``(faces, their new corners, dropped)``, or
     None when no vertex can go."""
     n = len(v64)
+    if not len(tris):
+        return None
     a, b = tris.ravel(), tris[:, [1, 2, 0]].ravel()
     # each edge once, undirected, with its way as the lowest bit, in one sort: a border edge is one whose key's run
     # holds one way only (its twin, the other way, is no triangle's); the runs' keys are the undirected edges
