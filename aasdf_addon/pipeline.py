@@ -198,8 +198,9 @@ def read_stage(context, inputs, steps, settings: FieldSettings, output: Output) 
     (:func:`coarser_than_asked`). Returns ``(read, voxel_size, warnings)``."""
     read = read_checked(inputs, output, context.evaluated_depsgraph_get())
     voxel_size = voxel_size_for(read, settings)
-    plan.check_reach(steps, *world_bounds(read), voxel_size)
-    return read, voxel_size, coarser_than_asked(read, steps, settings, voxel_size)
+    box = world_bounds(read)
+    plan.check_reach(steps, *box, voxel_size)
+    return read, voxel_size, coarser_than_asked(read, steps, settings, (voxel_size, box))
 
 
 # A voxel size from a resolution that is this many times coarser than the resolution would give along the result's
@@ -207,14 +208,15 @@ def read_stage(context, inputs, steps, settings: FieldSettings, output: Output) 
 COARSER_TOLD = 2.0
 
 
-def coarser_than_asked(read, steps, settings: FieldSettings, voxel_size: float) -> list:
+def coarser_than_asked(read, steps, settings: FieldSettings, taken: tuple) -> list:
     """A warning where **Resolution** (counted along all the inputs' box) gives voxels COARSER_TOLD times or more as
     coarse as it would along the box the result lies in (``plan.result_box``: a difference's first operand's, an
-    intersection's common box), with the **Voxel Size** that would give the result its resolution; else none."""
+    intersection's common box), with the **Voxel Size** that would give the result its resolution; else none.
+    ``taken``: the voxel size, and the inputs' box (:func:`world_bounds`)."""
     if settings.voxel_size > 0.0 or not read:
         return []
     box = plan.result_box(steps, [world_bounds([operand]) for operand in read])
-    lo, hi = world_bounds(read)
+    voxel_size, (lo, hi) = taken
     whole, own = float(np.linalg.norm(hi - lo)), 0.0 if box is None else float(np.linalg.norm(box[1] - box[0]))
     if not own > 0.0 or whole < COARSER_TOLD * own:
         return []

@@ -215,9 +215,9 @@ def _joined(field, join, judged: list, avoid: np.ndarray, retry: bool = True) ->
     as a first boolean's (their judge clear of nothing), with ``retry``; without, the fallback is returned (and what
     was remembered stays)."""
     surface, avoided = joined_again(field, join(judged), join, judged, avoid)
-    if surface["stats"]["kept_fallback"] and len(avoid) and not retry:
-        return surface
     if surface["stats"]["kept_fallback"] and len(avoid):
+        if not retry:
+            return surface
         judged = kept_triangles(field)
         surface, avoided = joined_again(field, join(judged), join, judged)
     remember(field, avoided if not surface["stats"]["kept_fallback"] else np.zeros((0, 3)))
