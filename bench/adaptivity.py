@@ -156,7 +156,7 @@ def main(argv=None):
     print(f"{platform.machine()}, {os.cpu_count()} cores, Blender {bpy.app.version_string}, /{RESOLUTION}")
     curves, times, addon_rows, remesh_rows = [], [], [], []
     for name, (op, a, b) in chosen.items():
-        voxel = baselines._diagonal(a, b) / RESOLUTION
+        voxel = baselines.diagonal(a, b) / RESOLUTION
         exact = exact_boolean(op, *a, *b)
         field = ops[op](*engine.build_fields([a, b], voxel_size=voxel))
         seconds = extraction_seconds(field, args.repeat)

@@ -60,13 +60,13 @@ def cases() -> dict:
     return {"bunny-spot": every["bunny+spot"], "spheres": every["two spheres"], "spheres-100k": dense}
 
 
-def _decorate(obj, name):
-    """What a modelled object carries: two materials (half the faces each) and a UV map, so the result's faces have
-    something to carry over."""
+def decorate(obj, name, materials: int = 2):
+    """What a modelled object carries: ``materials`` materials (faces take them in turn) and a UV map, so the
+    result's faces have something to carry over."""
     mesh = obj.data
-    for k in range(2):
+    for k in range(materials):
         mesh.materials.append(bpy.data.materials.new(f"{name}.{k}"))
-    index = (np.arange(len(mesh.polygons)) % 2).astype(np.int32)
+    index = (np.arange(len(mesh.polygons)) % materials).astype(np.int32)
     mesh.attributes.new("material_index", "INT", "FACE").data.foreach_set("value", index)
     corner_vert = np.empty(len(mesh.loops), np.int32)
     mesh.attributes[".corner_vert"].data.foreach_get("value", corner_vert)
@@ -125,8 +125,8 @@ def measure(a, b, voxel_size, repeat):
     bpy.ops.wm.read_homefile(use_empty=True)
     first = baselines.mesh_object("operand_a", *a)
     second = baselines.mesh_object("operand_b", *b)
-    _decorate(first, "a")
-    _decorate(second, "b")
+    decorate(first, "a")
+    decorate(second, "b")
     bpy.context.view_layer.update()
     diag = float(np.linalg.norm(b[0].max(0) - b[0].min(0)))
     out = {"cold": [], "moved": [], "turned": [], "rerun": [], "gn": [], "attributes": []}

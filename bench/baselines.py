@@ -388,7 +388,8 @@ def benchmark_cases() -> dict:
     return {"spot∪spot+0.3x": (spot, shifted), "bunny∪spot": (bunny, spot)}
 
 
-def _diagonal(*meshes) -> float:
+def diagonal(*meshes) -> float:
+    """The diagonal of the box around the meshes (each (verts, tris))."""
     verts = np.concatenate([m[0] for m in meshes])
     return float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0)))
 
@@ -415,7 +416,7 @@ def main(argv=None) -> None:
     for case, (a, b) in benchmark_cases().items():
         divisions = (256,) if quick else (256, 512)
         for div in divisions:
-            voxel = _diagonal(a, b) / div
+            voxel = diagonal(a, b) / div
             best = {}
             for _ in range(repeat):
                 runs = {"GN SDF boolean": gn_sdf_boolean(a, b, "UNION", voxel)}

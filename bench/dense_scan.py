@@ -39,7 +39,7 @@ scan = normalised(load_mesh("stanford-bunny.obj"))
 for _ in range(splits):
     scan = split_in_four(*scan)
 ball = uv_sphere(0.25, center=(0.1, 0.1, 0.1), rings=32, segments=64)
-h = baselines._diagonal(scan, ball) / 256
+h = baselines.diagonal(scan, ball) / 256
 register()
 run_aasdf(scan, ball, "UNION", h, keep)  # warm-up
 out = run_aasdf(scan, ball, "UNION", h, keep)

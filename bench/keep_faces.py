@@ -103,7 +103,7 @@ METHODS = {
 
 
 def measure(name, op, a, b, closed, repeat):
-    voxel = baselines._diagonal(a, b) / RESOLUTION
+    voxel = baselines.diagonal(a, b) / RESOLUTION
     times = {m: [] for m in METHODS}
     last = {}
     for r in range(repeat + 1):  # the first round warms up

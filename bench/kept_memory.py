@@ -44,7 +44,7 @@ elif case == "bunny":
 else:
     a = normalised(uv_sphere(1.0, rings=224, segments=224))
     b = normalised(load_mesh("spot.obj"), center=(0.3, 0.1, 0.0), diagonal=0.8)
-h = baselines._diagonal(a, b) / res
+h = baselines.diagonal(a, b) / res
 if method == "gn":
     def once():
         r = baselines.gn_sdf_boolean(a, b, "UNION", h)
