@@ -289,7 +289,10 @@ def _fans(faces, sizes) -> np.ndarray:
 
 def _labels(field, verts, regions) -> np.ndarray:
     """(V,) int64 source region of each vertex: its operand's field id times 2^32, plus with ``regions`` the region
-    of its closest source triangle."""
+    of its closest source triangle (found only where an operand has more than one: labels are compared, never
+    read)."""
+    if regions is not None and all(len(labels) == 0 or np.ptp(labels) == 0 for labels in regions.values()):
+        regions = None  # each operand one region (one material, no UV seam): its id tells them apart
     if regions is None:
         if len(field.field_ids) < 2:
             return np.zeros(len(verts), np.int64)

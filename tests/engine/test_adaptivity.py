@@ -108,6 +108,9 @@ def test_no_merge_across_source_regions():
     assert spanning(*split) == 0
     assert spanning(*plain) > 0
     assert len(split[2]) < 0.25 * len(field.to_mesh(quads=True)[2])
+    # one region (a material everywhere): the same polygons as none
+    same = field.to_mesh(quads=True, adaptivity=1.0, regions={0: np.full(len(tris), 5)})
+    assert all(np.array_equal(x, y) for x, y in zip(same, plain, strict=True))
 
 
 def test_a_box_at_adaptivity_1_is_a_few_polygons_a_face_also_mirrored():
