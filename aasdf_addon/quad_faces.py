@@ -120,7 +120,8 @@ def mergeable(attrs: dict, quads: int) -> np.ndarray:
             ok &= values[0 : 2 * quads : 2] == values[1 : 2 * quads : 2]
     for values in attrs.get("uv_maps", {}).values():
         uv = np.asarray(values, dtype=np.float32)[: 6 * quads].reshape(quads, 6, 2)
-        scale = np.linalg.norm(uv[:, [1, 2, 0]] - uv[:, [0, 1, 2]], axis=2).mean(axis=1)
+        u, v = uv[:, :, 0], uv[:, :, 1]  # (column by column: reductions over rows of 2 or 3 are several times slower)
+        scale = sum(np.hypot(u[:, (k + 1) % 3] - u[:, k], v[:, (k + 1) % 3] - v[:, k]) for k in range(3)) / 3.0
         jump = np.maximum(_gap(uv[:, 0], uv[:, 3]), _gap(uv[:, 2], uv[:, 4]))
         ok &= jump <= UV_TOLERANCE * scale + 1e-6
     for _kind, values in attrs.get("colors", {}).values():
@@ -130,4 +131,8 @@ def mergeable(attrs: dict, quads: int) -> np.ndarray:
 
 
 def _gap(a, b) -> np.ndarray:
-    return np.abs(a - b).max(axis=1)
+    """(N,) the largest difference of rows ``a`` and ``b`` (N, W), column by column."""
+    gap = np.abs(a[:, 0] - b[:, 0])
+    for k in range(1, a.shape[1]):
+        gap = np.maximum(gap, np.abs(a[:, k] - b[:, k]))
+    return gap
