@@ -83,7 +83,9 @@ class HostPool:
         self._ptrs: list[int] = []
         self._live: dict[int, int] = {}  # pointer -> mapped size of the arrays handed out
         # Python's cycle collector may free arrays inside any change of the lists above (an allocation there runs
-        # it): such a free, in the thread holding the (re-entrant) lock, is set aside until the change is done
+        # it): such a free, in the thread holding the (re-entrant) lock, is set aside until the change is done. A free
+        # never waits for another thread's change either (set aside, done by the next change): finalisers run at the
+        # interpreter's exit, after the daemon threads are stopped wherever they were, a change's lock held or not
         self._lock = threading.RLock()
         self._busy = False
         self._pending: list[tuple[int, int]] = []
@@ -102,9 +104,11 @@ class HostPool:
         self._ptrs.insert(k, ptr)
         self.pooled += size
 
-    def _enter(self) -> bool:
-        """Take the lock for a change of the lists; False (lock released) when this thread is inside one already."""
-        self._lock.acquire()
+    def _enter(self, wait: bool = True) -> bool:
+        """Take the lock for a change of the lists; False (lock released) when this thread is inside one already, or
+        without ``wait`` when another thread holds it."""
+        if not self._lock.acquire(wait):
+            return False
         if self._busy:
             self._lock.release()
             return False
@@ -162,7 +166,7 @@ class HostPool:
         return ptr
 
     def deallocate(self, ptr: int, size_in_bytes: int) -> None:
-        if not self._enter():
+        if not self._enter(wait=False):
             self._pending.append((ptr, size_in_bytes))
             return
         try:

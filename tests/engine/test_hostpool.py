@@ -180,3 +180,35 @@ def test_an_array_freed_inside_a_change_of_the_pool_waits_for_it():
         _view(p, n)[:] = 5
         pool.deallocate(p, n)
     assert pool.trim() == 8 * MB
+
+
+def test_a_free_never_waits_for_another_threads_change_of_the_pool():
+    """A finaliser may free an array while another thread is inside a change of the pool, or after that thread was
+    stopped there (a daemon thread, at the interpreter's exit): the free returns at once, set aside; the change takes
+    it when it is done."""
+    import threading
+
+    inside, go_on = threading.Event(), threading.Event()
+
+    class Stopping(hostpool.Pages):
+        def move(self, src, size, dst):
+            inside.set()
+            go_on.wait(10)  # a thread stopped inside the change
+            super().move(src, size, dst)
+
+    pool = hostpool.HostPool(_Recorder(), Stopping())
+    first, second = pool.allocate(2 * MB), pool.allocate(3 * MB)
+    pool.deallocate(first, 2 * MB)
+    got = []
+    changing = threading.Thread(target=lambda: got.append(pool.allocate(4 * MB)), daemon=True)  # moves the 2 MB
+    changing.start()
+    inside.wait(10)
+    freeing = threading.Thread(target=pool.deallocate, args=(second, 3 * MB), daemon=True)
+    freeing.start()
+    freeing.join(5)
+    assert not freeing.is_alive()  # (before: it waited as long as the other thread was stopped)
+    go_on.set()
+    changing.join(10)
+    assert pool.pooled == 3 * MB  # taken by the change when it was done
+    pool.deallocate(got[0], 4 * MB)
+    assert pool.trim() == 7 * MB
