@@ -212,3 +212,36 @@ def test_a_free_never_waits_for_another_threads_change_of_the_pool():
     assert pool.pooled == 3 * MB  # taken by the change when it was done
     pool.deallocate(got[0], 4 * MB)
     assert pool.trim() == 7 * MB
+
+
+EXIT_SCRIPT = """
+import sys, threading, time
+sys.path.insert(0, {root!r})
+import engine, warp as wp
+from engine import hostpool
+
+pool = hostpool.install()
+class Cycle: pass
+held = Cycle(); held.me = held; held.array = wp.empty(3 << 20, dtype=wp.uint8, device="cpu")
+del held  # (a cycle: freed by the collection at the interpreter's exit)
+first = wp.empty(2 << 20, dtype=wp.uint8, device="cpu")
+del first  # pooled
+inside = threading.Event()
+def move(src, size, dst):
+    inside.set()
+    time.sleep(3600)
+pool.pages.move = move  # the next allocation moves the pooled block: a thread stopped there
+threading.Thread(target=lambda: wp.empty(4 << 20, dtype=wp.uint8, device="cpu"), daemon=True).start()
+inside.wait()
+"""
+
+
+def test_a_process_exits_while_a_daemon_thread_is_inside_a_change_of_the_pool():
+    """As a script that leaves a boolean's judge running in its daemon thread: the interpreter stops the thread
+    wherever it is, and the frees of its last collection do not wait for it (before: the process never exited)."""
+    import subprocess
+    from pathlib import Path
+
+    root = str(Path(__file__).resolve().parents[2])
+    done = subprocess.run([sys.executable, "-c", EXIT_SCRIPT.format(root=root)], timeout=30, capture_output=True)
+    assert done.returncode == 0, done.stderr.decode()[-2000:]
