@@ -502,8 +502,9 @@ def _kept_and_new(field, voxel_surface: tuple, judged: tuple, finish, partial: b
     the ``voxel_surface`` (verts, tris), made by ``finish``, judged again clear of where faces are left passing through
     others (:func:`_clear_of_crossings`); the voxel surface alone where that leaves a clean boolean crossed through.
     ``partial``: the voxel surface is a boolean's along its seams alone; None where its whole result should be joined
-    instead: its join fell back, its clearing gave up kept faces past the seams' surface (``ENDS_SHORT``), or it was
-    left crossed through."""
+    instead: its join fell back, its clearing ended at a join that fell back with faces still left crossing (one that
+    gave up kept faces past the seams' surface, ``ENDS_SHORT``, or whose loops the seams' surface left unpaired: the
+    whole's voxel surface is under every kept face), or it was left crossed through."""
     verts, tris = voxel_surface
     join = lambda triangles: hybrid_surface(field, verts, tris, triangles, partial)  # noqa: E731
     surface = _joined(field, join, *judged)
@@ -512,7 +513,7 @@ def _kept_and_new(field, voxel_surface: tuple, judged: tuple, finish, partial: b
     surface = finish(surface)
     if surface["stats"]["crossing_left"]:
         surface = _clear_of_crossings(field, join, surface, finish)
-        if partial and surface["stats"].get("clearing_ended") == ENDS_SHORT:
+        if partial and surface["stats"].get("clearing_ended") and surface["stats"]["crossing_left"]:
             return None
     if _crossed_through(surface) and _clean(field):  # the join failed where it must not: remeshed
         if partial:
