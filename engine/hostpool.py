@@ -181,6 +181,8 @@ class HostPool:
         if not self._enter():
             return 0
         try:
+            while self._pending:  # (frees set aside by other threads' changes: pooled first, then given back)
+                self._free(*self._pending.pop())
             while self._sizes and self.pooled > keep:
                 released.append(self._take(len(self._sizes) - 1))
         finally:
