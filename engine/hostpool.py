@@ -118,11 +118,15 @@ class HostPool:
     def _leave(self) -> None:
         """Free what was set aside during the change, then let go of the lock."""
         try:
-            while self._pending:
-                self._free(*self._pending.pop())
+            self._drain()
         finally:
             self._busy = False
             self._lock.release()
+
+    def _drain(self) -> None:
+        """Free what was set aside (inside a change of the lists)."""
+        while self._pending:
+            self._free(*self._pending.pop())
 
     def _free(self, ptr: int, size_in_bytes: int) -> None:
         size = self._live.pop(ptr, None)
@@ -181,8 +185,7 @@ class HostPool:
         if not self._enter():
             return 0
         try:
-            while self._pending:  # (frees set aside by other threads' changes: pooled first, then given back)
-                self._free(*self._pending.pop())
+            self._drain()  # (frees set aside by other threads' changes: pooled first, then given back)
             while self._sizes and self.pooled > keep:
                 released.append(self._take(len(self._sizes) - 1))
         finally:

@@ -473,9 +473,9 @@ def _strips(points, k_loops, v_loops, pairs, reach: float, n_kept: int, device):
     return strips, pairs[np.maximum.reduceat(gaps, first) > reach, 0], far[far < n_kept].astype(np.int64)
 
 
-# A join along the seams alone falls back where the kept faces given up reach past their voxel surface; where the
-# faces given up about places left crossing do (:mod:`.clearing`), the whole result is made and joined instead (bunny
-# ∩ cow at /256: 9 pairs left crossing along the seams, none made whole; cow ∩ a placed box: 10 and none).
+# Why a join along the seams alone falls back where the kept faces given up reach past their voxel surface (the whole
+# result is then made and joined, as at any fallback of a first join or of a clearing that leaves faces crossing:
+# bunny ∩ cow at /256, 9 pairs left crossing along the seams, none made whole; cow ∩ a placed box, 10 and none).
 ENDS_SHORT = "the seams' surface ends short of the kept faces"
 
 # Faces left crossing are judged again clear of; more than this share of the new faces still crossing on clean meshes
