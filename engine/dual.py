@@ -541,6 +541,7 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
         m,
         lambda s, c: [s, cube_corners, values, tables["count"], counts, quad_counts, cube_of_node, below, crossed],
         device,
+        min_dim=EMIT_SPLIT_MIN_DIM,  # (a cube's 8 corners and its patches each)
     )
     vertex_start = wp.empty(m, dtype=wp.int32, device=device)
     wp.utils.array_scan(counts, vertex_start, inclusive=True)
@@ -578,6 +579,7 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
             whole,
         ],
         device,
+        min_dim=EMIT_SPLIT_MIN_DIM,  # (a cube's quads and their splits each)
     )
     surface = {"verts": verts.numpy().reshape(-1, 3), "tris": tris.numpy(), "ranks": ranks.numpy()}
     surface.update(cells=cells.numpy(), tunnels=0, whole=whole.numpy())

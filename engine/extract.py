@@ -23,7 +23,7 @@ import warp.geometry
 
 from .marching import CORNER_OFFSETS, HAS_SHARED_CORNER_CORE, empty_mesh, iso_nudge, polygonise
 from .octree import decode_codes, morton_decode
-from .parallel import launch_split
+from .parallel import EMIT_SPLIT_MIN_DIM, launch_split
 
 # The seven other corners in ascending key order (corner slot, then its offset). Keys are
 # i * stride_x + j * stride_y + k with stride_x > stride_y + 1 > 2, so lexicographic (i, j, k) order is key order.
@@ -359,6 +359,7 @@ def octree_level_cubes(codes, values, tree, *, origin, spacing, iso=0.0):
         n // 8,
         lambda s, c: [s, codes, *tree_args, shifted, 0, neighbours, active_scan, active, no_corners],
         device,
+        min_dim=EMIT_SPLIT_MIN_DIM,  # an octet's neighbours searched each
     )
     wp.utils.array_scan(active, active_scan, inclusive=True)
     n_cubes = int(active_scan[-1:].numpy()[0])
@@ -370,6 +371,7 @@ def octree_level_cubes(codes, values, tree, *, origin, spacing, iso=0.0):
         n // 8,
         lambda s, c: [s, codes, *tree_args, shifted, 1, neighbours, active_scan, active, cube_corners],
         device,
+        min_dim=EMIT_SPLIT_MIN_DIM,
     )
     return {"cube_corners": cube_corners, "shifted": shifted, "lo": lo}
 

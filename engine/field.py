@@ -351,6 +351,7 @@ class AdaptiveField:
                 n,
                 lambda lo, k: [arg, pts_wp[lo : lo + k], mode, values[lo : lo + k], grads[lo : lo + k]],
                 self.device,
+                min_dim=parallel.EMIT_SPLIT_MIN_DIM,  # a descent of the tree each: worth two threads from a thousand
             )
         values = values.numpy()
         if self.placement is not None:
@@ -375,6 +376,7 @@ class AdaptiveField:
                 len(pts),
                 lambda lo, n: [arg, pts_wp[lo : lo + n], ids[lo : lo + n]],
                 self.device,
+                min_dim=parallel.EMIT_SPLIT_MIN_DIM,  # (a descent of the tree each)
             )
         return ids.numpy()
 

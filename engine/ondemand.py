@@ -400,7 +400,7 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
     codes = octets.numpy()
     if not len(codes):
         return octets
-    centres = np.asarray(origin, dtype=np.float64) + ((coords := morton_decode_np(codes)) + 0.5) * (2.0 * h)
+    centres = np.asarray(origin, dtype=np.float64) + (morton_decode_np(codes) + 0.5) * (2.0 * h)
     keep = surface_within(other, centres, SEAM_REACH_VOXELS * h + float(blend))
     for f in (x, other):  # about where a mesh that passes through itself may give its faces up
         near = _near_region(f, centres, SEAM_REACH_VOXELS * h + float(blend), h)
@@ -413,7 +413,7 @@ def seam_octets(octets: wp.array, x, other, origin, h: float, blend: float) -> w
         local = centres if x.placement is None else x.placement.to_local(centres)
         reach = CAP_REACH_OCTETS * 2.0 * plan["voxel_size"] + _sign_check_reach(plan)
         keep |= _near_caps(caps, local, reach, octets.device)
-    return wp.array(codes[filled_notches(codes, coords, keep)], dtype=wp.int64, device=octets.device)
+    return wp.array(codes[filled_notches(codes, keep, octets.device)], dtype=wp.int64, device=octets.device)
 
 
 # The source meshes a kept-faces judge found passing through themselves, or with defects other than holes

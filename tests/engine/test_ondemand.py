@@ -352,7 +352,7 @@ def test_pinholes_and_notches_an_octet_wide_are_closed_and_nothing_else(depth):
     keep = coords[:, 2] == z  # a slab one octet thick
     pinhole, notch, corner = (coords == (2, 3, z)).all(axis=1), (coords == (0, 2, z)).all(axis=1), (coords == (0, 0, z))
     keep &= ~pinhole & ~notch & ~corner.all(axis=1)  # its hole (4 kept neighbours), edge notch (3), corner (2)
-    out = filled_notches(codes, coords, keep)
+    out = filled_notches(codes, keep)
     assert out[pinhole].all() and out[notch].all() and not out[corner.all(axis=1)].any()
     assert np.array_equal(out & ~(pinhole | notch), keep)  # nothing else: the slab's sides have 1 neighbour each
 
