@@ -114,7 +114,7 @@ def read_operands(objects, depsgraph) -> list:
             raise engine.AasdfError(no_instances(obj))
         if pieces:
             operand = joined(operand, pieces)
-        if obj.type != "MESH" and not len(operand.tris):
+        if not len(operand.tris):
             raise engine.AasdfError(no_faces(obj))
         operands.append(operand)
     return operands
@@ -133,10 +133,12 @@ def no_instances(obj) -> str:
 
 
 def no_faces(obj) -> str:
-    """The sentence refusing a text, curve, surface or metaball that evaluates to no faces, saying why where it can:
-    a metaball whose surface its family's base makes (Blender meshes a family as its base object, the one named
-    without a number), a text without characters, a curve without splines."""
+    """The sentence refusing an object that evaluates to no faces, saying why where it can: a mesh without faces (or
+    whose modifiers remove them), a metaball whose surface its family's base makes (Blender meshes a family as its base
+    object, the one named without a number), a text without characters, a curve without splines."""
     name = obj.name
+    if obj.type == "MESH":
+        return f"'{name}' has no faces (after its modifiers): add some to it, or leave it out of the selection"
     if obj.type == "META":
         base = bpy.data.objects.get(name.rsplit(".", 1)[0])
         if base is not None and base is not obj and base.type == "META":

@@ -449,14 +449,7 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             field, surface = combined(steps, fields, output, seams, progress)
         with timer.stage("surface"):
             progress.step("extracting the surface")
-            result = extract(
-                field,
-                surface,
-                sharp=output.sharp,
-                keep_faces=output.keep_faces,
-                adaptivity=output.adaptivity,
-                seams=seams,
-            )
+            result = _extracted(field, surface, output, seams)
         if len(result["tris"]) == 0:
             return {"object": output.target.name if output.target is not None else output.name, "empty": True}
         with timer.stage("attributes"):
@@ -465,28 +458,29 @@ def run(context, inputs, steps, settings: FieldSettings, output: Output, *, sour
             result = quads_back(whole_faces_back(result, surface, read, output), output)
         with timer.stage("write"):
             obj = _written(context, result, output, keyed, field, progress)
-            warnings = notes + result["warnings"]
-            warnings += debug_volume(context, field, obj, output) if output.debug_volume else []
-            warnings += [found] if (found := runtime.device_fallback(context)) else []
+            warnings = notes + result["warnings"] + _written_notes(context, field, obj, output)
             _hide_inputs(objects, output)
     finally:
         progress.end()
         # the engine's freed arrays stay resident for the next run's (a drag's moves), within the cache's limit
         runtime.release_memory(cache.spare_bytes(context))
-    hits, builds = timer.cache_delta()
     faces = len(result["tris"]) + len(result["attributes"].get("polygons", ((),))[0])
-    return _record(
-        timer,
-        obj,
-        voxel_size,
-        source,
-        operation,
-        len(objects),
-        field=field,
-        warnings=warnings,
-        counts=(len(result["verts"]), triangles, faces),
-        cache_delta=(hits, builds),
-    )
+    counts, delta = (len(result["verts"]), triangles, faces), timer.cache_delta()
+    numbers = {"field": field, "warnings": warnings, "counts": counts, "cache_delta": delta}
+    return _record(timer, obj, voxel_size, source, operation, len(objects), **numbers)
+
+
+def _extracted(field, surface: dict, output: Output, seams) -> dict:
+    """The surface stage: :func:`extract` with the output's settings."""
+    options = {"sharp": output.sharp, "keep_faces": output.keep_faces, "adaptivity": output.adaptivity}
+    return extract(field, surface, seams=seams, **options)
+
+
+def _written_notes(context, field, obj, output: Output) -> list:
+    """What the write stage tells the user: the debug volume's warnings where one is asked, and a device fallen back
+    from (no usable GPU)."""
+    notes = debug_volume(context, field, obj, output) if output.debug_volume else []
+    return notes + ([found] if (found := runtime.device_fallback(context)) else [])
 
 
 def _refined(steps, count: int, output: Output) -> list:

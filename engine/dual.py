@@ -536,13 +536,8 @@ def contour_dual(cube_corners, values, codes, proj, *, origin, spacing, iso=0.0)
     cube_of_node = wp.full(n, -1, dtype=wp.int32, device=device)
     below = wp.zeros(3 * n, dtype=wp.uint8, device=device)
     crossed = wp.empty(m, dtype=wp.uint8, device=device)
-    launch_split(
-        _count_patches_kernel,
-        m,
-        lambda s, c: [s, cube_corners, values, tables["count"], counts, quad_counts, cube_of_node, below, crossed],
-        device,
-        min_dim=EMIT_SPLIT_MIN_DIM,  # (a cube's 8 corners and its patches each)
-    )
+    patches = [cube_corners, values, tables["count"], counts, quad_counts, cube_of_node, below, crossed]
+    launch_split(_count_patches_kernel, m, lambda s, c: [s, *patches], device, min_dim=EMIT_SPLIT_MIN_DIM)
     vertex_start = wp.empty(m, dtype=wp.int32, device=device)
     wp.utils.array_scan(counts, vertex_start, inclusive=True)
     quad_scan = counts  # reused

@@ -371,13 +371,8 @@ class AdaptiveField:
         ids = wp.empty(len(pts), dtype=wp.int32, device=self.device)
         if len(pts):
             arg, pts_wp = self.arg(), wp.array(pts, dtype=wp.vec3, device=self.device)
-            parallel.launch_split(
-                source_ids_kernel,
-                len(pts),
-                lambda lo, n: [arg, pts_wp[lo : lo + n], ids[lo : lo + n]],
-                self.device,
-                min_dim=parallel.EMIT_SPLIT_MIN_DIM,  # (a descent of the tree each)
-            )
+            args = lambda lo, n: [arg, pts_wp[lo : lo + n], ids[lo : lo + n]]  # noqa: E731
+            parallel.launch_split(source_ids_kernel, len(pts), args, self.device, min_dim=parallel.EMIT_SPLIT_MIN_DIM)
         return ids.numpy()
 
     def closest_sources(self, points):

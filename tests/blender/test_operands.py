@@ -218,6 +218,8 @@ def test_surfaces_that_enclose_nothing_and_objects_without_geometry_are_refused_
         ball.data.elements.new().co = (1.0 + 0.8 * k, 0.0, 0.0)
     for obj in (bare, *balls):
         bpy.context.scene.collection.objects.link(obj)
+    # an empty mesh and one of points alone: each was "The mesh is empty: it has no vertices or no triangles"
+    hollow, dots = add_mesh_object("Hollow", [], []), add_mesh_object("Dots", [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0)], [])
     bpy.context.view_layer.update()
     objects = len(bpy.data.objects)
     cases = {
@@ -227,6 +229,8 @@ def test_surfaces_that_enclose_nothing_and_objects_without_geometry_are_refused_
         blank: "'Blank' has no characters: type some text into it",
         bare: "'Bare' has no splines: draw one into it",
         balls[1]: "'Blob.001' is part of the metaball 'Blob', whose object makes their surface: use 'Blob'",
+        hollow: r"'Hollow' has no faces \(after its modifiers\): add some to it, or leave it out of the selection",
+        dots: r"'Dots' has no faces \(after its modifiers\)",
     }
     for cutter, message in cases.items():
         select(block, cutter, active=block)
