@@ -500,7 +500,8 @@ def in_sorted(keys: np.ndarray, values: np.ndarray) -> np.ndarray:
     return keys[np.minimum(np.searchsorted(keys, values), len(keys) - 1)] == values
 
 
-# How many of an octet's six face neighbours kept keep it too (:func:`filled_notches`).
+# The six face neighbours of an octet, and how many of them kept keep an octet left out (:func:`filled_notches`).
+FACE_STEPS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.int64)
 NOTCH_NEIGHBOURS = 3
 
 
@@ -513,10 +514,8 @@ def _kept_neighbours_kernel(
     c = morton_decode(codes[i])
     found = int(0)
     for k in range(6):
-        step = 1 - 2 * (k % 2)
-        axis = k // 2
-        q = wp.vec3i(c[0] + wp.where(axis == 0, step, 0), c[1] + wp.where(axis == 1, step, 0), c[2])
-        q = wp.vec3i(q[0], q[1], q[2] + wp.where(axis == 2, step, 0))
+        q = wp.vec3i(c[0], c[1], c[2])
+        q[k // 2] = q[k // 2] + 1 - 2 * (k % 2)
         if q[0] >= 0 and q[1] >= 0 and q[2] >= 0:
             if find_key(kept, 0, kept.shape[0], morton_encode(q)) >= 0:
                 found += 1
@@ -528,21 +527,25 @@ def filled_notches(codes: np.ndarray, keep: np.ndarray, device=None) -> np.ndarr
     their six face neighbours kept taken too (one pass): a region of octets kept by a distance test closed at its
     pinholes and at notches an octet wide along its edge (a boolean along its seams kept the rocker arm's octets within
     6 voxels of its copy placed 5.12 voxels off, and the surface made there had a hole a voxel across, which no kept
-    face bordered: its join ran out of rounds). Each octet left out looks its neighbours up among the kept ones, sorted
-    (a binary search each, in Warp: numpy's six lookups of whole arrays took 6-15 ms a call on the plate's moves,
-    beside the judge's thread)."""
+    face bordered: its join ran out of rounds). Counted from the fewer of the two: those kept (their neighbours' codes,
+    each as often as kept octets border it: a dense operand's octets along the seams are a few of its own, the rocker
+    arm's 1,773 of 26,149: 10 -> 1.2 ms), or the octets left out, each looking its neighbours up among the kept ones
+    (a binary search each, in Warp: numpy's six lookups of whole arrays took 6-15 ms a call on the plate's moves)."""
     out = keep.copy()
     n_kept = int(np.count_nonzero(keep))
     if not n_kept or n_kept == len(keep):
         return out
+    if n_kept < len(keep) - n_kept:  # from the kept octets out
+        near = (morton_decode_np(codes[keep])[:, None, :] + FACE_STEPS[None]).reshape(-1, 3)
+        around, count = np.unique(morton_encode_np(near[(near >= 0).all(axis=1)]), return_counts=True)
+        return out | in_sorted(around[count >= NOTCH_NEIGHBOURS], codes)
     device = wp.get_device(device)
     rows = np.flatnonzero(~keep)
     left = wp.array(np.ascontiguousarray(codes[rows], dtype=np.int64), dtype=wp.int64, device=device)
     kept = wp.array(np.sort(codes[keep]).astype(np.int64), dtype=wp.int64, device=device)
     count = wp.empty(len(rows), dtype=wp.int32, device=device)
-    launch_split(
-        _kept_neighbours_kernel, len(rows), lambda lo, n: [lo, left, kept, count], device, min_dim=EMIT_SPLIT_MIN_DIM
-    )
+    args = lambda lo, n: [lo, left, kept, count]  # noqa: E731
+    launch_split(_kept_neighbours_kernel, len(rows), args, device, min_dim=EMIT_SPLIT_MIN_DIM)
     out[rows[count.numpy() >= NOTCH_NEIGHBOURS]] = True
     return out
 
