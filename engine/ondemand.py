@@ -326,12 +326,8 @@ def value_bounds(field, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if n:
         arg = field.in_frame().arg()
         pts_wp = wp.array(np.ascontiguousarray(pts, dtype=np.float32), dtype=wp.vec3, device=device)
-        parallel.launch_split(
-            _value_bounds_kernel,
-            n,
-            lambda lo, k: [arg, pts_wp[lo : lo + k], low[lo : lo + k], high[lo : lo + k]],
-            device,
-        )
+        args = lambda lo, k: [arg, pts_wp[lo : lo + k], low[lo : lo + k], high[lo : lo + k]]  # noqa: E731
+        parallel.launch_split(_value_bounds_kernel, n, args, device, min_dim=parallel.EMIT_SPLIT_MIN_DIM)
     low, high = low.numpy() * np.float32(scale), high.numpy() * np.float32(scale)
     jumps = _may_jump(field, pts)
     low[jumps], high[jumps] = -np.inf, np.inf
@@ -528,7 +524,8 @@ def _leaf_point_distances(field, local: np.ndarray) -> np.ndarray:
     if n:
         arg = field.in_frame().arg()
         pts = wp.array(np.ascontiguousarray(local, dtype=np.float32), dtype=wp.vec3, device=device)
-        parallel.launch_split(_leaf_point_kernel, n, lambda lo, k: [arg, pts[lo : lo + k], out[lo : lo + k]], device)
+        args = lambda lo, k: [arg, pts[lo : lo + k], out[lo : lo + k]]  # noqa: E731
+        parallel.launch_split(_leaf_point_kernel, n, args, device, min_dim=parallel.EMIT_SPLIT_MIN_DIM)
     return out.numpy()
 
 
@@ -579,10 +576,8 @@ def winding_sides(f, local: list, device) -> np.ndarray:
     front, back = (wp.array(end.astype(np.float32), dtype=wp.vec3, device=device) for end in local)
     out = wp.empty(len(front), dtype=wp.int8, device=device)
     if len(front):
-        parallel.launch_split(
-            _mesh_sides_kernel, len(front), lambda lo, k: [f, front[lo : lo + k], back[lo : lo + k], out[lo : lo + k]],
-            device,
-        )  # fmt: skip
+        args = lambda lo, k: [f, front[lo : lo + k], back[lo : lo + k], out[lo : lo + k]]  # noqa: E731
+        parallel.launch_split(_mesh_sides_kernel, len(front), args, device, min_dim=parallel.EMIT_SPLIT_MIN_DIM)
     return out.numpy()
 
 

@@ -323,6 +323,7 @@ def mesh_distances(mesh: wp.Mesh, points: np.ndarray, reach: float, device) -> n
         len(points),
         lambda lo, n: [mesh.id, pts[lo : lo + n], float(reach), out[lo : lo + n]],
         device,
+        min_dim=EMIT_SPLIT_MIN_DIM,  # a BVH query each
     )
     return out.numpy()
 
