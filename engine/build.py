@@ -30,9 +30,9 @@ from .geometry import tri_box_overlap
 from .holes import cap_lattices
 from .levels import LevelBuilder, finished, refined_across_holes
 from .meshcheck import edge_table, encloses_nothing, hole_boundary, problem_faces, weld_positions
-from .octree import add_octets, code_bits, in_sorted, morton_encode
+from .octree import add_octets, code_bits, in_sorted, morton_decode, morton_encode
 from .ondemand import partial_build
-from .plan import byte_grid_fits, check_budget, checked_plans, plan_field, thick_plan, thicknesses
+from .plan import byte_grid_fits, check_budget, checked_plans, grown_domain, plan_field, thick_plan, thicknesses
 from .selfcross import crossing_pairs
 from .winding import winding_arg
 
@@ -328,10 +328,69 @@ def _build_thick(plan: dict, *, device, field_id: int) -> AdaptiveField:
 
 
 def _build_planned(plan: dict, *, device, field_id: int, refine: str = "all") -> AdaptiveField:
-    """:func:`build_field` of a checked :func:`plan_field`: the steps of the module docstring."""
+    """:func:`build_field` of a checked :func:`plan_field`: the steps of the module docstring; an open mesh's built
+    again on a grown domain where its inside reaches the domain's edge (:data:`DOMAIN_GROWTH_ROUNDS`)."""
     device = _device(device)
     if plan.get("thickness") is not None:
         return _build_thick(plan, device=device, field_id=field_id)
+    field = _build_mesh(plan, device=device, field_id=field_id, refine=refine)
+    for _ in range(DOMAIN_GROWTH_ROUNDS):
+        caps = field.stats.get("hole_caps")
+        sides = None if caps is None else inside_at_edges(field)
+        grown = None if sides is None or not sides.any() else grown_domain(plan, sides, _growth(plan, caps))
+        if grown is None:
+            break
+        plan, field = grown, _build_mesh(grown, device=device, field_id=field_id, refine=refine)
+    return field
+
+
+# An open mesh's inside (where its winding number passes 1/2) can reach past its bounding box across its holes: two
+# open tubes side by side, overlapping, add their winding numbers past their ends, where the inside bulged 8 voxels
+# out of the domain (/128: cut there, the surface came out open). Its domain is grown on the sides reached, by the
+# largest hole's radius (at least a top cell), this many times at most.
+DOMAIN_GROWTH_ROUNDS = 3
+
+
+def _growth(plan: dict, caps) -> float:
+    """How far a domain is grown on a side an open mesh's inside reaches: its largest hole's radius, at least a top
+    cell."""
+    return max(float(np.max(caps[2])) if len(caps[2]) else 0.0, plan["voxel_size"] * 2 ** (plan["levels"] - 1))
+
+
+@wp.kernel(enable_backward=False)
+def _edge_sides_kernel(
+    codes: wp.array[wp.int64], values: wp.array[wp.float32], first: int, dims: wp.vec3i, sides: wp.array[wp.uint8]
+):
+    """Per node ``first + tid`` of a level of ``dims``: the sides of the domain (bits: low x, y, z, high x, y, z) on
+    whose outer layer it lies where it is inside (negative), else 0."""
+    i = first + wp.tid()
+    out = int(0)
+    if values[i] < 0.0:
+        c = morton_decode(codes[i])
+        for a in range(3):
+            if c[a] == 0:
+                out = out | (1 << a)
+            if c[a] == dims[a] - 1:
+                out = out | (8 << a)
+    sides[wp.tid()] = wp.uint8(out)
+
+
+def inside_at_edges(field) -> np.ndarray:
+    """(6,) bool: the sides of ``field``'s domain (low x, y, z, then high x, y, z) where a node of the outer layer of
+    its level is inside (negative): the surface there would run out of the domain, which counts as outside."""
+    offsets, found = np.asarray(field.level_offsets), 0
+    for level in range(field.levels):
+        n = int(offsets[level + 1] - offsets[level])
+        dims = np.asarray(field.top_dims, dtype=np.int64) * 2 ** (field.levels - 1 - level)
+        sides = wp.empty(n, dtype=wp.uint8, device=field.device)
+        args = [field.codes, field.values, int(offsets[level]), wp.vec3i(*(int(d) for d in dims)), sides]
+        wp.launch(_edge_sides_kernel, dim=n, inputs=args, device=field.device)
+        found |= int(np.bitwise_or.reduce(sides.numpy())) if n else 0
+    return (found >> np.arange(6)) & 1 == 1
+
+
+def _build_mesh(plan: dict, *, device, field_id: int, refine: str = "all") -> AdaptiveField:
+    """A mesh's field on the domain ``plan`` gives (no wall)."""
     timings = {}
     t0 = time.perf_counter()
     bvh = _MeshBuild(plan["vertices"], plan["triangles"], device)  # on a thread of its own while the checks run

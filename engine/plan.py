@@ -205,6 +205,24 @@ def plan_field(vertices, triangles, *, voxel_size, levels=4, padding=1) -> dict:
     }
 
 
+def grown_domain(plan: dict, sides: np.ndarray, reach: float) -> dict | None:
+    """``plan`` with its domain grown by ``reach`` on the ``sides`` (6,) bool (low x, y, z, then high x, y, z) that
+    an open mesh's inside reaches (:func:`.build.inside_at_edges`), snapped as :func:`plan_domain` snaps it; None where
+    the grown domain is more than the octree can address or than memory allows (the plan as it was stands)."""
+    top = plan["voxel_size"] * 2 ** (plan["levels"] - 1)
+    lo = np.asarray(plan["origin"], np.float64)
+    hi = lo + np.asarray(plan["top_dims"], np.float64) * top
+    lo, hi = lo - np.where(sides[:3], reach, 0.0), hi + np.where(sides[3:], reach, 0.0)
+    origin = np.floor(lo / top) * top  # (already a margin past the mesh on every side: none added)
+    top_dims = np.maximum(np.ceil((hi - origin) / top - 1e-9).astype(np.int64), 1)
+    fine_dims = top_dims * 2 ** (plan["levels"] - 1)
+    try:
+        check_budget(fine_dims, int(np.prod(top_dims)), plan["fine_nodes"])
+    except AasdfError:
+        return None
+    return {**plan, "origin": origin, "top_dims": top_dims, "fine_dims": fine_dims, "top_count": int(np.prod(top_dims))}
+
+
 def finite_number(name: str, value) -> float:
     """``value`` as a float: a number (TypeError) and finite (ValueError)."""
     try:
