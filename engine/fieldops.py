@@ -20,8 +20,9 @@ import numpy as np
 import warp as wp
 
 from .geometry import mesh_closest_point
+from .holes import sign_change_octets
 from .layout import level_layout
-from .octree import code_bits, decode_codes, dense_level, morton_decode, node_center, sort_unique
+from .octree import add_octets, code_bits, decode_codes, dense_level, morton_decode, node_center, sort_unique
 from .ondemand import refined
 from .parallel import launch_split
 from .plan import check_budget, checked_wall, finite_number, plan_grown
@@ -256,6 +257,17 @@ def band_octets(mesh_id, f_arg, signs, kind, a, *, origin, top_dims, levels, vox
     return wp.empty(0, dtype=wp.int64, device=device)
 
 
+# Rounds of octets added where the new surface leaves the band found top-down (:func:`.holes.sign_change_octets`): a
+# band cell's bound can miss it where the old surface's sides disagree about a cell (two open tubes overlapping, offset
+# by 0.05 at /128: 3 octets, the surface open there).
+BAND_ROUNDS = 2
+
+
+def octets_end_bit(top_dims, levels: int) -> int:
+    """The bits of the octet codes of a domain of ``top_dims`` top cells and ``levels`` levels."""
+    return 3 * code_bits(np.asarray(top_dims) * 2 ** (levels - 2))
+
+
 def levelset_field(
     mesh_id,
     base,
@@ -295,22 +307,21 @@ def levelset_field(
     if levels > 1:
         grid = {"origin": origin, "top_dims": top_dims, "levels": levels, "voxel_size": voxel_size, "device": device}
         octets = band_octets(mesh_id, f_arg, signs, kind, a, **grid)
-        octets = sort_unique(octets, end_bit=3 * code_bits(np.asarray(top_dims) * 2 ** (levels - 2)))
+        octets = sort_unique(octets, end_bit=octets_end_bit(top_dims, levels))
     timings["band"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    layout = level_layout(octets, top_dims, levels, device, timings)
-    values, proj, source = _level_values(layout, (mesh_id, f_arg, signs), kind, a, voxel_size, origin, field_ids[0])
-    timings["values"] = time.perf_counter() - t0
-    field = cls.from_layout(
-        layout,
-        voxel_size=voxel_size,
-        origin=origin,
-        values=values,
-        proj=proj,
-        source=source,
-        field_ids=field_ids,
-        timings=timings,
-    )
+    lattice = {"voxel_size": voxel_size, "origin": origin, "field_ids": field_ids, "timings": timings}
+    for round_ in range(BAND_ROUNDS + 1):
+        t0 = time.perf_counter()
+        layout = level_layout(octets, top_dims, levels, device, timings)
+        values, proj, source = _level_values(layout, (mesh_id, f_arg, signs), kind, a, voxel_size, origin, field_ids[0])
+        timings["values"] = timings.get("values", 0.0) + time.perf_counter() - t0
+        field = cls.from_layout(layout, values=values, proj=proj, source=source, **lattice)
+        extra = sign_change_octets(field) if levels > 1 and round_ < BAND_ROUNDS else ()
+        if not len(extra):
+            break
+        octets = add_octets(
+            octets, extra, np.asarray(top_dims) * 2 ** (levels - 2), end_bit=octets_end_bit(top_dims, levels)
+        )
     result = redistance(field)
     result.timings = {**timings, **{f"redistance_{k}": v for k, v in result.timings.items()}}
     return result
