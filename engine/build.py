@@ -359,13 +359,18 @@ def _growth(plan: dict, caps) -> float:
 
 @wp.kernel(enable_backward=False)
 def _edge_sides_kernel(
-    codes: wp.array[wp.int64], values: wp.array[wp.float32], first: int, dims: wp.vec3i, sides: wp.array[wp.uint8]
+    codes: wp.array[wp.int64],
+    values: wp.array[wp.float32],
+    first: int,
+    dims: wp.vec3i,
+    below: float,
+    sides: wp.array[wp.uint8],
 ):
     """Per node ``first + tid`` of a level of ``dims``: the sides of the domain (bits: low x, y, z, high x, y, z) on
-    whose outer layer it lies where it is inside (negative), else 0."""
+    whose outer layer it lies where its value is under ``below``, else 0."""
     i = first + wp.tid()
     out = int(0)
-    if values[i] < 0.0:
+    if values[i] < below:
         c = morton_decode(codes[i])
         for a in range(3):
             if c[a] == 0:
@@ -376,14 +381,18 @@ def _edge_sides_kernel(
 
 
 def inside_at_edges(field) -> np.ndarray:
-    """(6,) bool: the sides of ``field``'s domain (low x, y, z, then high x, y, z) where a node of the outer layer of
-    its level is inside (negative): the surface there would run out of the domain, which counts as outside."""
+    """(6,) bool: the sides of ``field``'s domain (low x, y, z, then high x, y, z) its inside reaches, where the
+    surface would run out of the domain (which counts as outside): a finest node of the outer layer inside, or a
+    coarser one deeper inside than its centre lies from the domain's edge (a coarse node's value a little under 0 says
+    the surface passes near it: the bunny's and the beetle's top levels at /64-/256, 0.09-0.71 voxel, surfaces
+    closed)."""
     offsets, found = np.asarray(field.level_offsets), 0
     for level in range(field.levels):
         n = int(offsets[level + 1] - offsets[level])
         dims = np.asarray(field.top_dims, dtype=np.int64) * 2 ** (field.levels - 1 - level)
+        below = 0.0 if level == 0 else -float(field.voxel_size) * 2 ** (level - 1)
         sides = wp.empty(n, dtype=wp.uint8, device=field.device)
-        args = [field.codes, field.values, int(offsets[level]), wp.vec3i(*(int(d) for d in dims)), sides]
+        args = [field.codes, field.values, int(offsets[level]), wp.vec3i(*(int(d) for d in dims)), below, sides]
         wp.launch(_edge_sides_kernel, dim=n, inputs=args, device=field.device)
         found |= int(np.bitwise_or.reduce(sides.numpy())) if n else 0
     return (found >> np.arange(6)) & 1 == 1
